@@ -1,0 +1,17 @@
+//! Ray-scene intersection. The only module that knows how the hierarchy is laid out:
+//! everything else calls [`Accel::intersect`] and [`Accel::occluded`].
+
+mod bvh;
+
+pub use bvh::Accel;
+
+/// The closest hit of a ray: which primitive, where along the ray, and where on it
+/// (barycentrics b1, b2 for a triangle; unused for a sphere).
+#[derive(Clone, Copy, Debug)]
+pub struct PrimHit {
+    pub t: f32,
+    pub shape: u32,
+    pub prim: u32,
+    pub b1: f32,
+    pub b2: f32,
+}

@@ -1,0 +1,221 @@
+//! Scattering models. Directions live in the local shading frame (normal = +z), both
+//! pointing away from the surface. `f` never includes the cosine; an estimator weights a
+//! sample by `f * |cos(wi)| / pdf`. Delta lobes report `pdf = 1` and `f = weight / |cos(wi)|`.
+
+pub mod diffuse;
+pub mod material;
+
+pub use material::{Material, MicrofacetKind};
+
+use crate::spectrum::Rgb;
+use glam::{Vec2, Vec3};
+
+/// Which quantity is being transported: radiance (from the camera) or importance (from
+/// the lights). Refraction and shading normals make scattering non-symmetric.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Default)]
+pub enum TransportMode {
+    #[default]
+    Radiance,
+    Importance,
+}
+
+/// Lobe classification of a sample or a model, as bit flags.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Default)]
+pub struct LobeFlags(pub u8);
+
+impl LobeFlags {
+    pub const NONE: LobeFlags = LobeFlags(0);
+    pub const REFLECTION: LobeFlags = LobeFlags(1);
+    pub const TRANSMISSION: LobeFlags = LobeFlags(2);
+    pub const DIFFUSE: LobeFlags = LobeFlags(4);
+    pub const GLOSSY: LobeFlags = LobeFlags(8);
+    pub const SPECULAR: LobeFlags = LobeFlags(16);
+    /// A null interaction: the ray continues unchanged (mask pass-through).
+    pub const NULL: LobeFlags = LobeFlags(32);
+    pub const DIFFUSE_REFLECTION: LobeFlags = LobeFlags(1 | 4);
+    pub const DIFFUSE_TRANSMISSION: LobeFlags = LobeFlags(2 | 4);
+    pub const GLOSSY_REFLECTION: LobeFlags = LobeFlags(1 | 8);
+    pub const GLOSSY_TRANSMISSION: LobeFlags = LobeFlags(2 | 8);
+    pub const SPECULAR_REFLECTION: LobeFlags = LobeFlags(1 | 16);
+    pub const SPECULAR_TRANSMISSION: LobeFlags = LobeFlags(2 | 16);
+    pub const NULL_TRANSMISSION: LobeFlags = LobeFlags(2 | 32);
+
+    #[inline]
+    pub fn contains(self, o: LobeFlags) -> bool {
+        self.0 & o.0 == o.0
+    }
+    #[inline]
+    pub fn intersects(self, o: LobeFlags) -> bool {
+        self.0 & o.0 != 0
+    }
+    /// Delta lobes cannot be hit by light sampling: MIS must skip them.
+    #[inline]
+    pub fn is_specular(self) -> bool {
+        self.intersects(LobeFlags(16 | 32))
+    }
+    #[inline]
+    pub fn is_null(self) -> bool {
+        self.intersects(LobeFlags::NULL)
+    }
+    #[inline]
+    pub fn has_non_specular(self) -> bool {
+        self.intersects(LobeFlags(4 | 8))
+    }
+}
+
+impl std::ops::BitOr for LobeFlags {
+    type Output = LobeFlags;
+    fn bitor(self, o: LobeFlags) -> LobeFlags {
+        LobeFlags(self.0 | o.0)
+    }
+}
+
+#[derive(Clone, Copy, Debug)]
+pub struct BsdfSample {
+    pub wi: Vec3,
+    pub f: Rgb,
+    /// Solid-angle density of `wi`; 1 for a delta lobe.
+    pub pdf: f32,
+    pub lobe: LobeFlags,
+    /// Relative IOR along the sampled direction (1 unless refracted): Russian roulette
+    /// uses it to undo radiance scaling.
+    pub eta: f32,
+}
+
+impl BsdfSample {
+    /// The sample's Monte Carlo weight f |cos| / pdf.
+    #[inline]
+    pub fn weight(&self) -> Rgb {
+        self.f * (self.wi.z.abs() / self.pdf)
+    }
+}
+
+/// A scattering model with its textures already evaluated at one surface point.
+#[derive(Clone, Debug)]
+pub enum BsdfModel {
+    Diffuse(diffuse::Diffuse),
+}
+
+/// The BSDF at one point: a model plus the wrappers Mitsuba composes around it.
+#[derive(Clone, Debug)]
+pub struct Bsdf {
+    /// Model seen from the front (+z) side.
+    pub front: BsdfModel,
+    /// Model seen from the back side when two-sided (Mitsuba `twosided`); directions are
+    /// mirrored to +z before it is evaluated. `None`: one-sided, the back is black
+    /// (except for models that transmit, which see both sides themselves).
+    pub back: Option<BsdfModel>,
+    /// Mitsuba `mask`: probability that the surface is there at all.
+    pub opacity: f32,
+}
+
+impl BsdfModel {
+    pub fn flags(&self) -> LobeFlags {
+        match self {
+            BsdfModel::Diffuse(m) => m.flags(),
+        }
+    }
+    pub fn eval(&self, wo: Vec3, wi: Vec3, mode: TransportMode) -> Rgb {
+        match self {
+            BsdfModel::Diffuse(m) => m.eval(wo, wi, mode),
+        }
+    }
+    pub fn sample(&self, wo: Vec3, uc: f32, u: Vec2, mode: TransportMode) -> Option<BsdfSample> {
+        match self {
+            BsdfModel::Diffuse(m) => m.sample(wo, uc, u, mode),
+        }
+    }
+    pub fn pdf(&self, wo: Vec3, wi: Vec3, mode: TransportMode) -> f32 {
+        match self {
+            BsdfModel::Diffuse(m) => m.pdf(wo, wi, mode),
+        }
+    }
+    /// Hemispherical-average diffuse reflectance: what radiosity uses for this surface.
+    pub fn diffuse_albedo(&self) -> Rgb {
+        match self {
+            BsdfModel::Diffuse(m) => m.reflectance,
+        }
+    }
+    /// Whether the model scatters light arriving on its back side by itself (dielectrics).
+    pub fn handles_back_side(&self) -> bool {
+        self.flags().intersects(LobeFlags::TRANSMISSION)
+    }
+}
+
+#[inline]
+fn flip(w: Vec3) -> Vec3 {
+    Vec3::new(w.x, w.y, -w.z)
+}
+
+impl Bsdf {
+    pub fn new(front: BsdfModel) -> Self {
+        Bsdf { front, back: None, opacity: 1.0 }
+    }
+
+    pub fn flags(&self) -> LobeFlags {
+        let mut f = self.front.flags();
+        if let Some(b) = &self.back {
+            f = f | b.flags();
+        }
+        if self.opacity < 1.0 {
+            f = f | LobeFlags::NULL_TRANSMISSION;
+        }
+        f
+    }
+
+    /// The model for this side, and whether directions must be mirrored to +z.
+    #[inline]
+    fn side(&self, wo: Vec3) -> Option<(&BsdfModel, bool)> {
+        if wo.z >= 0.0 || self.front.handles_back_side() {
+            Some((&self.front, false))
+        } else {
+            self.back.as_ref().map(|b| (b, true))
+        }
+    }
+
+    pub fn eval(&self, wo: Vec3, wi: Vec3, mode: TransportMode) -> Rgb {
+        match self.side(wo) {
+            Some((m, false)) => m.eval(wo, wi, mode) * self.opacity,
+            Some((m, true)) => m.eval(flip(wo), flip(wi), mode) * self.opacity,
+            None => Rgb::BLACK,
+        }
+    }
+
+    pub fn pdf(&self, wo: Vec3, wi: Vec3, mode: TransportMode) -> f32 {
+        match self.side(wo) {
+            Some((m, false)) => m.pdf(wo, wi, mode) * self.opacity,
+            Some((m, true)) => m.pdf(flip(wo), flip(wi), mode) * self.opacity,
+            None => 0.0,
+        }
+    }
+
+    pub fn sample(&self, wo: Vec3, uc: f32, u: Vec2, mode: TransportMode) -> Option<BsdfSample> {
+        let mut uc = uc;
+        if self.opacity < 1.0 {
+            // Mask: pass through with probability 1 - opacity (delta, weight 1).
+            if uc >= self.opacity {
+                let wi = -wo;
+                return Some(BsdfSample {
+                    wi,
+                    f: Rgb::splat((1.0 - self.opacity) / wi.z.abs().max(1e-12)),
+                    pdf: 1.0 - self.opacity,
+                    lobe: LobeFlags::NULL_TRANSMISSION,
+                    eta: 1.0,
+                });
+            }
+            uc /= self.opacity;
+        }
+        let (m, flipped) = self.side(wo)?;
+        let mut s = if flipped { m.sample(flip(wo), uc, u, mode)? } else { m.sample(wo, uc, u, mode)? };
+        if flipped {
+            s.wi = flip(s.wi);
+        }
+        s.f *= self.opacity;
+        s.pdf *= self.opacity;
+        Some(s)
+    }
+
+    pub fn diffuse_albedo(&self) -> Rgb {
+        self.front.diffuse_albedo() * self.opacity
+    }
+}

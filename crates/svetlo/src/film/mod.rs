@@ -1,0 +1,171 @@
+//! The film: pixel reconstruction from samples with a filter, and the images a render writes.
+//!
+//! Camera-side integrators render tiles ([`FilmTile`]) in parallel and merge them in a fixed
+//! order, so floating-point sums, and thus images, do not depend on scheduling.
+
+pub mod filter;
+pub mod image;
+
+pub use self::image::Image;
+pub use filter::Filter;
+
+use crate::spectrum::Rgb;
+use glam::Vec2;
+
+#[derive(Clone, Copy, Debug, Default)]
+struct Pixel {
+    /// Sum of filter-weighted radiance.
+    sum: Rgb,
+    /// Sum of filter weights.
+    weight: f64,
+    /// Per-pixel sample statistics (unfiltered, the samples whose position falls in the pixel):
+    /// sum and sum of squares, for the per-sample variance image.
+    s1: Rgb,
+    s2: Rgb,
+    n: u32,
+}
+
+/// An image in the making, or a tile of one. Coordinates are the full film's raster.
+#[derive(Clone, Debug)]
+pub struct FilmTile {
+    pub x0: u32,
+    pub y0: u32,
+    pub x1: u32,
+    pub y1: u32,
+    filter: Filter,
+    pixels: Vec<Pixel>,
+}
+
+impl FilmTile {
+    pub fn new(x0: u32, y0: u32, x1: u32, y1: u32, filter: Filter) -> Self {
+        FilmTile { x0, y0, x1, y1, filter, pixels: vec![Pixel::default(); ((x1 - x0) * (y1 - y0)) as usize] }
+    }
+
+    /// Add a sample taken at raster position `p` (pixels, origin top-left). The filter spreads it
+    /// over every pixel of this tile within its radius.
+    pub fn add_sample(&mut self, p: Vec2, l: Rgb) {
+        let l = if l.is_finite() { l } else { Rgb::BLACK };
+        let r = self.filter.radius();
+        let (w, h) = (self.x1 - self.x0, self.y1 - self.y0);
+        // The pixel that owns the sample, for variance statistics.
+        let (ox, oy) = (p.x.floor() as i64 - self.x0 as i64, p.y.floor() as i64 - self.y0 as i64);
+        if ox >= 0 && oy >= 0 && (ox as u32) < w && (oy as u32) < h {
+            let px = &mut self.pixels[(oy as u32 * w + ox as u32) as usize];
+            px.s1 += l;
+            px.s2 += l * l;
+            px.n += 1;
+        }
+        let xmin = ((p.x - 0.5 - r).ceil() as i64).max(self.x0 as i64);
+        let xmax = ((p.x - 0.5 + r).floor() as i64).min(self.x1 as i64 - 1);
+        let ymin = ((p.y - 0.5 - r).ceil() as i64).max(self.y0 as i64);
+        let ymax = ((p.y - 0.5 + r).floor() as i64).min(self.y1 as i64 - 1);
+        for y in ymin..=ymax {
+            let fy = self.filter.eval(y as f32 + 0.5 - p.y);
+            if fy == 0.0 {
+                continue;
+            }
+            for x in xmin..=xmax {
+                let wgt = fy * self.filter.eval(x as f32 + 0.5 - p.x);
+                if wgt == 0.0 {
+                    continue;
+                }
+                let idx = ((y as u32 - self.y0) * w + (x as u32 - self.x0)) as usize;
+                let px = &mut self.pixels[idx];
+                px.sum += l * wgt;
+                px.weight += wgt as f64;
+            }
+        }
+    }
+}
+
+/// The whole film: one tile covering the image.
+#[derive(Clone, Debug)]
+pub struct Film {
+    pub width: u32,
+    pub height: u32,
+    pub filter: Filter,
+    full: FilmTile,
+    /// Light-side estimators (light tracing, BDPT t=1, MLT) splat here; the value is divided by
+    /// `splat_scale` when the image is developed (e.g. the number of light paths per pixel).
+    splats: Vec<Rgb>,
+    pub splat_scale: f32,
+    /// Samples per pixel actually taken (the render may have been cancelled).
+    pub spp_done: u32,
+}
+
+impl Film {
+    pub fn new(width: u32, height: u32, filter: Filter) -> Self {
+        Film { width, height, filter, full: FilmTile::new(0, 0, width, height, filter), splats: Vec::new(), splat_scale: 1.0, spp_done: 0 }
+    }
+
+    /// A tile covering `[x0,x1) x [y0,y1)` of this film, to be filled and merged back.
+    pub fn tile(&self, x0: u32, y0: u32, x1: u32, y1: u32) -> FilmTile {
+        // Extend by the filter radius so samples near the border reach neighbours.
+        let r = self.filter.radius().ceil() as u32;
+        FilmTile::new(x0.saturating_sub(r), y0.saturating_sub(r), (x1 + r).min(self.width), (y1 + r).min(self.height), self.filter)
+    }
+
+    pub fn merge_tile(&mut self, t: &FilmTile) {
+        let tw = t.x1 - t.x0;
+        for y in t.y0..t.y1 {
+            for x in t.x0..t.x1 {
+                let s = &t.pixels[((y - t.y0) * tw + (x - t.x0)) as usize];
+                let d = &mut self.full.pixels[(y * self.width + x) as usize];
+                d.sum += s.sum;
+                d.weight += s.weight;
+                d.s1 += s.s1;
+                d.s2 += s.s2;
+                d.n += s.n;
+            }
+        }
+    }
+
+    pub fn add_sample(&mut self, p: Vec2, l: Rgb) {
+        self.full.add_sample(p, l);
+    }
+
+    /// Add an unfiltered contribution at raster position `p` (box reconstruction).
+    pub fn splat(&mut self, p: Vec2, l: Rgb) {
+        if !l.is_finite() || p.x < 0.0 || p.y < 0.0 {
+            return;
+        }
+        let (x, y) = (p.x as u32, p.y as u32);
+        if x >= self.width || y >= self.height {
+            return;
+        }
+        if self.splats.is_empty() {
+            self.splats = vec![Rgb::BLACK; (self.width * self.height) as usize];
+        }
+        self.splats[(y * self.width + x) as usize] += l;
+    }
+
+    /// The developed image: filtered samples plus scaled splats.
+    pub fn image(&self) -> Image {
+        let mut data: Vec<Rgb> = self.full.pixels.iter().map(|p| if p.weight > 0.0 { p.sum / p.weight as f32 } else { Rgb::BLACK }).collect();
+        if !self.splats.is_empty() {
+            for (d, s) in data.iter_mut().zip(&self.splats) {
+                *d += *s / self.splat_scale;
+            }
+        }
+        Image::new(self.width as usize, self.height as usize, data)
+    }
+
+    /// Per-sample variance of the radiance of the samples in each pixel (unbiased estimator),
+    /// the convention of Mitsuba's `_var` reference images.
+    pub fn variance_image(&self) -> Image {
+        let data = self
+            .full
+            .pixels
+            .iter()
+            .map(|p| {
+                if p.n < 2 {
+                    return Rgb::BLACK;
+                }
+                let n = p.n as f32;
+                let mean = p.s1 / n;
+                ((p.s2 - mean * mean * n) / (n - 1.0)).map(|v| v.max(0.0))
+            })
+            .collect();
+        Image::new(self.width as usize, self.height as usize, data)
+    }
+}

@@ -1,0 +1,82 @@
+//! Indexed triangle meshes in world space, with optional per-vertex normals and uvs.
+
+use super::Aabb;
+use glam::{Vec2, Vec3};
+
+#[derive(Clone, Debug, Default)]
+pub struct TriangleMesh {
+    pub positions: Vec<Vec3>,
+    /// Per-vertex shading normals (world space, unit), or empty.
+    pub normals: Vec<Vec3>,
+    /// Per-vertex texture coordinates, or empty.
+    pub uvs: Vec<Vec2>,
+    pub indices: Vec<[u32; 3]>,
+}
+
+impl TriangleMesh {
+    pub fn triangle_count(&self) -> usize {
+        self.indices.len()
+    }
+    #[inline]
+    pub fn vertices(&self, tri: usize) -> [Vec3; 3] {
+        let [a, b, c] = self.indices[tri];
+        [self.positions[a as usize], self.positions[b as usize], self.positions[c as usize]]
+    }
+    pub fn triangle_area(&self, tri: usize) -> f32 {
+        let [p0, p1, p2] = self.vertices(tri);
+        0.5 * (p1 - p0).cross(p2 - p0).length()
+    }
+    pub fn area(&self) -> f32 {
+        (0..self.triangle_count()).map(|i| self.triangle_area(i)).sum()
+    }
+    pub fn bounds(&self) -> Aabb {
+        Aabb::from_points(&self.positions)
+    }
+    /// Apply an affine transform (points, and normals by the inverse transpose).
+    pub fn transform(&mut self, m: &glam::Mat4) {
+        let inv = m.inverse();
+        for p in &mut self.positions {
+            *p = m.transform_point3(*p);
+        }
+        for n in &mut self.normals {
+            *n = crate::math::xform_normal(&inv, *n);
+        }
+        if m.determinant() < 0.0 {
+            // A mirroring transform flips winding; keep geometric normals consistent with shading ones.
+            for t in &mut self.indices {
+                t.swap(1, 2);
+            }
+        }
+    }
+    /// Interpolated attributes at barycentrics (b1, b2): (geometric normal, shading normal, uv, dp/du).
+    pub fn surface(&self, tri: usize, b1: f32, b2: f32) -> (Vec3, Vec3, Vec2, Vec3) {
+        let [i0, i1, i2] = self.indices[tri].map(|i| i as usize);
+        let (p0, p1, p2) = (self.positions[i0], self.positions[i1], self.positions[i2]);
+        let b0 = 1.0 - b1 - b2;
+        let ng = (p1 - p0).cross(p2 - p0).normalize_or_zero();
+        let (uv, dpdu) = if self.uvs.is_empty() {
+            (Vec2::new(b1, b2), p1 - p0)
+        } else {
+            let (t0, t1, t2) = (self.uvs[i0], self.uvs[i1], self.uvs[i2]);
+            let uv = t0 * b0 + t1 * b1 + t2 * b2;
+            let (du1, du2) = (t1 - t0, t2 - t0);
+            let det = du1.x * du2.y - du1.y * du2.x;
+            let dpdu = if det.abs() > 1e-12 { ((p1 - p0) * du2.y - (p2 - p0) * du1.y) / det } else { p1 - p0 };
+            (uv, dpdu)
+        };
+        let ns = if self.normals.is_empty() {
+            ng
+        } else {
+            let n = (self.normals[i0] * b0 + self.normals[i1] * b1 + self.normals[i2] * b2).normalize_or_zero();
+            if n == Vec3::ZERO {
+                ng
+            } else {
+                n
+            }
+        };
+        // The geometric normal follows the shading normal's side, as in Mitsuba, so that
+        // one-sided materials and emitters face where the mesh's normals say.
+        let ng = if !self.normals.is_empty() && ng.dot(ns) < 0.0 { -ng } else { ng };
+        (ng, ns, uv, dpdu)
+    }
+}

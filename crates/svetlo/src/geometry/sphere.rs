@@ -1,0 +1,66 @@
+//! Analytic sphere. Its normal points outward (inward if `flip_normals`).
+
+use super::Aabb;
+use crate::math::{INV_2PI, INV_PI, PI};
+use glam::{Vec2, Vec3};
+
+#[derive(Clone, Copy, Debug)]
+pub struct Sphere {
+    pub center: Vec3,
+    pub radius: f32,
+    pub flip_normals: bool,
+}
+
+impl Sphere {
+    pub fn bounds(&self) -> Aabb {
+        Aabb { min: self.center - Vec3::splat(self.radius), max: self.center + Vec3::splat(self.radius) }
+    }
+    pub fn area(&self) -> f32 {
+        4.0 * PI * self.radius * self.radius
+    }
+    /// Nearest hit distance in `(0, t_max)`. Solved in f64 relative to the center for accuracy.
+    #[inline]
+    pub fn intersect(&self, o: Vec3, d: Vec3, t_max: f32) -> Option<f32> {
+        let oc = (o - self.center).as_dvec3();
+        let d = d.as_dvec3();
+        let a = d.length_squared();
+        let b = oc.dot(d);
+        let r = self.radius as f64;
+        // Numerically stable discriminant (Hearn & Baker / Ray Tracing Gems ch. 7).
+        let l = oc - d * (b / a);
+        let disc = r * r - l.length_squared();
+        if disc < 0.0 {
+            return None;
+        }
+        let c = oc.length_squared() - r * r;
+        let q = -(b + b.signum() * (a * disc).sqrt());
+        let (mut t0, mut t1) = (c / q, q / a);
+        if q == 0.0 {
+            t0 = 0.0;
+            t1 = 0.0;
+        }
+        if t0 > t1 {
+            std::mem::swap(&mut t0, &mut t1);
+        }
+        let t_max = t_max as f64;
+        if t0 > 0.0 && t0 < t_max {
+            Some(t0 as f32)
+        } else if t1 > 0.0 && t1 < t_max {
+            Some(t1 as f32)
+        } else {
+            None
+        }
+    }
+    /// (geometric normal, uv, dp/du) at a point on the sphere. uv follows Mitsuba's convention.
+    pub fn surface(&self, p: Vec3) -> (Vec3, Vec2, Vec3) {
+        let local = (p - self.center) / self.radius;
+        let n = local.normalize_or_zero();
+        let phi = n.y.atan2(n.x);
+        let phi = if phi < 0.0 { phi + 2.0 * PI } else { phi };
+        let theta = n.z.clamp(-1.0, 1.0).acos();
+        let uv = Vec2::new(phi * INV_2PI, theta * INV_PI);
+        let dpdu = Vec3::new(-n.y, n.x, 0.0) * (2.0 * PI * self.radius);
+        let n = if self.flip_normals { -n } else { n };
+        (n, uv, dpdu)
+    }
+}

@@ -1,0 +1,210 @@
+//! Integrators: each method of the lecture renders a [`Scene`] into a [`Film`].
+//!
+//! Camera-side methods implement [`PixelEstimator`] (radiance along one camera ray) and share
+//! the parallel, deterministic, cancellable driver [`render_pixels`].
+
+pub mod direct;
+pub mod path;
+
+use crate::error::{Error, Result};
+use crate::film::{Film, Filter};
+use crate::sampling::{sampler::make_sampler, Sampler, SamplerKind};
+use crate::scene::Scene;
+use crate::spectrum::Rgb;
+use glam::Vec2;
+use rayon::prelude::*;
+use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
+use std::time::{Duration, Instant};
+
+/// Settings every Monte Carlo integrator shares, so that they solve the same problem.
+#[derive(Clone, Debug)]
+pub struct RenderSettings {
+    /// Samples per pixel (camera methods) or the method's equivalent; the maximum with `time_limit`.
+    pub spp: u32,
+    /// Stop after this much wall time, keeping whole passes.
+    pub time_limit: Option<Duration>,
+    /// Mitsuba 3's meaning: path segments from the camera; -1 unbounded.
+    pub max_depth: i32,
+    /// Russian roulette starts at this depth.
+    pub rr_depth: i32,
+    pub seed: u64,
+    /// Worker threads; 0 = all cores.
+    pub threads: usize,
+    pub sampler: SamplerKind,
+    pub filter: Filter,
+    /// Do not show emitters seen directly by the camera.
+    pub hide_emitters: bool,
+}
+
+impl Default for RenderSettings {
+    fn default() -> Self {
+        RenderSettings {
+            spp: 16,
+            time_limit: None,
+            max_depth: -1,
+            rr_depth: 5,
+            seed: 0,
+            threads: 0,
+            sampler: SamplerKind::Independent,
+            filter: Filter::default(),
+            hide_emitters: false,
+        }
+    }
+}
+
+impl RenderSettings {
+    /// The scene file's settings.
+    pub fn from_scene(scene: &Scene) -> Self {
+        let s = &scene.settings;
+        RenderSettings {
+            spp: s.spp,
+            max_depth: s.max_depth,
+            rr_depth: s.rr_depth,
+            seed: s.seed,
+            sampler: s.sampler,
+            filter: s.filter,
+            hide_emitters: s.hide_emitters,
+            ..Default::default()
+        }
+    }
+
+    pub fn validate(&self) -> Result<()> {
+        if self.spp == 0 {
+            return Err(Error::Settings("spp must be at least 1".into()));
+        }
+        if self.max_depth < -1 {
+            return Err(Error::Settings(format!("max_depth must be -1 (unbounded) or >= 0, got {}", self.max_depth)));
+        }
+        if self.rr_depth < 1 {
+            return Err(Error::Settings(format!("rr_depth must be >= 1, got {}", self.rr_depth)));
+        }
+        Ok(())
+    }
+
+    /// Whether a path may have `segments` segments.
+    #[inline]
+    pub fn depth_allows(&self, segments: i32) -> bool {
+        self.max_depth < 0 || segments <= self.max_depth
+    }
+}
+
+/// Progress of a render, shared with whoever shows it; setting `cancel` stops the render
+/// after the current pass, keeping the samples done.
+#[derive(Debug, Default)]
+pub struct Progress {
+    /// Work units done and planned (samples x pixels, or the method's own unit).
+    pub done: AtomicU64,
+    pub total: AtomicU64,
+    pub cancel: AtomicBool,
+}
+
+impl Progress {
+    pub fn new() -> Self {
+        Self::default()
+    }
+    pub fn cancelled(&self) -> bool {
+        self.cancel.load(Ordering::Relaxed)
+    }
+    pub fn fraction(&self) -> f64 {
+        let t = self.total.load(Ordering::Relaxed);
+        if t == 0 {
+            0.0
+        } else {
+            self.done.load(Ordering::Relaxed) as f64 / t as f64
+        }
+    }
+}
+
+pub trait Integrator: Sync {
+    fn render(&self, scene: &Scene, settings: &RenderSettings, progress: &Progress) -> Result<Film>;
+}
+
+/// Radiance along one camera ray: the core of every camera-side method.
+pub trait PixelEstimator: Sync {
+    fn li(&self, scene: &Scene, ray: &crate::geometry::Ray, sampler: &mut dyn Sampler, settings: &RenderSettings) -> Rgb;
+}
+
+const TILE: u32 = 16;
+
+/// Run a pixel estimator over the film: passes of a few samples per pixel over all tiles in
+/// parallel, tiles merged in a fixed order (deterministic for any thread count), stopping early
+/// on cancellation or when the time budget is spent. Each pass is kept whole.
+pub fn render_pixels(scene: &Scene, settings: &RenderSettings, progress: &Progress, est: &dyn PixelEstimator) -> Result<Film> {
+    settings.validate()?;
+    let cam = &scene.camera;
+    let (w, h) = (cam.width, cam.height);
+    let mut film = Film::new(w, h, settings.filter);
+    let tiles: Vec<(u32, u32, u32, u32)> = (0..h.div_ceil(TILE))
+        .flat_map(|ty| (0..w.div_ceil(TILE)).map(move |tx| (tx * TILE, ty * TILE, ((tx + 1) * TILE).min(w), ((ty + 1) * TILE).min(h))))
+        .collect();
+    progress.total.store(settings.spp as u64 * w as u64 * h as u64, Ordering::Relaxed);
+    let pool = rayon::ThreadPoolBuilder::new().num_threads(settings.threads).build().map_err(|e| Error::Settings(format!("thread pool: {e}")))?;
+    let start = Instant::now();
+    let proto = make_sampler(settings.sampler, settings.spp, settings.seed);
+    let mut spp_done = 0u32;
+    let mut pass_spp = 1u32;
+    while spp_done < settings.spp {
+        if progress.cancelled() || settings.time_limit.is_some_and(|t| start.elapsed() >= t) {
+            break;
+        }
+        let n = pass_spp.min(settings.spp - spp_done);
+        let s0 = spp_done;
+        let film_ref = &film;
+        let results: Vec<Option<crate::film::FilmTile>> = pool.install(|| {
+            tiles
+                .par_iter()
+                .map(|&(x0, y0, x1, y1)| {
+                    if progress.cancelled() {
+                        return None;
+                    }
+                    let mut tile = film_ref.tile(x0, y0, x1, y1);
+                    let mut sampler = proto.clone_box();
+                    for y in y0..y1 {
+                        for x in x0..x1 {
+                            for s in s0..s0 + n {
+                                sampler.start_pixel_sample(x, y, s);
+                                let pf = sampler.next_2d();
+                                let lens = sampler.next_2d();
+                                let time = sampler.next_1d();
+                                let raster = Vec2::new(x as f32 + pf.x, y as f32 + pf.y);
+                                let ray = cam.generate_ray(raster, lens, time);
+                                let l = est.li(scene, &ray, sampler.as_mut(), settings);
+                                tile.add_sample(raster, l);
+                            }
+                        }
+                    }
+                    progress.done.fetch_add(n as u64 * ((x1 - x0) * (y1 - y0)) as u64, Ordering::Relaxed);
+                    Some(tile)
+                })
+                .collect()
+        });
+        if results.iter().any(|t| t.is_none()) {
+            break; // cancelled mid-pass: drop the incomplete pass
+        }
+        for t in results.iter().flatten() {
+            film.merge_tile(t);
+        }
+        spp_done += n;
+        film.spp_done = spp_done;
+        // Grow passes so that per-pass overhead vanishes, while keeping cancellation responsive.
+        let elapsed = start.elapsed().as_secs_f64();
+        let per_spp = elapsed / spp_done as f64;
+        pass_spp = if per_spp > 0.0 { ((0.5 / per_spp) as u32).clamp(1, 64) } else { 64 };
+        if let Some(t) = settings.time_limit {
+            let left = t.as_secs_f64() - elapsed;
+            if per_spp > 0.0 {
+                pass_spp = pass_spp.min(((left / per_spp) as u32).max(1));
+            }
+        }
+    }
+    Ok(film)
+}
+
+/// The integrator a name selects (scene file `<integrator type=...>` or `--integrator`).
+pub fn by_name(name: &str) -> Result<Box<dyn Integrator>> {
+    match name {
+        "path" => Ok(Box::new(path::PathTracer)),
+        "direct" => Ok(Box::new(direct::DirectIntegrator::default())),
+        other => Err(Error::Settings(format!("unknown integrator '{other}' (available: path, direct)"))),
+    }
+}

@@ -1,0 +1,141 @@
+//! Unidirectional path tracing: next-event estimation and BSDF sampling combined by
+//! multiple importance sampling (power heuristic), Russian roulette.
+//!
+//! Estimator measure: solid angle at every vertex. Light selection by power; the light
+//! strategy's density is `pmf(light) * pdf_li` in solid angle.
+
+use super::{render_pixels, Integrator, PixelEstimator, Progress, RenderSettings};
+use crate::bsdf::TransportMode;
+use crate::error::Result;
+use crate::film::Film;
+use crate::geometry::Ray;
+use crate::sampling::{power_heuristic, Sampler};
+use crate::scene::Scene;
+use crate::spectrum::Rgb;
+use glam::Vec3;
+
+#[derive(Clone, Copy, Debug, Default)]
+pub struct PathTracer;
+
+impl Integrator for PathTracer {
+    fn render(&self, scene: &Scene, settings: &RenderSettings, progress: &Progress) -> Result<Film> {
+        render_pixels(scene, settings, progress, self)
+    }
+}
+
+/// Next-event estimation from a surface point: one light chosen by power, one point on it,
+/// weighted against BSDF sampling (`counts`: samples of each strategy). Returns the contribution without the path throughput.
+#[allow(clippy::too_many_arguments)]
+pub(crate) fn sample_light_mis(
+    scene: &Scene,
+    p: Vec3,
+    ng: Vec3,
+    frame: &crate::math::Frame,
+    wo: Vec3,
+    bsdf: &crate::bsdf::Bsdf,
+    u_light: f32,
+    u: glam::Vec2,
+    counts: (f32, f32),
+) -> Rgb {
+    if scene.lights.is_empty() {
+        return Rgb::BLACK;
+    }
+    let (li, pmf, _) = scene.light_distribution.sample_discrete(u_light);
+    if pmf <= 0.0 {
+        return Rgb::BLACK;
+    }
+    let light = &scene.lights[li];
+    let Some(ls) = light.sample_li(p, u, &scene.bounds) else { return Rgb::BLACK };
+    if ls.pdf <= 0.0 || ls.li.is_black() {
+        return Rgb::BLACK;
+    }
+    let wi = frame.to_local(ls.wi);
+    let f = bsdf.eval(wo, wi, TransportMode::Radiance);
+    if f.is_black() {
+        return Rgb::BLACK;
+    }
+    let blocked = if ls.infinite { scene.occluded_dir(p, ng, ls.wi) } else { scene.occluded(p, ng, ls.p) };
+    if blocked {
+        return Rgb::BLACK;
+    }
+    let pdf_light = pmf * ls.pdf;
+    let w = if light.is_delta() { 1.0 } else { power_heuristic(counts.0, pdf_light, counts.1, bsdf.pdf(wo, wi, TransportMode::Radiance)) };
+    f * ls.li * (wi.z.abs() * w / pdf_light)
+}
+
+impl PixelEstimator for PathTracer {
+    fn li(&self, scene: &Scene, camera_ray: &Ray, sampler: &mut dyn Sampler, settings: &RenderSettings) -> Rgb {
+        let mut l = Rgb::BLACK;
+        let mut beta = Rgb::WHITE;
+        let mut ray = *camera_ray;
+        // Segments traced so far; the camera ray is segment 1.
+        let mut depth = 0i32;
+        // State of the previous vertex, for MIS on emitters found by BSDF sampling.
+        let mut prev_specular = true;
+        let mut prev_pdf = 0.0f32;
+        let mut prev_p = ray.o;
+        let mut eta_scale = 1.0f32;
+        loop {
+            depth += 1;
+            let hide = depth == 1 && settings.hide_emitters;
+            let Some(si) = scene.intersect(&ray) else {
+                if !hide {
+                    for &ei in &scene.environment_lights {
+                        let light = &scene.lights[ei as usize];
+                        let le = light.le_escaped(ray.d);
+                        if le.is_black() {
+                            continue;
+                        }
+                        let w = if prev_specular { 1.0 } else { power_heuristic(1.0, prev_pdf, 1.0, scene.light_pmf(ei) * light.pdf_li_escaped(ray.d)) };
+                        l += beta * le * w;
+                    }
+                }
+                break;
+            };
+            if let Some((li, area)) = scene.area_light(&si) {
+                let le = area.l(si.ng, si.uv, si.wo);
+                if !le.is_black() && !hide {
+                    let w = if prev_specular { 1.0 } else { power_heuristic(1.0, prev_pdf, 1.0, scene.light_pmf(li) * area.pdf_li(prev_p, si.p, si.ng)) };
+                    l += beta * le * w;
+                }
+            }
+            // Another segment must fit in max_depth for anything more to count.
+            if !settings.depth_allows(depth + 1) {
+                break;
+            }
+            let bsdf = scene.material(&si).bsdf(si.uv);
+            let wo = si.to_local(si.wo);
+            let u_light = sampler.next_1d();
+            let u_l2 = sampler.next_2d();
+            if bsdf.flags().has_non_specular() {
+                l += beta * sample_light_mis(scene, si.p, si.ng, &si.shading, wo, &bsdf, u_light, u_l2, (1.0, 1.0));
+            }
+            let uc = sampler.next_1d();
+            let u = sampler.next_2d();
+            let Some(bs) = bsdf.sample(wo, uc, u, TransportMode::Radiance) else { break };
+            if bs.pdf <= 0.0 || bs.f.is_black() {
+                break;
+            }
+            beta *= bs.weight();
+            if bs.lobe.contains(crate::bsdf::LobeFlags::TRANSMISSION) {
+                eta_scale *= bs.eta * bs.eta;
+            }
+            prev_specular = bs.lobe.is_specular();
+            prev_pdf = bs.pdf;
+            prev_p = si.p;
+            ray = si.spawn_ray(si.to_world(bs.wi));
+            let u_rr = sampler.next_1d();
+            if depth >= settings.rr_depth {
+                let q = (beta * eta_scale).max_component().min(0.95);
+                if u_rr >= q {
+                    break;
+                }
+                beta /= q;
+            }
+            if beta.is_black() {
+                break;
+            }
+        }
+        l
+    }
+}

@@ -1,0 +1,7 @@
+//! Reading scenes and meshes, reading and writing images. Nothing else touches files.
+
+pub mod image_io;
+pub mod mitsuba;
+
+pub use image_io::{read_image, write_exr, write_image, write_png};
+pub use mitsuba::load_scene;

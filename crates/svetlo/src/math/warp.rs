@@ -1,0 +1,134 @@
+//! Warps from the unit square to other domains, each with its density.
+//! Densities are per unit area of the target domain (solid angle for directions).
+
+use super::{safe_sqrt, INV_2PI, INV_4PI, INV_PI, PI};
+use glam::{Vec2, Vec3};
+
+/// Shirley-Chiu concentric map to the unit disk.
+pub fn square_to_uniform_disk_concentric(u: Vec2) -> Vec2 {
+    let o = 2.0 * u - Vec2::ONE;
+    if o.x == 0.0 && o.y == 0.0 {
+        return Vec2::ZERO;
+    }
+    let (r, theta) = if o.x.abs() > o.y.abs() { (o.x, (PI / 4.0) * (o.y / o.x)) } else { (o.y, PI / 2.0 - (PI / 4.0) * (o.x / o.y)) };
+    Vec2::new(r * theta.cos(), r * theta.sin())
+}
+
+pub fn square_to_uniform_disk_concentric_pdf(p: Vec2) -> f32 {
+    if p.length_squared() <= 1.0 {
+        INV_PI
+    } else {
+        0.0
+    }
+}
+
+pub fn square_to_uniform_sphere(u: Vec2) -> Vec3 {
+    let z = 1.0 - 2.0 * u.y;
+    let r = safe_sqrt(1.0 - z * z);
+    let phi = 2.0 * PI * u.x;
+    Vec3::new(r * phi.cos(), r * phi.sin(), z)
+}
+
+pub fn square_to_uniform_sphere_pdf() -> f32 {
+    INV_4PI
+}
+
+pub fn square_to_uniform_hemisphere(u: Vec2) -> Vec3 {
+    let z = u.y;
+    let r = safe_sqrt(1.0 - z * z);
+    let phi = 2.0 * PI * u.x;
+    Vec3::new(r * phi.cos(), r * phi.sin(), z)
+}
+
+pub fn square_to_uniform_hemisphere_pdf(w: Vec3) -> f32 {
+    if w.z >= 0.0 {
+        INV_2PI
+    } else {
+        0.0
+    }
+}
+
+/// Malley's method: cosine-weighted hemisphere around +z.
+pub fn square_to_cosine_hemisphere(u: Vec2) -> Vec3 {
+    let d = square_to_uniform_disk_concentric(u);
+    let z = safe_sqrt(1.0 - d.length_squared());
+    Vec3::new(d.x, d.y, z)
+}
+
+pub fn square_to_cosine_hemisphere_pdf(w: Vec3) -> f32 {
+    w.z.max(0.0) * INV_PI
+}
+
+/// Uniform directions inside a cone of half-angle acos(cos_max) around +z.
+pub fn square_to_uniform_cone(u: Vec2, cos_max: f32) -> Vec3 {
+    let cos_t = (1.0 - u.y) + u.y * cos_max;
+    let sin_t = safe_sqrt(1.0 - cos_t * cos_t);
+    let phi = 2.0 * PI * u.x;
+    Vec3::new(sin_t * phi.cos(), sin_t * phi.sin(), cos_t)
+}
+
+pub fn square_to_uniform_cone_pdf(w: Vec3, cos_max: f32) -> f32 {
+    if w.z >= cos_max {
+        1.0 / (2.0 * PI * (1.0 - cos_max))
+    } else {
+        0.0
+    }
+}
+
+/// Barycentrics (b1, b2) uniform over a triangle (Heitz's low-distortion map).
+pub fn square_to_uniform_triangle(u: Vec2) -> Vec2 {
+    let (b0, b1);
+    if u.x < u.y {
+        b0 = u.x / 2.0;
+        b1 = u.y - b0;
+    } else {
+        b1 = u.y / 2.0;
+        b0 = u.x - b1;
+    }
+    Vec2::new(b0, b1)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// Integrate a pdf over the sphere by a fine midpoint rule in (cos theta, phi): must be 1.
+    fn integrate_sphere(pdf: impl Fn(Vec3) -> f32) -> f64 {
+        let (nt, np) = (400, 400);
+        let mut sum = 0.0f64;
+        for i in 0..nt {
+            let z = -1.0 + 2.0 * (i as f64 + 0.5) / nt as f64;
+            for j in 0..np {
+                let phi = 2.0 * std::f64::consts::PI * (j as f64 + 0.5) / np as f64;
+                let r = (1.0 - z * z).sqrt();
+                let w = Vec3::new((r * phi.cos()) as f32, (r * phi.sin()) as f32, z as f32);
+                sum += pdf(w) as f64;
+            }
+        }
+        sum * 4.0 * std::f64::consts::PI / (nt * np) as f64
+    }
+
+    #[test]
+    fn pdfs_integrate_to_one() {
+        assert!((integrate_sphere(|_| square_to_uniform_sphere_pdf()) - 1.0).abs() < 1e-3);
+        assert!((integrate_sphere(square_to_uniform_hemisphere_pdf) - 1.0).abs() < 1e-2);
+        assert!((integrate_sphere(square_to_cosine_hemisphere_pdf) - 1.0).abs() < 1e-3);
+        assert!((integrate_sphere(|w| square_to_uniform_cone_pdf(w, 0.5)) - 1.0).abs() < 1e-2);
+    }
+
+    #[test]
+    fn warps_land_in_their_domain() {
+        for i in 0..32 {
+            for j in 0..32 {
+                let u = Vec2::new((i as f32 + 0.5) / 32.0, (j as f32 + 0.5) / 32.0);
+                assert!(square_to_uniform_disk_concentric(u).length() <= 1.0 + 1e-6);
+                assert!((square_to_uniform_sphere(u).length() - 1.0).abs() < 1e-5);
+                let c = square_to_cosine_hemisphere(u);
+                assert!(c.z >= 0.0 && (c.length() - 1.0).abs() < 1e-5);
+                let b = square_to_uniform_triangle(u);
+                assert!(b.x >= 0.0 && b.y >= 0.0 && b.x + b.y <= 1.0 + 1e-6);
+                assert!(square_to_uniform_cone(u, 0.8).z >= 0.8 - 1e-6);
+            }
+        }
+    }
+}

@@ -1,0 +1,151 @@
+//! Piecewise-constant distributions: discrete choice (lights, triangles) and 2-D images.
+
+use glam::Vec2;
+
+#[derive(Clone, Debug)]
+pub struct Distribution1D {
+    /// Unnormalised function values.
+    pub func: Vec<f32>,
+    /// Normalised CDF, `func.len() + 1` entries from 0 to 1.
+    pub cdf: Vec<f32>,
+    pub integral: f32,
+}
+
+impl Distribution1D {
+    /// Values must be finite and non-negative; an all-zero function becomes uniform.
+    pub fn new(func: &[f32]) -> Self {
+        let n = func.len();
+        let mut cdf = vec![0.0f32; n + 1];
+        let mut acc = 0.0f64;
+        for i in 0..n {
+            acc += func[i].max(0.0) as f64 / n as f64;
+            cdf[i + 1] = acc as f32;
+        }
+        let integral = acc as f32;
+        if integral > 0.0 {
+            for c in cdf.iter_mut().skip(1) {
+                *c /= integral;
+            }
+        } else {
+            for (i, c) in cdf.iter_mut().enumerate() {
+                *c = i as f32 / n.max(1) as f32;
+            }
+        }
+        if n > 0 {
+            cdf[n] = 1.0;
+        }
+        Distribution1D { func: func.to_vec(), cdf, integral }
+    }
+    pub fn len(&self) -> usize {
+        self.func.len()
+    }
+    pub fn is_empty(&self) -> bool {
+        self.func.is_empty()
+    }
+    /// Probability of choosing entry `i` when sampling discretely.
+    #[inline]
+    pub fn pmf(&self, i: usize) -> f32 {
+        self.cdf[i + 1] - self.cdf[i]
+    }
+    #[inline]
+    fn find(&self, u: f32) -> usize {
+        // Largest i with cdf[i] <= u, and a non-empty interval.
+        let mut i = self.cdf.partition_point(|&c| c <= u).saturating_sub(1);
+        i = i.min(self.func.len() - 1);
+        while i > 0 && self.pmf(i) == 0.0 {
+            i -= 1;
+        }
+        while self.pmf(i) == 0.0 && i + 1 < self.func.len() {
+            i += 1;
+        }
+        i
+    }
+    /// Discrete sample: (index, pmf, u remapped to [0,1) within the chosen interval).
+    #[inline]
+    pub fn sample_discrete(&self, u: f32) -> (usize, f32, f32) {
+        let i = self.find(u);
+        let p = self.pmf(i);
+        let ur = if p > 0.0 { ((u - self.cdf[i]) / p).clamp(0.0, crate::math::ONE_MINUS_EPSILON) } else { 0.0 };
+        (i, p, ur)
+    }
+    /// Continuous sample in [0,1): (x, pdf, index).
+    #[inline]
+    pub fn sample_continuous(&self, u: f32) -> (f32, f32, usize) {
+        let (i, p, ur) = self.sample_discrete(u);
+        let n = self.func.len() as f32;
+        let x = ((i as f32 + ur) / n).min(crate::math::ONE_MINUS_EPSILON);
+        let pdf = if self.integral > 0.0 { self.func[i] / self.integral } else { 1.0 };
+        let _ = p;
+        (x, pdf, i)
+    }
+    /// Density of `sample_continuous` at x in [0,1).
+    pub fn pdf_continuous(&self, x: f32) -> f32 {
+        let n = self.func.len();
+        let i = ((x * n as f32) as usize).min(n - 1);
+        if self.integral > 0.0 {
+            self.func[i] / self.integral
+        } else {
+            1.0
+        }
+    }
+}
+
+/// A 2-D piecewise-constant distribution over [0,1]^2 (rows by v, columns by u).
+#[derive(Clone, Debug)]
+pub struct Distribution2D {
+    conditional: Vec<Distribution1D>,
+    marginal: Distribution1D,
+}
+
+impl Distribution2D {
+    /// `func` is row-major, `height` rows of `width` values.
+    pub fn new(func: &[f32], width: usize, height: usize) -> Self {
+        let conditional: Vec<Distribution1D> = (0..height).map(|y| Distribution1D::new(&func[y * width..(y + 1) * width])).collect();
+        let marg: Vec<f32> = conditional.iter().map(|c| c.integral).collect();
+        Distribution2D { marginal: Distribution1D::new(&marg), conditional }
+    }
+    /// Returns the point in [0,1)^2 and its density w.r.t. area in [0,1]^2.
+    pub fn sample(&self, u: Vec2) -> (Vec2, f32) {
+        let (y, py, row) = self.marginal.sample_continuous(u.y);
+        let (x, px, _) = self.conditional[row].sample_continuous(u.x);
+        (Vec2::new(x, y), px * py)
+    }
+    pub fn pdf(&self, p: Vec2) -> f32 {
+        let h = self.conditional.len();
+        let row = ((p.y * h as f32) as usize).min(h - 1);
+        self.marginal.pdf_continuous(p.y) * self.conditional[row].pdf_continuous(p.x)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn discrete_matches_weights() {
+        let d = Distribution1D::new(&[1.0, 0.0, 3.0]);
+        assert!((d.pmf(0) - 0.25).abs() < 1e-6 && d.pmf(1) == 0.0 && (d.pmf(2) - 0.75).abs() < 1e-6);
+        assert_eq!(d.sample_discrete(0.1).0, 0);
+        assert_eq!(d.sample_discrete(0.25).0, 2);
+        assert_eq!(d.sample_discrete(0.999).0, 2);
+    }
+
+    #[test]
+    fn continuous_pdf_consistent() {
+        let d = Distribution1D::new(&[1.0, 2.0, 0.5, 4.0]);
+        for k in 0..100 {
+            let u = (k as f32 + 0.5) / 100.0;
+            let (x, pdf, _) = d.sample_continuous(u);
+            assert!((pdf - d.pdf_continuous(x)).abs() < 1e-5);
+        }
+        let d2 = Distribution2D::new(&[1.0, 2.0, 3.0, 4.0, 0.0, 1.0], 3, 2);
+        // The pdf integrates to one over the unit square.
+        let mut s = 0.0;
+        for i in 0..30 {
+            for j in 0..20 {
+                s += d2.pdf(Vec2::new((i as f32 + 0.5) / 30.0, (j as f32 + 0.5) / 20.0));
+            }
+        }
+        assert!((s / 600.0 - 1.0).abs() < 1e-4);
+    }
+}

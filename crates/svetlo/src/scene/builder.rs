@@ -1,0 +1,145 @@
+//! Assembles a [`Scene`] from parts, validating what user input could get wrong.
+
+use super::{Scene, SceneSettings, Shape};
+use crate::accel::Accel;
+use crate::bsdf::Material;
+use crate::camera::Camera;
+use crate::error::{Error, Result};
+use crate::geometry::{Geometry, TriangleMesh};
+use crate::light::{AreaLight, Light, SceneBounds};
+use crate::sampling::Distribution1D;
+use crate::texture::Texture;
+use std::sync::Arc;
+
+#[derive(Default)]
+pub struct SceneBuilder {
+    shapes: Vec<(Geometry, u32, Option<Texture>, String)>,
+    materials: Vec<Material>,
+    lights: Vec<Light>,
+    camera: Option<Camera>,
+    pub settings: SceneSettings,
+    pub warnings: Vec<String>,
+}
+
+impl SceneBuilder {
+    pub fn new() -> Self {
+        Self::default()
+    }
+
+    pub fn add_material(&mut self, m: Material) -> u32 {
+        self.materials.push(m);
+        (self.materials.len() - 1) as u32
+    }
+
+    /// Add a shape with material `material`, emitting `emission` radiance if given.
+    /// Meshes are checked: NaN or infinite positions and out-of-range indices are errors,
+    /// zero-area triangles are dropped with a warning. `name` identifies it in messages.
+    pub fn add_shape(&mut self, geometry: Geometry, material: u32, emission: Option<Texture>, name: &str) -> Result<()> {
+        let geometry = match geometry {
+            Geometry::Mesh(m) => Geometry::Mesh(self.validate_mesh(m, name)?),
+            Geometry::Sphere(s) => {
+                if !(s.radius > 0.0 && s.radius.is_finite() && s.center.is_finite()) {
+                    return Err(Error::Invalid(format!("shape '{name}': sphere with radius {} at {:?}", s.radius, s.center)));
+                }
+                Geometry::Sphere(s)
+            }
+        };
+        if material as usize >= self.materials.len() {
+            return Err(Error::Invalid(format!("shape '{name}': material index {material} out of range")));
+        }
+        self.shapes.push((geometry, material, emission, name.to_string()));
+        Ok(())
+    }
+
+    fn validate_mesh(&mut self, mut m: TriangleMesh, name: &str) -> Result<TriangleMesh> {
+        if let Some(i) = m.positions.iter().position(|p| !p.is_finite()) {
+            return Err(Error::Invalid(format!("shape '{name}': vertex {i} is not finite ({:?})", m.positions[i])));
+        }
+        let nv = m.positions.len() as u32;
+        if let Some((t, tri)) = m.indices.iter().enumerate().find(|(_, t)| t.iter().any(|&i| i >= nv)) {
+            return Err(Error::Invalid(format!("shape '{name}': triangle {t} has index {:?} but the mesh has {nv} vertices", tri)));
+        }
+        if !m.normals.is_empty() && m.normals.len() != m.positions.len() {
+            self.warnings.push(format!("shape '{name}': {} normals for {} vertices, normals ignored", m.normals.len(), nv));
+            m.normals.clear();
+        }
+        if m.normals.iter().any(|n| !n.is_finite()) {
+            self.warnings.push(format!("shape '{name}': non-finite normals, normals ignored"));
+            m.normals.clear();
+        }
+        if !m.uvs.is_empty() && m.uvs.len() != m.positions.len() {
+            self.warnings.push(format!("shape '{name}': {} uvs for {} vertices, uvs ignored", m.uvs.len(), nv));
+            m.uvs.clear();
+        }
+        let before = m.indices.len();
+        let pos = &m.positions;
+        m.indices.retain(|t| {
+            let (a, b, c) = (pos[t[0] as usize], pos[t[1] as usize], pos[t[2] as usize]);
+            (b - a).cross(c - a).length_squared() > 0.0
+        });
+        let dropped = before - m.indices.len();
+        if dropped > 0 {
+            self.warnings.push(format!("shape '{name}': dropped {dropped} zero-area triangle(s) of {before}"));
+        }
+        if m.indices.is_empty() {
+            return Err(Error::Invalid(format!("shape '{name}': mesh has no triangle with non-zero area ({before} given)")));
+        }
+        Ok(m)
+    }
+
+    pub fn add_light(&mut self, l: Light) {
+        self.lights.push(l);
+    }
+
+    pub fn set_camera(&mut self, c: Camera) {
+        self.camera = Some(c);
+    }
+
+    pub fn has_camera(&self) -> bool {
+        self.camera.is_some()
+    }
+
+    pub fn shape_count(&self) -> usize {
+        self.shapes.len()
+    }
+
+    pub fn build(self) -> Result<Scene> {
+        let camera = self.camera.ok_or_else(|| Error::Invalid("the scene has no sensor (camera)".into()))?;
+        if camera.width == 0 || camera.height == 0 {
+            return Err(Error::Invalid(format!("film size {}x{} is empty", camera.width, camera.height)));
+        }
+        let mut lights = self.lights;
+        let mut shapes = Vec::with_capacity(self.shapes.len());
+        for (i, (g, material, emission, name)) in self.shapes.into_iter().enumerate() {
+            let g = Arc::new(g);
+            let light = emission.map(|e| {
+                lights.push(Light::Area(AreaLight::new(i as u32, g.clone(), e)));
+                (lights.len() - 1) as u32
+            });
+            shapes.push(Shape { geometry: g, material, light, name });
+        }
+        let geoms: Vec<&Geometry> = shapes.iter().map(|s| &*s.geometry).collect();
+        let accel = Accel::build(&geoms);
+        let bounds = SceneBounds::from_aabb(&accel.bounds());
+        let powers: Vec<f32> = lights.iter().map(|l| l.power(&bounds)).collect();
+        let light_distribution = Distribution1D::new(&powers);
+        let environment_lights =
+            lights.iter().enumerate().filter(|(_, l)| matches!(l, Light::Constant { .. } | Light::EnvMap(_))).map(|(i, _)| i as u32).collect();
+        let mut warnings = self.warnings;
+        if lights.is_empty() {
+            warnings.push("the scene has no emitter: the image will be black".into());
+        }
+        Ok(Scene {
+            shapes,
+            materials: self.materials,
+            lights,
+            light_distribution,
+            environment_lights,
+            camera,
+            accel,
+            bounds,
+            settings: self.settings,
+            warnings,
+        })
+    }
+}
