@@ -82,7 +82,7 @@ impl WatertightRay {
         }
         let inv = 1.0 / det;
         let t = t_scaled * inv;
-        if !(t > 0.0) {
+        if t.is_nan() || t <= 0.0 {
             return None;
         }
         Some((t, v * inv, w * inv))
