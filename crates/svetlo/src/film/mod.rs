@@ -3,6 +3,7 @@
 //! Camera-side integrators render tiles ([`FilmTile`]) in parallel and merge them in a fixed
 //! order, so floating-point sums, and thus images, do not depend on scheduling.
 
+pub mod compare;
 pub mod filter;
 pub mod image;
 

@@ -1,14 +1,21 @@
-//! Image files: EXR (linear float32, the truth), PNG (sRGB 8-bit, for looking), PFM.
+//! Image files: EXR (linear float32, the truth), PNG (sRGB 8-bit, for looking), PFM (the
+//! format of block-averaged references). Every error names the file.
 
 use crate::error::{Error, Result};
 use crate::film::Image;
 use crate::spectrum::Rgb;
+use std::io::Cursor;
 use std::path::Path;
 
 fn img_err(path: &Path, msg: impl std::fmt::Display) -> Error {
     Error::Image { file: path.to_path_buf(), msg: msg.to_string() }
 }
 
+fn io_err(path: &Path, source: std::io::Error) -> Error {
+    Error::Io { file: path.to_path_buf(), source }
+}
+
+/// Linear RGB as 32-bit float channels R, G, B.
 pub fn write_exr(path: &Path, img: &Image) -> Result<()> {
     exr::prelude::write_rgb_file(path, img.width, img.height, |x, y| {
         let c = img.get(x, y);
@@ -17,7 +24,7 @@ pub fn write_exr(path: &Path, img: &Image) -> Result<()> {
     .map_err(|e| img_err(path, e))
 }
 
-/// sRGB-encoded 8-bit PNG, values clamped to [0, 1].
+/// sRGB-encoded 8-bit PNG, values clamped to [0, 1] (NaN becomes 0).
 pub fn write_png(path: &Path, img: &Image) -> Result<()> {
     let mut buf = Vec::with_capacity(img.width * img.height * 3);
     for c in &img.data {
@@ -28,12 +35,122 @@ pub fn write_png(path: &Path, img: &Image) -> Result<()> {
     image::save_buffer(path, &buf, img.width as u32, img.height as u32, image::ColorType::Rgb8).map_err(|e| img_err(path, e))
 }
 
+/// PFM flavours: three channels (`PF`) or one (`Pf`, written as the pixel's luminance).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum PfmChannels {
+    Rgb,
+    Grey,
+}
+
+/// The bytes of a PFM file: rows bottom to top, float32 in the byte order the scale's sign
+/// announces (negative: little-endian).
+pub fn encode_pfm(img: &Image, channels: PfmChannels, big_endian: bool) -> Vec<u8> {
+    let (magic, nc) = match channels {
+        PfmChannels::Rgb => ("PF", 3),
+        PfmChannels::Grey => ("Pf", 1),
+    };
+    let scale = if big_endian { "1.0" } else { "-1.0" };
+    let mut out = format!("{magic}\n{} {}\n{scale}\n", img.width, img.height).into_bytes();
+    out.reserve(img.width * img.height * nc * 4);
+    for y in (0..img.height).rev() {
+        for x in 0..img.width {
+            let c = img.get(x, y);
+            let vals = [c.r, c.g, c.b];
+            let vals: &[f32] = if nc == 3 { &vals } else { &[c.luminance()] };
+            for &v in vals {
+                out.extend_from_slice(&if big_endian { v.to_be_bytes() } else { v.to_le_bytes() });
+            }
+        }
+    }
+    out
+}
+
+/// Little-endian RGB PFM.
+pub fn write_pfm(path: &Path, img: &Image) -> Result<()> {
+    std::fs::write(path, encode_pfm(img, PfmChannels::Rgb, false)).map_err(|e| io_err(path, e))
+}
+
+/// Parse a PFM file's bytes; `path` is only used in messages. A grey file gives r = g = b.
+pub fn decode_pfm(bytes: &[u8], path: &Path) -> Result<Image> {
+    // Header: three whitespace-separated tokens after the magic, then exactly one whitespace byte.
+    let mut pos = 0usize;
+    let mut token = |what: &str| -> Result<String> {
+        while pos < bytes.len() && bytes[pos].is_ascii_whitespace() {
+            pos += 1;
+        }
+        let start = pos;
+        while pos < bytes.len() && !bytes[pos].is_ascii_whitespace() && pos - start < 64 {
+            pos += 1;
+        }
+        if start == pos {
+            return Err(img_err(path, format!("PFM header ends before the {what}")));
+        }
+        Ok(String::from_utf8_lossy(&bytes[start..pos]).into_owned())
+    };
+    let magic = token("magic number")?;
+    let nc = match magic.as_str() {
+        "PF" => 3usize,
+        "Pf" => 1usize,
+        m => return Err(img_err(path, format!("not a PFM file (magic '{m}', expected 'PF' or 'Pf')"))),
+    };
+    let parse_dim = |s: String, what: &str| -> Result<usize> {
+        match s.parse::<usize>() {
+            Ok(v) if v > 0 => Ok(v),
+            _ => Err(img_err(path, format!("PFM {what} '{s}' is not a positive integer"))),
+        }
+    };
+    let w = token("width")?;
+    let w = parse_dim(w, "width")?;
+    let h = token("height")?;
+    let h = parse_dim(h, "height")?;
+    let s = token("scale")?;
+    let scale: f32 = s.parse().map_err(|_| img_err(path, format!("PFM scale '{s}' is not a number")))?;
+    if scale == 0.0 || !scale.is_finite() {
+        return Err(img_err(path, format!("PFM scale {scale} must be non-zero and finite")));
+    }
+    let little = scale < 0.0;
+    // One whitespace byte separates the header from the raster.
+    if pos >= bytes.len() || !bytes[pos].is_ascii_whitespace() {
+        return Err(img_err(path, "PFM header is not followed by the pixel data"));
+    }
+    pos += 1;
+    let need = w.checked_mul(h).and_then(|p| p.checked_mul(nc * 4)).ok_or_else(|| img_err(path, format!("PFM size {w}x{h} is too large")))?;
+    let data = &bytes[pos..];
+    if data.len() < need {
+        return Err(img_err(path, format!("PFM {w}x{h} needs {need} bytes of pixel data, the file has {}", data.len())));
+    }
+    let mut pixels = vec![Rgb::BLACK; w * h];
+    let val = |i: usize| {
+        let b = [data[4 * i], data[4 * i + 1], data[4 * i + 2], data[4 * i + 3]];
+        if little {
+            f32::from_le_bytes(b)
+        } else {
+            f32::from_be_bytes(b)
+        }
+    };
+    for row in 0..h {
+        // File row 0 is the image's bottom row.
+        let y = h - 1 - row;
+        for x in 0..w {
+            let i = (row * w + x) * nc;
+            pixels[y * w + x] = if nc == 3 { Rgb::new(val(i), val(i + 1), val(i + 2)) } else { Rgb::splat(val(i)) };
+        }
+    }
+    Ok(Image::new(w, h, pixels))
+}
+
+pub fn read_pfm(path: &Path) -> Result<Image> {
+    let bytes = std::fs::read(path).map_err(|e| io_err(path, e))?;
+    decode_pfm(&bytes, path)
+}
+
 /// Write by extension: .exr, .png or .pfm.
 pub fn write_image(path: &Path, img: &Image) -> Result<()> {
     match ext(path).as_str() {
         "exr" => write_exr(path, img),
         "png" => write_png(path, img),
-        other => Err(img_err(path, format!("unsupported output format '{other}' (exr, png)"))),
+        "pfm" => write_pfm(path, img),
+        other => Err(img_err(path, format!("unsupported output format '{other}' (exr, png, pfm)"))),
     }
 }
 
@@ -41,30 +158,231 @@ fn ext(path: &Path) -> String {
     path.extension().and_then(|e| e.to_str()).unwrap_or("").to_ascii_lowercase()
 }
 
-/// Read an EXR as linear RGB (alpha dropped, missing channels zero).
-pub fn read_exr(path: &Path) -> Result<Image> {
-    let img = exr::prelude::read_first_rgba_layer_from_file(
-        path,
-        |res, _| Image::filled(res.width(), res.height(), Rgb::BLACK),
-        |img: &mut Image, pos: exr::prelude::Vec2<usize>, (r, g, b, _a): (f32, f32, f32, f32)| {
-            let w = img.width;
-            img.data[pos.y() * w + pos.x()] = Rgb::new(r, g, b);
-        },
-    )
-    .map_err(|e| img_err(path, e))?;
-    Ok(img.layer_data.channel_data.pixels)
+/// The last component of a channel name ("diffuse.R" -> "R").
+fn channel_base(name: &str) -> &str {
+    name.rsplit('.').next().unwrap_or(name)
 }
 
-/// Read an image by extension. 8-bit formats are decoded from sRGB to linear.
+/// Decode an EXR's bytes as linear RGB: the first valid layer, at its largest resolution;
+/// any sample type becomes f32. R, G and B are taken by name (a layer prefix is allowed,
+/// unprefixed names win); a missing one is 0, except that a luminance-only image (Y) is grey.
+/// Alpha and other channels are ignored.
+pub fn decode_exr(bytes: &[u8], path: &Path) -> Result<Image> {
+    use exr::prelude::{read, ReadChannels, ReadLayers, Vec2};
+    let img = read()
+        .no_deep_data()
+        .largest_resolution_level()
+        .all_channels()
+        .first_valid_layer()
+        .all_attributes()
+        .from_buffered(Cursor::new(bytes))
+        .map_err(|e| img_err(path, e))?;
+    let layer = &img.layer_data;
+    let (w, h) = (layer.size.width(), layer.size.height());
+    let list = &layer.channel_data.list;
+    let find = |want: &str| {
+        let exact = list.iter().position(|c| c.name.to_string().eq_ignore_ascii_case(want));
+        exact.or_else(|| list.iter().position(|c| channel_base(&c.name.to_string()).eq_ignore_ascii_case(want)))
+    };
+    let (ir, ig, ib) = (find("R"), find("G"), find("B"));
+    let idx = if ir.is_none() && ig.is_none() && ib.is_none() {
+        match find("Y") {
+            Some(y) => [Some(y), Some(y), Some(y)],
+            None => {
+                let names: Vec<String> = list.iter().map(|c| c.name.to_string()).collect();
+                return Err(img_err(path, format!("EXR has no R, G, B or Y channel (channels: {})", names.join(", "))));
+            }
+        }
+    } else {
+        [ir, ig, ib]
+    };
+    // Channels must be sampled at every pixel (no subsampled chroma).
+    for i in idx.iter().flatten() {
+        let c = &list[*i];
+        if c.sampling != Vec2(1, 1) {
+            return Err(img_err(path, format!("EXR channel {} is subsampled, which is not supported", c.name)));
+        }
+    }
+    let chan: Vec<Option<Vec<f32>>> = idx.iter().map(|i| i.map(|i| list[i].sample_data.values_as_f32().collect())).collect();
+    let mut data = vec![Rgb::BLACK; w * h];
+    for (k, px) in data.iter_mut().enumerate() {
+        let get = |c: &Option<Vec<f32>>| c.as_ref().and_then(|v| v.get(k).copied()).unwrap_or(0.0);
+        *px = Rgb::new(get(&chan[0]), get(&chan[1]), get(&chan[2]));
+    }
+    Ok(Image::new(w, h, data))
+}
+
+pub fn read_exr(path: &Path) -> Result<Image> {
+    let bytes = std::fs::read(path).map_err(|e| io_err(path, e))?;
+    decode_exr(&bytes, path)
+}
+
+/// Read an image, recognising EXR and PFM by their magic bytes; other formats go to the
+/// `image` crate, and 8-bit formats are decoded from sRGB to linear.
 pub fn read_image(path: &Path) -> Result<Image> {
+    let bytes = std::fs::read(path).map_err(|e| io_err(path, e))?;
+    if bytes.starts_with(&[0x76, 0x2f, 0x31, 0x01]) {
+        return decode_exr(&bytes, path);
+    }
+    if bytes.starts_with(b"PF") || bytes.starts_with(b"Pf") {
+        return decode_pfm(&bytes, path);
+    }
     match ext(path).as_str() {
-        "exr" => read_exr(path),
+        "exr" => Err(img_err(path, "not an OpenEXR file (bad magic number)")),
+        "pfm" => Err(img_err(path, "not a PFM file (bad magic number)")),
         _ => {
-            let dynimg = image::open(path).map_err(|e| img_err(path, e))?;
+            let dynimg = image::load_from_memory(&bytes).map_err(|e| img_err(path, e))?;
             let rgb = dynimg.to_rgb32f();
             let (w, h) = (rgb.width() as usize, rgb.height() as usize);
             let data = rgb.pixels().map(|p| Rgb::new(Rgb::srgb_to_linear(p[0]), Rgb::srgb_to_linear(p[1]), Rgb::srgb_to_linear(p[2]))).collect();
             Ok(Image::new(w, h, data))
         }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use std::path::PathBuf;
+
+    fn tmp(name: &str) -> PathBuf {
+        let dir = std::env::temp_dir().join(format!("svetlo-imgio-{}", std::process::id()));
+        std::fs::create_dir_all(&dir).unwrap();
+        dir.join(name)
+    }
+
+    /// A test image with values over several orders of magnitude, negatives and a gradient.
+    fn test_image(w: usize, h: usize) -> Image {
+        let data = (0..w * h)
+            .map(|i| {
+                let (x, y) = ((i % w) as f32, (i / w) as f32);
+                Rgb::new(x * 0.37 + 1e-6, y * 1234.5, (x - y) * 0.01 - 0.003)
+            })
+            .collect();
+        Image::new(w, h, data)
+    }
+
+    #[test]
+    fn exr_round_trip_is_exact() {
+        let img = test_image(13, 7);
+        let p = tmp("rt.exr");
+        write_exr(&p, &img).unwrap();
+        assert_eq!(read_exr(&p).unwrap(), img);
+        assert_eq!(read_image(&p).unwrap(), img);
+    }
+
+    #[test]
+    fn exr_half_with_alpha_and_missing_channel() {
+        use exr::prelude::{f16, AnyChannel, AnyChannels, FlatSamples, SmallVec, WritableImage};
+        // A half-float image with R, B and A but no G: G reads as 0, A is ignored.
+        let (w, h) = (5usize, 3usize);
+        let r: Vec<f16> = (0..w * h).map(|i| f16::from_f32(i as f32 * 0.5)).collect();
+        let b: Vec<f16> = (0..w * h).map(|i| f16::from_f32(-(i as f32))).collect();
+        let a: Vec<f16> = vec![f16::from_f32(0.25); w * h];
+        let channels = AnyChannels::sort(SmallVec::from_vec(vec![
+            AnyChannel::new("R", FlatSamples::F16(r)),
+            AnyChannel::new("B", FlatSamples::F16(b)),
+            AnyChannel::new("A", FlatSamples::F16(a)),
+        ]));
+        let image = exr::prelude::Image::from_channels((w, h), channels);
+        let p = tmp("half.exr");
+        image.write().to_file(&p).unwrap();
+        let got = read_image(&p).unwrap();
+        assert_eq!((got.width, got.height), (w, h));
+        for i in 0..w * h {
+            assert_eq!(got.data[i], Rgb::new(i as f32 * 0.5, 0.0, -(i as f32)));
+        }
+    }
+
+    #[test]
+    fn pfm_round_trip_both_endians() {
+        let img = test_image(6, 4);
+        for big in [false, true] {
+            let bytes = encode_pfm(&img, PfmChannels::Rgb, big);
+            assert_eq!(&bytes[..3], b"PF\n");
+            let back = decode_pfm(&bytes, Path::new("mem.pfm")).unwrap();
+            assert_eq!(back, img, "big endian: {big}");
+        }
+        let p = tmp("rt.pfm");
+        write_pfm(&p, &img).unwrap();
+        assert_eq!(read_pfm(&p).unwrap(), img);
+        assert_eq!(read_image(&p).unwrap(), img);
+    }
+
+    #[test]
+    fn pfm_layout_is_bottom_to_top_little_endian() {
+        // 1x2 image: top pixel 1, bottom pixel 2; the file stores the bottom row first.
+        let img = Image::new(1, 2, vec![Rgb::splat(1.0), Rgb::splat(2.0)]);
+        let bytes = encode_pfm(&img, PfmChannels::Grey, false);
+        let header = b"Pf\n1 2\n-1.0\n";
+        assert_eq!(&bytes[..header.len()], header);
+        assert_eq!(&bytes[header.len()..header.len() + 4], &2.0f32.to_le_bytes());
+        assert_eq!(&bytes[header.len() + 4..], &1.0f32.to_le_bytes());
+        let back = decode_pfm(&bytes, Path::new("g.pfm")).unwrap();
+        assert_eq!(back, img);
+        // Big-endian grey, as another tool would write it, with a different scale magnitude.
+        let mut be = b"Pf 1 2 4.0\n".to_vec();
+        be.extend_from_slice(&2.0f32.to_be_bytes());
+        be.extend_from_slice(&1.0f32.to_be_bytes());
+        assert_eq!(decode_pfm(&be, Path::new("g.pfm")).unwrap(), img);
+    }
+
+    #[test]
+    fn pfm_errors_name_the_file() {
+        let p = Path::new("bad.pfm");
+        let cases: Vec<Vec<u8>> = vec![
+            b"P6\n1 1\n-1\n....".to_vec(),
+            b"PF\n2 2\n-1\n\0\0\0\0".to_vec(),
+            b"PF\n0 2\n-1\n".to_vec(),
+            b"PF\n99999999999 99999999999\n-1\n".to_vec(),
+            b"PF\n1 1\n0\n\0\0\0\0\0\0\0\0\0\0\0\0".to_vec(),
+            b"PF\n1".to_vec(),
+            Vec::new(),
+        ];
+        for c in cases {
+            let e = decode_pfm(&c, p).unwrap_err();
+            let msg = e.to_string();
+            assert!(msg.starts_with("bad.pfm: "), "{msg}");
+        }
+    }
+
+    #[test]
+    fn png_round_trip_within_quantisation() {
+        let data = (0..16 * 4).map(|i| Rgb::new(i as f32 / 63.0, 1.0 - i as f32 / 63.0, 0.5)).collect();
+        let img = Image::new(16, 4, data);
+        let p = tmp("rt.png");
+        write_png(&p, &img).unwrap();
+        let back = read_image(&p).unwrap();
+        assert_eq!((back.width, back.height), (16, 4));
+        for (a, b) in img.data.iter().zip(&back.data) {
+            for k in 0..3 {
+                // Half an 8-bit step in sRGB is at most ~0.0077 in linear near 1.
+                assert!((a[k] - b[k]).abs() < 0.008, "{a:?} vs {b:?}");
+            }
+        }
+        // Out-of-range values clamp.
+        let over = Image::new(2, 1, vec![Rgb::new(-1.0, 5.0, f32::NAN), Rgb::splat(1.0)]);
+        write_png(&p, &over).unwrap();
+        let back = read_image(&p).unwrap();
+        assert_eq!(back.data[0], Rgb::new(0.0, 1.0, 0.0));
+    }
+
+    #[test]
+    fn missing_and_corrupt_files_are_typed_errors() {
+        let p = tmp("does-not-exist.exr");
+        assert!(matches!(read_image(&p), Err(Error::Io { .. })));
+        let p = tmp("garbage.exr");
+        std::fs::write(&p, b"not an image at all").unwrap();
+        let e = read_image(&p).unwrap_err();
+        assert!(e.to_string().contains("garbage.exr"), "{e}");
+        // A truncated EXR.
+        let good = tmp("trunc-src.exr");
+        write_exr(&good, &test_image(32, 32)).unwrap();
+        let bytes = std::fs::read(&good).unwrap();
+        let p = tmp("trunc.exr");
+        std::fs::write(&p, &bytes[..bytes.len() / 2]).unwrap();
+        let e = read_image(&p).unwrap_err();
+        assert!(e.to_string().contains("trunc.exr"), "{e}");
+        assert!(write_image(&tmp("x.tga"), &test_image(2, 2)).is_err());
     }
 }

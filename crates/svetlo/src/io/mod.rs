@@ -3,5 +3,5 @@
 pub mod image_io;
 pub mod mitsuba;
 
-pub use image_io::{read_image, write_exr, write_image, write_png};
+pub use image_io::{read_exr, read_image, read_pfm, write_exr, write_image, write_pfm, write_png};
 pub use mitsuba::load_scene;

@@ -1,0 +1,484 @@
+//! `svetlo render`: load, apply the command line's overrides, render with a progress bar and
+//! Ctrl-C cancellation, write the images, print a summary.
+
+use crate::{parse_define, Usage, EXIT_INTERRUPTED};
+use anyhow::{Context, Result};
+use clap::{value_parser, Args, ValueEnum};
+use indicatif::{ProgressBar, ProgressStyle};
+use std::path::{Path, PathBuf};
+use std::process::ExitCode;
+use std::sync::atomic::{AtomicBool, AtomicU32, Ordering};
+use std::sync::Arc;
+use std::time::{Duration, Instant};
+use svetlo::film::{Film, Filter};
+use svetlo::integrator::{self, Integrator, Progress, RenderSettings};
+use svetlo::io::image_io::{write_exr, write_pfm, write_png};
+use svetlo::sampling::SamplerKind;
+use svetlo::scene::Scene;
+
+/// The spp of a render bounded by `--time` alone: large enough never to be reached.
+const TIME_ONLY_SPP: u32 = 1 << 24;
+
+#[derive(Clone, Copy, Debug, PartialEq, Eq, ValueEnum)]
+pub enum FilterArg {
+    Box,
+    Tent,
+    Gaussian,
+}
+
+#[derive(Clone, Copy, Debug, PartialEq, Eq, ValueEnum)]
+pub enum SamplerArg {
+    Independent,
+    Sobol,
+}
+
+#[derive(Args, Debug)]
+pub struct RenderArgs {
+    /// Scene file (Mitsuba XML).
+    pub scene: PathBuf,
+    /// Output image; OUT.png is written beside it. Default: <scene name>.exr in the current directory.
+    #[arg(short, long, value_name = "OUT.exr")]
+    pub output: Option<PathBuf>,
+    /// Samples per pixel (the maximum when --time is given).
+    #[arg(long, value_name = "N", allow_negative_numbers = true, value_parser = value_parser!(u32).range(1..))]
+    pub spp: Option<u32>,
+    /// Stop after this many seconds, keeping whole passes.
+    #[arg(long, value_name = "SECONDS", allow_negative_numbers = true, value_parser = parse_seconds)]
+    pub time: Option<f64>,
+    /// Random seed.
+    #[arg(long, value_name = "S")]
+    pub seed: Option<u64>,
+    /// Path segments from the camera (Mitsuba's meaning: 2 = direct light only, -1 = unbounded).
+    #[arg(long, value_name = "D", allow_negative_numbers = true, value_parser = value_parser!(i32).range(-1..))]
+    pub max_depth: Option<i32>,
+    /// Light transport method (path, direct, ...); default: the scene's.
+    #[arg(long, value_name = "NAME")]
+    pub integrator: Option<String>,
+    /// Image width in pixels; alone, the height follows the scene's aspect ratio.
+    #[arg(long, value_name = "W", allow_negative_numbers = true, value_parser = value_parser!(u32).range(1..=65536))]
+    pub width: Option<u32>,
+    /// Image height in pixels; alone, the width follows the scene's aspect ratio.
+    #[arg(long, value_name = "H", allow_negative_numbers = true, value_parser = value_parser!(u32).range(1..=65536))]
+    pub height: Option<u32>,
+    /// Pixel reconstruction filter (tent radius 1, Gaussian sigma 0.5).
+    #[arg(long, value_enum)]
+    pub filter: Option<FilterArg>,
+    /// Worker threads (0: all cores).
+    #[arg(long, value_name = "N", default_value_t = 0)]
+    pub threads: usize,
+    /// Sample generator.
+    #[arg(long, value_enum)]
+    pub sampler: Option<SamplerArg>,
+    /// Scene parameter for <default> / $name substitution (repeatable).
+    #[arg(short = 'D', value_name = "NAME=VALUE", value_parser = parse_define)]
+    pub define: Vec<(String, String)>,
+    /// Also write the per-sample variance image OUT_var.exr.
+    #[arg(long)]
+    pub variance: bool,
+}
+
+fn parse_seconds(s: &str) -> std::result::Result<f64, String> {
+    match s.parse::<f64>() {
+        Ok(t) if t > 0.0 && t.is_finite() && t < 1e9 => Ok(t),
+        Ok(t) => Err(format!("{t} is not a positive number of seconds")),
+        Err(_) => Err(format!("'{s}' is not a number of seconds")),
+    }
+}
+
+/// Where a render's images go: `<base>.exr`, `<base>.png`, `<base>_var.exr`, and
+/// `<base>.pfm` when the output was named `.pfm`.
+#[derive(Clone, Debug, PartialEq)]
+pub struct OutputPaths {
+    pub exr: PathBuf,
+    pub png: PathBuf,
+    pub var: PathBuf,
+    pub pfm: Option<PathBuf>,
+}
+
+fn with_suffix(base: &Path, suffix: &str) -> PathBuf {
+    let mut s = base.as_os_str().to_os_string();
+    s.push(suffix);
+    PathBuf::from(s)
+}
+
+impl OutputPaths {
+    pub fn new(scene: &Path, output: Option<&Path>) -> Result<Self> {
+        let (base, pfm) = match output {
+            None => {
+                let stem = scene.file_stem().ok_or_else(|| Usage(format!("scene path '{}' has no file name", scene.display())))?;
+                (PathBuf::from(stem), false)
+            }
+            Some(o) => {
+                let ext = o.extension().map(|e| e.to_string_lossy().to_ascii_lowercase());
+                match ext.as_deref() {
+                    None => (o.to_path_buf(), false),
+                    Some("exr") | Some("png") => (o.with_extension(""), false),
+                    Some("pfm") => (o.with_extension(""), true),
+                    Some(e) => return Err(Usage(format!("output '{}': unsupported extension '.{e}' (use .exr)", o.display())).into()),
+                }
+            }
+        };
+        if base.file_name().is_none() {
+            return Err(Usage(format!("output '{}' names no file", base.display())).into());
+        }
+        let paths = OutputPaths {
+            exr: with_suffix(&base, ".exr"),
+            png: with_suffix(&base, ".png"),
+            var: with_suffix(&base, "_var.exr"),
+            pfm: pfm.then(|| with_suffix(&base, ".pfm")),
+        };
+        // Fail before a long render, not after it.
+        let dir = paths.exr.parent().filter(|p| !p.as_os_str().is_empty()).unwrap_or(Path::new("."));
+        if !dir.is_dir() {
+            return Err(Usage(format!("output directory '{}' does not exist", dir.display())).into());
+        }
+        Ok(paths)
+    }
+}
+
+/// A scene with the command line's overrides applied, ready to render.
+pub struct Job {
+    pub scene: Scene,
+    pub settings: RenderSettings,
+    pub integrator_name: String,
+    pub integrator: Box<dyn Integrator>,
+}
+
+/// Apply the command line over the scene file's settings.
+pub fn configure(mut scene: Scene, a: &RenderArgs) -> Result<Job> {
+    let integrator_name = a.integrator.clone().unwrap_or_else(|| scene.settings.integrator.clone());
+    let integrator = integrator::by_name(&integrator_name).map_err(|e| {
+        if a.integrator.is_some() {
+            anyhow::Error::new(Usage(e.to_string()))
+        } else {
+            anyhow::Error::new(e).context(format!("the scene asks for integrator '{integrator_name}'; choose another with --integrator"))
+        }
+    })?;
+    let mut s = RenderSettings::from_scene(&scene);
+    if let Some(spp) = a.spp {
+        s.spp = spp;
+    } else if a.time.is_some() {
+        s.spp = TIME_ONLY_SPP;
+    }
+    s.time_limit = a.time.map(Duration::from_secs_f64);
+    if let Some(seed) = a.seed {
+        s.seed = seed;
+    }
+    if let Some(d) = a.max_depth {
+        s.max_depth = d;
+    }
+    s.threads = a.threads;
+    if let Some(f) = a.filter {
+        s.filter = match f {
+            FilterArg::Box => Filter::Box,
+            FilterArg::Tent => Filter::Tent { radius: 1.0 },
+            FilterArg::Gaussian => Filter::Gaussian { stddev: 0.5 },
+        };
+    }
+    if let Some(k) = a.sampler {
+        s.sampler = match k {
+            SamplerArg::Independent => SamplerKind::Independent,
+            SamplerArg::Sobol => SamplerKind::Sobol,
+        };
+    }
+    let cam = &mut scene.camera;
+    let aspect = cam.width as f64 / cam.height as f64;
+    match (a.width, a.height) {
+        (Some(w), Some(h)) => (cam.width, cam.height) = (w, h),
+        (Some(w), None) => (cam.width, cam.height) = (w, ((w as f64 / aspect).round() as u32).max(1)),
+        (None, Some(h)) => (cam.width, cam.height) = (((h as f64 * aspect).round() as u32).max(1), h),
+        (None, None) => {}
+    }
+    s.validate().context("render settings")?;
+    Ok(Job { scene, settings: s, integrator_name, integrator })
+}
+
+/// Render with a progress bar (drawn only on a terminal) fed from `progress` by a second thread.
+pub fn execute(job: &Job, progress: &Progress) -> Result<(Film, Duration)> {
+    let start = Instant::now();
+    let finished = AtomicBool::new(false);
+    let pixels = job.scene.camera.width as u64 * job.scene.camera.height as u64;
+    let film = std::thread::scope(|s| {
+        s.spawn(|| drive_bar(progress, &finished, start, job.settings.time_limit, pixels));
+        let r = job.integrator.render(&job.scene, &job.settings, progress);
+        finished.store(true, Ordering::Relaxed);
+        r
+    })?;
+    Ok((film, start.elapsed()))
+}
+
+const BAR_UNITS: u64 = 10_000;
+
+fn drive_bar(progress: &Progress, finished: &AtomicBool, start: Instant, time_limit: Option<Duration>, pixels: u64) {
+    let bar = ProgressBar::new(BAR_UNITS);
+    let style = ProgressStyle::with_template("{spinner} [{elapsed_precise}] [{wide_bar}] {percent:>3}% {msg} ETA {eta}")
+        .map(|s| s.progress_chars("=> "))
+        .unwrap_or_else(|_| ProgressStyle::default_bar());
+    bar.set_style(style);
+    while !finished.load(Ordering::Relaxed) {
+        let elapsed = start.elapsed();
+        // The render ends at whichever comes first: all samples, or the time budget.
+        let mut frac = progress.fraction();
+        if let Some(t) = time_limit {
+            frac = frac.max(elapsed.as_secs_f64() / t.as_secs_f64());
+        }
+        bar.set_position((frac.clamp(0.0, 1.0) * BAR_UNITS as f64) as u64);
+        let done = progress.done.load(Ordering::Relaxed);
+        let rate = done as f64 / elapsed.as_secs_f64().max(1e-9);
+        bar.set_message(format!("{:.1} spp, {}samples/s", done as f64 / pixels.max(1) as f64, si(rate)));
+        std::thread::sleep(Duration::from_millis(50));
+    }
+    bar.finish_and_clear();
+}
+
+/// A number with an SI prefix: 1234567 -> "1.23 M".
+pub fn si(x: f64) -> String {
+    let (v, p) = if x >= 1e9 {
+        (x / 1e9, "G")
+    } else if x >= 1e6 {
+        (x / 1e6, "M")
+    } else if x >= 1e3 {
+        (x / 1e3, "k")
+    } else {
+        (x, "")
+    };
+    format!("{v:.2} {p}")
+}
+
+/// First Ctrl-C: cancel the render (it returns the passes done). Second: exit at once.
+fn install_ctrlc(progress: Arc<Progress>) {
+    let presses = AtomicU32::new(0);
+    let r = ctrlc::try_set_handler(move || {
+        if presses.fetch_add(1, Ordering::SeqCst) == 0 {
+            progress.cancel.store(true, Ordering::SeqCst);
+            eprintln!("\ninterrupt: finishing the current pass and writing the image (Ctrl-C again to quit now)");
+        } else {
+            std::process::exit(EXIT_INTERRUPTED as i32);
+        }
+    });
+    if let Err(e) = r {
+        eprintln!("warning: Ctrl-C will not stop the render cleanly: {e}");
+    }
+}
+
+/// Write the images; returns the paths written.
+pub fn write_outputs(film: &Film, out: &OutputPaths, variance: bool) -> Result<Vec<PathBuf>> {
+    let img = film.image();
+    write_exr(&out.exr, &img)?;
+    write_png(&out.png, &img)?;
+    let mut written = vec![out.exr.clone(), out.png.clone()];
+    if let Some(p) = &out.pfm {
+        write_pfm(p, &img)?;
+        written.push(p.clone());
+    }
+    if variance {
+        write_exr(&out.var, &film.variance_image())?;
+        written.push(out.var.clone());
+    }
+    Ok(written)
+}
+
+/// Everything after loading: configure, render, write, report. Returns the exit code.
+pub fn render_loaded(scene: Scene, a: &RenderArgs, out: &OutputPaths, progress: &Progress) -> Result<ExitCode> {
+    let job = configure(scene, a)?;
+    let (w, h) = (job.scene.camera.width, job.scene.camera.height);
+    let (film, elapsed) = execute(&job, progress)?;
+    let written = write_outputs(&film, out, a.variance)?;
+    let secs = elapsed.as_secs_f64();
+    let samples = film.spp_done as f64 * w as f64 * h as f64;
+    println!("integrator  {}", job.integrator_name);
+    println!("resolution  {w}x{h}");
+    let planned = if a.spp.is_none() && a.time.is_some() { "time-limited".to_string() } else { format!("of {}", job.settings.spp) };
+    println!("spp         {} ({planned})", film.spp_done);
+    println!("time        {secs:.2} s");
+    println!("samples/s   {}", si(samples / secs.max(1e-9)));
+    for p in &written {
+        println!("wrote       {}", p.display());
+    }
+    if progress.cancelled() {
+        eprintln!("interrupted after {} spp", film.spp_done);
+        return Ok(ExitCode::from(EXIT_INTERRUPTED));
+    }
+    if film.spp_done == 0 {
+        anyhow::bail!("no sample pass finished within the time limit; the image is empty");
+    }
+    Ok(ExitCode::SUCCESS)
+}
+
+pub fn run(a: &RenderArgs) -> Result<ExitCode> {
+    // Check what can be checked before a possibly slow scene load.
+    if let Some(name) = &a.integrator {
+        integrator::by_name(name).map_err(|e| Usage(e.to_string()))?;
+    }
+    let out = OutputPaths::new(&a.scene, a.output.as_deref())?;
+    let scene = svetlo::io::load_scene(&a.scene, &a.define).context("cannot load the scene")?;
+    for w in &scene.warnings {
+        eprintln!("warning: {w}");
+    }
+    let progress = Arc::new(Progress::new());
+    install_ctrlc(progress.clone());
+    render_loaded(scene, a, &out, &progress)
+}
+
+#[cfg(test)]
+pub mod tests {
+    use super::*;
+    use crate::{Cli, Command};
+    use clap::Parser;
+    use glam::{Mat4, Vec3};
+    use svetlo::bsdf::Material;
+    use svetlo::camera::{Camera, Projection};
+    use svetlo::geometry::{Geometry, Sphere};
+    use svetlo::io::image_io::read_image;
+    use svetlo::light::Light;
+    use svetlo::scene::SceneBuilder;
+    use svetlo::texture::Texture;
+    use svetlo::Rgb;
+
+    /// A lit diffuse sphere seen by a 32x24 pinhole camera.
+    pub fn tiny_scene() -> Scene {
+        let mut b = SceneBuilder::new();
+        let m = b.add_material(Material::Diffuse { reflectance: Texture::Constant(Rgb::splat(0.6)) });
+        b.add_shape(Geometry::Sphere(Sphere { center: Vec3::new(0.0, 0.0, 4.0), radius: 1.0, flip_normals: false }), m, None, "ball").unwrap();
+        b.add_light(Light::Point { position: Vec3::new(1.0, 2.0, 0.0), intensity: Rgb::splat(10.0) });
+        b.set_camera(Camera {
+            to_world: Mat4::IDENTITY,
+            projection: Projection::Perspective { fov_x_deg: 40.0, aperture_radius: 0.0, focus_distance: 1.0 },
+            width: 32,
+            height: 24,
+            near_clip: 0.01,
+            far_clip: 100.0,
+            shutter_open: 0.0,
+            shutter_close: 0.0,
+        });
+        b.settings.spp = 3;
+        b.build().unwrap()
+    }
+
+    pub fn args(extra: &[&str]) -> RenderArgs {
+        let mut v = vec!["svetlo", "render", "scene.xml"];
+        v.extend_from_slice(extra);
+        match Cli::try_parse_from(v).unwrap().command {
+            Command::Render(a) => a,
+            _ => unreachable!(),
+        }
+    }
+
+    fn tmp(name: &str) -> PathBuf {
+        let d = std::env::temp_dir().join(format!("svetlo-cli-render-{}-{name}", std::process::id()));
+        std::fs::create_dir_all(&d).unwrap();
+        d
+    }
+
+    #[test]
+    fn overrides_apply() {
+        let a = args(&[
+            "--spp",
+            "5",
+            "--max-depth",
+            "-1",
+            "--seed",
+            "7",
+            "--filter",
+            "box",
+            "--sampler",
+            "sobol",
+            "--width",
+            "20",
+            "--height",
+            "10",
+            "--threads",
+            "2",
+            "--integrator",
+            "direct",
+        ]);
+        let job = configure(tiny_scene(), &a).unwrap();
+        assert_eq!(job.settings.spp, 5);
+        assert_eq!(job.settings.max_depth, -1);
+        assert_eq!(job.settings.seed, 7);
+        assert_eq!(job.settings.filter, Filter::Box);
+        assert_eq!(job.settings.sampler, SamplerKind::Sobol);
+        assert_eq!(job.settings.threads, 2);
+        assert_eq!((job.scene.camera.width, job.scene.camera.height), (20, 10));
+        assert_eq!(job.integrator_name, "direct");
+        // Without options the scene's own settings stand.
+        let job = configure(tiny_scene(), &args(&[])).unwrap();
+        assert_eq!(job.settings.spp, 3);
+        assert_eq!(job.integrator_name, "path");
+        assert_eq!((job.scene.camera.width, job.scene.camera.height), (32, 24));
+        // Width alone keeps the aspect ratio.
+        let job = configure(tiny_scene(), &args(&["--width", "64"])).unwrap();
+        assert_eq!((job.scene.camera.width, job.scene.camera.height), (64, 48));
+        // Time alone: spp is only a bound.
+        let job = configure(tiny_scene(), &args(&["--time", "2.5"])).unwrap();
+        assert_eq!(job.settings.spp, TIME_ONLY_SPP);
+        assert_eq!(job.settings.time_limit, Some(Duration::from_millis(2500)));
+        // Unknown integrator from the command line is a usage error.
+        let e = configure(tiny_scene(), &args(&["--integrator", "nope"])).err().unwrap();
+        assert!(e.downcast_ref::<Usage>().is_some(), "{e:#}");
+    }
+
+    #[test]
+    fn output_paths() {
+        let o = OutputPaths::new(Path::new("dir/cbox.v2.xml"), None).unwrap();
+        assert_eq!(o.exr, PathBuf::from("cbox.v2.exr"));
+        assert_eq!(o.png, PathBuf::from("cbox.v2.png"));
+        assert_eq!(o.var, PathBuf::from("cbox.v2_var.exr"));
+        let d = tmp("paths");
+        let o = OutputPaths::new(Path::new("s.xml"), Some(&d.join("a.png"))).unwrap();
+        assert_eq!(o.exr, d.join("a.exr"));
+        let o = OutputPaths::new(Path::new("s.xml"), Some(&d.join("a.pfm"))).unwrap();
+        assert_eq!(o.pfm, Some(d.join("a.pfm")));
+        assert!(OutputPaths::new(Path::new("s.xml"), Some(Path::new("a.tga"))).is_err());
+        let e = OutputPaths::new(Path::new("s.xml"), Some(&d.join("missing/a.exr"))).unwrap_err();
+        assert!(e.downcast_ref::<Usage>().is_some() && e.to_string().contains("does not exist"), "{e:#}");
+    }
+
+    #[test]
+    fn render_writes_exr_png_and_variance() {
+        let d = tmp("write");
+        let out = d.join("img.exr");
+        let a = args(&["--spp", "4", "--variance", "--width", "16", "--height", "12", "-o", out.to_str().unwrap()]);
+        let paths = OutputPaths::new(&a.scene, a.output.as_deref()).unwrap();
+        let code = render_loaded(tiny_scene(), &a, &paths, &Progress::new()).unwrap();
+        assert_eq!(code, ExitCode::SUCCESS);
+        let img = read_image(&d.join("img.exr")).unwrap();
+        let png = read_image(&d.join("img.png")).unwrap();
+        let var = read_image(&d.join("img_var.exr")).unwrap();
+        for i in [&img, &png, &var] {
+            assert_eq!((i.width, i.height), (16, 12));
+        }
+        assert!(img.mean().max_component() > 0.0, "the sphere is lit");
+        assert!(var.data.iter().all(|c| c.is_finite() && c.min_component() >= 0.0));
+    }
+
+    #[test]
+    fn cancelled_render_still_writes_and_exits_130() {
+        let d = tmp("cancel");
+        let a = args(&["--spp", "1000", "-o", d.join("c.exr").to_str().unwrap()]);
+        let paths = OutputPaths::new(&a.scene, a.output.as_deref()).unwrap();
+        let progress = Progress::new();
+        progress.cancel.store(true, Ordering::Relaxed);
+        let code = render_loaded(tiny_scene(), &a, &paths, &progress).unwrap();
+        assert_eq!(code, ExitCode::from(EXIT_INTERRUPTED));
+        assert!(d.join("c.exr").is_file() && d.join("c.png").is_file());
+    }
+
+    #[test]
+    fn time_limited_render_stops() {
+        let d = tmp("time");
+        let a = args(&["--time", "0.3", "-o", d.join("t.exr").to_str().unwrap()]);
+        let paths = OutputPaths::new(&a.scene, a.output.as_deref()).unwrap();
+        let t0 = Instant::now();
+        let code = render_loaded(tiny_scene(), &a, &paths, &Progress::new()).unwrap();
+        assert_eq!(code, ExitCode::SUCCESS);
+        assert!(t0.elapsed() < Duration::from_secs(10));
+    }
+
+    #[test]
+    fn si_prefixes() {
+        assert_eq!(si(1_234_567.0), "1.23 M");
+        assert_eq!(si(12.0), "12.00 ");
+        assert_eq!(si(2.5e9), "2.50 G");
+    }
+}
