@@ -23,8 +23,8 @@ pub fn load_obj(path: &Path, flip_tex_coords: bool) -> Result<LoadedMesh> {
     let file = std::fs::File::open(path).map_err(|e| Error::Io { file: path.to_path_buf(), source: e })?;
     let mut reader = std::io::BufReader::new(file);
     let opts = tobj::LoadOptions { single_index: true, triangulate: true, ignore_points: true, ignore_lines: true };
-    let (models, _) = tobj::load_obj_buf(&mut reader, &opts, |_| Ok((Vec::new(), Default::default())))
-        .map_err(|e| mesh_err(path, format!("invalid OBJ: {e}")))?;
+    let (models, _) =
+        tobj::load_obj_buf(&mut reader, &opts, |_| Ok((Vec::new(), Default::default()))).map_err(|e| mesh_err(path, format!("invalid OBJ: {e}")))?;
     let mut mesh = TriangleMesh::default();
     let mut warnings = Vec::new();
     let (mut all_uv, mut all_n) = (true, true);

@@ -15,6 +15,9 @@
 //! tables are the CIE's 5 nm data from 380 to 780 nm (Mitsuba integrates 360–830 nm; the
 //! colour matching functions are below 1.3e-4 outside, a difference under 0.1 %).
 
+// The tables keep the digits they are published with.
+#![allow(clippy::excessive_precision)]
+
 use crate::spectrum::Rgb;
 
 /// What a spectrum describes, which decides its normalisation.
@@ -226,11 +229,7 @@ fn d65(lambda: f32) -> f32 {
 /// CIE XYZ -> linear Rec. 709 (sRGB primaries, D65 white).
 pub fn xyz_to_linear_rgb(xyz: [f32; 3]) -> Rgb {
     let [x, y, z] = xyz;
-    Rgb::new(
-        3.240479 * x - 1.537150 * y - 0.498535 * z,
-        -0.969256 * x + 1.875992 * y + 0.041556 * z,
-        0.055648 * x - 0.204043 * y + 1.057311 * z,
-    )
+    Rgb::new(3.240479 * x - 1.537150 * y - 0.498535 * z, -0.969256 * x + 1.875992 * y + 0.041556 * z, 0.055648 * x - 0.204043 * y + 1.057311 * z)
 }
 
 /// Value of a sampled spectrum at `lambda` (linear between samples, zero outside).

@@ -62,7 +62,11 @@ impl<'a> Loader<'a> {
             "float" | "integer" => super::props::parse_f32(p.req("value")?, &p.loc, name)?,
             "string" => {
                 let s = p.req("value")?;
-                spectra::named_ior(s).ok_or_else(|| p.loc.err(format!("unknown index of refraction '{s}' (e.g. vacuum, air, water, bk7, glass, fused quartz, acrylic glass, polypropylene, diamond)")))?
+                spectra::named_ior(s).ok_or_else(|| {
+                    p.loc.err(format!(
+                        "unknown index of refraction '{s}' (e.g. vacuum, air, water, bk7, glass, fused quartz, acrylic glass, polypropylene, diamond)"
+                    ))
+                })?
             }
             t => return Err(p.loc.err(format!("{name}: expected a <float> or <string>, got <{t}>"))),
         };
@@ -174,7 +178,8 @@ impl<'a> Loader<'a> {
                 self.warn(format!("{}:{}: {ty} is not supported; the nested bsdf is used without it", node.loc.file.display(), node.loc.line));
                 self.bsdf(inner)?
             }
-            "principled" | "principledthin" | "blendbsdf" | "hair" | "measured" | "pplastic" | "polarizer" | "retarder" | "circular" | "roughcoating" | "coating" | "difftrans" | "phong" | "ward" => {
+            "principled" | "principledthin" | "blendbsdf" | "hair" | "measured" | "pplastic" | "polarizer" | "retarder" | "circular" | "roughcoating"
+            | "coating" | "difftrans" | "phong" | "ward" => {
                 return Err(node.loc.err(format!("bsdf type '{ty}' is not supported")));
             }
             other => return Err(node.loc.err(format!("unknown bsdf type '{other}'"))),

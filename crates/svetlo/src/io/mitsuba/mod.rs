@@ -91,9 +91,12 @@ impl<'a> Loader<'a> {
 
     /// A required file property (`filename`), resolved, or an error naming the element.
     fn file_prop(&self, node: &'a Node) -> Result<PathBuf> {
-        let p = self.prop(node, "filename")?.ok_or_else(|| node.loc.err(format!("<{} type=\"{}\"> needs a 'filename'", node.tag, node.attr("type").unwrap_or("?"))))?;
+        let p = self
+            .prop(node, "filename")?
+            .ok_or_else(|| node.loc.err(format!("<{} type=\"{}\"> needs a 'filename'", node.tag, node.attr("type").unwrap_or("?"))))?;
         let name = p.req("value")?;
-        self.resolve(p, name).ok_or_else(|| p.loc.err(format!("file '{name}' not found (looked next to {} and in the scene's search paths)", p.loc.file.display())))
+        self.resolve(p, name)
+            .ok_or_else(|| p.loc.err(format!("file '{name}' not found (looked next to {} and in the scene's search paths)", p.loc.file.display())))
     }
 
     fn scene(&mut self, root: &'a Node) -> Result<()> {

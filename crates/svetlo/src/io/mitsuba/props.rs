@@ -248,12 +248,7 @@ pub fn parse_transform(t: &Node) -> Result<Mat4> {
                 match v.len() {
                     // Row-major in the file; glam is column-major.
                     16 => Mat4::from_cols_array(&v.try_into().expect("16 values")).transpose(),
-                    9 => Mat4::from_cols(
-                        Vec4::new(v[0], v[3], v[6], 0.0),
-                        Vec4::new(v[1], v[4], v[7], 0.0),
-                        Vec4::new(v[2], v[5], v[8], 0.0),
-                        Vec4::W,
-                    ),
+                    9 => Mat4::from_cols(Vec4::new(v[0], v[3], v[6], 0.0), Vec4::new(v[1], v[4], v[7], 0.0), Vec4::new(v[2], v[5], v[8], 0.0), Vec4::W),
                     n => return Err(op.loc.err(format!("<matrix> needs 16 (or 9) values, got {n}"))),
                 }
             }

@@ -135,7 +135,7 @@ impl<'a> Loader<'a> {
             None => {
                 let fl = self.string(node, "focal_length")?.unwrap_or("50mm");
                 let mm = super::props::parse_f32(fl.trim().trim_end_matches("mm"), &node.loc, "focal_length")?;
-                if !(mm > 0.0) {
+                if mm.is_nan() || mm <= 0.0 {
                     return Err(node.loc.err(format!("focal_length must be positive, got {fl}")));
                 }
                 // The diagonal of a 36 x 24 mm frame.
@@ -152,7 +152,8 @@ impl<'a> Loader<'a> {
         let ty = node.type_()?;
         match ty {
             "moment" => {
-                let inner = node.children.iter().find(|c| c.tag == "integrator").ok_or_else(|| node.loc.err("the moment integrator needs a nested integrator"))?;
+                let inner =
+                    node.children.iter().find(|c| c.tag == "integrator").ok_or_else(|| node.loc.err("the moment integrator needs a nested integrator"))?;
                 self.warn("moment integrator: its nested integrator is used (no second-moment output)".to_string());
                 return self.integrator(inner);
             }

@@ -15,7 +15,7 @@ use std::path::{Path, PathBuf};
 fn uniform_scale(m: &Mat4) -> Option<f32> {
     let l = Mat3::from_mat4(*m);
     let s = l.determinant().abs().cbrt();
-    if !(s > 0.0) {
+    if s.is_nan() || s <= 0.0 {
         return None;
     }
     let q = l / s;
@@ -159,7 +159,10 @@ impl<'a> Loader<'a> {
             }
             _ => {
                 // A rotated (or non-uniformly scaled) sphere: its uv frame (or shape) needs a mesh.
-                self.warn(format!("sphere '{name}': rotated or non-uniformly scaled, tessellated ({} segments) to keep its shape and uv frame", shapes::CIRCLE_SEGMENTS));
+                self.warn(format!(
+                    "sphere '{name}': rotated or non-uniformly scaled, tessellated ({} segments) to keep its shape and uv frame",
+                    shapes::CIRCLE_SEGMENTS
+                ));
                 let mut m = shapes::uv_sphere(shapes::CIRCLE_SEGMENTS);
                 m.transform(&object);
                 Ok(Geometry::Mesh(finish(m, flip)))
@@ -178,9 +181,10 @@ impl<'a> Loader<'a> {
                 candidates.push(up.join(ext).join(format!("{stem}.{ext}")));
             }
         }
-        let twin = candidates.into_iter().find(|c| c.exists()).ok_or_else(|| {
-            node.loc.err(format!("'.serialized' meshes are not supported and no .obj/.ply twin of '{}' was found", path.display()))
-        })?;
+        let twin = candidates
+            .into_iter()
+            .find(|c| c.exists())
+            .ok_or_else(|| node.loc.err(format!("'.serialized' meshes are not supported and no .obj/.ply twin of '{}' was found", path.display())))?;
         self.warn(format!("{}: .serialized is not supported; loaded its twin {}", path.display(), twin.display()));
         // Serialized meshes store uvs as they are: no flip for either twin.
         if twin.extension().is_some_and(|e| e == "obj") {
@@ -203,4 +207,3 @@ fn finish(mut m: TriangleMesh, flip: bool) -> TriangleMesh {
     }
     m
 }
-

@@ -140,8 +140,7 @@ fn expand_children(doc: &roxmltree::Document, parent: roxmltree::Node, file: &Rc
             }
             "include" => {
                 let fname = node.req("filename")?;
-                let target = resolve_in(fname, &node.loc.dir(), &ctx.search_paths)
-                    .ok_or_else(|| node.loc.err(format!("included file '{fname}' not found")))?;
+                let target = resolve_in(fname, &node.loc.dir(), &ctx.search_paths).ok_or_else(|| node.loc.err(format!("included file '{fname}' not found")))?;
                 let inc = parse_file(&target, ctx)?;
                 out.extend(inc.children);
             }
