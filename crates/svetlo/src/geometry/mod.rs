@@ -4,6 +4,7 @@ pub mod aabb;
 pub mod interaction;
 pub mod mesh;
 pub mod ray;
+pub mod shapes;
 pub mod sphere;
 pub mod triangle;
 

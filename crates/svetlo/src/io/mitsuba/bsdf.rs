@@ -1,0 +1,188 @@
+//! BSDF plugins -> [`Material`].
+
+use super::xml::Node;
+use super::Loader;
+use crate::bsdf::material::{MicrofacetKind, Roughness};
+use crate::bsdf::Material;
+use crate::error::Result;
+use crate::io::spectra::{self, SpectrumKind};
+use crate::spectrum::Rgb;
+
+impl<'a> Loader<'a> {
+    /// The material index of a `<bsdf>` element; one with an id is built once and shared.
+    pub(super) fn material_index(&mut self, node: &'a Node) -> Result<u32> {
+        if let Some(id) = node.id() {
+            if let Some(&i) = self.materials_by_id.get(id) {
+                return Ok(i);
+            }
+        }
+        let m = self.bsdf(node)?;
+        let i = self.b.add_material(m);
+        if let Some(id) = node.id() {
+            self.materials_by_id.insert(id, i);
+        }
+        Ok(i)
+    }
+
+    /// Mitsuba's default when a shape has no BSDF: diffuse, reflectance 0.5.
+    pub(super) fn default_material(&mut self) -> u32 {
+        *self.default_material.get_or_insert_with(|| self.b.add_material(Material::default()))
+    }
+
+    /// Nested BSDFs of a BSDF (inline or by reference).
+    fn child_bsdfs(&self, node: &'a Node) -> Result<Vec<&'a Node>> {
+        let mut out = Vec::new();
+        for c in &node.children {
+            match c.tag.as_str() {
+                "bsdf" => out.push(c),
+                "ref" if c.name().is_none() => {
+                    let t = self.lookup(c)?;
+                    if t.tag == "bsdf" {
+                        out.push(t);
+                    }
+                }
+                _ => {}
+            }
+        }
+        Ok(out)
+    }
+
+    fn one_child(&self, node: &'a Node) -> Result<&'a Node> {
+        let kids = self.child_bsdfs(node)?;
+        match kids.as_slice() {
+            [one] => Ok(one),
+            _ => Err(node.loc.err(format!("bsdf '{}' needs exactly one nested bsdf, found {}", node.attr("type").unwrap_or("?"), kids.len()))),
+        }
+    }
+
+    /// An index of refraction: a number or one of Mitsuba's named materials.
+    fn ior(&self, node: &'a Node, name: &str, default: f32) -> Result<f32> {
+        let Some(p) = self.prop(node, name)? else { return Ok(default) };
+        let v = match p.tag.as_str() {
+            "float" | "integer" => super::props::parse_f32(p.req("value")?, &p.loc, name)?,
+            "string" => {
+                let s = p.req("value")?;
+                spectra::named_ior(s).ok_or_else(|| {
+                    p.loc.err(format!(
+                        "unknown index of refraction '{s}' (e.g. vacuum, air, water, bk7, glass, fused quartz, acrylic glass, polypropylene, diamond)"
+                    ))
+                })?
+            }
+            t => return Err(p.loc.err(format!("{name}: expected a <float> or <string>, got <{t}>"))),
+        };
+        if !(v > 0.0 && v.is_finite()) {
+            return Err(p.loc.err(format!("{name}: index of refraction must be positive, got {v}")));
+        }
+        Ok(v)
+    }
+
+    fn eta(&self, node: &'a Node, int_default: f32) -> Result<f32> {
+        Ok(self.ior(node, "int_ior", int_default)? / self.ior(node, "ext_ior", 1.000277)?)
+    }
+
+    fn roughness(&mut self, node: &'a Node) -> Result<Roughness> {
+        let kind = match self.string(node, "distribution")?.unwrap_or("beckmann") {
+            "beckmann" => MicrofacetKind::Beckmann,
+            "ggx" => MicrofacetKind::Ggx,
+            o => return Err(node.loc.err(format!("distribution '{o}' is not beckmann or ggx"))),
+        };
+        let (alpha_u, alpha_v) = if self.prop(node, "alpha")?.is_some() {
+            let a = self.float_texture(node, "alpha", 0.1)?;
+            (a.clone(), a)
+        } else {
+            (self.float_texture(node, "alpha_u", 0.1)?, self.float_texture(node, "alpha_v", 0.1)?)
+        };
+        for a in [&alpha_u, &alpha_v] {
+            if let crate::texture::Texture::Constant(c) = a {
+                if !(c.r >= 0.0 && c.r.is_finite()) {
+                    return Err(node.loc.err(format!("roughness alpha must be non-negative, got {}", c.r)));
+                }
+            }
+        }
+        Ok(Roughness { kind, alpha_u, alpha_v })
+    }
+
+    pub(super) fn bsdf(&mut self, node: &'a Node) -> Result<Material> {
+        let ty = node.type_()?;
+        let white = Rgb::WHITE;
+        let refl = SpectrumKind::Reflectance;
+        Ok(match ty {
+            "diffuse" => Material::Diffuse { reflectance: self.spectrum(node, "reflectance", Rgb::splat(0.5), refl)? },
+            "conductor" | "roughconductor" => {
+                let specular_reflectance = self.spectrum(node, "specular_reflectance", white, refl)?;
+                let material = self.string(node, "material")?;
+                let (eta, k) = if self.prop(node, "eta")?.is_some() || self.prop(node, "k")?.is_some() {
+                    if material.is_some() {
+                        return Err(node.loc.err("give either 'material' or 'eta'/'k', not both"));
+                    }
+                    let eta = self.constant_color(node, "eta", Rgb::BLACK, SpectrumKind::Unbounded)?;
+                    let k = self.constant_color(node, "k", Rgb::WHITE, SpectrumKind::Unbounded)?;
+                    (eta, k)
+                } else {
+                    let m = material.unwrap_or("none");
+                    spectra::named_conductor(m).ok_or_else(|| node.loc.err(format!("unknown conductor material '{m}' (none, Ag, Al, Au, Cu, Cr)")))?
+                };
+                let roughness = if ty == "roughconductor" { Some(self.roughness(node)?) } else { None };
+                Material::Conductor { eta, k, specular_reflectance, roughness }
+            }
+            "dielectric" | "roughdielectric" => {
+                let eta = self.eta(node, 1.5046)?;
+                let specular_reflectance = self.spectrum(node, "specular_reflectance", white, refl)?;
+                let specular_transmittance = self.spectrum(node, "specular_transmittance", white, refl)?;
+                let roughness = if ty == "roughdielectric" { Some(self.roughness(node)?) } else { None };
+                Material::Dielectric { eta, specular_reflectance, specular_transmittance, roughness }
+            }
+            "thindielectric" => Material::ThinDielectric {
+                eta: self.eta(node, 1.5046)?,
+                specular_reflectance: self.spectrum(node, "specular_reflectance", white, refl)?,
+                specular_transmittance: self.spectrum(node, "specular_transmittance", white, refl)?,
+            },
+            "plastic" | "roughplastic" => {
+                let roughness = if ty == "roughplastic" {
+                    let r = self.roughness(node)?;
+                    if self.prop(node, "alpha_u")?.is_some() {
+                        self.warn(format!("{}:{}: roughplastic is isotropic; alpha_u/alpha_v used as given", node.loc.file.display(), node.loc.line));
+                    }
+                    Some(r)
+                } else {
+                    None
+                };
+                Material::Plastic {
+                    diffuse_reflectance: self.spectrum(node, "diffuse_reflectance", Rgb::splat(0.5), refl)?,
+                    specular_reflectance: self.spectrum(node, "specular_reflectance", white, refl)?,
+                    eta: self.eta(node, 1.49)?,
+                    nonlinear: self.boolean(node, "nonlinear", false)?,
+                    roughness,
+                }
+            }
+            "twosided" => {
+                let kids = self.child_bsdfs(node)?;
+                match kids.as_slice() {
+                    [one] => {
+                        let m = self.bsdf(one)?;
+                        Material::TwoSided { front: Box::new(m.clone()), back: Box::new(m) }
+                    }
+                    [f, b] => Material::TwoSided { front: Box::new(self.bsdf(f)?), back: Box::new(self.bsdf(b)?) },
+                    _ => return Err(node.loc.err(format!("twosided needs one or two nested bsdfs, found {}", kids.len()))),
+                }
+            }
+            "mask" => {
+                let opacity = self.float_texture(node, "opacity", 0.5)?;
+                let inner = self.one_child(node)?;
+                Material::Mask { opacity, inner: Box::new(self.bsdf(inner)?) }
+            }
+            "null" => Material::Null,
+            // Surface-detail wrappers: render the surface without the detail.
+            "bumpmap" | "normalmap" => {
+                let inner = self.one_child(node)?;
+                self.warn(format!("{}:{}: {ty} is not supported; the nested bsdf is used without it", node.loc.file.display(), node.loc.line));
+                self.bsdf(inner)?
+            }
+            "principled" | "principledthin" | "blendbsdf" | "hair" | "measured" | "pplastic" | "polarizer" | "retarder" | "circular" | "roughcoating"
+            | "coating" | "difftrans" | "phong" | "ward" => {
+                return Err(node.loc.err(format!("bsdf type '{ty}' is not supported")));
+            }
+            other => return Err(node.loc.err(format!("unknown bsdf type '{other}'"))),
+        })
+    }
+}

@@ -1,0 +1,87 @@
+//! Emitter plugins other than `area` (which belongs to its shape).
+
+use super::xml::Node;
+use super::Loader;
+use crate::error::Result;
+use crate::io::spectra::SpectrumKind;
+use crate::light::{EnvMap, Light};
+use crate::math::Frame;
+use crate::spectrum::Rgb;
+use glam::{Mat4, Vec3};
+
+impl<'a> Loader<'a> {
+    pub(super) fn emitter(&mut self, node: &'a Node) -> Result<()> {
+        let ty = node.type_()?;
+        let to_world = self.transform(node, "to_world")?;
+        let il = SpectrumKind::Illuminant;
+        let light = match ty {
+            "point" => {
+                let position = match (self.vec3(node, "position")?, to_world) {
+                    (Some(_), Some(_)) => return Err(node.loc.err("point light: give 'position' or 'to_world', not both")),
+                    (Some(p), None) => p,
+                    (None, Some(m)) => m.w_axis.truncate(),
+                    (None, None) => Vec3::ZERO,
+                };
+                Light::Point { position, intensity: self.constant_color(node, "intensity", Rgb::WHITE, il)? }
+            }
+            "spot" => {
+                let m = to_world.unwrap_or(Mat4::IDENTITY);
+                let cutoff = self.float(node, "cutoff_angle", 20.0)?;
+                let beam = self.float(node, "beam_width", cutoff * 0.75)?;
+                if !(cutoff > 0.0 && cutoff <= 180.0 && beam > 0.0 && beam <= cutoff) {
+                    return Err(node.loc.err(format!("spot light: need 0 < beam_width ({beam}) <= cutoff_angle ({cutoff}) <= 180")));
+                }
+                if self.prop(node, "texture")?.is_some() {
+                    self.warn(format!("{}:{}: textured spot lights are not supported; the texture is ignored", node.loc.file.display(), node.loc.line));
+                }
+                let n = m.transform_vector3(Vec3::Z).normalize_or_zero();
+                if n == Vec3::ZERO {
+                    return Err(node.loc.err("spot light: degenerate to_world"));
+                }
+                let s = m.transform_vector3(Vec3::X);
+                let frame = Frame::from_normal_tangent(n, s);
+                let (cutoff, beam) = (cutoff.to_radians(), beam.to_radians());
+                Light::Spot {
+                    position: m.w_axis.truncate(),
+                    frame,
+                    intensity: self.constant_color(node, "intensity", Rgb::WHITE, il)?,
+                    cos_cutoff: cutoff.cos(),
+                    cos_beam: beam.cos(),
+                    cutoff_angle: cutoff,
+                    beam_width: beam,
+                }
+            }
+            "directional" => {
+                let d = match (self.vec3(node, "direction")?, to_world) {
+                    (Some(_), Some(_)) => return Err(node.loc.err("directional light: give 'direction' or 'to_world', not both")),
+                    (Some(d), None) => d,
+                    (None, Some(m)) => m.transform_vector3(Vec3::Z),
+                    (None, None) => Vec3::Z,
+                };
+                let direction = d.normalize_or_zero();
+                if direction == Vec3::ZERO || !direction.is_finite() {
+                    return Err(node.loc.err("directional light: zero direction"));
+                }
+                Light::Directional { direction, irradiance: self.constant_color(node, "irradiance", Rgb::WHITE, il)? }
+            }
+            "constant" => Light::Constant { radiance: self.constant_color(node, "radiance", Rgb::WHITE, il)? },
+            "envmap" => {
+                let path = self.file_prop(node)?;
+                let scale = self.float(node, "scale", 1.0)?;
+                if !(scale >= 0.0 && scale.is_finite()) {
+                    return Err(node.loc.err(format!("envmap scale must be non-negative, got {scale}")));
+                }
+                let image = self.bitmap(&path, false)?;
+                Light::EnvMap(Box::new(EnvMap::new(image, to_world.unwrap_or(Mat4::IDENTITY), scale)))
+            }
+            "projector" => {
+                self.warn(format!("{}:{}: projector emitters are not supported; skipped", node.loc.file.display(), node.loc.line));
+                return Ok(());
+            }
+            "area" => return Err(node.loc.err("an area emitter must be attached to a shape")),
+            other => return Err(node.loc.err(format!("unknown emitter type '{other}'"))),
+        };
+        self.b.add_light(light);
+        Ok(())
+    }
+}

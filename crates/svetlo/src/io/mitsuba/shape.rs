@@ -1,0 +1,209 @@
+//! Shape plugins: parametric shapes (meshed, spheres analytic), mesh files, instances.
+
+use super::xml::Node;
+use super::Loader;
+use crate::error::Result;
+use crate::geometry::{shapes, Geometry, Sphere, TriangleMesh};
+use crate::io::mesh_files::{self, LoadedMesh};
+use crate::io::spectra::SpectrumKind;
+use crate::math::Frame;
+use crate::spectrum::Rgb;
+use glam::{Mat3, Mat4, Vec3};
+use std::path::{Path, PathBuf};
+
+/// Is the linear part of `m` a uniform scale (any rotation allowed)? Returns the scale.
+fn uniform_scale(m: &Mat4) -> Option<f32> {
+    let l = Mat3::from_mat4(*m);
+    let s = l.determinant().abs().cbrt();
+    if s.is_nan() || s <= 0.0 {
+        return None;
+    }
+    let q = l / s;
+    let d = q.transpose() * q - Mat3::IDENTITY;
+    (d.to_cols_array().iter().all(|v| v.abs() < 1e-4)).then_some(s)
+}
+
+impl<'a> Loader<'a> {
+    /// Add the geometry of a `<shape>` (placed by `parent`, for instances) to the scene.
+    pub(super) fn shape(&mut self, node: &'a Node, parent: Mat4) -> Result<()> {
+        let ty = node.type_()?;
+        let to_world = parent * self.transform(node, "to_world")?.unwrap_or(Mat4::IDENTITY);
+        if ty == "instance" {
+            return self.instance(node, to_world);
+        }
+        self.shape_count += 1;
+        let name = node.id().map(str::to_string).unwrap_or_else(|| format!("{ty}#{}", self.shape_count));
+
+        // BSDF and emitter, inline or by reference.
+        let (mut material, mut emission) = (None, None);
+        for c in &node.children {
+            let target = match c.tag.as_str() {
+                "ref" if c.name().is_none() => self.lookup(c)?,
+                "ref" => {
+                    if matches!(c.name(), Some("interior") | Some("exterior")) {
+                        return Err(c.loc.err("participating media (interior/exterior) are not supported"));
+                    }
+                    continue;
+                }
+                "bsdf" | "emitter" | "medium" => c,
+                _ => continue,
+            };
+            match target.tag.as_str() {
+                "bsdf" => {
+                    if material.is_some() {
+                        return Err(c.loc.err(format!("shape '{name}' has more than one bsdf")));
+                    }
+                    material = Some(self.material_index(target)?);
+                }
+                "emitter" => {
+                    if target.type_()? != "area" {
+                        return Err(target.loc.err(format!("only area emitters can be attached to a shape, not '{}'", target.type_()?)));
+                    }
+                    if emission.is_some() {
+                        return Err(c.loc.err(format!("shape '{name}' has more than one emitter")));
+                    }
+                    emission = Some(self.spectrum(target, "radiance", Rgb::WHITE, SpectrumKind::Illuminant)?);
+                }
+                "medium" => return Err(target.loc.err("participating media are not supported")),
+                other => return Err(c.loc.err(format!("a <{other}> cannot be attached to a shape"))),
+            }
+        }
+        let flip = self.boolean(node, "flip_normals", false)?;
+        let geometry = match ty {
+            "sphere" => self.sphere(node, to_world, flip, emission.is_some(), &name)?,
+            "rectangle" | "cube" | "disk" | "cylinder" => {
+                let (mut m, local) = match ty {
+                    "rectangle" => (shapes::rectangle(), Mat4::IDENTITY),
+                    "cube" => (shapes::cube(), Mat4::IDENTITY),
+                    "disk" => (shapes::disk(shapes::CIRCLE_SEGMENTS), Mat4::IDENTITY),
+                    _ => (shapes::cylinder(shapes::CIRCLE_SEGMENTS), self.cylinder_frame(node)?),
+                };
+                m.transform(&(to_world * local));
+                Geometry::Mesh(finish(m, flip))
+            }
+            "obj" | "ply" | "serialized" => {
+                let path = self.file_prop(node)?;
+                let loaded = match ty {
+                    "obj" => mesh_files::load_obj(&path, self.boolean(node, "flip_tex_coords", true)?)?,
+                    "ply" => mesh_files::load_ply(&path, self.boolean(node, "flip_tex_coords", false)?)?,
+                    _ => self.serialized_twin(node, &path)?,
+                };
+                let LoadedMesh { mut mesh, warnings } = loaded;
+                for w in warnings {
+                    self.warn(w);
+                }
+                if self.boolean(node, "face_normals", false)? {
+                    mesh.normals.clear();
+                } else if mesh.normals.is_empty() {
+                    mesh_files::compute_vertex_normals(&mut mesh);
+                }
+                mesh.transform(&to_world);
+                Geometry::Mesh(finish(mesh, flip))
+            }
+            "shapegroup" => return Err(node.loc.err("a shapegroup cannot be nested inside another shape")),
+            "sdfgrid" | "bsplinecurve" | "linearcurve" | "ellipsoids" | "ellipsoidsmesh" | "merge" => {
+                self.warn(format!("{}:{}: shape type '{ty}' is not supported; shape '{name}' skipped", node.loc.file.display(), node.loc.line));
+                return Ok(());
+            }
+            other => return Err(node.loc.err(format!("unknown shape type '{other}'"))),
+        };
+        let material = match material {
+            Some(m) => m,
+            None => self.default_material(),
+        };
+        self.b.add_shape(geometry, material, emission, &name)
+    }
+
+    /// `<shape type="instance">`: copies the referenced shapegroup's shapes, transformed.
+    fn instance(&mut self, node: &'a Node, to_world: Mat4) -> Result<()> {
+        let r = node.children.iter().find(|c| c.tag == "ref").ok_or_else(|| node.loc.err("an instance needs a <ref id=...> to a shapegroup"))?;
+        let group = self.lookup(r)?;
+        if group.tag != "shape" || group.attr("type") != Some("shapegroup") {
+            return Err(r.loc.err("an instance must reference a shape of type 'shapegroup'"));
+        }
+        for c in group.children.iter().filter(|c| c.tag == "shape") {
+            self.shape(c, to_world)?;
+        }
+        Ok(())
+    }
+
+    /// Mitsuba's cylinder: from p0 to p1 with a radius, in the frame of `to_world`.
+    fn cylinder_frame(&self, node: &'a Node) -> Result<Mat4> {
+        let p0 = self.vec3(node, "p0")?.unwrap_or(Vec3::ZERO);
+        let p1 = self.vec3(node, "p1")?.unwrap_or(Vec3::Z);
+        let r = self.float(node, "radius", 1.0)?;
+        let d = p1 - p0;
+        let len = d.length();
+        if !(len > 0.0 && r > 0.0) {
+            return Err(node.loc.err(format!("cylinder needs p0 != p1 and radius > 0 (length {len}, radius {r})")));
+        }
+        let f = Frame::from_normal(d / len);
+        let rot = Mat4::from_cols(f.s.extend(0.0), f.t.extend(0.0), f.n.extend(0.0), glam::Vec4::W);
+        Ok(Mat4::from_translation(p0) * rot * Mat4::from_scale(Vec3::new(r, r, len)))
+    }
+
+    fn sphere(&mut self, node: &'a Node, to_world: Mat4, flip: bool, emits: bool, name: &str) -> Result<Geometry> {
+        let center = self.vec3(node, "center")?.unwrap_or(Vec3::ZERO);
+        let radius = self.float(node, "radius", 1.0)?;
+        if !(radius > 0.0 && radius.is_finite()) {
+            return Err(node.loc.err(format!("sphere radius must be positive, got {radius}")));
+        }
+        let object = to_world * Mat4::from_translation(center) * Mat4::from_scale(Vec3::splat(radius));
+        let lin = Mat3::from_mat4(object);
+        match uniform_scale(&object) {
+            Some(s) if emits || (lin / s - Mat3::IDENTITY).to_cols_array().iter().all(|v| v.abs() < 1e-5) => {
+                if (lin / s - Mat3::IDENTITY).to_cols_array().iter().any(|v| v.abs() >= 1e-5) {
+                    self.warn(format!("sphere '{name}': emitting sphere kept analytic; the rotation of its uv frame is ignored"));
+                }
+                Ok(Geometry::Sphere(Sphere { center: object.w_axis.truncate(), radius: s, flip_normals: flip }))
+            }
+            _ => {
+                // A rotated (or non-uniformly scaled) sphere: its uv frame (or shape) needs a mesh.
+                self.warn(format!(
+                    "sphere '{name}': rotated or non-uniformly scaled, tessellated ({} segments) to keep its shape and uv frame",
+                    shapes::CIRCLE_SEGMENTS
+                ));
+                let mut m = shapes::uv_sphere(shapes::CIRCLE_SEGMENTS);
+                m.transform(&object);
+                Ok(Geometry::Mesh(finish(m, flip)))
+            }
+        }
+    }
+
+    /// Mitsuba's `.serialized` format is not read; a twin OBJ/PLY of the same name is used.
+    fn serialized_twin(&mut self, node: &'a Node, path: &Path) -> Result<LoadedMesh> {
+        let stem = path.file_stem().and_then(|s| s.to_str()).unwrap_or("");
+        let dir = path.parent().unwrap_or(Path::new("."));
+        let mut candidates: Vec<PathBuf> = Vec::new();
+        for ext in ["obj", "ply"] {
+            candidates.push(dir.join(format!("{stem}.{ext}")));
+            if let Some(up) = dir.parent() {
+                candidates.push(up.join(ext).join(format!("{stem}.{ext}")));
+            }
+        }
+        let twin = candidates
+            .into_iter()
+            .find(|c| c.exists())
+            .ok_or_else(|| node.loc.err(format!("'.serialized' meshes are not supported and no .obj/.ply twin of '{}' was found", path.display())))?;
+        self.warn(format!("{}: .serialized is not supported; loaded its twin {}", path.display(), twin.display()));
+        // Serialized meshes store uvs as they are: no flip for either twin.
+        if twin.extension().is_some_and(|e| e == "obj") {
+            mesh_files::load_obj(&twin, false)
+        } else {
+            mesh_files::load_ply(&twin, false)
+        }
+    }
+}
+
+/// `flip_normals` on a mesh: reverse the winding and the shading normals.
+fn finish(mut m: TriangleMesh, flip: bool) -> TriangleMesh {
+    if flip {
+        for t in &mut m.indices {
+            t.swap(1, 2);
+        }
+        for n in &mut m.normals {
+            *n = -*n;
+        }
+    }
+    m
+}

@@ -1,0 +1,234 @@
+//! First pass over a Mitsuba XML file: parse it, expand `<include>`, apply `<default>` and
+//! `$name` substitution, collect `<path>` folders, and normalise the 0.5/0.6 dialect
+//! (camelCase names, `lookAt`). The result is an owned tree whose every element knows the
+//! file, line and column it came from, so later errors can point at it.
+
+use crate::error::{Error, Result};
+use std::collections::HashMap;
+use std::path::{Path, PathBuf};
+use std::rc::Rc;
+
+/// Where an element was written.
+#[derive(Clone, Debug)]
+pub struct Loc {
+    pub file: Rc<PathBuf>,
+    pub line: u32,
+    pub col: u32,
+}
+
+impl Loc {
+    pub fn err(&self, msg: impl Into<String>) -> Error {
+        Error::SceneAt { file: (*self.file).clone(), line: self.line, col: self.col, msg: msg.into() }
+    }
+    /// The folder of the file this element came from.
+    pub fn dir(&self) -> PathBuf {
+        self.file.parent().map(Path::to_path_buf).unwrap_or_default()
+    }
+}
+
+#[derive(Clone, Debug)]
+pub struct Node {
+    pub tag: String,
+    pub attrs: Vec<(String, String)>,
+    pub children: Vec<Node>,
+    pub loc: Loc,
+}
+
+impl Node {
+    pub fn attr(&self, k: &str) -> Option<&str> {
+        self.attrs.iter().find(|(a, _)| a == k).map(|(_, v)| v.as_str())
+    }
+    /// A required attribute.
+    pub fn req(&self, k: &str) -> Result<&str> {
+        self.attr(k).ok_or_else(|| self.loc.err(format!("<{}> needs a '{k}' attribute", self.tag)))
+    }
+    pub fn name(&self) -> Option<&str> {
+        self.attr("name")
+    }
+    pub fn type_(&self) -> Result<&str> {
+        self.req("type")
+    }
+    pub fn id(&self) -> Option<&str> {
+        self.attr("id")
+    }
+}
+
+/// The expanded scene: its root `<scene>` element and the folders `<path>` added.
+pub struct Parsed {
+    pub root: Node,
+    pub search_paths: Vec<PathBuf>,
+    /// Parameters given by the caller that no `$name` used.
+    pub unused_params: Vec<String>,
+}
+
+struct Ctx {
+    params: HashMap<String, String>,
+    used: std::collections::HashSet<String>,
+    search_paths: Vec<PathBuf>,
+    stack: Vec<PathBuf>,
+}
+
+/// Parse `path` and everything it includes. `defaults` override `<default>` values.
+pub fn parse(path: &Path, defaults: &[(String, String)]) -> Result<Parsed> {
+    let mut ctx = Ctx {
+        params: defaults.iter().cloned().collect(),
+        used: Default::default(),
+        search_paths: vec![path.parent().map(Path::to_path_buf).unwrap_or_default()],
+        stack: Vec::new(),
+    };
+    let root = parse_file(path, &mut ctx)?;
+    let unused_params = defaults.iter().map(|(k, _)| k.clone()).filter(|k| !ctx.used.contains(k)).collect();
+    Ok(Parsed { root, search_paths: ctx.search_paths, unused_params })
+}
+
+fn parse_file(path: &Path, ctx: &mut Ctx) -> Result<Node> {
+    let canon = std::fs::canonicalize(path).map_err(|e| Error::Io { file: path.to_path_buf(), source: e })?;
+    if ctx.stack.contains(&canon) {
+        let chain: Vec<String> = ctx.stack.iter().chain(std::iter::once(&canon)).map(|p| p.display().to_string()).collect();
+        return Err(Error::Scene { file: path.to_path_buf(), msg: format!("include cycle: {}", chain.join(" -> ")) });
+    }
+    let text = std::fs::read_to_string(path).map_err(|e| Error::Io { file: path.to_path_buf(), source: e })?;
+    let opts = roxmltree::ParsingOptions { allow_dtd: true, ..Default::default() };
+    let doc = roxmltree::Document::parse_with_options(&text, opts).map_err(|e| {
+        let p = e.pos();
+        Error::SceneAt { file: path.to_path_buf(), line: p.row, col: p.col, msg: format!("malformed XML: {e}") }
+    })?;
+    let file = Rc::new(path.to_path_buf());
+    let root = doc.root_element();
+    let loc = loc_of(&doc, root, &file);
+    if root.tag_name().name() != "scene" {
+        return Err(loc.err(format!("not a Mitsuba scene: the root element is <{}>, not <scene>", root.tag_name().name())));
+    }
+    ctx.stack.push(canon);
+    let children = expand_children(&doc, root, &file, ctx);
+    ctx.stack.pop();
+    let attrs = root.attributes().map(|a| (a.name().to_string(), a.value().to_string())).collect();
+    Ok(Node { tag: "scene".into(), attrs, children: children?, loc })
+}
+
+fn loc_of(doc: &roxmltree::Document, n: roxmltree::Node, file: &Rc<PathBuf>) -> Loc {
+    let p = doc.text_pos_at(n.range().start);
+    Loc { file: file.clone(), line: p.row, col: p.col }
+}
+
+fn expand_children(doc: &roxmltree::Document, parent: roxmltree::Node, file: &Rc<PathBuf>, ctx: &mut Ctx) -> Result<Vec<Node>> {
+    let mut out = Vec::new();
+    for n in parent.children().filter(|n| n.is_element()) {
+        let loc = loc_of(doc, n, file);
+        let tag = normalise_tag(n.tag_name().name());
+        let mut attrs = Vec::new();
+        for a in n.attributes() {
+            let v = substitute(a.value(), &loc, ctx)?;
+            let k = a.name().to_string();
+            // Property names of the 0.6 dialect are camelCase (toWorld, sampleCount, intIOR).
+            // (Parameter names of <default> are left alone: `$resX` must still find them.)
+            let v = if k == "name" && tag != "default" { camel_to_snake(&v) } else { v };
+            attrs.push((k, v));
+        }
+        let node = Node { tag, attrs, children: Vec::new(), loc };
+        match node.tag.as_str() {
+            "default" => {
+                let name = node.req("name")?.to_string();
+                let value = node.req("value")?.to_string();
+                ctx.params.entry(name).or_insert(value);
+            }
+            "path" => {
+                let v = node.req("value")?;
+                let p = Path::new(v);
+                let dir = if p.is_absolute() { p.to_path_buf() } else { node.loc.dir().join(p) };
+                ctx.search_paths.push(dir);
+            }
+            "include" => {
+                let fname = node.req("filename")?;
+                let target = resolve_in(fname, &node.loc.dir(), &ctx.search_paths).ok_or_else(|| node.loc.err(format!("included file '{fname}' not found")))?;
+                let inc = parse_file(&target, ctx)?;
+                out.extend(inc.children);
+            }
+            _ => {
+                let mut node = node;
+                node.children = expand_children(doc, n, file, ctx)?;
+                out.push(node);
+            }
+        }
+    }
+    Ok(out)
+}
+
+/// Find a file: as given if absolute, else next to the referring file, else in the search paths.
+pub fn resolve_in(name: &str, dir: &Path, search: &[PathBuf]) -> Option<PathBuf> {
+    let p = Path::new(name);
+    if p.is_absolute() {
+        return p.exists().then(|| p.to_path_buf());
+    }
+    std::iter::once(dir).chain(search.iter().rev().map(|p| p.as_path())).map(|d| d.join(p)).find(|c| c.exists())
+}
+
+/// Replace every `$name` by its parameter; an unknown name is an error.
+fn substitute(v: &str, loc: &Loc, ctx: &mut Ctx) -> Result<String> {
+    if !v.contains('$') {
+        return Ok(v.to_string());
+    }
+    let mut out = String::with_capacity(v.len());
+    let mut rest = v;
+    while let Some(i) = rest.find('$') {
+        out.push_str(&rest[..i]);
+        let after = &rest[i + 1..];
+        let len = after.find(|c: char| !(c.is_ascii_alphanumeric() || c == '_')).unwrap_or(after.len());
+        if len == 0 {
+            out.push('$');
+            rest = after;
+            continue;
+        }
+        let name = &after[..len];
+        let val = ctx.params.get(name).ok_or_else(|| loc.err(format!("undefined parameter '${name}' (give it with <default> or -D {name}=...)")))?;
+        out.push_str(val);
+        ctx.used.insert(name.to_string());
+        rest = &after[len..];
+    }
+    out.push_str(rest);
+    Ok(out)
+}
+
+fn normalise_tag(t: &str) -> String {
+    match t {
+        "lookAt" => "lookat".into(),
+        _ => t.to_string(),
+    }
+}
+
+/// `toWorld` -> `to_world`, `intIOR` -> `int_ior`; snake_case names pass unchanged.
+pub fn camel_to_snake(s: &str) -> String {
+    if !s.chars().any(|c| c.is_ascii_uppercase()) {
+        return s.to_string();
+    }
+    let mut out = String::with_capacity(s.len() + 4);
+    let mut prev_lower = false;
+    for c in s.chars() {
+        if c.is_ascii_uppercase() {
+            if prev_lower {
+                out.push('_');
+            }
+            out.push(c.to_ascii_lowercase());
+            prev_lower = false;
+        } else {
+            out.push(c);
+            prev_lower = c.is_ascii_lowercase() || c.is_ascii_digit();
+        }
+    }
+    out
+}
+
+#[cfg(test)]
+mod tests {
+    use super::camel_to_snake;
+
+    #[test]
+    fn camel_names() {
+        assert_eq!(camel_to_snake("toWorld"), "to_world");
+        assert_eq!(camel_to_snake("sampleCount"), "sample_count");
+        assert_eq!(camel_to_snake("intIOR"), "int_ior");
+        assert_eq!(camel_to_snake("fovAxis"), "fov_axis");
+        assert_eq!(camel_to_snake("max_depth"), "max_depth");
+        assert_eq!(camel_to_snake("alphaU"), "alpha_u");
+    }
+}
