@@ -95,9 +95,10 @@ impl Texture {
             }
             Texture::Bitmap { image, filter, wrap: wm, to_uv } => {
                 let p = to_uv.transform_point2(uv);
-                // Mitsuba's convention: v = 0 is the bottom row of the image.
+                // Mitsuba 3's convention: v = 0 is the top row of the image (its OBJ reader flips
+                // v so that OBJ files, whose v = 0 is the bottom, come out upright).
                 let x = p.x * image.width as f32;
-                let y = (1.0 - p.y) * image.height as f32;
+                let y = p.y * image.height as f32;
                 match filter {
                     FilterMode::Nearest => image.texel(wrap(x.floor() as i64, image.width, *wm), wrap(y.floor() as i64, image.height, *wm)),
                     FilterMode::Bilinear => {
