@@ -1,5 +1,16 @@
-//! Cameras: perspective (pinhole), thin lens, orthographic. Camera space looks down +z
-//! with +y up and +x to the left of the image, as in Mitsuba (`lookat` gives to_world).
+//! Cameras: perspective (pinhole), thin lens, orthographic, with Mitsuba 3's conventions.
+//! Camera space looks down +z with +y up and +x to the *left* of the image (`lookat` gives
+//! to_world); `fov_x_deg` spans the image's width (see [`fov_x_from_axis`] for Mitsuba's
+//! other `fov_axis` values); rays start on the near plane and end at the far plane, both
+//! measured along the optical axis. The orthographic film spans x in [-1, 1] and
+//! y in [-1/aspect, 1/aspect] in camera space before `to_world` scales it.
+//!
+//! For methods that trace from the lights, `importance.rs` adds the camera's importance
+//! `We`, its densities and the sampling of a direction toward the lens.
+
+mod importance;
+
+pub use importance::CameraSample;
 
 use crate::geometry::Ray;
 use crate::math::warp;
@@ -9,7 +20,8 @@ use glam::{Mat4, Vec2, Vec3};
 pub enum Projection {
     /// Pinhole when `aperture_radius` is 0, thin lens otherwise.
     Perspective { fov_x_deg: f32, aperture_radius: f32, focus_distance: f32 },
-    /// Orthographic: the film spans [-1,1] on both axes in camera space (scale with to_world).
+    /// Orthographic: the film spans x in [-1,1], y in [-1/aspect, 1/aspect] in camera space
+    /// (scale with to_world), as Mitsuba's `orthographic`.
     Orthographic,
 }
 
@@ -32,21 +44,30 @@ impl Camera {
     }
 
     /// Camera-space position on the plane z = 1 of a raster point (pixels, origin top-left).
-    fn raster_to_camera(&self, raster: Vec2) -> Vec2 {
-        let ndc = Vec2::new(raster.x / self.width as f32, raster.y / self.height as f32);
+    /// Half extents of the film in camera space: on the plane z = 1 for perspective
+    /// (tan of the half field of view on each axis), on z = 0 for orthographic.
+    pub fn film_half_extent(&self) -> Vec2 {
         match self.projection {
             Projection::Perspective { fov_x_deg, .. } => {
                 let tx = (0.5 * fov_x_deg.to_radians()).tan();
-                let ty = tx / self.aspect();
-                // +x of camera space is the image's left.
-                Vec2::new((1.0 - 2.0 * ndc.x) * tx, (1.0 - 2.0 * ndc.y) * ty)
+                Vec2::new(tx, tx / self.aspect())
             }
-            Projection::Orthographic => {
-                let a = self.aspect();
-                let (sx, sy) = if a >= 1.0 { (1.0, 1.0 / a) } else { (a, 1.0) };
-                Vec2::new((1.0 - 2.0 * ndc.x) * sx, (1.0 - 2.0 * ndc.y) * sy)
-            }
+            Projection::Orthographic => Vec2::new(1.0, 1.0 / self.aspect()),
         }
+    }
+
+    /// Camera-space position on the film (plane z = 1, or z = 0 for orthographic) of a
+    /// raster point (pixels, origin top-left).
+    fn raster_to_camera(&self, raster: Vec2) -> Vec2 {
+        let ndc = Vec2::new(raster.x / self.width as f32, raster.y / self.height as f32);
+        // +x of camera space is the image's left, +y its top.
+        (Vec2::ONE - 2.0 * ndc) * self.film_half_extent()
+    }
+
+    /// Inverse of `raster_to_camera`.
+    fn camera_to_raster(&self, c: Vec2) -> Vec2 {
+        let ndc = 0.5 * (Vec2::ONE - c / self.film_half_extent());
+        Vec2::new(ndc.x * self.width as f32, ndc.y * self.height as f32)
     }
 
     /// The ray through raster position `raster`, lens sample `lens` in [0,1)^2 and time
@@ -81,9 +102,78 @@ impl Camera {
     }
 }
 
+/// Mitsuba's `fov_axis`: the horizontal field of view (degrees) of a `fov` given along
+/// `axis` ("x", "y", "diagonal", "smaller", "larger") for a film of `width` x `height`.
+pub fn fov_x_from_axis(fov_deg: f32, axis: &str, width: u32, height: u32) -> crate::Result<f32> {
+    if !(fov_deg > 0.0 && fov_deg < 180.0) {
+        return Err(crate::Error::Invalid(format!("field of view {fov_deg} is not in (0, 180) degrees")));
+    }
+    let aspect = width as f64 / height.max(1) as f64;
+    let t = (0.5 * (fov_deg as f64).to_radians()).tan();
+    let from_y = || 2.0 * (t * aspect).atan();
+    let fov_x = match axis {
+        "x" => return Ok(fov_deg),
+        "y" => from_y(),
+        // The diagonal's half-length is t; the width's share of it is aspect / sqrt(1 + aspect²).
+        "diagonal" => 2.0 * (t * aspect / (1.0 + aspect * aspect).sqrt()).atan(),
+        "smaller" => {
+            if aspect > 1.0 {
+                from_y()
+            } else {
+                return Ok(fov_deg);
+            }
+        }
+        "larger" => {
+            if aspect > 1.0 {
+                return Ok(fov_deg);
+            } else {
+                from_y()
+            }
+        }
+        _ => return Err(crate::Error::Invalid(format!("unknown fov_axis \"{axis}\" (x, y, diagonal, smaller, larger)"))),
+    };
+    Ok(fov_x.to_degrees() as f32)
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn fov_axis_conversions() {
+        assert_eq!(fov_x_from_axis(40.0, "x", 200, 100).unwrap(), 40.0);
+        // Square pixels: tan(fx/2) = aspect tan(fy/2).
+        let fx = fov_x_from_axis(30.0, "y", 200, 100).unwrap();
+        assert!(((0.5 * fx.to_radians()).tan() - 2.0 * (15f32.to_radians()).tan()).abs() < 1e-5);
+        assert_eq!(fov_x_from_axis(30.0, "smaller", 200, 100).unwrap(), fx);
+        assert_eq!(fov_x_from_axis(30.0, "larger", 200, 100).unwrap(), 30.0);
+        // Diagonal of a square film: tan(fx/2) = tan(fd/2) / sqrt(2).
+        let fx = fov_x_from_axis(60.0, "diagonal", 100, 100).unwrap();
+        assert!(((0.5 * fx.to_radians()).tan() - (30f32.to_radians()).tan() / 2f32.sqrt()).abs() < 1e-5);
+        assert!(fov_x_from_axis(60.0, "z", 100, 100).is_err());
+        assert!(fov_x_from_axis(f32::NAN, "x", 100, 100).is_err());
+    }
+
+    #[test]
+    fn orthographic_extent_follows_mitsuba() {
+        // Mitsuba: x spans [-1, 1] whatever the aspect; y spans [-1/aspect, 1/aspect].
+        for &(w, h) in &[(200u32, 100u32), (100, 200)] {
+            let cam = Camera {
+                to_world: Mat4::IDENTITY,
+                projection: Projection::Orthographic,
+                width: w,
+                height: h,
+                near_clip: 0.0,
+                far_clip: 10.0,
+                shutter_open: 0.0,
+                shutter_close: 0.0,
+            };
+            let a = w as f32 / h as f32;
+            let r = cam.generate_ray(Vec2::new(0.0, 0.0), Vec2::splat(0.5), 0.0);
+            assert!((r.o - Vec3::new(1.0, 1.0 / a, 0.0)).length() < 1e-5, "{w}x{h}: {:?}", r.o);
+            assert!((r.d - Vec3::Z).length() < 1e-6);
+        }
+    }
 
     #[test]
     fn center_ray_looks_down_z() {

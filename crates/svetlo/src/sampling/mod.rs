@@ -3,10 +3,13 @@
 pub mod distribution;
 pub mod rng;
 pub mod sampler;
+pub mod sobol;
+pub mod stats;
 
 pub use distribution::{Distribution1D, Distribution2D};
 pub use rng::Pcg32;
 pub use sampler::{IndependentSampler, Sampler, SamplerKind};
+pub use sobol::SobolSampler;
 
 /// Power heuristic with beta = 2 (Veach), for `nf` samples of pdf `f` against `ng` of pdf `g`.
 #[inline]

@@ -61,6 +61,7 @@ impl Sampler for IndependentSampler {
 /// Build the sampler a render asked for.
 pub fn make_sampler(kind: SamplerKind, spp: u32, seed: u64) -> Box<dyn Sampler> {
     match kind {
-        SamplerKind::Independent | SamplerKind::Sobol => Box::new(IndependentSampler::new(spp, seed)),
+        SamplerKind::Independent => Box::new(IndependentSampler::new(spp, seed)),
+        SamplerKind::Sobol => Box::new(super::sobol::SobolSampler::new(spp, seed)),
     }
 }

@@ -1,0 +1,204 @@
+//! Area lights: a shape with an emitting material, Mitsuba's `area`. Emission is one-sided,
+//! on the front of the geometric normal, and Lambertian (radiance independent of direction).
+//!
+//! Sampling from a reference point (`sample_li`):
+//! * meshes: a point uniform by area (triangle by area, then uniform in the triangle),
+//!   converted to solid angle by dist² / (|cos θ_light| A);
+//! * spheres seen from outside: uniform in the cone of directions the sphere subtends
+//!   (every sample lands on the visible cap); from inside: uniform by area, as meshes.
+
+use super::{EmissionSample, LightSample};
+use crate::geometry::{Geometry, Ray, Sphere};
+use crate::math::{safe_sqrt, warp, Frame, INV_PI, PI};
+use crate::sampling::Distribution1D;
+use crate::spectrum::Rgb;
+use crate::texture::Texture;
+use glam::{Vec2, Vec3};
+use std::sync::Arc;
+
+/// Emitting shape: one-sided (front of the geometric normal), as Mitsuba's `area`.
+#[derive(Clone, Debug)]
+pub struct AreaLight {
+    pub shape: u32,
+    pub geometry: Arc<Geometry>,
+    pub radiance: Texture,
+    /// Triangle selection by area (meshes only).
+    pub tri_distribution: Option<Distribution1D>,
+    pub area: f32,
+}
+
+/// The cone of directions a sphere subtends from an outside point.
+struct SphereCone {
+    /// Unit vector from the sphere's center toward the reference point.
+    axis: Vec3,
+    sin2_max: f32,
+    /// 1 - cos θ_max, computed without cancellation for small cones.
+    one_minus_cos_max: f32,
+}
+
+impl SphereCone {
+    /// None when `p_ref` is inside the sphere (or on it): area sampling is used there.
+    fn new(s: &Sphere, p_ref: Vec3) -> Option<Self> {
+        let dc = p_ref - s.center;
+        let dist2 = dc.length_squared();
+        let r2 = s.radius * s.radius;
+        if dist2 <= r2 * (1.0 + 1e-5) {
+            return None;
+        }
+        let sin2_max = r2 / dist2;
+        let cos_max = safe_sqrt(1.0 - sin2_max);
+        Some(SphereCone { axis: dc / dist2.sqrt(), sin2_max, one_minus_cos_max: sin2_max / (1.0 + cos_max) })
+    }
+    fn pdf(&self) -> f32 {
+        1.0 / (2.0 * PI * self.one_minus_cos_max)
+    }
+}
+
+impl AreaLight {
+    pub fn new(shape: u32, geometry: Arc<Geometry>, radiance: Texture) -> Self {
+        let (tri_distribution, area) = match &*geometry {
+            Geometry::Mesh(m) => {
+                let areas: Vec<f32> = (0..m.triangle_count()).map(|t| m.triangle_area(t)).collect();
+                let area = areas.iter().sum();
+                (Some(Distribution1D::new(&areas)), area)
+            }
+            Geometry::Sphere(s) => (None, s.area()),
+        };
+        AreaLight { shape, geometry, radiance, tri_distribution, area }
+    }
+
+    /// Radiance leaving point with normal `n` and uv toward direction `w`.
+    #[inline]
+    pub fn l(&self, n: Vec3, uv: Vec2, w: Vec3) -> Rgb {
+        if n.dot(w) <= 0.0 {
+            Rgb::BLACK
+        } else {
+            self.radiance.eval(uv)
+        }
+    }
+
+    /// Uniform point on the surface by area: (point, geometric normal, uv, pdf_area).
+    /// Returns a zero pdf for a shape without area.
+    pub fn sample_point(&self, u: Vec2) -> (Vec3, Vec3, Vec2, f32) {
+        let pdf = if self.area > 0.0 { 1.0 / self.area } else { 0.0 };
+        match (&*self.geometry, &self.tri_distribution) {
+            (Geometry::Mesh(m), Some(dist)) if !dist.is_empty() => {
+                let (t, _, ur) = dist.sample_discrete(u.x);
+                let b = warp::square_to_uniform_triangle(Vec2::new(ur, u.y));
+                let [p0, p1, p2] = m.vertices(t);
+                let p = p0 * (1.0 - b.x - b.y) + p1 * b.x + p2 * b.y;
+                let (ng, _ns, uv, _) = m.surface(t, b.x, b.y);
+                (p, ng, uv, pdf)
+            }
+            (Geometry::Sphere(s), _) => {
+                let d = warp::square_to_uniform_sphere(u);
+                let p = s.center + d * s.radius;
+                let (n, uv, _) = s.surface(p);
+                (p, n, uv, pdf)
+            }
+            _ => (Vec3::ZERO, Vec3::Z, Vec2::ZERO, 0.0),
+        }
+    }
+
+    pub fn sample_li(&self, p_ref: Vec3, u: Vec2) -> Option<LightSample> {
+        if let Geometry::Sphere(s) = &*self.geometry {
+            if let Some(cone) = SphereCone::new(s, p_ref) {
+                return self.sample_sphere_cone(s, &cone, p_ref, u);
+            }
+        }
+        let (p, n, uv, pdf_area) = self.sample_point(u);
+        if pdf_area <= 0.0 {
+            return None;
+        }
+        let d = p - p_ref;
+        let dist2 = d.length_squared();
+        if dist2 == 0.0 {
+            return None;
+        }
+        let wi = d / dist2.sqrt();
+        let cos_l = n.dot(-wi);
+        if cos_l <= 0.0 {
+            return None; // the back of a one-sided emitter
+        }
+        let pdf = pdf_area * dist2 / cos_l;
+        Some(LightSample { wi, li: self.radiance.eval(uv), pdf, p, infinite: false })
+    }
+
+    /// Uniform direction in the cone; the point is where that direction first meets the
+    /// sphere, found from the angle at the sphere's center (no ray intersection, so no
+    /// misses at grazing angles).
+    fn sample_sphere_cone(&self, s: &Sphere, cone: &SphereCone, p_ref: Vec3, u: Vec2) -> Option<LightSample> {
+        let one_minus_cos = u.y * cone.one_minus_cos_max;
+        let cos_t = 1.0 - one_minus_cos;
+        let sin2_t = one_minus_cos * (2.0 - one_minus_cos);
+        // Angle α at the center between the axis and the hit point:
+        // cos α = sin²θ / sin θ_max + cos θ sqrt(1 - sin²θ / sin²θ_max).
+        let sin_max = cone.sin2_max.sqrt();
+        let cos_a = (sin2_t / sin_max + cos_t * safe_sqrt(1.0 - sin2_t / cone.sin2_max)).min(1.0);
+        let sin_a = safe_sqrt(1.0 - cos_a * cos_a);
+        let phi = 2.0 * PI * u.x;
+        let frame = Frame::from_normal(cone.axis);
+        let n_out = frame.to_world(Vec3::new(sin_a * phi.cos(), sin_a * phi.sin(), cos_a));
+        let p = s.center + n_out * s.radius;
+        let d = p - p_ref;
+        let dist = d.length();
+        if dist == 0.0 {
+            return None;
+        }
+        let wi = d / dist;
+        let (n, uv, _) = s.surface(p);
+        if n.dot(-wi) <= 0.0 {
+            return None; // an inward-facing sphere seen from outside emits nothing toward us
+        }
+        Some(LightSample { wi, li: self.radiance.eval(uv), pdf: cone.pdf(), p, infinite: false })
+    }
+
+    /// Solid-angle density of `sample_li` choosing the point `p` (normal `n`) from `p_ref`.
+    pub fn pdf_li(&self, p_ref: Vec3, p: Vec3, n: Vec3) -> f32 {
+        if let Geometry::Sphere(s) = &*self.geometry {
+            if let Some(cone) = SphereCone::new(s, p_ref) {
+                return cone.pdf();
+            }
+        }
+        if self.area <= 0.0 {
+            return 0.0;
+        }
+        let d = p - p_ref;
+        let dist2 = d.length_squared();
+        let cos_l = n.dot(d).abs() / dist2.sqrt();
+        if cos_l <= 0.0 || !cos_l.is_finite() {
+            return 0.0;
+        }
+        dist2 / (cos_l * self.area)
+    }
+
+    /// Emitted power Φ = π A · mean radiance (one-sided Lambertian emitter), luminance.
+    pub fn power(&self) -> f32 {
+        PI * self.area * self.radiance.mean().luminance().max(0.0)
+    }
+
+    /// A ray leaving the light: origin uniform by area, direction cosine-weighted about the
+    /// geometric normal (proportional to the emitted radiance's projected solid angle).
+    pub fn sample_le(&self, u_pos: Vec2, u_dir: Vec2, time: f32) -> Option<EmissionSample> {
+        let (p, n, uv, pdf_pos) = self.sample_point(u_pos);
+        if pdf_pos <= 0.0 {
+            return None;
+        }
+        let local = warp::square_to_cosine_hemisphere(u_dir);
+        let pdf_dir = warp::square_to_cosine_hemisphere_pdf(local);
+        if pdf_dir <= 0.0 {
+            return None;
+        }
+        let d = Frame::from_normal(n).to_world(local);
+        let mut ray = Ray::new(crate::geometry::ray::offset_ray_origin(p, n, d), d);
+        ray.time = time;
+        Some(EmissionSample { ray, le: self.radiance.eval(uv), pdf_pos, pdf_dir, n })
+    }
+
+    /// Densities of `sample_le` for a ray leaving the light at `ray.o` with normal `n`:
+    /// (per unit area, per unit solid angle).
+    pub fn pdf_le(&self, ray: &Ray, n: Vec3) -> (f32, f32) {
+        let pdf_pos = if self.area > 0.0 { 1.0 / self.area } else { 0.0 };
+        (pdf_pos, n.dot(ray.d).max(0.0) * INV_PI)
+    }
+}

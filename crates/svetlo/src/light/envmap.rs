@@ -1,0 +1,267 @@
+//! Latitude-longitude environment map with Mitsuba 3's conventions (`envmap`):
+//!
+//! * Local frame: +y up. A direction d has u = atan2(d.x, -d.z) / 2π (wrapped to [0,1)),
+//!   v = acos(d.y) / π, so the image's top row is straight up, and its left edge
+//!   (u = 0) looks down -z, with u growing toward +x.
+//! * The image is a grid of samples, not of cells: a column of pixels is repeated at the
+//!   right for periodicity, pixel column x sits at u = (x + 1/2) / width, and pixel row y
+//!   sits at v = y / (height - 1) (first row at the north pole, last at the south pole).
+//!   Radiance is bilinear between those samples, times `scale`.
+//! * Sampling: the density over (u, v) is the *bilinear* interpolant of luminance × sin θ
+//!   at the grid's vertices, normalised (Mitsuba samples the same function); each cell is
+//!   chosen by its integral, then a point inside it by inverting the bilinear patch. The
+//!   solid-angle pdf is pdf_uv / (2π² sin θ). `pdf` is the exact density of `sample`, and it
+//!   is positive wherever the radiance's luminance is.
+//! * `to_world` must be a rotation (directions are normalised after it).
+
+use crate::math::{safe_sqrt, INV_2PI, INV_PI, PI};
+use crate::sampling::Distribution1D;
+use crate::spectrum::Rgb;
+use crate::texture::Bitmap;
+use glam::{Mat3, Mat4, Vec2, Vec3};
+use std::sync::Arc;
+
+#[derive(Clone, Debug)]
+pub struct EnvMap {
+    pub image: Arc<Bitmap>,
+    pub to_world: Mat4,
+    pub scale: f32,
+    to_local: Mat3,
+    /// Vertex grid, `cols + 1` by `rows + 1` (periodic column added), row 0 at the top.
+    grid: Vec<Rgb>,
+    /// Cells: `cols` wide (= image width), `rows` high (= image height - 1).
+    cols: usize,
+    rows: usize,
+    dist: BilinearDistribution,
+}
+
+impl EnvMap {
+    /// Build the map and its sampling distribution. Degenerate images (empty, one row)
+    /// are padded so that nothing downstream can index out of range.
+    pub fn new(image: Arc<Bitmap>, to_world: Mat4, scale: f32) -> Self {
+        let (w, h) = (image.width, image.height);
+        let cols = w.max(1);
+        let rows = h.max(2) - 1;
+        let texel = |x: usize, y: usize| if w == 0 || h == 0 { Rgb::BLACK } else { image.texel(x % w, y.min(h - 1)) };
+        let mut grid = Vec::with_capacity((cols + 1) * (rows + 1));
+        for y in 0..=rows {
+            for x in 0..=cols {
+                grid.push(texel(x % cols, y));
+            }
+        }
+        let weights: Vec<f32> = (0..=rows)
+            .flat_map(|y| {
+                let sin_t = (PI * y as f32 / rows as f32).sin().max(0.0);
+                let g = &grid;
+                (0..=cols).map(move |x| g[y * (cols + 1) + x].luminance().max(0.0) * sin_t)
+            })
+            .collect();
+        let dist = BilinearDistribution::new(weights, cols, rows);
+        let to_local = Mat3::from_mat4(to_world).inverse();
+        EnvMap { image, to_world, scale, to_local, grid, cols, rows, dist }
+    }
+
+    /// Grid coordinates in [0,1)² (u shifted by half a texel) of a world direction, and sin θ.
+    fn dir_to_grid(&self, w: Vec3) -> (Vec2, f32) {
+        let l = (self.to_local * w).normalize_or_zero();
+        let mut u = l.x.atan2(-l.z) * INV_2PI - 0.5 / self.cols as f32;
+        u -= u.floor();
+        let v = l.y.clamp(-1.0, 1.0).acos() * INV_PI;
+        (Vec2::new(u, v), safe_sqrt(l.x * l.x + l.z * l.z))
+    }
+
+    /// World direction of grid coordinates, and sin θ.
+    fn grid_to_dir(&self, g: Vec2) -> (Vec3, f32) {
+        let phi = 2.0 * PI * (g.x + 0.5 / self.cols as f32);
+        let (st, ct) = (PI * g.y).sin_cos();
+        let l = Vec3::new(phi.sin() * st, ct, -phi.cos() * st);
+        ((Mat3::from_mat4(self.to_world) * l).normalize_or_zero(), st.max(0.0))
+    }
+
+    /// Radiance arriving from direction `w` (pointing away from the scene).
+    pub fn eval(&self, w: Vec3) -> Rgb {
+        let (g, _) = self.dir_to_grid(w);
+        let (ix, iy, fx, fy) = locate(g, self.cols, self.rows);
+        let stride = self.cols + 1;
+        let at = |x: usize, y: usize| self.grid[y * stride + x];
+        let top = at(ix, iy) * (1.0 - fx) + at(ix + 1, iy) * fx;
+        let bottom = at(ix, iy + 1) * (1.0 - fx) + at(ix + 1, iy + 1) * fx;
+        (top * (1.0 - fy) + bottom * fy) * self.scale
+    }
+
+    /// A direction toward the environment and its solid-angle density.
+    pub fn sample(&self, u: Vec2) -> Option<(Vec3, f32)> {
+        let (g, pdf_uv) = self.dist.sample(u)?;
+        let (w, sin_t) = self.grid_to_dir(g);
+        if sin_t <= 0.0 || pdf_uv <= 0.0 {
+            return None;
+        }
+        Some((w, pdf_uv / (2.0 * PI * PI * sin_t)))
+    }
+
+    /// Solid-angle density of `sample` choosing `w`.
+    pub fn pdf(&self, w: Vec3) -> f32 {
+        let (g, sin_t) = self.dir_to_grid(w);
+        if sin_t <= 0.0 {
+            return 0.0;
+        }
+        self.dist.pdf(g) / (2.0 * PI * PI * sin_t)
+    }
+
+    /// ∫ luminance(L) dω over the sphere (from the sampling function, so sin θ is
+    /// interpolated like the luminance), including `scale`.
+    pub fn luminance_integral(&self) -> f32 {
+        2.0 * PI * PI * self.dist.integral * self.scale
+    }
+}
+
+/// Cell and fractional position of grid coordinates in [0,1]².
+#[inline]
+fn locate(g: Vec2, cols: usize, rows: usize) -> (usize, usize, f32, f32) {
+    let x = (g.x * cols as f32).max(0.0);
+    let y = (g.y * rows as f32).max(0.0);
+    let ix = (x as usize).min(cols - 1);
+    let iy = (y as usize).min(rows - 1);
+    (ix, iy, (x - ix as f32).min(1.0), (y - iy as f32).min(1.0))
+}
+
+/// Sample t in [0,1) with density proportional to (1 - t) a + t b (a, b >= 0).
+#[inline]
+fn sample_linear(u: f32, a: f32, b: f32) -> f32 {
+    if a == b {
+        return u;
+    }
+    // Inverse CDF in a form without cancellation: t = u (a + b) / (a + sqrt(a² (1-u) + b² u)).
+    let den = a + ((1.0 - u) * a * a + u * b * b).sqrt();
+    if den <= 0.0 {
+        return 0.0;
+    }
+    (u * (a + b) / den).clamp(0.0, crate::math::ONE_MINUS_EPSILON)
+}
+
+/// A density on [0,1]² proportional to the bilinear interpolant of non-negative values
+/// at the vertices of a `cols` x `rows` grid of cells.
+#[derive(Clone, Debug)]
+struct BilinearDistribution {
+    f: Vec<f32>,
+    cols: usize,
+    rows: usize,
+    /// Rows of cells by the sum of their cells' integrals.
+    marginal: Distribution1D,
+    /// Cells within each row by their integral (mean of the 4 corners).
+    conditional: Vec<Distribution1D>,
+    /// ∫ f over [0,1]².
+    integral: f32,
+}
+
+impl BilinearDistribution {
+    fn new(f: Vec<f32>, cols: usize, rows: usize) -> Self {
+        let stride = cols + 1;
+        let conditional: Vec<Distribution1D> = (0..rows)
+            .map(|y| {
+                let cells: Vec<f32> =
+                    (0..cols).map(|x| 0.25 * (f[y * stride + x] + f[y * stride + x + 1] + f[(y + 1) * stride + x] + f[(y + 1) * stride + x + 1])).collect();
+                Distribution1D::new(&cells)
+            })
+            .collect();
+        // Distribution1D's integral is the mean over its cells: a row's share of the square.
+        let row_integrals: Vec<f32> = conditional.iter().map(|c| c.integral).collect();
+        let marginal = Distribution1D::new(&row_integrals);
+        let integral = marginal.integral;
+        BilinearDistribution { f, cols, rows, marginal, conditional, integral }
+    }
+
+    #[inline]
+    fn corners(&self, ix: usize, iy: usize) -> [f32; 4] {
+        let s = self.cols + 1;
+        [self.f[iy * s + ix], self.f[iy * s + ix + 1], self.f[(iy + 1) * s + ix], self.f[(iy + 1) * s + ix + 1]]
+    }
+
+    fn eval(&self, g: Vec2) -> f32 {
+        let (ix, iy, fx, fy) = locate(g, self.cols, self.rows);
+        let [f00, f10, f01, f11] = self.corners(ix, iy);
+        (f00 * (1.0 - fx) + f10 * fx) * (1.0 - fy) + (f01 * (1.0 - fx) + f11 * fx) * fy
+    }
+
+    fn sample(&self, u: Vec2) -> Option<(Vec2, f32)> {
+        if self.integral <= 0.0 {
+            return None;
+        }
+        let (iy, _, uy) = self.marginal.sample_discrete(u.y);
+        let (ix, _, ux) = self.conditional[iy].sample_discrete(u.x);
+        let [f00, f10, f01, f11] = self.corners(ix, iy);
+        // Inside the cell: v from its marginal (linear), then u given v (linear).
+        let ty = sample_linear(uy, f00 + f10, f01 + f11);
+        let tx = sample_linear(ux, f00 + (f01 - f00) * ty, f10 + (f11 - f10) * ty);
+        let g = Vec2::new((ix as f32 + tx) / self.cols as f32, (iy as f32 + ty) / self.rows as f32);
+        let pdf = self.pdf(g);
+        (pdf > 0.0).then_some((g, pdf))
+    }
+
+    fn pdf(&self, g: Vec2) -> f32 {
+        if self.integral <= 0.0 {
+            return 0.0;
+        }
+        self.eval(g) / self.integral
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn linear_sampling_inverts_its_cdf() {
+        for &(a, b) in &[(1.0f32, 3.0f32), (2.0, 0.0), (0.0, 5.0), (1.0, 1.0)] {
+            for k in 0..=10 {
+                let u = k as f32 / 10.0 * 0.999;
+                let t = sample_linear(u, a, b);
+                let cdf = (a * t + 0.5 * (b - a) * t * t) / (0.5 * (a + b));
+                assert!((cdf - u).abs() < 1e-5, "a={a} b={b} u={u} t={t} cdf={cdf}");
+            }
+        }
+    }
+
+    #[test]
+    fn bilinear_pdf_integrates_to_one() {
+        let f = vec![0.0, 1.0, 4.0, 2.0, 0.5, 0.0, 3.0, 1.0, 0.0, 0.0, 7.0, 1.0];
+        let d = BilinearDistribution::new(f, 3, 2);
+        let n = 600;
+        let mut s = 0.0f64;
+        for i in 0..n {
+            for j in 0..n {
+                s += d.pdf(Vec2::new((i as f32 + 0.5) / n as f32, (j as f32 + 0.5) / n as f32)) as f64;
+            }
+        }
+        assert!((s / (n * n) as f64 - 1.0).abs() < 1e-4, "{}", s / (n * n) as f64);
+    }
+
+    #[test]
+    fn mitsuba_orientation() {
+        // 4x3 image: a distinct color per pixel; look up pixel centers by direction.
+        let (w, h) = (4usize, 3usize);
+        let data: Vec<Rgb> = (0..w * h).map(|i| Rgb::new(i as f32, 0.0, 0.0)).collect();
+        let env = EnvMap::new(Arc::new(Bitmap::new(w, h, data)), Mat4::IDENTITY, 2.0);
+        let dir = |u: f32, v: f32| {
+            let (phi, th) = (2.0 * PI * u, PI * v);
+            Vec3::new(phi.sin() * th.sin(), th.cos(), -phi.cos() * th.sin())
+        };
+        // Row 0 is the north pole (+y); row 1 sits at the equator (v = 1/2), row 2 at -y.
+        for x in 0..w {
+            let u = (x as f32 + 0.5) / w as f32;
+            let got = env.eval(dir(u, 0.5)).r;
+            assert!((got - 2.0 * (4 + x) as f32).abs() < 1e-3, "column {x}: {got}");
+            // Halfway between rows 1 and 2 (v = 3/4): their mean.
+            let got = env.eval(dir(u, 0.75)).r;
+            assert!((got - 2.0 * (6 + x) as f32).abs() < 1e-3, "column {x}, v=3/4: {got}");
+        }
+        // Column 0's center is at u = 1/8: phi = 45 degrees from -z toward +x.
+        let d = Vec3::new(1.0, 0.0, -1.0).normalize();
+        assert!((env.eval(d).r - 2.0 * 4.0).abs() < 1e-3);
+        // A rotation of the map rotates the lookup.
+        let rot = Mat4::from_rotation_y(0.7);
+        let env_r = EnvMap::new(env.image.clone(), rot, 2.0);
+        let q = dir(0.3, 0.4);
+        assert!((env_r.eval(rot.transform_vector3(q)).r - env.eval(q).r).abs() < 1e-3);
+    }
+}
