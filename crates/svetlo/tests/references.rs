@@ -82,7 +82,7 @@ fn infinite_mirrors() {
 
 #[test]
 fn spot_light() {
-    mitsuba_z_test("spot_light/test_spot_light_path.xml", "test_spot");
+    mitsuba_z_test("spot_light/test_spot_direct.xml", "test_spot");
 }
 
 #[test]

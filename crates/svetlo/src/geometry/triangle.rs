@@ -100,6 +100,10 @@ mod tests {
         let (t, b1, b2) = r.intersect(p0, p1, p2, f32::INFINITY).expect("hit");
         assert!((t - 1.0).abs() < 1e-6 && (b1 - 0.25).abs() < 1e-6 && (b2 - 0.25).abs() < 1e-6);
         assert!(r.intersect(p0, p1, p2, 0.5).is_none());
+        // Asymmetric point: b1 weights p1, b2 weights p2.
+        let r = WatertightRay::new(Vec3::new(0.1, 0.6, 1.0), Vec3::new(0.0, 0.0, -1.0));
+        let (_, b1, b2) = r.intersect(p0, p1, p2, f32::INFINITY).expect("hit");
+        assert!((b1 - 0.1).abs() < 1e-6 && (b2 - 0.6).abs() < 1e-6, "barycentrics ({b1}, {b2})");
         let r = WatertightRay::new(Vec3::new(0.75, 0.75, 1.0), Vec3::new(0.0, 0.0, -1.0));
         assert!(r.intersect(p0, p1, p2, f32::INFINITY).is_none());
     }

@@ -76,6 +76,8 @@ pub enum Light {
         cos_beam: f32,
         cutoff_angle: f32,
         beam_width: f32,
+        /// Mitsuba's projected `texture`: multiplies the intensity, mapped over the cutoff cone.
+        texture: Option<crate::texture::Texture>,
     },
     /// Direction of travel `direction`, irradiance on a surface facing it.
     Directional {
@@ -133,11 +135,12 @@ impl Light {
                     return None;
                 }
                 let wi = d / dist2.sqrt();
-                let fall = self.spot_falloff(-wi);
-                if fall <= 0.0 {
+                let i = self.spot_intensity(-wi);
+                if i.is_black() {
                     return None;
                 }
-                Some(LightSample { wi, li: *intensity * (fall / dist2), pdf: 1.0, p: *position, infinite: false })
+                let _ = intensity;
+                Some(LightSample { wi, li: i / dist2, pdf: 1.0, p: *position, infinite: false })
             }
             Light::Directional { direction, irradiance } => {
                 let wi = -*direction;
@@ -209,7 +212,7 @@ impl Light {
                 let d = frame.to_world(local);
                 let mut ray = Ray::new(*position, d);
                 ray.time = time;
-                Some(EmissionSample { ray, le: *intensity * self.spot_falloff(d), pdf_pos: 1.0, pdf_dir, n: d })
+                Some(EmissionSample { ray, le: { let _ = intensity; self.spot_intensity(d) }, pdf_pos: 1.0, pdf_dir, n: d })
             }
             Light::Directional { direction, irradiance } => {
                 let (ray, pdf_pos) = ray_from_infinity(bounds, *direction, u_pos, time);

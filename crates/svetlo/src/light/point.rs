@@ -44,7 +44,7 @@ impl Light {
         let axis = to_world.transform_vector3(Vec3::Z).normalize_or_zero();
         let axis = if axis == Vec3::ZERO { Vec3::Z } else { axis };
         let frame = Frame::from_normal_tangent(axis, to_world.transform_vector3(Vec3::X));
-        Light::Spot { position, frame, intensity, cos_cutoff: cutoff_angle.cos(), cos_beam: beam_width.cos(), cutoff_angle, beam_width }
+        Light::Spot { position, frame, intensity, cos_cutoff: cutoff_angle.cos(), cos_beam: beam_width.cos(), cutoff_angle, beam_width, texture: None }
     }
 
     /// The spot's profile toward world direction `w` (leaving the light); 1 for other lights.
@@ -54,6 +54,28 @@ impl Light {
                 spot_falloff(frame.n.dot(w), cos_cutoff, cos_beam, cutoff_angle, beam_width)
             }
             _ => 1.0,
+        }
+    }
+
+    /// Radiant intensity of a spot light toward world direction `w` (unit): the intensity times
+    /// the falloff and, as Mitsuba 3 does, a texture projected over the cone: local direction
+    /// (x, y, z) maps to uv = 1/2 + (x, y) / (2 z tan(cutoff)).
+    pub fn spot_intensity(&self, w: Vec3) -> Rgb {
+        match self {
+            Light::Spot { frame, intensity, texture, .. } => {
+                let fall = self.spot_falloff(w);
+                if fall <= 0.0 {
+                    return Rgb::BLACK;
+                }
+                let mut i = *intensity * fall;
+                if let (Some(tex), Light::Spot { cutoff_angle, .. }) = (texture, self) {
+                    let l = frame.to_local(w);
+                    let k = 0.5 / (l.z * cutoff_angle.tan());
+                    i *= tex.eval(glam::Vec2::new(0.5 + l.x * k, 0.5 + l.y * k));
+                }
+                i
+            }
+            _ => Rgb::BLACK,
         }
     }
 }

@@ -37,6 +37,19 @@ pub struct SceneSettings {
     pub seed: u64,
     pub filter: Filter,
     pub hide_emitters: bool,
+    pub light_selection: LightSelection,
+}
+
+/// How next-event estimation picks a light.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub enum LightSelection {
+    /// Every light alike (Mitsuba 3's choice).
+    Uniform,
+    /// In proportion to emitted power.
+    Power,
+    /// Half power, half uniform.
+    #[default]
+    Mixed,
 }
 
 impl Default for SceneSettings {
@@ -50,6 +63,7 @@ impl Default for SceneSettings {
             seed: 0,
             filter: Filter::default(),
             hide_emitters: false,
+            light_selection: LightSelection::Mixed,
         }
     }
 }

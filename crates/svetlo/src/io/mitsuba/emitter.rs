@@ -31,9 +31,10 @@ impl<'a> Loader<'a> {
                 if !(cutoff > 0.0 && cutoff <= 180.0 && beam > 0.0 && beam <= cutoff) {
                     return Err(node.loc.err(format!("spot light: need 0 < beam_width ({beam}) <= cutoff_angle ({cutoff}) <= 180")));
                 }
-                if self.prop(node, "texture")?.is_some() {
-                    self.warn(format!("{}:{}: textured spot lights are not supported; the texture is ignored", node.loc.file.display(), node.loc.line));
-                }
+                let texture = match self.prop(node, "texture")? {
+                    Some(t) => Some(self.texture(t, crate::io::spectra::SpectrumKind::Reflectance)?),
+                    None => None,
+                };
                 let n = m.transform_vector3(Vec3::Z).normalize_or_zero();
                 if n == Vec3::ZERO {
                     return Err(node.loc.err("spot light: degenerate to_world"));
@@ -49,6 +50,7 @@ impl<'a> Loader<'a> {
                     cos_beam: beam.cos(),
                     cutoff_angle: cutoff,
                     beam_width: beam,
+                    texture,
                 }
             }
             "directional" => {
