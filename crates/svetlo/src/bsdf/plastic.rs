@@ -14,6 +14,7 @@ use super::{BsdfSample, LobeFlags, TransportMode};
 use crate::math::{warp, INV_PI};
 use crate::spectrum::Rgb;
 use glam::{Vec2, Vec3};
+use rayon::prelude::*;
 use std::cell::RefCell;
 use std::collections::HashMap;
 use std::sync::{Mutex, OnceLock};
@@ -134,14 +135,15 @@ impl CoatingTables {
         let dir = |mu: f32| Vec3::new((1.0 - mu * mu).max(0.0).sqrt(), 0.0, mu);
         let gl_out = gauss_legendre(32);
         let gl_in = gauss_legendre(128);
+        let ext: Vec<f64> = mus.par_iter().map(|&mu| interface_albedo(&md, dir(mu), eta, false, &gl_out)).collect();
         let mut transmittance = [0.0f32; TRANSMITTANCE_RES];
-        for (t, &mu) in transmittance.iter_mut().zip(&mus) {
-            *t = interface_albedo(&md, dir(mu), eta, false, &gl_out) as f32;
+        for (t, e) in transmittance.iter_mut().zip(&ext) {
+            *t = *e as f32;
         }
         // Mitsuba averages over the linspace points (not a trapezoid rule); kept so that
         // the diffuse brightness matches its images.
         let n = TRANSMITTANCE_RES as f64;
-        let internal = 2.0 * mus.iter().map(|&mu| interface_albedo(&md, dir(mu), 1.0 / eta, true, &gl_in) * mu as f64).sum::<f64>() / n;
+        let internal = 2.0 * mus.par_iter().map(|&mu| interface_albedo(&md, dir(mu), 1.0 / eta, true, &gl_in) * mu as f64).sum::<f64>() / n;
         let mean_t = 2.0 * mus.iter().zip(&transmittance).map(|(&mu, &t)| t as f64 * mu as f64).sum::<f64>() / n;
         CoatingTables { transmittance, internal_reflectance: internal as f32, mean_transmittance: mean_t as f32 }
     }
