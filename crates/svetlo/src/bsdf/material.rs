@@ -1,6 +1,10 @@
 //! Materials as the scene describes them (textured parameters). At a hit point a
 //! material becomes a [`Bsdf`] with every texture evaluated.
 
+use super::conductor::{RoughConductor, SmoothConductor};
+use super::dielectric::{RoughDielectric, SmoothDielectric, ThinDielectric};
+use super::microfacet::Microfacet;
+use super::plastic::{self, RoughPlastic, SmoothPlastic};
 use super::{diffuse::Diffuse, Bsdf, BsdfModel};
 use crate::spectrum::Rgb;
 use crate::texture::Texture;
@@ -47,16 +51,66 @@ impl Default for Material {
     }
 }
 
+impl Roughness {
+    /// The microfacet distribution at `uv` (alphas read from the first channel).
+    pub fn at(&self, uv: Vec2) -> Microfacet {
+        Microfacet::new(self.kind, self.alpha_u.eval_f32(uv), self.alpha_v.eval_f32(uv))
+    }
+}
+
+/// Mean of a texture for sampling heuristics. Bitmaps would need a pass over every texel
+/// per hit, so they use the local value: that changes only how samples are spread
+/// between lobes (the estimate stays unbiased), not the BSDF.
+fn sampling_mean(t: &Texture, uv: Vec2) -> f32 {
+    match t {
+        Texture::Bitmap { .. } => t.eval(uv).mean(),
+        _ => t.mean().mean(),
+    }
+}
+
 impl Material {
     /// The model one side of this material describes, with textures evaluated at `uv`.
     fn model(&self, uv: Vec2) -> Option<BsdfModel> {
         match self {
             Material::Diffuse { reflectance } => Some(BsdfModel::Diffuse(Diffuse { reflectance: reflectance.eval(uv).clamp(0.0, 1.0) })),
+            Material::Conductor { eta, k, specular_reflectance, roughness } => {
+                let specular_reflectance = specular_reflectance.eval(uv);
+                Some(match roughness {
+                    None => BsdfModel::SmoothConductor(SmoothConductor { eta: *eta, k: *k, specular_reflectance }),
+                    Some(r) => BsdfModel::RoughConductor(RoughConductor { distribution: r.at(uv), eta: *eta, k: *k, specular_reflectance }),
+                })
+            }
+            Material::Dielectric { eta, specular_reflectance, specular_transmittance, roughness } => {
+                let (specular_reflectance, specular_transmittance) = (specular_reflectance.eval(uv), specular_transmittance.eval(uv));
+                Some(match roughness {
+                    None => BsdfModel::SmoothDielectric(SmoothDielectric { eta: *eta, specular_reflectance, specular_transmittance }),
+                    Some(r) => BsdfModel::RoughDielectric(RoughDielectric { distribution: r.at(uv), eta: *eta, specular_reflectance, specular_transmittance }),
+                })
+            }
+            Material::ThinDielectric { eta, specular_reflectance, specular_transmittance } => Some(BsdfModel::ThinDielectric(ThinDielectric {
+                eta: *eta,
+                specular_reflectance: specular_reflectance.eval(uv),
+                specular_transmittance: specular_transmittance.eval(uv),
+            })),
+            Material::Plastic { diffuse_reflectance, specular_reflectance, eta, nonlinear, roughness } => {
+                let weight = plastic::specular_sampling_weight(sampling_mean(diffuse_reflectance, uv), sampling_mean(specular_reflectance, uv));
+                let diffuse = diffuse_reflectance.eval(uv).clamp(0.0, 1.0);
+                let specular = specular_reflectance.eval(uv);
+                Some(match roughness {
+                    None => BsdfModel::SmoothPlastic(SmoothPlastic {
+                        diffuse_reflectance: diffuse,
+                        specular_reflectance: specular,
+                        eta: *eta,
+                        nonlinear: *nonlinear,
+                        specular_sampling_weight: weight,
+                    }),
+                    // Mitsuba's roughplastic is isotropic: alpha_u is the roughness.
+                    Some(r) => BsdfModel::RoughPlastic(RoughPlastic::new(r.kind, r.alpha_u.eval_f32(uv), diffuse, specular, *eta, *nonlinear, weight)),
+                })
+            }
             Material::TwoSided { front, .. } => front.model(uv),
             Material::Mask { inner, .. } => inner.model(uv),
             Material::Null => None,
-            // Filled in by the BSDF models as they land; until then, a neutral diffuse.
-            _ => Some(BsdfModel::Diffuse(Diffuse { reflectance: Rgb::splat(0.5) })),
         }
     }
 

@@ -2,8 +2,13 @@
 //! pointing away from the surface. `f` never includes the cosine; an estimator weights a
 //! sample by `f * |cos(wi)| / pdf`. Delta lobes report `pdf = 1` and `f = weight / |cos(wi)|`.
 
+pub mod conductor;
+pub mod dielectric;
 pub mod diffuse;
+pub mod fresnel;
 pub mod material;
+pub mod microfacet;
+pub mod plastic;
 
 pub use material::{Material, MicrofacetKind};
 
@@ -94,6 +99,29 @@ impl BsdfSample {
 #[derive(Clone, Debug)]
 pub enum BsdfModel {
     Diffuse(diffuse::Diffuse),
+    SmoothConductor(conductor::SmoothConductor),
+    RoughConductor(conductor::RoughConductor),
+    SmoothDielectric(dielectric::SmoothDielectric),
+    RoughDielectric(dielectric::RoughDielectric),
+    ThinDielectric(dielectric::ThinDielectric),
+    SmoothPlastic(plastic::SmoothPlastic),
+    RoughPlastic(plastic::RoughPlastic),
+}
+
+/// Forward a call to the model inside, whatever it is.
+macro_rules! dispatch {
+    ($self:expr, $m:ident => $e:expr) => {
+        match $self {
+            BsdfModel::Diffuse($m) => $e,
+            BsdfModel::SmoothConductor($m) => $e,
+            BsdfModel::RoughConductor($m) => $e,
+            BsdfModel::SmoothDielectric($m) => $e,
+            BsdfModel::RoughDielectric($m) => $e,
+            BsdfModel::ThinDielectric($m) => $e,
+            BsdfModel::SmoothPlastic($m) => $e,
+            BsdfModel::RoughPlastic($m) => $e,
+        }
+    };
 }
 
 /// The BSDF at one point: a model plus the wrappers Mitsuba composes around it.
@@ -111,35 +139,38 @@ pub struct Bsdf {
 
 impl BsdfModel {
     pub fn flags(&self) -> LobeFlags {
-        match self {
-            BsdfModel::Diffuse(m) => m.flags(),
-        }
+        dispatch!(self, m => m.flags())
     }
     pub fn eval(&self, wo: Vec3, wi: Vec3, mode: TransportMode) -> Rgb {
-        match self {
-            BsdfModel::Diffuse(m) => m.eval(wo, wi, mode),
-        }
+        dispatch!(self, m => m.eval(wo, wi, mode))
     }
     pub fn sample(&self, wo: Vec3, uc: f32, u: Vec2, mode: TransportMode) -> Option<BsdfSample> {
-        match self {
-            BsdfModel::Diffuse(m) => m.sample(wo, uc, u, mode),
-        }
+        dispatch!(self, m => m.sample(wo, uc, u, mode))
     }
     pub fn pdf(&self, wo: Vec3, wi: Vec3, mode: TransportMode) -> f32 {
-        match self {
-            BsdfModel::Diffuse(m) => m.pdf(wo, wi, mode),
-        }
+        dispatch!(self, m => m.pdf(wo, wi, mode))
     }
     /// Hemispherical-average diffuse reflectance: what radiosity uses for this surface.
+    /// Specular and glossy models (conductors, dielectrics) have none: the hybrid display
+    /// pass ray-traces them. Plastic reports the albedo of its diffuse lobe.
     pub fn diffuse_albedo(&self) -> Rgb {
         match self {
             BsdfModel::Diffuse(m) => m.reflectance,
+            BsdfModel::SmoothPlastic(m) => m.diffuse_albedo(),
+            BsdfModel::RoughPlastic(m) => m.diffuse_albedo(),
+            _ => Rgb::BLACK,
         }
     }
     /// Whether the model scatters light arriving on its back side by itself (dielectrics).
     pub fn handles_back_side(&self) -> bool {
         self.flags().intersects(LobeFlags::TRANSMISSION)
     }
+}
+
+/// True for a usable density or length: positive and finite (false for NaN).
+#[inline]
+pub(crate) fn positive_finite(x: f32) -> bool {
+    x > 0.0 && x.is_finite()
 }
 
 #[inline]

@@ -1,0 +1,346 @@
+//! Mitsuba's `plastic` and `roughplastic`: a diffuse base under a dielectric coating.
+//!
+//! Light enters the coating with probability 1 - F (or the rough interface's transmittance
+//! t), scatters diffusely in the base, and bounces between base and coating; the internal
+//! reflectance of the coating (Fdr_int) gives the geometric series 1 / (1 - Fdr_int), or,
+//! with `nonlinear`, 1 / (1 - R Fdr_int), which tints multiply-bounced light. The 1/eta²
+//! accounts for the solid-angle compression through the interface. Same formulas as
+//! Mitsuba 3, so that images agree. Front side only.
+
+use super::fresnel;
+use super::material::MicrofacetKind;
+use super::microfacet::Microfacet;
+use super::{BsdfSample, LobeFlags, TransportMode};
+use crate::math::{warp, INV_PI};
+use crate::spectrum::Rgb;
+use glam::{Vec2, Vec3};
+use rayon::prelude::*;
+use std::cell::RefCell;
+use std::collections::HashMap;
+use std::sync::{Mutex, OnceLock};
+
+/// Probability of sampling the specular lobe, before the Fresnel term: Mitsuba's
+/// s_mean / (d_mean + s_mean) from the mean reflectances.
+pub fn specular_sampling_weight(diffuse_mean: f32, specular_mean: f32) -> f32 {
+    let s = specular_mean.max(0.0);
+    let d = diffuse_mean.max(0.0);
+    if s + d > 0.0 {
+        s / (s + d)
+    } else {
+        0.5
+    }
+}
+
+/// Diffuse reflectance corrected for the internal bounces under the coating.
+#[inline]
+fn base_albedo(diffuse: Rgb, internal: f32, nonlinear: bool) -> Rgb {
+    let denom = if nonlinear { Rgb::WHITE - diffuse * internal } else { Rgb::splat(1.0 - internal) };
+    Rgb::new(diffuse.r / denom.r, diffuse.g / denom.g, diffuse.b / denom.b)
+}
+
+/// Smooth coating: a delta specular lobe plus the diffuse base.
+#[derive(Clone, Copy, Debug)]
+pub struct SmoothPlastic {
+    pub diffuse_reflectance: Rgb,
+    pub specular_reflectance: Rgb,
+    pub eta: f32,
+    pub nonlinear: bool,
+    pub specular_sampling_weight: f32,
+}
+
+impl SmoothPlastic {
+    pub fn flags(&self) -> LobeFlags {
+        LobeFlags::SPECULAR_REFLECTION | LobeFlags::DIFFUSE_REFLECTION
+    }
+    fn prob_specular(&self, f_i: f32) -> f32 {
+        let ps = f_i * self.specular_sampling_weight;
+        let pd = (1.0 - f_i) * (1.0 - self.specular_sampling_weight);
+        if ps + pd > 0.0 {
+            ps / (ps + pd)
+        } else {
+            0.0
+        }
+    }
+    pub fn eval(&self, wo: Vec3, wi: Vec3, _mode: TransportMode) -> Rgb {
+        if wo.z <= 0.0 || wi.z <= 0.0 {
+            return Rgb::BLACK;
+        }
+        let f_o = fresnel::dielectric(wo.z, self.eta).0;
+        let f_i = fresnel::dielectric(wi.z, self.eta).0;
+        let fdr_int = fresnel::diffuse_reflectance(1.0 / self.eta);
+        base_albedo(self.diffuse_reflectance, fdr_int, self.nonlinear) * ((1.0 - f_o) * (1.0 - f_i) * INV_PI / (self.eta * self.eta))
+    }
+    pub fn pdf(&self, wo: Vec3, wi: Vec3, _mode: TransportMode) -> f32 {
+        if wo.z <= 0.0 || wi.z <= 0.0 {
+            return 0.0;
+        }
+        let f_o = fresnel::dielectric(wo.z, self.eta).0;
+        (1.0 - self.prob_specular(f_o)) * warp::square_to_cosine_hemisphere_pdf(wi)
+    }
+    pub fn sample(&self, wo: Vec3, uc: f32, u: Vec2, mode: TransportMode) -> Option<BsdfSample> {
+        if wo.z <= 0.0 {
+            return None;
+        }
+        let f_o = fresnel::dielectric(wo.z, self.eta).0;
+        let ps = self.prob_specular(f_o);
+        if uc < ps {
+            let wi = fresnel::reflect_z(wo);
+            let weight = self.specular_reflectance * (f_o / ps);
+            return Some(BsdfSample { wi, f: weight / wi.z, pdf: 1.0, lobe: LobeFlags::SPECULAR_REFLECTION, eta: 1.0 });
+        }
+        let wi = warp::square_to_cosine_hemisphere(u);
+        let pdf = self.pdf(wo, wi, mode);
+        if !super::positive_finite(pdf) {
+            return None;
+        }
+        Some(BsdfSample { wi, f: self.eval(wo, wi, mode), pdf, lobe: LobeFlags::DIFFUSE_REFLECTION, eta: 1.0 })
+    }
+    /// Hemispherical average of the diffuse lobe's albedo (for radiosity).
+    pub fn diffuse_albedo(&self) -> Rgb {
+        let t = 1.0 - fresnel::diffuse_reflectance(self.eta);
+        base_albedo(self.diffuse_reflectance, fresnel::diffuse_reflectance(1.0 / self.eta), self.nonlinear) * (t * t / (self.eta * self.eta))
+    }
+}
+
+/// Resolution of the transmittance table over cos θ (Mitsuba's MI_ROUGH_TRANSMITTANCE_RES).
+pub const TRANSMITTANCE_RES: usize = 64;
+
+/// Precomputed integrals of a rough interface of given roughness and IOR.
+#[derive(Debug)]
+pub struct CoatingTables {
+    /// Directional transmittance into the coating, t(cos θ) at cos θ = i / (RES - 1).
+    pub transmittance: [f32; TRANSMITTANCE_RES],
+    /// Hemispherical (cosine-weighted) internal reflectance of the coating seen from inside.
+    pub internal_reflectance: f32,
+    /// Hemispherical (cosine-weighted) average of `transmittance`.
+    pub mean_transmittance: f32,
+}
+
+impl CoatingTables {
+    /// Linear interpolation in the table, as Mitsuba's `lerp_gather`.
+    #[inline]
+    pub fn transmittance_at(&self, cos: f32) -> f32 {
+        let x = cos.clamp(0.0, 1.0) * (TRANSMITTANCE_RES - 1) as f32;
+        let i = (x as usize).min(TRANSMITTANCE_RES - 2);
+        let w = x - i as f32;
+        self.transmittance[i] * (1.0 - w) + self.transmittance[i + 1] * w
+    }
+
+    /// Integrate the interface's albedos by Gauss-Legendre quadrature over the visible-
+    /// normal sample space (the integrands are then smooth apart from total internal
+    /// reflection), as Mitsuba does.
+    pub fn compute(kind: MicrofacetKind, alpha: f32, eta: f32) -> CoatingTables {
+        let md = Microfacet::new(kind, alpha, alpha);
+        let mus: Vec<f32> = (0..TRANSMITTANCE_RES).map(|i| (i as f32 / (TRANSMITTANCE_RES - 1) as f32).max(1e-6)).collect();
+        let dir = |mu: f32| Vec3::new((1.0 - mu * mu).max(0.0).sqrt(), 0.0, mu);
+        let gl_out = gauss_legendre(32);
+        let gl_in = gauss_legendre(128);
+        let ext: Vec<f64> = mus.par_iter().map(|&mu| interface_albedo(&md, dir(mu), eta, false, &gl_out)).collect();
+        let mut transmittance = [0.0f32; TRANSMITTANCE_RES];
+        for (t, e) in transmittance.iter_mut().zip(&ext) {
+            *t = *e as f32;
+        }
+        // Mitsuba averages over the linspace points (not a trapezoid rule); kept so that
+        // the diffuse brightness matches its images.
+        let n = TRANSMITTANCE_RES as f64;
+        let internal = 2.0 * mus.par_iter().map(|&mu| interface_albedo(&md, dir(mu), 1.0 / eta, true, &gl_in) * mu as f64).sum::<f64>() / n;
+        let mean_t = 2.0 * mus.iter().zip(&transmittance).map(|(&mu, &t)| t as f64 * mu as f64).sum::<f64>() / n;
+        CoatingTables { transmittance, internal_reflectance: internal as f32, mean_transmittance: mean_t as f32 }
+    }
+
+    /// The tables for this coating, computed once per process and roughness (quantised to
+    /// ~1e-4 relative, which bounds the cache for textured roughness).
+    pub fn get(kind: MicrofacetKind, alpha: f32, eta: f32) -> &'static CoatingTables {
+        type Key = (u8, u32, u32);
+        thread_local! {
+            static LOCAL: RefCell<HashMap<Key, &'static CoatingTables>> = RefCell::new(HashMap::new());
+        }
+        static GLOBAL: OnceLock<Mutex<HashMap<Key, &'static CoatingTables>>> = OnceLock::new();
+        let alpha = f32::from_bits(alpha.max(super::microfacet::MIN_ALPHA).to_bits() & !0x3ff);
+        let key = (kind as u8, alpha.to_bits(), eta.to_bits());
+        if let Some(t) = LOCAL.with(|l| l.borrow().get(&key).copied()) {
+            return t;
+        }
+        let t = {
+            let mut g = GLOBAL.get_or_init(|| Mutex::new(HashMap::new())).lock().unwrap_or_else(|e| e.into_inner());
+            // Leaked on purpose: a handful of small tables live as long as the process.
+            *g.entry(key).or_insert_with(|| Box::leak(Box::new(CoatingTables::compute(kind, alpha, eta))))
+        };
+        LOCAL.with(|l| l.borrow_mut().insert(key, t));
+        t
+    }
+}
+
+/// ∫ over visible normals of (1 - F) G1(wt) (transmission) or F G1(wr) (reflection) for
+/// incident direction `v`: the directional albedo of that lobe of a rough interface.
+fn interface_albedo(md: &Microfacet, v: Vec3, eta: f32, reflection: bool, gl: &[(f64, f64)]) -> f64 {
+    let mut acc = 0.0f64;
+    for &(x, wx) in gl {
+        for &(y, wy) in gl {
+            let u = Vec2::new((0.5 * x + 0.5) as f32, (0.5 * y + 0.5) as f32);
+            let m = md.sample_visible(v, u);
+            let (f, cos_t, _, eta_ti) = fresnel::dielectric(v.dot(m), eta);
+            let val = if reflection {
+                let w = fresnel::reflect(v, m);
+                if w.z > 0.0 {
+                    f * md.g1(w, m)
+                } else {
+                    0.0
+                }
+            } else {
+                let w = fresnel::refract(v, m, cos_t, eta_ti);
+                if w.z < 0.0 {
+                    (1.0 - f) * md.g1(w, m)
+                } else {
+                    0.0
+                }
+            };
+            acc += val as f64 * wx * wy;
+        }
+    }
+    acc * 0.25
+}
+
+/// Gauss-Legendre nodes and weights on [-1, 1] (Newton's method on P_n).
+pub(crate) fn gauss_legendre(n: usize) -> Vec<(f64, f64)> {
+    let mut out = Vec::with_capacity(n);
+    for i in 0..n {
+        let mut x = (std::f64::consts::PI * (i as f64 + 0.75) / (n as f64 + 0.5)).cos();
+        let mut dp = 1.0;
+        for _ in 0..100 {
+            // Recurrence for P_n(x) and its derivative.
+            let (mut p0, mut p1) = (1.0f64, x);
+            for k in 2..=n {
+                let p2 = ((2 * k - 1) as f64 * x * p1 - (k - 1) as f64 * p0) / k as f64;
+                p0 = p1;
+                p1 = p2;
+            }
+            // p1 = P_n(x), p0 = P_{n-1}(x).
+            dp = n as f64 * (x * p1 - p0) / (x * x - 1.0);
+            let dx = p1 / dp;
+            x -= dx;
+            if dx.abs() < 1e-15 {
+                break;
+            }
+        }
+        out.push((x, 2.0 / ((1.0 - x * x) * dp * dp)));
+    }
+    out
+}
+
+/// Rough coating over the diffuse base (isotropic roughness, as Mitsuba's `roughplastic`).
+#[derive(Clone, Copy, Debug)]
+pub struct RoughPlastic {
+    pub distribution: Microfacet,
+    pub diffuse_reflectance: Rgb,
+    pub specular_reflectance: Rgb,
+    pub eta: f32,
+    pub nonlinear: bool,
+    pub specular_sampling_weight: f32,
+    pub tables: &'static CoatingTables,
+}
+
+impl RoughPlastic {
+    pub fn new(
+        kind: MicrofacetKind,
+        alpha: f32,
+        diffuse_reflectance: Rgb,
+        specular_reflectance: Rgb,
+        eta: f32,
+        nonlinear: bool,
+        specular_sampling_weight: f32,
+    ) -> Self {
+        let distribution = Microfacet::new(kind, alpha, alpha);
+        let tables = CoatingTables::get(kind, distribution.alpha_u, eta);
+        RoughPlastic { distribution, diffuse_reflectance, specular_reflectance, eta, nonlinear, specular_sampling_weight, tables }
+    }
+    pub fn flags(&self) -> LobeFlags {
+        LobeFlags::GLOSSY_REFLECTION | LobeFlags::DIFFUSE_REFLECTION
+    }
+    fn prob_specular(&self, t_o: f32) -> f32 {
+        let ps = (1.0 - t_o) * self.specular_sampling_weight;
+        let pd = t_o * (1.0 - self.specular_sampling_weight);
+        if ps + pd > 0.0 {
+            ps / (ps + pd)
+        } else {
+            0.0
+        }
+    }
+    pub fn eval(&self, wo: Vec3, wi: Vec3, _mode: TransportMode) -> Rgb {
+        if wo.z <= 0.0 || wi.z <= 0.0 {
+            return Rgb::BLACK;
+        }
+        let h = (wo + wi).normalize();
+        let md = &self.distribution;
+        let f = fresnel::dielectric(wo.dot(h), self.eta).0;
+        let spec = self.specular_reflectance * (f * md.d(h) * md.g(wo, wi, h) / (4.0 * wo.z * wi.z));
+        let t = self.tables;
+        let diff = base_albedo(self.diffuse_reflectance, t.internal_reflectance, self.nonlinear)
+            * (INV_PI / (self.eta * self.eta) * t.transmittance_at(wo.z) * t.transmittance_at(wi.z));
+        spec + diff
+    }
+    pub fn pdf(&self, wo: Vec3, wi: Vec3, _mode: TransportMode) -> f32 {
+        if wo.z <= 0.0 || wi.z <= 0.0 {
+            return 0.0;
+        }
+        let ps = self.prob_specular(self.tables.transmittance_at(wo.z));
+        let h = (wo + wi).normalize();
+        let hi = wi.dot(h);
+        let spec = if hi > 0.0 { self.distribution.pdf_visible(wo, h) / (4.0 * hi) } else { 0.0 };
+        ps * spec + (1.0 - ps) * warp::square_to_cosine_hemisphere_pdf(wi)
+    }
+    pub fn sample(&self, wo: Vec3, uc: f32, u: Vec2, mode: TransportMode) -> Option<BsdfSample> {
+        if wo.z <= 0.0 {
+            return None;
+        }
+        let ps = self.prob_specular(self.tables.transmittance_at(wo.z));
+        let (wi, lobe) = if uc < ps {
+            let m = self.distribution.sample_visible(wo, u);
+            (fresnel::reflect(wo, m), LobeFlags::GLOSSY_REFLECTION)
+        } else {
+            (warp::square_to_cosine_hemisphere(u), LobeFlags::DIFFUSE_REFLECTION)
+        };
+        if wi.z <= 0.0 {
+            return None;
+        }
+        let pdf = self.pdf(wo, wi, mode);
+        if !super::positive_finite(pdf) {
+            return None;
+        }
+        Some(BsdfSample { wi, f: self.eval(wo, wi, mode), pdf, lobe, eta: 1.0 })
+    }
+    /// Hemispherical average of the diffuse lobe's albedo (for radiosity).
+    pub fn diffuse_albedo(&self) -> Rgb {
+        let t = self.tables;
+        base_albedo(self.diffuse_reflectance, t.internal_reflectance, self.nonlinear) * (t.mean_transmittance * t.mean_transmittance / (self.eta * self.eta))
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn gauss_legendre_integrates_polynomials_exactly() {
+        let gl = gauss_legendre(8);
+        let w: f64 = gl.iter().map(|p| p.1).sum();
+        assert!((w - 2.0).abs() < 1e-12);
+        // Exact up to degree 15.
+        let i: f64 = gl.iter().map(|&(x, w)| w * x.powi(14)).sum();
+        assert!((i - 2.0 / 15.0).abs() < 1e-12);
+    }
+
+    #[test]
+    fn coating_tables_approach_smooth_interface() {
+        // A nearly smooth coating transmits 1 - F(cos) and its internal reflectance is
+        // the diffuse Fresnel reflectance (up to Mitsuba's linspace averaging).
+        let t = CoatingTables::compute(MicrofacetKind::Ggx, 1e-3, 1.5);
+        for i in [8usize, 20, 40, 63] {
+            let mu = i as f32 / 63.0;
+            let expect = 1.0 - fresnel::dielectric(mu, 1.5).0;
+            assert!((t.transmittance[i] - expect).abs() < 2e-3, "mu {mu}: {} vs {expect}", t.transmittance[i]);
+        }
+        let fdr = fresnel::diffuse_reflectance(1.0 / 1.5);
+        assert!((t.internal_reflectance - fdr).abs() < 0.03, "{} vs {fdr}", t.internal_reflectance);
+    }
+}
