@@ -186,7 +186,6 @@ const TINY_XML: &str = r#"<scene version="3.0.0">
 "#;
 
 #[test]
-#[ignore = "needs svetlo::io::load_scene (the Mitsuba loader, another branch)"]
 fn render_end_to_end() {
     let d = tmp("e2e");
     let scene = d.join("tiny.xml");
@@ -206,7 +205,6 @@ fn render_end_to_end() {
 }
 
 #[test]
-#[ignore = "needs svetlo::io::load_scene (the Mitsuba loader, another branch)"]
 fn ctrl_c_writes_the_image_and_exits_130() {
     let d = tmp("ctrlc");
     let scene = d.join("tiny.xml");
