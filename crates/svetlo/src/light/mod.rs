@@ -128,7 +128,7 @@ impl Light {
                 let wi = d / dist2.sqrt();
                 Some(LightSample { wi, li: *intensity / dist2, pdf: 1.0, p: *position, infinite: false })
             }
-            Light::Spot { position, intensity, .. } => {
+            Light::Spot { position, .. } => {
                 let d = *position - p_ref;
                 let dist2 = d.length_squared();
                 if dist2 == 0.0 {
@@ -139,7 +139,6 @@ impl Light {
                 if i.is_black() {
                     return None;
                 }
-                let _ = intensity;
                 Some(LightSample { wi, li: i / dist2, pdf: 1.0, p: *position, infinite: false })
             }
             Light::Directional { direction, irradiance } => {
@@ -188,7 +187,10 @@ impl Light {
         match self {
             Light::Area(a) => a.power(),
             Light::Point { intensity, .. } => 4.0 * PI * intensity.luminance(),
-            Light::Spot { intensity, cutoff_angle, beam_width, .. } => point::spot_solid_angle(*cutoff_angle, *beam_width) * intensity.luminance(),
+            Light::Spot { intensity, cutoff_angle, beam_width, texture, .. } => {
+                let tex = texture.as_ref().map_or(Rgb::WHITE, |t| t.mean());
+                point::spot_solid_angle(*cutoff_angle, *beam_width) * (*intensity * tex).luminance()
+            }
             Light::Directional { irradiance, .. } => disk * irradiance.luminance(),
             Light::Constant { radiance } => 4.0 * PI * disk * radiance.luminance(),
             Light::EnvMap(env) => disk * env.luminance_integral(),
@@ -206,13 +208,13 @@ impl Light {
                 ray.time = time;
                 Some(EmissionSample { ray, le: *intensity, pdf_pos: 1.0, pdf_dir: point::POINT_PDF_DIR, n: d })
             }
-            Light::Spot { position, frame, intensity, cos_cutoff, .. } => {
+            Light::Spot { position, frame, cos_cutoff, .. } => {
                 let local = warp::square_to_uniform_cone(u_dir, *cos_cutoff);
                 let pdf_dir = warp::square_to_uniform_cone_pdf(local, *cos_cutoff);
                 let d = frame.to_world(local);
                 let mut ray = Ray::new(*position, d);
                 ray.time = time;
-                Some(EmissionSample { ray, le: { let _ = intensity; self.spot_intensity(d) }, pdf_pos: 1.0, pdf_dir, n: d })
+                Some(EmissionSample { ray, le: self.spot_intensity(d), pdf_pos: 1.0, pdf_dir, n: d })
             }
             Light::Directional { direction, irradiance } => {
                 let (ray, pdf_pos) = ray_from_infinity(bounds, *direction, u_pos, time);
