@@ -3,7 +3,7 @@
 //! Leaves are emitted through a callback that packs the primitives however the
 //! caller stores them and returns the leaf's child code.
 
-use super::wide::{Node4, EMPTY_CHILD, LEAF_BIT};
+use super::wide::{Node, EMPTY_CHILD, LEAF_BIT, WIDTH};
 use crate::geometry::Aabb;
 use glam::Vec3;
 
@@ -13,8 +13,8 @@ const PARALLEL_MIN: usize = 8 * 1024;
 /// Below this depth SAH splits give way to median splits, which bounds the depth
 /// (and so the traversal stack) on pathological inputs.
 const SAH_MAX_DEPTH: usize = 40;
-/// Binary depth never exceeds SAH_MAX_DEPTH + 32, and a wide node pushes at most 3 entries.
-pub const MAX_STACK: usize = 3 * (SAH_MAX_DEPTH + 33);
+/// Binary depth never exceeds SAH_MAX_DEPTH + 32, and a wide node pushes at most WIDTH - 1 entries.
+pub const MAX_STACK: usize = (WIDTH - 1) * (SAH_MAX_DEPTH + 33);
 
 /// What the SAH needs to know about the leaves of one kind of primitive.
 #[derive(Clone, Copy, Debug)]
@@ -39,11 +39,11 @@ struct Ctx<'a> {
     params: LeafParams,
 }
 
-/// Builds the 4-wide tree over `bounds`. Returns the nodes (root first; none when
+/// Builds the wide tree over `bounds`. Returns the nodes (root first; none when
 /// there is no primitive) and the primitive order the leaves refer to. `emit_leaf`
 /// gets each leaf's slice of that order, in depth-first order, and returns its
 /// child code (with `LEAF_BIT` set).
-pub fn build_wide(bounds: &[Aabb], params: LeafParams, mut emit_leaf: impl FnMut(&[u32]) -> u32) -> (Vec<Node4>, Vec<u32>) {
+pub fn build_wide(bounds: &[Aabb], params: LeafParams, mut emit_leaf: impl FnMut(&[u32]) -> u32) -> (Vec<Node>, Vec<u32>) {
     let mut order: Vec<u32> = (0..bounds.len() as u32).collect();
     if bounds.is_empty() {
         return (Vec::new(), order);
@@ -58,13 +58,13 @@ pub fn build_wide(bounds: &[Aabb], params: LeafParams, mut emit_leaf: impl FnMut
         BNode::Leaf { .. } => (vec![&root], vec![root_bounds]),
         BNode::Inner { .. } => collapse(&root),
     };
-    nodes.push(Node4::empty());
+    nodes.push(Node::empty());
     fill_node(0, &root_children, &root_boxes, &order, &mut nodes, &mut emit_leaf);
     (nodes, order)
 }
 
-fn fill_node(idx: usize, children: &[&BNode], boxes: &[Aabb], order: &[u32], nodes: &mut Vec<Node4>, emit_leaf: &mut impl FnMut(&[u32]) -> u32) {
-    let mut codes = [EMPTY_CHILD; 4];
+fn fill_node(idx: usize, children: &[&BNode], boxes: &[Aabb], order: &[u32], nodes: &mut Vec<Node>, emit_leaf: &mut impl FnMut(&[u32]) -> u32) {
+    let mut codes = [EMPTY_CHILD; WIDTH];
     for (k, child) in children.iter().enumerate() {
         codes[k] = match child {
             BNode::Leaf { start, count } => {
@@ -74,22 +74,22 @@ fn fill_node(idx: usize, children: &[&BNode], boxes: &[Aabb], order: &[u32], nod
             }
             BNode::Inner { .. } => {
                 let ci = nodes.len();
-                nodes.push(Node4::empty());
+                nodes.push(Node::empty());
                 let (gc, gb) = collapse(child);
                 fill_node(ci, &gc, &gb, order, nodes, emit_leaf);
                 ci as u32
             }
         };
     }
-    nodes[idx] = Node4::new(boxes, codes);
+    nodes[idx] = Node::new(boxes, codes);
 }
 
-/// The up-to-four children of a binary inner node in the wide tree: open the
-/// child of largest surface area until there are four (or only leaves remain).
+/// The up-to-WIDTH children of a binary inner node in the wide tree: open the
+/// child of largest surface area until there are WIDTH (or only leaves remain).
 fn collapse(node: &BNode) -> (Vec<&BNode>, Vec<Aabb>) {
     let BNode::Inner { bounds, children } = node else { unreachable!("collapse of a leaf") };
     let mut list: Vec<(&BNode, Aabb)> = vec![(&children[0], bounds[0]), (&children[1], bounds[1])];
-    while list.len() < 4 {
+    while list.len() < WIDTH {
         let best = list
             .iter()
             .enumerate()

@@ -1,10 +1,10 @@
-//! The scene's accelerator: a 4-wide BVH over triangles (stored by value, four to a
+//! The scene's accelerator: an 8-wide BVH over triangles (stored by value, four to a
 //! SIMD block, in leaf order) and a second, small one over analytic spheres. A ray
 //! walks both; the nearer hit wins.
 
 use super::build::{build_wide, LeafParams};
 use super::tri4::{Tri4, TriRay};
-use super::wide::{leaf_code, leaf_range, traverse, BoxRay, Node4};
+use super::wide::{leaf_code, leaf_range, traverse, BoxRay, Node};
 use super::PrimHit;
 use crate::geometry::{Aabb, Geometry, Ray, Sphere};
 use glam::Vec3;
@@ -16,11 +16,11 @@ struct PrimRef {
 }
 
 pub struct Accel {
-    tri_nodes: Vec<Node4>,
+    tri_nodes: Vec<Node>,
     tris: Vec<Tri4>,
     /// Four per block of `tris`, one per lane.
     tri_refs: Vec<PrimRef>,
-    sph_nodes: Vec<Node4>,
+    sph_nodes: Vec<Node>,
     spheres: Vec<Sphere>,
     sph_refs: Vec<PrimRef>,
     bounds: Aabb,
@@ -54,7 +54,10 @@ impl Accel {
         let tri_bounds: Vec<Aabb> = tri_v.iter().map(|t| Aabb::from_points(t)).collect();
         let mut tris = Vec::with_capacity(tri_v.len() / 2);
         let mut tri_refs = Vec::with_capacity(tri_v.len() * 2);
-        let (tri_nodes, _) = build_wide(&tri_bounds, TRI_LEAF, |prims| {
+        let mut tl = TRI_LEAF;
+        if let Ok(v) = std::env::var("SV_TC") { tl.traversal_cost = v.parse().unwrap(); }
+        if let Ok(v) = std::env::var("SV_ML") { tl.max_leaf = v.parse().unwrap(); }
+        let (tri_nodes, _) = build_wide(&tri_bounds, tl, |prims| {
             let start = tris.len();
             for chunk in prims.chunks(4) {
                 let verts: Vec<[Vec3; 3]> = chunk.iter().map(|&i| tri_v[i as usize]).collect();
@@ -67,6 +70,7 @@ impl Accel {
             leaf_code(start, tris.len() - start)
         });
 
+        if std::env::var("SV_STATS").is_ok() { eprintln!("nodes {} blocks {} tris {}", tri_nodes.len(), tris.len(), tri_v.len()); }
         let sph_bounds: Vec<Aabb> = sph.iter().map(|s| s.bounds()).collect();
         let mut spheres = Vec::with_capacity(sph.len());
         let mut sph_refs = Vec::with_capacity(sph.len());

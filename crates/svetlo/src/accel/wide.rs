@@ -1,5 +1,7 @@
-//! The 4-wide node and its traversal: one SIMD slab test for four child boxes,
-//! children visited nearest first, stack entries skipped once a nearer hit is known.
+//! The wide node and its traversal: SIMD slab tests for eight child boxes (two
+//! groups of four lanes), children visited nearest first, stack entries skipped
+//! once a nearer hit is known. Incoherent rays over a large mesh wait on memory at
+//! every level, so the width is chosen for a shallow tree, not for the SIMD unit.
 
 use super::build::MAX_STACK;
 use crate::geometry::Aabb;
@@ -11,6 +13,9 @@ pub const LEAF_BIT: u32 = 1 << 31;
 /// An unused child slot. Its box is empty, so the slab test never selects it.
 pub const EMPTY_CHILD: u32 = u32::MAX;
 const LEAF_COUNT_BITS: u32 = 4;
+/// Children per node.
+pub const WIDTH: usize = 8;
+const GROUPS: usize = WIDTH / 4;
 /// Most entries (groups) one leaf code can hold.
 pub const LEAF_MAX_ENTRIES: usize = 1 << LEAF_COUNT_BITS;
 
@@ -28,30 +33,28 @@ pub fn leaf_range(code: u32) -> (usize, usize) {
     ((c >> LEAF_COUNT_BITS) as usize, (c & ((1 << LEAF_COUNT_BITS) - 1)) as usize + 1)
 }
 
-/// Four child boxes in SoA form (min x, y, z, max x, y, z; one lane per child) and
-/// their codes: an inner node's index, or a leaf code. Two cache lines.
+/// Child boxes in SoA form (`planes[min x, y, z, max x, y, z][group]`, one lane per
+/// child) and their codes: an inner node's index, or a leaf code. Four cache lines.
 #[derive(Clone, Copy, Debug)]
 #[repr(C, align(64))]
-pub struct Node4 {
-    planes: [Vec4; 6],
-    children: [u32; 4],
+pub struct Node {
+    planes: [[Vec4; GROUPS]; 6],
+    children: [u32; WIDTH],
 }
 
-impl Node4 {
-    pub fn empty() -> Node4 {
-        Node4 {
-            planes: [Vec4::INFINITY, Vec4::INFINITY, Vec4::INFINITY, Vec4::NEG_INFINITY, Vec4::NEG_INFINITY, Vec4::NEG_INFINITY],
-            children: [EMPTY_CHILD; 4],
-        }
+impl Node {
+    pub fn empty() -> Node {
+        let (inf, ninf) = ([Vec4::INFINITY; GROUPS], [Vec4::NEG_INFINITY; GROUPS]);
+        Node { planes: [inf, inf, inf, ninf, ninf, ninf], children: [EMPTY_CHILD; WIDTH] }
     }
 
-    pub fn new(boxes: &[Aabb], children: [u32; 4]) -> Node4 {
-        let mut n = Node4::empty();
+    pub fn new(boxes: &[Aabb], children: [u32; WIDTH]) -> Node {
+        let mut n = Node::empty();
         n.children = children;
         for (k, b) in boxes.iter().enumerate() {
             for a in 0..3 {
-                n.planes[a][k] = b.min[a];
-                n.planes[3 + a][k] = b.max[a];
+                n.planes[a][k / 4][k % 4] = b.min[a];
+                n.planes[3 + a][k / 4][k % 4] = b.max[a];
             }
         }
         n
@@ -60,11 +63,10 @@ impl Node4 {
     /// Union of the children's boxes.
     pub fn bounds(&self) -> Aabb {
         let mut b = Aabb::EMPTY;
-        for k in 0..4 {
+        for k in 0..WIDTH {
             if self.children[k] != EMPTY_CHILD {
-                let min = Vec3::new(self.planes[0][k], self.planes[1][k], self.planes[2][k]);
-                let max = Vec3::new(self.planes[3][k], self.planes[4][k], self.planes[5][k]);
-                b = b.union(Aabb { min, max });
+                let p = |a: usize| self.planes[a][k / 4][k % 4];
+                b = b.union(Aabb { min: Vec3::new(p(0), p(1), p(2)), max: Vec3::new(p(3), p(4), p(5)) });
             }
         }
         b
@@ -100,19 +102,25 @@ impl BoxRay {
         BoxRay { o: [Vec4::splat(o.x), Vec4::splat(o.y), Vec4::splat(o.z)], inv: [Vec4::splat(inv.x), Vec4::splat(inv.y), Vec4::splat(inv.z)], near, far }
     }
 
-    /// Entry distances of the four children and the mask of those the ray meets in `[0, t_max]`.
+    /// Entry distances of the children and the mask of those the ray meets in `[0, t_max]`.
     #[inline(always)]
-    fn test(&self, n: &Node4, t_max: f32) -> (Vec4, u32) {
+    fn test(&self, n: &Node, t_max: f32) -> ([f32; WIDTH], u32) {
         let p = &n.planes;
-        let tnx = (p[self.near[0]] - self.o[0]) * self.inv[0];
-        let tny = (p[self.near[1]] - self.o[1]) * self.inv[1];
-        let tnz = (p[self.near[2]] - self.o[2]) * self.inv[2];
-        let tfx = (p[self.far[0]] - self.o[0]) * self.inv[0];
-        let tfy = (p[self.far[1]] - self.o[1]) * self.inv[1];
-        let tfz = (p[self.far[2]] - self.o[2]) * self.inv[2];
-        let tn = tnx.max(tny).max(tnz.max(Vec4::ZERO));
-        let tf = tfx.min(tfy).min(tfz.min(Vec4::splat(t_max))) * FAR_SLACK;
-        (tn, tn.cmple(tf).bitmask())
+        let mut tn_all = [0.0; WIDTH];
+        let mut mask = 0;
+        for g in 0..GROUPS {
+            let tnx = (p[self.near[0]][g] - self.o[0]) * self.inv[0];
+            let tny = (p[self.near[1]][g] - self.o[1]) * self.inv[1];
+            let tnz = (p[self.near[2]][g] - self.o[2]) * self.inv[2];
+            let tfx = (p[self.far[0]][g] - self.o[0]) * self.inv[0];
+            let tfy = (p[self.far[1]][g] - self.o[1]) * self.inv[1];
+            let tfz = (p[self.far[2]][g] - self.o[2]) * self.inv[2];
+            let tn = tnx.max(tny).max(tnz.max(Vec4::ZERO));
+            let tf = tfx.min(tfy).min(tfz.min(Vec4::splat(t_max))) * FAR_SLACK;
+            mask |= tn.cmple(tf).bitmask() << (4 * g);
+            tn.write_to_slice(&mut tn_all[4 * g..4 * g + 4]);
+        }
+        (tn_all, mask)
     }
 }
 
@@ -120,7 +128,7 @@ impl BoxRay {
 /// ray reaches. The callback returns whether it found a hit (and then has lowered
 /// `t_max` to it). With `ANY`, stops at the first hit. Returns whether any leaf hit.
 #[inline(always)]
-pub fn traverse<const ANY: bool>(nodes: &[Node4], ray: &BoxRay, t_max: &mut f32, mut leaf: impl FnMut(u32, &mut f32) -> bool) -> bool {
+pub fn traverse<const ANY: bool>(nodes: &[Node], ray: &BoxRay, t_max: &mut f32, mut leaf: impl FnMut(u32, &mut f32) -> bool) -> bool {
     if nodes.is_empty() {
         return false;
     }
@@ -133,7 +141,6 @@ pub fn traverse<const ANY: bool>(nodes: &[Node4], ray: &BoxRay, t_max: &mut f32,
             let node = &nodes[cur as usize];
             let (tn, mut mask) = ray.test(node, *t_max);
             if mask != 0 {
-                let tn = tn.to_array();
                 let c = &node.children;
                 let first = mask.trailing_zeros() as usize;
                 mask &= mask - 1;
@@ -150,7 +157,7 @@ pub fn traverse<const ANY: bool>(nodes: &[Node4], ray: &BoxRay, t_max: &mut f32,
                     cur = c[near];
                     continue;
                 }
-                // Three or four children: push all, sort the new entries so that the nearest is on top.
+                // Three or more children: push all, sort the new entries so that the nearest is on top.
                 let base = sp;
                 stack[sp].write((c[first], tn[first]));
                 stack[sp + 1].write((c[second], tn[second]));
