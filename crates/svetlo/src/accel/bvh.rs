@@ -4,7 +4,7 @@
 
 use super::build::{build_wide, LeafParams};
 use super::tri4::{Tri4, TriRay};
-use super::wide::{leaf_code, leaf_range, traverse, BoxRay, Node};
+use super::wide::{leaf_code, leaf_range, prefetch, traverse, BoxRay, Node};
 use super::PrimHit;
 use crate::geometry::{Aabb, Geometry, Ray, Sphere};
 use glam::Vec3;
@@ -18,8 +18,8 @@ struct PrimRef {
 pub struct Accel {
     tri_nodes: Vec<Node>,
     tris: Vec<Tri4>,
-    /// Four per block of `tris`, one per lane.
-    tri_refs: Vec<PrimRef>,
+    /// (first triangle id, shape) per mesh, by first id: triangle ids number all meshes' triangles in turn.
+    meshes: Vec<(u32, u32)>,
     sph_nodes: Vec<Node>,
     spheres: Vec<Sphere>,
     sph_refs: Vec<PrimRef>,
@@ -32,17 +32,16 @@ const SPHERE_LEAF: LeafParams = LeafParams { group: 1, max_leaf: 4, traversal_co
 impl Accel {
     pub fn build(shapes: &[&Geometry]) -> Accel {
         let mut tri_v: Vec<[Vec3; 3]> = Vec::new();
-        let mut tri_r = Vec::new();
+        let mut meshes = Vec::new();
         let mut sph = Vec::new();
         let mut sph_r = Vec::new();
         for (si, g) in shapes.iter().enumerate() {
             match g {
                 Geometry::Mesh(m) => {
-                    tri_v.reserve(m.triangle_count());
-                    for t in 0..m.triangle_count() {
-                        tri_v.push(m.vertices(t));
-                        tri_r.push(PrimRef { shape: si as u32, prim: t as u32 });
+                    if m.triangle_count() > 0 {
+                        meshes.push((tri_v.len() as u32, si as u32));
                     }
+                    tri_v.extend((0..m.triangle_count()).map(|t| m.vertices(t)));
                 }
                 Geometry::Sphere(s) => {
                     sph.push(*s);
@@ -52,20 +51,16 @@ impl Accel {
         }
 
         let tri_bounds: Vec<Aabb> = tri_v.iter().map(|t| Aabb::from_points(t)).collect();
-        let mut tris = Vec::with_capacity(tri_v.len() / 2);
-        let mut tri_refs = Vec::with_capacity(tri_v.len() * 2);
+        assert!(tri_v.len() < u32::MAX as usize, "too many triangles");
+        let mut tris = Vec::with_capacity(tri_v.len() / 3);
         let mut tl = TRI_LEAF;
         if let Ok(v) = std::env::var("SV_TC") { tl.traversal_cost = v.parse().unwrap(); }
         if let Ok(v) = std::env::var("SV_ML") { tl.max_leaf = v.parse().unwrap(); }
         let (tri_nodes, _) = build_wide(&tri_bounds, tl, |prims| {
             let start = tris.len();
             for chunk in prims.chunks(4) {
-                let verts: Vec<[Vec3; 3]> = chunk.iter().map(|&i| tri_v[i as usize]).collect();
-                tris.push(Tri4::new(&verts));
-                for lane in 0..4 {
-                    // Padding lanes are never reported; any valid ref will do.
-                    tri_refs.push(tri_r[chunk[lane.min(chunk.len() - 1)] as usize]);
-                }
+                let lanes: Vec<([Vec3; 3], u32)> = chunk.iter().map(|&i| (tri_v[i as usize], i)).collect();
+                tris.push(Tri4::new(&lanes));
             }
             leaf_code(start, tris.len() - start)
         });
@@ -89,7 +84,7 @@ impl Accel {
                 bounds = bounds.union(root.bounds());
             }
         }
-        Accel { tri_nodes, tris, tri_refs, sph_nodes, spheres, sph_refs, bounds }
+        Accel { tri_nodes, tris, meshes, sph_nodes, spheres, sph_refs, bounds }
     }
 
     pub fn bounds(&self) -> Aabb {
@@ -111,14 +106,18 @@ impl Accel {
         let mut best: Option<PrimHit> = None;
         if !self.tri_nodes.is_empty() {
             let tray = TriRay::new(ray.o, ray.d);
-            let mut hit: Option<(usize, f32, f32)> = None;
-            traverse::<ANY>(&self.tri_nodes, &bray, &mut t_max, |code, t_max| {
+            let mut hit: Option<(u32, f32, f32)> = None;
+            let prefetch_leaf = |code| {
+                let (start, count) = leaf_range(code);
+                prefetch(self.tris.as_ptr().wrapping_add(start), count.min(2) * std::mem::size_of::<Tri4>());
+            };
+            traverse::<ANY>(&self.tri_nodes, &bray, &mut t_max, prefetch_leaf, |code, t_max| {
                 let (start, count) = leaf_range(code);
                 let mut found = false;
-                for (k, block) in self.tris[start..start + count].iter().enumerate() {
+                for block in &self.tris[start..start + count] {
                     if let Some((lane, t, b1, b2)) = block.intersect(&tray, *t_max) {
                         *t_max = t;
-                        hit = Some(((start + k) * 4 + lane, b1, b2));
+                        hit = Some((block.ids[lane], b1, b2));
                         found = true;
                         if ANY {
                             break;
@@ -127,9 +126,9 @@ impl Accel {
                 }
                 found
             });
-            if let Some((i, b1, b2)) = hit {
-                let r = self.tri_refs[i];
-                best = Some(PrimHit { t: t_max, shape: r.shape, prim: r.prim, b1, b2 });
+            if let Some((id, b1, b2)) = hit {
+                let (first, shape) = self.meshes[self.meshes.partition_point(|m| m.0 <= id) - 1];
+                best = Some(PrimHit { t: t_max, shape, prim: id - first, b1, b2 });
                 if ANY {
                     return best;
                 }
@@ -137,7 +136,7 @@ impl Accel {
         }
         if !self.sph_nodes.is_empty() {
             let mut hit = None;
-            traverse::<ANY>(&self.sph_nodes, &bray, &mut t_max, |code, t_max| {
+            traverse::<ANY>(&self.sph_nodes, &bray, &mut t_max, |_| {}, |code, t_max| {
                 let (start, count) = leaf_range(code);
                 let mut found = false;
                 for i in start..start + count {

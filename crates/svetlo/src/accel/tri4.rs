@@ -5,27 +5,31 @@
 use crate::geometry::triangle::WatertightRay;
 use glam::{Vec3, Vec4};
 
-/// `p[vertex][axis]`, one triangle per lane. Unused lanes hold NaN vertices, which
-/// every comparison of the test rejects.
+/// `p[vertex][axis]`, one triangle per lane, and each lane's triangle id (kept beside
+/// the vertices: a hit then costs no further cache miss). Unused lanes hold NaN
+/// vertices, which every comparison of the test rejects.
 #[derive(Clone, Copy, Debug)]
-#[repr(C, align(16))]
+#[repr(C, align(32))]
 pub struct Tri4 {
     p: [[Vec4; 3]; 3],
+    pub ids: [u32; 4],
 }
 
 impl Tri4 {
-    /// Packs up to four triangles; missing lanes become NaN.
-    pub fn new(tris: &[[Vec3; 3]]) -> Tri4 {
-        assert!(tris.len() <= 4);
+    /// Packs up to four triangles (vertices, id); missing lanes become NaN.
+    pub fn new(tris: &[([Vec3; 3], u32)]) -> Tri4 {
+        assert!(!tris.is_empty() && tris.len() <= 4);
         let mut p = [[Vec4::NAN; 3]; 3];
-        for (lane, t) in tris.iter().enumerate() {
+        let mut ids = [tris[0].1; 4];
+        for (lane, (t, id)) in tris.iter().enumerate() {
+            ids[lane] = *id;
             for (v, pv) in t.iter().enumerate() {
                 for a in 0..3 {
                     p[v][a][lane] = pv[a];
                 }
             }
         }
-        Tri4 { p }
+        Tri4 { p, ids }
     }
 
     #[inline]
