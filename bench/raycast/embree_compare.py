@@ -1,9 +1,12 @@
 #!/usr/bin/env python3
 """svetlo's accelerator against Embree (embreex) on the same mesh and the same rays.
 
-Runs the Rust bench (crates/svetlo/examples/raycast_bench.rs), which writes the mesh,
-the rays and svetlo's hits to --out, then casts the same rays with Embree, checks
-that both found the same hits, and prints both throughputs and their ratio.
+Starts the Rust bench (crates/svetlo/examples/raycast_bench.rs --serve), which builds
+the mesh and svetlo's BVH and writes the mesh, the rays and svetlo's hits to --out;
+builds Embree's scene on the same mesh; checks that both find the same hits; then,
+for each ray set, query and thread count, alternates one svetlo run and one Embree
+run (--repeat times), so that both see the same load on a shared machine, and
+prints both throughputs and their ratio.
 
 embreex casts one ray per rtcIntersect1/rtcOccluded1 call from a Cython loop that
 holds the GIL, so its 2-thread numbers come from 2 forked processes sharing the
@@ -28,13 +31,27 @@ from embreex.mesh_construction import TriangleMesh
 ROOT = os.path.abspath(os.path.join(os.path.dirname(__file__), "..", ".."))
 
 
-def run_rust(args):
-    cmd = [args.rust_bin, "--out", args.out, "--repeat", str(args.repeat), "--threads", args.threads]
-    if args.subdiv:
-        cmd += ["--subdiv", str(args.subdiv)]
-    print("$", " ".join(cmd), flush=True)
-    out = subprocess.run(cmd, check=True, capture_output=True, text=True, cwd=ROOT).stdout
-    return [json.loads(line) for line in out.splitlines() if line.startswith("{")]
+class RustBench:
+    """The Rust bench in --serve mode: one cast per request."""
+
+    def __init__(self, args):
+        cmd = [args.rust_bin, "--out", args.out, "--serve"]
+        if args.subdiv:
+            cmd += ["--subdiv", str(args.subdiv)]
+        print("$", " ".join(cmd), flush=True)
+        self.proc = subprocess.Popen(cmd, stdin=subprocess.PIPE, stdout=subprocess.PIPE, text=True, cwd=ROOT)
+        self.build = json.loads(self.proc.stdout.readline())
+        if self.proc.stdout.readline().strip() != "ready":
+            raise RuntimeError("raycast_bench did not start")
+
+    def cast(self, name, query, threads):
+        self.proc.stdin.write(f"{name} {query} {threads}\n")
+        self.proc.stdin.flush()
+        return json.loads(self.proc.stdout.readline())
+
+    def close(self):
+        self.proc.stdin.close()
+        self.proc.wait()
 
 
 def load_mesh(path):
@@ -123,7 +140,7 @@ def fmt_runs(xs):
 def main():
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--out", default=os.path.join(ROOT, "bench", "out"))
-    ap.add_argument("--repeat", type=int, default=3)
+    ap.add_argument("--repeat", type=int, default=5)
     ap.add_argument("--threads", default="1,2")
     ap.add_argument("--subdiv", type=int, default=0, help="cube-sphere subdivision (289: 1M triangles)")
     ap.add_argument("--rust-bin", default=os.path.join(ROOT, "target", "release", "examples", "raycast_bench"))
@@ -131,8 +148,10 @@ def main():
     args = ap.parse_args()
     threads = [int(t) for t in args.threads.split(",")]
 
-    rust = run_rust(args)
-    build = next(r for r in rust if r["kind"] == "build")
+    if not os.path.exists(args.rust_bin):
+        subprocess.run(["cargo", "build", "--release", "-p", "svetlo", "--example", "raycast_bench"], check=True, cwd=ROOT)
+    rust = RustBench(args)
+    build = rust.build
     print(f"mesh: {build['triangles']} triangles; load average {os.getloadavg()[0]:.2f} on {os.cpu_count()} cpus")
 
     v, f = load_mesh(os.path.join(args.out, "mesh.bin"))
@@ -164,8 +183,13 @@ def main():
         for query in ("closest", "occluded"):
             eq = "INTERSECT" if query == "closest" else "OCCLUDED"
             for th in threads:
-                s = next(r for r in rust if r["kind"] == "cast" and r["set"] == name and r["query"] == query and r["threads"] == th)
-                times = [time_cast(scene, rays, eq, th) for _ in range(args.repeat)]
+                s = {"mrays": [], "cpu_mrays_per_thread": []}
+                times = []
+                for _ in range(args.repeat):
+                    r = rust.cast(name, query, th)
+                    s["mrays"] += r["mrays"]
+                    s["cpu_mrays_per_thread"] += r["cpu_mrays_per_thread"]
+                    times.append(time_cast(scene, rays, eq, th))
                 e = [len(rays[0]) / w / 1e6 for w, _ in times]
                 e_cpu = [len(rays[0]) / c / 1e6 for _, c in times]
                 ratio = statistics.median(s["mrays"]) / statistics.median(e)
@@ -176,6 +200,7 @@ def main():
                       f"{statistics.median(s['cpu_mrays_per_thread']):7.2f}    {statistics.median(e_cpu):7.2f}    {ratio_cpu:6.2f}  {note}", flush=True)
                 rows.append({"set": name, "query": query, "threads": th, "svetlo": s["mrays"], "embree": e, "ratio": ratio,
                              "svetlo_cpu": s["cpu_mrays_per_thread"], "embree_cpu": e_cpu, "ratio_cpu": ratio_cpu, "check": chk})
+    rust.close()
     print(f"load average after: {os.getloadavg()[0]:.2f}")
     if args.json:
         with open(args.json, "w") as fh:

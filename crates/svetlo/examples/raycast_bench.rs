@@ -2,9 +2,13 @@
 //! Writes the mesh, the rays and svetlo's hits to `--out` (bench/out by default) so
 //! that bench/raycast/embree_compare.py can run Embree on exactly the same input.
 //!
-//! cargo run --release --example raycast_bench -- [--out DIR] [--repeat N] [--threads 1,2] [--subdiv N] [--no-write] [--sets coherent,incoherent,segments]
+//! cargo run --release --example raycast_bench -- [--out DIR] [--repeat N] [--threads 1,2] [--subdiv N] [--no-write] [--sets coherent,incoherent,segments] [--serve]
 //!
 //! Prints one JSON object per line: the build, then one per (ray set, query, threads).
+//! With `--serve`, prints `ready` after the build and then answers lines
+//! `SET closest|occluded THREADS` on stdin with one cast each, until stdin closes:
+//! embree_compare.py uses it to alternate svetlo and Embree runs in time, so that
+//! both see the same load on a shared machine.
 
 use std::io::Write;
 use std::sync::atomic::{AtomicUsize, Ordering};
@@ -22,10 +26,12 @@ struct Args {
     write: bool,
     /// Only these ray sets (all when empty).
     sets: Vec<String>,
+    /// Answer `SET QUERY THREADS` lines from stdin, one cast each (lets a driver interleave runs).
+    serve: bool,
 }
 
 fn parse_args() -> Args {
-    let mut a = Args { out: "bench/out".into(), repeat: 3, threads: vec![1, 2], subdiv: 289, write: true, sets: Vec::new() };
+    let mut a = Args { out: "bench/out".into(), repeat: 3, threads: vec![1, 2], subdiv: 289, write: true, sets: Vec::new(), serve: false };
     let mut it = std::env::args().skip(1);
     while let Some(k) = it.next() {
         let mut val = || it.next().unwrap_or_else(|| panic!("{k} needs a value"));
@@ -35,6 +41,7 @@ fn parse_args() -> Args {
             "--threads" => a.threads = val().split(',').map(|s| s.parse().expect("--threads 1,2")).collect(),
             "--subdiv" => a.subdiv = val().parse().expect("--subdiv N"),
             "--no-write" => a.write = false,
+            "--serve" => a.serve = true,
             "--sets" => a.sets = val().split(',').map(str::to_string).collect(),
             _ => panic!("unknown argument {k}"),
         }
@@ -60,7 +67,14 @@ fn displacement(p: Vec3) -> f32 {
 /// Face edges duplicate their vertices, as a mesh exported per face would.
 fn bumpy_planet(n: usize) -> TriangleMesh {
     let mut m = TriangleMesh::default();
-    let faces = [(Vec3::X, Vec3::Y, Vec3::Z), (Vec3::NEG_X, Vec3::Z, Vec3::Y), (Vec3::Y, Vec3::Z, Vec3::X), (Vec3::NEG_Y, Vec3::X, Vec3::Z), (Vec3::Z, Vec3::X, Vec3::Y), (Vec3::NEG_Z, Vec3::Y, Vec3::X)];
+    let faces = [
+        (Vec3::X, Vec3::Y, Vec3::Z),
+        (Vec3::NEG_X, Vec3::Z, Vec3::Y),
+        (Vec3::Y, Vec3::Z, Vec3::X),
+        (Vec3::NEG_Y, Vec3::X, Vec3::Z),
+        (Vec3::Z, Vec3::X, Vec3::Y),
+        (Vec3::NEG_Z, Vec3::Y, Vec3::X),
+    ];
     for (normal, u, v) in faces {
         let base = m.positions.len() as u32;
         for i in 0..=n {
@@ -164,10 +178,7 @@ fn write_hits(path: &std::path::Path, accel: &Accel, rays: &[Ray]) -> std::io::R
 /// CPU time this thread has run, in ns (Linux; 0 elsewhere). Unlike wall time it
 /// does not count the time the thread waited for a core on a loaded machine.
 fn thread_cpu_ns() -> u64 {
-    std::fs::read_to_string("/proc/thread-self/schedstat")
-        .ok()
-        .and_then(|s| s.split_whitespace().next().and_then(|v| v.parse().ok()))
-        .unwrap_or(0)
+    std::fs::read_to_string("/proc/thread-self/schedstat").ok().and_then(|s| s.split_whitespace().next().and_then(|v| v.parse().ok())).unwrap_or(0)
 }
 
 /// Casts all rays on `threads` threads (dynamic chunks); returns (wall seconds,
@@ -198,6 +209,21 @@ fn cast(accel: &Accel, rays: &[Ray], threads: usize, occlusion: bool) -> (f64, f
         }
     });
     (t0.elapsed().as_secs_f64(), cpu_ns.into_inner() as f64 * 1e-9, hits.into_inner())
+}
+
+/// One JSON line: throughput of each run by wall clock and per CPU-second of a thread.
+fn report(name: &str, rays: &[Ray], occlusion: bool, threads: usize, runs: &[(f64, f64, usize)]) {
+    let n = rays.len() as f64;
+    let list = |f: &dyn Fn(&(f64, f64, usize)) -> f64| runs.iter().map(|r| format!("{:.3}", n / f(r) / 1e6)).collect::<Vec<_>>().join(",");
+    let query = if occlusion { "occluded" } else { "closest" };
+    println!(
+        "{{\"kind\":\"cast\",\"set\":\"{name}\",\"query\":\"{query}\",\"threads\":{threads},\"rays\":{},\"hits\":{},\"mrays\":[{}],\"cpu_mrays_per_thread\":[{}]}}",
+        rays.len(),
+        runs[0].2,
+        list(&|r| r.0),
+        list(&|r| r.1)
+    );
+    std::io::stdout().flush().expect("stdout");
 }
 
 fn main() -> std::io::Result<()> {
@@ -232,26 +258,23 @@ fn main() -> std::io::Result<()> {
             write_hits(&args.out.join(format!("hits_{name}.bin")), &accel, rays)?;
         }
     }
+    if args.serve {
+        println!("ready");
+        for line in std::io::stdin().lines() {
+            let line = line?;
+            let w: Vec<&str> = line.split_whitespace().collect();
+            let [set, query, threads] = w[..] else { break };
+            let rays = &sets.iter().find(|(n, _)| *n == set).unwrap_or_else(|| panic!("no ray set {set}")).1;
+            let threads = threads.parse().expect("thread count");
+            report(set, rays, query == "occluded", threads, &[cast(&accel, rays, threads, query == "occluded")]);
+        }
+        return Ok(());
+    }
     for (name, rays) in &sets {
         for occlusion in [false, true] {
             for &threads in &args.threads {
-                let mut mrays = Vec::new();
-                let mut cpu_mrays = Vec::new();
-                let mut hits = 0;
-                for _ in 0..args.repeat {
-                    let (wall, cpu, h) = cast(&accel, rays, threads, occlusion);
-                    mrays.push(format!("{:.3}", rays.len() as f64 / wall / 1e6));
-                    // Per thread: rays per CPU-second of one thread.
-                    cpu_mrays.push(format!("{:.3}", rays.len() as f64 / cpu / 1e6));
-                    hits = h;
-                }
-                let query = if occlusion { "occluded" } else { "closest" };
-                println!(
-                    "{{\"kind\":\"cast\",\"set\":\"{name}\",\"query\":\"{query}\",\"threads\":{threads},\"rays\":{},\"hits\":{hits},\"mrays\":[{}],\"cpu_mrays_per_thread\":[{}]}}",
-                    rays.len(),
-                    mrays.join(","),
-                    cpu_mrays.join(",")
-                );
+                let runs: Vec<_> = (0..args.repeat).map(|_| cast(&accel, rays, threads, occlusion)).collect();
+                report(name, rays, occlusion, threads, &runs);
             }
         }
     }

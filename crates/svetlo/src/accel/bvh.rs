@@ -9,12 +9,6 @@ use super::PrimHit;
 use crate::geometry::{Aabb, Geometry, Ray, Sphere};
 use glam::Vec3;
 
-#[derive(Clone, Copy, Debug)]
-struct PrimRef {
-    shape: u32,
-    prim: u32,
-}
-
 pub struct Accel {
     tri_nodes: Vec<Node>,
     tris: Vec<Tri4>,
@@ -22,7 +16,8 @@ pub struct Accel {
     meshes: Vec<(u32, u32)>,
     sph_nodes: Vec<Node>,
     spheres: Vec<Sphere>,
-    sph_refs: Vec<PrimRef>,
+    /// Shape index of each sphere of `spheres`.
+    sph_shapes: Vec<u32>,
     bounds: Aabb,
 }
 
@@ -45,7 +40,7 @@ impl Accel {
                 }
                 Geometry::Sphere(s) => {
                     sph.push(*s);
-                    sph_r.push(PrimRef { shape: si as u32, prim: 0 });
+                    sph_r.push(si as u32);
                 }
             }
         }
@@ -53,10 +48,7 @@ impl Accel {
         let tri_bounds: Vec<Aabb> = tri_v.iter().map(|t| Aabb::from_points(t)).collect();
         assert!(tri_v.len() < u32::MAX as usize, "too many triangles");
         let mut tris = Vec::with_capacity(tri_v.len() / 3);
-        let mut tl = TRI_LEAF;
-        if let Ok(v) = std::env::var("SV_TC") { tl.traversal_cost = v.parse().unwrap(); }
-        if let Ok(v) = std::env::var("SV_ML") { tl.max_leaf = v.parse().unwrap(); }
-        let (tri_nodes, _) = build_wide(&tri_bounds, tl, |prims| {
+        let (tri_nodes, _) = build_wide(&tri_bounds, TRI_LEAF, |prims| {
             let start = tris.len();
             for chunk in prims.chunks(4) {
                 let lanes: Vec<([Vec3; 3], u32)> = chunk.iter().map(|&i| (tri_v[i as usize], i)).collect();
@@ -65,15 +57,14 @@ impl Accel {
             leaf_code(start, tris.len() - start)
         });
 
-        if std::env::var("SV_STATS").is_ok() { eprintln!("nodes {} blocks {} tris {}", tri_nodes.len(), tris.len(), tri_v.len()); }
         let sph_bounds: Vec<Aabb> = sph.iter().map(|s| s.bounds()).collect();
         let mut spheres = Vec::with_capacity(sph.len());
-        let mut sph_refs = Vec::with_capacity(sph.len());
+        let mut sph_shapes = Vec::with_capacity(sph.len());
         let (sph_nodes, _) = build_wide(&sph_bounds, SPHERE_LEAF, |prims| {
             let start = spheres.len();
             for &i in prims {
                 spheres.push(sph[i as usize]);
-                sph_refs.push(sph_r[i as usize]);
+                sph_shapes.push(sph_r[i as usize]);
             }
             leaf_code(start, prims.len())
         });
@@ -84,7 +75,7 @@ impl Accel {
                 bounds = bounds.union(root.bounds());
             }
         }
-        Accel { tri_nodes, tris, meshes, sph_nodes, spheres, sph_refs, bounds }
+        Accel { tri_nodes, tris, meshes, sph_nodes, spheres, sph_shapes, bounds }
     }
 
     pub fn bounds(&self) -> Aabb {
@@ -136,24 +127,29 @@ impl Accel {
         }
         if !self.sph_nodes.is_empty() {
             let mut hit = None;
-            traverse::<ANY>(&self.sph_nodes, &bray, &mut t_max, |_| {}, |code, t_max| {
-                let (start, count) = leaf_range(code);
-                let mut found = false;
-                for i in start..start + count {
-                    if let Some(t) = self.spheres[i].intersect(ray.o, ray.d, *t_max) {
-                        *t_max = t;
-                        hit = Some(i);
-                        found = true;
-                        if ANY {
-                            break;
+            traverse::<ANY>(
+                &self.sph_nodes,
+                &bray,
+                &mut t_max,
+                |_| {},
+                |code, t_max| {
+                    let (start, count) = leaf_range(code);
+                    let mut found = false;
+                    for i in start..start + count {
+                        if let Some(t) = self.spheres[i].intersect(ray.o, ray.d, *t_max) {
+                            *t_max = t;
+                            hit = Some(i);
+                            found = true;
+                            if ANY {
+                                break;
+                            }
                         }
                     }
-                }
-                found
-            });
+                    found
+                },
+            );
             if let Some(i) = hit {
-                let r = self.sph_refs[i];
-                best = Some(PrimHit { t: t_max, shape: r.shape, prim: r.prim, b1: 0.0, b2: 0.0 });
+                best = Some(PrimHit { t: t_max, shape: self.sph_shapes[i], prim: 0, b1: 0.0, b2: 0.0 });
             }
         }
         best

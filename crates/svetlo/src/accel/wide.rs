@@ -21,7 +21,7 @@ pub const LEAF_MAX_ENTRIES: usize = 1 << LEAF_COUNT_BITS;
 
 #[inline]
 pub fn leaf_code(start: usize, count: usize) -> u32 {
-    assert!(count >= 1 && count <= LEAF_MAX_ENTRIES, "leaf of {count} entries");
+    assert!((1..=LEAF_MAX_ENTRIES).contains(&count), "leaf of {count} entries");
     assert!(start < (1 << (31 - LEAF_COUNT_BITS)), "too many leaf entries for the child code");
     LEAF_BIT | (start as u32) << LEAF_COUNT_BITS | (count as u32 - 1)
 }
