@@ -100,7 +100,7 @@ impl Accel {
             let mut hit: Option<(u32, f32, f32)> = None;
             let prefetch_leaf = |code| {
                 let (start, count) = leaf_range(code);
-                prefetch(self.tris.as_ptr().wrapping_add(start), count.min(2) * std::mem::size_of::<Tri4>());
+                prefetch(self.tris.as_ptr().wrapping_add(start), count * std::mem::size_of::<Tri4>());
             };
             traverse::<ANY>(&self.tri_nodes, &bray, &mut t_max, prefetch_leaf, |code, t_max| {
                 let (start, count) = leaf_range(code);
