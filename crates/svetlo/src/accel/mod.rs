@@ -1,7 +1,13 @@
 //! Ray-scene intersection. The only module that knows how the hierarchy is laid out:
 //! everything else calls [`Accel::intersect`] and [`Accel::occluded`].
 
+mod build;
 mod bvh;
+mod tri4;
+mod wide;
+
+#[cfg(test)]
+mod tests;
 
 pub use bvh::Accel;
 

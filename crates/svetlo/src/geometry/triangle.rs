@@ -8,12 +8,13 @@ use glam::Vec3;
 #[derive(Clone, Copy, Debug)]
 pub struct WatertightRay {
     pub o: Vec3,
-    kx: usize,
-    ky: usize,
-    kz: usize,
-    sx: f32,
-    sy: f32,
-    sz: f32,
+    // Crate-visible so that the SIMD test in accel/ reproduces this one bit for bit.
+    pub(crate) kx: usize,
+    pub(crate) ky: usize,
+    pub(crate) kz: usize,
+    pub(crate) sx: f32,
+    pub(crate) sy: f32,
+    pub(crate) sz: f32,
 }
 
 impl WatertightRay {

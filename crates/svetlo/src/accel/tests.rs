@@ -1,0 +1,259 @@
+//! The accelerator against brute force: same closest hit (t bit for bit, same
+//! primitive unless two primitives tie on t), same occlusion answer.
+
+use super::{Accel, PrimHit};
+use crate::geometry::triangle::WatertightRay;
+use crate::geometry::{Geometry, Ray, Sphere, TriangleMesh};
+use crate::sampling::rng::Pcg32;
+use glam::Vec3;
+
+/// Every primitive of every shape, in order, shrinking t_max at each hit.
+fn brute(shapes: &[Geometry], ray: &Ray) -> Option<PrimHit> {
+    let w = WatertightRay::new(ray.o, ray.d);
+    let mut t_max = ray.t_max;
+    let mut best = None;
+    for (si, g) in shapes.iter().enumerate() {
+        match g {
+            Geometry::Mesh(m) => {
+                for t in 0..m.triangle_count() {
+                    let [p0, p1, p2] = m.vertices(t);
+                    if let Some((th, b1, b2)) = w.intersect(p0, p1, p2, t_max) {
+                        t_max = th;
+                        best = Some(PrimHit { t: th, shape: si as u32, prim: t as u32, b1, b2 });
+                    }
+                }
+            }
+            Geometry::Sphere(s) => {
+                if let Some(th) = s.intersect(ray.o, ray.d, t_max) {
+                    t_max = th;
+                    best = Some(PrimHit { t: th, shape: si as u32, prim: 0, b1: 0.0, b2: 0.0 });
+                }
+            }
+        }
+    }
+    best
+}
+
+/// The hit distance of one given primitive, for telling ties from errors.
+fn prim_t(shapes: &[Geometry], ray: &Ray, shape: u32, prim: u32) -> Option<f32> {
+    match &shapes[shape as usize] {
+        Geometry::Mesh(m) => {
+            let [p0, p1, p2] = m.vertices(prim as usize);
+            WatertightRay::new(ray.o, ray.d).intersect(p0, p1, p2, ray.t_max).map(|h| h.0)
+        }
+        Geometry::Sphere(s) => s.intersect(ray.o, ray.d, ray.t_max),
+    }
+}
+
+fn check(shapes: &[Geometry], accel: &Accel, ray: &Ray) {
+    let want = brute(shapes, ray);
+    let got = accel.intersect(ray);
+    match (want, got) {
+        (None, None) => {}
+        (Some(w), Some(g)) => {
+            if (w.shape, w.prim) == (g.shape, g.prim) {
+                assert_eq!((w.t, w.b1, w.b2), (g.t, g.b1, g.b2), "same primitive, different hit for {ray:?}");
+            } else {
+                // Two primitives meeting the ray at one point (a shared edge or vertex): their t may
+                // differ by rounding, and the scalar test's t_max cut is itself that fuzzy.
+                assert!((w.t - g.t).abs() <= 1e-6 * w.t.abs().max(1e-3), "not a tie for {ray:?}: want {w:?}, got {g:?}");
+                assert_eq!(prim_t(shapes, ray, g.shape, g.prim), Some(g.t), "reported t is not its primitive's for {ray:?}");
+            }
+        }
+        _ => panic!("hit mismatch for {ray:?}: want {want:?}, got {got:?}"),
+    }
+    assert_eq!(accel.occluded(ray), want.is_some(), "occluded mismatch for {ray:?}");
+}
+
+fn v3(rng: &mut Pcg32) -> Vec3 {
+    Vec3::new(rng.next_f32(), rng.next_f32(), rng.next_f32())
+}
+
+fn dir(rng: &mut Pcg32) -> Vec3 {
+    let z = 1.0 - 2.0 * rng.next_f32();
+    let r = (1.0 - z * z).max(0.0).sqrt();
+    let phi = 2.0 * std::f32::consts::PI * rng.next_f32();
+    Vec3::new(r * phi.cos(), r * phi.sin(), z)
+}
+
+/// Small random triangles in the unit cube, one triangle per mesh for half of them.
+fn soup(rng: &mut Pcg32, n: usize) -> Vec<Geometry> {
+    let mut big = TriangleMesh::default();
+    let mut shapes = Vec::new();
+    for i in 0..n {
+        let c = v3(rng);
+        let ps: Vec<Vec3> = (0..3).map(|_| c + (v3(rng) - 0.5) * 0.2).collect();
+        if i % 2 == 0 {
+            let k = big.positions.len() as u32;
+            big.positions.extend(&ps);
+            big.indices.push([k, k + 1, k + 2]);
+        } else {
+            shapes.push(Geometry::Mesh(TriangleMesh { positions: ps, indices: vec![[0, 1, 2]], ..Default::default() }));
+        }
+    }
+    shapes.insert(0, Geometry::Mesh(big));
+    shapes
+}
+
+/// A closed, bumpy sphere of shared vertices (n x 2n grid, poles included).
+fn bumpy_sphere(n: usize, center: Vec3, radius: f32) -> TriangleMesh {
+    let mut m = TriangleMesh::default();
+    for i in 0..=n {
+        let theta = std::f32::consts::PI * i as f32 / n as f32;
+        for j in 0..2 * n {
+            let phi = std::f32::consts::PI * j as f32 / n as f32;
+            let r = radius * (1.0 + 0.1 * (5.0 * theta).sin() * (7.0 * phi).cos());
+            m.positions.push(center + r * Vec3::new(theta.sin() * phi.cos(), theta.sin() * phi.sin(), theta.cos()));
+        }
+    }
+    let idx = |i: usize, j: usize| (i * 2 * n + j % (2 * n)) as u32;
+    for i in 0..n {
+        for j in 0..2 * n {
+            m.indices.push([idx(i, j), idx(i + 1, j), idx(i + 1, j + 1)]);
+            m.indices.push([idx(i, j), idx(i + 1, j + 1), idx(i, j + 1)]);
+        }
+    }
+    m
+}
+
+fn scene_rays(rng: &mut Pcg32, n: usize) -> Vec<Ray> {
+    let mut rays = Vec::new();
+    for i in 0..n {
+        // Origins in and around the unit cube: inside node boxes and outside all of them.
+        let o = v3(rng) * 1.6 - 0.3;
+        let mut d = dir(rng);
+        // Every fourth ray is axis-parallel or lies in a coordinate plane (zero components, some -0.0).
+        match i % 8 {
+            1 => d = Vec3::new(0.0, 0.0, d.z.signum()),
+            3 => d = Vec3::new(-0.0, d.y, d.z).normalize(),
+            5 => d = Vec3::new(d.x.signum(), -0.0, 0.0),
+            7 => d = Vec3::new(d.x, d.y, 0.0).normalize(),
+            _ => {}
+        }
+        let t_max = if i % 3 == 0 { rng.next_f32() * 0.8 } else { f32::INFINITY };
+        rays.push(Ray::with_max(o, d, t_max));
+    }
+    rays
+}
+
+fn run(shapes: &[Geometry], rays: &[Ray]) -> usize {
+    let refs: Vec<&Geometry> = shapes.iter().collect();
+    let accel = Accel::build(&refs);
+    let mut hits = 0;
+    for r in rays {
+        check(shapes, &accel, r);
+        hits += accel.intersect(r).is_some() as usize;
+    }
+    hits
+}
+
+#[test]
+fn random_soup_matches_brute_force() {
+    let mut rng = Pcg32::new(1, 7);
+    let shapes = soup(&mut rng, 3000);
+    let rays = scene_rays(&mut rng, 4000);
+    let hits = run(&shapes, &rays);
+    // Guard against a test that passes by never hitting.
+    assert!(hits > rays.len() / 4 && hits < rays.len(), "{hits} hits");
+}
+
+#[test]
+fn meshes_and_spheres_match_brute_force() {
+    let mut rng = Pcg32::new(2, 7);
+    let mut shapes = vec![Geometry::Mesh(bumpy_sphere(40, Vec3::new(0.3, 0.5, 0.5), 0.25)), Geometry::Mesh(bumpy_sphere(25, Vec3::new(0.75, 0.5, 0.4), 0.2))];
+    for _ in 0..9 {
+        shapes.push(Geometry::Sphere(Sphere { center: v3(&mut rng), radius: 0.02 + 0.1 * rng.next_f32(), flip_normals: false }));
+    }
+    // A sphere overlapping a mesh, so that the two hierarchies compete for the nearest hit.
+    shapes.push(Geometry::Sphere(Sphere { center: Vec3::new(0.3, 0.5, 0.75), radius: 0.1, flip_normals: false }));
+    let rays = scene_rays(&mut rng, 4000);
+    let hits = run(&shapes, &rays);
+    assert!(hits > rays.len() / 20, "{hits} hits");
+}
+
+#[test]
+fn spheres_only_and_empty_scene() {
+    let mut rng = Pcg32::new(3, 7);
+    let shapes: Vec<Geometry> = (0..40).map(|_| Geometry::Sphere(Sphere { center: v3(&mut rng), radius: 0.05, flip_normals: false })).collect();
+    let rays = scene_rays(&mut rng, 2000);
+    assert!(run(&shapes, &rays) > 0);
+
+    let empty = Accel::build(&[]);
+    assert!(empty.bounds().is_empty());
+    for r in &rays[..100] {
+        assert!(empty.intersect(r).is_none() && !empty.occluded(r));
+    }
+    // An empty mesh is no primitive either.
+    let shapes = vec![Geometry::Mesh(TriangleMesh::default())];
+    assert_eq!(run(&shapes, &rays[..100]), 0);
+}
+
+#[test]
+fn coincident_triangles_and_single_triangle() {
+    // 200 copies of one triangle: every centroid equal, so no SAH split exists.
+    let tri = [Vec3::new(0.0, 0.0, 0.5), Vec3::new(1.0, 0.0, 0.5), Vec3::new(0.0, 1.0, 0.5)];
+    let mut m = TriangleMesh::default();
+    for k in 0..200u32 {
+        m.positions.extend(tri);
+        m.indices.push([3 * k, 3 * k + 1, 3 * k + 2]);
+    }
+    let mut rng = Pcg32::new(4, 7);
+    let rays = scene_rays(&mut rng, 1000);
+    assert!(run(&[Geometry::Mesh(m)], &rays) > 0);
+    let single = TriangleMesh { positions: tri.to_vec(), indices: vec![[0, 1, 2]], ..Default::default() };
+    assert!(run(&[Geometry::Mesh(single)], &rays) > 0);
+}
+
+#[test]
+fn no_cracks_between_leaves() {
+    // A 64x64 grid of quads (two triangles each) at z = 0.5: rays aimed exactly at grid
+    // vertices and edge points, from many directions, must all hit, whichever leaf holds which triangle.
+    let n = 64;
+    let mut m = TriangleMesh::default();
+    for i in 0..=n {
+        for j in 0..=n {
+            m.positions.push(Vec3::new(i as f32 / n as f32, j as f32 / n as f32, 0.5));
+        }
+    }
+    let idx = |i: usize, j: usize| (i * (n + 1) + j) as u32;
+    for i in 0..n {
+        for j in 0..n {
+            m.indices.push([idx(i, j), idx(i + 1, j), idx(i + 1, j + 1)]);
+            m.indices.push([idx(i, j), idx(i + 1, j + 1), idx(i, j + 1)]);
+        }
+    }
+    let shapes = [Geometry::Mesh(m)];
+    let accel = Accel::build(&[&shapes[0]]);
+    let mut rng = Pcg32::new(5, 7);
+    for k in 0..20000 {
+        let (i, j) = (1 + (rng.next_u32() % (n as u32 - 1)), 1 + (rng.next_u32() % (n as u32 - 1)));
+        // A grid vertex, or a point on a horizontal, vertical or diagonal edge.
+        let s = rng.next_f32();
+        let target = match k % 4 {
+            0 => Vec3::new(i as f32, j as f32, 0.0),
+            1 => Vec3::new(i as f32 + s, j as f32, 0.0),
+            2 => Vec3::new(i as f32, j as f32 + s, 0.0),
+            _ => Vec3::new(i as f32 + s, j as f32 + s, 0.0),
+        } / n as f32
+            + Vec3::new(0.0, 0.0, 0.5);
+        let mut d = dir(&mut rng);
+        if k % 5 == 0 {
+            d = Vec3::new(0.0, 0.0, if k % 2 == 0 { -1.0 } else { 1.0 });
+        }
+        if d.z.abs() < 0.05 {
+            continue;
+        }
+        let ray = Ray::new(target - d * (0.3 + rng.next_f32()), d);
+        assert!(accel.intersect(&ray).is_some(), "ray {k} slipped through: {ray:?}");
+        assert!(accel.occluded(&ray), "ray {k} not occluded: {ray:?}");
+        if k % 8 == 0 {
+            check(&shapes, &accel, &ray);
+        }
+    }
+}
+
+#[test]
+fn accel_is_send_and_sync() {
+    fn assert_send_sync<T: Send + Sync>() {}
+    assert_send_sync::<Accel>();
+}

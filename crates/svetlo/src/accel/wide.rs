@@ -1,0 +1,236 @@
+//! The wide node and its traversal: SIMD slab tests for eight child boxes (two
+//! groups of four lanes), children visited nearest first, stack entries skipped
+//! once a nearer hit is known. Incoherent rays over a large mesh wait on memory at
+//! every level, so the width is chosen for a shallow tree, not for the SIMD unit.
+
+use super::build::MAX_STACK;
+use crate::geometry::Aabb;
+use glam::{Vec3, Vec4};
+use std::mem::MaybeUninit;
+
+/// Set in a child code that names a leaf: `LEAF_BIT | start << 4 | (count - 1)`.
+pub const LEAF_BIT: u32 = 1 << 31;
+/// An unused child slot. Its box is empty, so the slab test never selects it.
+pub const EMPTY_CHILD: u32 = u32::MAX;
+const LEAF_COUNT_BITS: u32 = 4;
+/// Children per node.
+pub const WIDTH: usize = 8;
+const GROUPS: usize = WIDTH / 4;
+/// Most entries (groups) one leaf code can hold.
+pub const LEAF_MAX_ENTRIES: usize = 1 << LEAF_COUNT_BITS;
+
+#[inline]
+pub fn leaf_code(start: usize, count: usize) -> u32 {
+    assert!((1..=LEAF_MAX_ENTRIES).contains(&count), "leaf of {count} entries");
+    assert!(start < (1 << (31 - LEAF_COUNT_BITS)), "too many leaf entries for the child code");
+    LEAF_BIT | (start as u32) << LEAF_COUNT_BITS | (count as u32 - 1)
+}
+
+/// (start, count) of a leaf code.
+#[inline]
+pub fn leaf_range(code: u32) -> (usize, usize) {
+    let c = code & !LEAF_BIT;
+    ((c >> LEAF_COUNT_BITS) as usize, (c & ((1 << LEAF_COUNT_BITS) - 1)) as usize + 1)
+}
+
+/// Child boxes in SoA form (`planes[min x, y, z, max x, y, z][group]`, one lane per
+/// child) and their codes: an inner node's index, or a leaf code. Four cache lines.
+#[derive(Clone, Copy, Debug)]
+#[repr(C, align(64))]
+pub struct Node {
+    planes: [[Vec4; GROUPS]; 6],
+    children: [u32; WIDTH],
+}
+
+impl Node {
+    pub fn empty() -> Node {
+        let (inf, ninf) = ([Vec4::INFINITY; GROUPS], [Vec4::NEG_INFINITY; GROUPS]);
+        Node { planes: [inf, inf, inf, ninf, ninf, ninf], children: [EMPTY_CHILD; WIDTH] }
+    }
+
+    pub fn new(boxes: &[Aabb], children: [u32; WIDTH]) -> Node {
+        let mut n = Node::empty();
+        n.children = children;
+        for (k, b) in boxes.iter().enumerate() {
+            for a in 0..3 {
+                n.planes[a][k / 4][k % 4] = b.min[a];
+                n.planes[3 + a][k / 4][k % 4] = b.max[a];
+            }
+        }
+        n
+    }
+
+    /// Union of the children's boxes.
+    pub fn bounds(&self) -> Aabb {
+        let mut b = Aabb::EMPTY;
+        for k in 0..WIDTH {
+            if self.children[k] != EMPTY_CHILD {
+                let p = |a: usize| self.planes[a][k / 4][k % 4];
+                b = b.union(Aabb { min: Vec3::new(p(0), p(1), p(2)), max: Vec3::new(p(3), p(4), p(5)) });
+            }
+        }
+        b
+    }
+}
+
+/// Per-ray data for the slab test.
+#[derive(Clone, Copy, Debug)]
+pub struct BoxRay {
+    o: [Vec4; 3],
+    inv: [Vec4; 3],
+    /// Plane index (into `Node4::planes`) of the near and far slab per axis.
+    near: [usize; 3],
+    far: [usize; 3],
+}
+
+/// Slack on the far distance: 1 + 2 gamma(3) (PBRT's bound on the rounding error of
+/// the slab test), so that a box whose face a triangle touches is not missed.
+const FAR_SLACK: f32 = 1.0 + 2.0 * (3.0 * f32::EPSILON * 0.5) / (1.0 - 3.0 * f32::EPSILON * 0.5);
+
+impl BoxRay {
+    pub fn new(o: Vec3, d: Vec3) -> BoxRay {
+        // A zero component becomes a tiny one of the same sign: the slab products stay
+        // finite (no 0 * inf = NaN) and the ray is still effectively parallel to that slab.
+        const TINY: f32 = 1e-30;
+        let d = Vec3::select(d.abs().cmplt(Vec3::splat(TINY)), Vec3::splat(TINY).copysign(d), d);
+        let inv = d.recip();
+        let mut near = [0; 3];
+        let mut far = [0; 3];
+        for a in 0..3 {
+            (near[a], far[a]) = if inv[a] >= 0.0 { (a, a + 3) } else { (a + 3, a) };
+        }
+        BoxRay { o: [Vec4::splat(o.x), Vec4::splat(o.y), Vec4::splat(o.z)], inv: [Vec4::splat(inv.x), Vec4::splat(inv.y), Vec4::splat(inv.z)], near, far }
+    }
+
+    /// Entry distances of the children and the mask of those the ray meets in `[0, t_max]`.
+    #[inline(always)]
+    fn test(&self, n: &Node, t_max: f32) -> ([f32; WIDTH], u32) {
+        let p = &n.planes;
+        let mut tn_all = [0.0; WIDTH];
+        let mut mask = 0;
+        for g in 0..GROUPS {
+            let tnx = (p[self.near[0]][g] - self.o[0]) * self.inv[0];
+            let tny = (p[self.near[1]][g] - self.o[1]) * self.inv[1];
+            let tnz = (p[self.near[2]][g] - self.o[2]) * self.inv[2];
+            let tfx = (p[self.far[0]][g] - self.o[0]) * self.inv[0];
+            let tfy = (p[self.far[1]][g] - self.o[1]) * self.inv[1];
+            let tfz = (p[self.far[2]][g] - self.o[2]) * self.inv[2];
+            let tn = tnx.max(tny).max(tnz.max(Vec4::ZERO));
+            let tf = tfx.min(tfy).min(tfz.min(Vec4::splat(t_max))) * FAR_SLACK;
+            mask |= tn.cmple(tf).bitmask() << (4 * g);
+            tn.write_to_slice(&mut tn_all[4 * g..4 * g + 4]);
+        }
+        (tn_all, mask)
+    }
+}
+
+/// Asks for the cache lines of `len` bytes at `p` ahead of use: the traversal of an
+/// incoherent ray waits on memory, and a pushed child is often visited soon after.
+#[inline(always)]
+pub fn prefetch<T>(p: *const T, len: usize) {
+    #[cfg(target_arch = "x86_64")]
+    for off in (0..len).step_by(64) {
+        // SAFETY: prefetching is a hint; it never faults, whatever the address.
+        unsafe { std::arch::x86_64::_mm_prefetch::<{ std::arch::x86_64::_MM_HINT_T0 }>((p as *const i8).wrapping_add(off)) };
+    }
+    #[cfg(not(target_arch = "x86_64"))]
+    let _ = (p, len);
+}
+
+#[inline(always)]
+fn prefetch_child(nodes: &[Node], code: u32, leaf: &impl Fn(u32)) {
+    if code & LEAF_BIT == 0 {
+        prefetch(nodes.as_ptr().wrapping_add(code as usize), std::mem::size_of::<Node>());
+    } else {
+        leaf(code);
+    }
+}
+
+/// Walks the tree rooted at `nodes[0]`, calling `leaf(code, t_max)` on every leaf the
+/// ray reaches. The callback returns whether it found a hit (and then has lowered
+/// `t_max` to it). With `ANY`, stops at the first hit. Returns whether any leaf hit.
+/// `prefetch_leaf(code)` may prefetch a leaf's primitives when it is pushed.
+#[inline(always)]
+pub fn traverse<const ANY: bool>(
+    nodes: &[Node],
+    ray: &BoxRay,
+    t_max: &mut f32,
+    prefetch_leaf: impl Fn(u32),
+    mut leaf: impl FnMut(u32, &mut f32) -> bool,
+) -> bool {
+    if nodes.is_empty() {
+        return false;
+    }
+    let mut stack: [MaybeUninit<(u32, f32)>; MAX_STACK] = [const { MaybeUninit::uninit() }; MAX_STACK];
+    let mut sp = 0usize;
+    let mut found = false;
+    let mut cur = 0u32;
+    loop {
+        if cur & LEAF_BIT == 0 {
+            let node = &nodes[cur as usize];
+            let (tn, mut mask) = ray.test(node, *t_max);
+            if mask != 0 {
+                let c = &node.children;
+                let first = mask.trailing_zeros() as usize;
+                mask &= mask - 1;
+                if mask == 0 {
+                    cur = c[first];
+                    continue;
+                }
+                let second = mask.trailing_zeros() as usize;
+                mask &= mask - 1;
+                if mask == 0 {
+                    let (near, far) = if tn[first] <= tn[second] { (first, second) } else { (second, first) };
+                    prefetch_child(nodes, c[far], &prefetch_leaf);
+                    stack[sp].write((c[far], tn[far]));
+                    sp += 1;
+                    cur = c[near];
+                    continue;
+                }
+                // Three or more children: push all, sort the new entries so that the nearest is on top.
+                let base = sp;
+                stack[sp].write((c[first], tn[first]));
+                stack[sp + 1].write((c[second], tn[second]));
+                sp += 2;
+                prefetch_child(nodes, c[first], &prefetch_leaf);
+                prefetch_child(nodes, c[second], &prefetch_leaf);
+                while mask != 0 {
+                    let k = mask.trailing_zeros() as usize;
+                    mask &= mask - 1;
+                    prefetch_child(nodes, c[k], &prefetch_leaf);
+                    stack[sp].write((c[k], tn[k]));
+                    sp += 1;
+                }
+                if !ANY {
+                    // SAFETY: entries base..sp were written just above.
+                    let top = unsafe { std::slice::from_raw_parts_mut(stack.as_mut_ptr().add(base) as *mut (u32, f32), sp - base) };
+                    for i in 1..top.len() {
+                        let mut j = i;
+                        while j > 0 && top[j - 1].1 < top[j].1 {
+                            top.swap(j - 1, j);
+                            j -= 1;
+                        }
+                    }
+                }
+            }
+        } else if cur != EMPTY_CHILD && leaf(cur, t_max) {
+            found = true;
+            if ANY {
+                return true;
+            }
+        }
+        // Pop the next entry that may still hold a nearer hit.
+        loop {
+            if sp == 0 {
+                return found;
+            }
+            sp -= 1;
+            // SAFETY: every entry below sp was written by a push.
+            let (n, t) = unsafe { stack[sp].assume_init() };
+            if t <= *t_max * FAR_SLACK {
+                cur = n;
+                break;
+            }
+        }
+    }
+}
