@@ -206,13 +206,13 @@ impl Light {
                 ray.time = time;
                 Some(EmissionSample { ray, le: *intensity, pdf_pos: 1.0, pdf_dir: point::POINT_PDF_DIR, n: d })
             }
-            Light::Spot { position, frame, intensity, cos_cutoff, .. } => {
+            Light::Spot { position, frame, cos_cutoff, .. } => {
                 let local = warp::square_to_uniform_cone(u_dir, *cos_cutoff);
                 let pdf_dir = warp::square_to_uniform_cone_pdf(local, *cos_cutoff);
                 let d = frame.to_world(local);
                 let mut ray = Ray::new(*position, d);
                 ray.time = time;
-                Some(EmissionSample { ray, le: { let _ = intensity; self.spot_intensity(d) }, pdf_pos: 1.0, pdf_dir, n: d })
+                Some(EmissionSample { ray, le: self.spot_intensity(d), pdf_pos: 1.0, pdf_dir, n: d })
             }
             Light::Directional { direction, irradiance } => {
                 let (ray, pdf_pos) = ray_from_infinity(bounds, *direction, u_pos, time);
