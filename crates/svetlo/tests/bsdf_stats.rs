@@ -5,7 +5,6 @@
 
 mod common;
 
-use common::stats::{normal_isf, sidak};
 use common::*;
 use glam::{Vec2, Vec3};
 use svetlo::bsdf::conductor::{RoughConductor, SmoothConductor};
@@ -14,6 +13,7 @@ use svetlo::bsdf::diffuse::Diffuse;
 use svetlo::bsdf::microfacet::Microfacet;
 use svetlo::bsdf::plastic::{RoughPlastic, SmoothPlastic};
 use svetlo::bsdf::{fresnel, BsdfModel, LobeFlags, MicrofacetKind, TransportMode};
+use svetlo::sampling::stats::{normal_isf, sidak_alpha};
 use svetlo::sampling::Pcg32;
 use svetlo::Rgb;
 
@@ -68,7 +68,7 @@ fn rough_plastic(kind: MicrofacetKind, alpha: f32, diffuse: f32, eta: f32, nonli
 
 fn chi2_family(label: &str, cases: &[Case], n: usize, bins: SphereBins) {
     let total: usize = cases.iter().map(|c| c.wos.len()).sum();
-    let level = sidak(FAMILY_ALPHA, total);
+    let level = sidak_alpha(FAMILY_ALPHA, total);
     let mut failures = Vec::new();
     let mut min_p = 1.0f64;
     for (k, case) in cases.iter().enumerate() {
@@ -240,7 +240,7 @@ fn white_furnace_albedo_at_most_one() {
     let wos = [dir_deg(0.5, 0.0), dir_deg(30.0, 40.0), dir_deg(60.0, 100.0), dir_deg(85.0, 190.0), dir_deg(140.0, 10.0), dir_deg(110.0, 80.0)];
     let n = 40_000;
     let tests = models.len() * wos.len() * 3;
-    let z = normal_isf(sidak(FAMILY_ALPHA, tests));
+    let z = normal_isf(sidak_alpha(FAMILY_ALPHA, tests));
     let mut report = Vec::new();
     for (name, m) in &models {
         for (j, &wo) in wos.iter().enumerate() {
@@ -310,7 +310,7 @@ fn smooth_dielectric_conserves_energy_and_follows_fresnel() {
     let m = BsdfModel::SmoothDielectric(SmoothDielectric { eta, specular_reflectance: Rgb::WHITE, specular_transmittance: Rgb::WHITE });
     let wos = [dir_deg(10.0, 0.0), dir_deg(50.0, 30.0), dir_deg(85.0, 60.0), dir_deg(160.0, 90.0), dir_deg(135.0, 120.0), dir_deg(125.0, 0.0)];
     let n = 20_000;
-    let z = normal_isf(sidak(FAMILY_ALPHA, wos.len()) / 2.0);
+    let z = normal_isf(sidak_alpha(FAMILY_ALPHA, wos.len()) / 2.0);
     let mut rng = Pcg32::new(3, 3);
     for wo in wos {
         let (n1, n2) = if wo.z > 0.0 { (1.0, eta as f64) } else { (eta as f64, 1.0) };
@@ -352,7 +352,7 @@ fn thin_dielectric_reflectance() {
     let m = BsdfModel::ThinDielectric(ThinDielectric { eta, specular_reflectance: Rgb::WHITE, specular_transmittance: Rgb::WHITE });
     let wos = [dir_deg(20.0, 0.0), dir_deg(70.0, 30.0), dir_deg(130.0, 90.0)];
     let n = 20_000;
-    let z = normal_isf(sidak(FAMILY_ALPHA, wos.len()) / 2.0);
+    let z = normal_isf(sidak_alpha(FAMILY_ALPHA, wos.len()) / 2.0);
     let mut rng = Pcg32::new(5, 5);
     for wo in wos {
         let r1 = fresnel_ref(wo.z.abs() as f64, 1.0, eta as f64);

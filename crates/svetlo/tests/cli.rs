@@ -1,6 +1,9 @@
 //! Library side of what the command line does: render a scene, write EXR/PNG/variance and read
 //! them back, compare images; determinism over thread counts; cancellation.
 
+mod common;
+
+use common::scenes::shared_scenes_dir;
 use glam::{Mat4, Vec3};
 use std::path::PathBuf;
 use std::sync::atomic::Ordering;
@@ -66,10 +69,6 @@ fn tmp_dir(name: &str) -> PathBuf {
     let d = std::env::temp_dir().join(format!("svetlo-libcli-{}-{name}", std::process::id()));
     std::fs::create_dir_all(&d).unwrap();
     d
-}
-
-fn shared_scenes() -> PathBuf {
-    PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../../../shared/scenes")
 }
 
 #[test]
@@ -182,7 +181,7 @@ fn time_limit_stops_early() {
 /// checks EXR (half float) reading and the PFM row order against real files.
 #[test]
 fn shared_reference_exr_and_pfm_agree() {
-    let dir = shared_scenes().join("bitterli/cornell-box");
+    let dir = shared_scenes_dir().join("bitterli/cornell-box");
     let exr = read_image(&dir.join("TungstenRender.exr")).unwrap();
     let pfm = read_image(&dir.join("TungstenRender_box4x4_256x256.pfm")).unwrap();
     assert_eq!((exr.width, exr.height), (1024, 1024));
@@ -211,7 +210,7 @@ fn shared_reference_exr_and_pfm_agree() {
 /// Mitsuba's float32 references read with the right size and plausible values.
 #[test]
 fn shared_mitsuba_reference_reads() {
-    let dir = shared_scenes().join("mitsuba-data/scenes/cbox/refs");
+    let dir = shared_scenes_dir().join("mitsuba-data/scenes/cbox/refs");
     let img = read_image(&dir.join("cbox-rgb_mitsuba3.9.1_llvm_ad_rgb_4096spp.exr")).unwrap();
     let var = read_image(&dir.join("cbox-rgb_mitsuba3.9.1_llvm_ad_rgb_4096spp_var.exr")).unwrap();
     assert_eq!((img.width, img.height), (var.width, var.height));

@@ -1,6 +1,9 @@
 //! The Mitsuba loader: the shared test scenes, the project's own scene, conventions
 //! (transforms, look-at, fov axes, spectra) and bad input, which must give typed errors.
 
+mod common;
+
+use common::scenes::shared;
 use glam::{Mat4, Vec3};
 use std::path::{Path, PathBuf};
 use svetlo::camera::Projection;
@@ -20,16 +23,6 @@ impl ErrOnly for svetlo::Result<Scene> {
             Ok(_) => panic!("expected an error, but the scene loaded"),
             Err(e) => e,
         }
-    }
-}
-
-fn shared() -> Option<PathBuf> {
-    let p = Path::new(env!("CARGO_MANIFEST_DIR")).join("../../../shared/scenes");
-    if p.exists() {
-        Some(p)
-    } else {
-        eprintln!("SKIPPED: {} not found (the shared test scenes are not checked out)", p.display());
-        None
     }
 }
 

@@ -5,21 +5,14 @@
 //! Bitterli scenes have block-averaged Tungsten references without variance: relMSE bounds.
 //! Needs `../shared/scenes` beside the repository; without it each test says so and passes.
 
-use std::path::{Path, PathBuf};
+mod common;
+
+use common::scenes::shared;
+use std::path::Path;
 use svetlo::film::compare::{rel_mse, z_test};
 use svetlo::film::{Filter, Image};
 use svetlo::integrator::{self, Progress, RenderSettings};
 use svetlo::io::{load_scene, read_image};
-
-fn shared() -> Option<PathBuf> {
-    let p = Path::new(env!("CARGO_MANIFEST_DIR")).join("../../../shared/scenes");
-    if p.is_dir() {
-        Some(p)
-    } else {
-        eprintln!("SKIPPED: {} not found (the shared scenes folder must sit beside the repository)", p.display());
-        None
-    }
-}
 
 fn render_file(scene_path: &Path, defaults: &[(&str, &str)], tweak: impl Fn(&mut RenderSettings)) -> (Image, u32) {
     let defaults: Vec<(String, String)> = defaults.iter().map(|(a, b)| (a.to_string(), b.to_string())).collect();

@@ -19,6 +19,18 @@ use std::cell::RefCell;
 use std::collections::HashMap;
 use std::sync::{Mutex, OnceLock};
 
+/// Probability of sampling the coating's specular lobe: the specular and diffuse shares
+/// (`specular`, `diffuse`: the light each lobe gets), weighted by the sampling weight.
+fn specular_probability(specular: f32, diffuse: f32, weight: f32) -> f32 {
+    let ps = specular * weight;
+    let pd = diffuse * (1.0 - weight);
+    if ps + pd > 0.0 {
+        ps / (ps + pd)
+    } else {
+        0.0
+    }
+}
+
 /// Probability of sampling the specular lobe, before the Fresnel term: Mitsuba's
 /// s_mean / (d_mean + s_mean) from the mean reflectances.
 pub fn specular_sampling_weight(diffuse_mean: f32, specular_mean: f32) -> f32 {
@@ -52,14 +64,8 @@ impl SmoothPlastic {
     pub fn flags(&self) -> LobeFlags {
         LobeFlags::SPECULAR_REFLECTION | LobeFlags::DIFFUSE_REFLECTION
     }
-    fn prob_specular(&self, f_i: f32) -> f32 {
-        let ps = f_i * self.specular_sampling_weight;
-        let pd = (1.0 - f_i) * (1.0 - self.specular_sampling_weight);
-        if ps + pd > 0.0 {
-            ps / (ps + pd)
-        } else {
-            0.0
-        }
+    fn prob_specular(&self, f_o: f32) -> f32 {
+        specular_probability(f_o, 1.0 - f_o, self.specular_sampling_weight)
     }
     pub fn eval(&self, wo: Vec3, wi: Vec3, _mode: TransportMode) -> Rgb {
         if wo.z <= 0.0 || wi.z <= 0.0 {
@@ -258,13 +264,7 @@ impl RoughPlastic {
         LobeFlags::GLOSSY_REFLECTION | LobeFlags::DIFFUSE_REFLECTION
     }
     fn prob_specular(&self, t_o: f32) -> f32 {
-        let ps = (1.0 - t_o) * self.specular_sampling_weight;
-        let pd = t_o * (1.0 - self.specular_sampling_weight);
-        if ps + pd > 0.0 {
-            ps / (ps + pd)
-        } else {
-            0.0
-        }
+        specular_probability(1.0 - t_o, t_o, self.specular_sampling_weight)
     }
     pub fn eval(&self, wo: Vec3, wi: Vec3, _mode: TransportMode) -> Rgb {
         if wo.z <= 0.0 || wi.z <= 0.0 {

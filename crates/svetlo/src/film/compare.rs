@@ -11,6 +11,7 @@
 
 use crate::error::{Error, Result};
 use crate::film::Image;
+use crate::sampling::stats::{sidak_alpha, two_sided_p};
 use crate::spectrum::Rgb;
 
 /// Family-wise significance level of Mitsuba's render test.
@@ -41,75 +42,6 @@ pub fn rel_mse(img: &Image, reference: &Image) -> Result<f64> {
         }
     }
     Ok(sum / (3 * img.data.len()) as f64)
-}
-
-/// Complementary error function, accurate to about 1e-13 relative over the whole real line
-/// (p-values near 1e-7 and below must be right): power series of erf below 2, Lentz's
-/// evaluation of the continued fraction of erfc above.
-pub fn erfc(x: f64) -> f64 {
-    if x.is_nan() {
-        return f64::NAN;
-    }
-    if x < 0.0 {
-        return 2.0 - erfc(-x);
-    }
-    if x < 2.0 {
-        // erf(x) = 2/sqrt(pi) sum_n (-1)^n x^(2n+1) / (n! (2n+1)); terms stay below ~20 here.
-        let x2 = x * x;
-        let mut t = x; // (-1)^n x^(2n+1) / n!
-        let mut sum = x;
-        for n in 1..200 {
-            t *= -x2 / n as f64;
-            let term = t / (2 * n + 1) as f64;
-            sum += term;
-            if term.abs() < 1e-17 * sum.abs() {
-                break;
-            }
-        }
-        return 1.0 - sum * std::f64::consts::FRAC_2_SQRT_PI;
-    }
-    if x > 27.3 {
-        return 0.0; // below the smallest f64
-    }
-    // erfc(x) = exp(-x^2)/sqrt(pi) / (x + (1/2)/(x + 1/(x + (3/2)/(x + 2/(x + ...))))).
-    const TINY: f64 = 1e-300;
-    let mut f = x;
-    let mut c = x;
-    let mut d = 0.0f64;
-    for n in 1..1000 {
-        let a = n as f64 * 0.5;
-        d = x + a * d;
-        if d == 0.0 {
-            d = TINY;
-        }
-        c = x + a / c;
-        if c == 0.0 {
-            c = TINY;
-        }
-        d = 1.0 / d;
-        let delta = c * d;
-        f *= delta;
-        if (delta - 1.0).abs() < 1e-16 {
-            break;
-        }
-    }
-    (-x * x).exp() / (f * std::f64::consts::PI.sqrt())
-}
-
-/// Standard normal cumulative distribution function.
-pub fn normal_cdf(x: f64) -> f64 {
-    0.5 * erfc(-x / std::f64::consts::SQRT_2)
-}
-
-/// Two-sided p-value of a standard normal statistic: `2 (1 - Phi(|z|))`, without cancellation.
-pub fn two_sided_p(z: f64) -> f64 {
-    erfc(z.abs() / std::f64::consts::SQRT_2)
-}
-
-/// Šidák's per-test level for a family-wise level `significance` over `tests` tests.
-pub fn sidak_alpha(significance: f64, tests: usize) -> f64 {
-    // 1 - (1 - s)^(1/N), computed without cancellation for large N.
-    -((-significance).ln_1p() / tests.max(1) as f64).exp_m1()
 }
 
 /// The outcome of [`z_test`].
@@ -185,45 +117,6 @@ pub fn z_test_with(img: &Image, reference: &Image, variance: &Image, spp: u32, s
 mod tests {
     use super::*;
     use crate::sampling::Pcg32;
-
-    /// 2/sqrt(pi) * integral of exp(-t^2) from x to x+12 by composite Simpson (reference erfc).
-    fn erfc_simpson(x: f64) -> f64 {
-        let n = 40_000;
-        let h = 12.0 / n as f64;
-        let f = |t: f64| (-t * t).exp();
-        let mut s = f(x) + f(x + 12.0);
-        for i in 1..n {
-            s += f(x + i as f64 * h) * if i % 2 == 1 { 4.0 } else { 2.0 };
-        }
-        s * h / 3.0 * std::f64::consts::FRAC_2_SQRT_PI
-    }
-
-    #[test]
-    fn erfc_matches_quadrature_and_known_values() {
-        for x in [0.0, 0.1, 0.5, 1.0, 1.5, 1.99, 2.0, 2.01, 2.5, 3.0, 4.0, 5.0, 6.5, 8.0, 10.0] {
-            let (a, b) = (erfc(x), erfc_simpson(x));
-            assert!(((a - b) / b).abs() < 1e-10, "erfc({x}) = {a}, quadrature {b}");
-        }
-        // Published values (Abramowitz & Stegun table 7.1 and standard normal quantiles).
-        assert!((erfc(1.0) - 0.157_299_207_050_285_1).abs() < 1e-15);
-        assert!((erfc(3.0) / 2.209_049_699_858_544e-5 - 1.0).abs() < 1e-12);
-        assert!((normal_cdf(1.959_963_984_540_054) - 0.975).abs() < 1e-14);
-        assert!((erfc(-1.0) - (2.0 - 0.157_299_207_050_285_1)).abs() < 1e-15);
-        assert_eq!(erfc(30.0), 0.0);
-        assert_eq!(erfc(-30.0), 2.0);
-        // Continuity at the switch between series and continued fraction.
-        let (lo, hi) = (erfc(2.0 - 1e-12), erfc(2.0));
-        assert!(((lo - hi) / hi).abs() < 1e-11);
-    }
-
-    #[test]
-    fn sidak_alpha_matches_direct_formula() {
-        let a = sidak_alpha(0.01, 100);
-        assert!((a - (1.0 - 0.99f64.powf(0.01))).abs() < 1e-15);
-        // 256x256 pixels: about 1.5e-7, as the README's alpha ~ 1e-7.
-        let a = sidak_alpha(0.01, 256 * 256);
-        assert!((a / 1.533_58e-7 - 1.0).abs() < 1e-4, "{a}");
-    }
 
     /// RGB -> XYZ matrix (columns from `Rgb::to_xyz`) and its inverse.
     fn xyz_to_rgb(c: [f32; 3]) -> Rgb {

@@ -1,6 +1,8 @@
-//! Statistics for the tests of samplers: the chi-square distribution's tail (p-values), the
-//! normal CDF, and a chi-square goodness-of-fit test that pools sparse cells. Everything in
-//! f64: the tails we ask for are small.
+//! Statistics for the tests of samplers and for comparing renders with references: the
+//! chi-square distribution's tail (p-values), the normal distribution's CDF, tail and
+//! inverse tail, a chi-square goodness-of-fit test that pools sparse cells, and Šidák's
+//! correction for families of tests. Everything in f64: the tails we ask for are small.
+//! This is the project's one home for these functions; tests use them from here too.
 
 use std::f64::consts::PI;
 
@@ -103,18 +105,87 @@ pub fn chi2_sf(x: f64, dof: f64) -> f64 {
     gamma_q(0.5 * dof, 0.5 * x)
 }
 
-/// Complementary error function.
+/// Complementary error function, accurate to about 1e-13 relative over the whole real line
+/// (p-values near 1e-7 and below must be right): power series of erf below 2, Lentz's
+/// evaluation of the continued fraction of erfc above.
 pub fn erfc(x: f64) -> f64 {
-    if x >= 0.0 {
-        gamma_q(0.5, x * x)
-    } else {
-        1.0 + gamma_p(0.5, x * x)
+    if x.is_nan() {
+        return f64::NAN;
     }
+    if x < 0.0 {
+        return 2.0 - erfc(-x);
+    }
+    if x < 2.0 {
+        // erf(x) = 2/sqrt(pi) sum_n (-1)^n x^(2n+1) / (n! (2n+1)); terms stay below ~20 here.
+        let x2 = x * x;
+        let mut t = x; // (-1)^n x^(2n+1) / n!
+        let mut sum = x;
+        for n in 1..200 {
+            t *= -x2 / n as f64;
+            let term = t / (2 * n + 1) as f64;
+            sum += term;
+            if term.abs() < 1e-17 * sum.abs() {
+                break;
+            }
+        }
+        return 1.0 - sum * std::f64::consts::FRAC_2_SQRT_PI;
+    }
+    if x > 27.3 {
+        return 0.0; // below the smallest f64
+    }
+    // erfc(x) = exp(-x^2)/sqrt(pi) / (x + (1/2)/(x + 1/(x + (3/2)/(x + 2/(x + ...))))).
+    const TINY: f64 = 1e-300;
+    let mut f = x;
+    let mut c = x;
+    let mut d = 0.0f64;
+    for n in 1..1000 {
+        let a = n as f64 * 0.5;
+        d = x + a * d;
+        if d == 0.0 {
+            d = TINY;
+        }
+        c = x + a / c;
+        if c == 0.0 {
+            c = TINY;
+        }
+        d = 1.0 / d;
+        let delta = c * d;
+        f *= delta;
+        if (delta - 1.0).abs() < 1e-16 {
+            break;
+        }
+    }
+    (-x * x).exp() / (f * std::f64::consts::PI.sqrt())
 }
 
 /// Standard normal cumulative distribution Φ(z).
 pub fn normal_cdf(z: f64) -> f64 {
     0.5 * erfc(-z / std::f64::consts::SQRT_2)
+}
+
+/// Standard normal tail P(Z > z) = 1 - Φ(z), accurate far into the tail (no cancellation).
+pub fn normal_sf(z: f64) -> f64 {
+    0.5 * erfc(z / std::f64::consts::SQRT_2)
+}
+
+/// The z with P(Z > z) = p, for p in (0, 1): bisection on [`normal_sf`] (which is monotone),
+/// to full f64 precision.
+pub fn normal_isf(p: f64) -> f64 {
+    let (mut lo, mut hi) = (-40.0f64, 40.0f64);
+    for _ in 0..200 {
+        let mid = 0.5 * (lo + hi);
+        if normal_sf(mid) > p {
+            lo = mid;
+        } else {
+            hi = mid;
+        }
+    }
+    0.5 * (lo + hi)
+}
+
+/// Two-sided p-value of a standard normal statistic: `2 (1 - Φ(|z|))`, without cancellation.
+pub fn two_sided_p(z: f64) -> f64 {
+    erfc(z.abs() / std::f64::consts::SQRT_2)
 }
 
 /// Outcome of a chi-square goodness-of-fit test.
@@ -167,9 +238,11 @@ pub fn chi_square_test(observed: &[f64], expected: &[f64], min_expected: f64) ->
 }
 
 /// Šidák-corrected per-test significance so that `tests` independent tests together
-/// reject a correct sampler with probability `family_alpha`.
+/// reject a correct sampler with probability `family_alpha`: `1 - (1 - family_alpha)^(1 / tests)`.
 pub fn sidak_alpha(family_alpha: f64, tests: usize) -> f64 {
-    1.0 - (1.0 - family_alpha).powf(1.0 / tests.max(1) as f64)
+    // Through ln_1p / exp_m1: the direct formula loses digits to cancellation for large
+    // `tests` (2.5e-7 relative at 1e8 tests).
+    -((-family_alpha).ln_1p() / tests.max(1) as f64).exp_m1()
 }
 
 #[cfg(test)]
@@ -194,6 +267,12 @@ mod tests {
         }
         // dof 2: closed form exp(-x/2).
         assert!((chi2_sf(7.0, 2.0) - (-3.5f64).exp()).abs() < 1e-14);
+        for &x in &[0.1, 1.0, 5.0, 30.0] {
+            assert!((chi2_sf(x, 2.0) - (-x / 2.0f64).exp()).abs() < 1e-12);
+        }
+        // Tabulated quantiles: chi2(0.95; 10) = 18.307, chi2(0.99; 100) = 135.807.
+        assert!((chi2_sf(18.307, 10.0) - 0.05).abs() < 1e-4);
+        assert!((chi2_sf(135.807, 100.0) - 0.01).abs() < 1e-4);
     }
 
     #[test]
@@ -202,6 +281,78 @@ mod tests {
         assert!((normal_cdf(1.959_963_985) - 0.975).abs() < 1e-9);
         assert!((normal_cdf(-3.0) - 0.001_349_898_031_630_094_6).abs() < 1e-12);
         assert!((erfc(1.0) - 0.157_299_207_050_285_13).abs() < 1e-13);
+    }
+
+    #[test]
+    fn incomplete_gamma_values() {
+        // Q(2.5, 1) and Q(5000, 5500) (= chi2_sf(11000, 10000), a 3.6e-12 tail at large dof)
+        // from mpmath at 30 digits; P + Q = 1 on both sides of the series/fraction switch.
+        assert!((gamma_q(2.5, 1.0) / 0.849_145_036_084_609_6 - 1.0).abs() < 1e-14);
+        assert!((chi2_sf(11_000.0, 10_000.0) / 3.618_329_558_096_479e-12 - 1.0).abs() < 1e-10);
+        assert!((chi2_sf(200.0, 100.0) / 1.178_450_072_097_942_2e-8 - 1.0).abs() < 1e-12);
+        for &(a, x) in &[(0.5, 0.2), (2.5, 1.0), (2.5, 3.6), (40.0, 39.0), (40.0, 45.0)] {
+            assert!((gamma_p(a, x) + gamma_q(a, x) - 1.0).abs() < 1e-14, "P + Q at ({a}, {x})");
+        }
+        assert_eq!(gamma_q(3.0, 0.0), 1.0);
+        assert_eq!(gamma_p(3.0, 0.0), 0.0);
+    }
+
+    /// 2/sqrt(pi) * integral of exp(-t^2) from x to x+12 by composite Simpson (reference erfc).
+    fn erfc_simpson(x: f64) -> f64 {
+        let n = 40_000;
+        let h = 12.0 / n as f64;
+        let f = |t: f64| (-t * t).exp();
+        let mut s = f(x) + f(x + 12.0);
+        for i in 1..n {
+            s += f(x + i as f64 * h) * if i % 2 == 1 { 4.0 } else { 2.0 };
+        }
+        s * h / 3.0 * std::f64::consts::FRAC_2_SQRT_PI
+    }
+
+    #[test]
+    fn erfc_matches_quadrature_and_known_values() {
+        for x in [0.0, 0.1, 0.5, 1.0, 1.5, 1.99, 2.0, 2.01, 2.5, 3.0, 4.0, 5.0, 6.5, 8.0, 10.0] {
+            let (a, b) = (erfc(x), erfc_simpson(x));
+            assert!(((a - b) / b).abs() < 1e-10, "erfc({x}) = {a}, quadrature {b}");
+        }
+        // Published values (Abramowitz & Stegun table 7.1 and standard normal quantiles).
+        assert!((erfc(1.0) - 0.157_299_207_050_285_1).abs() < 1e-15);
+        assert!((erfc(3.0) / 2.209_049_699_858_544e-5 - 1.0).abs() < 1e-12);
+        assert!((normal_cdf(1.959_963_984_540_054) - 0.975).abs() < 1e-14);
+        assert!((erfc(-1.0) - (2.0 - 0.157_299_207_050_285_1)).abs() < 1e-15);
+        assert_eq!(erfc(30.0), 0.0);
+        assert_eq!(erfc(-30.0), 2.0);
+        // Continuity at the switch between series and continued fraction.
+        let (lo, hi) = (erfc(2.0 - 1e-12), erfc(2.0));
+        assert!(((lo - hi) / hi).abs() < 1e-11);
+        // Far tails (mpmath, 30 digits): p-values of 1e-12 and below keep their digits.
+        assert!((erfc(5.0) / 1.537_459_794_428_034_8e-12 - 1.0).abs() < 1e-13);
+        assert!((erfc(8.0) / 1.122_429_717_298_292_7e-29 - 1.0).abs() < 1e-13);
+        assert!(erfc(f64::NAN).is_nan());
+    }
+
+    #[test]
+    fn normal_tail_and_inverse() {
+        assert!((normal_sf(1.959_964) - 0.025).abs() < 1e-6);
+        assert!((normal_isf(0.001) - 3.090_232).abs() < 1e-5);
+        assert!((normal_sf(-1.0) + normal_sf(1.0) - 1.0).abs() < 1e-15);
+        assert!((two_sided_p(-1.959_963_984_540_054) - 0.05).abs() < 1e-14);
+        for &p in &[1e-12, 1e-6, 0.01, 0.3, 0.5, 0.9] {
+            let z = normal_isf(p);
+            assert!((normal_sf(z) / p - 1.0).abs() < 1e-12, "normal_isf({p}) = {z}");
+        }
+    }
+
+    #[test]
+    fn sidak_alpha_matches_direct_formula() {
+        let a = sidak_alpha(0.01, 100);
+        assert!((a - (1.0 - 0.99f64.powf(0.01))).abs() < 1e-15);
+        // 256x256 pixels: about 1.5e-7, as the README's alpha ~ 1e-7.
+        let a = sidak_alpha(0.01, 256 * 256);
+        assert!((a / 1.533_58e-7 - 1.0).abs() < 1e-4, "{a}");
+        // 1e8 tests, where the direct formula is off by 2.5e-7 relative (mpmath value).
+        let a = sidak_alpha(0.01, 100_000_000);
+        assert!((a / 1.005_033_585_299_639_5e-10 - 1.0).abs() < 1e-13, "{a}");
     }
 
     #[test]

@@ -1,12 +1,13 @@
-//! Reusable statistical test machinery for BSDFs (and any direction sampler with a pdf):
+//! Shared test helpers. Here: reusable statistical test machinery for BSDFs (and any direction sampler with a pdf):
 //! chi-square goodness of fit of samples against the pdf integrated over bins of the
 //! sphere, agreement of `sample` with `eval`/`pdf`, reciprocity and white-furnace albedo.
 #![allow(dead_code)]
 
-pub mod stats;
+pub mod scenes;
 
 use glam::{Vec2, Vec3};
 use svetlo::bsdf::{BsdfModel, TransportMode};
+use svetlo::sampling::stats::chi2_sf;
 use svetlo::sampling::Pcg32;
 
 pub const TWO_PI: f64 = 2.0 * std::f64::consts::PI;
@@ -188,7 +189,7 @@ pub fn chi2_test(model: &BsdfModel, wo: Vec3, mode: TransportMode, bins: SphereB
         })
         .sum();
     let dof = cells.len().saturating_sub(1).max(1);
-    let p_value = if stat.is_finite() { stats::chi2_sf(stat, dof) } else { 0.0 };
+    let p_value = if stat.is_finite() { chi2_sf(stat, dof as f64) } else { 0.0 };
     Chi2Outcome { p_value, stat, dof, mismatches, first_mismatch, impossible, pdf_mass: mass }
 }
 
