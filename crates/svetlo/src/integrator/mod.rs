@@ -4,7 +4,9 @@
 //! the parallel, deterministic, cancellable driver [`render_pixels`].
 
 pub mod direct;
+pub mod local;
 pub mod path;
+pub mod whitted;
 
 use crate::error::{Error, Result};
 use crate::film::{Film, Filter};
@@ -205,6 +207,7 @@ pub fn by_name(name: &str) -> Result<Box<dyn Integrator>> {
     match name {
         "path" => Ok(Box::new(path::PathTracer)),
         "direct" => Ok(Box::new(direct::DirectIntegrator::default())),
-        other => Err(Error::Settings(format!("unknown integrator '{other}' (available: path, direct)"))),
+        "whitted" => Ok(Box::new(whitted::Whitted)),
+        other => Err(Error::Settings(format!("unknown integrator '{other}' (available: path, direct, whitted)"))),
     }
 }
