@@ -1,5 +1,7 @@
 //! The classic integrators against the path tracer where their light path classes coincide
-//! (issue 5): `whitted` equals `path` on point-lit scenes with mirrors and glass. Two-sample
+//! (issue 5): `whitted` equals `path` on point-lit scenes with mirrors and glass;
+//! `distributed` equals `path` for direct light from area lights (max_depth 2) and at any
+//! depth on scenes without diffuse lobes. Two-sample
 //! per-pixel Z-tests (Šidák over all pixel channels, family level 1 %), plus the z of the
 //! image means.
 
@@ -70,4 +72,59 @@ fn whitted_depth_meaning() {
     let w2 = render(&scene, "whitted", 256, 2, 1);
     let p2 = render(&scene, "path", 1024, 2, 6);
     check("max_depth 2", &w2, &p2);
+}
+
+/// Area-lit diffuse and glossy surfaces (Lambert floor, Phong and rough-conductor spheres,
+/// a Ward panel), a thin-lens camera: soft shadows, glossy highlights, depth of field.
+fn area_lit_scene(aperture: f32) -> Scene {
+    let mut b = SceneBuilder::new();
+    add(&mut b, quad(Vec3::new(-3.0, 0.0, -3.0), Vec3::new(0.0, 0.0, 6.0), Vec3::new(6.0, 0.0, 0.0)), diffuse(Rgb::new(0.6, 0.6, 0.5)), None, "floor");
+    add(&mut b, sphere(Vec3::new(-0.8, 0.7, 0.0), 0.7), phong_material(0.4, 0.5, 40.0), None, "phong");
+    add(&mut b, sphere(Vec3::new(0.9, 0.6, 0.4), 0.6), rough_conductor(0.2), None, "metal");
+    let ward = svetlo::bsdf::Material::Ward {
+        diffuse_reflectance: svetlo::texture::Texture::Constant(Rgb::splat(0.3)),
+        specular_reflectance: svetlo::texture::Texture::Constant(Rgb::splat(0.6)),
+        alpha_u: svetlo::texture::Texture::Constant(Rgb::splat(0.1)),
+        alpha_v: svetlo::texture::Texture::Constant(Rgb::splat(0.4)),
+        variant: svetlo::bsdf::ward::WardVariant::Balanced,
+    };
+    add(&mut b, quad(Vec3::new(-2.0, 0.0, -1.5), Vec3::new(4.0, 0.0, 0.0), Vec3::new(0.0, 2.0, 0.0)), ward, None, "panel");
+    // Emits downward (normal a x b = -y).
+    add(
+        &mut b,
+        quad(Vec3::new(-0.5, 3.0, -0.5), Vec3::new(1.0, 0.0, 0.0), Vec3::new(0.0, 0.0, 1.0)),
+        diffuse(Rgb::BLACK),
+        Some(Rgb::new(6.0, 5.0, 4.0)),
+        "lamp",
+    );
+    let mut cam = camera(look_at(Vec3::new(0.0, 2.0, 5.0), Vec3::new(0.0, 0.6, 0.0), Vec3::Y), 45.0, 32, 24);
+    if aperture > 0.0 {
+        cam.projection = svetlo::camera::Projection::Perspective { fov_x_deg: 45.0, aperture_radius: aperture, focus_distance: 5.0 };
+    }
+    b.set_camera(cam);
+    b.build().expect("scene")
+}
+
+#[test]
+fn distributed_equals_path_direct_light() {
+    let scene = area_lit_scene(0.15);
+    let d = render(&scene, "distributed", 256, 2, 7);
+    let p = render(&scene, "path", 256, 2, 8);
+    check("area-lit, max_depth 2", &d, &p);
+}
+
+/// No diffuse lobe anywhere (rough metal floor and sphere, glass): the path classes agree
+/// at every depth.
+#[test]
+fn distributed_equals_path_without_diffuse() {
+    let mut b = SceneBuilder::new();
+    add(&mut b, quad(Vec3::new(-3.0, 0.0, -3.0), Vec3::new(0.0, 0.0, 6.0), Vec3::new(6.0, 0.0, 0.0)), rough_conductor(0.3), None, "floor");
+    add(&mut b, sphere(Vec3::new(-0.7, 0.7, 0.0), 0.7), rough_conductor(0.08), None, "metal");
+    add(&mut b, sphere(Vec3::new(0.9, 0.6, 0.5), 0.6), glass(), None, "glass");
+    add(&mut b, quad(Vec3::new(-1.0, 3.0, -1.0), Vec3::new(2.0, 0.0, 0.0), Vec3::new(0.0, 0.0, 2.0)), diffuse(Rgb::BLACK), Some(Rgb::splat(3.0)), "lamp");
+    b.set_camera(camera(look_at(Vec3::new(0.0, 2.0, 5.0), Vec3::new(0.0, 0.6, 0.0), Vec3::Y), 45.0, 32, 24));
+    let scene = b.build().expect("scene");
+    let d = render(&scene, "distributed", 256, 6, 9);
+    let p = render(&scene, "path", 256, 6, 10);
+    check("no diffuse, max_depth 6", &d, &p);
 }

@@ -4,6 +4,7 @@
 //! the parallel, deterministic, cancellable driver [`render_pixels`].
 
 pub mod direct;
+pub mod distributed;
 pub mod local;
 pub mod path;
 pub mod whitted;
@@ -208,6 +209,7 @@ pub fn by_name(name: &str) -> Result<Box<dyn Integrator>> {
         "path" => Ok(Box::new(path::PathTracer)),
         "direct" => Ok(Box::new(direct::DirectIntegrator::default())),
         "whitted" => Ok(Box::new(whitted::Whitted)),
-        other => Err(Error::Settings(format!("unknown integrator '{other}' (available: path, direct, whitted)"))),
+        "distributed" => Ok(Box::new(distributed::Distributed)),
+        other => Err(Error::Settings(format!("unknown integrator '{other}' (available: path, direct, whitted, distributed)"))),
     }
 }

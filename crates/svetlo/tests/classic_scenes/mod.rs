@@ -121,3 +121,32 @@ pub fn compare(a: &Film, b: &Film, alpha: f64, exact_tol: f32) -> Comparison {
     let mean_z = (sa - sb) / sv.sqrt().max(1e-12);
     Comparison { failed, tested: n, min_p, mean_a: sa / n as f64, mean_b: sb / n as f64, mean_z }
 }
+
+pub fn rough_conductor(alpha: f32) -> Material {
+    Material::Conductor {
+        eta: Rgb::new(0.2, 0.9, 1.1),
+        k: Rgb::new(3.9, 2.4, 2.2),
+        specular_reflectance: Texture::Constant(Rgb::WHITE),
+        roughness: Some(svetlo::bsdf::material::Roughness {
+            kind: svetlo::bsdf::MicrofacetKind::Ggx,
+            alpha_u: Texture::Constant(Rgb::splat(alpha)),
+            alpha_v: Texture::Constant(Rgb::splat(alpha)),
+        }),
+    }
+}
+
+pub fn phong_material(kd: f32, ks: f32, n: f32) -> Material {
+    Material::Phong {
+        diffuse_reflectance: Texture::Constant(Rgb::splat(kd)),
+        specular_reflectance: Texture::Constant(Rgb::splat(ks)),
+        exponent: Texture::Constant(Rgb::splat(n)),
+    }
+}
+
+pub fn blinn_material(kd: f32, ks: f32, n: f32) -> Material {
+    Material::BlinnPhong {
+        diffuse_reflectance: Texture::Constant(Rgb::splat(kd)),
+        specular_reflectance: Texture::Constant(Rgb::splat(ks)),
+        exponent: Texture::Constant(Rgb::splat(n)),
+    }
+}
