@@ -8,6 +8,7 @@ pub mod distributed;
 pub mod local;
 pub mod path;
 pub mod whitted;
+pub mod zbuffer;
 
 use crate::error::{Error, Result};
 use crate::film::{Film, Filter};
@@ -210,6 +211,7 @@ pub fn by_name(name: &str) -> Result<Box<dyn Integrator>> {
         "direct" => Ok(Box::new(direct::DirectIntegrator::default())),
         "whitted" => Ok(Box::new(whitted::Whitted)),
         "distributed" => Ok(Box::new(distributed::Distributed)),
-        other => Err(Error::Settings(format!("unknown integrator '{other}' (available: path, direct, whitted, distributed)"))),
+        "zbuffer" => Ok(Box::new(zbuffer::ZBuffer::default())),
+        other => Err(Error::Settings(format!("unknown integrator '{other}' (available: path, direct, whitted, distributed, zbuffer)"))),
     }
 }
