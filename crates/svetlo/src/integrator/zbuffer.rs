@@ -134,7 +134,9 @@ impl ZBuffer {
 
     fn shadow_maps(&self, scene: &Scene, lights: &LocalLights, tris: &[RasterTri]) -> Vec<Option<ShadowMap>> {
         let res = self.shadow_map_resolution.max(16);
-        let near = 1e-4 * scene.bounds.radius;
+        // Vertices clipped at a near plane very close to the light project far outside the
+        // map, where f32 edge functions lose the precision to cover texels right.
+        let near = 1e-2 * scene.bounds.radius;
         scene
             .lights
             .iter()
