@@ -1,10 +1,16 @@
 //! Materials as the scene describes them (textured parameters). At a hit point a
 //! material becomes a [`Bsdf`] with every texture evaluated.
 
+use super::blinn::BlinnPhong;
 use super::conductor::{RoughConductor, SmoothConductor};
+use super::cook_torrance::CookTorrance;
 use super::dielectric::{RoughDielectric, SmoothDielectric, ThinDielectric};
+use super::lobes::glossy_sampling_weight;
 use super::microfacet::Microfacet;
+use super::oren_nayar::OrenNayar;
+use super::phong::Phong;
 use super::plastic::{self, RoughPlastic, SmoothPlastic};
+use super::ward::{Ward, WardVariant};
 use super::{diffuse::Diffuse, Bsdf, BsdfModel};
 use crate::spectrum::Rgb;
 use crate::texture::Texture;
@@ -37,6 +43,16 @@ pub enum Material {
     ThinDielectric { eta: f32, specular_reflectance: Texture, specular_transmittance: Texture },
     /// Mitsuba `plastic` and `roughplastic`: diffuse base under a dielectric coating.
     Plastic { diffuse_reflectance: Texture, specular_reflectance: Texture, eta: f32, nonlinear: bool, roughness: Option<Roughness> },
+    /// Mitsuba 0.6 `phong`: the modified (energy-conserving) Phong of Lafortune and Willems.
+    Phong { diffuse_reflectance: Texture, specular_reflectance: Texture, exponent: Texture },
+    /// svetlo's `blinnphong`: normalised Blinn-Phong (see `bsdf/blinn.rs`).
+    BlinnPhong { diffuse_reflectance: Texture, specular_reflectance: Texture, exponent: Texture },
+    /// svetlo's `cooktorrance`: Beckmann D, V-groove G, dielectric Fresnel with `eta`.
+    CookTorrance { diffuse_reflectance: Texture, specular_reflectance: Texture, alpha: Texture, eta: f32 },
+    /// Mitsuba 0.6 `roughdiffuse` (qualitative Oren-Nayar), `alpha` the RMS slope.
+    OrenNayar { reflectance: Texture, alpha: Texture },
+    /// Mitsuba 0.6 `ward`.
+    Ward { diffuse_reflectance: Texture, specular_reflectance: Texture, alpha_u: Texture, alpha_v: Texture, variant: WardVariant },
     /// Mitsuba `twosided`: front and back models (the same one twice in the common case).
     TwoSided { front: Box<Material>, back: Box<Material> },
     /// Mitsuba `mask`: the surface is present with probability `opacity`.
@@ -107,6 +123,48 @@ impl Material {
                     // Mitsuba's roughplastic is isotropic: alpha_u is the roughness.
                     Some(r) => BsdfModel::RoughPlastic(RoughPlastic::new(r.kind, r.alpha_u.eval_f32(uv), diffuse, specular, *eta, *nonlinear, weight)),
                 })
+            }
+            Material::Phong { diffuse_reflectance, specular_reflectance, exponent } => {
+                let (kd, ks) = (diffuse_reflectance.eval(uv).clamp(0.0, 1.0), specular_reflectance.eval(uv).clamp(0.0, 1.0));
+                let w = glossy_sampling_weight(kd, ks);
+                Some(BsdfModel::Phong(Phong {
+                    diffuse_reflectance: kd,
+                    specular_reflectance: ks,
+                    exponent: exponent.eval_f32(uv).max(0.0),
+                    specular_sampling_weight: w,
+                }))
+            }
+            Material::BlinnPhong { diffuse_reflectance, specular_reflectance, exponent } => {
+                let (kd, ks) = (diffuse_reflectance.eval(uv).clamp(0.0, 1.0), specular_reflectance.eval(uv).clamp(0.0, 1.0));
+                let w = glossy_sampling_weight(kd, ks);
+                Some(BsdfModel::BlinnPhong(BlinnPhong {
+                    diffuse_reflectance: kd,
+                    specular_reflectance: ks,
+                    exponent: exponent.eval_f32(uv).max(0.0),
+                    specular_sampling_weight: w,
+                }))
+            }
+            Material::CookTorrance { diffuse_reflectance, specular_reflectance, alpha, eta } => {
+                let (kd, ks) = (diffuse_reflectance.eval(uv).clamp(0.0, 1.0), specular_reflectance.eval(uv).clamp(0.0, 1.0));
+                let w = glossy_sampling_weight(kd, ks);
+                let alpha = alpha.eval_f32(uv).max(super::microfacet::MIN_ALPHA);
+                Some(BsdfModel::CookTorrance(CookTorrance { diffuse_reflectance: kd, specular_reflectance: ks, alpha, eta: *eta, specular_sampling_weight: w }))
+            }
+            Material::OrenNayar { reflectance, alpha } => {
+                Some(BsdfModel::OrenNayar(OrenNayar::from_alpha(reflectance.eval(uv).clamp(0.0, 1.0), alpha.eval_f32(uv))))
+            }
+            Material::Ward { diffuse_reflectance, specular_reflectance, alpha_u, alpha_v, variant } => {
+                let (kd, ks) = (diffuse_reflectance.eval(uv).clamp(0.0, 1.0), specular_reflectance.eval(uv).clamp(0.0, 1.0));
+                let w = glossy_sampling_weight(kd, ks);
+                let a = |t: &Texture| t.eval_f32(uv).max(super::microfacet::MIN_ALPHA);
+                Some(BsdfModel::Ward(Ward {
+                    diffuse_reflectance: kd,
+                    specular_reflectance: ks,
+                    alpha_u: a(alpha_u),
+                    alpha_v: a(alpha_v),
+                    variant: *variant,
+                    specular_sampling_weight: w,
+                }))
             }
             Material::TwoSided { front, .. } => front.model(uv),
             Material::Mask { inner, .. } => inner.model(uv),

@@ -2,13 +2,19 @@
 //! pointing away from the surface. `f` never includes the cosine; an estimator weights a
 //! sample by `f * |cos(wi)| / pdf`. Delta lobes report `pdf = 1` and `f = weight / |cos(wi)|`.
 
+pub mod blinn;
 pub mod conductor;
+pub mod cook_torrance;
 pub mod dielectric;
 pub mod diffuse;
 pub mod fresnel;
+pub mod lobes;
 pub mod material;
 pub mod microfacet;
+pub mod oren_nayar;
+pub mod phong;
 pub mod plastic;
+pub mod ward;
 
 pub use material::{Material, MicrofacetKind};
 
@@ -106,6 +112,11 @@ pub enum BsdfModel {
     ThinDielectric(dielectric::ThinDielectric),
     SmoothPlastic(plastic::SmoothPlastic),
     RoughPlastic(plastic::RoughPlastic),
+    Phong(phong::Phong),
+    BlinnPhong(blinn::BlinnPhong),
+    CookTorrance(cook_torrance::CookTorrance),
+    OrenNayar(oren_nayar::OrenNayar),
+    Ward(ward::Ward),
 }
 
 /// Forward a call to the model inside, whatever it is.
@@ -120,6 +131,11 @@ macro_rules! dispatch {
             BsdfModel::ThinDielectric($m) => $e,
             BsdfModel::SmoothPlastic($m) => $e,
             BsdfModel::RoughPlastic($m) => $e,
+            BsdfModel::Phong($m) => $e,
+            BsdfModel::BlinnPhong($m) => $e,
+            BsdfModel::CookTorrance($m) => $e,
+            BsdfModel::OrenNayar($m) => $e,
+            BsdfModel::Ward($m) => $e,
         }
     };
 }
@@ -152,12 +168,18 @@ impl BsdfModel {
     }
     /// Hemispherical-average diffuse reflectance: what radiosity uses for this surface.
     /// Specular and glossy models (conductors, dielectrics) have none: the hybrid display
-    /// pass ray-traces them. Plastic reports the albedo of its diffuse lobe.
+    /// pass ray-traces them. Plastic and the classic two-lobe models
+    /// report the albedo of their diffuse lobe.
     pub fn diffuse_albedo(&self) -> Rgb {
         match self {
             BsdfModel::Diffuse(m) => m.reflectance,
             BsdfModel::SmoothPlastic(m) => m.diffuse_albedo(),
             BsdfModel::RoughPlastic(m) => m.diffuse_albedo(),
+            BsdfModel::Phong(m) => m.diffuse_reflectance,
+            BsdfModel::BlinnPhong(m) => m.diffuse_reflectance,
+            BsdfModel::CookTorrance(m) => m.diffuse_reflectance,
+            BsdfModel::Ward(m) => m.diffuse_reflectance,
+            BsdfModel::OrenNayar(m) => m.reflectance,
             _ => Rgb::BLACK,
         }
     }

@@ -4,7 +4,11 @@
 //! the parallel, deterministic, cancellable driver [`render_pixels`].
 
 pub mod direct;
+pub mod distributed;
+pub mod local;
 pub mod path;
+pub mod whitted;
+pub mod zbuffer;
 
 use crate::error::{Error, Result};
 use crate::film::{Film, Filter};
@@ -205,6 +209,9 @@ pub fn by_name(name: &str) -> Result<Box<dyn Integrator>> {
     match name {
         "path" => Ok(Box::new(path::PathTracer)),
         "direct" => Ok(Box::new(direct::DirectIntegrator::default())),
-        other => Err(Error::Settings(format!("unknown integrator '{other}' (available: path, direct)"))),
+        "whitted" => Ok(Box::new(whitted::Whitted)),
+        "distributed" => Ok(Box::new(distributed::Distributed)),
+        "zbuffer" => Ok(Box::new(zbuffer::ZBuffer::default())),
+        other => Err(Error::Settings(format!("unknown integrator '{other}' (available: path, direct, whitted, distributed, zbuffer)"))),
     }
 }

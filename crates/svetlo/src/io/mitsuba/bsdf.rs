@@ -106,6 +106,9 @@ impl<'a> Loader<'a> {
         let ty = node.type_()?;
         let white = Rgb::WHITE;
         let refl = SpectrumKind::Reflectance;
+        if let Some(m) = self.classic_bsdf(node, ty)? {
+            return Ok(m);
+        }
         Ok(match ty {
             "diffuse" => Material::Diffuse { reflectance: self.spectrum(node, "reflectance", Rgb::splat(0.5), refl)? },
             "conductor" | "roughconductor" => {
@@ -179,7 +182,7 @@ impl<'a> Loader<'a> {
                 self.bsdf(inner)?
             }
             "principled" | "principledthin" | "blendbsdf" | "hair" | "measured" | "pplastic" | "polarizer" | "retarder" | "circular" | "roughcoating"
-            | "coating" | "difftrans" | "phong" | "ward" => {
+            | "coating" | "difftrans" => {
                 return Err(node.loc.err(format!("bsdf type '{ty}' is not supported")));
             }
             other => return Err(node.loc.err(format!("unknown bsdf type '{other}'"))),

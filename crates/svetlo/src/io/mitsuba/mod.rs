@@ -9,6 +9,7 @@
 //! reasonable fallback exists, loads with a line in `Scene::warnings`.
 
 mod bsdf;
+mod classic;
 mod emitter;
 mod props;
 mod sensor;
