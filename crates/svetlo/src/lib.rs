@@ -13,6 +13,7 @@ pub mod integrator;
 pub mod io;
 pub mod light;
 pub mod math;
+pub mod radiosity;
 pub mod sampling;
 pub mod scene;
 pub mod spectrum;

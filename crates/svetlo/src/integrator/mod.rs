@@ -205,6 +205,11 @@ pub fn by_name(name: &str) -> Result<Box<dyn Integrator>> {
     match name {
         "path" => Ok(Box::new(path::PathTracer)),
         "direct" => Ok(Box::new(direct::DirectIntegrator::default())),
-        other => Err(Error::Settings(format!("unknown integrator '{other}' (available: path, direct)"))),
+        "radiosity" => Ok(Box::new(crate::radiosity::display::RadiosityIntegrator { options: Default::default() })),
+        // `radiosity:key=value,...` selects the method (see `RadiosityOptions::parse`).
+        other if other.starts_with("radiosity:") => {
+            Ok(Box::new(crate::radiosity::display::RadiosityIntegrator { options: crate::radiosity::RadiosityOptions::parse(&other["radiosity:".len()..])? }))
+        }
+        other => Err(Error::Settings(format!("unknown integrator '{other}' (available: path, direct, radiosity[:options])"))),
     }
 }
