@@ -3,7 +3,8 @@
 //! Gouraud interpolates values at the display-mesh vertices (area-weighted averages of the
 //! elements around each vertex), linearly across the element.
 
-use super::{Shading, Solved};
+use super::mesh::RadiosityMesh;
+use super::Shading;
 use crate::integrator::{render_pixels, PixelEstimator, RenderSettings};
 use crate::math::INV_PI;
 use crate::sampling::Sampler;
@@ -11,10 +12,10 @@ use crate::scene::Scene;
 use crate::spectrum::Rgb;
 
 /// Radiosity of every display vertex: the area-weighted mean of the elements that share it.
-pub fn vertex_radiosity(solved: &Solved, b: &[Rgb]) -> Vec<Rgb> {
-    let mut sum = vec![Rgb::BLACK; solved.mesh.vertices.len()];
-    let mut w = vec![0.0f32; solved.mesh.vertices.len()];
-    for (e, be) in solved.mesh.elements.iter().zip(b) {
+pub fn vertex_radiosity(mesh: &RadiosityMesh, b: &[Rgb]) -> Vec<Rgb> {
+    let mut sum = vec![Rgb::BLACK; mesh.vertices.len()];
+    let mut w = vec![0.0f32; mesh.vertices.len()];
+    for (e, be) in mesh.elements.iter().zip(b) {
         for v in e.vertex {
             sum[v as usize] += *be * e.area;
             w[v as usize] += e.area;
@@ -25,7 +26,7 @@ pub fn vertex_radiosity(solved: &Solved, b: &[Rgb]) -> Vec<Rgb> {
 
 /// Radiance along camera rays from a solution.
 pub struct RadiosityView<'a> {
-    pub solved: &'a Solved,
+    pub mesh: &'a RadiosityMesh,
     /// Radiosity per element (the solution, or an intermediate one with the ambient term).
     pub b: &'a [Rgb],
     pub vertex_b: Vec<Rgb>,
@@ -33,21 +34,21 @@ pub struct RadiosityView<'a> {
 }
 
 impl<'a> RadiosityView<'a> {
-    pub fn new(solved: &'a Solved, b: &'a [Rgb], shading: Shading) -> Self {
-        let vertex_b = if shading == Shading::Gouraud { vertex_radiosity(solved, b) } else { vec![] };
-        RadiosityView { solved, b, vertex_b, shading }
+    pub fn new(mesh: &'a RadiosityMesh, b: &'a [Rgb], shading: Shading) -> Self {
+        let vertex_b = if shading == Shading::Gouraud { vertex_radiosity(mesh, b) } else { vec![] };
+        RadiosityView { mesh, b, vertex_b, shading }
     }
 
     /// Radiosity leaving the surface the ray hits (None: the ray escapes).
     pub fn radiosity(&self, scene: &Scene, ray: &crate::geometry::Ray) -> Option<Rgb> {
         let hit = scene.accel.intersect(ray)?;
         let p = ray.at(hit.t);
-        let Some(i) = self.solved.mesh.element_at(&hit, p, ray.d) else { return Some(Rgb::BLACK) };
-        let e = &self.solved.mesh.elements[i as usize];
+        let Some(i) = self.mesh.element_at(&hit, p, ray.d) else { return Some(Rgb::BLACK) };
+        let e = &self.mesh.elements[i as usize];
         Some(match self.shading {
             Shading::Flat => self.b[i as usize],
             Shading::Gouraud => {
-                let w = self.solved.mesh.corner_weights(&hit, p, e);
+                let w = self.mesh.corner_weights(&hit, p, e);
                 self.vertex_b[e.vertex[0] as usize] * w[0] + self.vertex_b[e.vertex[1] as usize] * w[1] + self.vertex_b[e.vertex[2] as usize] * w[2]
             }
         })
@@ -78,7 +79,7 @@ impl crate::integrator::Integrator for RadiosityIntegrator {
                 *x -= e.emission;
             }
         }
-        let view = RadiosityView::new(&solved, &b, self.options.shading);
+        let view = RadiosityView::new(&solved.mesh, &b, self.options.shading);
         render_pixels(scene, settings, progress, &view)
     }
 }

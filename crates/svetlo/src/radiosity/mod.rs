@@ -137,6 +137,17 @@ pub fn system<'a>(mesh: &RadiosityMesh, rows: solver::Rows<'a>) -> System<'a> {
 /// solution holds exactly the light of paths of at most max_depth − 1 diffuse bounces
 /// (Jacobi sweeps from E) unless the truncation is below the tolerance anyway.
 pub fn solve(scene: &Scene, opts: &RadiosityOptions, max_depth: i32) -> Result<Solved> {
+    solve_observed(scene, opts, max_depth, &mut |_, _, _| {})
+}
+
+/// [`solve`], calling `observe(mesh, shots, state)` at each reported step of a progressive
+/// solve (for intermediate images with the ambient term).
+pub fn solve_observed(
+    scene: &Scene,
+    opts: &RadiosityOptions,
+    max_depth: i32,
+    observe: &mut dyn FnMut(&RadiosityMesh, usize, &solver::progressive::State),
+) -> Result<Solved> {
     let t0 = Instant::now();
     let mesh = RadiosityMesh::build(scene, &opts.mesh)?;
     let mesh_seconds = t0.elapsed().as_secs_f64();
@@ -162,6 +173,10 @@ pub fn solve(scene: &Scene, opts: &RadiosityOptions, max_depth: i32) -> Result<S
     let t2 = Instant::now();
     let sol = match truncate {
         Some(k) => solver::jacobi::bounces(&sys, k)?,
+        None if opts.solver == SolverKind::Progressive => {
+            opts.solve.validate()?;
+            solver::progressive::solve(&sys, &opts.solve, &mut |s, st| observe(&mesh, s, st))?
+        }
         None => opts.solver.solve(&sys, &opts.solve)?,
     };
     let solve_seconds = t2.elapsed().as_secs_f64();

@@ -1,6 +1,6 @@
 //! Progressive refinement (Cohen, Chen, Wallace & Greenberg 1988): shoot, don't gather.
 //! Each step takes the element with the most unshot power A_i |ΔB_i|, computes its row of form
-//! factors (only now: the rows of elements that never shoot are never computed), and sends
+//! factors (only now, and once: the rows of elements that never shoot are never computed), and sends
 //! ρ_j F_ji ΔB_i = ρ_j F_ij (A_i / A_j) ΔB_i to every element j it sees. The unshot radiosity
 //! is the residual of the system (exactly, when F is reciprocal).
 //!
@@ -62,6 +62,7 @@ pub fn solve(sys: &System, opts: &SolveOptions, observe: &mut dyn FnMut(usize, &
     let rr = interreflection(sys);
     let report_every = (n / 8).max(1);
     let mut rows = 0u64;
+    let mut cache: Vec<Option<Vec<(u32, f32)>>> = vec![None; n];
     let mut converged = false;
     for s in 1..=opts.max_steps {
         let Some((i, _)) = power.iter().enumerate().max_by(|a, c| a.1.total_cmp(c.1)) else { break };
@@ -80,9 +81,12 @@ pub fn solve(sys: &System, opts: &SolveOptions, observe: &mut dyn FnMut(usize, &
         let shot = du * w as f64;
         unshot[i] = du - shot;
         power[i] = sys.area[i] as f64 * l1d(unshot[i]);
-        let row = sys.rows.row(i);
-        rows += 1;
-        for (j, f) in row {
+        // Rows are kept once computed: an element shoots again as light comes back to it.
+        if cache[i].is_none() {
+            cache[i] = Some(sys.rows.row(i));
+            rows += 1;
+        }
+        for &(j, f) in cache[i].as_deref().unwrap_or(&[]) {
             let j = j as usize;
             let d = to_d(sys.reflectance[j]) * shot * (f as f64 * sys.area[i] as f64 / sys.area[j] as f64);
             b[j] += d;
