@@ -25,7 +25,7 @@ pub struct RadiosityArgs {
     /// Form factors: analytic, hemicube or raycast.
     #[arg(long, value_name = "METHOD")]
     pub form_factors: Option<String>,
-    /// Solver: jacobi, gauss-seidel, southwell or progressive.
+    /// Solver: jacobi, gauss-seidel, southwell, progressive or two-level.
     #[arg(long, value_name = "NAME")]
     pub solver: Option<String>,
     /// Longest element edge, in scene units.

@@ -22,7 +22,8 @@ use std::collections::HashMap;
 /// How to cut the scene into elements.
 #[derive(Clone, Debug)]
 pub struct MeshOptions {
-    /// Longest edge an element may have, in scene units (None: one element per input triangle).
+    /// Longest edge an element may have, in scene units. None: a fifth of the radius of the
+    /// scene's bounding sphere (about 2k elements and a few seconds for the Cornell box).
     pub max_edge: Option<f32>,
     /// Refuse to build more elements than this (the full matrix grows with its square).
     pub max_elements: usize,
@@ -158,6 +159,7 @@ impl RadiosityMesh {
             }
         }
         let diag = scene.bounds.radius.max(1e-6);
+        let max_edge = opts.max_edge.unwrap_or(diag / 5.0);
         let mut mesh = RadiosityMesh { elements: vec![], patches: vec![], vertices: vec![], maps: vec![], warnings: vec![] };
         let mut welder = Welder { map: HashMap::new(), step: diag * 1e-6 };
         for (si, shape) in scene.shapes.iter().enumerate() {
@@ -199,9 +201,9 @@ impl RadiosityMesh {
                     (b - a).length().max((c - b).length()).max((a - c).length())
                 })
                 .fold(0.0f32, f32::max);
-            let n = match (opts.max_edge, sphere) {
-                (Some(e), None) => ((longest / e).ceil() as u32).max(1),
-                _ => 1,
+            let n = match sphere {
+                None => ((longest / max_edge).ceil() as u32).max(1),
+                Some(_) => 1,
             };
             let per_side = tri_mesh.triangle_count() as u64 * (n as u64 * n as u64);
             let total = mesh.elements.len() as u64 + per_side * if two_sided { 2 } else { 1 };

@@ -129,6 +129,7 @@ pub fn system<'a>(mesh: &RadiosityMesh, rows: solver::Rows<'a>) -> System<'a> {
         emission: mesh.elements.iter().map(|e| e.emission).collect(),
         reflectance: mesh.elements.iter().map(|e| e.reflectance).collect(),
         area: mesh.elements.iter().map(|e| e.area).collect(),
+        patch_of: mesh.elements.iter().map(|e| e.patch).collect(),
         rows,
     }
 }

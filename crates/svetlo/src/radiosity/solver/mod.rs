@@ -7,6 +7,7 @@ pub mod gauss_seidel;
 pub mod jacobi;
 pub mod progressive;
 pub mod southwell;
+pub mod two_level;
 
 use super::form_factor::{FormFactors, RowSource};
 use crate::error::{Error, Result};
@@ -18,6 +19,8 @@ pub struct System<'a> {
     pub emission: Vec<Rgb>,
     pub reflectance: Vec<Rgb>,
     pub area: Vec<f32>,
+    /// Patch of each element (two-level substructuring); may be empty for the other solvers.
+    pub patch_of: Vec<u32>,
     /// The form factors, as a whole matrix or computed a row at a time.
     pub rows: Rows<'a>,
 }
@@ -171,6 +174,8 @@ pub enum SolverKind {
     GaussSeidel,
     Southwell,
     Progressive,
+    /// Cohen's two-level substructuring (system on patches, elements gather).
+    TwoLevel,
 }
 
 impl SolverKind {
@@ -180,7 +185,8 @@ impl SolverKind {
             "gauss-seidel" | "gs" => Ok(SolverKind::GaussSeidel),
             "southwell" => Ok(SolverKind::Southwell),
             "progressive" => Ok(SolverKind::Progressive),
-            o => Err(Error::Settings(format!("radiosity: unknown solver '{o}' (jacobi, gauss-seidel, southwell, progressive)"))),
+            "two-level" => Ok(SolverKind::TwoLevel),
+            o => Err(Error::Settings(format!("radiosity: unknown solver '{o}' (jacobi, gauss-seidel, southwell, progressive, two-level)"))),
         }
     }
 
@@ -191,6 +197,7 @@ impl SolverKind {
             SolverKind::GaussSeidel => gauss_seidel::solve(sys, opts),
             SolverKind::Southwell => southwell::solve(sys, opts),
             SolverKind::Progressive => progressive::solve(sys, opts, &mut |_, _| {}),
+            SolverKind::TwoLevel => two_level::solve(sys, opts),
         }
     }
 }
