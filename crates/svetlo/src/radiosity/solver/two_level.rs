@@ -44,8 +44,8 @@ pub fn solve(sys: &System, opts: &SolveOptions) -> Result<Solution> {
     let rows: Vec<Vec<(u32, f32)>> = rows.into_iter().enumerate().map(|(p, r)| merge(r).into_iter().map(|(pp, x)| (pp, x / area[p])).collect()).collect();
     for p in 0..np {
         if area[p] > 0.0 {
-            e[p] = e[p] * (1.0 / area[p]);
-            rho[p] = rho[p] * (1.0 / area[p]);
+            e[p] *= 1.0 / area[p];
+            rho[p] *= 1.0 / area[p];
         }
     }
     let fp = FormFactors::from_rows(rows);
