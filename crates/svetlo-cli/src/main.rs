@@ -5,6 +5,7 @@
 
 mod compare;
 mod info;
+mod radiosity;
 mod render;
 
 use clap::{Parser, Subcommand};
@@ -25,6 +26,8 @@ pub enum Command {
     Compare(compare::CompareArgs),
     /// Describe a scene: shapes, materials, lights, camera, settings and loader warnings.
     Info(info::InfoArgs),
+    /// Solve a scene by radiosity: convergence report, solved mesh (PLY), progressive snapshots.
+    Radiosity(radiosity::RadiosityArgs),
 }
 
 /// A mistake in what the user asked for (exit code 2), as opposed to a failure while doing it.
@@ -58,6 +61,7 @@ fn main() -> ExitCode {
         Command::Render(a) => render::run(&a),
         Command::Compare(a) => compare::run(&a),
         Command::Info(a) => info::run(&a),
+        Command::Radiosity(a) => radiosity::run(&a),
     };
     match result {
         Ok(code) => code,

@@ -1,7 +1,9 @@
 //! svetlo: a physically based renderer. One immutable [`scene::Scene`], many ways
 //! to transport light through it (see DESIGN.md in the shared folder).
 //!
-//! Modules are listed in dependency order: a module uses those above it, never below.
+//! Dependency order (a module uses only those before it; rustfmt lists them alphabetically):
+//! math, spectrum, geometry, accel, sampling, texture, bsdf, camera, film, light, scene,
+//! then the methods (integrator, raster, radiosity), and io (files) last.
 
 pub mod accel;
 pub mod bsdf;
@@ -13,6 +15,7 @@ pub mod integrator;
 pub mod io;
 pub mod light;
 pub mod math;
+pub mod radiosity;
 pub mod raster;
 pub mod sampling;
 pub mod scene;

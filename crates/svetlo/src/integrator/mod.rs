@@ -212,6 +212,11 @@ pub fn by_name(name: &str) -> Result<Box<dyn Integrator>> {
         "whitted" => Ok(Box::new(whitted::Whitted)),
         "distributed" => Ok(Box::new(distributed::Distributed)),
         "zbuffer" => Ok(Box::new(zbuffer::ZBuffer::default())),
-        other => Err(Error::Settings(format!("unknown integrator '{other}' (available: path, direct, whitted, distributed, zbuffer)"))),
+        "radiosity" => Ok(Box::new(crate::radiosity::display::RadiosityIntegrator { options: Default::default() })),
+        // `radiosity:key=value,...` selects the method (see `RadiosityOptions::parse`).
+        other if other.starts_with("radiosity:") => {
+            Ok(Box::new(crate::radiosity::display::RadiosityIntegrator { options: crate::radiosity::RadiosityOptions::parse(&other["radiosity:".len()..])? }))
+        }
+        other => Err(Error::Settings(format!("unknown integrator '{other}' (available: path, direct, whitted, distributed, zbuffer, radiosity[:options])"))),
     }
 }

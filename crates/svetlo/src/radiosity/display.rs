@@ -1,0 +1,85 @@
+//! Showing a radiosity solution through the scene's camera: each camera ray finds the element
+//! it hits, and the radiance leaving it is L = B / π. Flat shading uses the element's value;
+//! Gouraud interpolates values at the display-mesh vertices (area-weighted averages of the
+//! elements around each vertex), linearly across the element.
+
+use super::mesh::RadiosityMesh;
+use super::Shading;
+use crate::integrator::{render_pixels, PixelEstimator, RenderSettings};
+use crate::math::INV_PI;
+use crate::sampling::Sampler;
+use crate::scene::Scene;
+use crate::spectrum::Rgb;
+
+/// Radiosity of every display vertex: the area-weighted mean of the elements that share it.
+pub fn vertex_radiosity(mesh: &RadiosityMesh, b: &[Rgb]) -> Vec<Rgb> {
+    let mut sum = vec![Rgb::BLACK; mesh.vertices.len()];
+    let mut w = vec![0.0f32; mesh.vertices.len()];
+    for (e, be) in mesh.elements.iter().zip(b) {
+        for v in e.vertex {
+            sum[v as usize] += *be * e.area;
+            w[v as usize] += e.area;
+        }
+    }
+    sum.iter().zip(&w).map(|(s, w)| if *w > 0.0 { *s * (1.0 / *w) } else { Rgb::BLACK }).collect()
+}
+
+/// Radiance along camera rays from a solution.
+pub struct RadiosityView<'a> {
+    pub mesh: &'a RadiosityMesh,
+    /// Radiosity per element (the solution, or an intermediate one with the ambient term).
+    pub b: &'a [Rgb],
+    pub vertex_b: Vec<Rgb>,
+    pub shading: Shading,
+}
+
+impl<'a> RadiosityView<'a> {
+    pub fn new(mesh: &'a RadiosityMesh, b: &'a [Rgb], shading: Shading) -> Self {
+        let vertex_b = if shading == Shading::Gouraud { vertex_radiosity(mesh, b) } else { vec![] };
+        RadiosityView { mesh, b, vertex_b, shading }
+    }
+
+    /// Radiosity leaving the surface the ray hits (None: the ray escapes).
+    pub fn radiosity(&self, scene: &Scene, ray: &crate::geometry::Ray) -> Option<Rgb> {
+        let hit = scene.accel.intersect(ray)?;
+        let p = ray.at(hit.t);
+        let Some(i) = self.mesh.element_at(&hit, p, ray.d) else { return Some(Rgb::BLACK) };
+        let e = &self.mesh.elements[i as usize];
+        Some(match self.shading {
+            Shading::Flat => self.b[i as usize],
+            Shading::Gouraud => {
+                let w = self.mesh.corner_weights(&hit, p, e);
+                self.vertex_b[e.vertex[0] as usize] * w[0] + self.vertex_b[e.vertex[1] as usize] * w[1] + self.vertex_b[e.vertex[2] as usize] * w[2]
+            }
+        })
+    }
+}
+
+impl PixelEstimator for RadiosityView<'_> {
+    fn li(&self, scene: &Scene, ray: &crate::geometry::Ray, _sampler: &mut dyn Sampler, settings: &RenderSettings) -> Rgb {
+        let _ = settings;
+        self.radiosity(scene, ray).map(|b| b * INV_PI).unwrap_or(Rgb::BLACK)
+    }
+}
+
+/// The `radiosity` integrator: solve, then ray-cast the solution through the camera with the
+/// settings' samples per pixel (antialiasing) and filter.
+pub struct RadiosityIntegrator {
+    pub options: super::RadiosityOptions,
+}
+
+impl crate::integrator::Integrator for RadiosityIntegrator {
+    fn render(&self, scene: &Scene, settings: &RenderSettings, progress: &crate::integrator::Progress) -> crate::error::Result<crate::film::Film> {
+        settings.validate()?;
+        let solved = super::solve(scene, &self.options, settings.max_depth)?;
+        let mut b = solved.b.clone();
+        if settings.hide_emitters {
+            // Hidden emitters show only the light they reflect.
+            for (x, e) in b.iter_mut().zip(&solved.mesh.elements) {
+                *x -= e.emission;
+            }
+        }
+        let view = RadiosityView::new(&solved.mesh, &b, self.options.shading);
+        render_pixels(scene, settings, progress, &view)
+    }
+}

@@ -1,0 +1,199 @@
+//! Radiosity: the scene's surfaces cut into elements of constant radiosity, the form factors
+//! between them, and the linear system B = E + ρ ⊙ (F B) per RGB channel, solved by one of
+//! several methods; then shown through the scene's camera by ray casting.
+//!
+//! Units (DESIGN.md): B and E in W/m², L = B / π leaving a diffuse surface. Emission comes from
+//! the shapes' area lights (E = π × mean radiance of the emitter's texture, front side only);
+//! reflectance is each material's diffuse albedo (`Bsdf::diffuse_albedo`), black for
+//! conductors and dielectrics. Point, directional and environment lights do not take part.
+
+pub mod display;
+pub mod form_factor;
+pub mod mesh;
+pub mod solver;
+
+use crate::error::{Error, Result};
+use crate::scene::Scene;
+use crate::spectrum::Rgb;
+use form_factor::{FormFactors, Method, RowSource};
+use mesh::{MeshOptions, RadiosityMesh};
+use solver::{SolveOptions, SolverKind, Step, System};
+use std::time::Instant;
+
+/// How radiosity is shown: one value per element, or interpolated from the vertices.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Default)]
+pub enum Shading {
+    Flat,
+    #[default]
+    Gouraud,
+}
+
+/// Everything that selects a radiosity method.
+#[derive(Clone, Debug)]
+pub struct RadiosityOptions {
+    pub mesh: MeshOptions,
+    pub form_factors: Method,
+    pub solver: SolverKind,
+    pub solve: SolveOptions,
+    /// Average A_i F_ij and A_j F_ji before solving.
+    pub reciprocity: bool,
+    pub shading: Shading,
+}
+
+impl Default for RadiosityOptions {
+    fn default() -> Self {
+        RadiosityOptions {
+            mesh: MeshOptions::default(),
+            form_factors: Method::default(),
+            solver: SolverKind::GaussSeidel,
+            solve: SolveOptions::default(),
+            reciprocity: false,
+            shading: Shading::Gouraud,
+        }
+    }
+}
+
+impl RadiosityOptions {
+    /// Options from `key=value` pairs separated by commas, e.g.
+    /// `form-factors=hemicube,solver=progressive,element-size=0.05,tolerance=1e-3`.
+    /// Keys: form-factors, solver, element-size, max-elements, tolerance, max-steps, omega
+    /// (a number or `adaptive`), hemicube-resolution, rays, visibility-grid, source-grid, seed, reciprocity
+    /// (true/false), shading (flat/gouraud).
+    pub fn parse(params: &str) -> Result<Self> {
+        let mut o = RadiosityOptions::default();
+        let (mut res, mut rays, mut vis, mut src, mut seed) = (None, None, None, None, None);
+        for kv in params.split(',').map(str::trim).filter(|s| !s.is_empty()) {
+            let (k, v) = kv.split_once('=').ok_or_else(|| Error::Settings(format!("radiosity: expected key=value, got '{kv}'")))?;
+            let num = |v: &str| v.parse::<f64>().map_err(|_| Error::Settings(format!("radiosity: {k} needs a number, got '{v}'")));
+            let int = |v: &str| v.parse::<u64>().map_err(|_| Error::Settings(format!("radiosity: {k} needs a whole number, got '{v}'")));
+            match k {
+                "form-factors" | "ff" => o.form_factors = Method::parse(v)?,
+                "solver" => o.solver = SolverKind::parse(v)?,
+                "element-size" | "max-edge" => o.mesh.max_edge = Some(num(v)? as f32),
+                "max-elements" => o.mesh.max_elements = int(v)? as usize,
+                "tolerance" => o.solve.tolerance = num(v)?,
+                "max-steps" => o.solve.max_steps = int(v)? as usize,
+                "omega" if v == "adaptive" => o.solve.adaptive_omega = true,
+                "omega" => o.solve.omega = num(v)? as f32,
+                "hemicube-resolution" => res = Some(int(v)? as u32),
+                "rays" => rays = Some(int(v)? as u32),
+                "visibility-grid" => vis = Some(int(v)? as u32),
+                "source-grid" => src = Some(int(v)? as u32),
+                "seed" => seed = Some(int(v)?),
+                "reciprocity" => o.reciprocity = v.parse().map_err(|_| Error::Settings(format!("radiosity: reciprocity is true or false, got '{v}'")))?,
+                "shading" => {
+                    o.shading = match v {
+                        "flat" => Shading::Flat,
+                        "gouraud" => Shading::Gouraud,
+                        _ => return Err(Error::Settings(format!("radiosity: shading is flat or gouraud, got '{v}'"))),
+                    }
+                }
+                _ => return Err(Error::Settings(format!("radiosity: unknown option '{k}'"))),
+            }
+        }
+        match &mut o.form_factors {
+            Method::Analytic { vis_grid, src_grid } => {
+                *vis_grid = vis.unwrap_or(*vis_grid);
+                *src_grid = src.unwrap_or(*src_grid);
+            }
+            Method::Hemicube { resolution } => *resolution = res.unwrap_or(*resolution),
+            Method::Raycast { rays: r, seed: s } => {
+                *r = rays.unwrap_or(*r);
+                *s = seed.unwrap_or(*s);
+            }
+        }
+        o.solve.validate()?;
+        Ok(o)
+    }
+}
+
+/// A solved scene: the mesh, the radiosity of each element and how the solve went.
+pub struct Solved {
+    pub mesh: RadiosityMesh,
+    pub b: Vec<Rgb>,
+    pub history: Vec<Step>,
+    pub converged: bool,
+    /// Form-factor rows computed.
+    pub rows_computed: u64,
+    /// Non-zero form factors stored (0 when progressive computed rows on demand).
+    pub nnz: usize,
+    pub matrix_bytes: usize,
+    pub mesh_seconds: f64,
+    pub form_factor_seconds: f64,
+    pub solve_seconds: f64,
+}
+
+/// The system's per-element data.
+pub fn system<'a>(mesh: &RadiosityMesh, rows: solver::Rows<'a>) -> System<'a> {
+    System {
+        emission: mesh.elements.iter().map(|e| e.emission).collect(),
+        reflectance: mesh.elements.iter().map(|e| e.reflectance).collect(),
+        area: mesh.elements.iter().map(|e| e.area).collect(),
+        patch_of: mesh.elements.iter().map(|e| e.patch).collect(),
+        rows,
+    }
+}
+
+/// Mesh, compute form factors, solve. `max_depth` has Mitsuba's meaning: with a bound, the
+/// solution holds exactly the light of paths of at most max_depth − 1 diffuse bounces
+/// (Jacobi sweeps from E) unless the truncation is below the tolerance anyway.
+pub fn solve(scene: &Scene, opts: &RadiosityOptions, max_depth: i32) -> Result<Solved> {
+    solve_observed(scene, opts, max_depth, &mut |_, _, _| {})
+}
+
+/// [`solve`], calling `observe(mesh, shots, state)` at each reported step of a progressive
+/// solve (for intermediate images with the ambient term).
+pub fn solve_observed(
+    scene: &Scene,
+    opts: &RadiosityOptions,
+    max_depth: i32,
+    observe: &mut dyn FnMut(&RadiosityMesh, usize, &solver::progressive::State),
+) -> Result<Solved> {
+    let t0 = Instant::now();
+    let mesh = RadiosityMesh::build(scene, &opts.mesh)?;
+    let mesh_seconds = t0.elapsed().as_secs_f64();
+    let source = RowSource::new(scene, &mesh, opts.form_factors)?;
+    let rho_max = mesh.elements.iter().map(|e| e.reflectance.max_component()).fold(0.0f32, f32::max) as f64;
+    let bounces = if max_depth >= 0 { Some((max_depth - 1).max(0) as usize) } else { None };
+    let truncate = bounces.filter(|&k| rho_max.powi(k as i32) > opts.solve.tolerance * 1e-2);
+    let on_demand = opts.solver == SolverKind::Progressive && !opts.reciprocity && truncate.is_none();
+    let t1 = Instant::now();
+    let matrix: Option<FormFactors> = if on_demand {
+        None
+    } else {
+        let m = source.matrix();
+        let areas: Vec<f32> = mesh.elements.iter().map(|e| e.area).collect();
+        Some(if opts.reciprocity { m.reciprocal(&areas) } else { m })
+    };
+    let form_factor_seconds = t1.elapsed().as_secs_f64();
+    let rows = match &matrix {
+        Some(m) => solver::Rows::Matrix(m),
+        None => solver::Rows::OnDemand(&source),
+    };
+    let sys = system(&mesh, rows);
+    let t2 = Instant::now();
+    let sol = match truncate {
+        Some(k) => solver::jacobi::bounces(&sys, k)?,
+        None if opts.solver == SolverKind::Progressive => {
+            opts.solve.validate()?;
+            solver::progressive::solve(&sys, &opts.solve, &mut |s, st| observe(&mesh, s, st))?
+        }
+        None => opts.solver.solve(&sys, &opts.solve)?,
+    };
+    let solve_seconds = t2.elapsed().as_secs_f64();
+    let rows_computed = source.rows_computed.load(std::sync::atomic::Ordering::Relaxed);
+    let (nnz, matrix_bytes) = matrix.as_ref().map(|m| (m.nnz(), m.memory())).unwrap_or((0, 0));
+    drop(sys);
+    Ok(Solved {
+        mesh,
+        b: sol.b,
+        history: sol.history,
+        converged: sol.converged,
+        rows_computed,
+        nnz,
+        matrix_bytes,
+        mesh_seconds,
+        form_factor_seconds,
+        solve_seconds,
+    })
+}
