@@ -6,7 +6,6 @@
 
 mod common;
 
-use common::stats::{normal_isf, sidak};
 use common::*;
 use glam::Vec3;
 use svetlo::bsdf::blinn::BlinnPhong;
@@ -16,6 +15,7 @@ use svetlo::bsdf::oren_nayar::OrenNayar;
 use svetlo::bsdf::phong::Phong;
 use svetlo::bsdf::ward::{Ward, WardVariant};
 use svetlo::bsdf::{BsdfModel, TransportMode};
+use svetlo::sampling::stats::{normal_isf, sidak_alpha};
 use svetlo::sampling::Pcg32;
 use svetlo::Rgb;
 
@@ -88,7 +88,7 @@ fn chi2_classic() {
     let cases = cases();
     let wos = top_dirs();
     let total = cases.len() * wos.len();
-    let level = sidak(FAMILY_ALPHA, total);
+    let level = sidak_alpha(FAMILY_ALPHA, total);
     let mut failures = Vec::new();
     let mut min_p = 1.0f64;
     for (k, (name, model)) in cases.iter().enumerate() {
@@ -157,7 +157,7 @@ fn white_furnace_classic() {
     let wos = [dir_deg(0.5, 0.0), dir_deg(30.0, 40.0), dir_deg(60.0, 100.0), dir_deg(80.0, 190.0), dir_deg(88.0, 10.0)];
     let n = 40_000;
     let tests = models.len() * wos.len();
-    let z = normal_isf(sidak(FAMILY_ALPHA, tests));
+    let z = normal_isf(sidak_alpha(FAMILY_ALPHA, tests));
     let mut report = Vec::new();
     for (name, m) in &models {
         for (j, &wo) in wos.iter().enumerate() {
@@ -197,7 +197,7 @@ fn ward_variants_near_specular() {
 #[test]
 fn oren_nayar_energy() {
     let n = 40_000;
-    let z = normal_isf(sidak(FAMILY_ALPHA, 5 * 6));
+    let z = normal_isf(sidak_alpha(FAMILY_ALPHA, 5 * 6));
     for a in [0.02f32, 0.1, 0.25, 0.5, 1.5] {
         for (j, th) in [0.5f64, 30.0, 60.0, 80.0, 85.0, 89.0].into_iter().enumerate() {
             let (mean, se) = albedo(&oren_nayar(1.0, a), dir_deg(th, 10.0), TransportMode::Radiance, n, j as u64);
@@ -214,7 +214,7 @@ fn oren_nayar_energy() {
 fn normal_incidence_albedos() {
     let wo = Vec3::Z;
     let n_mc = 200_000;
-    let z = normal_isf(sidak(FAMILY_ALPHA, 8) / 2.0);
+    let z = normal_isf(sidak_alpha(FAMILY_ALPHA, 8) / 2.0);
     for n in [2.0f64, 30.0, 500.0] {
         let (mean, se) = albedo(&phong(0.0, 0.8, n as f32), wo, TransportMode::Radiance, n_mc, 11);
         assert!((mean[0] - 0.8).abs() <= z * se[0] + 1e-4, "phong n {n}: {} ± {} vs 0.8", mean[0], se[0]);

@@ -108,7 +108,7 @@ pub fn compare(a: &Film, b: &Film, alpha: f64, exact_tol: f32) -> Comparison {
                 continue;
             }
             let z = (x - y).abs() / var.sqrt();
-            let p = svetlo::film::compare::two_sided_p(z);
+            let p = svetlo::sampling::stats::two_sided_p(z);
             min_p = min_p.min(p);
             if p < level {
                 failed += 1;
