@@ -176,6 +176,8 @@ pub enum SolverKind {
     Progressive,
     /// Cohen's two-level substructuring (system on patches, elements gather).
     TwoLevel,
+    /// Hanrahan–Salzman–Aupperle: quadtrees and links instead of a matrix (`radiosity::hierarchical`).
+    Hierarchical,
 }
 
 impl SolverKind {
@@ -186,7 +188,8 @@ impl SolverKind {
             "southwell" => Ok(SolverKind::Southwell),
             "progressive" => Ok(SolverKind::Progressive),
             "two-level" => Ok(SolverKind::TwoLevel),
-            o => Err(Error::Settings(format!("radiosity: unknown solver '{o}' (jacobi, gauss-seidel, southwell, progressive, two-level)"))),
+            "hierarchical" | "hr" => Ok(SolverKind::Hierarchical),
+            o => Err(Error::Settings(format!("radiosity: unknown solver '{o}' (jacobi, gauss-seidel, southwell, progressive, ssg, two-level, hierarchical)"))),
         }
     }
 
@@ -198,6 +201,9 @@ impl SolverKind {
             SolverKind::Southwell => southwell::solve(sys, opts),
             SolverKind::Progressive => progressive::solve(sys, opts, &mut |_, _| {}),
             SolverKind::TwoLevel => two_level::solve(sys, opts),
+            SolverKind::Hierarchical => {
+                Err(Error::Settings("radiosity: the hierarchical solver builds its own links from the scene (radiosity::solve)".into()))
+            }
         }
     }
 }
