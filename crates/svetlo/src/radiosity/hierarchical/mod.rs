@@ -121,6 +121,7 @@ pub struct Hierarchy<'a> {
     /// Camera samples (root, point) for direct importance, and the number of rays cast.
     camera_hits: Vec<(u32, Vec3)>,
     camera_rays: usize,
+    /// Mean importance over the camera's hits (the BFV rule's scale).
     pub w_mean: f32,
     pub stats: Stats,
     /// Links made since the last form-factor pass, waiting for their F.
@@ -268,8 +269,6 @@ impl<'a> Hierarchy<'a> {
             }
         }
         self.camera_rays = (nx * ny) as usize;
-        let area = self.roots.total_area() as f32;
-        self.w_mean = (self.camera_hits.len() as f32 / self.camera_rays as f32 / area).max(1e-30);
     }
 
     /// Solve for importance per unit area: w = r + Σ_links ρ_p F_qp w_p, the links read backwards
@@ -301,6 +300,10 @@ impl<'a> Hierarchy<'a> {
                 self.push_pull_w(r, 0.0, &direct);
             }
         }
+        // The scale of the BFV rule: the mean importance where the camera looks, so that what the
+        // camera sees is refined about as the BF rule would, and the rest by how much it matters.
+        let seen: f64 = self.camera_hits.iter().map(|&(r, p)| self.forest.nodes[self.forest.find(r, p, u8::MAX) as usize].w as f64).sum();
+        self.w_mean = ((seen / self.camera_hits.len().max(1) as f64) as f32).max(1e-30);
     }
 
     fn push_pull_w(&mut self, n: u32, down: f32, direct: &[f32]) -> f32 {
