@@ -2,9 +2,8 @@
 //! glass sphere (scenes/cornell-spheres.xml), block by block.
 
 use svetlo::film::{Filter, Image};
-use svetlo::integrator::{Integrator, Progress, RenderSettings};
+use svetlo::integrator::{Progress, RenderSettings};
 use svetlo::scene::Scene;
-use svetlo::Rgb;
 
 const RES: usize = 64;
 const BLOCKS: usize = 4;
