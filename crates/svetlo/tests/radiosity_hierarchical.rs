@@ -39,7 +39,7 @@ fn shape_means(scene: &Scene, s: &Solved) -> ShapeMeans {
 
 fn image(scene: &Scene, s: &Solved, opts: &RadiosityOptions) -> svetlo::film::Image {
     let settings = RenderSettings { spp: 4, filter: Filter::Box, ..RenderSettings::from_scene(scene) };
-    let view = svetlo::radiosity::display::RadiosityView::new(&s.mesh, &s.b, opts.shading);
+    let view = s.view(opts.shading);
     svetlo::integrator::render_pixels(scene, &settings, &Progress::new(), &view).expect("render").image()
 }
 

@@ -150,6 +150,24 @@ pub struct Solved {
     pub solve_seconds: f64,
     /// Links, nodes and leaves of a hierarchical solve.
     pub hierarchy: Option<hierarchical::Stats>,
+    /// Gouraud values at the display vertices when the solver provides its own (hierarchical:
+    /// interpolated over its leaves); None: area-weighted means of the elements around each vertex.
+    pub vertex_b: Option<Vec<Rgb>>,
+}
+
+impl Solved {
+    /// The solution shown through a camera.
+    pub fn view(&self, shading: Shading) -> display::RadiosityView<'_> {
+        match &self.vertex_b {
+            Some(v) if shading == Shading::Gouraud => display::RadiosityView::with_vertex_values(&self.mesh, &self.b, v.clone()),
+            _ => display::RadiosityView::new(&self.mesh, &self.b, shading),
+        }
+    }
+
+    /// Radiosity at every display vertex (for Gouraud display and the PLY output).
+    pub fn vertex_radiosity(&self) -> Vec<Rgb> {
+        self.vertex_b.clone().unwrap_or_else(|| display::vertex_radiosity(&self.mesh, &self.b))
+    }
 }
 
 /// The system's per-element data.
@@ -228,6 +246,7 @@ pub fn solve_observed(
         form_factor_seconds,
         solve_seconds,
         hierarchy: None,
+        vertex_b: None,
     })
 }
 
@@ -252,5 +271,6 @@ fn solve_hierarchical(scene: &Scene, opts: &RadiosityOptions, max_depth: i32) ->
         form_factor_seconds: o.stats.refine_seconds,
         solve_seconds: total - o.stats.refine_seconds,
         hierarchy: Some(o.stats),
+        vertex_b: Some(o.vertex_b),
     })
 }
