@@ -132,6 +132,21 @@ fn furnace_gives_e_over_one_minus_rho() {
     }
 }
 
+/// A bounded max_depth keeps exactly max_depth − 1 diffuse bounces (Jacobi sweeps from E):
+/// in the furnace B = E (1 + ρ + ρ²) for max_depth 3, within the closure error (2 %).
+#[test]
+fn max_depth_truncates_the_bounces() {
+    let (rho, le) = (0.6f32, 1.0f32);
+    let scene = furnace(rho, le);
+    let opts = RadiosityOptions::parse("solver=hierarchical,refine=f,epsilon=0.01,min-area=0.004").expect("opts");
+    let s = svetlo::radiosity::solve(&scene, &opts, 3).expect("solve");
+    let exact = std::f32::consts::PI * le * (1.0 + rho + rho * rho);
+    let (lo, hi) = s.b.iter().fold((f32::MAX, f32::MIN), |(a, c), b| (a.min(b.g / exact), c.max(b.g / exact)));
+    println!("max_depth 3: {} sweeps, B/exact in [{lo:.4}, {hi:.4}]", s.history.len());
+    assert_eq!(s.history.len(), 2);
+    assert!(lo > 0.98 && hi < 1.02, "[{lo}, {hi}]");
+}
+
 /// Links carry F as a linear function over the receiver, so a leaf inherits its ancestors'
 /// links to first order: the fraction of each leaf's hemisphere its links cover stays near 1.
 /// Refined everywhere (links only between leaves) the 9-point quadrature of the contour
@@ -215,4 +230,16 @@ fn importance_refines_less_where_the_camera_does_not_look() {
     // either and the full matrix at this element size in this view (5e-3).
     assert!((res[2].0 as f64) < 0.5 * res[0].0 as f64, "{res:?}");
     assert!(res[2].1 < 5e-4 && res[2].1 < res[1].1, "{res:?}");
+}
+
+#[test]
+fn bad_hierarchical_options_are_errors() {
+    let scene = furnace(0.5, 1.0);
+    for o in ["epsilon=-1", "epsilon=0", "min-area=0", "min-area=-2", "epsilon=nan"] {
+        let opts = RadiosityOptions::parse(&format!("solver=hierarchical,{o}")).expect("parses");
+        assert!(svetlo::radiosity::solve(&scene, &opts, -1).is_err(), "{o}");
+    }
+    for o in ["refine=q", "importance=maybe", "hybrid=1x", "gather=-1"] {
+        assert!(RadiosityOptions::parse(o).is_err(), "{o}");
+    }
 }
