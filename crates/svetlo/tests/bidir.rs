@@ -280,14 +280,22 @@ fn settings(spp: u32, max_depth: i32) -> RenderSettings {
 fn white_furnace_light_and_bdpt() {
     let scene = furnace(0.5);
     for name in ["light", "bdpt"] {
-        let b = batches(&scene, name, &settings(4, -1), 8);
+        // Light tracing spreads its paths over the whole film: give it more of them.
+        let st = |d: i32| settings(if name == "light" { 64 } else { 4 }, d);
+        let b = batches(&scene, name, &st(-1), 8);
         let (m, se) = b.image_mean();
         let z = (m - 2.0) / se.max(1e-9);
         println!("{name}: furnace rho 0.5: {m:.5} ± {se:.1e} (z {z:.2})");
         assert!(z.abs() < Z_MEAN, "{name}: furnace mean {m} ≠ 2 ({z:.2} standard errors)");
+        // Hidden emitters: what is seen directly is left out, the rest stays: 2 - 1.
+        let b = batches(&scene, name, &RenderSettings { hide_emitters: true, ..st(-1) }, 8);
+        let (m, se) = b.image_mean();
+        let z = (m - 1.0) / se.max(1e-9);
+        println!("{name}: furnace, emitters hidden: {m:.5} ± {se:.1e} (z {z:.2})");
+        assert!(z.abs() < Z_MEAN, "{name}: furnace with hidden emitters {m} ≠ 1 ({z:.2} standard errors)");
         // Depth truncation, Mitsuba's meaning: emission plus d - 1 bounces.
         for d in [1, 3] {
-            let b = batches(&scene, name, &settings(4, d), 8);
+            let b = batches(&scene, name, &st(d), 8);
             let (m, se) = b.image_mean();
             let expected: f64 = (0..d).map(|k| 0.5f64.powi(k)).sum();
             let z = (m - expected) / se.max(1e-6 * expected);
@@ -494,14 +502,18 @@ fn non_specular_mask(scene: &Scene) -> Vec<bool> {
 }
 
 fn bsdf_spheres(name: &str, spp: u32, k: usize) {
-    let Some((scene, refs)) = mitsuba_scene("mitsuba-data/tests/scenes/bsdf_spheres/test_arealight_path.xml", &[]) else { return };
-    let reference = read_image(&refs.join("test_arealight_ref_rgb.exr")).unwrap();
-    let variance = read_image(&refs.join("test_arealight_ref_rgb_var.exr")).unwrap();
+    bsdf_spheres_lit("arealight", name, spp, k);
+}
+
+fn bsdf_spheres_lit(light: &str, name: &str, spp: u32, k: usize) {
+    let Some((scene, refs)) = mitsuba_scene(&format!("mitsuba-data/tests/scenes/bsdf_spheres/test_{light}_path.xml"), &[]) else { return };
+    let reference = read_image(&refs.join(format!("test_{light}_ref_rgb.exr"))).unwrap();
+    let variance = read_image(&refs.join(format!("test_{light}_ref_rgb_var.exr"))).unwrap();
     let mut st = RenderSettings::from_scene(&scene);
     st.spp = spp;
     let b = batches(&scene, name, &st, k);
     let mask = (name == "light").then(|| non_specular_mask(&scene));
-    reference_test(&b, &reference, &variance, 32768.0, mask.as_deref(), &format!("bsdf_spheres/arealight {name}"));
+    reference_test(&b, &reference, &variance, 32768.0, mask.as_deref(), &format!("bsdf_spheres/{light} {name}"));
 }
 
 #[test]
@@ -514,6 +526,16 @@ fn bsdf_spheres_arealight_light() {
     bsdf_spheres("light", 16, 16);
 }
 
+/// The other lights of the sphere grid: a point light (delta position), a constant and an
+/// environment-map sky (light paths entering from infinity); the rough dielectric.
+#[test]
+#[ignore]
+fn bsdf_spheres_other_lights_bdpt() {
+    for light in ["pointlight", "constant", "envmap", "roughdielectric"] {
+        bsdf_spheres_lit(light, "bdpt", 8, 16);
+    }
+}
+
 fn various_emitters(name: &str, spp: u32, k: usize, res: (&str, &str)) {
     let Some((scene, refs)) =
         mitsuba_scene("mitsuba-data/tests/scenes/various_emitters/test_various_emitters_ptracer.xml", &[("resx", res.0), ("resy", res.1)])
@@ -522,6 +544,8 @@ fn various_emitters(name: &str, spp: u32, k: usize, res: (&str, &str)) {
     };
     let reference = read_image(&refs.join("test_various_emitters_ref_rgb.exr")).unwrap();
     let variance = read_image(&refs.join("test_various_emitters_ref_rgb_var.exr")).unwrap();
+    let block = reference.width / scene.camera.width as usize;
+    let (reference, variance) = block_reference(&reference, &variance, block);
     let mut st = RenderSettings::from_scene(&scene);
     st.spp = spp;
     let b = batches(&scene, name, &st, k);
@@ -535,17 +559,25 @@ fn various_emitters(name: &str, spp: u32, k: usize, res: (&str, &str)) {
             scene.intersect(&ray).is_none_or(|si| !(-12.0..=-4.0).contains(&si.p.x))
         })
         .collect();
-    reference_test(&b, &reference, &variance, 32768.0, Some(&mask), &format!("various_emitters {name}"));
+    reference_test(&b, &reference, &variance, 32768.0 * (block * block) as f64, Some(&mask), &format!("various_emitters {name} at {}x{}", b.width, b.height));
 }
 
+/// At half the reference's resolution (2 x 2 blocks of it).
 #[test]
 fn various_emitters_light() {
-    various_emitters("light", 4, 16, ("512", "64"));
+    various_emitters("light", 4, 16, ("256", "32"));
 }
 
 #[test]
 fn various_emitters_bdpt() {
-    various_emitters("bdpt", 2, 16, ("512", "64"));
+    various_emitters("bdpt", 2, 16, ("256", "32"));
+}
+
+#[test]
+#[ignore]
+fn various_emitters_full_resolution() {
+    various_emitters("light", 8, 16, ("512", "64"));
+    various_emitters("bdpt", 4, 16, ("512", "64"));
 }
 
 /// Average `b` x `b` blocks of the reference and of its per-sample variance: the block mean
