@@ -3,10 +3,13 @@
 //! Camera-side methods implement [`PixelEstimator`] (radiance along one camera ray) and share
 //! the parallel, deterministic, cancellable driver [`render_pixels`].
 
+pub mod bdpt;
 pub mod direct;
 pub mod distributed;
+pub mod light;
 pub mod local;
 pub mod path;
+pub mod splat;
 pub mod whitted;
 pub mod zbuffer;
 
@@ -208,6 +211,8 @@ pub fn render_pixels(scene: &Scene, settings: &RenderSettings, progress: &Progre
 pub fn by_name(name: &str) -> Result<Box<dyn Integrator>> {
     match name {
         "path" => Ok(Box::new(path::PathTracer)),
+        "light" | "ptracer" => Ok(Box::new(light::LightTracer)),
+        "bdpt" => Ok(Box::new(bdpt::Bdpt)),
         "direct" => Ok(Box::new(direct::DirectIntegrator::default())),
         "whitted" => Ok(Box::new(whitted::Whitted)),
         "distributed" => Ok(Box::new(distributed::Distributed)),
@@ -217,6 +222,8 @@ pub fn by_name(name: &str) -> Result<Box<dyn Integrator>> {
         other if other.starts_with("radiosity:") => {
             Ok(Box::new(crate::radiosity::display::RadiosityIntegrator { options: crate::radiosity::RadiosityOptions::parse(&other["radiosity:".len()..])? }))
         }
-        other => Err(Error::Settings(format!("unknown integrator '{other}' (available: path, direct, whitted, distributed, zbuffer, radiosity[:options])"))),
+        other => Err(Error::Settings(format!(
+            "unknown integrator '{other}' (available: path, light, bdpt, direct, whitted, distributed, zbuffer, radiosity[:options])"
+        ))),
     }
 }
