@@ -2,8 +2,8 @@
 //! everything else calls [`Accel::intersect`] and [`Accel::occluded`].
 
 mod build;
-mod kdtree;
 mod bvh;
+mod kdtree;
 mod tri4;
 mod wide;
 
