@@ -61,14 +61,15 @@ pub(crate) fn segments_left(max_depth: i32, depth: i32) -> i32 {
     }
 }
 
-/// Width of one pixel, in scene units, at the distance of the scene's center from the camera:
-/// the scale of the default lookup radii.
+/// Width of one pixel, in scene units, at the distance of the scene's center from the camera
+/// (at least half the scene's radius, for cameras inside it): the scale of the default
+/// lookup radii.
 pub(crate) fn pixel_footprint(scene: &Scene) -> f32 {
     let cam = &scene.camera;
     let c = Vec2::new(cam.width as f32 * 0.5, cam.height as f32 * 0.5);
     let r0 = cam.generate_ray(c, Vec2::splat(0.5), 0.0);
     let r1 = cam.generate_ray(c + Vec2::X, Vec2::splat(0.5), 0.0);
-    let t = (scene.bounds.center - r0.o).dot(r0.d).max(1e-3 * scene.bounds.radius);
+    let t = (scene.bounds.center - r0.o).dot(r0.d).max(0.5 * scene.bounds.radius);
     let f = (r0.at(t) - r1.at(t)).length();
     if f > 0.0 && f.is_finite() {
         f
