@@ -265,6 +265,7 @@ fn solve_all(scene: &Scene, edge: f32, method: Method, reciprocal: bool, tol: f6
         ("gauss-seidel", SolverKind::GaussSeidel, 1.0, false),
         ("sor 1.2", SolverKind::GaussSeidel, 1.2, false),
         ("southwell", SolverKind::Southwell, 1.0, false),
+        ("super-shoot-gather", SolverKind::Ssg, 1.0, false),
         ("progressive", SolverKind::Progressive, 1.0, false),
         ("progressive ω=1.3", SolverKind::Progressive, 1.3, false),
         ("progressive adaptive ω", SolverKind::Progressive, 1.0, true),

@@ -9,6 +9,7 @@ pub mod distributed;
 pub mod light;
 pub mod local;
 pub mod path;
+pub mod photon;
 pub mod splat;
 pub mod whitted;
 pub mod zbuffer;
@@ -222,8 +223,13 @@ pub fn by_name(name: &str) -> Result<Box<dyn Integrator>> {
         other if other.starts_with("radiosity:") => {
             Ok(Box::new(crate::radiosity::display::RadiosityIntegrator { options: crate::radiosity::RadiosityOptions::parse(&other["radiosity:".len()..])? }))
         }
+        "photon" => Ok(Box::new(photon::PhotonMapper::default())),
+        "sppm" => Ok(Box::new(photon::Sppm::default())),
+        // `photon:key=value,...` and `sppm:key=value,...` (see `PhotonOptions::parse`, `SppmOptions::parse`).
+        other if other.starts_with("photon:") => Ok(Box::new(photon::PhotonMapper { options: photon::PhotonOptions::parse(&other["photon:".len()..])? })),
+        other if other.starts_with("sppm:") => Ok(Box::new(photon::Sppm { options: photon::SppmOptions::parse(&other["sppm:".len()..])? })),
         other => Err(Error::Settings(format!(
-            "unknown integrator '{other}' (available: path, light, bdpt, direct, whitted, distributed, zbuffer, radiosity[:options])"
+            "unknown integrator '{other}' (available: path, light, bdpt, direct, whitted, distributed, zbuffer, radiosity[:options], photon[:options], sppm[:options])"
         ))),
     }
 }
