@@ -150,22 +150,25 @@ pub fn run(a: &RadiosityArgs) -> Result<ExitCode> {
     }
     println!("scene        {}", a.scene.display());
     println!(
-        "elements     {} in {} patches, {} display vertices, area {:.4}",
+        "{}     {} in {} patches, {} display vertices, area {:.4}",
+        if solved.hierarchy.is_some() { "display " } else { "elements" },
         solved.mesh.elements.len(),
         solved.mesh.patches.len(),
         solved.mesh.vertices.len(),
         solved.mesh.total_area()
     );
-    println!(
-        "form factors {:?}: {} rows computed, {} stored ({:.1} MiB)",
-        opts.form_factors,
-        solved.rows_computed,
-        solved.nnz,
-        solved.matrix_bytes as f64 / (1 << 20) as f64
-    );
+    if solved.hierarchy.is_none() {
+        println!(
+            "form factors {:?}: {} rows computed, {} stored ({:.1} MiB)",
+            opts.form_factors,
+            solved.rows_computed,
+            solved.nnz,
+            solved.matrix_bytes as f64 / (1 << 20) as f64
+        );
+    }
     if let Some(h) = &solved.hierarchy {
         println!(
-            "hierarchy    {} links, {} nodes, {} leaves, {} link form factors computed, {} refine passes, {:.1} MiB",
+            "hierarchy    {} links, {} nodes, {} leaves (elements), {} link form factors computed, {} refine passes, {:.1} MiB",
             h.links,
             h.nodes,
             h.leaves,

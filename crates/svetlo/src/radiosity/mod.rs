@@ -10,6 +10,7 @@
 pub mod display;
 pub mod form_factor;
 pub mod hierarchical;
+pub mod hybrid;
 pub mod mesh;
 pub mod solver;
 
@@ -41,6 +42,10 @@ pub struct RadiosityOptions {
     pub shading: Shading,
     /// Settings of the hierarchical solver.
     pub hierarchical: hierarchical::HierarchicalOptions,
+    /// Two-pass display: ray tracing adds specular paths and a final gather ([`hybrid`]).
+    pub hybrid: bool,
+    /// Final-gather rays (and light samples) per camera sample of the hybrid display; 0 reads the solution directly.
+    pub gather: u32,
 }
 
 impl Default for RadiosityOptions {
@@ -53,6 +58,8 @@ impl Default for RadiosityOptions {
             reciprocity: false,
             shading: Shading::Gouraud,
             hierarchical: Default::default(),
+            hybrid: false,
+            gather: 16,
         }
     }
 }
@@ -63,7 +70,7 @@ impl RadiosityOptions {
     /// Keys: form-factors, solver, element-size, max-elements, tolerance, max-steps, omega
     /// (a number or `adaptive`), hemicube-resolution, rays, visibility-grid, source-grid, seed, reciprocity
     /// (true/false), shading (flat/gouraud); hierarchical solver: epsilon, min-area, refine (f/bf),
-    /// importance (true/false), passes.
+    /// importance (true/false), passes; display: hybrid (true/false), gather (final-gather rays).
     pub fn parse(params: &str) -> Result<Self> {
         let mut o = RadiosityOptions::default();
         let (mut res, mut rays, mut vis, mut src, mut seed) = (None, None, None, None, None);
@@ -93,6 +100,8 @@ impl RadiosityOptions {
                         _ => return Err(Error::Settings(format!("radiosity: shading is flat or gouraud, got '{v}'"))),
                     }
                 }
+                "hybrid" => o.hybrid = v.parse().map_err(|_| Error::Settings(format!("radiosity: hybrid is true or false, got '{v}'")))?,
+                "gather" => o.gather = int(v)?.min(1 << 16) as u32,
                 "epsilon" => o.hierarchical.epsilon = num(v)?,
                 "min-area" => o.hierarchical.min_area = Some(num(v)? as f32),
                 "passes" => o.hierarchical.max_passes = int(v)? as usize,
