@@ -41,7 +41,7 @@ impl<'a> RadiosityView<'a> {
 
     /// Radiosity leaving the surface the ray hits (None: the ray escapes).
     pub fn radiosity(&self, scene: &Scene, ray: &crate::geometry::Ray) -> Option<Rgb> {
-        let hit = scene.accel.intersect(ray)?;
+        let hit = scene.intersect_prim(ray)?;
         let p = ray.at(hit.t);
         let Some(i) = self.mesh.element_at(&hit, p, ray.d) else { return Some(Rgb::BLACK) };
         let e = &self.mesh.elements[i as usize];

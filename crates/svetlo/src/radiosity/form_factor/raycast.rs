@@ -28,7 +28,7 @@ pub fn row(scene: &Scene, mesh: &RadiosityMesh, i: usize, rays: u32, seed: u64) 
         let p = e.point(b.x, b.y);
         let d = frame.to_world(warp::square_to_cosine_hemisphere(u));
         let ray = Ray::new(offset_ray_origin(p, e.normal, d), d);
-        if let Some(h) = scene.accel.intersect(&ray) {
+        if let Some(h) = scene.intersect_prim(&ray) {
             if let Some(j) = mesh.element_at(&h, ray.at(h.t), d) {
                 if j as usize != i {
                     hits.push((j, w));
