@@ -295,6 +295,9 @@ pub fn render_loaded(scene: Scene, a: &RenderArgs, out: &OutputPaths, progress: 
     for p in &written {
         println!("wrote       {}", p.display());
     }
+    if let Some(r) = job.integrator.report() {
+        eprint!("{r}");
+    }
     if progress.cancelled() {
         eprintln!("interrupted after {} spp", film.spp_done);
         return Ok(ExitCode::from(EXIT_INTERRUPTED));

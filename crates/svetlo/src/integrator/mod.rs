@@ -6,7 +6,9 @@
 pub mod direct;
 pub mod distributed;
 pub mod local;
+pub mod metropolis;
 pub mod path;
+pub mod pssmlt;
 pub mod whitted;
 pub mod zbuffer;
 
@@ -121,6 +123,11 @@ impl Progress {
 
 pub trait Integrator: Sync {
     fn render(&self, scene: &Scene, settings: &RenderSettings, progress: &Progress) -> Result<Film>;
+    /// A report of the last render for people (e.g. Metropolis acceptance rates), if the
+    /// method keeps one.
+    fn report(&self) -> Option<String> {
+        None
+    }
 }
 
 /// Radiance along one camera ray: the core of every camera-side method.
@@ -217,6 +224,11 @@ pub fn by_name(name: &str) -> Result<Box<dyn Integrator>> {
         other if other.starts_with("radiosity:") => {
             Ok(Box::new(crate::radiosity::display::RadiosityIntegrator { options: crate::radiosity::RadiosityOptions::parse(&other["radiosity:".len()..])? }))
         }
-        other => Err(Error::Settings(format!("unknown integrator '{other}' (available: path, direct, whitted, distributed, zbuffer, radiosity[:options])"))),
+        "pssmlt" => Ok(Box::new(pssmlt::Pssmlt::default())),
+        // `pssmlt:key=value,...` (see `PssmltOptions::parse`).
+        other if other.starts_with("pssmlt:") => Ok(Box::new(pssmlt::Pssmlt::new(pssmlt::PssmltOptions::parse(&other["pssmlt:".len()..])?))),
+        other => Err(Error::Settings(format!(
+            "unknown integrator '{other}' (available: path, direct, whitted, distributed, zbuffer, radiosity[:options], pssmlt[:options])"
+        ))),
     }
 }
