@@ -110,7 +110,7 @@ impl Pssmlt {
         match self.options.target {
             PssTargetKind::Path => {
                 let t = PathTarget { scene, settings, opts: &self.options };
-                metropolis::run(&t, scene, settings, &self.options.chain, progress)
+                metropolis::run(&t, scene.camera.width, scene.camera.height, settings, &self.options.chain, progress)
             }
         }
     }

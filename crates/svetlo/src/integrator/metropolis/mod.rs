@@ -25,7 +25,6 @@ use crate::error::{Error, Result};
 use crate::film::Film;
 use crate::sampling::rng::hash_seed;
 use crate::sampling::Pcg32;
-use crate::scene::Scene;
 use crate::spectrum::Rgb;
 use glam::Vec2;
 use rayon::prelude::*;
@@ -125,6 +124,10 @@ pub struct ChainStats {
     pub bootstrap_nonzero: usize,
     pub chains: usize,
     pub mutations: u64,
+    /// Per chain: the sum of everything it splatted and its number of mutations (the spread
+    /// of chain means gives the image mean's standard error, chains being independent).
+    pub chain_sums: Vec<[f64; 3]>,
+    pub chain_mutations: Vec<u64>,
 }
 
 impl ChainStats {
@@ -148,6 +151,36 @@ impl ChainStats {
             self.accepted[k] as f64 / self.proposed[k] as f64
         }
     }
+    /// The image's mean per channel (the splats per mutation) and its standard error, from the
+    /// spread between chains and the bootstrap's error in b.
+    pub fn image_mean(&self) -> Option<([f64; 3], [f64; 3])> {
+        let used: Vec<usize> = (0..self.chain_mutations.len()).filter(|&c| self.chain_mutations[c] > 0).collect();
+        let n = used.len();
+        if n < 2 || self.b <= 0.0 {
+            return None;
+        }
+        let total: u64 = used.iter().map(|&c| self.chain_mutations[c]).sum();
+        let mut mean = [0.0; 3];
+        let mut se = [0.0; 3];
+        let rb = self.b_stderr / self.b;
+        for k in 0..3 {
+            // Per-mutation means of each chain, weighted by its length.
+            let m: f64 = used.iter().map(|&c| self.chain_sums[c][k]).sum::<f64>() / total as f64;
+            let var: f64 = used
+                .iter()
+                .map(|&c| {
+                    let mc = self.chain_sums[c][k] / self.chain_mutations[c] as f64;
+                    (mc - m) * (mc - m)
+                })
+                .sum::<f64>()
+                / (n - 1) as f64;
+            mean[k] = m;
+            let rel_chain = (var / n as f64).sqrt() / m.abs().max(f64::MIN_POSITIVE);
+            se[k] = m.abs() * (rel_chain * rel_chain + rb * rb).sqrt();
+        }
+        Some((mean, se))
+    }
+
     /// A short table for people.
     pub fn report(&self) -> String {
         let mut s = String::new();
@@ -183,18 +216,27 @@ struct Chain<S> {
     left: u64,
 }
 
-/// Render `target` by Metropolis sampling: `settings.spp` mutations per pixel (or until the
-/// time limit), `cfg.chains` chains.
-pub fn run<T: MetropolisTarget>(target: &T, scene: &Scene, settings: &RenderSettings, cfg: &ChainSettings, progress: &Progress) -> Result<(Film, ChainStats)> {
+/// Render `target` on a `width` x `height` film by Metropolis sampling: `settings.spp`
+/// mutations per pixel (or until the time limit), `cfg.chains` chains.
+pub fn run<T: MetropolisTarget>(
+    target: &T,
+    width: u32,
+    height: u32,
+    settings: &RenderSettings,
+    cfg: &ChainSettings,
+    progress: &Progress,
+) -> Result<(Film, ChainStats)> {
     settings.validate()?;
     cfg.validate()?;
     let start = Instant::now();
-    let (w, h) = (scene.camera.width, scene.camera.height);
+    let (w, h) = (width, height);
     let npix = w as u64 * h as u64;
     let mut film = Film::new(w, h, settings.filter);
     let mut stats = ChainStats::new(target.mutation_names());
     stats.bootstrap = cfg.bootstrap;
     stats.chains = cfg.chains;
+    stats.chain_sums = vec![[0.0; 3]; cfg.chains];
+    stats.chain_mutations = vec![0; cfg.chains];
     let total = settings.spp as u64 * npix;
     progress.total.store(total, Ordering::Relaxed);
     let pool = rayon::ThreadPoolBuilder::new().num_threads(settings.threads).build().map_err(|e| Error::Settings(format!("thread pool: {e}")))?;
@@ -316,10 +358,18 @@ pub fn run<T: MetropolisTarget>(target: &T, scene: &Scene, settings: &RenderSett
                 })
                 .collect()
         });
-        for (splats, st) in &results {
+        for (c, (splats, st)) in results.iter().enumerate() {
+            let mut cs = [0.0f64; 3];
             for &(r, l) in splats {
                 film.splat(r, l);
+                for (k, v) in cs.iter_mut().enumerate() {
+                    *v += l[k] as f64;
+                }
             }
+            for (k, v) in cs.iter().enumerate() {
+                stats.chain_sums[c][k] += v;
+            }
+            stats.chain_mutations[c] += st.mutations;
             stats.merge(st);
             done += st.mutations;
         }
