@@ -3,12 +3,15 @@
 //! Camera-side methods implement [`PixelEstimator`] (radiance along one camera ray) and share
 //! the parallel, deterministic, cancellable driver [`render_pixels`].
 
+pub mod bdpt;
 pub mod direct;
 pub mod distributed;
+pub mod light;
 pub mod local;
 pub mod metropolis;
 pub mod path;
 pub mod pssmlt;
+pub mod splat;
 pub mod whitted;
 pub mod zbuffer;
 
@@ -215,6 +218,8 @@ pub fn render_pixels(scene: &Scene, settings: &RenderSettings, progress: &Progre
 pub fn by_name(name: &str) -> Result<Box<dyn Integrator>> {
     match name {
         "path" => Ok(Box::new(path::PathTracer)),
+        "light" | "ptracer" => Ok(Box::new(light::LightTracer)),
+        "bdpt" => Ok(Box::new(bdpt::Bdpt)),
         "direct" => Ok(Box::new(direct::DirectIntegrator::default())),
         "whitted" => Ok(Box::new(whitted::Whitted)),
         "distributed" => Ok(Box::new(distributed::Distributed)),
@@ -228,7 +233,7 @@ pub fn by_name(name: &str) -> Result<Box<dyn Integrator>> {
         // `pssmlt:key=value,...` (see `PssmltOptions::parse`).
         other if other.starts_with("pssmlt:") => Ok(Box::new(pssmlt::Pssmlt::new(pssmlt::PssmltOptions::parse(&other["pssmlt:".len()..])?))),
         other => Err(Error::Settings(format!(
-            "unknown integrator '{other}' (available: path, direct, whitted, distributed, zbuffer, radiosity[:options], pssmlt[:options])"
+            "unknown integrator '{other}' (available: path, light, bdpt, direct, whitted, distributed, zbuffer, radiosity[:options], pssmlt[:options])"
         ))),
     }
 }

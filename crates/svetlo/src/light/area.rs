@@ -121,7 +121,7 @@ impl AreaLight {
             return None; // the back of a one-sided emitter
         }
         let pdf = pdf_area * dist2 / cos_l;
-        Some(LightSample { wi, li: self.radiance.eval(uv), pdf, p, infinite: false })
+        Some(LightSample { wi, li: self.radiance.eval(uv), pdf, p, n, infinite: false })
     }
 
     /// Uniform direction in the cone; the point is where that direction first meets the
@@ -150,7 +150,7 @@ impl AreaLight {
         if n.dot(-wi) <= 0.0 {
             return None; // an inward-facing sphere seen from outside emits nothing toward us
         }
-        Some(LightSample { wi, li: self.radiance.eval(uv), pdf: cone.pdf(), p, infinite: false })
+        Some(LightSample { wi, li: self.radiance.eval(uv), pdf: cone.pdf(), p, n, infinite: false })
     }
 
     /// Solid-angle density of `sample_li` choosing the point `p` (normal `n`) from `p_ref`.
