@@ -333,13 +333,11 @@ pub fn render_loaded(scene: Scene, a: &RenderArgs, out: &OutputPaths, progress: 
     for p in &written {
         println!("wrote       {}", p.display());
     }
-<<<<<<< HEAD
-    if let Some(r) = job.integrator.report() {
-        eprint!("{r}");
-=======
     if let (Some(dir), false) = (&a.strategies, strategy_files.is_empty()) {
         println!("strategies  {} images in {}", strategy_files.len(), dir.display());
->>>>>>> bidir
+    }
+    if let Some(r) = job.integrator.report() {
+        eprint!("{r}");
     }
     if progress.cancelled() {
         eprintln!("interrupted after {} spp", film.spp_done);
