@@ -17,7 +17,7 @@ use svetlo::film::compare::rel_mse;
 use svetlo::film::Image;
 use svetlo::integrator::metropolis::pss::PssSampler;
 use svetlo::integrator::metropolis::{self, ChainSettings, ChainStats, Contribution, MetropolisTarget, Proposal};
-use svetlo::integrator::pssmlt::{Pssmlt, PssmltOptions};
+use svetlo::integrator::pssmlt::{PssTargetKind, Pssmlt, PssmltOptions};
 use svetlo::integrator::{Progress, RenderSettings};
 use svetlo::io::{load_scene, read_image};
 use svetlo::sampling::{Pcg32, Sampler};
@@ -232,8 +232,10 @@ fn pssmlt_cbox_rgb() {
     let Some(root) = shared() else { return };
     let dir = root.join("mitsuba-data/scenes/cbox");
     let reference = read_image(&dir.join("refs/cbox-rgb_mitsuba3.9.1_llvm_ad_rgb_4096spp.exr")).expect("reference");
-    let opts = PssmltOptions { chain: ChainSettings { chains: 64, bootstrap: 40_000 }, ..Default::default() };
-    check_against_reference(&dir.join("cbox-rgb.xml"), &reference, 16, [32, 256], 0.35, opts);
+    for target in [PssTargetKind::Bdpt, PssTargetKind::Path] {
+        let opts = PssmltOptions { chain: ChainSettings { chains: 64, bootstrap: 40_000 }, target, ..Default::default() };
+        check_against_reference(&dir.join("cbox-rgb.xml"), &reference, 16, [32, 256], 0.35, opts);
+    }
 }
 
 #[test]

@@ -6,19 +6,28 @@
 //! perturbation of every coordinate on the torus) and large steps (independent samples). Both
 //! proposals are symmetric, so a = min(1, f(y) / f(x)).
 //!
+//! Target `bdpt` (the default): one bidirectional sample, as Kelemen et al. did: the camera
+//! subpath reads stream 0 (raster position anywhere on the image, lens, time, then the
+//! walk), the light subpath stream 1 and the connections stream 2, so that one subpath
+//! growing does not shift the others' coordinates. Every strategy (s, t) is MIS-weighted and
+//! deposited where it lands (t = 1 elsewhere on the film); f is their total luminance, so
+//! no depth or strategy is truncated away.
+//!
 //! Target `path`: the path tracer (next-event estimation + MIS); coordinates 0-1 pick the
 //! raster position anywhere on the image, 2-4 the lens and time, the rest feed the path.
 //!
 //! Options (`pssmlt:key=value,...`): `large-step` (probability, default 0.3), `sigma` (small
 //! step deviation, 0.01), `chains` (256), `bootstrap` (100000 seed samples), `target`
-//! (`path`).
+//! (`bdpt` or `path`).
 
+use super::light::require_connectible_camera;
 use super::metropolis::pss::PssSampler;
 use super::metropolis::{self, ChainSettings, ChainStats, Contribution, MetropolisTarget, Proposal};
 use super::path::PathTracer;
 use super::{Integrator, PixelEstimator, Progress, RenderSettings};
 use crate::error::{Error, Result};
 use crate::film::Film;
+use crate::path::{camera_subpath, connect, light_subpath, PathConfig, Vertex};
 use crate::sampling::{Pcg32, Sampler};
 use crate::scene::Scene;
 use glam::Vec2;
@@ -28,6 +37,7 @@ use std::sync::Mutex;
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Default)]
 pub enum PssTargetKind {
     #[default]
+    Bdpt,
     Path,
 }
 
@@ -41,7 +51,7 @@ pub struct PssmltOptions {
 
 impl Default for PssmltOptions {
     fn default() -> Self {
-        PssmltOptions { large_step_probability: 0.3, sigma: 0.01, target: PssTargetKind::Path, chain: ChainSettings::default() }
+        PssmltOptions { large_step_probability: 0.3, sigma: 0.01, target: PssTargetKind::Bdpt, chain: ChainSettings::default() }
     }
 }
 
@@ -72,7 +82,8 @@ impl PssmltOptions {
                 "target" => {
                     o.target = match v {
                         "path" => PssTargetKind::Path,
-                        _ => return Err(Error::Settings(format!("pssmlt: target is path, got '{v}'"))),
+                        "bdpt" => PssTargetKind::Bdpt,
+                        _ => return Err(Error::Settings(format!("pssmlt: target is bdpt or path, got '{v}'"))),
                     }
                 }
                 _ => return Err(Error::Settings(format!("pssmlt: unknown option '{k}' (large-step, sigma, chains, bootstrap, target)"))),
@@ -108,6 +119,12 @@ impl Pssmlt {
     pub fn render_with_stats(&self, scene: &Scene, settings: &RenderSettings, progress: &Progress) -> Result<(Film, ChainStats)> {
         self.options.validate()?;
         match self.options.target {
+            PssTargetKind::Bdpt => {
+                require_connectible_camera(scene, "pssmlt")?;
+                let cfg = PathConfig::new(scene, settings.max_depth, settings.rr_depth, settings.hide_emitters);
+                let t = BdptTarget { scene, cfg, opts: &self.options };
+                metropolis::run(&t, scene.camera.width, scene.camera.height, settings, &self.options.chain, progress)
+            }
             PssTargetKind::Path => {
                 let t = PathTarget { scene, settings, opts: &self.options };
                 metropolis::run(&t, scene.camera.width, scene.camera.height, settings, &self.options.chain, progress)
@@ -179,5 +196,88 @@ impl MetropolisTarget for PathTarget<'_> {
     }
     fn reject(&self, s: &mut PssSampler) {
         s.reject();
+    }
+}
+
+/// Bidirectional path tracing driven by primary samples (three streams).
+struct BdptTarget<'a> {
+    scene: &'a Scene,
+    cfg: PathConfig,
+    opts: &'a PssmltOptions,
+}
+
+pub struct BdptState {
+    sampler: PssSampler,
+    camera: Vec<Vertex>,
+    light: Vec<Vertex>,
+}
+
+impl BdptTarget<'_> {
+    fn fresh(&self, rng: Pcg32) -> BdptState {
+        BdptState {
+            sampler: PssSampler::new(rng, self.opts.sigma, self.opts.large_step_probability, 3),
+            camera: Vec::with_capacity(16),
+            light: Vec::with_capacity(16),
+        }
+    }
+
+    fn eval(&self, st: &mut BdptState, out: &mut Contribution) {
+        let scene = self.scene;
+        let cam = &scene.camera;
+        let s = &mut st.sampler;
+        s.start_stream(0);
+        let u = s.next_2d();
+        let raster = Vec2::new(u.x * cam.width as f32, u.y * cam.height as f32);
+        let lens = s.next_2d();
+        let time = s.next_1d();
+        let ray = cam.generate_ray(raster, lens, time);
+        camera_subpath(scene, &self.cfg, &ray, raster, s, &mut st.camera);
+        s.start_stream(1);
+        light_subpath(scene, &self.cfg, ray.time, s, &mut st.light);
+        s.start_stream(2);
+        let mut here = crate::spectrum::Rgb::BLACK;
+        for t in 1..=st.camera.len() {
+            for sl in 0..=st.light.len() {
+                if sl + t < 2 || !self.cfg.allows(sl + t) {
+                    continue;
+                }
+                let Some(c) = connect(scene, &self.cfg, &st.light, &st.camera, sl, t, s, true) else { continue };
+                match c.raster {
+                    Some(r) => out.push(r, c.l * c.weight),
+                    None => here += c.l * c.weight,
+                }
+            }
+        }
+        out.push(raster, here);
+    }
+}
+
+impl MetropolisTarget for BdptTarget<'_> {
+    type State = BdptState;
+    fn mutation_names(&self) -> Vec<&'static str> {
+        KINDS.to_vec()
+    }
+    fn bootstrap(&self, rng: Pcg32, weights: &mut Vec<f32>) {
+        let mut st = self.fresh(rng);
+        let mut c = Contribution::default();
+        self.eval(&mut st, &mut c);
+        weights.push(c.f());
+    }
+    fn start(&self, rng: Pcg32, _candidate: usize, chain_rng: Pcg32, out: &mut Contribution) -> Option<BdptState> {
+        let mut st = self.fresh(rng);
+        self.eval(&mut st, out);
+        st.sampler.set_rng(chain_rng);
+        Some(st)
+    }
+    fn propose(&self, st: &mut BdptState, out: &mut Contribution) -> Proposal {
+        st.sampler.start_iteration();
+        self.eval(st, out);
+        Proposal { kind: usize::from(st.sampler.is_large_step()), t_ratio: 1.0 }
+    }
+    fn accept(&self, st: &mut BdptState) {
+        st.sampler.accept();
+    }
+    fn reject(&self, st: &mut BdptState) {
+        st.sampler.reject();
     }
 }
