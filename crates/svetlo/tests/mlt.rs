@@ -17,6 +17,7 @@ use svetlo::film::compare::rel_mse;
 use svetlo::film::Image;
 use svetlo::integrator::metropolis::pss::PssSampler;
 use svetlo::integrator::metropolis::{self, ChainSettings, ChainStats, Contribution, MetropolisTarget, Proposal};
+use svetlo::integrator::mlt::{Mlt, MltOptions};
 use svetlo::integrator::pssmlt::{PssTargetKind, Pssmlt, PssmltOptions};
 use svetlo::integrator::{Progress, RenderSettings};
 use svetlo::io::{load_scene, read_image};
@@ -182,26 +183,37 @@ fn block_average(img: &Image, f: usize) -> Image {
     Image::new(w, h, data)
 }
 
-/// Render a shared scene with PSSMLT at `res` x `res` pixels and `spp` mutations per pixel.
-fn pssmlt_render(scene_path: &std::path::Path, res: u32, spp: u32, seed: u64, opts: PssmltOptions) -> (Image, ChainStats) {
+/// Which Metropolis integrator a test runs.
+#[derive(Clone)]
+enum Method {
+    Pss(PssmltOptions),
+    Veach(MltOptions),
+}
+
+/// Render a shared scene at `res` x `res` pixels and `spp` mutations per pixel.
+fn mlt_render(scene_path: &std::path::Path, res: u32, spp: u32, seed: u64, method: &Method) -> (Image, ChainStats) {
     let mut scene = load_scene(scene_path, &[]).unwrap_or_else(|e| panic!("{}: {e}", scene_path.display()));
     scene.camera.width = res;
     scene.camera.height = res;
     let mut settings = RenderSettings::from_scene(&scene);
     settings.spp = spp;
     settings.seed = seed;
-    let (film, stats) = Pssmlt::new(opts).render_with_stats(&scene, &settings, &Progress::new()).expect("render");
+    let (film, stats) = match method {
+        Method::Pss(o) => Pssmlt::new(o.clone()).render_with_stats(&scene, &settings, &Progress::new()),
+        Method::Veach(o) => Mlt::new(o.clone()).render_with_stats(&scene, &settings, &Progress::new()),
+    }
+    .expect("render");
     (film.image(), stats)
 }
 
 /// Mean within confidence and relMSE falling with mutations, against a reference
 /// block-averaged by `f` to `res` pixels.
-fn check_against_reference(scene_path: &std::path::Path, reference: &Image, f: usize, spp: [u32; 2], max_ratio: f64, opts: PssmltOptions) {
+fn check_against_reference(scene_path: &std::path::Path, reference: &Image, f: usize, spp: [u32; 2], max_ratio: f64, method: Method) {
     let reference = block_average(reference, f);
     let res = reference.width as u32;
     let mut errs = Vec::new();
     for (i, &n) in spp.iter().enumerate() {
-        let (img, stats) = pssmlt_render(scene_path, res, n, 7, opts.clone());
+        let (img, stats) = mlt_render(scene_path, res, n, 7, &method);
         let (mean, se) = stats.image_mean().expect("chains");
         let rm = reference.mean();
         // The relMSE of the image's shape: scaled to the reference's mean luminance, so that
@@ -234,7 +246,7 @@ fn pssmlt_cbox_rgb() {
     let reference = read_image(&dir.join("refs/cbox-rgb_mitsuba3.9.1_llvm_ad_rgb_4096spp.exr")).expect("reference");
     for target in [PssTargetKind::Bdpt, PssTargetKind::Path] {
         let opts = PssmltOptions { chain: ChainSettings { chains: 64, bootstrap: 40_000 }, target, ..Default::default() };
-        check_against_reference(&dir.join("cbox-rgb.xml"), &reference, 16, [32, 256], 0.35, opts);
+        check_against_reference(&dir.join("cbox-rgb.xml"), &reference, 16, [32, 256], 0.35, Method::Pss(opts));
     }
 }
 
@@ -246,5 +258,14 @@ fn pssmlt_bsdf_spheres_arealight() {
     let opts = PssmltOptions { chain: ChainSettings { chains: 64, bootstrap: 200_000 }, ..Default::default() };
     // Rare bright paths (the light seen in the glass and metal spheres) make this image's
     // relMSE noisier from seed to seed: seen between 0.11 and 0.44 for 8x; a bias stalls it at 1.
-    check_against_reference(&dir.join("test_arealight_path.xml"), &reference, 4, [256, 2048], 0.6, opts);
+    check_against_reference(&dir.join("test_arealight_path.xml"), &reference, 4, [256, 2048], 0.6, Method::Pss(opts));
+}
+
+#[test]
+fn mlt_cbox_rgb() {
+    let Some(root) = shared() else { return };
+    let dir = root.join("mitsuba-data/scenes/cbox");
+    let reference = read_image(&dir.join("refs/cbox-rgb_mitsuba3.9.1_llvm_ad_rgb_4096spp.exr")).expect("reference");
+    let opts = MltOptions { chain: ChainSettings { chains: 64, bootstrap: 40_000 }, ..Default::default() };
+    check_against_reference(&dir.join("cbox-rgb.xml"), &reference, 16, [32, 256], 0.35, Method::Veach(opts));
 }

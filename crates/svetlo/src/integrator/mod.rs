@@ -9,6 +9,7 @@ pub mod distributed;
 pub mod light;
 pub mod local;
 pub mod metropolis;
+pub mod mlt;
 pub mod path;
 pub mod pssmlt;
 pub mod splat;
@@ -230,10 +231,13 @@ pub fn by_name(name: &str) -> Result<Box<dyn Integrator>> {
             Ok(Box::new(crate::radiosity::display::RadiosityIntegrator { options: crate::radiosity::RadiosityOptions::parse(&other["radiosity:".len()..])? }))
         }
         "pssmlt" => Ok(Box::new(pssmlt::Pssmlt::default())),
+        "mlt" => Ok(Box::new(mlt::Mlt::default())),
+        // `mlt:key=value,...` (see `MltOptions::parse`).
+        other if other.starts_with("mlt:") => Ok(Box::new(mlt::Mlt::new(mlt::MltOptions::parse(&other["mlt:".len()..])?))),
         // `pssmlt:key=value,...` (see `PssmltOptions::parse`).
         other if other.starts_with("pssmlt:") => Ok(Box::new(pssmlt::Pssmlt::new(pssmlt::PssmltOptions::parse(&other["pssmlt:".len()..])?))),
         other => Err(Error::Settings(format!(
-            "unknown integrator '{other}' (available: path, light, bdpt, direct, whitted, distributed, zbuffer, radiosity[:options], pssmlt[:options])"
+            "unknown integrator '{other}' (available: path, light, bdpt, direct, whitted, distributed, zbuffer, radiosity[:options], pssmlt[:options], mlt[:options])"
         ))),
     }
 }
