@@ -17,7 +17,7 @@ use svetlo::film::compare::rel_mse;
 use svetlo::film::Image;
 use svetlo::integrator::metropolis::pss::PssSampler;
 use svetlo::integrator::metropolis::{self, ChainSettings, ChainStats, Contribution, MetropolisTarget, Proposal};
-use svetlo::integrator::mlt::{Mlt, MltOptions};
+use svetlo::integrator::mlt::{has_delta_lobes, Mlt, MltOptions};
 use svetlo::integrator::pssmlt::{PssTargetKind, Pssmlt, PssmltOptions};
 use svetlo::integrator::{Progress, RenderSettings};
 use svetlo::io::{load_scene, read_image};
@@ -190,20 +190,60 @@ enum Method {
     Veach(MltOptions),
 }
 
+/// What a test render gives: the image, the chains' statistics, and the mean and standard
+/// error per channel of the part of the image the chains do not cover (Veach MLT's BDPT
+/// complement, from the spread of independent renders; zero for PSSMLT).
+struct Rendered {
+    img: Image,
+    stats: ChainStats,
+    extra_mean: [f64; 3],
+    extra_se: [f64; 3],
+}
+
 /// Render a shared scene at `res` x `res` pixels and `spp` mutations per pixel.
-fn mlt_render(scene_path: &std::path::Path, res: u32, spp: u32, seed: u64, method: &Method) -> (Image, ChainStats) {
+fn mlt_render(scene_path: &std::path::Path, res: u32, spp: u32, seed: u64, method: &Method) -> Rendered {
     let mut scene = load_scene(scene_path, &[]).unwrap_or_else(|e| panic!("{}: {e}", scene_path.display()));
     scene.camera.width = res;
     scene.camera.height = res;
     let mut settings = RenderSettings::from_scene(&scene);
     settings.spp = spp;
     settings.seed = seed;
-    let (film, stats) = match method {
-        Method::Pss(o) => Pssmlt::new(o.clone()).render_with_stats(&scene, &settings, &Progress::new()),
-        Method::Veach(o) => Mlt::new(o.clone()).render_with_stats(&scene, &settings, &Progress::new()),
+    match method {
+        Method::Pss(o) => {
+            let (film, stats) = Pssmlt::new(o.clone()).render_with_stats(&scene, &settings, &Progress::new()).expect("render");
+            Rendered { img: film.image(), stats, extra_mean: [0.0; 3], extra_se: [0.0; 3] }
+        }
+        Method::Veach(o) => {
+            // The complement's samples grow with the mutations: eight renders of spp/8 each.
+            let mlt = Mlt::new(MltOptions { complement_spp: Some((spp / 8).max(1)), ..o.clone() });
+            let (film, stats) = mlt.render_chains(&scene, &settings, &Progress::new()).expect("render");
+            let mut img = film.image();
+            let (mut extra_mean, mut extra_se) = ([0.0; 3], [0.0; 3]);
+            if has_delta_lobes(&scene) {
+                // Eight independent complements; their average joins the image.
+                let n = 8;
+                let mut parts = Vec::new();
+                for r in 0..n {
+                    let mut s = settings.clone();
+                    s.seed = seed * 1000 + r;
+                    parts.push(mlt.render_complement(&scene, &s, &Progress::new()).expect("complement").image());
+                }
+                for p in &parts {
+                    for (d, v) in img.data.iter_mut().zip(&p.data) {
+                        *d += *v / n as f32;
+                    }
+                }
+                for k in 0..3 {
+                    let means: Vec<f64> = parts.iter().map(|p| p.mean()[k] as f64).collect();
+                    let m = means.iter().sum::<f64>() / n as f64;
+                    let var = means.iter().map(|x| (x - m) * (x - m)).sum::<f64>() / (n - 1) as f64;
+                    extra_mean[k] = m;
+                    extra_se[k] = (var / n as f64).sqrt();
+                }
+            }
+            Rendered { img, stats, extra_mean, extra_se }
+        }
     }
-    .expect("render");
-    (film.image(), stats)
 }
 
 /// Mean within confidence and relMSE falling with mutations, against a reference
@@ -213,8 +253,10 @@ fn check_against_reference(scene_path: &std::path::Path, reference: &Image, f: u
     let res = reference.width as u32;
     let mut errs = Vec::new();
     for (i, &n) in spp.iter().enumerate() {
-        let (img, stats) = mlt_render(scene_path, res, n, 7, &method);
-        let (mean, se) = stats.image_mean().expect("chains");
+        let Rendered { img, stats, extra_mean, extra_se } = mlt_render(scene_path, res, n, 7, &method);
+        let (chain_mean, chain_se) = stats.image_mean().expect("chains");
+        let mean: Vec<f64> = (0..3).map(|k| chain_mean[k] + extra_mean[k]).collect();
+        let se: Vec<f64> = (0..3).map(|k| chain_se[k].hypot(extra_se[k])).collect();
         let rm = reference.mean();
         // The relMSE of the image's shape: scaled to the reference's mean luminance, so that
         // the bootstrap's error in b (the same for both renders: same seed) does not floor it;
@@ -268,4 +310,15 @@ fn mlt_cbox_rgb() {
     let reference = read_image(&dir.join("refs/cbox-rgb_mitsuba3.9.1_llvm_ad_rgb_4096spp.exr")).expect("reference");
     let opts = MltOptions { chain: ChainSettings { chains: 64, bootstrap: 40_000 }, ..Default::default() };
     check_against_reference(&dir.join("cbox-rgb.xml"), &reference, 16, [32, 256], 0.35, Method::Veach(opts));
+}
+
+/// Glass, metal and plastic spheres: the chains take the non-delta paths and the BDPT
+/// complement the rest.
+#[test]
+fn mlt_bsdf_spheres_arealight() {
+    let Some(root) = shared() else { return };
+    let dir = root.join("mitsuba-data/tests/scenes/bsdf_spheres");
+    let reference = read_image(&dir.join("refs/test_arealight_ref_rgb.exr")).expect("reference");
+    let opts = MltOptions { chain: ChainSettings { chains: 64, bootstrap: 200_000 }, ..Default::default() };
+    check_against_reference(&dir.join("test_arealight_path.xml"), &reference, 4, [256, 2048], 0.6, Method::Veach(opts));
 }

@@ -112,7 +112,7 @@ fn check_scene(scene: &Scene) -> Result<()> {
 }
 
 /// Whether any material has a delta lobe (then the complement has light to add).
-fn has_delta_lobes(scene: &Scene) -> bool {
+pub fn has_delta_lobes(scene: &Scene) -> bool {
     scene.materials.iter().any(|m| m.bsdf(Vec2::ZERO).flags().is_specular())
 }
 
