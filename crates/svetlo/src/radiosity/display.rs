@@ -46,7 +46,7 @@ impl<'a> RadiosityView<'a> {
 
     /// Radiosity leaving the surface the ray hits (None: the ray escapes).
     pub fn radiosity(&self, scene: &Scene, ray: &crate::geometry::Ray) -> Option<Rgb> {
-        let hit = scene.accel.intersect(ray)?;
+        let hit = scene.intersect_prim(ray)?;
         Some(self.element_radiosity(&hit, ray.at(hit.t), ray.d).map(|(_, b)| b).unwrap_or(Rgb::BLACK))
     }
 

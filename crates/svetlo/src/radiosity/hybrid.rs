@@ -53,7 +53,7 @@ impl<'a> HybridView<'a> {
     fn gather_ray(&self, scene: &Scene, mut ray: Ray, sampler: &mut dyn Sampler) -> Rgb {
         let mut beta = Rgb::WHITE;
         for bounce in 0..=MAX_SPECULAR {
-            let Some(hit) = scene.accel.intersect(&ray) else { return Rgb::BLACK };
+            let Some(hit) = scene.intersect_prim(&ray) else { return Rgb::BLACK };
             if !self.specular[hit.shape as usize] {
                 let mut l = self.reflected(&hit, &ray);
                 if bounce > 0 && scene.shapes[hit.shape as usize].light.is_some() {
@@ -84,7 +84,7 @@ impl PixelEstimator for HybridView<'_> {
         let mut beta = Rgb::WHITE;
         let mut ray = *camera_ray;
         for bounce in 0..=MAX_SPECULAR {
-            let Some(hit) = scene.accel.intersect(&ray) else { break };
+            let Some(hit) = scene.intersect_prim(&ray) else { break };
             let Some(si) = scene.intersect(&ray) else { break };
             if let Some((_, area)) = scene.area_light(&si) {
                 if !(bounce == 0 && settings.hide_emitters) {
@@ -104,7 +104,7 @@ impl PixelEstimator for HybridView<'_> {
                 let n = if si.ng.dot(si.wo) < 0.0 { -si.ng } else { si.ng };
                 let frame = Frame::from_normal(n);
                 for _ in 0..self.gather {
-                    direct += sample_light_mis(scene, si.p, si.ng, &si.shading, wo, &bsdf, sampler.next_1d(), sampler.next_2d(), (1.0, 0.0));
+                    direct += sample_light_mis(scene, si.p, si.ng, &si.shading, wo, &bsdf, sampler.next_1d(), sampler.next_2d(), (1.0, 0.0), si.time);
                     let w = frame.to_world(warp::square_to_cosine_hemisphere(sampler.next_2d()));
                     indirect += self.gather_ray(scene, Ray::new(offset_ray_origin(si.p, si.ng, w), w), sampler);
                 }

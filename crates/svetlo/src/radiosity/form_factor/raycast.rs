@@ -41,7 +41,7 @@ pub fn row(scene: &Scene, mesh: &RadiosityMesh, i: usize, rays: u32, seed: u64) 
         let mut ray = Ray::new(offset_ray_origin(p, e.normal, d), d);
         let mut weight = w;
         for _ in 0..=MAX_SPECULAR {
-            let Some(h) = scene.accel.intersect(&ray) else { break };
+            let Some(h) = scene.intersect_prim(&ray) else { break };
             if let Some(j) = mesh.element_at(&h, ray.at(h.t), ray.d) {
                 if j as usize != i {
                     hits.push((j, weight));

@@ -260,7 +260,7 @@ impl<'a> Hierarchy<'a> {
             for x in 0..nx {
                 let raster = Vec2::new((x as f32 + 0.5) * cam.width as f32 / nx as f32, (y as f32 + 0.5) * cam.height as f32 / ny as f32);
                 let ray: Ray = cam.generate_ray(raster, Vec2::splat(0.5), 0.0);
-                if let Some(hit) = self.scene.accel.intersect(&ray) {
+                if let Some(hit) = self.scene.intersect_prim(&ray) {
                     let p = ray.at(hit.t);
                     if let Some(r) = self.roots.element_at(&hit, p, ray.d) {
                         self.camera_hits.push((r, p));
