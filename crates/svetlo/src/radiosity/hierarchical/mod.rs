@@ -67,8 +67,9 @@ impl Default for HierarchicalOptions {
 }
 
 /// A link: the receiver gathers F · B_src from `src`, F a linear function over the receiver
-/// given by its corner values `f` (their mean is the area-averaged form factor); `f_est` is
-/// the oracle's variation of F.
+/// given by its corner values `f` (their mean is the area-averaged form factor); `f_est`
+/// bounds the error of F for the oracle (the variation of the unoccluded F over either node,
+/// or F itself when the link is partially visible).
 #[derive(Clone, Copy, Debug)]
 pub struct Link {
     pub src: u32,
