@@ -102,7 +102,7 @@ impl Sppm {
     /// One iteration's photons: on diffuse surfaces, at least two segments from the light.
     fn photon_pass(&self, scene: &Scene, settings: &RenderSettings, iteration: u64, count: u64) -> KdTree<Photon> {
         let max_seg = photon_max_segments(settings.max_depth);
-        let photons = trace_photons(scene, settings.seed, iteration, count, max_seg, |d| {
+        let photons = trace_photons(scene, settings.seed, iteration, count, max_seg, |_, d| {
             let keep = (d.segments >= 2 && d.surface.intersects(LobeFlags::DIFFUSE)).then(|| Photon::from_deposit(d, 1.0));
             (keep, true)
         });

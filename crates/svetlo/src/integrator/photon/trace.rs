@@ -29,6 +29,11 @@ pub(crate) struct Deposit {
     pub caustic: bool,
     /// The lobes of the surface it landed on.
     pub surface: LobeFlags,
+    /// Geometric and shading normals there.
+    pub ng: Vec3,
+    pub ns: Vec3,
+    /// Reflectance of the side it arrived on, where that side is purely Lambertian.
+    pub albedo: Option<Rgb>,
 }
 
 /// The random numbers of photon path `index` of pass `tag`: a function of (seed, tag, index)
@@ -66,7 +71,17 @@ pub(crate) fn trace_photon(scene: &Scene, rng: &mut Pcg32, max_segments: i32, vi
         let bsdf = scene.material(&si).bsdf(si.uv);
         let flags = bsdf.flags();
         if flags.has_non_specular() {
-            let d = Deposit { p: si.p, wi: si.wo, power: beta, segments: segments as u32, caustic: all_specular && segments >= 2, surface: flags };
+            let d = Deposit {
+                p: si.p,
+                wi: si.wo,
+                power: beta,
+                segments: segments as u32,
+                caustic: all_specular && segments >= 2,
+                surface: flags,
+                ng: si.ng,
+                ns: si.shading.n,
+                albedo: super::map::lambertian_albedo(&bsdf, si.to_local(si.wo)),
+            };
             if !visit(&d) {
                 break;
             }
@@ -101,14 +116,15 @@ pub(crate) fn trace_photon(scene: &Scene, rng: &mut Pcg32, max_segments: i32, vi
 }
 
 /// Trace photon paths `0..count` of pass `tag` in parallel and collect what `keep` makes of
-/// each landing, in path order (so the result does not depend on the thread count).
+/// each landing (given the path's index), in path order (so the result does not depend on the
+/// thread count).
 pub(crate) fn trace_photons<T: Send>(
     scene: &Scene,
     seed: u64,
     tag: u64,
     count: u64,
     max_segments: i32,
-    keep: impl Fn(&Deposit) -> (Option<T>, bool) + Sync,
+    keep: impl Fn(u64, &Deposit) -> (Option<T>, bool) + Sync,
 ) -> Vec<T> {
     const CHUNK: u64 = 4096;
     let chunks = count.div_ceil(CHUNK);
@@ -119,7 +135,7 @@ pub(crate) fn trace_photons<T: Send>(
             for i in c * CHUNK..((c + 1) * CHUNK).min(count) {
                 let mut rng = photon_rng(seed, tag, i);
                 trace_photon(scene, &mut rng, max_segments, &mut |d| {
-                    let (v, go_on) = keep(d);
+                    let (v, go_on) = keep(i, d);
                     out.extend(v);
                     go_on
                 });
