@@ -75,6 +75,13 @@ pub struct RenderArgs {
     /// Also write the per-sample variance image OUT_var.exr.
     #[arg(long)]
     pub variance: bool,
+    /// BDPT only: also write one image per (s, t) strategy into DIR, MIS-weighted
+    /// (s<S>_t<T>_weighted.exr, they sum to the image) and unweighted (s<S>_t<T>_unweighted.exr).
+    #[arg(long, value_name = "DIR")]
+    pub strategies: Option<PathBuf>,
+    /// With --strategies: the longest paths (in segments) that get their own images.
+    #[arg(long, value_name = "N", default_value_t = 5, value_parser = value_parser!(u32).range(1..=32))]
+    pub strategy_depth: u32,
 }
 
 fn parse_seconds(s: &str) -> std::result::Result<f64, String> {
@@ -154,6 +161,9 @@ pub fn configure(mut scene: Scene, a: &RenderArgs) -> Result<Job> {
             anyhow::Error::new(e).context(format!("the scene asks for integrator '{integrator_name}'; choose another with --integrator"))
         }
     })?;
+    if a.strategies.is_some() && integrator_name != "bdpt" {
+        return Err(Usage(format!("--strategies needs --integrator bdpt (the render would use '{integrator_name}')")).into());
+    }
     let mut s = RenderSettings::from_scene(&scene);
     if let Some(spp) = a.spp {
         s.spp = spp;
@@ -195,16 +205,38 @@ pub fn configure(mut scene: Scene, a: &RenderArgs) -> Result<Job> {
 
 /// Render with a progress bar (drawn only on a terminal) fed from `progress` by a second thread.
 pub fn execute(job: &Job, progress: &Progress) -> Result<(Film, Duration)> {
+    let (film, (), elapsed) = execute_with(job, progress, || Ok((job.integrator.render(&job.scene, &job.settings, progress)?, ())))?;
+    Ok((film, elapsed))
+}
+
+/// `execute` for any render function that also returns something besides the film.
+fn execute_with<T>(job: &Job, progress: &Progress, render: impl FnOnce() -> svetlo::Result<(Film, T)>) -> Result<(Film, T, Duration)> {
     let start = Instant::now();
     let finished = AtomicBool::new(false);
     let pixels = job.scene.camera.width as u64 * job.scene.camera.height as u64;
-    let film = std::thread::scope(|s| {
+    let (film, extra) = std::thread::scope(|s| {
         s.spawn(|| drive_bar(progress, &finished, start, job.settings.time_limit, pixels));
-        let r = job.integrator.render(&job.scene, &job.settings, progress);
+        let r = render();
         finished.store(true, Ordering::Relaxed);
         r
     })?;
-    Ok((film, start.elapsed()))
+    Ok((film, extra, start.elapsed()))
+}
+
+/// BDPT with one image per strategy, written into `dir` (created if missing).
+fn execute_strategies(job: &Job, progress: &Progress, dir: &Path, depth: u32) -> Result<(Film, Duration, Vec<PathBuf>)> {
+    std::fs::create_dir_all(dir).with_context(|| format!("cannot create the strategies folder '{}'", dir.display()))?;
+    let (film, images, elapsed) =
+        execute_with(job, progress, || svetlo::integrator::bdpt::Bdpt.render_with_strategies(&job.scene, &job.settings, progress, depth as usize))?;
+    let mut written = Vec::new();
+    for im in &images {
+        for (img, kind) in [(&im.weighted, "weighted"), (&im.unweighted, "unweighted")] {
+            let p = dir.join(format!("s{}_t{}_{kind}.exr", im.s, im.t));
+            write_exr(&p, img)?;
+            written.push(p);
+        }
+    }
+    Ok((film, elapsed, written))
 }
 
 const BAR_UNITS: u64 = 10_000;
@@ -281,8 +313,20 @@ pub fn write_outputs(film: &Film, out: &OutputPaths, variance: bool) -> Result<V
 /// Everything after loading: configure, render, write, report. Returns the exit code.
 pub fn render_loaded(scene: Scene, a: &RenderArgs, out: &OutputPaths, progress: &Progress) -> Result<ExitCode> {
     let job = configure(scene, a)?;
+    if a.variance && matches!(job.integrator_name.as_str(), "light" | "ptracer" | "bdpt") {
+        eprintln!(
+            "warning: --variance counts only what each pixel's own samples add; the {} integrator's splats (light paths) are not in it",
+            job.integrator_name
+        );
+    }
     let (w, h) = (job.scene.camera.width, job.scene.camera.height);
-    let (film, elapsed) = execute(&job, progress)?;
+    let (film, elapsed, strategy_files) = match &a.strategies {
+        Some(dir) => execute_strategies(&job, progress, dir, a.strategy_depth)?,
+        None => {
+            let (film, elapsed) = execute(&job, progress)?;
+            (film, elapsed, Vec::new())
+        }
+    };
     let written = write_outputs(&film, out, a.variance)?;
     let secs = elapsed.as_secs_f64();
     let samples = film.spp_done as f64 * w as f64 * h as f64;
@@ -294,6 +338,9 @@ pub fn render_loaded(scene: Scene, a: &RenderArgs, out: &OutputPaths, progress: 
     println!("samples/s   {}", si(samples / secs.max(1e-9)));
     for p in &written {
         println!("wrote       {}", p.display());
+    }
+    if let (Some(dir), false) = (&a.strategies, strategy_files.is_empty()) {
+        println!("strategies  {} images in {}", strategy_files.len(), dir.display());
     }
     if progress.cancelled() {
         eprintln!("interrupted after {} spp", film.spp_done);
@@ -309,6 +356,9 @@ pub fn run(a: &RenderArgs) -> Result<ExitCode> {
     // Check what can be checked before a possibly slow scene load.
     if let Some(name) = &a.integrator {
         integrator::by_name(name).map_err(|e| Usage(e.to_string()))?;
+        if a.strategies.is_some() && name != "bdpt" {
+            return Err(Usage(format!("--strategies needs --integrator bdpt, not '{name}'")).into());
+        }
     }
     let out = OutputPaths::new(&a.scene, a.output.as_deref())?;
     let scene = svetlo::io::load_scene(&a.scene, &a.define).context("cannot load the scene")?;
@@ -416,6 +466,40 @@ pub mod tests {
         // Unknown integrator from the command line is a usage error.
         let e = configure(tiny_scene(), &args(&["--integrator", "nope"])).err().unwrap();
         assert!(e.downcast_ref::<Usage>().is_some(), "{e:#}");
+    }
+
+    #[test]
+    fn strategies_need_bdpt() {
+        let e = configure(tiny_scene(), &args(&["--strategies", "dir", "--integrator", "path"])).err().unwrap();
+        assert!(e.downcast_ref::<Usage>().is_some() && e.to_string().contains("bdpt"), "{e:#}");
+        // Without --integrator the scene's (path) is used: still an error.
+        let e = configure(tiny_scene(), &args(&["--strategies", "dir"])).err().unwrap();
+        assert!(e.downcast_ref::<Usage>().is_some(), "{e:#}");
+        assert!(configure(tiny_scene(), &args(&["--strategies", "dir", "--integrator", "bdpt"])).is_ok());
+    }
+
+    #[test]
+    fn strategies_written() {
+        let d = tmp("strategies");
+        let a = args(&[
+            "--spp",
+            "2",
+            "--integrator",
+            "bdpt",
+            "--strategies",
+            d.join("st").to_str().unwrap(),
+            "--strategy-depth",
+            "2",
+            "-o",
+            d.join("b.exr").to_str().unwrap(),
+        ]);
+        let paths = OutputPaths::new(&a.scene, a.output.as_deref()).unwrap();
+        assert_eq!(render_loaded(tiny_scene(), &a, &paths, &Progress::new()).unwrap(), ExitCode::SUCCESS);
+        // Depth 2: (1,1), (0,2), (2,1), (1,2), (0,3), weighted and unweighted.
+        let n = std::fs::read_dir(d.join("st")).unwrap().count();
+        assert_eq!(n, 10);
+        assert!(d.join("st/s1_t2_weighted.exr").is_file() && d.join("st/s2_t1_unweighted.exr").is_file());
+        std::fs::remove_dir_all(&d).unwrap();
     }
 
     #[test]

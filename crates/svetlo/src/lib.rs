@@ -2,7 +2,7 @@
 //! to transport light through it (see DESIGN.md in the shared folder).
 //!
 //! Dependency order (a module uses only those before it; rustfmt lists them alphabetically):
-//! math, spectrum, geometry, accel, sampling, texture, bsdf, camera, film, light, scene,
+//! math, spectrum, geometry, accel, sampling, texture, bsdf, camera, film, light, scene, path,
 //! then the methods (integrator, raster, radiosity), and io (files) last.
 
 pub mod accel;
@@ -15,6 +15,7 @@ pub mod integrator;
 pub mod io;
 pub mod light;
 pub mod math;
+pub mod path;
 pub mod radiosity;
 pub mod raster;
 pub mod sampling;

@@ -3,11 +3,14 @@
 //! Camera-side methods implement [`PixelEstimator`] (radiance along one camera ray) and share
 //! the parallel, deterministic, cancellable driver [`render_pixels`].
 
+pub mod bdpt;
 pub mod direct;
 pub mod distributed;
+pub mod light;
 pub mod local;
 pub mod path;
 pub mod photon;
+pub mod splat;
 pub mod whitted;
 pub mod zbuffer;
 
@@ -209,6 +212,8 @@ pub fn render_pixels(scene: &Scene, settings: &RenderSettings, progress: &Progre
 pub fn by_name(name: &str) -> Result<Box<dyn Integrator>> {
     match name {
         "path" => Ok(Box::new(path::PathTracer)),
+        "light" | "ptracer" => Ok(Box::new(light::LightTracer)),
+        "bdpt" => Ok(Box::new(bdpt::Bdpt)),
         "direct" => Ok(Box::new(direct::DirectIntegrator::default())),
         "whitted" => Ok(Box::new(whitted::Whitted)),
         "distributed" => Ok(Box::new(distributed::Distributed)),
@@ -224,7 +229,7 @@ pub fn by_name(name: &str) -> Result<Box<dyn Integrator>> {
         other if other.starts_with("photon:") => Ok(Box::new(photon::PhotonMapper { options: photon::PhotonOptions::parse(&other["photon:".len()..])? })),
         other if other.starts_with("sppm:") => Ok(Box::new(photon::Sppm { options: photon::SppmOptions::parse(&other["sppm:".len()..])? })),
         other => Err(Error::Settings(format!(
-            "unknown integrator '{other}' (available: path, direct, whitted, distributed, zbuffer, radiosity[:options], photon[:options], sppm[:options])"
+            "unknown integrator '{other}' (available: path, light, bdpt, direct, whitted, distributed, zbuffer, radiosity[:options], photon[:options], sppm[:options])"
         ))),
     }
 }

@@ -40,6 +40,9 @@ pub struct LightSample {
     pub pdf: f32,
     /// The sampled point on the light (for infinite lights a point beyond the scene).
     pub p: Vec3,
+    /// Surface normal at `p` for area lights (bidirectional methods convert densities with
+    /// it); zero for the others.
+    pub n: Vec3,
     /// Whether `p` is at infinity (shadow rays then run to the scene's bound).
     pub infinite: bool,
 }
@@ -126,7 +129,7 @@ impl Light {
                     return None;
                 }
                 let wi = d / dist2.sqrt();
-                Some(LightSample { wi, li: *intensity / dist2, pdf: 1.0, p: *position, infinite: false })
+                Some(LightSample { wi, li: *intensity / dist2, pdf: 1.0, p: *position, n: Vec3::ZERO, infinite: false })
             }
             Light::Spot { position, .. } => {
                 let d = *position - p_ref;
@@ -139,19 +142,26 @@ impl Light {
                 if i.is_black() {
                     return None;
                 }
-                Some(LightSample { wi, li: i / dist2, pdf: 1.0, p: *position, infinite: false })
+                Some(LightSample { wi, li: i / dist2, pdf: 1.0, p: *position, n: Vec3::ZERO, infinite: false })
             }
             Light::Directional { direction, irradiance } => {
                 let wi = -*direction;
-                Some(LightSample { wi, li: *irradiance, pdf: 1.0, p: point_at_infinity(bounds, p_ref, wi), infinite: true })
+                Some(LightSample { wi, li: *irradiance, pdf: 1.0, p: point_at_infinity(bounds, p_ref, wi), n: Vec3::ZERO, infinite: true })
             }
             Light::Constant { radiance } => {
                 let wi = warp::square_to_uniform_sphere(u);
-                Some(LightSample { wi, li: *radiance, pdf: warp::square_to_uniform_sphere_pdf(), p: point_at_infinity(bounds, p_ref, wi), infinite: true })
+                Some(LightSample {
+                    wi,
+                    li: *radiance,
+                    pdf: warp::square_to_uniform_sphere_pdf(),
+                    p: point_at_infinity(bounds, p_ref, wi),
+                    n: Vec3::ZERO,
+                    infinite: true,
+                })
             }
             Light::EnvMap(env) => {
                 let (wi, pdf) = env.sample(u)?;
-                Some(LightSample { wi, li: env.eval(wi), pdf, p: point_at_infinity(bounds, p_ref, wi), infinite: true })
+                Some(LightSample { wi, li: env.eval(wi), pdf, p: point_at_infinity(bounds, p_ref, wi), n: Vec3::ZERO, infinite: true })
             }
         }
     }

@@ -1,0 +1,137 @@
+//! Bidirectional path tracing (Veach 1997, ch. 10): per pixel sample one camera subpath and
+//! one light subpath, every prefix pair (s, t) connected, each strategy weighted by the
+//! power heuristic over all strategies that could have produced the same path (computed in
+//! time linear in the path's length, see `path/mis.rs`). Strategies with t = 1 land on other
+//! pixels and are splatted (scaled by 1/spp, one light path per pixel sample).
+//!
+//! Estimator measure: area at every vertex (solid angle for vertices at infinity).
+//! `render_with_strategies` also returns one image per (s, t), weighted and unweighted,
+//! reconstructed with a box filter: the weighted ones sum to the BDPT image (exactly so
+//! when the render's filter is the box).
+
+use super::light::require_connectible_camera;
+use super::splat::{render_splatting, SampleOut, SplatEstimator};
+use super::{Integrator, Progress, RenderSettings};
+use crate::error::Result;
+use crate::film::{Film, Image};
+use crate::geometry::Ray;
+use crate::path::{camera_subpath, connect, light_subpath, PathConfig, Vertex};
+use crate::sampling::Sampler;
+use crate::scene::Scene;
+use crate::spectrum::Rgb;
+use glam::Vec2;
+
+#[derive(Clone, Copy, Debug, Default)]
+pub struct Bdpt;
+
+/// The images of one strategy: s light vertices, t camera vertices (s + t - 1 segments).
+#[derive(Clone, Debug)]
+pub struct StrategyImage {
+    pub s: usize,
+    pub t: usize,
+    /// Its share of the BDPT image (MIS-weighted).
+    pub weighted: Image,
+    /// What the strategy estimates alone (the full contribution of the paths it samples).
+    pub unweighted: Image,
+}
+
+#[derive(Default)]
+pub struct Scratch {
+    camera: Vec<Vertex>,
+    light: Vec<Vertex>,
+}
+
+struct Estimator {
+    cfg: PathConfig,
+    /// Strategy index by (s, t) for the per-strategy images: index[s][t].
+    index: Vec<Vec<Option<u32>>>,
+}
+
+impl Estimator {
+    fn strategy(&self, s: usize, t: usize) -> Option<u32> {
+        self.index.get(s).and_then(|r| r.get(t)).copied().flatten()
+    }
+}
+
+impl SplatEstimator for Estimator {
+    type Scratch = Scratch;
+    fn scratch(&self) -> Scratch {
+        Scratch { camera: Vec::with_capacity(16), light: Vec::with_capacity(16) }
+    }
+    fn sample(
+        &self,
+        scene: &Scene,
+        _settings: &RenderSettings,
+        ray: &Ray,
+        raster: Vec2,
+        sampler: &mut dyn Sampler,
+        sc: &mut Scratch,
+        out: &mut SampleOut,
+    ) -> Rgb {
+        camera_subpath(scene, &self.cfg, ray, raster, sampler, &mut sc.camera);
+        light_subpath(scene, &self.cfg, ray.time, sampler, &mut sc.light);
+        let mut l = Rgb::BLACK;
+        for t in 1..=sc.camera.len() {
+            for s in 0..=sc.light.len() {
+                if s + t < 2 || !self.cfg.allows(s + t) {
+                    continue;
+                }
+                let Some(c) = connect(scene, &self.cfg, &sc.light, &sc.camera, s, t, sampler, true) else { continue };
+                let v = c.l * c.weight;
+                match c.raster {
+                    Some(r) => out.splat(r, v),
+                    None => l += v,
+                }
+                if let Some(k) = self.strategy(s, t) {
+                    let at = c.raster.unwrap_or(raster);
+                    out.push(1 + 2 * k, at, v);
+                    out.push(2 + 2 * k, at, c.l);
+                }
+            }
+        }
+        l
+    }
+}
+
+impl Bdpt {
+    /// Render, and keep the images of every strategy with at most `max_segments` segments
+    /// (within max_depth).
+    pub fn render_with_strategies(
+        &self,
+        scene: &Scene,
+        settings: &RenderSettings,
+        progress: &Progress,
+        max_segments: usize,
+    ) -> Result<(Film, Vec<StrategyImage>)> {
+        require_connectible_camera(scene, "bdpt")?;
+        let cfg = PathConfig::new(scene, settings.max_depth, settings.rr_depth, settings.hide_emitters);
+        let max_segments = if settings.max_depth >= 0 { max_segments.min(settings.max_depth as usize) } else { max_segments };
+        let mut list = Vec::new();
+        let mut index = vec![vec![None; max_segments + 2]; max_segments + 2];
+        for n in 2..=max_segments + 1 {
+            for s in (0..n).rev() {
+                index[s][n - s] = Some(list.len() as u32);
+                list.push((s, n - s));
+            }
+        }
+        let est = Estimator { cfg, index };
+        let r = render_splatting(scene, settings, progress, &est, 2 * list.len())?;
+        let (w, h) = (r.film.width as usize, r.film.height as usize);
+        let mut channels = r.channels.into_iter();
+        let mut images = Vec::with_capacity(list.len());
+        for (s, t) in list {
+            let weighted = Image::new(w, h, channels.next().unwrap_or_default());
+            let unweighted = Image::new(w, h, channels.next().unwrap_or_default());
+            images.push(StrategyImage { s, t, weighted, unweighted });
+        }
+        Ok((r.film, images))
+    }
+}
+
+impl Integrator for Bdpt {
+    fn render(&self, scene: &Scene, settings: &RenderSettings, progress: &Progress) -> Result<Film> {
+        require_connectible_camera(scene, "bdpt")?;
+        let est = Estimator { cfg: PathConfig::new(scene, settings.max_depth, settings.rr_depth, settings.hide_emitters), index: Vec::new() };
+        Ok(render_splatting(scene, settings, progress, &est, 0)?.film)
+    }
+}

@@ -1,0 +1,169 @@
+//! The driver of methods that also write away from their own pixel (light tracing, BDPT's
+//! t = 1): like [`render_pixels`](super::render_pixels), passes over tiles in parallel, but
+//! each pixel sample may also emit splats. Tiles keep their splats in lists that are added
+//! to the film in tile order after the pass, so the image does not depend on the number of
+//! threads or on scheduling. Besides the film, an estimator may feed extra images
+//! ("channels", box reconstruction, divided by the spp at the end), e.g. one per strategy.
+
+use super::{Progress, RenderSettings};
+use crate::error::{Error, Result};
+use crate::film::{Film, FilmTile};
+use crate::geometry::Ray;
+use crate::sampling::{sampler::make_sampler, Sampler};
+use crate::scene::Scene;
+use crate::spectrum::Rgb;
+use glam::Vec2;
+use rayon::prelude::*;
+use std::sync::atomic::Ordering;
+use std::time::Instant;
+
+const TILE: u32 = 16;
+/// Pixel samples per pass at most, bounding the memory splat lists take.
+const MAX_PASS_SAMPLES: u64 = 1 << 19;
+
+/// A contribution away from the filtered pixel sample: channel 0 is the film's splat
+/// buffer, channel c > 0 the extra image c - 1.
+#[derive(Clone, Copy, Debug)]
+pub struct Splat {
+    pub raster: Vec2,
+    pub channel: u32,
+    pub value: Rgb,
+}
+
+/// What one pixel sample produced.
+pub struct SampleOut<'a> {
+    pub splats: &'a mut Vec<Splat>,
+}
+
+impl SampleOut<'_> {
+    #[inline]
+    pub fn splat(&mut self, raster: Vec2, value: Rgb) {
+        self.push(0, raster, value);
+    }
+    #[inline]
+    pub fn push(&mut self, channel: u32, raster: Vec2, value: Rgb) {
+        if !value.is_black() && value.is_finite() {
+            self.splats.push(Splat { raster, channel, value });
+        }
+    }
+}
+
+/// One pixel sample of a method that splats.
+pub trait SplatEstimator: Sync {
+    /// Per-thread scratch space (subpath buffers), reused across samples.
+    type Scratch: Send;
+    fn scratch(&self) -> Self::Scratch;
+    /// Radiance to add at `raster` through the pixel filter; light-side results go to `out`.
+    #[allow(clippy::too_many_arguments)]
+    fn sample(
+        &self,
+        scene: &Scene,
+        settings: &RenderSettings,
+        ray: &Ray,
+        raster: Vec2,
+        sampler: &mut dyn Sampler,
+        scratch: &mut Self::Scratch,
+        out: &mut SampleOut,
+    ) -> Rgb;
+}
+
+/// The film (splats scaled by the spp done) and the extra channels (already divided by it).
+pub struct SplatRender {
+    pub film: Film,
+    pub channels: Vec<Vec<Rgb>>,
+}
+
+/// Render with an estimator that splats; `channels` extra images of the film's size.
+pub fn render_splatting<E: SplatEstimator>(scene: &Scene, settings: &RenderSettings, progress: &Progress, est: &E, channels: usize) -> Result<SplatRender> {
+    settings.validate()?;
+    let cam = &scene.camera;
+    let (w, h) = (cam.width, cam.height);
+    let mut film = Film::new(w, h, settings.filter);
+    let mut extra: Vec<Vec<Rgb>> = vec![vec![Rgb::BLACK; (w * h) as usize]; channels];
+    let tiles: Vec<(u32, u32, u32, u32)> = (0..h.div_ceil(TILE))
+        .flat_map(|ty| (0..w.div_ceil(TILE)).map(move |tx| (tx * TILE, ty * TILE, ((tx + 1) * TILE).min(w), ((ty + 1) * TILE).min(h))))
+        .collect();
+    progress.total.store(settings.spp as u64 * w as u64 * h as u64, Ordering::Relaxed);
+    let pool = rayon::ThreadPoolBuilder::new().num_threads(settings.threads).build().map_err(|e| Error::Settings(format!("thread pool: {e}")))?;
+    let start = Instant::now();
+    let proto = make_sampler(settings.sampler, settings.spp, settings.seed);
+    let max_pass = ((MAX_PASS_SAMPLES / (w as u64 * h as u64).max(1)) as u32).max(1);
+    let mut spp_done = 0u32;
+    let mut pass_spp = 1u32;
+    while spp_done < settings.spp {
+        if progress.cancelled() || settings.time_limit.is_some_and(|t| start.elapsed() >= t) {
+            break;
+        }
+        let n = pass_spp.min(settings.spp - spp_done).min(max_pass);
+        let s0 = spp_done;
+        let film_ref = &film;
+        let results: Vec<Option<(FilmTile, Vec<Splat>)>> = pool.install(|| {
+            tiles
+                .par_iter()
+                .map(|&(x0, y0, x1, y1)| {
+                    if progress.cancelled() {
+                        return None;
+                    }
+                    let mut tile = film_ref.tile(x0, y0, x1, y1);
+                    let mut splats = Vec::new();
+                    let mut sampler = proto.clone_box();
+                    let mut scratch = est.scratch();
+                    for y in y0..y1 {
+                        for x in x0..x1 {
+                            for s in s0..s0 + n {
+                                sampler.start_pixel_sample(x, y, s);
+                                let pf = sampler.next_2d();
+                                let lens = sampler.next_2d();
+                                let time = sampler.next_1d();
+                                let raster = Vec2::new(x as f32 + pf.x, y as f32 + pf.y);
+                                let ray = cam.generate_ray(raster, lens, time);
+                                let mut out = SampleOut { splats: &mut splats };
+                                let l = est.sample(scene, settings, &ray, raster, sampler.as_mut(), &mut scratch, &mut out);
+                                tile.add_sample(raster, l);
+                            }
+                        }
+                    }
+                    progress.done.fetch_add(n as u64 * ((x1 - x0) * (y1 - y0)) as u64, Ordering::Relaxed);
+                    Some((tile, splats))
+                })
+                .collect()
+        });
+        if results.iter().any(|t| t.is_none()) {
+            break; // cancelled mid-pass: drop the incomplete pass
+        }
+        for (t, splats) in results.iter().flatten() {
+            film.merge_tile(t);
+            for sp in splats {
+                if sp.channel == 0 {
+                    film.splat(sp.raster, sp.value);
+                } else if let Some(img) = extra.get_mut(sp.channel as usize - 1) {
+                    let (x, y) = (sp.raster.x.floor(), sp.raster.y.floor());
+                    if x >= 0.0 && y >= 0.0 && (x as u32) < w && (y as u32) < h {
+                        img[(y as u32 * w + x as u32) as usize] += sp.value;
+                    }
+                }
+            }
+        }
+        spp_done += n;
+        film.spp_done = spp_done;
+        let elapsed = start.elapsed().as_secs_f64();
+        let per_spp = elapsed / spp_done as f64;
+        pass_spp = if per_spp > 0.0 { ((0.5 / per_spp) as u32).clamp(1, 64) } else { 64 };
+        if let Some(t) = settings.time_limit {
+            let left = t.as_secs_f64() - elapsed;
+            if per_spp > 0.0 {
+                pass_spp = pass_spp.min(((left / per_spp) as u32).max(1));
+            }
+        }
+    }
+    // Each pixel sample traced one light path: N = W H spp paths, and the camera's
+    // importance is normalised so that splats scale by W H / N = 1 / spp.
+    film.splat_scale = spp_done.max(1) as f32;
+    let inv = 1.0 / spp_done.max(1) as f32;
+    for img in &mut extra {
+        for p in img.iter_mut() {
+            *p *= inv;
+        }
+    }
+    Ok(SplatRender { film, channels: extra })
+}

@@ -1,0 +1,135 @@
+//! Connecting the first s vertices of a light subpath to the first t of a camera subpath:
+//! the path's unweighted contribution and its MIS weight.
+//!
+//! * s = 0: the camera subpath itself ends on an emitter;
+//! * t = 1: the light subpath's end is connected to a fresh point on the lens
+//!   (`Camera::sample_wi`); the result lands at its own film position (a splat);
+//! * s = 1: a fresh point on a light (`Light::sample_li`, next-event estimation);
+//! * otherwise the two ends are joined by a shadow ray.
+//!
+//! Sampler dimensions: t = 1 uses two (the lens), s = 1 three (light choice, point).
+
+use super::vertex::geometry_term;
+use super::{mis_weight, PathConfig, Vertex, VertexKind};
+use crate::bsdf::TransportMode;
+use crate::sampling::Sampler;
+use crate::scene::Scene;
+use crate::spectrum::Rgb;
+use glam::Vec2;
+
+/// One strategy's estimate for one pair of subpaths.
+#[derive(Clone, Copy, Debug)]
+pub struct Connection {
+    /// Unweighted contribution (in the film's pixel units; splats are divided by the
+    /// number of light paths per pixel).
+    pub l: Rgb,
+    /// Power-heuristic weight (1 when not asked for).
+    pub weight: f32,
+    /// Film position for t = 1 (a splat); None: the camera subpath's own pixel.
+    pub raster: Option<Vec2>,
+}
+
+/// Strategy (s, t) on the subpaths `light` and `camera`; None when it contributes nothing.
+/// `weighted`: compute the MIS weight (pure light tracing does not need it; it may then pass
+/// an empty camera subpath for t = 1).
+#[allow(clippy::too_many_arguments)]
+pub fn connect(
+    scene: &Scene,
+    cfg: &PathConfig,
+    light: &[Vertex],
+    camera: &[Vertex],
+    s: usize,
+    t: usize,
+    sampler: &mut dyn Sampler,
+    weighted: bool,
+) -> Option<Connection> {
+    if t == 0 || s > light.len() || (t > camera.len() && t != 1) || s + t < 2 || !cfg.allows(s + t) {
+        return None;
+    }
+    if s + t == 2 && cfg.hide_emitters {
+        return None;
+    }
+    // A camera path that escaped can only be used as a whole.
+    if s > 0 && t >= 2 && camera[t - 1].kind == VertexKind::Light {
+        return None;
+    }
+    let mut sampled: Option<Vertex> = None;
+    let mut raster = None;
+    let l = if s == 0 {
+        let pt = &camera[t - 1];
+        if !pt.is_light() {
+            return None;
+        }
+        pt.beta * pt.le(scene, &camera[t - 2])
+    } else if t == 1 {
+        let u = sampler.next_2d();
+        let qs = &light[s - 1];
+        if !cfg.camera_connectible || !qs.connectible(scene) || (s == 1 && !qs.is_area_light(scene)) {
+            return None;
+        }
+        let cs = scene.camera.sample_wi(qs.p, u)?;
+        if cs.pdf <= 0.0 || cs.we <= 0.0 {
+            return None;
+        }
+        let cam = Vertex::camera(cs.p_lens, cs.raster, Rgb::splat(cs.we / cs.pdf));
+        let f = if s == 1 { qs.le(scene, &cam) } else { qs.f(&cam, TransportMode::Importance) };
+        let l = qs.beta * f * cam.beta * qs.abs_cos_to(&cam);
+        if l.is_black() || scene.occluded(qs.p, qs.ng, cs.p_lens) {
+            return None;
+        }
+        raster = Some(cs.raster);
+        sampled = Some(cam);
+        l
+    } else if s == 1 {
+        let u_light = sampler.next_1d();
+        let u = sampler.next_2d();
+        let pt = &camera[t - 1];
+        if !pt.connectible(scene) || scene.lights.is_empty() {
+            return None;
+        }
+        let (li, pmf, _) = scene.light_distribution.sample_discrete(u_light);
+        if pmf <= 0.0 {
+            return None;
+        }
+        let ls = scene.lights[li].sample_li(pt.p, u, &scene.bounds)?;
+        if ls.pdf <= 0.0 || ls.li.is_black() {
+            return None;
+        }
+        let beta = ls.li / (pmf * ls.pdf);
+        let mut v = if ls.infinite {
+            Vertex::light_infinite(Some(li as u32), ls.p, ls.wi, beta, 0.0)
+        } else {
+            Vertex::light_point(li as u32, ls.p, ls.n, ls.li, beta, 0.0)
+        };
+        v.pdf_fwd = v.pdf_light_origin(scene, pt);
+        let l = pt.beta * pt.f(&v, TransportMode::Radiance) * v.beta * pt.abs_cos_to(&v);
+        if l.is_black() {
+            return None;
+        }
+        let blocked = if ls.infinite { scene.occluded_dir(pt.p, pt.ng, ls.wi) } else { scene.occluded(pt.p, pt.ng, ls.p) };
+        if blocked {
+            return None;
+        }
+        sampled = Some(v);
+        l
+    } else {
+        let (qs, pt) = (&light[s - 1], &camera[t - 1]);
+        if !qs.connectible(scene) || !pt.connectible(scene) {
+            return None;
+        }
+        let l = qs.beta * qs.f(pt, TransportMode::Importance) * pt.f(qs, TransportMode::Radiance) * pt.beta;
+        if l.is_black() {
+            return None;
+        }
+        let g = geometry_term(scene, qs, pt);
+        if g == 0.0 {
+            return None;
+        }
+        l * g
+    };
+    if l.is_black() || !l.is_finite() {
+        return None;
+    }
+    let weight = if weighted { mis_weight(scene, cfg, light, camera, sampled.as_ref(), s, t) } else { 1.0 };
+    Some(Connection { l, weight, raster })
+}

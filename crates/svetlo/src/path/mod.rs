@@ -1,0 +1,65 @@
+//! The path space shared by every bidirectional method (light tracing, BDPT, Metropolis,
+//! photon tracing): vertices carrying densities in area measure, random walks from the
+//! camera and from the lights, the connection of a light subpath to a camera subpath and
+//! its multiple-importance weight (Veach's thesis, ch. 10; the bookkeeping follows pbrt's).
+//!
+//! Measures and conventions:
+//! * `pdf_fwd`: the density with which the walk that built a vertex sampled it from its
+//!   predecessor, per unit area at the vertex (per unit solid angle for a vertex at infinity);
+//!   `pdf_rev`: the same for a walk in the other direction, sampling it from its successor.
+//!   Densities of delta (specular) choices are stored as 0 and the vertex is marked `delta`.
+//! * `beta`: the subpath's throughput up to the vertex (the Monte Carlo weight of the walk):
+//!   1 at the camera, Le cos / (pmf pdf_pos pdf_dir) leaving a light.
+//! * A full path of s light vertices and t camera vertices has s + t - 1 segments; with
+//!   Mitsuba's `max_depth` D a camera subpath has at most D + 1 vertices and a light subpath
+//!   at most D, so every strategy of every admissible path exists and the MIS weights of
+//!   one path sum to one.
+//! * Strategies never implemented (t = 0: a light path hitting the lens) get no weight; the
+//!   (s, t) = (1, 1) strategy (an emitter connected straight to the camera) exists for area
+//!   lights only, as a point light is invisible to a camera ray.
+
+mod connect;
+mod mis;
+mod vertex;
+mod walk;
+
+pub use connect::{connect, Connection};
+pub use mis::mis_weight;
+pub use vertex::{Event, EventKind, Vertex, VertexKind};
+pub use walk::{camera_subpath, light_subpath, random_walk};
+
+use crate::scene::Scene;
+
+/// What the walks and connections need to know about the render.
+#[derive(Clone, Copy, Debug)]
+pub struct PathConfig {
+    /// Most vertices a camera subpath may have (max_depth + 1; unbounded: usize::MAX).
+    pub max_camera_vertices: usize,
+    /// Most vertices a light subpath may have (max_depth).
+    pub max_light_vertices: usize,
+    /// Russian roulette from this many segments on.
+    pub rr_depth: i32,
+    /// Leave out paths of one segment (emitters seen directly).
+    pub hide_emitters: bool,
+    /// Whether the camera can be connected to (perspective and thin lens; not orthographic).
+    pub camera_connectible: bool,
+}
+
+impl PathConfig {
+    /// `max_depth` in Mitsuba's meaning (-1 unbounded).
+    pub fn new(scene: &Scene, max_depth: i32, rr_depth: i32, hide_emitters: bool) -> Self {
+        let (cam, light) = if max_depth < 0 { (usize::MAX, usize::MAX) } else { (max_depth as usize + 1, max_depth as usize) };
+        PathConfig {
+            max_camera_vertices: cam,
+            max_light_vertices: light,
+            rr_depth,
+            hide_emitters,
+            camera_connectible: !matches!(scene.camera.projection, crate::camera::Projection::Orthographic),
+        }
+    }
+
+    /// Whether a path of `vertices` vertices fits in max_depth.
+    pub fn allows(&self, vertices: usize) -> bool {
+        vertices <= self.max_camera_vertices
+    }
+}

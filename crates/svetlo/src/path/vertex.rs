@@ -1,0 +1,367 @@
+//! One vertex of a path, and the densities and throughputs between two vertices.
+
+use crate::bsdf::{Bsdf, LobeFlags, TransportMode};
+use crate::geometry::SurfaceInteraction;
+use crate::light::Light;
+use crate::math::{Frame, PI};
+use crate::scene::Scene;
+use crate::spectrum::Rgb;
+use glam::{Vec2, Vec3};
+
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum VertexKind {
+    /// The lens (or pinhole).
+    Camera,
+    /// A light's endpoint: a point on an emitter, a point or spot light, or a direction at
+    /// infinity (environment, directional, or a camera ray that escaped the scene).
+    Light,
+    /// A surface the walk scattered on (it may also emit: a camera path that hit an emitter).
+    Surface,
+}
+
+/// What happened at a vertex, for light path expressions: E camera, L light, D diffuse,
+/// G glossy, S specular, N null (a mask let the path through), each a reflection or a
+/// transmission.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum EventKind {
+    Camera,
+    Light,
+    Diffuse,
+    Glossy,
+    Specular,
+    Null,
+}
+
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct Event {
+    pub kind: EventKind,
+    pub transmission: bool,
+}
+
+impl Event {
+    pub const CAMERA: Event = Event { kind: EventKind::Camera, transmission: false };
+    pub const LIGHT: Event = Event { kind: EventKind::Light, transmission: false };
+
+    /// The event of a sampled lobe.
+    pub fn from_lobe(l: LobeFlags) -> Event {
+        let kind = if l.is_null() {
+            EventKind::Null
+        } else if l.contains(LobeFlags::SPECULAR) {
+            EventKind::Specular
+        } else if l.contains(LobeFlags::GLOSSY) {
+            EventKind::Glossy
+        } else {
+            EventKind::Diffuse
+        };
+        Event { kind, transmission: l.contains(LobeFlags::TRANSMISSION) }
+    }
+
+    /// The event of a connection through a BSDF: its non-specular part, glossy if it has one.
+    pub fn connection(flags: LobeFlags, transmission: bool) -> Event {
+        let kind = if flags.contains(LobeFlags::GLOSSY) { EventKind::Glossy } else { EventKind::Diffuse };
+        Event { kind, transmission }
+    }
+
+    /// One letter: E, L, D, G, S or N.
+    pub fn symbol(self) -> char {
+        match self.kind {
+            EventKind::Camera => 'E',
+            EventKind::Light => 'L',
+            EventKind::Diffuse => 'D',
+            EventKind::Glossy => 'G',
+            EventKind::Specular => 'S',
+            EventKind::Null => 'N',
+        }
+    }
+}
+
+#[derive(Clone, Debug)]
+pub struct Vertex {
+    pub kind: VertexKind,
+    pub p: Vec3,
+    /// Geometric normal; zero where the vertex is not on a surface (camera, point lights,
+    /// directions at infinity): densities convert to it without a cosine.
+    pub ng: Vec3,
+    /// Shading frame (surfaces; the geometric one for area-light endpoints).
+    pub shading: Frame,
+    pub uv: Vec2,
+    /// Surfaces: unit direction toward the previous vertex of the walk. Vertices at
+    /// infinity: the unit direction from the scene toward the light.
+    pub wo: Vec3,
+    pub bsdf: Option<Bsdf>,
+    /// The light of a light endpoint, or the emitter of a surface; None for a camera ray
+    /// that escaped (all environment lights together).
+    pub light: Option<u32>,
+    /// Light endpoints sampled from the light: radiance (area) or intensity (point, spot)
+    /// at the origin.
+    pub le: Rgb,
+    pub infinite: bool,
+    pub beta: Rgb,
+    pub pdf_fwd: f32,
+    pub pdf_rev: f32,
+    pub delta: bool,
+    pub event: Event,
+    /// Camera vertices: where on the film.
+    pub raster: Vec2,
+}
+
+#[inline]
+fn remap_nan(x: f32) -> f32 {
+    if x.is_finite() {
+        x
+    } else {
+        0.0
+    }
+}
+
+/// The factor that makes scattering with shading normals adjoint (Veach §5.3): in
+/// importance transport f(wo, wi) |wi·ns| must become f |wo·ns| |wi·ng| / |wo·ng|.
+#[inline]
+pub(crate) fn shading_correction(ng: Vec3, ns: Vec3, wo: Vec3, wi: Vec3, mode: TransportMode) -> f32 {
+    if mode == TransportMode::Radiance {
+        return 1.0;
+    }
+    let num = wo.dot(ns).abs() * wi.dot(ng).abs();
+    let den = wo.dot(ng).abs() * wi.dot(ns).abs();
+    if den == 0.0 {
+        0.0
+    } else {
+        num / den
+    }
+}
+
+impl Vertex {
+    fn blank(kind: VertexKind) -> Self {
+        Vertex {
+            kind,
+            p: Vec3::ZERO,
+            ng: Vec3::ZERO,
+            shading: Frame::from_normal(Vec3::Z),
+            uv: Vec2::ZERO,
+            wo: Vec3::ZERO,
+            bsdf: None,
+            light: None,
+            le: Rgb::BLACK,
+            infinite: false,
+            beta: Rgb::BLACK,
+            pdf_fwd: 0.0,
+            pdf_rev: 0.0,
+            delta: false,
+            event: if kind == VertexKind::Camera { Event::CAMERA } else { Event::LIGHT },
+            raster: Vec2::ZERO,
+        }
+    }
+
+    /// The camera at lens point `p` (world), seeing raster position `raster`.
+    pub fn camera(p: Vec3, raster: Vec2, beta: Rgb) -> Self {
+        Vertex { p, raster, beta, ..Self::blank(VertexKind::Camera) }
+    }
+
+    /// A light endpoint at `p` (normal `n`, zero for point lights) of light `light`.
+    pub fn light_point(light: u32, p: Vec3, n: Vec3, le: Rgb, beta: Rgb, pdf_fwd: f32) -> Self {
+        let shading = if n == Vec3::ZERO { Frame::from_normal(Vec3::Z) } else { Frame::from_normal(n) };
+        Vertex { p, ng: n, shading, light: Some(light), le, beta, pdf_fwd, ..Self::blank(VertexKind::Light) }
+    }
+
+    /// A light endpoint at infinity: light arrives from direction `toward_light`.
+    pub fn light_infinite(light: Option<u32>, p: Vec3, toward_light: Vec3, beta: Rgb, pdf_fwd: f32) -> Self {
+        Vertex { p, wo: toward_light, light, infinite: true, beta, pdf_fwd, ..Self::blank(VertexKind::Light) }
+    }
+
+    /// A surface hit with its BSDF; `pdf_fwd` is set by the walk.
+    pub fn surface(scene: &Scene, si: &SurfaceInteraction, beta: Rgb) -> Self {
+        let bsdf = scene.material(si).bsdf(si.uv);
+        let light = scene.area_light(si).map(|(i, _)| i);
+        Vertex { p: si.p, ng: si.ng, shading: si.shading, uv: si.uv, wo: si.wo, bsdf: Some(bsdf), light, beta, ..Self::blank(VertexKind::Surface) }
+    }
+
+    #[inline]
+    pub fn on_surface(&self) -> bool {
+        self.ng != Vec3::ZERO
+    }
+
+    /// Whether light leaves this vertex by emission (a light endpoint or an emitting surface).
+    pub fn is_light(&self) -> bool {
+        self.kind == VertexKind::Light || (self.kind == VertexKind::Surface && self.light.is_some())
+    }
+
+    /// A light whose position or direction is a delta: no strategy can hit it.
+    pub fn is_delta_light(&self, scene: &Scene) -> bool {
+        self.kind == VertexKind::Light && self.light.is_some_and(|i| scene.lights[i as usize].is_delta())
+    }
+
+    /// An emitting area (a surface that a camera path can hit, and that can be connected to
+    /// the camera directly).
+    pub fn is_area_light(&self, scene: &Scene) -> bool {
+        !self.infinite && self.light.is_some_and(|i| matches!(scene.lights[i as usize], Light::Area(_)))
+    }
+
+    /// Whether a deterministic connection can end here.
+    pub fn connectible(&self, scene: &Scene) -> bool {
+        match self.kind {
+            VertexKind::Camera => true,
+            VertexKind::Light => !self.light.is_some_and(|i| matches!(scene.lights[i as usize], Light::Directional { .. })),
+            VertexKind::Surface => self.bsdf.as_ref().is_some_and(|b| b.flags().has_non_specular()),
+        }
+    }
+
+    /// Unit direction from this vertex to `other` and the squared distance (1 for a vertex at
+    /// infinity, whose densities stay per unit solid angle).
+    #[inline]
+    pub fn direction_to(&self, other: &Vertex) -> (Vec3, f32) {
+        if other.infinite {
+            return (other.wo, 1.0);
+        }
+        if self.infinite {
+            return (-self.wo, 1.0);
+        }
+        let d = other.p - self.p;
+        let d2 = d.length_squared();
+        if d2 == 0.0 {
+            return (Vec3::ZERO, 0.0);
+        }
+        (d / d2.sqrt(), d2)
+    }
+
+    /// Convert a solid-angle density at this vertex into an area density at `next`.
+    pub fn convert_density(&self, pdf: f32, next: &Vertex) -> f32 {
+        if next.infinite {
+            return pdf;
+        }
+        let (w, d2) = self.direction_to(next);
+        if d2 == 0.0 {
+            return 0.0;
+        }
+        let mut pdf = pdf / d2;
+        if next.on_surface() {
+            pdf *= next.ng.dot(w).abs();
+        }
+        remap_nan(pdf)
+    }
+
+    /// BSDF toward `next` (world direction), with the shading-normal correction of
+    /// importance transport. Zero for vertices without a BSDF.
+    pub fn f(&self, next: &Vertex, mode: TransportMode) -> Rgb {
+        let Some(bsdf) = &self.bsdf else { return Rgb::BLACK };
+        let (wi, d2) = self.direction_to(next);
+        if d2 == 0.0 {
+            return Rgb::BLACK;
+        }
+        let f = bsdf.eval(self.shading.to_local(self.wo), self.shading.to_local(wi), mode);
+        f * shading_correction(self.ng, self.shading.n, self.wo, wi, mode)
+    }
+
+    /// |cos| between the shading normal and the direction to `other` (1 off surfaces).
+    pub fn abs_cos_to(&self, other: &Vertex) -> f32 {
+        if !self.on_surface() {
+            return 1.0;
+        }
+        self.shading.n.dot(self.direction_to(other).0).abs()
+    }
+
+    /// Emission from this vertex toward `toward`: radiance of an area light or an environment,
+    /// intensity of a point or spot light.
+    pub fn le(&self, scene: &Scene, toward: &Vertex) -> Rgb {
+        if self.infinite {
+            // A camera ray escaped: all environment lights (toward is the last surface).
+            return scene.environment_lights.iter().fold(Rgb::BLACK, |acc, &i| acc + scene.lights[i as usize].le_escaped(self.wo));
+        }
+        let Some(li) = self.light else { return Rgb::BLACK };
+        let (w, d2) = self.direction_to(toward);
+        if d2 == 0.0 {
+            return Rgb::BLACK;
+        }
+        match &scene.lights[li as usize] {
+            Light::Area(a) => {
+                if self.kind == VertexKind::Surface {
+                    a.l(self.ng, self.uv, w)
+                } else if self.ng.dot(w) > 0.0 {
+                    self.le
+                } else {
+                    Rgb::BLACK
+                }
+            }
+            l @ Light::Spot { .. } => l.spot_intensity(w),
+            Light::Point { .. } => self.le,
+            _ => Rgb::BLACK,
+        }
+    }
+
+    /// Area density at `next` of a walk at this vertex that arrived from `prev` and samples
+    /// `next` (`mode`: the direction of that walk). Light endpoints sample by emission.
+    pub fn pdf(&self, scene: &Scene, prev: Option<&Vertex>, next: &Vertex, mode: TransportMode) -> f32 {
+        if self.kind == VertexKind::Light {
+            return self.pdf_light(scene, next);
+        }
+        let (wn, d2) = self.direction_to(next);
+        if d2 == 0.0 {
+            return 0.0;
+        }
+        let pdf = match self.kind {
+            VertexKind::Camera => scene.camera.pdf_we(&crate::geometry::Ray::new(self.p, wn)).1,
+            _ => {
+                let (Some(bsdf), Some(prev)) = (&self.bsdf, prev) else { return 0.0 };
+                let (wp, dp2) = self.direction_to(prev);
+                if dp2 == 0.0 {
+                    return 0.0;
+                }
+                bsdf.pdf(self.shading.to_local(wp), self.shading.to_local(wn), mode)
+            }
+        };
+        self.convert_density(pdf, next)
+    }
+
+    /// Area density at `v` of a ray leaving this light vertex toward it (emission's
+    /// directional density; for lights at infinity the density of the entry disk).
+    pub fn pdf_light(&self, scene: &Scene, v: &Vertex) -> f32 {
+        let (w, d2) = self.direction_to(v);
+        if d2 == 0.0 {
+            return 0.0;
+        }
+        let mut pdf = if self.infinite {
+            1.0 / (PI * scene.bounds.radius * scene.bounds.radius)
+        } else {
+            let Some(li) = self.light else { return 0.0 };
+            scene.lights[li as usize].pdf_le(&crate::geometry::Ray::new(self.p, w), self.ng, &scene.bounds).1 / d2
+        };
+        if v.on_surface() {
+            pdf *= v.ng.dot(w).abs();
+        }
+        remap_nan(pdf)
+    }
+
+    /// Density with which a light subpath starts at this vertex (light choice times the
+    /// origin's density; for infinite lights the direction toward `v`, per unit solid angle).
+    pub fn pdf_light_origin(&self, scene: &Scene, v: &Vertex) -> f32 {
+        if self.infinite {
+            let (w, _) = self.direction_to(v);
+            return infinite_light_density(scene, w);
+        }
+        let Some(li) = self.light else { return 0.0 };
+        let (w, d2) = self.direction_to(v);
+        if d2 == 0.0 {
+            return 0.0;
+        }
+        let (pdf_pos, _) = scene.lights[li as usize].pdf_le(&crate::geometry::Ray::new(self.p, w), self.ng, &scene.bounds);
+        scene.light_pmf(li) * pdf_pos
+    }
+}
+
+/// Solid-angle density with which light selection and environment sampling produce light
+/// travelling in direction `d` (summed over the environment lights).
+pub(crate) fn infinite_light_density(scene: &Scene, d: Vec3) -> f32 {
+    scene.environment_lights.iter().map(|&i| scene.light_pmf(i) * scene.lights[i as usize].pdf_li_escaped(-d)).sum()
+}
+
+/// The geometric term between two surface vertices with shading cosines, zero when blocked.
+pub(crate) fn geometry_term(scene: &Scene, a: &Vertex, b: &Vertex) -> f32 {
+    let (_, d2) = a.direction_to(b);
+    if d2 == 0.0 {
+        return 0.0;
+    }
+    let g = a.abs_cos_to(b) * b.abs_cos_to(a) / d2;
+    if g == 0.0 || scene.occluded(a.p, a.ng, b.p) {
+        return 0.0;
+    }
+    g
+}
