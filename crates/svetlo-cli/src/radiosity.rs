@@ -25,7 +25,7 @@ pub struct RadiosityArgs {
     /// Form factors: analytic, hemicube or raycast.
     #[arg(long, value_name = "METHOD")]
     pub form_factors: Option<String>,
-    /// Solver: jacobi, gauss-seidel, southwell, progressive or two-level.
+    /// Solver: jacobi, gauss-seidel, southwell, progressive, ssg, two-level or hierarchical.
     #[arg(long, value_name = "NAME")]
     pub solver: Option<String>,
     /// Longest element edge, in scene units.
@@ -37,6 +37,18 @@ pub struct RadiosityArgs {
     /// Over-relaxation factor, or `adaptive` (progressive).
     #[arg(long, value_name = "W")]
     pub omega: Option<String>,
+    /// Hierarchical solver: oracle threshold ε.
+    #[arg(long, value_name = "EPS")]
+    pub epsilon: Option<f64>,
+    /// Hierarchical solver: smallest element area (scene units²).
+    #[arg(long, value_name = "AREA")]
+    pub min_area: Option<f32>,
+    /// Hierarchical solver: refinement oracle, f or bf.
+    #[arg(long, value_name = "RULE")]
+    pub refine: Option<String>,
+    /// Hierarchical solver: weight the BF oracle by importance from the camera (Smits' BFV).
+    #[arg(long)]
+    pub importance: bool,
     /// More options as key=value (see the library's RadiosityOptions::parse), repeatable.
     #[arg(short = 'O', value_name = "KEY=VALUE")]
     pub option: Vec<String>,
@@ -67,6 +79,18 @@ fn options(a: &RadiosityArgs) -> Result<RadiosityOptions> {
     }
     if let Some(v) = &a.omega {
         kv.push(format!("omega={v}"));
+    }
+    if let Some(v) = a.epsilon {
+        kv.push(format!("epsilon={v}"));
+    }
+    if let Some(v) = a.min_area {
+        kv.push(format!("min-area={v}"));
+    }
+    if let Some(v) = &a.refine {
+        kv.push(format!("refine={v}"));
+    }
+    if a.importance {
+        kv.push("importance=true".into());
     }
     kv.extend(a.option.iter().cloned());
     RadiosityOptions::parse(&kv.join(",")).map_err(|e| Usage(e.to_string()).into())
@@ -126,19 +150,33 @@ pub fn run(a: &RadiosityArgs) -> Result<ExitCode> {
     }
     println!("scene        {}", a.scene.display());
     println!(
-        "elements     {} in {} patches, {} display vertices, area {:.4}",
+        "{}     {} in {} patches, {} display vertices, area {:.4}",
+        if solved.hierarchy.is_some() { "display " } else { "elements" },
         solved.mesh.elements.len(),
         solved.mesh.patches.len(),
         solved.mesh.vertices.len(),
         solved.mesh.total_area()
     );
-    println!(
-        "form factors {:?}: {} rows computed, {} stored ({:.1} MiB)",
-        opts.form_factors,
-        solved.rows_computed,
-        solved.nnz,
-        solved.matrix_bytes as f64 / (1 << 20) as f64
-    );
+    if solved.hierarchy.is_none() {
+        println!(
+            "form factors {:?}: {} rows computed, {} stored ({:.1} MiB)",
+            opts.form_factors,
+            solved.rows_computed,
+            solved.nnz,
+            solved.matrix_bytes as f64 / (1 << 20) as f64
+        );
+    }
+    if let Some(h) = &solved.hierarchy {
+        println!(
+            "hierarchy    {} links, {} nodes, {} leaves (elements), {} link form factors computed, {} refine passes, {:.1} MiB",
+            h.links,
+            h.nodes,
+            h.leaves,
+            h.form_factors,
+            h.passes,
+            h.memory as f64 / (1 << 20) as f64
+        );
+    }
     println!("solver       {:?}, tolerance {:.1e}: {}", opts.solver, opts.solve.tolerance, if solved.converged { "converged" } else { "NOT converged" });
     println!("time         mesh {:.3} s, form factors {:.3} s, solve {:.3} s", solved.mesh_seconds, solved.form_factor_seconds, solved.solve_seconds);
     if a.report {

@@ -313,6 +313,12 @@ pub fn write_outputs(film: &Film, out: &OutputPaths, variance: bool) -> Result<V
 /// Everything after loading: configure, render, write, report. Returns the exit code.
 pub fn render_loaded(scene: Scene, a: &RenderArgs, out: &OutputPaths, progress: &Progress) -> Result<ExitCode> {
     let job = configure(scene, a)?;
+    if a.variance && matches!(job.integrator_name.as_str(), "light" | "ptracer" | "bdpt") {
+        eprintln!(
+            "warning: --variance counts only what each pixel's own samples add; the {} integrator's splats (light paths) are not in it",
+            job.integrator_name
+        );
+    }
     let (w, h) = (job.scene.camera.width, job.scene.camera.height);
     let (film, elapsed, strategy_files) = match &a.strategies {
         Some(dir) => execute_strategies(&job, progress, dir, a.strategy_depth)?,

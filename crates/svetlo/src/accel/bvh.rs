@@ -19,9 +19,11 @@ pub struct Accel {
     /// Shape index of each sphere of `spheres`.
     sph_shapes: Vec<u32>,
     bounds: Aabb,
+    /// The CPU has AVX: node tests take all eight children at once.
+    pub(super) avx: bool,
 }
 
-const TRI_LEAF: LeafParams = LeafParams { group: 4, max_leaf: 16, traversal_cost: 1.0 };
+const TRI_LEAF: LeafParams = LeafParams { group: 4, max_leaf: 16, traversal_cost: 0.3 };
 const SPHERE_LEAF: LeafParams = LeafParams { group: 1, max_leaf: 4, traversal_cost: 1.0 };
 
 impl Accel {
@@ -75,7 +77,7 @@ impl Accel {
                 bounds = bounds.union(root.bounds());
             }
         }
-        Accel { tri_nodes, tris, meshes, sph_nodes, spheres, sph_shapes, bounds }
+        Accel { tri_nodes, tris, meshes, sph_nodes, spheres, sph_shapes, bounds, avx: has_avx() }
     }
 
     pub fn bounds(&self) -> Aabb {
@@ -92,6 +94,24 @@ impl Accel {
 
     #[inline(always)]
     fn trace<const ANY: bool>(&self, ray: &Ray) -> Option<PrimHit> {
+        #[cfg(target_arch = "x86_64")]
+        if self.avx {
+            // SAFETY: `avx` is set only when the CPU reports AVX.
+            return unsafe { self.trace_avx::<ANY>(ray) };
+        }
+        self.trace_with::<ANY, false>(ray)
+    }
+
+    /// # Safety
+    /// The CPU must support AVX.
+    #[cfg(target_arch = "x86_64")]
+    #[target_feature(enable = "avx")]
+    unsafe fn trace_avx<const ANY: bool>(&self, ray: &Ray) -> Option<PrimHit> {
+        self.trace_with::<ANY, true>(ray)
+    }
+
+    #[inline(always)]
+    fn trace_with<const ANY: bool, const AVX: bool>(&self, ray: &Ray) -> Option<PrimHit> {
         let bray = BoxRay::new(ray.o, ray.d);
         let mut t_max = ray.t_max;
         let mut best: Option<PrimHit> = None;
@@ -102,7 +122,7 @@ impl Accel {
                 let (start, count) = leaf_range(code);
                 prefetch(self.tris.as_ptr().wrapping_add(start), count * std::mem::size_of::<Tri4>());
             };
-            traverse::<ANY>(&self.tri_nodes, &bray, &mut t_max, prefetch_leaf, |code, t_max| {
+            traverse::<ANY, AVX>(&self.tri_nodes, &bray, &mut t_max, prefetch_leaf, |code, t_max| {
                 let (start, count) = leaf_range(code);
                 let mut found = false;
                 for block in &self.tris[start..start + count] {
@@ -127,7 +147,7 @@ impl Accel {
         }
         if !self.sph_nodes.is_empty() {
             let mut hit = None;
-            traverse::<ANY>(
+            traverse::<ANY, AVX>(
                 &self.sph_nodes,
                 &bray,
                 &mut t_max,
@@ -153,5 +173,16 @@ impl Accel {
             }
         }
         best
+    }
+}
+
+fn has_avx() -> bool {
+    #[cfg(target_arch = "x86_64")]
+    {
+        std::is_x86_feature_detected!("avx") && std::env::var_os("SVETLO_NO_AVX").is_none()
+    }
+    #[cfg(not(target_arch = "x86_64"))]
+    {
+        false
     }
 }

@@ -3,6 +3,7 @@
 
 mod build;
 mod bvh;
+mod kdtree;
 mod tri4;
 mod wide;
 
@@ -10,6 +11,7 @@ mod wide;
 mod tests;
 
 pub use bvh::Accel;
+pub use kdtree::{KdPoint, KdTree};
 
 /// The closest hit of a ray: which primitive, where along the ray, and where on it
 /// (barycentrics b1, b2 for a triangle; unused for a sphere).

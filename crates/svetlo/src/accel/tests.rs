@@ -136,13 +136,19 @@ fn scene_rays(rng: &mut Pcg32, n: usize) -> Vec<Ray> {
     rays
 }
 
+/// Checks every ray against brute force, with the SIMD node test this CPU picks and with
+/// the 4-lane SSE one (both must agree with brute force, so with each other).
 fn run(shapes: &[Geometry], rays: &[Ray]) -> usize {
     let refs: Vec<&Geometry> = shapes.iter().collect();
-    let accel = Accel::build(&refs);
+    let mut accel = Accel::build(&refs);
     let mut hits = 0;
     for r in rays {
         check(shapes, &accel, r);
         hits += accel.intersect(r).is_some() as usize;
+    }
+    accel.avx = false;
+    for r in rays {
+        check(shapes, &accel, r);
     }
     hits
 }

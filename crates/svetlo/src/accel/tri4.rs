@@ -118,11 +118,12 @@ pub struct TriRay {
 impl TriRay {
     pub fn new(o: Vec3, d: Vec3) -> TriRay {
         let w = WatertightRay::new(o, d);
+        let oa = o.to_array();
         TriRay {
             k: [w.kx, w.ky, w.kz],
-            ox: Vec4::splat(o[w.kx]),
-            oy: Vec4::splat(o[w.ky]),
-            oz: Vec4::splat(o[w.kz]),
+            ox: Vec4::splat(oa[w.kx]),
+            oy: Vec4::splat(oa[w.ky]),
+            oz: Vec4::splat(oa[w.kz]),
             sx: Vec4::splat(w.sx),
             sy: Vec4::splat(w.sy),
             sz: Vec4::splat(w.sz),

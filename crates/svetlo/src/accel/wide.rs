@@ -78,6 +78,9 @@ impl Node {
 pub struct BoxRay {
     o: [Vec4; 3],
     inv: [Vec4; 3],
+    /// The same origin and inverse direction as scalars, broadcast by the AVX test.
+    o1: [f32; 3],
+    inv1: [f32; 3],
     /// Plane index (into `Node4::planes`) of the near and far slab per axis.
     near: [usize; 3],
     far: [usize; 3],
@@ -99,7 +102,50 @@ impl BoxRay {
         for a in 0..3 {
             (near[a], far[a]) = if inv[a] >= 0.0 { (a, a + 3) } else { (a + 3, a) };
         }
-        BoxRay { o: [Vec4::splat(o.x), Vec4::splat(o.y), Vec4::splat(o.z)], inv: [Vec4::splat(inv.x), Vec4::splat(inv.y), Vec4::splat(inv.z)], near, far }
+        BoxRay {
+            o: [Vec4::splat(o.x), Vec4::splat(o.y), Vec4::splat(o.z)],
+            inv: [Vec4::splat(inv.x), Vec4::splat(inv.y), Vec4::splat(inv.z)],
+            o1: o.to_array(),
+            inv1: inv.to_array(),
+            near,
+            far,
+        }
+    }
+
+    /// The slab test of `test`, all eight children in one AVX register: the same
+    /// operations in the same order, so the result is bit-identical.
+    ///
+    /// # Safety
+    /// The CPU must support AVX, and the caller must be compiled with it enabled
+    /// (`#[target_feature(enable = "avx")]`) so that this inlines into AVX code.
+    #[cfg(target_arch = "x86_64")]
+    #[inline(always)]
+    unsafe fn test_avx(&self, n: &Node, t_max: f32) -> ([f32; WIDTH], u32) {
+        use std::arch::x86_64::*;
+        // `planes[k]` is eight contiguous floats (two Vec4 groups), 32-byte aligned by the node's alignment.
+        let plane = |k: usize| _mm256_load_ps(n.planes[k].as_ptr() as *const f32);
+        let o = |a: usize| _mm256_set1_ps(self.o1[a]);
+        let inv = |a: usize| _mm256_set1_ps(self.inv1[a]);
+        let slab = |k: usize, a: usize| _mm256_mul_ps(_mm256_sub_ps(plane(k), o(a)), inv(a));
+        let (tnx, tny, tnz) = (slab(self.near[0], 0), slab(self.near[1], 1), slab(self.near[2], 2));
+        let (tfx, tfy, tfz) = (slab(self.far[0], 0), slab(self.far[1], 1), slab(self.far[2], 2));
+        let tn = _mm256_max_ps(_mm256_max_ps(tnx, tny), _mm256_max_ps(tnz, _mm256_setzero_ps()));
+        let tf = _mm256_mul_ps(_mm256_min_ps(_mm256_min_ps(tfx, tfy), _mm256_min_ps(tfz, _mm256_set1_ps(t_max))), _mm256_set1_ps(FAR_SLACK));
+        let mask = _mm256_movemask_ps(_mm256_cmp_ps::<_CMP_LE_OQ>(tn, tf)) as u32;
+        let mut tn_all = [0.0; WIDTH];
+        _mm256_storeu_ps(tn_all.as_mut_ptr(), tn);
+        (tn_all, mask)
+    }
+
+    #[inline(always)]
+    fn test_dispatch<const AVX: bool>(&self, n: &Node, t_max: f32) -> ([f32; WIDTH], u32) {
+        #[cfg(target_arch = "x86_64")]
+        if AVX {
+            // SAFETY: AVX = true is only instantiated inside `#[target_feature(enable = "avx")]`
+            // functions, which callers enter only after detecting AVX at run time.
+            return unsafe { self.test_avx(n, t_max) };
+        }
+        self.test(n, t_max)
     }
 
     /// Entry distances of the children and the mask of those the ray meets in `[0, t_max]`.
@@ -151,7 +197,7 @@ fn prefetch_child(nodes: &[Node], code: u32, leaf: &impl Fn(u32)) {
 /// `t_max` to it). With `ANY`, stops at the first hit. Returns whether any leaf hit.
 /// `prefetch_leaf(code)` may prefetch a leaf's primitives when it is pushed.
 #[inline(always)]
-pub fn traverse<const ANY: bool>(
+pub fn traverse<const ANY: bool, const AVX: bool>(
     nodes: &[Node],
     ray: &BoxRay,
     t_max: &mut f32,
@@ -168,7 +214,7 @@ pub fn traverse<const ANY: bool>(
     loop {
         if cur & LEAF_BIT == 0 {
             let node = &nodes[cur as usize];
-            let (tn, mut mask) = ray.test(node, *t_max);
+            let (tn, mut mask) = ray.test_dispatch::<AVX>(node, *t_max);
             if mask != 0 {
                 let c = &node.children;
                 let first = mask.trailing_zeros() as usize;

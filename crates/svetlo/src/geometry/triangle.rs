@@ -32,12 +32,16 @@ impl WatertightRay {
         } else {
             2
         };
-        let mut kx = (kz + 1) % 3;
-        let mut ky = (kx + 1) % 3;
-        if d[kz] < 0.0 {
+        // Indices into a plain array (the permutation is always in 0..3): no bounds checks in the hot path.
+        const NEXT: [usize; 3] = [1, 2, 0];
+        let mut kx = NEXT[kz];
+        let mut ky = NEXT[kx];
+        let dv = d.to_array();
+        if dv[kz] < 0.0 {
             std::mem::swap(&mut kx, &mut ky);
         }
-        WatertightRay { o, kx, ky, kz, sx: d[kx] / d[kz], sy: d[ky] / d[kz], sz: 1.0 / d[kz] }
+        let sz = 1.0 / dv[kz];
+        WatertightRay { o, kx, ky, kz, sx: dv[kx] / dv[kz], sy: dv[ky] / dv[kz], sz }
     }
 
     /// Returns (t, b1, b2) with the hit point `(1-b1-b2) p0 + b1 p1 + b2 p2`.

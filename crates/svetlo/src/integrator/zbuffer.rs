@@ -15,6 +15,7 @@
 //! puts their fragments back on the exact sphere.
 //!
 //! The number of subsamples per pixel is the square nearest to `spp` (at most 8 x 8).
+//! Moving shapes (motion blur) are drawn in their pose at the middle of the shutter.
 
 use super::local::LocalLights;
 use super::{Integrator, Progress, RenderSettings};
@@ -27,7 +28,7 @@ use crate::raster::shadow::ShadowMap;
 use crate::raster::{DepthBuffer, View, ViewProjection};
 use crate::scene::Scene;
 use crate::spectrum::Rgb;
-use glam::{Vec2, Vec3};
+use glam::{Mat3, Mat4, Vec2, Vec3};
 use rayon::prelude::*;
 use std::sync::atomic::Ordering;
 
@@ -86,6 +87,20 @@ fn sphere_triangles(c: Vec3, r: f32, seg: u32) -> Vec<[Vec3; 3]> {
     out
 }
 
+/// Where each shape is drawn: moving shapes at the middle of the shutter (reference pose to
+/// world, and its inverse); `None` for static shapes.
+fn poses(scene: &Scene) -> Vec<Option<(Mat4, Mat4)>> {
+    let mid = 0.5 * (scene.camera.shutter_open + scene.camera.shutter_close);
+    scene
+        .shapes
+        .iter()
+        .map(|s| {
+            let m = s.motion.as_ref()?.relative(mid);
+            Some((m, m.inverse()))
+        })
+        .collect()
+}
+
 /// A surface point as the shader needs it.
 struct Surface {
     p: Vec3,
@@ -96,9 +111,10 @@ struct Surface {
 }
 
 impl ZBuffer {
-    fn triangles(&self, scene: &Scene) -> Vec<RasterTri> {
+    fn triangles(&self, scene: &Scene, poses: &[Option<(Mat4, Mat4)>]) -> Vec<RasterTri> {
         let mut tris = Vec::new();
         for (si, s) in scene.shapes.iter().enumerate() {
+            let first = tris.len();
             match &*s.geometry {
                 Geometry::Mesh(m) => {
                     for t in 0..m.triangle_count() {
@@ -111,25 +127,42 @@ impl ZBuffer {
                     }
                 }
             }
+            if let Some((m, _)) = poses[si] {
+                for t in &mut tris[first..] {
+                    t.v = t.v.map(|p| m.transform_point3(p));
+                }
+            }
         }
         tris
     }
 
     /// The surface at barycentrics `b` of a raster triangle.
-    fn surface(scene: &Scene, t: &RasterTri, b: [f32; 3]) -> Surface {
-        match &*scene.shapes[t.shape as usize].geometry {
+    fn surface(scene: &Scene, poses: &[Option<(Mat4, Mat4)>], t: &RasterTri, b: [f32; 3]) -> Surface {
+        let q = t.v[0] * b[0] + t.v[1] * b[1] + t.v[2] * b[2];
+        let pose = poses[t.shape as usize];
+        let mut s = match &*scene.shapes[t.shape as usize].geometry {
             Geometry::Mesh(m) => {
-                let p = t.v[0] * b[0] + t.v[1] * b[1] + t.v[2] * b[2];
                 let (ng, ns, uv, dpdu) = m.surface(t.prim as usize, b[1], b[2]);
-                Surface { p, ng, ns, uv, dpdu }
+                Surface { p: q, ng, ns, uv, dpdu }
             }
             Geometry::Sphere(s) => {
-                let q = t.v[0] * b[0] + t.v[1] * b[1] + t.v[2] * b[2];
+                let q = pose.map_or(q, |(_, inv)| inv.transform_point3(q));
                 let p = s.center + (q - s.center).normalize_or_zero() * s.radius;
                 let (n, uv, dpdu) = s.surface(p);
                 Surface { p, ng: n, ns: n, uv, dpdu }
             }
+        };
+        if let Some((m, inv)) = pose {
+            // Normals by the inverse transpose; the mesh point is already in place.
+            let normal = Mat3::from_mat4(inv).transpose();
+            if matches!(&*scene.shapes[t.shape as usize].geometry, Geometry::Sphere(_)) {
+                s.p = m.transform_point3(s.p);
+            }
+            s.ng = (normal * s.ng).normalize();
+            s.ns = (normal * s.ns).normalize();
+            s.dpdu = Mat3::from_mat4(m) * s.dpdu;
         }
+        s
     }
 
     fn shadow_maps(&self, scene: &Scene, lights: &LocalLights, tris: &[RasterTri]) -> Vec<Option<ShadowMap>> {
@@ -208,7 +241,8 @@ impl Integrator for ZBuffer {
         let eye = cam.to_world.transform_point3(Vec3::ZERO);
         let view_dir = cam.to_world.transform_vector3(Vec3::Z).normalize();
         let lights = LocalLights::new(scene);
-        let tris = self.triangles(scene);
+        let poses = poses(scene);
+        let tris = self.triangles(scene, &poses);
         let maps = self.shadow_maps(scene, &lights, &tris);
         progress.total.store((w * h) as u64, Ordering::Relaxed);
 
@@ -252,11 +286,11 @@ impl Integrator for ZBuffer {
                             };
                             match self.shading {
                                 Shading::Phong => {
-                                    let s = Self::surface(scene, t, b);
+                                    let s = Self::surface(scene, &poses, t, b);
                                     self.shade(scene, &lights, &maps, t.shape, &s, eye_for(s.p), settings)
                                 }
                                 Shading::Flat => {
-                                    let mut s = Self::surface(scene, t, [1.0 / 3.0; 3]);
+                                    let mut s = Self::surface(scene, &poses, t, [1.0 / 3.0; 3]);
                                     s.ns = s.ng;
                                     self.shade(scene, &lights, &maps, t.shape, &s, eye_for(s.p), settings)
                                 }
@@ -264,7 +298,7 @@ impl Integrator for ZBuffer {
                                     .iter()
                                     .zip(b)
                                     .map(|(vb, wgt)| {
-                                        let s = Self::surface(scene, t, *vb);
+                                        let s = Self::surface(scene, &poses, t, *vb);
                                         self.shade(scene, &lights, &maps, t.shape, &s, eye_for(s.p), settings) * wgt
                                     })
                                     .sum(),

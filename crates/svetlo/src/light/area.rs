@@ -25,6 +25,28 @@ pub struct AreaLight {
     /// Triangle selection by area (meshes only).
     pub tri_distribution: Option<Distribution1D>,
     pub area: f32,
+    /// Per triangle, the geometric normal on the side the shading normals face, when it is
+    /// the same over the whole triangle (all vertex normals on one side): light sampling then
+    /// needs no interpolation. `None` falls back to `TriangleMesh::surface` at the point.
+    tri_normals: Vec<Option<Vec3>>,
+}
+
+/// The geometric normal of triangle `t` as `TriangleMesh::surface` orients it, if that is the
+/// same at every point of the triangle: no shading normals, or all three on one side.
+fn constant_normal(m: &crate::geometry::TriangleMesh, t: usize) -> Option<Vec3> {
+    let [p0, p1, p2] = m.vertices(t);
+    let ng = (p1 - p0).cross(p2 - p0).normalize_or_zero();
+    if m.normals.is_empty() {
+        return Some(ng);
+    }
+    let sides = m.indices[t].map(|i| ng.dot(m.normals[i as usize]));
+    if sides.iter().all(|&d| d > 0.0) {
+        Some(ng)
+    } else if sides.iter().all(|&d| d < 0.0) {
+        Some(-ng)
+    } else {
+        None
+    }
 }
 
 /// The cone of directions a sphere subtends from an outside point.
@@ -56,15 +78,16 @@ impl SphereCone {
 
 impl AreaLight {
     pub fn new(shape: u32, geometry: Arc<Geometry>, radiance: Texture) -> Self {
-        let (tri_distribution, area) = match &*geometry {
+        let (tri_distribution, area, tri_normals) = match &*geometry {
             Geometry::Mesh(m) => {
                 let areas: Vec<f32> = (0..m.triangle_count()).map(|t| m.triangle_area(t)).collect();
                 let area = areas.iter().sum();
-                (Some(Distribution1D::new(&areas)), area)
+                let normals = (0..m.triangle_count()).map(|t| constant_normal(m, t)).collect();
+                (Some(Distribution1D::new(&areas)), area, normals)
             }
-            Geometry::Sphere(s) => (None, s.area()),
+            Geometry::Sphere(s) => (None, s.area(), Vec::new()),
         };
-        AreaLight { shape, geometry, radiance, tri_distribution, area }
+        AreaLight { shape, geometry, radiance, tri_distribution, area, tri_normals }
     }
 
     /// Radiance leaving point with normal `n` and uv toward direction `w`.
@@ -87,8 +110,14 @@ impl AreaLight {
                 let b = warp::square_to_uniform_triangle(Vec2::new(ur, u.y));
                 let [p0, p1, p2] = m.vertices(t);
                 let p = p0 * (1.0 - b.x - b.y) + p1 * b.x + p2 * b.y;
-                let (ng, _ns, uv, _) = m.surface(t, b.x, b.y);
-                (p, ng, uv, pdf)
+                match self.tri_normals.get(t) {
+                    // A constant texture needs no uv.
+                    Some(Some(ng)) if self.radiance.is_constant() => (p, *ng, Vec2::ZERO, pdf),
+                    _ => {
+                        let (ng, _ns, uv, _) = m.surface(t, b.x, b.y);
+                        (p, ng, uv, pdf)
+                    }
+                }
             }
             (Geometry::Sphere(s), _) => {
                 let d = warp::square_to_uniform_sphere(u);

@@ -29,11 +29,14 @@ pub struct MeshOptions {
     pub max_elements: usize,
     /// Segments around a sphere's equator.
     pub sphere_segments: usize,
+    /// Splits per triangle edge for each shape, overriding `max_edge` where given (the
+    /// hierarchical solver's display mesh uses powers of two, matching its quadtrees).
+    pub shape_splits: Vec<u32>,
 }
 
 impl Default for MeshOptions {
     fn default() -> Self {
-        MeshOptions { max_edge: None, max_elements: 1 << 20, sphere_segments: 32 }
+        MeshOptions { max_edge: None, max_elements: 1 << 20, sphere_segments: 32, shape_splits: vec![] }
     }
 }
 
@@ -202,7 +205,10 @@ impl RadiosityMesh {
                 })
                 .fold(0.0f32, f32::max);
             let n = match sphere {
-                None => ((longest / max_edge).ceil() as u32).max(1),
+                None => match opts.shape_splits.get(si) {
+                    Some(&k) => k.max(1),
+                    None => ((longest / max_edge).ceil() as u32).max(1),
+                },
                 Some(_) => 1,
             };
             let per_side = tri_mesh.triangle_count() as u64 * (n as u64 * n as u64);

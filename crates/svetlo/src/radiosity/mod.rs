@@ -9,6 +9,8 @@
 
 pub mod display;
 pub mod form_factor;
+pub mod hierarchical;
+pub mod hybrid;
 pub mod mesh;
 pub mod solver;
 
@@ -38,6 +40,12 @@ pub struct RadiosityOptions {
     /// Average A_i F_ij and A_j F_ji before solving.
     pub reciprocity: bool,
     pub shading: Shading,
+    /// Settings of the hierarchical solver.
+    pub hierarchical: hierarchical::HierarchicalOptions,
+    /// Two-pass display: ray tracing adds specular paths and a final gather ([`hybrid`]).
+    pub hybrid: bool,
+    /// Final-gather rays (and light samples) per camera sample of the hybrid display; 0 reads the solution directly.
+    pub gather: u32,
 }
 
 impl Default for RadiosityOptions {
@@ -49,6 +57,9 @@ impl Default for RadiosityOptions {
             solve: SolveOptions::default(),
             reciprocity: false,
             shading: Shading::Gouraud,
+            hierarchical: Default::default(),
+            hybrid: false,
+            gather: 16,
         }
     }
 }
@@ -58,7 +69,8 @@ impl RadiosityOptions {
     /// `form-factors=hemicube,solver=progressive,element-size=0.05,tolerance=1e-3`.
     /// Keys: form-factors, solver, element-size, max-elements, tolerance, max-steps, omega
     /// (a number or `adaptive`), hemicube-resolution, rays, visibility-grid, source-grid, seed, reciprocity
-    /// (true/false), shading (flat/gouraud).
+    /// (true/false), shading (flat/gouraud); hierarchical solver: epsilon, min-area, refine (f/bf),
+    /// importance (true/false), passes; display: hybrid (true/false), gather (final-gather rays).
     pub fn parse(params: &str) -> Result<Self> {
         let mut o = RadiosityOptions::default();
         let (mut res, mut rays, mut vis, mut src, mut seed) = (None, None, None, None, None);
@@ -87,6 +99,21 @@ impl RadiosityOptions {
                         "gouraud" => Shading::Gouraud,
                         _ => return Err(Error::Settings(format!("radiosity: shading is flat or gouraud, got '{v}'"))),
                     }
+                }
+                "hybrid" => o.hybrid = v.parse().map_err(|_| Error::Settings(format!("radiosity: hybrid is true or false, got '{v}'")))?,
+                "gather" => o.gather = int(v)?.min(1 << 16) as u32,
+                "epsilon" => o.hierarchical.epsilon = num(v)?,
+                "min-area" => o.hierarchical.min_area = Some(num(v)? as f32),
+                "passes" => o.hierarchical.max_passes = int(v)? as usize,
+                "refine" => {
+                    o.hierarchical.rule = match v {
+                        "f" | "F" => hierarchical::Rule::F,
+                        "bf" | "BF" => hierarchical::Rule::BF,
+                        _ => return Err(Error::Settings(format!("radiosity: refine is f or bf, got '{v}'"))),
+                    }
+                }
+                "importance" => {
+                    o.hierarchical.importance = v.parse().map_err(|_| Error::Settings(format!("radiosity: importance is true or false, got '{v}'")))?
                 }
                 _ => return Err(Error::Settings(format!("radiosity: unknown option '{k}'"))),
             }
@@ -121,6 +148,8 @@ pub struct Solved {
     pub mesh_seconds: f64,
     pub form_factor_seconds: f64,
     pub solve_seconds: f64,
+    /// Links, nodes and leaves of a hierarchical solve.
+    pub hierarchy: Option<hierarchical::Stats>,
 }
 
 /// The system's per-element data.
@@ -149,6 +178,9 @@ pub fn solve_observed(
     max_depth: i32,
     observe: &mut dyn FnMut(&RadiosityMesh, usize, &solver::progressive::State),
 ) -> Result<Solved> {
+    if opts.solver == SolverKind::Hierarchical {
+        return solve_hierarchical(scene, opts, max_depth);
+    }
     let t0 = Instant::now();
     let mesh = RadiosityMesh::build(scene, &opts.mesh)?;
     let mesh_seconds = t0.elapsed().as_secs_f64();
@@ -195,5 +227,30 @@ pub fn solve_observed(
         mesh_seconds,
         form_factor_seconds,
         solve_seconds,
+        hierarchy: None,
+    })
+}
+
+fn solve_hierarchical(scene: &Scene, opts: &RadiosityOptions, max_depth: i32) -> Result<Solved> {
+    opts.solve.validate()?;
+    let t = Instant::now();
+    let bounces = if max_depth >= 0 { Some((max_depth - 1).max(0) as usize) } else { None };
+    // Truncate only where it matters, as for the matrix solvers (ρ_max^k above the tolerance).
+    let rho_max = scene.materials.iter().map(|m| m.bsdf(glam::Vec2::splat(0.5)).diffuse_albedo().max_component()).fold(0.0f32, f32::max) as f64;
+    let bounces = bounces.filter(|&k| rho_max.powi(k as i32) > opts.solve.tolerance * 1e-2);
+    let o = hierarchical::solve(scene, &opts.mesh, &opts.hierarchical, opts.solve.tolerance, opts.solve.max_steps.min(10_000), bounces)?;
+    let total = t.elapsed().as_secs_f64();
+    Ok(Solved {
+        mesh: o.mesh,
+        b: o.b,
+        history: o.history,
+        converged: o.converged,
+        rows_computed: o.stats.form_factors,
+        nnz: o.stats.links,
+        matrix_bytes: o.stats.memory,
+        mesh_seconds: 0.0,
+        form_factor_seconds: o.stats.refine_seconds,
+        solve_seconds: total - o.stats.refine_seconds,
+        hierarchy: Some(o.stats),
     })
 }

@@ -7,6 +7,7 @@ pub mod gauss_seidel;
 pub mod jacobi;
 pub mod progressive;
 pub mod southwell;
+pub mod ssg;
 pub mod two_level;
 
 use super::form_factor::{FormFactors, RowSource};
@@ -176,6 +177,10 @@ pub enum SolverKind {
     Progressive,
     /// Cohen's two-level substructuring (system on patches, elements gather).
     TwoLevel,
+    /// Super-Shoot-Gather: patches shoot their unshot power at once, elements gather it.
+    Ssg,
+    /// Hanrahan–Salzman–Aupperle: quadtrees and links instead of a matrix (`radiosity::hierarchical`).
+    Hierarchical,
 }
 
 impl SolverKind {
@@ -186,7 +191,9 @@ impl SolverKind {
             "southwell" => Ok(SolverKind::Southwell),
             "progressive" => Ok(SolverKind::Progressive),
             "two-level" => Ok(SolverKind::TwoLevel),
-            o => Err(Error::Settings(format!("radiosity: unknown solver '{o}' (jacobi, gauss-seidel, southwell, progressive, two-level)"))),
+            "ssg" | "super-shoot-gather" => Ok(SolverKind::Ssg),
+            "hierarchical" | "hr" => Ok(SolverKind::Hierarchical),
+            o => Err(Error::Settings(format!("radiosity: unknown solver '{o}' (jacobi, gauss-seidel, southwell, progressive, ssg, two-level, hierarchical)"))),
         }
     }
 
@@ -198,6 +205,10 @@ impl SolverKind {
             SolverKind::Southwell => southwell::solve(sys, opts),
             SolverKind::Progressive => progressive::solve(sys, opts, &mut |_, _| {}),
             SolverKind::TwoLevel => two_level::solve(sys, opts),
+            SolverKind::Ssg => ssg::solve(sys, opts),
+            SolverKind::Hierarchical => {
+                Err(Error::Settings("radiosity: the hierarchical solver builds its own links from the scene (radiosity::solve)".into()))
+            }
         }
     }
 }

@@ -1,0 +1,111 @@
+#!/usr/bin/env python3
+"""Equal-time error of path, light and bdpt (and Mitsuba 3's `path`) on the scenes where
+tracing from the lights should win: scenes/caustic.xml and scenes/indirect-room.xml.
+
+Each method renders for the same wall time (svetlo: `--time T`; Mitsuba: the spp its own
+calibration run says fit in T); the error is relMSE against a long, high-spp reference
+(svetlo bdpt, `--ref-spp`, cached under target/bench-bidir/). relMSE = mean over pixels and
+channels of (x - r)^2 / (r^2 + 0.01), the project's convention. Usage (repository root):
+
+    python3 bench/bidir/compare.py [--time 10] [--ref-spp 1024] [--mitsuba scalar_rgb|llvm_ad_rgb|none]
+
+Timing on a shared machine is noisy: the ratio of errors at equal time is what matters,
+and every run prints the time it actually took.
+"""
+import argparse
+import os
+import subprocess
+import sys
+import time
+
+import numpy as np
+
+ROOT = os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
+SCENES = ["caustic", "indirect-room"]
+METHODS = ["path", "light", "bdpt"]
+
+
+def read_exr(path):
+    import mitsuba as mi
+    if mi.variant() is None:
+        mi.set_variant("scalar_rgb")
+    return np.array(mi.Bitmap(path).convert(mi.Bitmap.PixelFormat.RGB, mi.Struct.Type.Float32, srgb_gamma=False), dtype=np.float64)
+
+
+def relmse(img, ref):
+    return float(np.mean((img - ref) ** 2 / (ref * ref + 0.01)))
+
+
+def svetlo(binary, scene, out, extra):
+    t0 = time.perf_counter()
+    r = subprocess.run([binary, "render", scene, "-o", out] + extra, check=True, capture_output=True, text=True)
+    wall = time.perf_counter() - t0
+    spp = next((int(l.split()[1]) for l in r.stdout.splitlines() if l.startswith("spp")), 0)
+    secs = next((float(l.split()[1]) for l in r.stdout.splitlines() if l.startswith("time")), wall)
+    return spp, secs
+
+
+def mitsuba_path(variant, scene, spp, out):
+    """Render in a fresh process; returns the render time alone (load and JIT excluded)."""
+    code = (
+        "import mitsuba as mi, time;"
+        f"mi.set_variant('{variant}');"
+        f"s = mi.load_file(r'{scene}', spp={spp}, integrator='path');"
+        "t0 = time.perf_counter();"
+        f"img = mi.render(s, spp={spp});"
+        "import drjit as dr; dr.eval(img);"
+        "print(time.perf_counter() - t0);"
+        f"mi.Bitmap(img).write(r'{out}')"
+    )
+    r = subprocess.run([sys.executable, "-c", code], check=True, capture_output=True, text=True)
+    return float(r.stdout.strip().splitlines()[-1])
+
+
+def main():
+    ap = argparse.ArgumentParser()
+    ap.add_argument("--time", type=float, default=10.0, help="seconds per method and scene")
+    ap.add_argument("--ref-spp", type=int, default=1024)
+    ap.add_argument("--mitsuba", default="scalar_rgb", help="Mitsuba 3 variant, or 'none'")
+    ap.add_argument("--scenes", default=",".join(SCENES))
+    ap.add_argument("--svetlo", default=os.path.join(ROOT, "target", "release", "svetlo"))
+    a = ap.parse_args()
+    work = os.path.join(ROOT, "target", "bench-bidir")
+    os.makedirs(work, exist_ok=True)
+    rows = []
+    for name in a.scenes.split(","):
+        scene = os.path.join(ROOT, "scenes", f"{name}.xml")
+        ref_path = os.path.join(work, f"ref_{name}_bdpt_{a.ref_spp}spp.exr")
+        if not os.path.exists(ref_path):
+            print(f"{name}: rendering the reference (bdpt, {a.ref_spp} spp) ...", flush=True)
+            tmp = ref_path + ".tmp.exr"
+            svetlo(a.svetlo, scene, tmp, ["--integrator", "bdpt", "--spp", str(a.ref_spp), "--seed", "987654321"])
+            os.replace(tmp, ref_path)
+        ref = read_exr(ref_path)
+        results = {}
+        for m in METHODS:
+            out = os.path.join(work, f"{name}_{m}.exr")
+            spp, secs = svetlo(a.svetlo, scene, out, ["--integrator", m, "--time", str(a.time), "--seed", "1"])
+            results[f"svetlo {m}"] = (spp, secs, relmse(read_exr(out), ref))
+        if a.mitsuba != "none":
+            out = os.path.join(work, f"{name}_mitsuba_path.exr")
+            t4 = mitsuba_path(a.mitsuba, scene, 4, out)
+            spp = max(1, int(4 * a.time / max(t4, 1e-3)))
+            secs = mitsuba_path(a.mitsuba, scene, spp, out)
+            if abs(secs - a.time) > 0.1 * a.time:  # the short calibration run misjudges: rescale once
+                spp = max(1, int(spp * a.time / max(secs, 1e-3)))
+                secs = mitsuba_path(a.mitsuba, scene, spp, out)
+            results[f"mitsuba {a.mitsuba} path"] = (spp, secs, relmse(read_exr(out), ref))
+        base = results["svetlo path"][2]
+        for k, (spp, secs, e) in results.items():
+            rows.append((name, k, spp, secs, e, base / e if e > 0 else float("inf")))
+        # The reference's own error, for scale: bdpt's error at equal time shrinks by its spp ratio.
+        bspp, _, be = results["svetlo bdpt"]
+        rows.append((name, "(reference floor, est.)", a.ref_spp, float("nan"), be * bspp / a.ref_spp, float("nan")))
+    print(f"\nequal time: {a.time:g} s per method; reference: svetlo bdpt {a.ref_spp} spp")
+    print(f"{'scene':<15}{'method':<28}{'spp':>7}{'time (s)':>10}{'relMSE':>12}{'path / it':>11}")
+    for r in rows:
+        print(f"{r[0]:<15}{r[1]:<28}{r[2]:>7}{r[3]:>10.2f}{r[4]:>12.3e}{r[5]:>11.2f}")
+
+
+if __name__ == "__main__":
+    main()

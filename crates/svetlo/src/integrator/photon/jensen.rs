@@ -1,0 +1,246 @@
+//! Photon mapping (Jensen 1996, 2001): a global and a caustic photon map, then a camera pass.
+//!
+//! At each camera vertex with a diffuse lobe (see `camera.rs` for the split of path space):
+//! * direct light: NEE and a BSDF sample under MIS, as `path`;
+//! * caustics (light that reached x through specular bounces only, L S+ x): the caustic map,
+//!   built from its own, larger photon pass;
+//! * the rest of the indirect light: a final gather. Rays leave x by BSDF sampling (non-delta
+//!   lobes), follow delta bounces, and at the first non-specular surface y read the global
+//!   map, which there estimates everything arriving at y. Emitters met on the way are
+//!   ignored: NEE and the caustic map have them. With `gather=0` the global map is read at
+//!   x itself, without its direct and caustic photons (fast, blotchy).
+//!
+//! Depth: photons remember their light segments; a lookup at camera depth d only takes
+//! photons of at most `max_depth - d` segments, so the paths are those `path` solves.
+//! The estimate is biased (blur of radius r); it vanishes as the photon count grows with k
+//! fixed. Deterministic for a seed whatever the thread count.
+
+use super::camera::{camera_walk, DiffuseVertex};
+use super::map::{Kernel, Lookup, Photon, PhotonMap};
+use super::trace::trace_photons;
+use super::{parse_count, parse_pairs, parse_positive, photon_max_segments, pixel_footprint, segments_left};
+use crate::bsdf::TransportMode;
+use crate::error::{Error, Result};
+use crate::film::Film;
+use crate::geometry::Ray;
+use crate::integrator::{render_pixels, Integrator, PixelEstimator, Progress, RenderSettings};
+use crate::sampling::Sampler;
+use crate::scene::Scene;
+use crate::spectrum::Rgb;
+use std::time::Instant;
+
+#[derive(Clone, Debug, PartialEq)]
+pub struct PhotonOptions {
+    /// Photon paths emitted for the global map.
+    pub photons: u64,
+    /// Photon paths emitted for the caustic map.
+    pub caustic_photons: u64,
+    /// Nearest photons per global lookup (0: every photon within `radius`).
+    pub k: usize,
+    /// Largest global lookup radius (scene units); None: 24 pixel footprints.
+    pub radius: Option<f32>,
+    pub caustic_k: usize,
+    /// None: 6 pixel footprints.
+    pub caustic_radius: Option<f32>,
+    /// Final-gather rays per camera sample (0: read the global map directly).
+    pub gather: u32,
+    pub kernel: Kernel,
+}
+
+impl Default for PhotonOptions {
+    fn default() -> Self {
+        PhotonOptions {
+            photons: 200_000,
+            caustic_photons: 200_000,
+            k: 64,
+            radius: None,
+            caustic_k: 32,
+            caustic_radius: None,
+            gather: 16,
+            kernel: Kernel::Cone { k: 1.0 },
+        }
+    }
+}
+
+impl PhotonOptions {
+    /// `photons=N,caustic-photons=N,k=K,radius=R,caustic-k=K,caustic-radius=R,gather=N,filter=box|cone|epanechnikov`.
+    pub fn parse(params: &str) -> Result<Self> {
+        let m = "photon";
+        let mut o = PhotonOptions::default();
+        for (k, v) in parse_pairs(m, params)? {
+            match k {
+                "photons" => o.photons = parse_count(m, k, v)?,
+                "caustic-photons" => o.caustic_photons = parse_count(m, k, v)?,
+                "k" => o.k = parse_count(m, k, v)? as usize,
+                "caustic-k" => o.caustic_k = parse_count(m, k, v)? as usize,
+                "radius" => o.radius = Some(parse_positive(m, k, v)?),
+                "caustic-radius" => o.caustic_radius = Some(parse_positive(m, k, v)?),
+                "gather" => o.gather = parse_count(m, k, v)?.min(1 << 16) as u32,
+                "filter" => o.kernel = Kernel::parse(v)?,
+                _ => {
+                    return Err(Error::Settings(format!(
+                        "photon: unknown option '{k}' (photons, caustic-photons, k, radius, caustic-k, caustic-radius, gather, filter)"
+                    )))
+                }
+            }
+        }
+        Ok(o)
+    }
+}
+
+#[derive(Clone, Debug, Default)]
+pub struct PhotonMapper {
+    pub options: PhotonOptions,
+}
+
+/// Pass tags: the global and caustic passes draw independent photons.
+const TAG_GLOBAL: u64 = 0x676c_6f62;
+const TAG_CAUSTIC: u64 = 0x6361_7573;
+/// Delta bounces a gather ray follows before Russian roulette may end it.
+const GATHER_RR_AFTER: u32 = 4;
+
+struct Maps {
+    global: PhotonMap,
+    caustic: PhotonMap,
+    global_lookup: Lookup,
+    caustic_lookup: Lookup,
+}
+
+impl PhotonMapper {
+    fn build_maps(&self, scene: &Scene, settings: &RenderSettings) -> Maps {
+        let o = &self.options;
+        let max_seg = photon_max_segments(settings.max_depth);
+        let gscale = 1.0 / o.photons.max(1) as f32;
+        let global: Vec<Photon> = trace_photons(scene, settings.seed, TAG_GLOBAL, o.photons, max_seg, |d| (Some(Photon::from_deposit(d, gscale)), true));
+        let cscale = 1.0 / o.caustic_photons.max(1) as f32;
+        let caustic: Vec<Photon> = trace_photons(scene, settings.seed, TAG_CAUSTIC, o.caustic_photons, max_seg, |d| {
+            let keep = (d.caustic && d.surface.intersects(crate::bsdf::LobeFlags::DIFFUSE)).then(|| Photon::from_deposit(d, cscale));
+            // A path stays a caustic one only through delta bounces.
+            let go_on = (d.caustic || d.segments == 1) && d.surface.is_specular();
+            (keep, go_on)
+        });
+        let px = pixel_footprint(scene);
+        Maps {
+            global: PhotonMap::new(global),
+            caustic: PhotonMap::new(caustic),
+            global_lookup: Lookup { k: o.k, max_radius: o.radius.unwrap_or(24.0 * px), kernel: o.kernel },
+            caustic_lookup: Lookup { k: o.caustic_k, max_radius: o.caustic_radius.unwrap_or(6.0 * px), kernel: o.kernel },
+        }
+    }
+}
+
+impl Integrator for PhotonMapper {
+    fn render(&self, scene: &Scene, settings: &RenderSettings, progress: &Progress) -> Result<Film> {
+        settings.validate()?;
+        let start = Instant::now();
+        let pool = rayon::ThreadPoolBuilder::new().num_threads(settings.threads).build().map_err(|e| Error::Settings(format!("thread pool: {e}")))?;
+        let maps = pool.install(|| self.build_maps(scene, settings));
+        // The photon passes count against a time budget.
+        let mut s = settings.clone();
+        if let Some(t) = s.time_limit {
+            s.time_limit = Some(t.saturating_sub(start.elapsed()));
+        }
+        let est = Estimator { maps, gather: self.options.gather };
+        render_pixels(scene, &s, progress, &est)
+    }
+}
+
+struct Estimator {
+    maps: Maps,
+    gather: u32,
+}
+
+impl Estimator {
+    /// The photon part at a diffuse camera vertex: caustics, and the rest of the indirect light.
+    fn photons_at(&self, scene: &Scene, v: &DiffuseVertex, sampler: &mut dyn Sampler, settings: &RenderSettings) -> Rgb {
+        let left = segments_left(settings.max_depth, v.depth);
+        let m = &self.maps;
+        let mut l = m.caustic.radiance(v.si, v.bsdf, v.wo, &m.caustic_lookup, |p| (p.segments as i32) <= left);
+        if self.gather == 0 {
+            l += m.global.radiance(v.si, v.bsdf, v.wo, &m.global_lookup, |p| !p.caustic && p.segments >= 2 && (p.segments as i32) <= left);
+            return l;
+        }
+        let mut g = Rgb::BLACK;
+        for _ in 0..self.gather {
+            let uc = sampler.next_1d();
+            let u = sampler.next_2d();
+            let Some(bs) = v.bsdf.sample(v.wo, uc, u, TransportMode::Radiance) else { continue };
+            if bs.lobe.is_specular() || bs.pdf <= 0.0 || bs.f.is_black() {
+                continue;
+            }
+            let ray = v.si.spawn_ray(v.si.to_world(bs.wi));
+            g += bs.weight() * self.gather_ray(scene, ray, v.depth + 1, sampler, settings);
+        }
+        l + g / self.gather as f32
+    }
+
+    /// Radiance a gather ray brings back from the global map, through delta bounces; `depth`
+    /// is that of the first surface it meets.
+    fn gather_ray(&self, scene: &Scene, mut ray: Ray, mut depth: i32, sampler: &mut dyn Sampler, settings: &RenderSettings) -> Rgb {
+        let m = &self.maps;
+        let mut t = Rgb::WHITE;
+        let mut l = Rgb::BLACK;
+        let mut bounces = 0u32;
+        // A photon there needs one segment at least.
+        while settings.depth_allows(depth + 1) {
+            let Some(si) = scene.intersect(&ray) else { break };
+            let bsdf = scene.material(&si).bsdf(si.uv);
+            let flags = bsdf.flags();
+            let wo = si.to_local(si.wo);
+            if flags.has_non_specular() {
+                let left = segments_left(settings.max_depth, depth);
+                l += t * m.global.radiance(&si, &bsdf, wo, &m.global_lookup, |p| (p.segments as i32) <= left);
+            }
+            if !flags.is_specular() {
+                break;
+            }
+            let uc = sampler.next_1d();
+            let u = sampler.next_2d();
+            let Some(bs) = bsdf.sample(wo, uc, u, TransportMode::Radiance) else { break };
+            if !bs.lobe.is_specular() || bs.pdf <= 0.0 {
+                break;
+            }
+            t *= bs.weight();
+            bounces += 1;
+            if bounces > GATHER_RR_AFTER {
+                let q = t.max_component().min(0.95);
+                if sampler.next_1d() >= q {
+                    break;
+                }
+                t /= q;
+            }
+            if t.is_black() {
+                break;
+            }
+            ray = si.spawn_ray(si.to_world(bs.wi));
+            depth += 1;
+        }
+        l
+    }
+}
+
+impl PixelEstimator for Estimator {
+    fn li(&self, scene: &Scene, ray: &Ray, sampler: &mut dyn Sampler, settings: &RenderSettings) -> Rgb {
+        camera_walk(scene, ray, sampler, settings, &mut |v, s| self.photons_at(scene, v, s, settings))
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn options_parse() {
+        let o = PhotonOptions::parse("photons=1_000,caustic-photons=5000, k=10,radius=0.5,gather=0,filter=box").unwrap();
+        assert_eq!(o.photons, 1000);
+        assert_eq!(o.caustic_photons, 5000);
+        assert_eq!(o.k, 10);
+        assert_eq!(o.radius, Some(0.5));
+        assert_eq!(o.gather, 0);
+        assert_eq!(o.kernel, Kernel::Box);
+        assert_eq!(PhotonOptions::parse("").unwrap(), PhotonOptions::default());
+        for bad in ["photons", "photons=-3", "radius=0", "radius=nan", "filter=gauss", "colour=red"] {
+            assert!(PhotonOptions::parse(bad).is_err(), "{bad}");
+        }
+    }
+}
