@@ -124,10 +124,7 @@ impl Mlt {
     /// The Metropolis part alone (paths without delta vertices) and its statistics.
     pub fn render_chains(&self, scene: &Scene, settings: &RenderSettings, progress: &Progress) -> Result<(Film, ChainStats)> {
         self.options.validate()?;
-        check_scene(scene)?;
-        let space = Space::new(scene, settings.max_depth, settings.hide_emitters);
-        let total: f64 = self.options.weights.iter().sum();
-        let t = Target { space, probs: self.options.weights.map(|w| w / total) };
+        let t = Target::new(scene, settings, self.options.weights)?;
         metropolis::run(&t, scene.camera.width, scene.camera.height, settings, &self.options.chain, progress)
     }
 
@@ -177,6 +174,22 @@ pub struct Target<'a> {
     pub space: Space<'a>,
     /// Probabilities of the mutations, in `MUTATIONS` order.
     pub probs: [f64; 3],
+    /// Powers of each mutation's T(y→x)/T(x→y): 1 for rendering; tests set -1 (the ratio
+    /// upside down) to check that a wrong acceptance ratio is detected.
+    #[doc(hidden)]
+    pub ratio_power: [f64; 3],
+}
+
+impl<'a> Target<'a> {
+    /// The chains' target for `scene` with mutation probabilities `weights` (any scale).
+    pub fn new(scene: &'a Scene, settings: &RenderSettings, weights: [f64; 3]) -> Result<Self> {
+        check_scene(scene)?;
+        let total: f64 = weights.iter().sum();
+        if total.is_nan() || total <= 0.0 {
+            return Err(Error::Settings("mlt: no mutation has a positive probability".into()));
+        }
+        Ok(Target { space: Space::new(scene, settings.max_depth, settings.hide_emitters), probs: weights.map(|w| w / total), ratio_power: [1.0; 3] })
+    }
 }
 
 pub struct State {
@@ -231,7 +244,7 @@ impl MetropolisTarget for Target<'_> {
             Some((y, ratio)) => {
                 self.contribution(&y, out);
                 st.y = Some(y);
-                Proposal { kind, t_ratio: ratio }
+                Proposal { kind, t_ratio: if self.ratio_power[kind] == 1.0 { ratio } else { ratio.powf(self.ratio_power[kind]) } }
             }
             None => {
                 st.y = None;
