@@ -156,6 +156,9 @@ impl RadiosityOptions {
 
 /// Elements of the regular mesh from which the automatic solver is hierarchical.
 pub const AUTO_HIERARCHICAL_FROM: usize = 1500;
+/// The automatic hierarchical solve's element size, without one given: the scene's bounding
+/// radius over this (the matrix's default is radius / 5).
+pub const AUTO_HIERARCHICAL_EDGE_DIVISOR: f32 = 8.0;
 
 /// A solved scene: the mesh, the radiosity of each element and how the solve went.
 pub struct Solved {
@@ -229,7 +232,11 @@ pub fn solve_observed(
     let mesh_seconds = t0.elapsed().as_secs_f64();
     let kind = opts.solver_for(mesh.elements.len());
     if kind == SolverKind::Hierarchical {
-        return solve_hierarchical(scene, opts, max_depth);
+        // Chosen automatically without an element size: finer leaves than the matrix's default
+        // (the hierarchy only refines where the oracle asks; bench/radiosity README).
+        let mut o = opts.clone();
+        o.mesh.max_edge = o.mesh.max_edge.or(Some(scene.bounds.radius.max(1e-6) / AUTO_HIERARCHICAL_EDGE_DIVISOR));
+        return solve_hierarchical(scene, &o, max_depth);
     }
     let source = RowSource::new(scene, &mesh, opts.form_factors)?;
     let rho_max = mesh.elements.iter().map(|e| e.reflectance.max_component()).fold(0.0f32, f32::max) as f64;
