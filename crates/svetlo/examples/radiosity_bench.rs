@@ -6,6 +6,9 @@
 //!
 //! cargo run --release --example radiosity_bench -- [--scene DIR] [--sizes 0.5,0.25,0.125,0.0625] [--max-matrix N] [--epsilon E]
 //!
+//! Progressive refinement computes each row's form factors in parallel (the row's targets are
+//! split over the threads), so its seconds compare with GS's, whose rows run in parallel too.
+//!
 //! Prints a Markdown table row per element size as it goes. Sizes whose full matrix would have
 //! more than `--max-matrix` elements (default 20000: ~1.5 GB of form factors, minutes on two
 //! cores) skip the matrix methods.
@@ -65,7 +68,7 @@ fn main() {
     // project the matrix's size where it is not built).
     let mut density = f64::NAN;
     println!(
-        "| element size | elements | GS: form factors | GS: s to 1 % | GS: MiB | GS relMSE | progressive: rows for 5 % image (of n) | progressive: rows / s to 1 % | progressive: MiB (est.) | HR: leaves | HR: links | links / leaf | HR: s to 1 % | HR: MiB | HR relMSE | GS / HR form factors |"
+        "| element size | elements | GS: form factors | GS: s to 1 % | GS: MiB | GS relMSE | progressive: rows for 5 % image (of n) / s | progressive: rows / s to 1 % | progressive: MiB (est.) | HR: leaves | HR: links | links / leaf | HR: s to 1 % | HR: MiB | HR relMSE | GS / HR form factors |"
     );
     println!("|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|");
     for h in sizes {
@@ -91,13 +94,13 @@ fn main() {
             // Progressive refinement with rows computed as elements shoot.
             let lazy = RowSource::new(&scene, &mesh, method).expect("source");
             let psys = svetlo::radiosity::system(&mesh, solver::Rows::OnDemand(&lazy));
-            let mut first_good: Option<u64> = None;
+            let mut first_good: Option<(u64, f64)> = None;
             let mut rows_now = 0u64;
             let t = Instant::now();
             let psol = solver::progressive::solve(&psys, &SolveOptions { tolerance: 1e-2, ..Default::default() }, &mut |_, st| {
                 rows_now = lazy.rows_computed.load(std::sync::atomic::Ordering::Relaxed);
                 if first_good.is_none() && display_error(&st.display(&psys.reflectance), &exact, &psys.area) < 0.05 {
-                    first_good = Some(rows_now);
+                    first_good = Some((rows_now, t.elapsed().as_secs_f64()));
                 }
             })
             .expect("progressive");
@@ -105,9 +108,10 @@ fn main() {
             let rows = psol.history.last().map(|s| s.rows).unwrap_or(0);
             let per_row = m.nnz() as f64 / n as f64;
             row += &format!(
-                " {} ({:.0} %) | {rows} / {p_secs:.1} | {:.1} |",
-                first_good.map(|r| r.to_string()).unwrap_or("-".into()),
-                first_good.map(|r| 100.0 * r as f64 / n as f64).unwrap_or(f64::NAN),
+                " {} ({:.0} %) / {:.1} s | {rows} / {p_secs:.1} | {:.1} |",
+                first_good.map(|r| r.0.to_string()).unwrap_or("-".into()),
+                first_good.map(|r| 100.0 * r.0 as f64 / n as f64).unwrap_or(f64::NAN),
+                first_good.map(|r| r.1).unwrap_or(f64::NAN),
                 mib((rows as f64 * per_row * 8.0) as usize)
             );
             drop(sys);
