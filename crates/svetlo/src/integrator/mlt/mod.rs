@@ -378,3 +378,30 @@ impl SplatEstimator for Complement {
         l
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn options_parse_and_reject_bad_input() {
+        let o = MltOptions::parse("bidir=1,lens=0,caustic=2,chains=4,bootstrap=10,complement-spp=3").unwrap();
+        assert_eq!((o.weights, o.chain.chains, o.chain.bootstrap, o.complement_spp), ([1.0, 0.0, 2.0], 4, 10, Some(3)));
+        for bad in ["bidir=0", "lens=-1", "caustic=nan", "complement-spp=0", "chains=x", "multi=1", "lens"] {
+            assert!(MltOptions::parse(bad).is_err(), "{bad} accepted");
+        }
+        assert!(crate::integrator::by_name("mlt:lens=x").is_err());
+    }
+
+    #[test]
+    fn transition_choice_probabilities_are_normalised() {
+        use super::mutations::{n_pos, pd};
+        for k in 1..8 {
+            let s: f64 = (1..=k + 1).map(|kd| pd(kd, k)).sum();
+            assert!((s - 1.0).abs() < 1e-12);
+            for kd in 1..=k + 1 {
+                assert!(n_pos(kd, k) >= 1);
+            }
+        }
+    }
+}
