@@ -342,6 +342,9 @@ pub fn render_loaded(scene: Scene, a: &RenderArgs, out: &OutputPaths, progress: 
     if let (Some(dir), false) = (&a.strategies, strategy_files.is_empty()) {
         println!("strategies  {} images in {}", strategy_files.len(), dir.display());
     }
+    if let Some(r) = job.integrator.report() {
+        eprint!("{r}");
+    }
     if progress.cancelled() {
         eprintln!("interrupted after {} spp", film.spp_done);
         return Ok(ExitCode::from(EXIT_INTERRUPTED));

@@ -18,6 +18,8 @@ pub struct SurfaceInteraction {
     pub prim: u32,
     /// Direction toward the ray origin (-ray.d), world space.
     pub wo: Vec3,
+    /// The time of the ray that found the point (motion blur): rays leaving it keep it.
+    pub time: f32,
 }
 
 impl SurfaceInteraction {
@@ -32,6 +34,8 @@ impl SurfaceInteraction {
     /// A ray leaving the surface in direction `d`, offset to avoid self-intersection.
     #[inline]
     pub fn spawn_ray(&self, d: Vec3) -> super::Ray {
-        super::Ray::new(super::ray::offset_ray_origin(self.p, self.ng, d), d)
+        let mut r = super::Ray::new(super::ray::offset_ray_origin(self.p, self.ng, d), d);
+        r.time = self.time;
+        r
     }
 }

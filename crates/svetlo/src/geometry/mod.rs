@@ -3,6 +3,7 @@
 pub mod aabb;
 pub mod interaction;
 pub mod mesh;
+pub mod motion;
 pub mod ray;
 pub mod shapes;
 pub mod sphere;
@@ -11,6 +12,7 @@ pub mod triangle;
 pub use aabb::Aabb;
 pub use interaction::SurfaceInteraction;
 pub use mesh::TriangleMesh;
+pub use motion::{AnimatedTransform, Motion};
 pub use ray::Ray;
 pub use sphere::Sphere;
 

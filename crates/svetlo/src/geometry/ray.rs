@@ -1,7 +1,8 @@
 use glam::Vec3;
 
 /// A ray `o + t d`, valid for `t` in `(0, t_max)`. `d` need not be normalised
-/// but is for every ray the integrators trace. `time` in [0,1] is the shutter time.
+/// but is for every ray the integrators trace. `time` is the scene time
+/// the ray sees moving shapes at (the camera's shutter interval; 0 when not given).
 #[derive(Clone, Copy, Debug)]
 pub struct Ray {
     pub o: Vec3,
@@ -13,11 +14,11 @@ pub struct Ray {
 impl Ray {
     #[inline]
     pub fn new(o: Vec3, d: Vec3) -> Self {
-        Ray { o, d, t_max: f32::INFINITY, time: 0.5 }
+        Ray { o, d, t_max: f32::INFINITY, time: 0.0 }
     }
     #[inline]
     pub fn with_max(o: Vec3, d: Vec3, t_max: f32) -> Self {
-        Ray { o, d, t_max, time: 0.5 }
+        Ray { o, d, t_max, time: 0.0 }
     }
     #[inline]
     pub fn at(&self, t: f32) -> Vec3 {

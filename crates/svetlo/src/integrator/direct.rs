@@ -53,7 +53,7 @@ impl PixelEstimator for DirectIntegrator {
             for _ in 0..self.emitter_samples {
                 let ul = sampler.next_1d();
                 let u = sampler.next_2d();
-                let c = sample_light_mis(scene, si.p, si.ng, &si.shading, wo, &bsdf, ul, u, (ne, nb));
+                let c = sample_light_mis(scene, si.p, si.ng, &si.shading, wo, &bsdf, ul, u, (ne, nb), si.time);
                 l += c / ne;
             }
         }

@@ -82,7 +82,7 @@ impl PixelEstimator for Distributed {
             let u_light = sampler.next_1d();
             let u_l2 = sampler.next_2d();
             if bsdf.flags().has_non_specular() {
-                l += beta * sample_light_mis(scene, si.p, si.ng, &si.shading, wo, &bsdf, u_light, u_l2, (1.0, 1.0));
+                l += beta * sample_light_mis(scene, si.p, si.ng, &si.shading, wo, &bsdf, u_light, u_l2, (1.0, 1.0), si.time);
             }
             let uc = sampler.next_1d();
             let u = sampler.next_2d();

@@ -114,10 +114,11 @@ impl LocalLights {
         }
     }
 
-    /// Σ over lights of f(wo, wi) L |cos θi|, with a shadow ray to each light when `shadows`.
+    /// Σ over lights of f(wo, wi) L |cos θi|, with a shadow ray to each light when `shadows`
+    /// (seeing the scene at `time`).
     /// `wo` is in the shading frame `frame`; `p`, `ng` in world space.
     #[allow(clippy::too_many_arguments)]
-    pub fn shade(&self, scene: &Scene, p: Vec3, ng: Vec3, frame: &Frame, wo: Vec3, bsdf: &Bsdf, shadows: bool) -> Rgb {
+    pub fn shade(&self, scene: &Scene, p: Vec3, ng: Vec3, frame: &Frame, wo: Vec3, bsdf: &Bsdf, shadows: bool, time: f32) -> Rgb {
         let mut l = Rgb::BLACK;
         for i in 0..scene.lights.len() {
             let Some(s) = self.sample(scene, i, p) else { continue };
@@ -128,8 +129,8 @@ impl LocalLights {
             }
             if shadows {
                 let blocked = match s.p {
-                    Some(q) => scene.occluded(p, ng, q),
-                    None => scene.occluded_dir(p, ng, s.wi),
+                    Some(q) => scene.occluded_at(p, ng, q, time),
+                    None => scene.occluded_dir_at(p, ng, s.wi, time),
                 };
                 if blocked {
                     continue;

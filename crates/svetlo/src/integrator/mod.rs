@@ -8,8 +8,11 @@ pub mod direct;
 pub mod distributed;
 pub mod light;
 pub mod local;
+pub mod metropolis;
+pub mod mlt;
 pub mod path;
 pub mod photon;
+pub mod pssmlt;
 pub mod splat;
 pub mod whitted;
 pub mod zbuffer;
@@ -125,6 +128,11 @@ impl Progress {
 
 pub trait Integrator: Sync {
     fn render(&self, scene: &Scene, settings: &RenderSettings, progress: &Progress) -> Result<Film>;
+    /// A report of the last render for people (e.g. Metropolis acceptance rates), if the
+    /// method keeps one.
+    fn report(&self) -> Option<String> {
+        None
+    }
 }
 
 /// Radiance along one camera ray: the core of every camera-side method.
@@ -228,8 +236,14 @@ pub fn by_name(name: &str) -> Result<Box<dyn Integrator>> {
         // `photon:key=value,...` and `sppm:key=value,...` (see `PhotonOptions::parse`, `SppmOptions::parse`).
         other if other.starts_with("photon:") => Ok(Box::new(photon::PhotonMapper { options: photon::PhotonOptions::parse(&other["photon:".len()..])? })),
         other if other.starts_with("sppm:") => Ok(Box::new(photon::Sppm { options: photon::SppmOptions::parse(&other["sppm:".len()..])? })),
+        "pssmlt" => Ok(Box::new(pssmlt::Pssmlt::default())),
+        "mlt" => Ok(Box::new(mlt::Mlt::default())),
+        // `mlt:key=value,...` (see `MltOptions::parse`).
+        other if other.starts_with("mlt:") => Ok(Box::new(mlt::Mlt::new(mlt::MltOptions::parse(&other["mlt:".len()..])?))),
+        // `pssmlt:key=value,...` (see `PssmltOptions::parse`).
+        other if other.starts_with("pssmlt:") => Ok(Box::new(pssmlt::Pssmlt::new(pssmlt::PssmltOptions::parse(&other["pssmlt:".len()..])?))),
         other => Err(Error::Settings(format!(
-            "unknown integrator '{other}' (available: path, light, bdpt, direct, whitted, distributed, zbuffer, radiosity[:options], photon[:options], sppm[:options])"
+            "unknown integrator '{other}' (available: path, light, bdpt, direct, whitted, distributed, zbuffer, radiosity[:options], photon[:options], sppm[:options], pssmlt[:options], mlt[:options])"
         ))),
     }
 }

@@ -24,7 +24,8 @@ impl Integrator for PathTracer {
 }
 
 /// Next-event estimation from a surface point: one light chosen by power, one point on it,
-/// weighted against BSDF sampling (`counts`: samples of each strategy). Returns the contribution without the path throughput.
+/// weighted against BSDF sampling (`counts`: samples of each strategy); the shadow ray
+/// sees the scene at `time`. Returns the contribution without the path throughput.
 #[allow(clippy::too_many_arguments)]
 pub(crate) fn sample_light_mis(
     scene: &Scene,
@@ -36,6 +37,7 @@ pub(crate) fn sample_light_mis(
     u_light: f32,
     u: glam::Vec2,
     counts: (f32, f32),
+    time: f32,
 ) -> Rgb {
     if scene.lights.is_empty() {
         return Rgb::BLACK;
@@ -54,7 +56,7 @@ pub(crate) fn sample_light_mis(
     if f.is_black() {
         return Rgb::BLACK;
     }
-    let blocked = if ls.infinite { scene.occluded_dir(p, ng, ls.wi) } else { scene.occluded(p, ng, ls.p) };
+    let blocked = if ls.infinite { scene.occluded_dir_at(p, ng, ls.wi, time) } else { scene.occluded_at(p, ng, ls.p, time) };
     if blocked {
         return Rgb::BLACK;
     }
@@ -108,7 +110,7 @@ impl PixelEstimator for PathTracer {
             let u_light = sampler.next_1d();
             let u_l2 = sampler.next_2d();
             if bsdf.flags().has_non_specular() {
-                l += beta * sample_light_mis(scene, si.p, si.ng, &si.shading, wo, &bsdf, u_light, u_l2, (1.0, 1.0));
+                l += beta * sample_light_mis(scene, si.p, si.ng, &si.shading, wo, &bsdf, u_light, u_l2, (1.0, 1.0), si.time);
             }
             let uc = sampler.next_1d();
             let u = sampler.next_2d();

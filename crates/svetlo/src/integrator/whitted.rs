@@ -128,7 +128,7 @@ impl WhittedEstimator {
         let bsdf = scene.material(&si).bsdf(si.uv);
         let wo = si.to_local(si.wo);
         if bsdf.flags().has_non_specular() {
-            l += self.lights.shade(scene, si.p, si.ng, &si.shading, wo, &bsdf, true);
+            l += self.lights.shade(scene, si.p, si.ng, &si.shading, wo, &bsdf, true, si.time);
         }
         for (wi, w) in specular_branches(&bsdf, wo) {
             let t = throughput * w;

@@ -39,19 +39,32 @@ impl<'a> RadiosityView<'a> {
         RadiosityView { mesh, b, vertex_b, shading }
     }
 
+    /// Gouraud display with given vertex values (one per display vertex).
+    pub fn with_vertex_values(mesh: &'a RadiosityMesh, b: &'a [Rgb], vertex_b: Vec<Rgb>) -> Self {
+        RadiosityView { mesh, b, vertex_b, shading: Shading::Gouraud }
+    }
+
     /// Radiosity leaving the surface the ray hits (None: the ray escapes).
     pub fn radiosity(&self, scene: &Scene, ray: &crate::geometry::Ray) -> Option<Rgb> {
-        let hit = scene.accel.intersect(ray)?;
-        let p = ray.at(hit.t);
-        let Some(i) = self.mesh.element_at(&hit, p, ray.d) else { return Some(Rgb::BLACK) };
+        let hit = scene.intersect_prim(ray)?;
+        Some(self.element_radiosity(&hit, ray.at(hit.t), ray.d).map(|(_, b)| b).unwrap_or(Rgb::BLACK))
+    }
+
+    /// The element hit at `p` by a ray along `d`, and the radiosity shown there (None: the
+    /// surface has no element on that side).
+    pub fn element_radiosity(&self, hit: &crate::accel::PrimHit, p: glam::Vec3, d: glam::Vec3) -> Option<(u32, Rgb)> {
+        let i = self.mesh.element_at(hit, p, d)?;
         let e = &self.mesh.elements[i as usize];
-        Some(match self.shading {
-            Shading::Flat => self.b[i as usize],
-            Shading::Gouraud => {
-                let w = self.mesh.corner_weights(&hit, p, e);
-                self.vertex_b[e.vertex[0] as usize] * w[0] + self.vertex_b[e.vertex[1] as usize] * w[1] + self.vertex_b[e.vertex[2] as usize] * w[2]
-            }
-        })
+        Some((
+            i,
+            match self.shading {
+                Shading::Flat => self.b[i as usize],
+                Shading::Gouraud => {
+                    let w = self.mesh.corner_weights(hit, p, e);
+                    self.vertex_b[e.vertex[0] as usize] * w[0] + self.vertex_b[e.vertex[1] as usize] * w[1] + self.vertex_b[e.vertex[2] as usize] * w[2]
+                }
+            },
+        ))
     }
 }
 
@@ -71,15 +84,24 @@ pub struct RadiosityIntegrator {
 impl crate::integrator::Integrator for RadiosityIntegrator {
     fn render(&self, scene: &Scene, settings: &RenderSettings, progress: &crate::integrator::Progress) -> crate::error::Result<crate::film::Film> {
         settings.validate()?;
-        let solved = super::solve(scene, &self.options, settings.max_depth)?;
-        let mut b = solved.b.clone();
+        let mut solved = super::solve(scene, &self.options, settings.max_depth)?;
         if settings.hide_emitters {
             // Hidden emitters show only the light they reflect.
-            for (x, e) in b.iter_mut().zip(&solved.mesh.elements) {
-                *x -= e.emission;
+            let emission: Vec<Rgb> = solved.mesh.elements.iter().map(|e| e.emission).collect();
+            for (x, e) in solved.b.iter_mut().zip(&emission) {
+                *x -= *e;
+            }
+            if let Some(v) = &mut solved.vertex_b {
+                for (x, e) in v.iter_mut().zip(vertex_radiosity(&solved.mesh, &emission)) {
+                    *x -= e;
+                }
             }
         }
-        let view = RadiosityView::new(&solved.mesh, &b, self.options.shading);
+        let view = solved.view(self.options.shading);
+        if self.options.hybrid {
+            let hybrid = super::hybrid::HybridView::new(scene, view, self.options.gather);
+            return render_pixels(scene, settings, progress, &hybrid);
+        }
         render_pixels(scene, settings, progress, &view)
     }
 }

@@ -10,6 +10,7 @@
 pub mod display;
 pub mod form_factor;
 pub mod hierarchical;
+pub mod hybrid;
 pub mod mesh;
 pub mod solver;
 
@@ -41,6 +42,10 @@ pub struct RadiosityOptions {
     pub shading: Shading,
     /// Settings of the hierarchical solver.
     pub hierarchical: hierarchical::HierarchicalOptions,
+    /// Two-pass display: ray tracing adds specular paths and a final gather ([`hybrid`]).
+    pub hybrid: bool,
+    /// Final-gather rays (and light samples) per camera sample of the hybrid display; 0 reads the solution directly.
+    pub gather: u32,
 }
 
 impl Default for RadiosityOptions {
@@ -53,6 +58,8 @@ impl Default for RadiosityOptions {
             reciprocity: false,
             shading: Shading::Gouraud,
             hierarchical: Default::default(),
+            hybrid: false,
+            gather: 16,
         }
     }
 }
@@ -63,7 +70,7 @@ impl RadiosityOptions {
     /// Keys: form-factors, solver, element-size, max-elements, tolerance, max-steps, omega
     /// (a number or `adaptive`), hemicube-resolution, rays, visibility-grid, source-grid, seed, reciprocity
     /// (true/false), shading (flat/gouraud); hierarchical solver: epsilon, min-area, refine (f/bf),
-    /// importance (true/false), passes.
+    /// importance (true/false), passes; display: hybrid (true/false), gather (final-gather rays).
     pub fn parse(params: &str) -> Result<Self> {
         let mut o = RadiosityOptions::default();
         let (mut res, mut rays, mut vis, mut src, mut seed) = (None, None, None, None, None);
@@ -93,6 +100,8 @@ impl RadiosityOptions {
                         _ => return Err(Error::Settings(format!("radiosity: shading is flat or gouraud, got '{v}'"))),
                     }
                 }
+                "hybrid" => o.hybrid = v.parse().map_err(|_| Error::Settings(format!("radiosity: hybrid is true or false, got '{v}'")))?,
+                "gather" => o.gather = int(v)?.min(1 << 16) as u32,
                 "epsilon" => o.hierarchical.epsilon = num(v)?,
                 "min-area" => o.hierarchical.min_area = Some(num(v)? as f32),
                 "passes" => o.hierarchical.max_passes = int(v)? as usize,
@@ -141,6 +150,24 @@ pub struct Solved {
     pub solve_seconds: f64,
     /// Links, nodes and leaves of a hierarchical solve.
     pub hierarchy: Option<hierarchical::Stats>,
+    /// Gouraud values at the display vertices when the solver provides its own (hierarchical:
+    /// interpolated over its leaves); None: area-weighted means of the elements around each vertex.
+    pub vertex_b: Option<Vec<Rgb>>,
+}
+
+impl Solved {
+    /// The solution shown through a camera.
+    pub fn view(&self, shading: Shading) -> display::RadiosityView<'_> {
+        match &self.vertex_b {
+            Some(v) if shading == Shading::Gouraud => display::RadiosityView::with_vertex_values(&self.mesh, &self.b, v.clone()),
+            _ => display::RadiosityView::new(&self.mesh, &self.b, shading),
+        }
+    }
+
+    /// Radiosity at every display vertex (for Gouraud display and the PLY output).
+    pub fn vertex_radiosity(&self) -> Vec<Rgb> {
+        self.vertex_b.clone().unwrap_or_else(|| display::vertex_radiosity(&self.mesh, &self.b))
+    }
 }
 
 /// The system's per-element data.
@@ -219,6 +246,7 @@ pub fn solve_observed(
         form_factor_seconds,
         solve_seconds,
         hierarchy: None,
+        vertex_b: None,
     })
 }
 
@@ -243,5 +271,6 @@ fn solve_hierarchical(scene: &Scene, opts: &RadiosityOptions, max_depth: i32) ->
         form_factor_seconds: o.stats.refine_seconds,
         solve_seconds: total - o.stats.refine_seconds,
         hierarchy: Some(o.stats),
+        vertex_b: Some(o.vertex_b),
     })
 }

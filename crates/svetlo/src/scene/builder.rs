@@ -1,11 +1,11 @@
 //! Assembles a [`Scene`] from parts, validating what user input could get wrong.
 
-use super::{LightSelection, Scene, SceneSettings, Shape};
+use super::{LightSelection, MovingShape, Scene, SceneSettings, Shape};
 use crate::accel::Accel;
 use crate::bsdf::Material;
 use crate::camera::Camera;
 use crate::error::{Error, Result};
-use crate::geometry::{Geometry, TriangleMesh};
+use crate::geometry::{AnimatedTransform, Geometry, Motion, TriangleMesh};
 use crate::light::{AreaLight, Light, SceneBounds};
 use crate::sampling::Distribution1D;
 use crate::texture::Texture;
@@ -28,9 +28,12 @@ fn light_selection_distribution(lights: &[Light], bounds: &SceneBounds, how: Lig
     Distribution1D::new(&weights)
 }
 
+/// A shape as added: geometry, material, emission, name, animation.
+type PendingShape = (Geometry, u32, Option<Texture>, String, Option<AnimatedTransform>);
+
 #[derive(Default)]
 pub struct SceneBuilder {
-    shapes: Vec<(Geometry, u32, Option<Texture>, String)>,
+    shapes: Vec<PendingShape>,
     materials: Vec<Material>,
     lights: Vec<Light>,
     camera: Option<Camera>,
@@ -64,7 +67,24 @@ impl SceneBuilder {
         if material as usize >= self.materials.len() {
             return Err(Error::Invalid(format!("shape '{name}': material index {material} out of range")));
         }
-        self.shapes.push((geometry, material, emission, name.to_string()));
+        self.shapes.push((geometry, material, emission, name.to_string(), None));
+        Ok(())
+    }
+
+    /// Add a shape that moves during the shutter: `geometry` is given in its pose at the
+    /// animation's first keyframe (`animation.reference()`). Moving emitters are not supported
+    /// (their light sampling would need the time); an animation that does not move adds a static shape.
+    pub fn add_animated_shape(&mut self, geometry: Geometry, material: u32, emission: Option<Texture>, name: &str, animation: AnimatedTransform) -> Result<()> {
+        if animation.is_static() {
+            return self.add_shape(geometry, material, emission, name);
+        }
+        if emission.is_some() {
+            return Err(Error::Invalid(format!("shape '{name}': an emitting shape cannot be animated (moving area lights are not supported)")));
+        }
+        self.add_shape(geometry, material, None, name)?;
+        if let Some(last) = self.shapes.last_mut() {
+            last.4 = Some(animation);
+        }
         Ok(())
     }
 
@@ -127,17 +147,31 @@ impl SceneBuilder {
         }
         let mut lights = self.lights;
         let mut shapes = Vec::with_capacity(self.shapes.len());
-        for (i, (g, material, emission, name)) in self.shapes.into_iter().enumerate() {
+        for (i, (g, material, emission, name, animation)) in self.shapes.into_iter().enumerate() {
             let g = Arc::new(g);
             let light = emission.map(|e| {
                 lights.push(Light::Area(AreaLight::new(i as u32, g.clone(), e)));
                 (lights.len() - 1) as u32
             });
-            shapes.push(Shape { geometry: g, material, light, name });
+            shapes.push(Shape { geometry: g, material, light, name, motion: animation.map(|a| Arc::new(Motion::new(a))) });
         }
-        let geoms: Vec<&Geometry> = shapes.iter().map(|s| &*s.geometry).collect();
+        let static_ids: Vec<u32> = (0..shapes.len() as u32).filter(|&i| shapes[i as usize].motion.is_none()).collect();
+        let geoms: Vec<&Geometry> = static_ids.iter().map(|&i| &*shapes[i as usize].geometry).collect();
         let accel = Accel::build(&geoms);
-        let bounds = SceneBounds::from_aabb(&accel.bounds());
+        let moving: Vec<MovingShape> = shapes
+            .iter()
+            .enumerate()
+            .filter_map(|(i, s)| {
+                let motion = s.motion.clone()?;
+                let accel = Accel::build(&[&*s.geometry]);
+                let (t0, t1) = motion.animation.time_range();
+                let bounds = motion.bounds(&accel.bounds(), t0, t1);
+                Some(MovingShape { shape: i as u32, accel, motion, bounds })
+            })
+            .collect();
+        let all_bounds = moving.iter().fold(accel.bounds(), |b, m| b.union(m.bounds));
+        let bounds = SceneBounds::from_aabb(&all_bounds);
+        let static_shapes = if moving.is_empty() { Vec::new() } else { static_ids };
         let light_distribution = light_selection_distribution(&lights, &bounds, self.settings.light_selection);
         let environment_lights =
             lights.iter().enumerate().filter(|(_, l)| matches!(l, Light::Constant { .. } | Light::EnvMap(_))).map(|(i, _)| i as u32).collect();
@@ -153,6 +187,8 @@ impl SceneBuilder {
             environment_lights,
             camera,
             accel,
+            static_shapes,
+            moving,
             bounds,
             settings: self.settings,
             warnings,

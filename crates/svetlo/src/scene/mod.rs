@@ -5,14 +5,15 @@ mod builder;
 pub use builder::SceneBuilder;
 
 use crate::accel::Accel;
+use crate::accel::PrimHit;
 use crate::bsdf::Material;
 use crate::camera::Camera;
 use crate::film::Filter;
-use crate::geometry::{Geometry, Ray, SurfaceInteraction};
+use crate::geometry::{Geometry, Motion, Ray, SurfaceInteraction};
 use crate::light::{Light, SceneBounds};
 use crate::math::Frame;
 use crate::sampling::{Distribution1D, SamplerKind};
-use glam::Vec3;
+use glam::{Mat3, Mat4, Vec3};
 use std::sync::Arc;
 
 #[derive(Clone, Debug)]
@@ -23,6 +24,18 @@ pub struct Shape {
     pub light: Option<u32>,
     /// The scene file's id or a generated name, for messages.
     pub name: String,
+    /// Animated to_world (motion blur); `geometry` is then its pose at the first keyframe.
+    pub motion: Option<Arc<Motion>>,
+}
+
+/// A shape that moves during the shutter: its own accelerator over its reference pose, into
+/// which rays are carried at their time.
+pub struct MovingShape {
+    pub shape: u32,
+    pub accel: Accel,
+    pub motion: Arc<Motion>,
+    /// World bounds over every time (the pose is held outside the keyframes).
+    pub bounds: crate::geometry::Aabb,
 }
 
 /// Render settings a scene file carries (Mitsuba `<integrator>`, `<sampler>`, `<film>`).
@@ -77,7 +90,12 @@ pub struct Scene {
     /// Indices of the infinite lights that rays escaping the scene see (constant, envmap).
     pub environment_lights: Vec<u32>,
     pub camera: Camera,
+    /// The accelerator over the static shapes.
     pub accel: Accel,
+    /// Scene shape index of each shape of `accel` when some shapes move (empty: the identity).
+    pub static_shapes: Vec<u32>,
+    /// Shapes with an animated transform, intersected at each ray's time.
+    pub moving: Vec<MovingShape>,
     pub bounds: SceneBounds,
     pub settings: SceneSettings,
     /// Everything the loader ignored or adapted, for `svetlo info` and the log.
@@ -85,9 +103,66 @@ pub struct Scene {
 }
 
 impl Scene {
+    /// Closest primitive along the ray, static or moving (shape ids index `shapes`).
+    pub fn intersect_prim(&self, ray: &Ray) -> Option<PrimHit> {
+        self.closest(ray).map(|(h, _)| h)
+    }
+
+    /// The closest hit; for a moving shape also the ray carried into its reference pose and
+    /// the transform from that pose to the world at the ray's time.
+    fn closest(&self, ray: &Ray) -> Option<(PrimHit, Option<(Ray, Mat4)>)> {
+        let mut best = self.accel.intersect(ray).map(|mut h| {
+            if !self.static_shapes.is_empty() {
+                h.shape = self.static_shapes[h.shape as usize];
+            }
+            (h, None)
+        });
+        if self.moving.is_empty() {
+            return best;
+        }
+        let mut t_max = best.as_ref().map_or(ray.t_max, |(h, _)| h.t);
+        let inv_d = ray.d.recip();
+        for mv in &self.moving {
+            if mv.bounds.intersect(ray.o, inv_d, t_max).is_none() {
+                continue;
+            }
+            let (local, m) = Self::to_reference(mv, ray, t_max);
+            if let Some(mut h) = mv.accel.intersect(&local) {
+                t_max = h.t;
+                h.shape = mv.shape;
+                best = Some((h, Some((local, m))));
+            }
+        }
+        best
+    }
+
+    /// `ray` in the reference pose of a moving shape (same parameter t), and the transform back.
+    #[inline]
+    fn to_reference(mv: &MovingShape, ray: &Ray, t_max: f32) -> (Ray, Mat4) {
+        let m = mv.motion.relative(ray.time);
+        let inv = m.inverse();
+        (Ray { o: inv.transform_point3(ray.o), d: inv.transform_vector3(ray.d), t_max, time: ray.time }, m)
+    }
+
     /// Closest surface along the ray.
     pub fn intersect(&self, ray: &Ray) -> Option<SurfaceInteraction> {
-        let hit = self.accel.intersect(ray)?;
+        let (hit, moving) = self.closest(ray)?;
+        match moving {
+            None => Some(self.interaction(&hit, ray)),
+            Some((local, m)) => {
+                let si = self.interaction(&hit, &local);
+                let lin = Mat3::from_mat4(m);
+                let normal = lin.inverse().transpose();
+                let ng = (normal * si.ng).normalize();
+                let ns = (normal * si.shading.n).normalize();
+                let shading = Frame::from_normal_tangent(ns, lin * si.shading.s);
+                Some(SurfaceInteraction { p: m.transform_point3(si.p), ng, shading, wo: -ray.d, ..si })
+            }
+        }
+    }
+
+    /// The surface record of a primitive hit by `ray` (in the space the primitive is stored in).
+    fn interaction(&self, hit: &PrimHit, ray: &Ray) -> SurfaceInteraction {
         let shape = &self.shapes[hit.shape as usize];
         let p_ray = ray.at(hit.t);
         let (p, ng, ns, uv, dpdu) = match &*shape.geometry {
@@ -106,12 +181,27 @@ impl Scene {
                 (p, n, n, uv, dpdu)
             }
         };
-        Some(SurfaceInteraction { p, t: hit.t, ng, shading: Frame::from_normal_tangent(ns, dpdu), uv, shape: hit.shape, prim: hit.prim, wo: -ray.d })
+        SurfaceInteraction { p, t: hit.t, ng, shading: Frame::from_normal_tangent(ns, dpdu), uv, shape: hit.shape, prim: hit.prim, wo: -ray.d, time: ray.time }
     }
 
-    /// Is the straight segment between two points blocked? `p0` is offset off its surface with
-    /// normal `n0`; the far end stops short of `p1` so that the target surface does not count.
+    /// Is anything in the way along `ray` (static or, at the ray's time, moving)?
+    fn blocked(&self, ray: &Ray) -> bool {
+        if self.accel.occluded(ray) {
+            return true;
+        }
+        let inv_d = ray.d.recip();
+        self.moving.iter().any(|mv| mv.bounds.intersect(ray.o, inv_d, ray.t_max).is_some() && mv.accel.occluded(&Self::to_reference(mv, ray, ray.t_max).0))
+    }
+
+    /// Is the straight segment between two points blocked at time 0 (see [`Self::occluded_at`])?
     pub fn occluded(&self, p0: Vec3, n0: Vec3, p1: Vec3) -> bool {
+        self.occluded_at(p0, n0, p1, 0.0)
+    }
+
+    /// Is the straight segment between two points blocked at `time`? `p0` is offset off its
+    /// surface with normal `n0`; the far end stops short of `p1` so that the target surface
+    /// does not count.
+    pub fn occluded_at(&self, p0: Vec3, n0: Vec3, p1: Vec3, time: f32) -> bool {
         let d = p1 - p0;
         let o = crate::geometry::ray::offset_ray_origin(p0, n0, d);
         let d = p1 - o;
@@ -119,14 +209,22 @@ impl Scene {
         if dist == 0.0 {
             return false;
         }
-        let ray = Ray::with_max(o, d / dist, dist * (1.0 - crate::geometry::ray::SHADOW_EPSILON));
-        self.accel.occluded(&ray)
+        let mut ray = Ray::with_max(o, d / dist, dist * (1.0 - crate::geometry::ray::SHADOW_EPSILON));
+        ray.time = time;
+        self.blocked(&ray)
     }
 
-    /// Is anything in the way from `p0` (normal `n0`) toward direction `w`, to infinity?
+    /// Is anything in the way from `p0` (normal `n0`) toward direction `w`, to infinity, at time 0?
     pub fn occluded_dir(&self, p0: Vec3, n0: Vec3, w: Vec3) -> bool {
+        self.occluded_dir_at(p0, n0, w, 0.0)
+    }
+
+    /// Is anything in the way from `p0` (normal `n0`) toward direction `w`, to infinity, at `time`?
+    pub fn occluded_dir_at(&self, p0: Vec3, n0: Vec3, w: Vec3, time: f32) -> bool {
         let o = crate::geometry::ray::offset_ray_origin(p0, n0, w);
-        self.accel.occluded(&Ray::new(o, w))
+        let mut ray = Ray::new(o, w);
+        ray.time = time;
+        self.blocked(&ray)
     }
 
     /// The area light of the shape hit, if it emits.

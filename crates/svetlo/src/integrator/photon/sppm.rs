@@ -17,7 +17,7 @@
 use super::camera::camera_walk;
 use super::map::Photon;
 use super::trace::trace_photons;
-use super::{parse_count, parse_pairs, parse_positive, photon_max_segments, pixel_footprint, segments_left};
+use super::{parse_count, parse_pairs, parse_positive, pixel_footprint, segments_left};
 use crate::accel::KdTree;
 use crate::bsdf::{Bsdf, LobeFlags, TransportMode};
 use crate::error::{Error, Result};
@@ -25,6 +25,7 @@ use crate::film::{Film, Filter};
 use crate::geometry::SurfaceInteraction;
 use crate::integrator::{Integrator, Progress, RenderSettings};
 use crate::math::PI;
+use crate::path::PathConfig;
 use crate::sampling::sampler::make_sampler;
 use crate::scene::Scene;
 use crate::spectrum::Rgb;
@@ -101,8 +102,8 @@ struct Stats {
 impl Sppm {
     /// One iteration's photons: on diffuse surfaces, at least two segments from the light.
     fn photon_pass(&self, scene: &Scene, settings: &RenderSettings, iteration: u64, count: u64) -> KdTree<Photon> {
-        let max_seg = photon_max_segments(settings.max_depth);
-        let photons = trace_photons(scene, settings.seed, iteration, count, max_seg, |d| {
+        let cfg = PathConfig::new(scene, settings.max_depth, settings.rr_depth, settings.hide_emitters);
+        let photons = trace_photons(scene, settings.seed, iteration, count, &cfg, |_, d| {
             let keep = (d.segments >= 2 && d.surface.intersects(LobeFlags::DIFFUSE)).then(|| Photon::from_deposit(d, 1.0));
             (keep, true)
         });

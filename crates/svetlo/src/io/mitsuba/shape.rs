@@ -1,9 +1,10 @@
 //! Shape plugins: parametric shapes (meshed, spheres analytic), mesh files, instances.
 
+use super::props::{parse_f32, parse_transform};
 use super::xml::Node;
 use super::Loader;
-use crate::error::Result;
-use crate::geometry::{shapes, Geometry, Sphere, TriangleMesh};
+use crate::error::{Error, Result};
+use crate::geometry::{shapes, AnimatedTransform, Geometry, Sphere, TriangleMesh};
 use crate::io::mesh_files::{self, LoadedMesh};
 use crate::io::spectra::SpectrumKind;
 use crate::math::Frame;
@@ -27,8 +28,16 @@ impl<'a> Loader<'a> {
     /// Add the geometry of a `<shape>` (placed by `parent`, for instances) to the scene.
     pub(super) fn shape(&mut self, node: &'a Node, parent: Mat4) -> Result<()> {
         let ty = node.type_()?;
-        let to_world = parent * self.transform(node, "to_world")?.unwrap_or(Mat4::IDENTITY);
+        let animation = self.animation(node, parent)?;
+        let to_world = match &animation {
+            // The geometry is built in the pose of the first keyframe.
+            Some(a) => a.reference(),
+            None => parent * self.transform(node, "to_world")?.unwrap_or(Mat4::IDENTITY),
+        };
         if ty == "instance" {
+            if let Some(c) = node.children.iter().find(|c| c.tag == "animation") {
+                return Err(c.loc.err("an instance cannot be animated; animate the shapes of its shapegroup"));
+            }
             return self.instance(node, to_world);
         }
         self.shape_count += 1;
@@ -111,7 +120,49 @@ impl<'a> Loader<'a> {
             Some(m) => m,
             None => self.default_material(),
         };
-        self.b.add_shape(geometry, material, emission, &name)
+        match animation {
+            Some(a) => {
+                if emission.is_some() && !a.is_static() {
+                    return Err(node.loc.err(format!("shape '{name}': an emitting shape cannot be animated (moving area lights are not supported)")));
+                }
+                self.b.add_animated_shape(geometry, material, emission, &name, a)
+            }
+            None => self.b.add_shape(geometry, material, emission, &name),
+        }
+    }
+
+    /// The svetlo extension for motion blur (Mitsuba 0.6's syntax):
+    /// `<animation name="to_world">` holding `<transform time="..">` keyframes, in increasing
+    /// time, in place of the shape's `<transform name="to_world">`. `parent` places it (instances).
+    fn animation(&self, node: &'a Node, parent: Mat4) -> Result<Option<AnimatedTransform>> {
+        let mut found: Option<AnimatedTransform> = None;
+        for c in node.children.iter().filter(|c| c.tag == "animation") {
+            if found.is_some() {
+                return Err(c.loc.err("a shape has at most one <animation>"));
+            }
+            match c.name() {
+                Some("to_world") => {}
+                Some(other) => return Err(c.loc.err(format!("only to_world can be animated, not '{other}'"))),
+                None => return Err(c.loc.err("<animation> needs name=\"to_world\"")),
+            }
+            if node.children.iter().any(|t| t.tag == "transform" && t.name() == Some("to_world")) {
+                return Err(c.loc.err("a shape has either a to_world <transform> or an <animation>, not both"));
+            }
+            let mut keys = Vec::new();
+            for k in &c.children {
+                if k.tag != "transform" {
+                    return Err(k.loc.err(format!("an <animation> holds <transform time=..> keyframes, not <{}>", k.tag)));
+                }
+                let time = parse_f32(k.req("time")?, &k.loc, "time")?;
+                keys.push((time, parent * parse_transform(k)?));
+            }
+            let a = AnimatedTransform::new(&keys).map_err(|e| match e {
+                Error::Invalid(msg) => c.loc.err(format!("<animation>: {msg}")),
+                other => other,
+            })?;
+            found = Some(a);
+        }
+        Ok(found)
     }
 
     /// `<shape type="instance">`: copies the referenced shapegroup's shapes, transformed.

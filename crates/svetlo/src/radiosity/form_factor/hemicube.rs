@@ -52,7 +52,7 @@ pub fn row(scene: &Scene, mesh: &RadiosityMesh, i: usize, pixels: &[(Vec3, f32)]
     for (d, df) in pixels {
         let d = frame.to_world(*d);
         let ray = Ray::new(o, d);
-        if let Some(h) = scene.accel.intersect(&ray) {
+        if let Some(h) = scene.intersect_prim(&ray) {
             if let Some(j) = mesh.element_at(&h, ray.at(h.t), d) {
                 if j as usize != i {
                     hits.push((j, *df));

@@ -1,0 +1,383 @@
+//! The Metropolis machinery shared by primary-sample MLT (Kelemen) and path-space MLT (Veach).
+//!
+//! A [`MetropolisTarget`] knows how to draw independent seed samples, and how to propose,
+//! accept and reject mutations of a chain's state. The driver [`run`] does the rest:
+//!
+//! - **Bootstrap**: `bootstrap` independent samples estimate the normalisation
+//!   b = ∫ f (f = luminance of the path's contribution). Each sample may offer several
+//!   candidate start states with weights w (unbiased estimates of f/p); b = mean of Σ w.
+//! - **Starts**: each chain starts at a candidate chosen with probability ∝ w, which is
+//!   distributed as f/b when the bootstrap is large (sampling-importance-resampling): no
+//!   start-up bias to burn in. The candidate is rebuilt by replaying its seed's random stream.
+//! - **Chains**: a fixed number of independent chains, each with its own random streams, run
+//!   in rounds over threads; their splats are merged in chain order, so the image depends on
+//!   the seed and not on the thread count.
+//! - **Expected values**: each mutation deposits the current state with weight (1 − a) and
+//!   the proposal with weight a, each as b · L / f (Veach's and Kelemen's estimator).
+//!
+//! Film normalisation: the pixel value is (npix / N) Σ b · L / f over the N mutations, i.e.
+//! splats divided by the mutations per pixel (`--spp`).
+
+pub mod pss;
+
+use super::{Progress, RenderSettings};
+use crate::error::{Error, Result};
+use crate::film::Film;
+use crate::sampling::rng::hash_seed;
+use crate::sampling::Pcg32;
+use crate::spectrum::Rgb;
+use glam::Vec2;
+use rayon::prelude::*;
+use std::fmt::Write as _;
+use std::sync::atomic::Ordering;
+use std::time::Instant;
+
+/// What one state deposits on the film: radiance estimates at raster positions.
+#[derive(Clone, Debug, Default)]
+pub struct Contribution {
+    pub splats: Vec<(Vec2, Rgb)>,
+}
+
+impl Contribution {
+    pub fn clear(&mut self) {
+        self.splats.clear();
+    }
+    pub fn push(&mut self, raster: Vec2, l: Rgb) {
+        if l.is_finite() && !l.is_black() {
+            self.splats.push((raster, l));
+        }
+    }
+    /// The scalar the chain is distributed by: total luminance (non-negative, finite).
+    pub fn f(&self) -> f32 {
+        let f: f32 = self.splats.iter().map(|(_, l)| l.luminance().max(0.0)).sum();
+        if f.is_finite() {
+            f
+        } else {
+            0.0
+        }
+    }
+}
+
+/// A proposed mutation: which kind, and the ratio T(y→x) / T(x→y) of its transition densities
+/// (1 for symmetric proposals; 0 rejects).
+#[derive(Clone, Copy, Debug)]
+pub struct Proposal {
+    pub kind: usize,
+    pub t_ratio: f64,
+}
+
+/// A state space with its mutations.
+pub trait MetropolisTarget: Sync {
+    type State: Send;
+    /// Names of the mutation kinds `Proposal::kind` indexes.
+    fn mutation_names(&self) -> Vec<&'static str>;
+    /// One independent seed sample drawn with `rng`: push the weight (f/p) of each candidate
+    /// start state it offers.
+    fn bootstrap(&self, rng: Pcg32, weights: &mut Vec<f32>);
+    /// Replay the seed sample of `rng`, start a chain at its candidate `candidate`, continuing
+    /// with `chain_rng`; fill `out` with that state's contribution.
+    fn start(&self, rng: Pcg32, candidate: usize, chain_rng: Pcg32, out: &mut Contribution) -> Option<Self::State>;
+    /// Propose a mutation of the current state and fill `out` with the proposal's contribution.
+    fn propose(&self, state: &mut Self::State, out: &mut Contribution) -> Proposal;
+    fn accept(&self, state: &mut Self::State);
+    fn reject(&self, state: &mut Self::State);
+}
+
+/// Settings of the driver.
+#[derive(Clone, Debug)]
+pub struct ChainSettings {
+    pub chains: usize,
+    pub bootstrap: usize,
+}
+
+impl Default for ChainSettings {
+    fn default() -> Self {
+        ChainSettings { chains: 256, bootstrap: 100_000 }
+    }
+}
+
+impl ChainSettings {
+    pub fn validate(&self) -> Result<()> {
+        if self.chains == 0 || self.chains > 1 << 20 {
+            return Err(Error::Settings(format!("chains must be in 1..=1048576, got {}", self.chains)));
+        }
+        if self.bootstrap == 0 || self.bootstrap > 1 << 28 {
+            return Err(Error::Settings(format!("bootstrap must be in 1..=268435456, got {}", self.bootstrap)));
+        }
+        Ok(())
+    }
+}
+
+/// Acceptance statistics and the normalisation of a Metropolis render.
+#[derive(Clone, Debug, Default)]
+pub struct ChainStats {
+    pub names: Vec<&'static str>,
+    pub proposed: Vec<u64>,
+    pub accepted: Vec<u64>,
+    /// Sum of acceptance probabilities a, per kind.
+    pub acceptance_sum: Vec<f64>,
+    /// Estimated b = ∫ f and its standard error.
+    pub b: f64,
+    pub b_stderr: f64,
+    pub bootstrap: usize,
+    /// Bootstrap samples with a non-zero contribution.
+    pub bootstrap_nonzero: usize,
+    pub chains: usize,
+    pub mutations: u64,
+    /// Per chain: the sum of everything it splatted and its number of mutations (the spread
+    /// of chain means gives the image mean's standard error, chains being independent).
+    pub chain_sums: Vec<[f64; 3]>,
+    pub chain_mutations: Vec<u64>,
+}
+
+impl ChainStats {
+    fn new(names: Vec<&'static str>) -> Self {
+        let n = names.len();
+        ChainStats { names, proposed: vec![0; n], accepted: vec![0; n], acceptance_sum: vec![0.0; n], ..Default::default() }
+    }
+    fn merge(&mut self, o: &ChainStats) {
+        for k in 0..self.names.len() {
+            self.proposed[k] += o.proposed[k];
+            self.accepted[k] += o.accepted[k];
+            self.acceptance_sum[k] += o.acceptance_sum[k];
+        }
+        self.mutations += o.mutations;
+    }
+    /// Fraction of proposals of kind `k` accepted.
+    pub fn acceptance_rate(&self, k: usize) -> f64 {
+        if self.proposed[k] == 0 {
+            0.0
+        } else {
+            self.accepted[k] as f64 / self.proposed[k] as f64
+        }
+    }
+    /// The image's mean per channel (the splats per mutation) and its standard error, from the
+    /// spread between chains and the bootstrap's error in b.
+    pub fn image_mean(&self) -> Option<([f64; 3], [f64; 3])> {
+        let used: Vec<usize> = (0..self.chain_mutations.len()).filter(|&c| self.chain_mutations[c] > 0).collect();
+        let n = used.len();
+        if n < 2 || self.b <= 0.0 {
+            return None;
+        }
+        let total: u64 = used.iter().map(|&c| self.chain_mutations[c]).sum();
+        let mut mean = [0.0; 3];
+        let mut se = [0.0; 3];
+        let rb = self.b_stderr / self.b;
+        for k in 0..3 {
+            // Per-mutation means of each chain, weighted by its length.
+            let m: f64 = used.iter().map(|&c| self.chain_sums[c][k]).sum::<f64>() / total as f64;
+            let var: f64 = used
+                .iter()
+                .map(|&c| {
+                    let mc = self.chain_sums[c][k] / self.chain_mutations[c] as f64;
+                    (mc - m) * (mc - m)
+                })
+                .sum::<f64>()
+                / (n - 1) as f64;
+            mean[k] = m;
+            let rel_chain = (var / n as f64).sqrt() / m.abs().max(f64::MIN_POSITIVE);
+            se[k] = m.abs() * (rel_chain * rel_chain + rb * rb).sqrt();
+        }
+        Some((mean, se))
+    }
+
+    /// A short table for people.
+    pub fn report(&self) -> String {
+        let mut s = String::new();
+        let _ = writeln!(s, "b           {:.6e} ± {:.2e} ({} bootstrap samples, {} non-zero)", self.b, self.b_stderr, self.bootstrap, self.bootstrap_nonzero);
+        let _ = writeln!(s, "chains      {}, {} mutations", self.chains, self.mutations);
+        let _ = writeln!(s, "mutation        proposed   accepted   mean a");
+        for k in 0..self.names.len() {
+            let mean_a = if self.proposed[k] == 0 { 0.0 } else { self.acceptance_sum[k] / self.proposed[k] as f64 };
+            let _ = writeln!(s, "{:<14} {:>9} {:>9.2} % {:>8.3}", self.names[k], self.proposed[k], 100.0 * self.acceptance_rate(k), mean_a);
+        }
+        s
+    }
+}
+
+/// Mutations per chain per round: rounds bound the memory of splat lists and let a time limit
+/// or a cancellation stop the render.
+const ROUND: u64 = 1024;
+
+fn boot_rng(seed: u64, i: usize) -> Pcg32 {
+    Pcg32::new(hash_seed(&[seed, 0x626f_6f74, i as u64]), 0)
+}
+
+fn chain_rng(seed: u64, c: usize, stream: u64) -> Pcg32 {
+    Pcg32::new(hash_seed(&[seed, 0x6368_6169, c as u64]), stream)
+}
+
+struct Chain<S> {
+    state: S,
+    current: Contribution,
+    f: f32,
+    /// Decides acceptance, independently of the target's own streams.
+    rng: Pcg32,
+    left: u64,
+}
+
+/// Render `target` on a `width` x `height` film by Metropolis sampling: `settings.spp`
+/// mutations per pixel (or until the time limit), `cfg.chains` chains.
+pub fn run<T: MetropolisTarget>(
+    target: &T,
+    width: u32,
+    height: u32,
+    settings: &RenderSettings,
+    cfg: &ChainSettings,
+    progress: &Progress,
+) -> Result<(Film, ChainStats)> {
+    settings.validate()?;
+    cfg.validate()?;
+    let start = Instant::now();
+    let (w, h) = (width, height);
+    let npix = w as u64 * h as u64;
+    let mut film = Film::new(w, h, settings.filter);
+    let mut stats = ChainStats::new(target.mutation_names());
+    stats.bootstrap = cfg.bootstrap;
+    stats.chains = cfg.chains;
+    stats.chain_sums = vec![[0.0; 3]; cfg.chains];
+    stats.chain_mutations = vec![0; cfg.chains];
+    let total = settings.spp as u64 * npix;
+    progress.total.store(total, Ordering::Relaxed);
+    let pool = rayon::ThreadPoolBuilder::new().num_threads(settings.threads).build().map_err(|e| Error::Settings(format!("thread pool: {e}")))?;
+    let seed = settings.seed;
+
+    // Bootstrap: candidate weights of every seed sample, in index order.
+    let boot: Vec<Vec<f32>> = pool.install(|| {
+        (0..cfg.bootstrap)
+            .into_par_iter()
+            .map(|i| {
+                let mut wts = Vec::new();
+                target.bootstrap(boot_rng(seed, i), &mut wts);
+                wts
+            })
+            .collect()
+    });
+    let mut cdf: Vec<(f64, u32, u32)> = Vec::new();
+    let (mut sum, mut sum2) = (0.0f64, 0.0f64);
+    for (i, wts) in boot.iter().enumerate() {
+        let mut si = 0.0f64;
+        for (k, &wt) in wts.iter().enumerate() {
+            if wt > 0.0 && wt.is_finite() {
+                si += wt as f64;
+                cdf.push((sum + si, i as u32, k as u32));
+            }
+        }
+        if si > 0.0 {
+            stats.bootstrap_nonzero += 1;
+        }
+        sum += si;
+        sum2 += si * si;
+    }
+    drop(boot);
+    let nb = cfg.bootstrap as f64;
+    stats.b = sum / nb;
+    stats.b_stderr = ((sum2 / nb - stats.b * stats.b).max(0.0) / nb).sqrt();
+    if stats.b <= 0.0 || progress.cancelled() {
+        // Nothing reaches the camera: the black image is the answer.
+        film.spp_done = settings.spp;
+        return Ok((film, stats));
+    }
+    let b = stats.b as f32;
+
+    // Chain starts, in proportion to the bootstrap weights.
+    let per_chain = total / cfg.chains as u64;
+    let extra = total % cfg.chains as u64;
+    let mut chains: Vec<Option<Chain<T::State>>> = pool.install(|| {
+        (0..cfg.chains)
+            .into_par_iter()
+            .map(|c| {
+                let mut pick = chain_rng(seed, c, 0);
+                let u = pick.next_f64() * sum;
+                let j = cdf.partition_point(|e| e.0 <= u).min(cdf.len() - 1);
+                let (_, i, k) = cdf[j];
+                let mut current = Contribution::default();
+                let state = target.start(boot_rng(seed, i as usize), k as usize, chain_rng(seed, c, 1), &mut current)?;
+                let f = current.f();
+                (f > 0.0).then(|| Chain { state, current, f, rng: chain_rng(seed, c, 2), left: per_chain + (c as u64) })
+            })
+            .collect()
+    });
+    drop(cdf);
+    for (c, ch) in chains.iter_mut().enumerate() {
+        if let Some(ch) = ch {
+            ch.left = per_chain + u64::from((c as u64) < extra);
+        }
+    }
+
+    let mut done = 0u64;
+    let names = target.mutation_names();
+    loop {
+        if progress.cancelled() || settings.time_limit.is_some_and(|t| start.elapsed() >= t) {
+            break;
+        }
+        if chains.iter().all(|c| c.as_ref().is_none_or(|c| c.left == 0)) {
+            break;
+        }
+        let results: Vec<(Vec<(Vec2, Rgb)>, ChainStats)> = pool.install(|| {
+            chains
+                .par_iter_mut()
+                .map(|slot| {
+                    let mut st = ChainStats::new(names.clone());
+                    let mut splats = Vec::new();
+                    let Some(ch) = slot.as_mut() else { return (splats, st) };
+                    let n = ch.left.min(ROUND);
+                    let mut proposal = Contribution::default();
+                    for _ in 0..n {
+                        proposal.clear();
+                        let p = target.propose(&mut ch.state, &mut proposal);
+                        let fy = proposal.f();
+                        let a = if fy <= 0.0 || p.t_ratio.is_nan() || p.t_ratio <= 0.0 || !p.t_ratio.is_finite() {
+                            0.0
+                        } else {
+                            ((fy as f64 * p.t_ratio) / ch.f as f64).min(1.0) as f32
+                        };
+                        // Expected values: both states contribute, weighted by 1 - a and a.
+                        if a < 1.0 {
+                            let wx = (1.0 - a) * b / ch.f;
+                            splats.extend(ch.current.splats.iter().map(|&(r, l)| (r, l * wx)));
+                        }
+                        if a > 0.0 {
+                            let wy = a * b / fy;
+                            splats.extend(proposal.splats.iter().map(|&(r, l)| (r, l * wy)));
+                        }
+                        st.proposed[p.kind] += 1;
+                        st.acceptance_sum[p.kind] += a as f64;
+                        if ch.rng.next_f32() < a {
+                            st.accepted[p.kind] += 1;
+                            target.accept(&mut ch.state);
+                            std::mem::swap(&mut ch.current, &mut proposal);
+                            ch.f = fy;
+                        } else {
+                            target.reject(&mut ch.state);
+                        }
+                    }
+                    ch.left -= n;
+                    st.mutations = n;
+                    (splats, st)
+                })
+                .collect()
+        });
+        for (c, (splats, st)) in results.iter().enumerate() {
+            let mut cs = [0.0f64; 3];
+            for &(r, l) in splats {
+                film.splat(r, l);
+                for (k, v) in cs.iter_mut().enumerate() {
+                    *v += l[k] as f64;
+                }
+            }
+            for (k, v) in cs.iter().enumerate() {
+                stats.chain_sums[c][k] += v;
+            }
+            stats.chain_mutations[c] += st.mutations;
+            stats.merge(st);
+            done += st.mutations;
+        }
+        progress.done.store(done, Ordering::Relaxed);
+    }
+    // Chains that could not start (f = 0 at a candidate, which a consistent target never
+    // offers) leave their share of mutations undone; normalise by what was done.
+    film.splat_scale = (done as f64 / npix as f64).max(f64::MIN_POSITIVE) as f32;
+    film.spp_done = if done == 0 { 0 } else { ((done as f64 / npix as f64).round() as u32).max(1) };
+    Ok((film, stats))
+}

@@ -1,0 +1,314 @@
+//! Veach's Metropolis light transport (Veach & Guibas 1997; Veach's thesis, ch. 11): Markov
+//! chains over light paths (`path::Vertex` lists, light to camera) with the bidirectional
+//! mutation and the lens and caustic perturbations, run by the shared Metropolis driver
+//! (bootstrap for b and the starts, chains over threads, expected-value splats).
+//!
+//! The chains cover the paths with an area-light end, a pinhole camera and non-delta
+//! scattering (`space.rs`). What goes through a delta lobe (mirrors, glass, the coat of
+//! plastic) is added by a **complement**: bidirectional path tracing that keeps only the
+//! connections with at least one delta vertex. The two partition path space, so their sum
+//! is the whole image; on a scene without delta lobes the complement is skipped.
+//!
+//! Options (`mlt:key=value,...`): `bidir`, `lens`, `caustic` (relative probabilities of
+//! the mutations, 0 switches one off; defaults 0.4, 0.3, 0.3), `chains` (256), `bootstrap`
+//! (100000 independent paths), `complement-spp` (samples per pixel of the complement,
+//! default a quarter of `--spp`, at least 1).
+
+pub mod mutations;
+pub mod space;
+
+use self::space::{MPath, Space};
+use super::metropolis::{self, ChainSettings, ChainStats, Contribution, MetropolisTarget, Proposal};
+use super::pssmlt::parse_chain_option;
+use super::splat::{render_splatting, SampleOut, SplatEstimator};
+use super::{Integrator, Progress, RenderSettings};
+use crate::camera::Projection;
+use crate::error::{Error, Result};
+use crate::film::Film;
+use crate::geometry::Ray;
+use crate::light::Light;
+use crate::path::{camera_subpath, connect, light_subpath, PathConfig, Vertex};
+use crate::sampling::{Pcg32, Sampler};
+use crate::scene::Scene;
+use crate::spectrum::Rgb;
+use glam::Vec2;
+use std::sync::Mutex;
+
+/// Mutation kinds, in `Proposal::kind` order.
+pub const MUTATIONS: [&str; 3] = ["bidirectional", "lens", "caustic"];
+
+#[derive(Clone, Debug)]
+pub struct MltOptions {
+    /// Relative probabilities of the mutations, in `MUTATIONS` order.
+    pub weights: [f64; 3],
+    pub chain: ChainSettings,
+    /// Samples per pixel of the complement (None: a quarter of the render's).
+    pub complement_spp: Option<u32>,
+}
+
+impl Default for MltOptions {
+    fn default() -> Self {
+        MltOptions { weights: [0.4, 0.3, 0.3], chain: ChainSettings::default(), complement_spp: None }
+    }
+}
+
+impl MltOptions {
+    pub fn parse(params: &str) -> Result<Self> {
+        let mut o = MltOptions::default();
+        for kv in params.split(',').map(str::trim).filter(|s| !s.is_empty()) {
+            let (k, v) = kv.split_once('=').ok_or_else(|| Error::Settings(format!("mlt: expected key=value, got '{kv}'")))?;
+            if parse_chain_option("mlt", &mut o.chain, k, v)? {
+                continue;
+            }
+            let num = |v: &str| v.parse::<f64>().map_err(|_| Error::Settings(format!("mlt: {k} needs a number, got '{v}'")));
+            match k {
+                "bidir" | "bidirectional" => o.weights[0] = num(v)?,
+                "lens" => o.weights[1] = num(v)?,
+                "caustic" => o.weights[2] = num(v)?,
+                "complement-spp" => {
+                    o.complement_spp = Some(
+                        v.parse::<u32>()
+                            .ok()
+                            .filter(|&n| n > 0)
+                            .ok_or_else(|| Error::Settings(format!("mlt: complement-spp needs a whole number >= 1, got '{v}'")))?,
+                    )
+                }
+                _ => return Err(Error::Settings(format!("mlt: unknown option '{k}' (bidir, lens, caustic, chains, bootstrap, complement-spp)"))),
+            }
+        }
+        o.validate()?;
+        Ok(o)
+    }
+
+    pub fn validate(&self) -> Result<()> {
+        if self.weights.iter().any(|w| !(w.is_finite() && *w >= 0.0)) {
+            return Err(Error::Settings("mlt: mutation probabilities must be finite and >= 0".into()));
+        }
+        if self.weights[0] <= 0.0 {
+            // Only the bidirectional mutation changes a path's length and light end: without it
+            // the chains are not ergodic.
+            return Err(Error::Settings("mlt: the bidirectional mutation cannot be switched off (the perturbations alone do not reach all paths)".into()));
+        }
+        self.chain.validate()
+    }
+}
+
+#[derive(Debug, Default)]
+pub struct Mlt {
+    pub options: MltOptions,
+    last: Mutex<Option<ChainStats>>,
+}
+
+/// Whether Veach MLT can render `scene` (area lights only, a pinhole camera).
+fn check_scene(scene: &Scene) -> Result<()> {
+    match scene.camera.projection {
+        Projection::Perspective { aperture_radius: 0.0, .. } => {}
+        _ => return Err(Error::Settings("mlt: needs a pinhole perspective camera (use pssmlt for thin lens or orthographic)".into())),
+    }
+    if scene.lights.iter().any(|l| !matches!(l, Light::Area(_))) {
+        return Err(Error::Settings("mlt: needs a scene lit by area lights only (use pssmlt for point, spot, directional or environment lights)".into()));
+    }
+    Ok(())
+}
+
+/// Whether any material has a delta lobe (then the complement has light to add).
+pub fn has_delta_lobes(scene: &Scene) -> bool {
+    scene.materials.iter().any(|m| m.bsdf(Vec2::ZERO).flags().is_specular())
+}
+
+impl Mlt {
+    pub fn new(options: MltOptions) -> Self {
+        Mlt { options, last: Mutex::new(None) }
+    }
+
+    /// The Metropolis part alone (paths without delta vertices) and its statistics.
+    pub fn render_chains(&self, scene: &Scene, settings: &RenderSettings, progress: &Progress) -> Result<(Film, ChainStats)> {
+        self.options.validate()?;
+        let t = Target::new(scene, settings, self.options.weights)?;
+        metropolis::run(&t, scene.camera.width, scene.camera.height, settings, &self.options.chain, progress)
+    }
+
+    /// The complement: BDPT over the paths with a delta vertex.
+    pub fn render_complement(&self, scene: &Scene, settings: &RenderSettings, progress: &Progress) -> Result<Film> {
+        let cfg = PathConfig::new(scene, settings.max_depth, settings.rr_depth, settings.hide_emitters);
+        let mut s = settings.clone();
+        s.spp = self.options.complement_spp.unwrap_or((settings.spp / 4).max(1));
+        Ok(render_splatting(scene, &s, progress, &Complement { cfg }, 0)?.film)
+    }
+
+    /// The whole image and the chains' statistics.
+    pub fn render_with_stats(&self, scene: &Scene, settings: &RenderSettings, progress: &Progress) -> Result<(Film, ChainStats)> {
+        let (chains, stats) = self.render_chains(scene, settings, progress)?;
+        if !has_delta_lobes(scene) {
+            return Ok((chains, stats));
+        }
+        let mut film = self.render_complement(scene, settings, progress)?;
+        // Add the chains' developed image as splats of the complement's scale.
+        let img = chains.image();
+        let scale = film.splat_scale;
+        for y in 0..img.height {
+            for x in 0..img.width {
+                film.splat(Vec2::new(x as f32 + 0.5, y as f32 + 0.5), img.get(x, y) * scale);
+            }
+        }
+        film.spp_done = chains.spp_done;
+        Ok((film, stats))
+    }
+}
+
+impl Integrator for Mlt {
+    fn render(&self, scene: &Scene, settings: &RenderSettings, progress: &Progress) -> Result<Film> {
+        let (film, stats) = self.render_with_stats(scene, settings, progress)?;
+        if let Ok(mut l) = self.last.lock() {
+            *l = Some(stats);
+        }
+        Ok(film)
+    }
+    fn report(&self) -> Option<String> {
+        self.last.lock().ok()?.as_ref().map(|s| s.report())
+    }
+}
+
+/// The chains' target: a path and its contribution splatted at its film position.
+pub struct Target<'a> {
+    pub space: Space<'a>,
+    /// Probabilities of the mutations, in `MUTATIONS` order.
+    pub probs: [f64; 3],
+    /// Powers of each mutation's T(y→x)/T(x→y): 1 for rendering; tests set -1 (the ratio
+    /// upside down) to check that a wrong acceptance ratio is detected.
+    #[doc(hidden)]
+    pub ratio_power: [f64; 3],
+}
+
+impl<'a> Target<'a> {
+    /// The chains' target for `scene` with mutation probabilities `weights` (any scale).
+    pub fn new(scene: &'a Scene, settings: &RenderSettings, weights: [f64; 3]) -> Result<Self> {
+        check_scene(scene)?;
+        let total: f64 = weights.iter().sum();
+        if total.is_nan() || total <= 0.0 {
+            return Err(Error::Settings("mlt: no mutation has a positive probability".into()));
+        }
+        Ok(Target { space: Space::new(scene, settings.max_depth, settings.hide_emitters), probs: weights.map(|w| w / total), ratio_power: [1.0; 3] })
+    }
+}
+
+pub struct State {
+    pub x: MPath,
+    y: Option<MPath>,
+    rng: Pcg32,
+}
+
+impl Target<'_> {
+    /// The contribution of `x` as film splats.
+    pub fn contribution(&self, x: &MPath, out: &mut Contribution) {
+        out.push(x.raster(), self.space.contribution(x));
+    }
+
+    /// Propose by mutation `kind`: the proposal and T(y→x)/T(x→y), or None (stay).
+    pub fn mutate(&self, kind: usize, x: &MPath, rng: &mut Pcg32) -> Option<(MPath, f64)> {
+        match kind {
+            0 => mutations::bidirectional(&self.space, x, rng),
+            1 => mutations::lens(&self.space, x, rng),
+            _ => mutations::caustic(&self.space, x, rng),
+        }
+    }
+}
+
+impl MetropolisTarget for Target<'_> {
+    type State = State;
+    fn mutation_names(&self) -> Vec<&'static str> {
+        MUTATIONS.to_vec()
+    }
+    fn bootstrap(&self, mut rng: Pcg32, weights: &mut Vec<f32>) {
+        let w = match mutations::independent(&self.space, &mut rng) {
+            Some((y, p)) => (self.space.contribution(&y).luminance() as f64 / p) as f32,
+            None => 0.0,
+        };
+        weights.push(if w.is_finite() { w.max(0.0) } else { 0.0 });
+    }
+    fn start(&self, mut rng: Pcg32, _candidate: usize, chain_rng: Pcg32, out: &mut Contribution) -> Option<State> {
+        let (x, _) = mutations::independent(&self.space, &mut rng)?;
+        self.contribution(&x, out);
+        Some(State { x, y: None, rng: chain_rng })
+    }
+    fn propose(&self, st: &mut State, out: &mut Contribution) -> Proposal {
+        let u = st.rng.next_f64();
+        let kind = if u < self.probs[0] {
+            0
+        } else if u < self.probs[0] + self.probs[1] {
+            1
+        } else {
+            2
+        };
+        match self.mutate(kind, &st.x, &mut st.rng) {
+            Some((y, ratio)) => {
+                self.contribution(&y, out);
+                st.y = Some(y);
+                Proposal { kind, t_ratio: if self.ratio_power[kind] == 1.0 { ratio } else { ratio.powf(self.ratio_power[kind]) } }
+            }
+            None => {
+                st.y = None;
+                Proposal { kind, t_ratio: 0.0 }
+            }
+        }
+    }
+    fn accept(&self, st: &mut State) {
+        if let Some(y) = st.y.take() {
+            st.x = y;
+        }
+    }
+    fn reject(&self, st: &mut State) {
+        st.y = None;
+    }
+}
+
+/// BDPT restricted to the paths with at least one delta vertex.
+struct Complement {
+    cfg: PathConfig,
+}
+
+#[derive(Default)]
+struct Scratch {
+    camera: Vec<Vertex>,
+    light: Vec<Vertex>,
+}
+
+impl SplatEstimator for Complement {
+    type Scratch = Scratch;
+    fn scratch(&self) -> Scratch {
+        Scratch::default()
+    }
+    fn sample(
+        &self,
+        scene: &Scene,
+        _settings: &RenderSettings,
+        ray: &Ray,
+        raster: Vec2,
+        sampler: &mut dyn Sampler,
+        sc: &mut Scratch,
+        out: &mut SampleOut,
+    ) -> Rgb {
+        camera_subpath(scene, &self.cfg, ray, raster, sampler, &mut sc.camera);
+        light_subpath(scene, &self.cfg, ray.time, sampler, &mut sc.light);
+        let mut l = Rgb::BLACK;
+        for t in 1..=sc.camera.len() {
+            for s in 0..=sc.light.len() {
+                if s + t < 2 || !self.cfg.allows(s + t) {
+                    continue;
+                }
+                // Consume the connection's dimensions whether or not the path counts.
+                let Some(c) = connect(scene, &self.cfg, &sc.light, &sc.camera, s, t, sampler, true) else { continue };
+                let delta = sc.light[..s].iter().any(|v| v.delta) || sc.camera[..t.min(sc.camera.len())].iter().any(|v| v.delta);
+                if !delta {
+                    continue;
+                }
+                let v = c.l * c.weight;
+                match c.raster {
+                    Some(r) => out.splat(r, v),
+                    None => l += v,
+                }
+            }
+        }
+        l
+    }
+}
