@@ -19,6 +19,8 @@ pub(crate) struct Photon {
     pub p: Vec3,
     pub wi: Vec3,
     pub power: Rgb,
+    /// Geometric normal of the surface it landed on, on the side it arrived from.
+    pub n: Vec3,
     pub segments: u16,
     pub caustic: bool,
     /// Its path gave the sites of the precomputed radiance (then it takes no part in it).
@@ -28,7 +30,15 @@ pub(crate) struct Photon {
 impl Photon {
     /// A stored photon from a landing, its power scaled (by 1 / number of emitted paths).
     pub fn from_deposit(d: &Deposit, scale: f32) -> Self {
-        Photon { p: d.p, wi: d.wi, power: d.power * scale, segments: d.segments.min(u16::MAX as u32) as u16, caustic: d.caustic, site_path: false }
+        Photon {
+            p: d.p,
+            wi: d.wi,
+            n: if d.wi.dot(d.ng) >= 0.0 { d.ng } else { -d.ng },
+            power: d.power * scale,
+            segments: d.segments.min(u16::MAX as u32) as u16,
+            caustic: d.caustic,
+            site_path: false,
+        }
     }
 }
 
@@ -90,8 +100,12 @@ impl PhotonMap {
     }
 
     /// Radiance reflected at `si` toward `wo` (local shading frame) by the non-delta part of
-    /// `bsdf`, from the photons `accept` lets through.
+    /// `bsdf`, from the photons `accept` lets through that landed on a surface facing the same
+    /// way (Jensen's filter: no photons from the other side of a thin wall or a corner's
+    /// other face).
     pub fn radiance(&self, si: &SurfaceInteraction, bsdf: &Bsdf, wo: Vec3, lookup: &Lookup, accept: impl Fn(&Photon) -> bool) -> Rgb {
+        let n = if si.wo.dot(si.ng) >= 0.0 { si.ng } else { -si.ng };
+        let accept = |ph: &Photon| ph.n.dot(n) > SAME_ORIENTATION_COS && accept(ph);
         let mut sum = Rgb::BLACK;
         let mut add = |ph: &Photon, d2: f32, r2: f32| {
             let wi = si.to_local(ph.wi);
@@ -187,6 +201,9 @@ pub(crate) struct PrecomputedRadiance {
     max_radius: f32,
 }
 
+/// Orientation agreement of a photon's surface with the lookup point's (cos 60°).
+pub(crate) const SAME_ORIENTATION_COS: f32 = 0.5;
+
 /// Orientation agreement for a site to stand for a lookup point (cos 25°).
 const SITE_NORMAL_COS: f32 = 0.9;
 
@@ -203,7 +220,7 @@ impl PrecomputedRadiance {
                 // Only photons of other paths than the sites': a density estimated where a photon
                 // is known to be (or read at the site nearest a point, whose cell is larger
                 // where photons are sparser) would be biased by that photon's own position.
-                let found = map.tree.k_nearest(s.p, lookup.k, lookup.max_radius, |ph| !ph.site_path && ph.wi.dot(s.n) > 0.0);
+                let found = map.tree.k_nearest(s.p, lookup.k, lookup.max_radius, |ph| !ph.site_path && ph.n.dot(s.n) > SAME_ORIENTATION_COS);
                 let (inside, r2) = knn_disc(&found, lookup);
                 if r2 > 0.0 {
                     for &(i, d2) in inside {
