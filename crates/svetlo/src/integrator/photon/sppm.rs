@@ -15,7 +15,7 @@
 //! of iterations; a time budget stops after a whole iteration.
 
 use super::camera::camera_walk;
-use super::map::{Photon, SAME_ORIENTATION_COS};
+use super::map::{visible, Photon, SAME_ORIENTATION_COS};
 use super::trace::trace_photons;
 use super::{parse_count, parse_pairs, parse_positive, pixel_footprint, segments_left};
 use crate::accel::KdTree;
@@ -45,10 +45,8 @@ pub struct SppmOptions {
     /// Visible points per pixel: the first this many diffuse vertices of a camera path (more
     /// come only through delta lobes of diffuse-and-specular surfaces, such as plastic).
     pub max_visible: u32,
-    /// Count only photons the visible point sees (a shadow ray between the two, each end lifted
-    /// off its surface by a quarter of the radius): no light leaks through thin walls into the
-    /// room beside, along the surfaces that run under them. Photons on surfaces facing
-    /// another way are left out in any case.
+    /// Count only photons the visible point sees (`map::visible`): no light leaks through thin
+    /// walls. Photons on surfaces facing another way are left out in any case.
     pub visibility: bool,
 }
 
@@ -82,11 +80,6 @@ impl SppmOptions {
         Ok(o)
     }
 }
-
-/// Lift of the visibility test's end points off the surface, in gather radii: above the
-/// sagitta of a sphere of radius r / 2 over a chord of r, so curved surfaces do not shadow
-/// themselves.
-const VISIBILITY_LIFT: f32 = 0.25;
 
 #[derive(Clone, Debug, Default)]
 pub struct Sppm {
@@ -196,7 +189,6 @@ impl Integrator for Sppm {
                             let mut m = 0u32;
                             // Lifted off the surface on the seen side, for the visibility test.
                             let n = if vp.si.wo.dot(vp.si.ng) >= 0.0 { vp.si.ng } else { -vp.si.ng };
-                            let p0 = vp.si.p + n * (VISIBILITY_LIFT * st.r);
                             tree.for_each_in_radius(vp.si.p, st.r, |ph, _| {
                                 if (ph.segments as i32) > left {
                                     return;
@@ -207,10 +199,7 @@ impl Integrator for Sppm {
                                     return;
                                 }
                                 let f = vp.bsdf.eval(vp.wo, wi, TransportMode::Radiance);
-                                if f.is_black()
-                                    || ph.n.dot(n) <= SAME_ORIENTATION_COS
-                                    || (visibility && scene.occluded(p0, n, ph.p + ph.n * (VISIBILITY_LIFT * st.r)))
-                                {
+                                if f.is_black() || ph.n.dot(n) <= SAME_ORIENTATION_COS || (visibility && !visible(scene, vp.si.p, n, ph.p, ph.n)) {
                                     return;
                                 }
                                 phi += f * ph.power * (wi.z.abs() / cos_g);
