@@ -15,7 +15,7 @@
 mod classic_scenes;
 
 use classic_scenes::*;
-use glam::{Mat4, Vec2, Vec3};
+use glam::{Mat4, Vec2};
 use svetlo::camera::{Camera, Projection};
 use svetlo::film::{Film, Filter};
 use svetlo::integrator::{self, Progress, RenderSettings};
