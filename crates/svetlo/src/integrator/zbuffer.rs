@@ -257,6 +257,10 @@ pub struct FrameImage {
     pub ss: u32,
     pub subsamples: Vec<Rgb>,
     pub image: crate::film::Image,
+    /// Wall time of the visibility pass (transform, rasterise, depth test) and of the rest
+    /// (shading the visible subsamples, resolve), for benchmarks.
+    pub visibility_time: std::time::Duration,
+    pub shading_time: std::time::Duration,
 }
 
 impl ZBuffer {
@@ -296,6 +300,7 @@ impl Prepared {
 
         // Visibility pass: the depth key and the nearest triangle of every subsample; nothing
         // else is computed for fragments that may be hidden later.
+        let start = std::time::Instant::now();
         let far_key = view.key(cam.far_clip);
         let mut depth = vec![far_key; (w * h) as usize];
         let mut ids = vec![u32::MAX; (w * h) as usize];
@@ -310,6 +315,7 @@ impl Prepared {
             });
         }
 
+        let visibility_time = start.elapsed();
         // Shading pass: only the visible fragment of each subsample, rows in parallel.
         let eye = cam.to_world.transform_point3(Vec3::ZERO);
         let view_dir = cam.to_world.transform_vector3(Vec3::Z).normalize();
@@ -387,7 +393,7 @@ impl Prepared {
                 out[x / ss as usize] += *c * norm;
             }
         }
-        Ok(FrameImage { ss, subsamples, image })
+        Ok(FrameImage { ss, subsamples, image, visibility_time, shading_time: start.elapsed() - visibility_time })
     }
 }
 
