@@ -178,7 +178,7 @@ pub fn run(a: &RadiosityArgs) -> Result<ExitCode> {
             h.memory as f64 / (1 << 20) as f64
         );
     }
-    println!("solver       {:?}, tolerance {:.1e}: {}", opts.solver, opts.solve.tolerance, if solved.converged { "converged" } else { "NOT converged" });
+    println!("solver       {:?}, tolerance {:.1e}: {}", solved.solver, opts.solve.tolerance, if solved.converged { "converged" } else { "NOT converged" });
     println!("time         mesh {:.3} s, form factors {:.3} s, solve {:.3} s", solved.mesh_seconds, solved.form_factor_seconds, solved.solve_seconds);
     if a.report {
         println!("{:>10} {:>12} {:>10} {:>12}", "step", "residual", "seconds", "rows");

@@ -381,7 +381,7 @@ fn cornell(options: &str) -> Option<(f64, usize, f64)> {
 /// elements); the bound 1.5e-2 leaves room for platform differences and no more.
 #[test]
 fn cornell_box_agrees_with_the_path_traced_reference() {
-    let Some((e, n, secs)) = cornell("element-size=0.5") else { return };
+    let Some((e, n, secs)) = cornell("solver=gauss-seidel,element-size=0.5") else { return };
     println!("cornell box: {n} elements, relMSE {e:.3e}, {secs:.2} s");
     assert!(e < 1.5e-2, "relMSE {e}");
 }
@@ -392,8 +392,8 @@ fn cornell_box_agrees_with_the_path_traced_reference() {
 fn cornell_box_error_against_element_count() {
     println!("| element size | elements | relMSE (Gouraud) | relMSE (flat) | seconds |");
     for size in ["0.5", "0.35", "0.25", "0.18", "0.125"] {
-        let Some((e, n, secs)) = cornell(&format!("element-size={size}")) else { return };
-        let (ef, _, _) = cornell(&format!("element-size={size},shading=flat")).expect("flat");
+        let Some((e, n, secs)) = cornell(&format!("solver=gauss-seidel,element-size={size}")) else { return };
+        let (ef, _, _) = cornell(&format!("solver=gauss-seidel,element-size={size},shading=flat")).expect("flat");
         println!("| {size} | {n} | {e:.3e} | {ef:.3e} | {secs:.1} |");
     }
 }

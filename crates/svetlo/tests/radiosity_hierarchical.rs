@@ -172,7 +172,7 @@ fn refined_everywhere_it_is_the_full_matrix() {
     // Walls: two triangles of area 1/2, split twice (area 1/32 ≥ 0.03); the light's triangles (0.02) stay whole.
     let opts = RadiosityOptions::parse("solver=hierarchical,refine=f,epsilon=1e-9,min-area=0.03,tolerance=1e-6").expect("opts");
     let h = svetlo::radiosity::solve(&scene, &opts, -1).expect("hierarchical");
-    let mut full = RadiosityOptions::parse("tolerance=1e-6").expect("opts");
+    let mut full = RadiosityOptions::parse("solver=gauss-seidel,tolerance=1e-6").expect("opts");
     full.mesh = MeshOptions { shape_splits: vec![4, 4, 4, 4, 4, 4, 1], ..Default::default() };
     let f = svetlo::radiosity::solve(&scene, &full, -1).expect("full");
     assert_eq!(h.mesh.elements.len(), f.mesh.elements.len());
@@ -234,7 +234,7 @@ fn solve_cornell(scene: &Scene, options: &str) -> (Solved, RadiosityOptions) {
 #[test]
 fn cornell_box_matches_the_full_matrix() {
     let Some((scene, reference)) = cornell_scene(256) else { return };
-    let (full, fo) = solve_cornell(&scene, "element-size=0.5,tolerance=1e-4");
+    let (full, fo) = solve_cornell(&scene, "solver=gauss-seidel,element-size=0.5,tolerance=1e-4");
     let (hier, ho) = solve_cornell(&scene, "solver=hierarchical,element-size=0.5,tolerance=1e-4");
     let (fi, hi) = (image(&scene, &full, &fo), image(&scene, &hier, &ho));
     let against_full = svetlo::film::compare::rel_mse(&hi, &fi).expect("relmse");

@@ -201,6 +201,16 @@ impl<'a> Hierarchy<'a> {
         }
     }
 
+    /// B = E at every leaf (nothing gathered), area-weighted means above.
+    pub fn reset_to_emission(&mut self) {
+        for node in &mut self.forest.nodes {
+            node.gathered = [Rgb::BLACK; 3];
+        }
+        for r in 0..self.forest.roots as u32 {
+            self.push_pull(r, [Rgb::BLACK; 3]);
+        }
+    }
+
     #[inline]
     fn gather(&self, n: u32) -> [Rgb; 3] {
         let mut s = [Rgb::BLACK; 3];
@@ -460,10 +470,29 @@ pub fn solve(scene: &Scene, mesh: &MeshOptions, opts: &HierarchicalOptions, tole
     let mut step = 0;
     let mut converged = false;
     if let Some(k) = bounces {
-        for _ in 0..k {
-            h.jacobi_sweep();
-            step += 1;
-            history.push(Step { step, residual: h.residual(), seconds: t0.elapsed().as_secs_f64(), rows: h.link_count() as u64 });
+        // Exactly k bounces from E, then re-refine with that B (the BF rule refined only the
+        // lights' links against E alone) and start again from E, until no link changes.
+        for pass in 0..=opts.max_passes {
+            h.stats.passes = pass + 1;
+            h.reset_to_emission();
+            for _ in 0..k {
+                h.jacobi_sweep();
+                step += 1;
+                history.push(Step { step, residual: h.residual(), seconds: t0.elapsed().as_secs_f64(), rows: h.link_count() as u64 });
+            }
+            if pass == opts.max_passes {
+                break;
+            }
+            let t = Instant::now();
+            if opts.importance {
+                h.solve_importance(8);
+            }
+            let changed = h.rerefine();
+            h.compute_pending();
+            refine_seconds += t.elapsed().as_secs_f64();
+            if changed == 0 {
+                break;
+            }
         }
         converged = true;
     } else {
