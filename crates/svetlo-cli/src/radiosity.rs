@@ -11,7 +11,7 @@ use std::path::PathBuf;
 use std::process::ExitCode;
 use svetlo::film::{Film, Filter};
 use svetlo::integrator::{render_pixels, Progress, RenderSettings};
-use svetlo::radiosity::display::{vertex_radiosity, RadiosityView};
+use svetlo::radiosity::display::RadiosityView;
 use svetlo::radiosity::{RadiosityOptions, Shading};
 use svetlo::Rgb;
 
@@ -96,8 +96,9 @@ fn options(a: &RadiosityArgs) -> Result<RadiosityOptions> {
     RadiosityOptions::parse(&kv.join(",")).map_err(|e| Usage(e.to_string()).into())
 }
 
-fn write_ply(path: &PathBuf, mesh: &svetlo::radiosity::mesh::RadiosityMesh, b: &[Rgb]) -> Result<()> {
-    let vb = vertex_radiosity(mesh, b);
+fn write_ply(path: &PathBuf, solved: &svetlo::radiosity::Solved) -> Result<()> {
+    let mesh = &solved.mesh;
+    let vb = solved.vertex_radiosity();
     let mut out = std::io::BufWriter::new(std::fs::File::create(path).with_context(|| format!("cannot write {}", path.display()))?);
     writeln!(out, "ply\nformat ascii 1.0\ncomment svetlo radiosity: colours are sRGB of B/pi clamped to 1; b_r, b_g, b_b are B in W/m^2")?;
     writeln!(out, "element vertex {}\nproperty float x\nproperty float y\nproperty float z", mesh.vertices.len())?;
@@ -177,7 +178,7 @@ pub fn run(a: &RadiosityArgs) -> Result<ExitCode> {
             h.memory as f64 / (1 << 20) as f64
         );
     }
-    println!("solver       {:?}, tolerance {:.1e}: {}", opts.solver, opts.solve.tolerance, if solved.converged { "converged" } else { "NOT converged" });
+    println!("solver       {:?}, tolerance {:.1e}: {}", solved.solver, opts.solve.tolerance, if solved.converged { "converged" } else { "NOT converged" });
     println!("time         mesh {:.3} s, form factors {:.3} s, solve {:.3} s", solved.mesh_seconds, solved.form_factor_seconds, solved.solve_seconds);
     if a.report {
         println!("{:>10} {:>12} {:>10} {:>12}", "step", "residual", "seconds", "rows");
@@ -186,7 +187,7 @@ pub fn run(a: &RadiosityArgs) -> Result<ExitCode> {
         }
     }
     if let Some(p) = &a.ply {
-        write_ply(p, &solved.mesh, &solved.b)?;
+        write_ply(p, &solved)?;
         println!("wrote        {}", p.display());
     }
     Ok(ExitCode::SUCCESS)

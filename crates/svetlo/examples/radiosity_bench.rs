@@ -21,10 +21,9 @@ use svetlo::radiosity::{RadiosityOptions, Shading};
 use svetlo::scene::Scene;
 use svetlo::Rgb;
 
-fn relmse(scene: &Scene, mesh: &RadiosityMesh, b: &[Rgb], reference: &svetlo::film::Image) -> f64 {
+fn relmse(scene: &Scene, view: &RadiosityView, reference: &svetlo::film::Image) -> f64 {
     let settings = RenderSettings { spp: 4, filter: Filter::Box, ..RenderSettings::from_scene(scene) };
-    let view = RadiosityView::new(mesh, b, Shading::Gouraud);
-    let film = render_pixels(scene, &settings, &Progress::new(), &view).expect("render");
+    let film = render_pixels(scene, &settings, &Progress::new(), view).expect("render");
     svetlo::film::compare::rel_mse(&film.image(), reference).expect("relmse")
 }
 
@@ -83,7 +82,7 @@ fn main() {
             let sys = svetlo::radiosity::system(&mesh, solver::Rows::Matrix(&m));
             let sol = SolverKind::GaussSeidel.solve(&sys, &SolveOptions { tolerance: 1e-2, ..Default::default() }).expect("gs");
             let gs_secs = t.elapsed().as_secs_f64();
-            let e = relmse(&scene, &mesh, &sol.b, &reference);
+            let e = relmse(&scene, &RadiosityView::new(&mesh, &sol.b, Shading::Gouraud), &reference);
             // The converged solution the progressive display is measured against.
             let exact = SolverKind::GaussSeidel.solve(&sys, &SolveOptions { tolerance: 1e-5, ..Default::default() }).expect("exact").b;
             gs_nnz = Some(m.nnz());
@@ -122,7 +121,7 @@ fn main() {
         let s = svetlo::radiosity::solve(&scene, &opts, -1).expect("hierarchical");
         let secs = t.elapsed().as_secs_f64();
         let hs = s.hierarchy.as_ref().expect("stats");
-        let e = relmse(&scene, &s.mesh, &s.b, &reference);
+        let e = relmse(&scene, &s.view(Shading::Gouraud), &reference);
         row += &format!(
             " {} | {} | {:.1} | {secs:.1} | {:.1} | {e:.2e} | {} |",
             hs.leaves,

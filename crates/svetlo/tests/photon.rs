@@ -87,6 +87,9 @@ fn sppm_white_furnace_depth() {
 #[test]
 fn photon_white_furnace() {
     furnace_t_test("photon:photons=5000,caustic-photons=1000,gather=4,k=16", 2, -1, 2.0);
+    // Precomputed radiance per photon path length: gather hits at depth 2 of 3 read one-segment photons only.
+    furnace_t_test("photon:photons=5000,caustic-photons=1000,gather=4,k=16", 2, 3, 1.75);
+    furnace_t_test("photon:photons=5000,caustic-photons=1000,gather=4,k=16,precompute=0", 2, 3, 1.75);
     furnace_t_test("photon:photons=5000,caustic-photons=1000,gather=0,k=16", 2, 4, 1.875);
 }
 

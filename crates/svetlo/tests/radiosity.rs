@@ -381,7 +381,7 @@ fn cornell(options: &str) -> Option<(f64, usize, f64)> {
 /// elements); the bound 1.5e-2 leaves room for platform differences and no more.
 #[test]
 fn cornell_box_agrees_with_the_path_traced_reference() {
-    let Some((e, n, secs)) = cornell("element-size=0.5") else { return };
+    let Some((e, n, secs)) = cornell("solver=gauss-seidel,element-size=0.5") else { return };
     println!("cornell box: {n} elements, relMSE {e:.3e}, {secs:.2} s");
     assert!(e < 1.5e-2, "relMSE {e}");
 }
@@ -392,8 +392,8 @@ fn cornell_box_agrees_with_the_path_traced_reference() {
 fn cornell_box_error_against_element_count() {
     println!("| element size | elements | relMSE (Gouraud) | relMSE (flat) | seconds |");
     for size in ["0.5", "0.35", "0.25", "0.18", "0.125"] {
-        let Some((e, n, secs)) = cornell(&format!("element-size={size}")) else { return };
-        let (ef, _, _) = cornell(&format!("element-size={size},shading=flat")).expect("flat");
+        let Some((e, n, secs)) = cornell(&format!("solver=gauss-seidel,element-size={size}")) else { return };
+        let (ef, _, _) = cornell(&format!("solver=gauss-seidel,element-size={size},shading=flat")).expect("flat");
         println!("| {size} | {n} | {e:.3e} | {ef:.3e} | {secs:.1} |");
     }
 }
@@ -509,6 +509,23 @@ fn display_meshes_have_no_t_vertices() {
     let scene = lit_box();
     let mesh = RadiosityMesh::build(&scene, &MeshOptions { max_edge: Some(0.3), ..Default::default() }).expect("mesh");
     assert_eq!(t_vertices(&mesh), 0);
+    // The check can fail: halving one element across an inner edge leaves a T-vertex on its neighbour's edge.
+    let split_makes_t = (0..3).any(|k| {
+        let mut bad = mesh.clone();
+        let e = bad.elements[5].clone();
+        let (a, b, c) = (k, (k + 1) % 3, (k + 2) % 3);
+        let mid = (e.p[a] + e.p[b]) * 0.5;
+        bad.vertices.push(mid);
+        let m = (bad.vertices.len() - 1) as u32;
+        let mut h1 = e.clone();
+        (h1.p, h1.vertex) = ([e.p[a], mid, e.p[c]], [e.vertex[a], m, e.vertex[c]]);
+        let mut h2 = e.clone();
+        (h2.p, h2.vertex) = ([mid, e.p[b], e.p[c]], [m, e.vertex[b], e.vertex[c]]);
+        bad.elements[5] = h1;
+        bad.elements.push(h2);
+        t_vertices(&bad) > 0
+    });
+    assert!(split_makes_t);
     let opts = svetlo::radiosity::RadiosityOptions::parse("solver=hierarchical,element-size=0.25,tolerance=1e-3").expect("options");
     let solved = svetlo::radiosity::solve(&scene, &opts, -1).expect("solve");
     let h = solved.hierarchy.as_ref().expect("stats");

@@ -85,6 +85,32 @@ fn sampling_mean(t: &Texture, uv: Vec2) -> f32 {
 }
 
 impl Material {
+    /// Does the BSDF not depend on the surface point (no texture but constants)? Then one
+    /// `bsdf()` serves every point, which the rasteriser's shading pass exploits.
+    pub fn is_uniform(&self) -> bool {
+        let c = |t: &Texture| matches!(t, Texture::Constant(_));
+        let r = |r: &Option<Roughness>| r.as_ref().is_none_or(|r| c(&r.alpha_u) && c(&r.alpha_v));
+        match self {
+            Material::Diffuse { reflectance } => c(reflectance),
+            Material::Conductor { specular_reflectance, roughness, .. } => c(specular_reflectance) && r(roughness),
+            Material::Dielectric { specular_reflectance, specular_transmittance, roughness, .. } => {
+                c(specular_reflectance) && c(specular_transmittance) && r(roughness)
+            }
+            Material::ThinDielectric { specular_reflectance, specular_transmittance, .. } => c(specular_reflectance) && c(specular_transmittance),
+            Material::Plastic { diffuse_reflectance, specular_reflectance, roughness, .. } => c(diffuse_reflectance) && c(specular_reflectance) && r(roughness),
+            Material::Phong { diffuse_reflectance, specular_reflectance, exponent }
+            | Material::BlinnPhong { diffuse_reflectance, specular_reflectance, exponent } => c(diffuse_reflectance) && c(specular_reflectance) && c(exponent),
+            Material::CookTorrance { diffuse_reflectance, specular_reflectance, alpha, .. } => c(diffuse_reflectance) && c(specular_reflectance) && c(alpha),
+            Material::OrenNayar { reflectance, alpha } => c(reflectance) && c(alpha),
+            Material::Ward { diffuse_reflectance, specular_reflectance, alpha_u, alpha_v, .. } => {
+                c(diffuse_reflectance) && c(specular_reflectance) && c(alpha_u) && c(alpha_v)
+            }
+            Material::TwoSided { front, back } => front.is_uniform() && back.is_uniform(),
+            Material::Mask { opacity, inner } => c(opacity) && inner.is_uniform(),
+            Material::Null => true,
+        }
+    }
+
     /// The model one side of this material describes, with textures evaluated at `uv`.
     fn model(&self, uv: Vec2) -> Option<BsdfModel> {
         match self {

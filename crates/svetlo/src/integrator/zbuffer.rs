@@ -19,13 +19,14 @@
 
 use super::local::LocalLights;
 use super::{Integrator, Progress, RenderSettings};
+use crate::bsdf::Bsdf;
 use crate::error::Result;
 use crate::film::Film;
 use crate::geometry::Geometry;
 use crate::light::Light;
 use crate::math::{Frame, PI};
 use crate::raster::shadow::ShadowMap;
-use crate::raster::{DepthBuffer, View, ViewProjection};
+use crate::raster::{View, ViewProjection};
 use crate::scene::Scene;
 use crate::spectrum::Rgb;
 use glam::{Mat3, Mat4, Vec2, Vec3};
@@ -196,17 +197,27 @@ impl ZBuffer {
     }
 
     #[allow(clippy::too_many_arguments)]
-    fn shade(&self, scene: &Scene, lights: &LocalLights, maps: &[Option<ShadowMap>], shape: u32, s: &Surface, eye: Vec3, settings: &RenderSettings) -> Rgb {
+    fn shade(&self, scene: &Scene, prepared: &Prepared, shape: u32, s: &Surface, eye: Vec3, hide_emitters: bool) -> Rgb {
+        let (lights, maps) = (&prepared.lights, &prepared.maps);
         let wo_w = (eye - s.p).normalize_or_zero();
         let mut l = Rgb::BLACK;
         let sh = &scene.shapes[shape as usize];
-        if let (Some(li), false) = (sh.light, settings.hide_emitters) {
+        if let (Some(li), false) = (sh.light, hide_emitters) {
             if let Light::Area(a) = &scene.lights[li as usize] {
                 l += a.l(s.ng, s.uv, wo_w);
             }
         }
-        let bsdf = scene.materials[sh.material as usize].bsdf(s.uv);
-        l += self.ambient * bsdf.diffuse_albedo();
+        let owned;
+        let bsdf = match &prepared.bsdfs[sh.material as usize] {
+            Some(b) => b,
+            None => {
+                owned = scene.materials[sh.material as usize].bsdf(s.uv);
+                &owned
+            }
+        };
+        if !self.ambient.is_black() {
+            l += self.ambient * bsdf.diffuse_albedo();
+        }
         let frame = Frame::from_normal_tangent(s.ns, s.dpdu);
         let wo = frame.to_local(wo_w);
         for (i, map) in maps.iter().enumerate() {
@@ -227,94 +238,243 @@ impl ZBuffer {
     }
 }
 
-impl Integrator for ZBuffer {
-    fn render(&self, scene: &Scene, settings: &RenderSettings, progress: &Progress) -> Result<Film> {
-        settings.validate()?;
-        let cam = &scene.camera;
-        let ss = ((settings.spp as f32).sqrt().round() as u32).clamp(1, 8);
+/// What a frame needs that does not depend on the camera: the scene's triangles (in world
+/// space, moving shapes at mid-shutter), the lights as points and their shadow maps.
+/// Prepared once; each [`Prepared::frame`] then only rasterises and shades.
+pub struct Prepared {
+    zbuffer: ZBuffer,
+    lights: LocalLights,
+    poses: Vec<Option<(Mat4, Mat4)>>,
+    tris: Vec<RasterTri>,
+    maps: Vec<Option<ShadowMap>>,
+    /// The BSDF of each material that has no texture (the same at every point).
+    bsdfs: Vec<Option<Bsdf>>,
+}
+
+/// One frame: the colour of every subsample (`ss` x `ss` per pixel) and the image that
+/// averages them (box resolve).
+pub struct FrameImage {
+    pub ss: u32,
+    pub subsamples: Vec<Rgb>,
+    pub image: crate::film::Image,
+    /// Wall time of the visibility pass (transform, rasterise, depth test) and of the rest
+    /// (shading the visible subsamples, resolve), for benchmarks.
+    pub visibility_time: std::time::Duration,
+    pub shading_time: std::time::Duration,
+}
+
+impl ZBuffer {
+    /// The camera-independent work of a render (see [`Prepared`]).
+    pub fn prepare(&self, scene: &Scene) -> Prepared {
+        let lights = LocalLights::new(scene);
+        let poses = poses(scene);
+        let tris = self.triangles(scene, &poses);
+        let maps = self.shadow_maps(scene, &lights, &tris);
+        let bsdfs = scene.materials.iter().map(|m| m.is_uniform().then(|| m.bsdf(Vec2::ZERO))).collect();
+        Prepared { zbuffer: *self, lights, poses, tris, maps, bsdfs }
+    }
+}
+
+/// Subsamples per pixel side for `spp`: the nearest square, at most 8 x 8.
+pub fn subsamples_per_side(spp: u32) -> u32 {
+    ((spp as f32).sqrt().round() as u32).clamp(1, 8)
+}
+
+impl Prepared {
+    pub fn triangle_count(&self) -> usize {
+        self.tris.len()
+    }
+
+    /// Render the scene as `camera` sees it with `ss` x `ss` subsamples per pixel, shading on
+    /// `threads` threads (1: on the calling thread; 0: all cores).
+    pub fn frame(&self, scene: &Scene, camera: &crate::camera::Camera, ss: u32, hide_emitters: bool, threads: usize) -> Result<FrameImage> {
+        let cam = camera;
+        let ss = ss.clamp(1, 8);
         let (w, h) = (cam.width * ss, cam.height * ss);
         let projection = match cam.projection {
             crate::camera::Projection::Perspective { .. } => ViewProjection::Perspective { half: cam.film_half_extent() },
             crate::camera::Projection::Orthographic => ViewProjection::Orthographic { half: cam.film_half_extent() },
         };
-        let view = View { world_to_camera: cam.to_world.inverse(), projection, width: w, height: h, near: cam.near_clip.max(1e-5) };
-        let eye = cam.to_world.transform_point3(Vec3::ZERO);
-        let view_dir = cam.to_world.transform_vector3(Vec3::Z).normalize();
-        let lights = LocalLights::new(scene);
-        let poses = poses(scene);
-        let tris = self.triangles(scene, &poses);
-        let maps = self.shadow_maps(scene, &lights, &tris);
-        progress.total.store((w * h) as u64, Ordering::Relaxed);
+        let world_to_camera = cam.to_world.inverse();
+        let view = View { world_to_camera, projection, width: w, height: h, near: cam.near_clip.max(1e-5) };
 
-        // Visibility pass: the nearest triangle and its barycentrics per subsample.
-        let mut depth = DepthBuffer::new(w, h);
-        let mut ids: Vec<(u32, [f32; 3])> = vec![(u32::MAX, [0.0; 3]); (w * h) as usize];
-        for (k, t) in tris.iter().enumerate() {
-            view.raster_triangle(t.v, |f| {
-                if f.z <= cam.far_clip && depth.test_and_set(f.x, f.y, f.z) {
-                    ids[(f.y * w + f.x) as usize] = (k as u32, f.b);
+        // Visibility pass: the depth key and the nearest triangle of every subsample; nothing
+        // else is computed for fragments that may be hidden later.
+        let start = std::time::Instant::now();
+        let far_key = view.key(cam.far_clip);
+        let mut depth = vec![far_key; (w * h) as usize];
+        let mut ids = vec![u32::MAX; (w * h) as usize];
+        for (k, t) in self.tris.iter().enumerate() {
+            let pc = t.v.map(|p| world_to_camera.transform_point3(p));
+            view.raster_keys(pc, |i, key| {
+                // SAFETY of the index: raster_keys only reports pixels inside the view.
+                if key > depth[i] {
+                    depth[i] = key;
+                    ids[i] = k as u32;
                 }
             });
         }
+
+        let visibility_time = start.elapsed();
+        // Shading pass: only the visible fragment of each subsample, rows in parallel.
+        let eye = cam.to_world.transform_point3(Vec3::ZERO);
+        let view_dir = cam.to_world.transform_vector3(Vec3::Z).normalize();
+        // The line through a subsample centre: camera-space film point c = (1 - 2 r / size) half,
+        // direction (c, 1) from the eye (perspective) or origin (c, 0) along +z (orthographic).
+        let half = cam.film_half_extent();
+        let lin = Mat3::from_mat4(cam.to_world);
+        let step = Vec2::new(-2.0 * half.x / w as f32, -2.0 * half.y / h as f32);
+        let line = |x: u32, y: u32| -> (Vec3, Vec3) {
+            let c = half + Vec2::new(x as f32 + 0.5, y as f32 + 0.5) * step;
+            match projection {
+                ViewProjection::Perspective { .. } => (eye, lin * Vec3::new(c.x, c.y, 1.0)),
+                ViewProjection::Orthographic { .. } => (cam.to_world.transform_point3(Vec3::new(c.x, c.y, 0.0)), view_dir),
+            }
+        };
+        let shade_row = |y: u32| -> Vec<Rgb> {
+            let mut cached: Option<MeshTri> = None;
+            (0..w)
+                .map(|x| {
+                    let k = ids[(y * w + x) as usize];
+                    let (o, d) = line(x, y);
+                    if k == u32::MAX {
+                        let d = d.normalize();
+                        return if hide_emitters { Rgb::BLACK } else { scene.environment_lights.iter().map(|&e| scene.lights[e as usize].le_escaped(d)).sum() };
+                    }
+                    let t = &self.tris[k as usize];
+                    let b = barycentrics(t.v, o, d);
+                    let eye_for = |p: Vec3| match projection {
+                        ViewProjection::Perspective { .. } => eye,
+                        ViewProjection::Orthographic { .. } => p - view_dir,
+                    };
+                    let z = &self.zbuffer;
+                    match z.shading {
+                        Shading::Phong => {
+                            let s = match (&*scene.shapes[t.shape as usize].geometry, self.poses[t.shape as usize]) {
+                                (Geometry::Mesh(m), None) => {
+                                    let mt = match cached {
+                                        Some(c) if c.id == k => c,
+                                        _ => *cached.insert(MeshTri::new(k, m, t.prim as usize)),
+                                    };
+                                    mt.surface(t.v[0] * b[0] + t.v[1] * b[1] + t.v[2] * b[2], b)
+                                }
+                                _ => ZBuffer::surface(scene, &self.poses, t, b),
+                            };
+                            z.shade(scene, self, t.shape, &s, eye_for(s.p), hide_emitters)
+                        }
+                        Shading::Flat => {
+                            let mut s = ZBuffer::surface(scene, &self.poses, t, [1.0 / 3.0; 3]);
+                            s.ns = s.ng;
+                            z.shade(scene, self, t.shape, &s, eye_for(s.p), hide_emitters)
+                        }
+                        Shading::Gouraud => [[1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, 1.0]]
+                            .iter()
+                            .zip(b)
+                            .map(|(vb, wgt)| {
+                                let s = ZBuffer::surface(scene, &self.poses, t, *vb);
+                                z.shade(scene, self, t.shape, &s, eye_for(s.p), hide_emitters) * wgt
+                            })
+                            .sum(),
+                    }
+                })
+                .collect()
+        };
+        let subsamples: Vec<Rgb> = if threads == 1 {
+            (0..h).flat_map(shade_row).collect()
+        } else {
+            let pool = rayon::ThreadPoolBuilder::new().num_threads(threads).build().map_err(|e| crate::error::Error::Settings(format!("thread pool: {e}")))?;
+            pool.install(|| (0..h).into_par_iter().flat_map_iter(shade_row).collect())
+        };
+        let mut image = crate::film::Image::new(cam.width as usize, cam.height as usize, vec![Rgb::BLACK; (cam.width * cam.height) as usize]);
+        let norm = 1.0 / (ss * ss) as f32;
+        for y in 0..h {
+            let row = &subsamples[(y * w) as usize..((y + 1) * w) as usize];
+            let out = &mut image.data[((y / ss) * cam.width) as usize..((y / ss + 1) * cam.width) as usize];
+            for (x, c) in row.iter().enumerate() {
+                out[x / ss as usize] += *c * norm;
+            }
+        }
+        Ok(FrameImage { ss, subsamples, image, visibility_time, shading_time: start.elapsed() - visibility_time })
+    }
+}
+
+/// A static mesh triangle's shading inputs, fetched once for a run of subsamples that see
+/// it (big triangles cover many in a row).
+#[derive(Clone, Copy)]
+struct MeshTri {
+    id: u32,
+    ng: Vec3,
+    normals: Option<[Vec3; 3]>,
+    uv: [Vec2; 3],
+    dpdu: Vec3,
+}
+
+impl MeshTri {
+    fn new(id: u32, m: &crate::geometry::TriangleMesh, prim: usize) -> Self {
+        // dp/du is constant over a triangle.
+        let (_, _, _, dpdu) = m.surface(prim, 1.0 / 3.0, 1.0 / 3.0);
+        // The unflipped geometric normal: the flip toward the shading normal is per point.
+        let [p0, p1, p2] = m.vertices(prim);
+        let ng0 = (p1 - p0).cross(p2 - p0).normalize_or_zero();
+        let idx = m.indices[prim].map(|i| i as usize);
+        let normals = (!m.normals.is_empty()).then(|| idx.map(|i| m.normals[i]));
+        let uv = if m.uvs.is_empty() { [Vec2::ZERO, Vec2::X, Vec2::Y] } else { idx.map(|i| m.uvs[i]) };
+        MeshTri { id, ng: ng0, normals, uv, dpdu }
+    }
+
+    /// As `TriangleMesh::surface` at barycentrics `b`, at point `p`.
+    #[inline]
+    fn surface(&self, p: Vec3, b: [f32; 3]) -> Surface {
+        let uv = self.uv[0] * b[0] + self.uv[1] * b[1] + self.uv[2] * b[2];
+        let (ng, ns) = match self.normals {
+            None => (self.ng, self.ng),
+            Some(n) => {
+                let ns = (n[0] * b[0] + n[1] * b[1] + n[2] * b[2]).normalize_or_zero();
+                let ns = if ns == Vec3::ZERO { self.ng } else { ns };
+                (if self.ng.dot(ns) < 0.0 { -self.ng } else { self.ng }, ns)
+            }
+        };
+        Surface { p, ng, ns, uv, dpdu: self.dpdu }
+    }
+}
+
+/// Barycentrics of the point where the line `o + t d` meets the plane of triangle `v`
+/// (perspective-correct by construction: the visible point of a subsample is found again
+/// from its camera ray, so the visibility pass stores nothing but the triangle).
+#[inline]
+fn barycentrics(v: [Vec3; 3], o: Vec3, d: Vec3) -> [f32; 3] {
+    let (e1, e2) = (v[1] - v[0], v[2] - v[0]);
+    let p = d.cross(e2);
+    let det = e1.dot(p);
+    if det == 0.0 {
+        return [1.0 / 3.0; 3];
+    }
+    let inv = 1.0 / det;
+    let s = o - v[0];
+    let b1 = s.dot(p) * inv;
+    let b2 = d.dot(s.cross(e1)) * inv;
+    [1.0 - b1 - b2, b1, b2]
+}
+
+impl Integrator for ZBuffer {
+    fn render(&self, scene: &Scene, settings: &RenderSettings, progress: &Progress) -> Result<Film> {
+        settings.validate()?;
+        let cam = &scene.camera;
+        let ss = subsamples_per_side(settings.spp);
+        let prepared = self.prepare(scene);
         if progress.cancelled() {
             return Ok(Film::new(cam.width, cam.height, settings.filter));
         }
-
-        // Shading pass, rows in parallel.
-        let pool =
-            rayon::ThreadPoolBuilder::new().num_threads(settings.threads).build().map_err(|e| crate::error::Error::Settings(format!("thread pool: {e}")))?;
-        let colours: Vec<Rgb> = pool.install(|| {
-            (0..h)
-                .into_par_iter()
-                .flat_map_iter(|y| {
-                    let row: Vec<Rgb> = (0..w)
-                        .map(|x| {
-                            let (k, b) = ids[(y * w + x) as usize];
-                            if k == u32::MAX {
-                                let raster = Vec2::new((x as f32 + 0.5) / ss as f32, (y as f32 + 0.5) / ss as f32);
-                                let d = cam.generate_ray(raster, Vec2::splat(0.5), 0.5).d;
-                                return if settings.hide_emitters {
-                                    Rgb::BLACK
-                                } else {
-                                    scene.environment_lights.iter().map(|&e| scene.lights[e as usize].le_escaped(d)).sum()
-                                };
-                            }
-                            let t = &tris[k as usize];
-                            let eye_for = |p: Vec3| match projection {
-                                ViewProjection::Perspective { .. } => eye,
-                                ViewProjection::Orthographic { .. } => p - view_dir,
-                            };
-                            match self.shading {
-                                Shading::Phong => {
-                                    let s = Self::surface(scene, &poses, t, b);
-                                    self.shade(scene, &lights, &maps, t.shape, &s, eye_for(s.p), settings)
-                                }
-                                Shading::Flat => {
-                                    let mut s = Self::surface(scene, &poses, t, [1.0 / 3.0; 3]);
-                                    s.ns = s.ng;
-                                    self.shade(scene, &lights, &maps, t.shape, &s, eye_for(s.p), settings)
-                                }
-                                Shading::Gouraud => [[1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, 1.0]]
-                                    .iter()
-                                    .zip(b)
-                                    .map(|(vb, wgt)| {
-                                        let s = Self::surface(scene, &poses, t, *vb);
-                                        self.shade(scene, &lights, &maps, t.shape, &s, eye_for(s.p), settings) * wgt
-                                    })
-                                    .sum(),
-                            }
-                        })
-                        .collect();
-                    progress.done.fetch_add(w as u64, Ordering::Relaxed);
-                    row
-                })
-                .collect()
-        });
+        let (w, h) = (cam.width * ss, cam.height * ss);
+        progress.total.store((w * h) as u64, Ordering::Relaxed);
+        let frame = prepared.frame(scene, cam, ss, settings.hide_emitters, settings.threads)?;
+        progress.done.store((w * h) as u64, Ordering::Relaxed);
+        // Through the film, so that the scene's reconstruction filter applies to the subsamples.
         let mut film = Film::new(cam.width, cam.height, settings.filter);
         for y in 0..h {
             for x in 0..w {
                 let raster = Vec2::new((x as f32 + 0.5) / ss as f32, (y as f32 + 0.5) / ss as f32);
-                film.add_sample(raster, colours[(y * w + x) as usize]);
+                film.add_sample(raster, frame.subsamples[(y * w + x) as usize]);
             }
         }
         film.spp_done = ss * ss;

@@ -17,6 +17,22 @@
 //! * Strategies never implemented (t = 0: a light path hitting the lens) get no weight; the
 //!   (s, t) = (1, 1) strategy (an emitter connected straight to the camera) exists for area
 //!   lights only, as a point light is invisible to a camera ray.
+//!
+//! Use (what `integrator/bdpt.rs` does per pixel sample; any [`Sampler`](crate::sampling::Sampler),
+//! e.g. a primary-sample-space one, drives the walks):
+//!
+//! ```ignore
+//! let cfg = PathConfig::new(scene, settings.max_depth, settings.rr_depth, settings.hide_emitters);
+//! camera_subpath(scene, &cfg, &ray, raster, sampler, &mut camera);
+//! light_subpath(scene, &cfg, ray.time, sampler, &mut light);
+//! for t in 1..=camera.len() {
+//!     for s in 0..=light.len() {
+//!         if let Some(c) = connect(scene, &cfg, &light, &camera, s, t, sampler, true) {
+//!             // c.l * c.weight at c.raster (t = 1, a splat) or at the pixel's own raster
+//!         }
+//!     }
+//! }
+//! ```
 
 mod connect;
 mod mis;

@@ -39,6 +39,11 @@ impl<'a> RadiosityView<'a> {
         RadiosityView { mesh, b, vertex_b, shading }
     }
 
+    /// Gouraud display with given vertex values (one per display vertex).
+    pub fn with_vertex_values(mesh: &'a RadiosityMesh, b: &'a [Rgb], vertex_b: Vec<Rgb>) -> Self {
+        RadiosityView { mesh, b, vertex_b, shading: Shading::Gouraud }
+    }
+
     /// Radiosity leaving the surface the ray hits (None: the ray escapes).
     pub fn radiosity(&self, scene: &Scene, ray: &crate::geometry::Ray) -> Option<Rgb> {
         let hit = scene.intersect_prim(ray)?;
@@ -79,15 +84,20 @@ pub struct RadiosityIntegrator {
 impl crate::integrator::Integrator for RadiosityIntegrator {
     fn render(&self, scene: &Scene, settings: &RenderSettings, progress: &crate::integrator::Progress) -> crate::error::Result<crate::film::Film> {
         settings.validate()?;
-        let solved = super::solve(scene, &self.options, settings.max_depth)?;
-        let mut b = solved.b.clone();
+        let mut solved = super::solve(scene, &self.options, settings.max_depth)?;
         if settings.hide_emitters {
             // Hidden emitters show only the light they reflect.
-            for (x, e) in b.iter_mut().zip(&solved.mesh.elements) {
-                *x -= e.emission;
+            let emission: Vec<Rgb> = solved.mesh.elements.iter().map(|e| e.emission).collect();
+            for (x, e) in solved.b.iter_mut().zip(&emission) {
+                *x -= *e;
+            }
+            if let Some(v) = &mut solved.vertex_b {
+                for (x, e) in v.iter_mut().zip(vertex_radiosity(&solved.mesh, &emission)) {
+                    *x -= e;
+                }
             }
         }
-        let view = RadiosityView::new(&solved.mesh, &b, self.options.shading);
+        let view = solved.view(self.options.shading);
         if self.options.hybrid {
             let hybrid = super::hybrid::HybridView::new(scene, view, self.options.gather);
             return render_pixels(scene, settings, progress, &hybrid);

@@ -35,6 +35,9 @@ pub enum Shading {
 pub struct RadiosityOptions {
     pub mesh: MeshOptions,
     pub form_factors: Method,
+    /// The form-factor method was chosen by the user (the automatic solver then keeps the
+    /// full matrix, the only solver that uses it; hierarchical links are always analytic).
+    pub form_factors_given: bool,
     pub solver: SolverKind,
     pub solve: SolveOptions,
     /// Average A_i F_ij and A_j F_ji before solving.
@@ -53,7 +56,8 @@ impl Default for RadiosityOptions {
         RadiosityOptions {
             mesh: MeshOptions::default(),
             form_factors: Method::default(),
-            solver: SolverKind::GaussSeidel,
+            form_factors_given: false,
+            solver: SolverKind::Auto,
             solve: SolveOptions::default(),
             reciprocity: false,
             shading: Shading::Gouraud,
@@ -79,7 +83,10 @@ impl RadiosityOptions {
             let num = |v: &str| v.parse::<f64>().map_err(|_| Error::Settings(format!("radiosity: {k} needs a number, got '{v}'")));
             let int = |v: &str| v.parse::<u64>().map_err(|_| Error::Settings(format!("radiosity: {k} needs a whole number, got '{v}'")));
             match k {
-                "form-factors" | "ff" => o.form_factors = Method::parse(v)?,
+                "form-factors" | "ff" => {
+                    o.form_factors = Method::parse(v)?;
+                    o.form_factors_given = true;
+                }
                 "solver" => o.solver = SolverKind::parse(v)?,
                 "element-size" | "max-edge" => o.mesh.max_edge = Some(num(v)? as f32),
                 "max-elements" => o.mesh.max_elements = int(v)? as usize,
@@ -132,12 +139,30 @@ impl RadiosityOptions {
         o.solve.validate()?;
         Ok(o)
     }
+
+    /// The solver that runs for a scene whose regular mesh has `elements` elements: the one
+    /// asked for, or for [`SolverKind::Auto`] hierarchical from [`AUTO_HIERARCHICAL_FROM`]
+    /// elements on (bench/radiosity: it reaches the full matrix's accuracy in less time, by a
+    /// factor that widens with the element count) and Gauss-Seidel on the full matrix below
+    /// (small matrices are quick, and exact on their mesh) or when a form-factor method was chosen.
+    pub fn solver_for(&self, elements: usize) -> SolverKind {
+        match self.solver {
+            SolverKind::Auto if self.form_factors_given || elements < AUTO_HIERARCHICAL_FROM => SolverKind::GaussSeidel,
+            SolverKind::Auto => SolverKind::Hierarchical,
+            s => s,
+        }
+    }
 }
+
+/// Elements of the regular mesh from which the automatic solver is hierarchical.
+pub const AUTO_HIERARCHICAL_FROM: usize = 1500;
 
 /// A solved scene: the mesh, the radiosity of each element and how the solve went.
 pub struct Solved {
     pub mesh: RadiosityMesh,
     pub b: Vec<Rgb>,
+    /// The solver that ran (the automatic choice resolved).
+    pub solver: SolverKind,
     pub history: Vec<Step>,
     pub converged: bool,
     /// Form-factor rows computed.
@@ -150,6 +175,24 @@ pub struct Solved {
     pub solve_seconds: f64,
     /// Links, nodes and leaves of a hierarchical solve.
     pub hierarchy: Option<hierarchical::Stats>,
+    /// Gouraud values at the display vertices when the solver provides its own (hierarchical:
+    /// interpolated over its leaves); None: area-weighted means of the elements around each vertex.
+    pub vertex_b: Option<Vec<Rgb>>,
+}
+
+impl Solved {
+    /// The solution shown through a camera.
+    pub fn view(&self, shading: Shading) -> display::RadiosityView<'_> {
+        match &self.vertex_b {
+            Some(v) if shading == Shading::Gouraud => display::RadiosityView::with_vertex_values(&self.mesh, &self.b, v.clone()),
+            _ => display::RadiosityView::new(&self.mesh, &self.b, shading),
+        }
+    }
+
+    /// Radiosity at every display vertex (for Gouraud display and the PLY output).
+    pub fn vertex_radiosity(&self) -> Vec<Rgb> {
+        self.vertex_b.clone().unwrap_or_else(|| display::vertex_radiosity(&self.mesh, &self.b))
+    }
 }
 
 /// The system's per-element data.
@@ -184,11 +227,15 @@ pub fn solve_observed(
     let t0 = Instant::now();
     let mesh = RadiosityMesh::build(scene, &opts.mesh)?;
     let mesh_seconds = t0.elapsed().as_secs_f64();
+    let kind = opts.solver_for(mesh.elements.len());
+    if kind == SolverKind::Hierarchical {
+        return solve_hierarchical(scene, opts, max_depth);
+    }
     let source = RowSource::new(scene, &mesh, opts.form_factors)?;
     let rho_max = mesh.elements.iter().map(|e| e.reflectance.max_component()).fold(0.0f32, f32::max) as f64;
     let bounces = if max_depth >= 0 { Some((max_depth - 1).max(0) as usize) } else { None };
     let truncate = bounces.filter(|&k| rho_max.powi(k as i32) > opts.solve.tolerance * 1e-2);
-    let on_demand = opts.solver == SolverKind::Progressive && !opts.reciprocity && truncate.is_none();
+    let on_demand = kind == SolverKind::Progressive && !opts.reciprocity && truncate.is_none();
     let t1 = Instant::now();
     let matrix: Option<FormFactors> = if on_demand {
         None
@@ -206,11 +253,11 @@ pub fn solve_observed(
     let t2 = Instant::now();
     let sol = match truncate {
         Some(k) => solver::jacobi::bounces(&sys, k)?,
-        None if opts.solver == SolverKind::Progressive => {
+        None if kind == SolverKind::Progressive => {
             opts.solve.validate()?;
             solver::progressive::solve(&sys, &opts.solve, &mut |s, st| observe(&mesh, s, st))?
         }
-        None => opts.solver.solve(&sys, &opts.solve)?,
+        None => kind.solve(&sys, &opts.solve)?,
     };
     let solve_seconds = t2.elapsed().as_secs_f64();
     let rows_computed = source.rows_computed.load(std::sync::atomic::Ordering::Relaxed);
@@ -219,6 +266,7 @@ pub fn solve_observed(
     Ok(Solved {
         mesh,
         b: sol.b,
+        solver: kind,
         history: sol.history,
         converged: sol.converged,
         rows_computed,
@@ -228,6 +276,7 @@ pub fn solve_observed(
         form_factor_seconds,
         solve_seconds,
         hierarchy: None,
+        vertex_b: None,
     })
 }
 
@@ -243,6 +292,7 @@ fn solve_hierarchical(scene: &Scene, opts: &RadiosityOptions, max_depth: i32) ->
     Ok(Solved {
         mesh: o.mesh,
         b: o.b,
+        solver: SolverKind::Hierarchical,
         history: o.history,
         converged: o.converged,
         rows_computed: o.stats.form_factors,
@@ -252,5 +302,6 @@ fn solve_hierarchical(scene: &Scene, opts: &RadiosityOptions, max_depth: i32) ->
         form_factor_seconds: o.stats.refine_seconds,
         solve_seconds: total - o.stats.refine_seconds,
         hierarchy: Some(o.stats),
+        vertex_b: Some(o.vertex_b),
     })
 }

@@ -9,8 +9,16 @@ use glam::{Mat4, Vec2, Vec3, Vec4};
 
 #[derive(Clone, Debug)]
 pub enum ShadowMap {
-    Cube { position: Vec3, faces: Vec<(View, DepthBuffer)> },
-    Directional { view: View, buffer: DepthBuffer },
+    Cube {
+        position: Vec3,
+        faces: Vec<(View, DepthBuffer)>,
+    },
+    /// `to_light`: the unit direction toward the light.
+    Directional {
+        view: View,
+        buffer: DepthBuffer,
+        to_light: Vec3,
+    },
 }
 
 fn look_at(origin: Vec3, dir: Vec3, up: Vec3) -> Mat4 {
@@ -21,13 +29,16 @@ fn look_at(origin: Vec3, dir: Vec3, up: Vec3) -> Mat4 {
 }
 
 fn render(view: View, tris: &[[Vec3; 3]]) -> DepthBuffer {
-    let mut buf = DepthBuffer::new(view.width, view.height);
+    let empty = view.key(f32::INFINITY);
+    let mut keys = vec![empty; (view.width * view.height) as usize];
     for t in tris {
-        view.raster_triangle(*t, |f| {
-            buf.test_and_set(f.x, f.y, f.z);
+        view.raster_keys(t.map(|p| view.world_to_camera.transform_point3(p)), |i, k| {
+            if k > keys[i] {
+                keys[i] = k;
+            }
         });
     }
-    buf
+    DepthBuffer { width: view.width, height: view.height, z: keys.into_iter().map(|k| if k == empty { f32::INFINITY } else { view.depth_of_key(k) }).collect() }
 }
 
 const AXES: [Vec3; 6] = [Vec3::X, Vec3::NEG_X, Vec3::Y, Vec3::NEG_Y, Vec3::Z, Vec3::NEG_Z];
@@ -63,7 +74,7 @@ impl ShadowMap {
             height: res,
             near: 0.0,
         };
-        ShadowMap::Directional { view, buffer: render(view, tris) }
+        ShadowMap::Directional { view, buffer: render(view, tris), to_light: -d }
     }
 
     /// Whether `p` (surface normal `n`) sees the light according to the map.
@@ -91,10 +102,7 @@ impl ShadowMap {
                 };
                 (&faces[k].0, &faces[k].1, (-d).normalize_or_zero())
             }
-            ShadowMap::Directional { view, buffer } => {
-                let dir = view.world_to_camera.inverse().transform_vector3(Vec3::Z);
-                (view, buffer, -dir)
-            }
+            ShadowMap::Directional { view, buffer, to_light } => (view, buffer, *to_light),
         };
         let pc = view.world_to_camera.transform_point3(p);
         if pc.z <= 0.0 {

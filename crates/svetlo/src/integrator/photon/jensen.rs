@@ -16,7 +16,7 @@
 //! fixed. Deterministic for a seed whatever the thread count.
 
 use super::camera::{camera_walk, DiffuseVertex};
-use super::map::{Kernel, Lookup, Photon, PhotonMap};
+use super::map::{lambertian_albedo, Kernel, Lookup, Photon, PhotonMap, PrecomputedRadiance, RadianceSite};
 use super::trace::trace_photons;
 use super::{parse_count, parse_pairs, parse_positive, photon_max_segments, pixel_footprint, segments_left};
 use crate::bsdf::TransportMode;
@@ -24,6 +24,7 @@ use crate::error::{Error, Result};
 use crate::film::Film;
 use crate::geometry::Ray;
 use crate::integrator::{render_pixels, Integrator, PixelEstimator, Progress, RenderSettings};
+use crate::path::PathConfig;
 use crate::sampling::Sampler;
 use crate::scene::Scene;
 use crate::spectrum::Rgb;
@@ -45,6 +46,11 @@ pub struct PhotonOptions {
     /// Final-gather rays per camera sample (0: read the global map directly).
     pub gather: u32,
     pub kernel: Kernel,
+    /// Precompute the global map's radiance at every n-th photon on a Lambertian surface, read
+    /// by final-gather rays (Christensen); 0: search the photons at every gather ray.
+    pub precompute: u32,
+    /// Count only photons a lookup point sees (`map::visible`): no leaks through thin walls.
+    pub visibility: bool,
 }
 
 impl Default for PhotonOptions {
@@ -58,12 +64,14 @@ impl Default for PhotonOptions {
             caustic_radius: None,
             gather: 16,
             kernel: Kernel::Cone { k: 1.0 },
+            precompute: 4,
+            visibility: true,
         }
     }
 }
 
 impl PhotonOptions {
-    /// `photons=N,caustic-photons=N,k=K,radius=R,caustic-k=K,caustic-radius=R,gather=N,filter=box|cone|epanechnikov`.
+    /// `photons=N,caustic-photons=N,k=K,radius=R,caustic-k=K,caustic-radius=R,gather=N,filter=box|cone|epanechnikov,precompute=N,visibility=true|false`.
     pub fn parse(params: &str) -> Result<Self> {
         let m = "photon";
         let mut o = PhotonOptions::default();
@@ -77,9 +85,11 @@ impl PhotonOptions {
                 "caustic-radius" => o.caustic_radius = Some(parse_positive(m, k, v)?),
                 "gather" => o.gather = parse_count(m, k, v)?.min(1 << 16) as u32,
                 "filter" => o.kernel = Kernel::parse(v)?,
+                "precompute" => o.precompute = parse_count(m, k, v)?.min(1 << 20) as u32,
+                "visibility" => o.visibility = v.parse().map_err(|_| Error::Settings(format!("photon: visibility is true or false, got '{v}'")))?,
                 _ => {
                     return Err(Error::Settings(format!(
-                        "photon: unknown option '{k}' (photons, caustic-photons, k, radius, caustic-k, caustic-radius, gather, filter)"
+                        "photon: unknown option '{k}' (photons, caustic-photons, k, radius, caustic-k, caustic-radius, gather, filter, precompute, visibility)"
                     )))
                 }
             }
@@ -101,6 +111,7 @@ const GATHER_RR_AFTER: u32 = 4;
 
 struct Maps {
     global: PhotonMap,
+    precomputed: Option<PrecomputedRadiance>,
     caustic: PhotonMap,
     global_lookup: Lookup,
     caustic_lookup: Lookup,
@@ -110,20 +121,40 @@ impl PhotonMapper {
     fn build_maps(&self, scene: &Scene, settings: &RenderSettings) -> Maps {
         let o = &self.options;
         let max_seg = photon_max_segments(settings.max_depth);
+        let cfg = PathConfig::new(scene, settings.max_depth, settings.rr_depth, settings.hide_emitters);
         let gscale = 1.0 / o.photons.max(1) as f32;
-        let global: Vec<Photon> = trace_photons(scene, settings.seed, TAG_GLOBAL, o.photons, max_seg, |d| (Some(Photon::from_deposit(d, gscale)), true));
+        // Every `precompute`-th path lends its Lambertian landings as precomputed-radiance sites.
+        let every = if o.gather > 0 { o.precompute as u64 } else { 0 };
+        let landed: Vec<(Photon, Option<RadianceSite>)> = trace_photons(scene, settings.seed, TAG_GLOBAL, o.photons, &cfg, |i, d| {
+            let site_path = every > 0 && i % every == 0;
+            let site = if site_path {
+                d.albedo.map(|albedo| RadianceSite { p: d.p, n: if d.wi.dot(d.ng) >= 0.0 { d.ng } else { -d.ng }, ns: d.ns, albedo })
+            } else {
+                None
+            };
+            (Some((Photon { site_path, ..Photon::from_deposit(d, gscale) }, site)), true)
+        });
+        let sites: Vec<RadianceSite> = landed.iter().filter_map(|x| x.1).collect();
+        let site_paths = if every > 0 { o.photons.div_ceil(every) } else { 0 };
+        let other_paths_scale = o.photons as f32 / (o.photons - site_paths).max(1) as f32;
+        let global: Vec<Photon> = landed.into_iter().map(|x| x.0).collect();
         let cscale = 1.0 / o.caustic_photons.max(1) as f32;
-        let caustic: Vec<Photon> = trace_photons(scene, settings.seed, TAG_CAUSTIC, o.caustic_photons, max_seg, |d| {
+        let caustic: Vec<Photon> = trace_photons(scene, settings.seed, TAG_CAUSTIC, o.caustic_photons, &cfg, |_, d| {
             let keep = (d.caustic && d.surface.intersects(crate::bsdf::LobeFlags::DIFFUSE)).then(|| Photon::from_deposit(d, cscale));
             // A path stays a caustic one only through delta bounces.
             let go_on = (d.caustic || d.segments == 1) && d.surface.is_specular();
             (keep, go_on)
         });
         let px = pixel_footprint(scene);
+        let global_lookup = Lookup { k: o.k, max_radius: o.radius.unwrap_or(24.0 * px), kernel: o.kernel };
+        let global = PhotonMap::new(global);
+        let precomputed = (!sites.is_empty())
+            .then(|| PrecomputedRadiance::new(&global, o.visibility.then_some(scene), &sites, &global_lookup, max_seg.max(1) as usize, other_paths_scale));
         Maps {
-            global: PhotonMap::new(global),
+            global,
+            precomputed,
             caustic: PhotonMap::new(caustic),
-            global_lookup: Lookup { k: o.k, max_radius: o.radius.unwrap_or(24.0 * px), kernel: o.kernel },
+            global_lookup,
             caustic_lookup: Lookup { k: o.caustic_k, max_radius: o.caustic_radius.unwrap_or(6.0 * px), kernel: o.kernel },
         }
     }
@@ -140,7 +171,7 @@ impl Integrator for PhotonMapper {
         if let Some(t) = s.time_limit {
             s.time_limit = Some(t.saturating_sub(start.elapsed()));
         }
-        let est = Estimator { maps, gather: self.options.gather };
+        let est = Estimator { maps, gather: self.options.gather, visibility: self.options.visibility };
         render_pixels(scene, &s, progress, &est)
     }
 }
@@ -148,6 +179,7 @@ impl Integrator for PhotonMapper {
 struct Estimator {
     maps: Maps,
     gather: u32,
+    visibility: bool,
 }
 
 impl Estimator {
@@ -155,9 +187,11 @@ impl Estimator {
     fn photons_at(&self, scene: &Scene, v: &DiffuseVertex, sampler: &mut dyn Sampler, settings: &RenderSettings) -> Rgb {
         let left = segments_left(settings.max_depth, v.depth);
         let m = &self.maps;
-        let mut l = m.caustic.radiance(v.si, v.bsdf, v.wo, &m.caustic_lookup, |p| (p.segments as i32) <= left);
+        let mut l = m.caustic.radiance(self.visibility.then_some(scene), v.si, v.bsdf, v.wo, &m.caustic_lookup, |p| (p.segments as i32) <= left);
         if self.gather == 0 {
-            l += m.global.radiance(v.si, v.bsdf, v.wo, &m.global_lookup, |p| !p.caustic && p.segments >= 2 && (p.segments as i32) <= left);
+            l += m.global.radiance(self.visibility.then_some(scene), v.si, v.bsdf, v.wo, &m.global_lookup, |p| {
+                !p.caustic && p.segments >= 2 && (p.segments as i32) <= left
+            });
             return l;
         }
         let mut g = Rgb::BLACK;
@@ -189,7 +223,13 @@ impl Estimator {
             let wo = si.to_local(si.wo);
             if flags.has_non_specular() {
                 let left = segments_left(settings.max_depth, depth);
-                l += t * m.global.radiance(&si, &bsdf, wo, &m.global_lookup, |p| (p.segments as i32) <= left);
+                let n = if si.wo.dot(si.ng) >= 0.0 { si.ng } else { -si.ng };
+                let pre = match (&m.precomputed, lambertian_albedo(&bsdf, wo)) {
+                    (Some(pc), Some(_)) => pc.radiance(si.p, n, left),
+                    _ => None,
+                };
+                l += t * pre
+                    .unwrap_or_else(|| m.global.radiance(self.visibility.then_some(scene), &si, &bsdf, wo, &m.global_lookup, |p| (p.segments as i32) <= left));
             }
             if !flags.is_specular() {
                 break;

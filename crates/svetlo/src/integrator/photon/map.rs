@@ -7,10 +7,11 @@
 
 use super::trace::Deposit;
 use crate::accel::{KdPoint, KdTree};
-use crate::bsdf::{Bsdf, TransportMode};
+use crate::bsdf::{Bsdf, BsdfModel, TransportMode};
 use crate::error::{Error, Result};
 use crate::geometry::SurfaceInteraction;
 use crate::math::PI;
+use crate::scene::Scene;
 use crate::spectrum::Rgb;
 use glam::Vec3;
 
@@ -19,14 +20,26 @@ pub(crate) struct Photon {
     pub p: Vec3,
     pub wi: Vec3,
     pub power: Rgb,
+    /// Geometric normal of the surface it landed on, on the side it arrived from.
+    pub n: Vec3,
     pub segments: u16,
     pub caustic: bool,
+    /// Its path gave the sites of the precomputed radiance (then it takes no part in it).
+    pub site_path: bool,
 }
 
 impl Photon {
     /// A stored photon from a landing, its power scaled (by 1 / number of emitted paths).
     pub fn from_deposit(d: &Deposit, scale: f32) -> Self {
-        Photon { p: d.p, wi: d.wi, power: d.power * scale, segments: d.segments.min(u16::MAX as u32) as u16, caustic: d.caustic }
+        Photon {
+            p: d.p,
+            wi: d.wi,
+            n: if d.wi.dot(d.ng) >= 0.0 { d.ng } else { -d.ng },
+            power: d.power * scale,
+            segments: d.segments.min(u16::MAX as u32) as u16,
+            caustic: d.caustic,
+            site_path: false,
+        }
     }
 }
 
@@ -88,8 +101,22 @@ impl PhotonMap {
     }
 
     /// Radiance reflected at `si` toward `wo` (local shading frame) by the non-delta part of
-    /// `bsdf`, from the photons `accept` lets through.
-    pub fn radiance(&self, si: &SurfaceInteraction, bsdf: &Bsdf, wo: Vec3, lookup: &Lookup, accept: impl Fn(&Photon) -> bool) -> Rgb {
+    /// `bsdf`, from the photons `accept` lets through that landed on a surface facing the same
+    /// way (Jensen's filter: no photons from the other side of a thin wall or a corner's
+    /// other face).
+    /// With `visibility`, only photons the point sees count (see [`visible`]).
+    #[allow(clippy::too_many_arguments)]
+    pub fn radiance(
+        &self,
+        visibility: Option<&Scene>,
+        si: &SurfaceInteraction,
+        bsdf: &Bsdf,
+        wo: Vec3,
+        lookup: &Lookup,
+        accept: impl Fn(&Photon) -> bool,
+    ) -> Rgb {
+        let n = if si.wo.dot(si.ng) >= 0.0 { si.ng } else { -si.ng };
+        let accept = |ph: &Photon| ph.n.dot(n) > SAME_ORIENTATION_COS && accept(ph) && visibility.is_none_or(|sc| visible(sc, si.p, n, ph.p, ph.n));
         let mut sum = Rgb::BLACK;
         let mut add = |ph: &Photon, d2: f32, r2: f32| {
             let wi = si.to_local(ph.wi);
@@ -111,17 +138,142 @@ impl PhotonMap {
             });
             r2
         } else {
-            let found = self.tree.k_nearest(si.p, lookup.k, lookup.max_radius, &accept);
-            // Fewer than k photons within the maximum: the disc is the maximum one.
-            let r2 = if found.len() == lookup.k { found.last().map_or(0.0, |&(_, d2)| d2) } else { lookup.max_radius * lookup.max_radius };
+            let found = self.tree.k_nearest(si.p, lookup.k, lookup.max_radius, accept);
+            let (inside, r2) = knn_disc(&found, lookup);
             if r2 <= 0.0 {
                 return Rgb::BLACK;
             }
-            for &(i, d2) in &found {
+            for &(i, d2) in inside {
                 add(&self.tree.items()[i], d2, r2);
             }
             r2
         };
         sum / (PI * r2)
+    }
+}
+
+/// The photons of a k-nearest search that count, and the disc's squared radius. With k found
+/// the disc reaches the k-th, which lies on its edge: it is left out, as the k - 1 inside over
+/// the disc's area is the unbiased density of a uniform Poisson process (k / area overshoots
+/// by k / (k - 1)). With fewer, the disc is the largest allowed and all count.
+fn knn_disc<'a>(found: &'a [(usize, f32)], lookup: &Lookup) -> (&'a [(usize, f32)], f32) {
+    if found.len() == lookup.k && lookup.k > 0 {
+        (&found[..lookup.k - 1], found[lookup.k - 1].1)
+    } else {
+        (found, lookup.max_radius * lookup.max_radius)
+    }
+}
+
+/// The reflectance of the side of `bsdf` that `w` (local) is on, where that side is purely
+/// Lambertian (then reflected radiance is albedo / π times irradiance, whatever wo).
+pub(crate) fn lambertian_albedo(bsdf: &Bsdf, w: Vec3) -> Option<Rgb> {
+    let m = if w.z >= 0.0 || bsdf.front.handles_back_side() { &bsdf.front } else { bsdf.back.as_ref()? };
+    match m {
+        BsdfModel::Diffuse(d) => Some(d.reflectance * bsdf.opacity),
+        _ => None,
+    }
+}
+
+/// A place where a photon landed on a Lambertian side, whose radiance is precomputed.
+#[derive(Clone, Copy, Debug)]
+pub(crate) struct RadianceSite {
+    pub p: Vec3,
+    /// Geometric normal on the lit side.
+    pub n: Vec3,
+    pub ns: Vec3,
+    pub albedo: Rgb,
+}
+
+#[derive(Clone, Copy, Debug)]
+struct RadiancePoint {
+    p: Vec3,
+    n: Vec3,
+    first: u32,
+}
+
+impl KdPoint for RadiancePoint {
+    #[inline]
+    fn position(&self) -> Vec3 {
+        self.p
+    }
+}
+
+/// Christensen's precomputed radiance ("Faster photon map global illumination", 1999): the
+/// global map's estimate at a subset of the photons on Lambertian surfaces, so that a final
+/// gather ray landing on one reads its nearest site (same orientation) instead of searching k
+/// photons. Kept per photon path length (cumulative over `buckets` segment counts) so that
+/// depth-limited lookups stay exact about which paths they count. The extra blur (the distance
+/// to the nearest site) vanishes as photons grow, like the estimate's own.
+pub(crate) struct PrecomputedRadiance {
+    tree: KdTree<RadiancePoint>,
+    /// values[first + b]: radiance of photons of at most b + 1 segments (the last bucket: all).
+    values: Vec<Rgb>,
+    buckets: usize,
+    max_radius: f32,
+}
+
+/// Whether a lookup point `p` (surface normal `n` on the seen side) sees a photon at `q`
+/// (normal `nq` on its lit side): a shadow ray between the two, each end lifted off its
+/// surface by a quarter of their distance (more than the sagitta of a sphere of radius half
+/// that distance, so curved surfaces do not shadow themselves). Without it light leaks through
+/// thin walls into the room beside, along the surfaces that run under them.
+pub(crate) fn visible(scene: &Scene, p: Vec3, n: Vec3, q: Vec3, nq: Vec3) -> bool {
+    let lift = VISIBILITY_LIFT * (q - p).length();
+    lift == 0.0 || !scene.occluded(p + n * lift, n, q + nq * lift)
+}
+
+const VISIBILITY_LIFT: f32 = 0.25;
+
+/// Orientation agreement of a photon's surface with the lookup point's (cos 60°).
+pub(crate) const SAME_ORIENTATION_COS: f32 = 0.5;
+
+/// Orientation agreement for a site to stand for a lookup point (cos 25°).
+const SITE_NORMAL_COS: f32 = 0.9;
+
+impl PrecomputedRadiance {
+    /// `buckets`: photon segment counts told apart (1 when depth is unbounded);
+    /// `other_paths_scale`: photon paths emitted over those that gave no site.
+    pub fn new(map: &PhotonMap, visibility: Option<&Scene>, sites: &[RadianceSite], lookup: &Lookup, buckets: usize, other_paths_scale: f32) -> Self {
+        use rayon::prelude::*;
+        let buckets = buckets.max(1);
+        let per_site: Vec<Vec<Rgb>> = sites
+            .par_iter()
+            .map(|s| {
+                let mut b = vec![Rgb::BLACK; buckets];
+                // Only photons of other paths than the sites': a density estimated where a photon
+                // is known to be (or read at the site nearest a point, whose cell is larger
+                // where photons are sparser) would be biased by that photon's own position.
+                let found = map.tree.k_nearest(s.p, lookup.k, lookup.max_radius, |ph| {
+                    !ph.site_path && ph.n.dot(s.n) > SAME_ORIENTATION_COS && visibility.is_none_or(|sc| visible(sc, s.p, s.n, ph.p, ph.n))
+                });
+                let (inside, r2) = knn_disc(&found, lookup);
+                if r2 > 0.0 {
+                    for &(i, d2) in inside {
+                        let ph = &map.tree.items()[i];
+                        let cos_g = ph.wi.dot(s.n);
+                        let k = (ph.segments as usize).clamp(1, buckets) - 1;
+                        b[k] += ph.power * (ph.wi.dot(s.ns).abs() / cos_g * lookup.kernel.weight(d2, r2));
+                    }
+                }
+                let scale = s.albedo * (other_paths_scale / (PI * PI * r2.max(f32::MIN_POSITIVE)));
+                let mut acc = Rgb::BLACK;
+                for v in b.iter_mut() {
+                    acc += *v;
+                    *v = if r2 > 0.0 { acc * scale } else { Rgb::BLACK };
+                }
+                b
+            })
+            .collect();
+        let points: Vec<RadiancePoint> = sites.iter().enumerate().map(|(i, s)| RadiancePoint { p: s.p, n: s.n, first: (i * buckets) as u32 }).collect();
+        PrecomputedRadiance { tree: KdTree::new(points), values: per_site.into_iter().flatten().collect(), buckets, max_radius: lookup.max_radius }
+    }
+
+    /// Radiance leaving a Lambertian point `p` on the side of geometric normal `n`, from
+    /// photons of at most `segments` segments; None where no site is near enough.
+    pub fn radiance(&self, p: Vec3, n: Vec3, segments: i32) -> Option<Rgb> {
+        let found = self.tree.k_nearest(p, 1, self.max_radius, |s| s.n.dot(n) > SITE_NORMAL_COS);
+        let &(i, _) = found.first()?;
+        let b = (segments.max(1) as usize).min(self.buckets) - 1;
+        Some(self.values[self.tree.items()[i].first as usize + b])
     }
 }

@@ -87,42 +87,46 @@ pub(crate) fn sees(a: &Element, b: &Element) -> bool {
 /// averaged over points of i (the centroid, or `src_grid`² points when the pair is close), times the fraction of
 /// `vis_grid`² shadow rays to points of j that are unblocked.
 pub fn row(scene: &Scene, mesh: &RadiosityMesh, i: usize, vis_grid: u32, src_grid: u32) -> Vec<(u32, f32)> {
+    use rayon::prelude::*;
     let ei = &mesh.elements[i];
     let ri = ei.radius();
-    let mut out = Vec::new();
     let near_pts = triangle_points(&ei.p, src_grid.max(1));
     let far_pts = [ei.centroid];
-    for (j, ej) in mesh.elements.iter().enumerate() {
-        if j == i || !sees(ei, ej) || !sees(ej, ei) {
-            continue;
-        }
-        let near = (ej.centroid - ei.centroid).length() < 3.0 * (ri + ej.radius());
-        let src: &[Vec3] = if near { &near_pts } else { &far_pts };
-        let targets = triangle_points(&ej.p, vis_grid.max(1));
-        let mut f = 0.0;
-        for (s, x) in src.iter().enumerate() {
-            let fx = point_to_polygon(*x, ei.normal, &ej.p);
-            if fx <= 0.0 {
-                continue;
+    // The targets in parallel (progressive refinement computes one row at a time); each entry
+    // depends on (i, j) only and the collect keeps j's order, so the row does not depend on threads.
+    mesh.elements
+        .par_iter()
+        .enumerate()
+        .with_min_len(64)
+        .filter_map(|(j, ej)| {
+            if j == i || !sees(ei, ej) || !sees(ej, ei) {
+                return None;
             }
-            // One ray per source point when there are many, the whole target grid otherwise.
-            let v = if src.len() > 1 {
-                if scene.occluded(*x, ei.normal, targets[s % targets.len()]) {
-                    0.0
-                } else {
-                    1.0
+            let near = (ej.centroid - ei.centroid).length() < 3.0 * (ri + ej.radius());
+            let src: &[Vec3] = if near { &near_pts } else { &far_pts };
+            let targets = triangle_points(&ej.p, vis_grid.max(1));
+            let mut f = 0.0;
+            for (s, x) in src.iter().enumerate() {
+                let fx = point_to_polygon(*x, ei.normal, &ej.p);
+                if fx <= 0.0 {
+                    continue;
                 }
-            } else {
-                targets.iter().filter(|y| !scene.occluded(*x, ei.normal, **y)).count() as f64 / targets.len() as f64
-            };
-            f += fx * v;
-        }
-        let f = f / src.len() as f64;
-        if f > 0.0 {
-            out.push((j as u32, f as f32));
-        }
-    }
-    out
+                // One ray per source point when there are many, the whole target grid otherwise.
+                let v = if src.len() > 1 {
+                    if scene.occluded(*x, ei.normal, targets[s % targets.len()]) {
+                        0.0
+                    } else {
+                        1.0
+                    }
+                } else {
+                    targets.iter().filter(|y| !scene.occluded(*x, ei.normal, **y)).count() as f64 / targets.len() as f64
+                };
+                f += fx * v;
+            }
+            let f = f / src.len() as f64;
+            (f > 0.0).then_some((j as u32, f as f32))
+        })
+        .collect()
 }
 
 /// Closed forms from Howell's catalogue, for tests and as documentation of what the

@@ -67,8 +67,9 @@ impl Default for HierarchicalOptions {
 }
 
 /// A link: the receiver gathers F · B_src from `src`, F a linear function over the receiver
-/// given by its corner values `f` (their mean is the area-averaged form factor); `f_est` is
-/// the oracle's variation of F.
+/// given by its corner values `f` (their mean is the area-averaged form factor); `f_est`
+/// bounds the error of F for the oracle (the variation of the unoccluded F over either node,
+/// or F itself when the link is partially visible).
 #[derive(Clone, Copy, Debug)]
 pub struct Link {
     pub src: u32,
@@ -194,6 +195,16 @@ impl<'a> Hierarchy<'a> {
         let g: Vec<[Rgb; 3]> = (0..self.forest.nodes.len() as u32).map(|n| self.gather(n)).collect();
         for (node, g) in self.forest.nodes.iter_mut().zip(g) {
             node.gathered = g;
+        }
+        for r in 0..self.forest.roots as u32 {
+            self.push_pull(r, [Rgb::BLACK; 3]);
+        }
+    }
+
+    /// B = E at every leaf (nothing gathered), area-weighted means above.
+    pub fn reset_to_emission(&mut self) {
+        for node in &mut self.forest.nodes {
+            node.gathered = [Rgb::BLACK; 3];
         }
         for r in 0..self.forest.roots as u32 {
             self.push_pull(r, [Rgb::BLACK; 3]);
@@ -354,9 +365,10 @@ impl<'a> Hierarchy<'a> {
     }
 
     /// The display mesh: each shape split 2^d times per edge, d its deepest leaf (lowered while
-    /// the mesh would exceed `display_elements`), and every display element's radiosity, read
-    /// from the node that covers it exactly (or the leaf above it).
-    pub fn display(&self, mesh: &MeshOptions) -> Result<(RadiosityMesh, Vec<Rgb>)> {
+    /// the mesh would exceed `display_elements`), every display element's radiosity, read
+    /// from the node that covers it exactly (or the leaf above it), and Gouraud values at the
+    /// display vertices (see [`Self::leaf_gouraud`]).
+    pub fn display(&self, mesh: &MeshOptions) -> Result<(RadiosityMesh, Vec<Rgb>, Vec<Rgb>)> {
         let shapes = self.scene.shapes.len();
         let mut depth = vec![0u8; shapes];
         let mut tris = vec![0usize; shapes];
@@ -374,7 +386,7 @@ impl<'a> Hierarchy<'a> {
         }
         let splits: Vec<u32> = depth.iter().map(|d| 1u32 << d.min(&cap)).collect();
         let display = RadiosityMesh::build(self.scene, &MeshOptions { shape_splits: splits.clone(), max_elements: usize::MAX, ..mesh.clone() })?;
-        let b = display
+        let b: Vec<Rgb> = display
             .elements
             .iter()
             .map(|e| {
@@ -383,7 +395,48 @@ impl<'a> Hierarchy<'a> {
                 self.forest.nodes[n as usize].b
             })
             .collect();
-        Ok((display, b))
+        let vertex_b = self.leaf_gouraud(&display, &b, &splits);
+        Ok((display, b, vertex_b))
+    }
+
+    /// Gouraud over the leaves, not the (finer) display elements: a leaf's corners take the
+    /// area-weighted mean of the display elements around them (so of the leaves that meet
+    /// there), and every display vertex inside or on the edge of a leaf takes the linear
+    /// interpolation of that leaf's corner values. A vertex on the boundary of leaves of
+    /// different sizes (a T-vertex of the leaf mesh) takes the value of the largest, i.e. the
+    /// interpolation along the long edge, so the two sides agree there and nothing cracks.
+    fn leaf_gouraud(&self, display: &RadiosityMesh, b: &[Rgb], splits: &[u32]) -> Vec<Rgb> {
+        use std::collections::HashMap;
+        let fine = super::display::vertex_radiosity(display, b);
+        let step = self.scene.bounds.radius.max(1e-6) * 1e-5;
+        let key =
+            |e: &super::mesh::Element, p: Vec3| (e.shape, e.back, [(p.x / step).round() as i64, (p.y / step).round() as i64, (p.z / step).round() as i64]);
+        let mut at: HashMap<(u32, bool, [i64; 3]), u32> = HashMap::new();
+        for e in &display.elements {
+            for k in 0..3 {
+                at.insert(key(e, e.p[k]), e.vertex[k]);
+            }
+        }
+        let mut best: Vec<(f32, Rgb)> = vec![(-1.0, Rgb::BLACK); display.vertices.len()];
+        for e in &display.elements {
+            let d = splits[e.shape as usize].trailing_zeros() as u8;
+            let node = &self.forest.nodes[self.forest.find(e.patch, e.centroid, d) as usize];
+            let corners = node.p.map(|c| at.get(&key(e, c)).map(|&v| fine[v as usize]));
+            for k in 0..3 {
+                let v = e.vertex[k] as usize;
+                let value = match corners {
+                    [Some(c0), Some(c1), Some(c2)] if node.depth < d => {
+                        let w = node.barycentric(e.p[k]);
+                        c0 * w[0] + c1 * w[1] + c2 * w[2]
+                    }
+                    _ => fine[v],
+                };
+                if node.area > best[v].0 {
+                    best[v] = (node.area, value);
+                }
+            }
+        }
+        best.into_iter().map(|(_, v)| v).collect()
     }
 }
 
@@ -391,6 +444,8 @@ impl<'a> Hierarchy<'a> {
 pub struct Outcome {
     pub mesh: RadiosityMesh,
     pub b: Vec<Rgb>,
+    /// Gouraud values at the display mesh's vertices.
+    pub vertex_b: Vec<Rgb>,
     pub history: Vec<Step>,
     pub converged: bool,
     pub stats: Stats,
@@ -415,10 +470,29 @@ pub fn solve(scene: &Scene, mesh: &MeshOptions, opts: &HierarchicalOptions, tole
     let mut step = 0;
     let mut converged = false;
     if let Some(k) = bounces {
-        for _ in 0..k {
-            h.jacobi_sweep();
-            step += 1;
-            history.push(Step { step, residual: h.residual(), seconds: t0.elapsed().as_secs_f64(), rows: h.link_count() as u64 });
+        // Exactly k bounces from E, then re-refine with that B (the BF rule refined only the
+        // lights' links against E alone) and start again from E, until no link changes.
+        for pass in 0..=opts.max_passes {
+            h.stats.passes = pass + 1;
+            h.reset_to_emission();
+            for _ in 0..k {
+                h.jacobi_sweep();
+                step += 1;
+                history.push(Step { step, residual: h.residual(), seconds: t0.elapsed().as_secs_f64(), rows: h.link_count() as u64 });
+            }
+            if pass == opts.max_passes {
+                break;
+            }
+            let t = Instant::now();
+            if opts.importance {
+                h.solve_importance(8);
+            }
+            let changed = h.rerefine();
+            h.compute_pending();
+            refine_seconds += t.elapsed().as_secs_f64();
+            if changed == 0 {
+                break;
+            }
         }
         converged = true;
     } else {
@@ -452,6 +526,6 @@ pub fn solve(scene: &Scene, mesh: &MeshOptions, opts: &HierarchicalOptions, tole
     }
     h.update_stats();
     h.stats.refine_seconds = refine_seconds;
-    let (display, b) = h.display(mesh)?;
-    Ok(Outcome { mesh: display, b, history, converged, stats: h.stats })
+    let (display, b, vertex_b) = h.display(mesh)?;
+    Ok(Outcome { mesh: display, b, vertex_b, history, converged, stats: h.stats })
 }

@@ -58,11 +58,12 @@ impl Hierarchy<'_> {
         }
     }
 
-    /// Link p ← q, or split the node over which F varies more and refine its children.
-    fn refine(&mut self, p: u32, q: u32, est: Option<(f32, f32)>) {
+    /// Link p ← q, or split the node over which F varies more and refine its children
+    /// (`split` forces the split at this level: a partially visible link found too coarse).
+    fn refine(&mut self, p: u32, q: u32, est: Option<(f32, f32)>, split: bool) {
         let (vp, vq) = est.unwrap_or_else(|| self.estimate(p, q));
         let (sp, sq) = (self.splittable(p), self.splittable(q));
-        if (!sp && !sq) || self.error(p, q, vp, vq) <= self.opts.epsilon {
+        if (!sp && !sq) || (!split && self.error(p, q, vp, vq) <= self.opts.epsilon) {
             self.pending.push((p, q, vp, vq));
             return;
         }
@@ -70,14 +71,14 @@ impl Hierarchy<'_> {
             let c = self.split(q);
             for k in c..c + 4 {
                 if self.faces_both(p, k) {
-                    self.refine(p, k, None);
+                    self.refine(p, k, None, false);
                 }
             }
         } else {
             let c = self.split(p);
             for k in c..c + 4 {
                 if self.faces_both(k, q) {
-                    self.refine(k, q, None);
+                    self.refine(k, q, None, false);
                 }
             }
         }
@@ -98,7 +99,7 @@ impl Hierarchy<'_> {
             }
             for q in 0..n {
                 if p != q && !(self.rho(q).is_black() && self.emission(q).is_black()) && self.faces_both(p, q) {
-                    self.refine(p, q, None);
+                    self.refine(p, q, None, false);
                 }
             }
         }
@@ -112,14 +113,11 @@ impl Hierarchy<'_> {
             let old = std::mem::take(&mut self.links[p as usize]);
             for l in old {
                 let can = self.splittable(p) || self.splittable(l.src);
-                // The stored f_est is the larger variation; recompute the pair for the decision.
+                // f_est bounds the error of the link's F (see `compute_pending`).
                 if can && self.error(p, l.src, l.f_est, l.f_est) > self.opts.epsilon {
-                    let est = self.estimate(p, l.src);
-                    if self.error(p, l.src, est.0, est.1) > self.opts.epsilon {
-                        changed += 1;
-                        self.refine(p, l.src, Some(est));
-                        continue;
-                    }
+                    changed += 1;
+                    self.refine(p, l.src, None, true);
+                    continue;
                 }
                 self.links[p as usize].push(l);
             }
@@ -131,11 +129,15 @@ impl Hierarchy<'_> {
     /// no light passes (every sample blocked or behind the source) are dropped.
     pub fn compute_pending(&mut self) {
         let pending = std::mem::take(&mut self.pending);
-        let fs: Vec<[f32; 3]> = pending.par_iter().map(|&(p, q, _, _)| self.link_form_factor(p, q)).collect();
+        let fs: Vec<([f32; 3], bool)> = pending.par_iter().map(|&(p, q, _, _)| self.link_form_factor(p, q)).collect();
         self.stats.form_factors += pending.len() as u64;
-        for ((p, q, vp, vq), f) in pending.into_iter().zip(fs) {
+        for ((p, q, vp, vq), (f, partial)) in pending.into_iter().zip(fs) {
             if f.iter().any(|&x| x != 0.0) {
-                self.links[p as usize].push(Link { src: q, f, f_est: vp.max(vq) });
+                // A partially visible link may be off by as much as its whole F (the shadow
+                // boundary can fall anywhere in it), not just by the variation of the unoccluded F.
+                let mean = (f[0] + f[1] + f[2]) / 3.0;
+                let f_est = if partial { vp.max(vq).max(mean) } else { vp.max(vq) };
+                self.links[p as usize].push(Link { src: q, f, f_est });
             }
         }
     }
@@ -145,18 +147,25 @@ impl Hierarchy<'_> {
     /// 3 × 3 split (strata paired by a permutation), fitted by least squares. The fit's mean is
     /// the 9 points' mean (they are symmetric about the centroid), i.e. the area-averaged F.
     /// Points behind q's plane receive nothing from its front.
-    pub fn link_form_factor(&self, p: u32, q: u32) -> [f32; 3] {
+    /// Also says whether the link is partially visible (some of its rays blocked, some not).
+    pub fn link_form_factor(&self, p: u32, q: u32) -> ([f32; 3], bool) {
         let (np, nq) = (&self.forest.nodes[p as usize], &self.forest.nodes[q as usize]);
         let targets = triangle_points(&nq.p, 3);
         let mut m = glam::DMat3::ZERO;
         let mut rhs = glam::DVec3::ZERO;
+        let (mut open, mut blocked) = (0, 0);
         for (k, (u, v)) in midpoints3().into_iter().enumerate() {
             let x = np.p[0] + (np.p[1] - np.p[0]) * u + (np.p[2] - np.p[0]) * v;
             let mut f = 0.0;
             if nq.normal.dot(x - nq.centroid) > 0.0 {
                 f = point_to_polygon(x, np.normal, &nq.p);
-                if f > 0.0 && self.scene.occluded(x, np.normal, targets[(4 * k + 1) % targets.len()]) {
-                    f = 0.0;
+                if f > 0.0 {
+                    if self.scene.occluded(x, np.normal, targets[(4 * k + 1) % targets.len()]) {
+                        f = 0.0;
+                        blocked += 1;
+                    } else {
+                        open += 1;
+                    }
                 }
             }
             let a = glam::DVec3::new(1.0, u as f64, v as f64);
@@ -164,7 +173,7 @@ impl Hierarchy<'_> {
             rhs += a * f;
         }
         let c = m.inverse() * rhs;
-        [c.x as f32, (c.x + c.y) as f32, (c.x + c.z) as f32]
+        ([c.x as f32, (c.x + c.y) as f32, (c.x + c.z) as f32], open > 0 && blocked > 0)
     }
 }
 

@@ -69,13 +69,7 @@ impl Node {
     /// Which child holds point `x` (in the node's plane): by its barycentrics, a corner child
     /// when one weight reaches 1/2, the middle one otherwise.
     pub fn child_of(&self, x: Vec3) -> u32 {
-        let (e1, e2, q) = (self.p[1] - self.p[0], self.p[2] - self.p[0], x - self.p[0]);
-        let (d11, d12, d22) = (e1.dot(e1), e1.dot(e2), e2.dot(e2));
-        let (q1, q2) = (q.dot(e1), q.dot(e2));
-        let det = (d11 * d22 - d12 * d12).max(1e-30);
-        let b1 = (d22 * q1 - d12 * q2) / det;
-        let b2 = (d11 * q2 - d12 * q1) / det;
-        let b0 = 1.0 - b1 - b2;
+        let [b0, b1, b2] = self.barycentric(x);
         if b0 >= 0.5 {
             0
         } else if b1 >= 0.5 {
@@ -85,6 +79,17 @@ impl Node {
         } else {
             3
         }
+    }
+
+    /// Barycentric weights of the corners at point `x` (projected onto the node's plane).
+    pub fn barycentric(&self, x: Vec3) -> [f32; 3] {
+        let (e1, e2, q) = (self.p[1] - self.p[0], self.p[2] - self.p[0], x - self.p[0]);
+        let (d11, d12, d22) = (e1.dot(e1), e1.dot(e2), e2.dot(e2));
+        let (q1, q2) = (q.dot(e1), q.dot(e2));
+        let det = (d11 * d22 - d12 * d12).max(1e-30);
+        let b1 = (d22 * q1 - d12 * q2) / det;
+        let b2 = (d11 * q2 - d12 * q1) / det;
+        [1.0 - b1 - b2, b1, b2]
     }
 
     /// Can any of `other`'s corners be in front of this node (so light may pass from one to the other)?

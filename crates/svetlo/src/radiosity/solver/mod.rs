@@ -171,6 +171,9 @@ impl Recorder {
 /// Which solver.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum SolverKind {
+    /// The default: chosen per scene by [`crate::radiosity::RadiosityOptions::solver_for`]
+    /// (hierarchical on large meshes, Gauss-Seidel on the full matrix otherwise).
+    Auto,
     Jacobi,
     GaussSeidel,
     Southwell,
@@ -186,6 +189,7 @@ pub enum SolverKind {
 impl SolverKind {
     pub fn parse(name: &str) -> Result<Self> {
         match name {
+            "auto" => Ok(SolverKind::Auto),
             "jacobi" => Ok(SolverKind::Jacobi),
             "gauss-seidel" | "gs" => Ok(SolverKind::GaussSeidel),
             "southwell" => Ok(SolverKind::Southwell),
@@ -193,7 +197,9 @@ impl SolverKind {
             "two-level" => Ok(SolverKind::TwoLevel),
             "ssg" | "super-shoot-gather" => Ok(SolverKind::Ssg),
             "hierarchical" | "hr" => Ok(SolverKind::Hierarchical),
-            o => Err(Error::Settings(format!("radiosity: unknown solver '{o}' (jacobi, gauss-seidel, southwell, progressive, ssg, two-level, hierarchical)"))),
+            o => Err(Error::Settings(format!(
+                "radiosity: unknown solver '{o}' (auto, jacobi, gauss-seidel, southwell, progressive, ssg, two-level, hierarchical)"
+            ))),
         }
     }
 
@@ -201,7 +207,8 @@ impl SolverKind {
         opts.validate()?;
         match self {
             SolverKind::Jacobi => jacobi::solve(sys, opts),
-            SolverKind::GaussSeidel => gauss_seidel::solve(sys, opts),
+            // With a matrix already built, the automatic choice is Gauss-Seidel.
+            SolverKind::GaussSeidel | SolverKind::Auto => gauss_seidel::solve(sys, opts),
             SolverKind::Southwell => southwell::solve(sys, opts),
             SolverKind::Progressive => progressive::solve(sys, opts, &mut |_, _| {}),
             SolverKind::TwoLevel => two_level::solve(sys, opts),
