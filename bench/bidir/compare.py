@@ -9,9 +9,9 @@ channels of (x - r)^2 / (r^2 + 0.01), the project's convention. Usage (repositor
 
     python3 bench/bidir/compare.py [--time 10] [--ref-spp 1024] [--mitsuba scalar_rgb|llvm_ad_rgb|none]
 
-Timing on a shared machine is noisy: methods run alternately for `--repeats` rounds and
-each keeps its least disturbed run (the most spp in the time); the ratio of errors at equal
-time is what matters.
+Timing on a shared machine is noisy and relMSE heavy-tailed (rare bright paths): methods
+run alternately for `--repeats` rounds with different seeds and the table shows the means;
+the ratio of errors at equal time is what matters.
 """
 import argparse
 import os
@@ -46,7 +46,7 @@ def svetlo(binary, scene, out, extra):
     return spp, secs
 
 
-def mitsuba_path(variant, scene, spp, out):
+def mitsuba_path(variant, scene, spp, out, seed=0):
     """Render in a fresh process; returns the render time alone (load and JIT excluded)."""
     code = (
         "import mitsuba as mi, time;"
@@ -54,7 +54,7 @@ def mitsuba_path(variant, scene, spp, out):
         f"s = mi.load_file(r'{scene}', spp={spp}, integrator='path');"
         "import numpy as np;"
         "t0 = time.perf_counter();"
-        f"img = mi.render(s, spp={spp});"
+        f"img = mi.render(s, spp={spp}, seed={seed});"
         "arr = np.array(img);"  # forces the (lazy, JIT-compiled) render to run
         "print(time.perf_counter() - t0);"
         f"mi.Bitmap(arr).write(r'{out}')"
@@ -69,7 +69,7 @@ def main():
     ap.add_argument("--ref-spp", type=int, default=1024)
     ap.add_argument("--mitsuba", default="scalar_rgb", help="Mitsuba 3 variant, or 'none'")
     ap.add_argument("--scenes", default=",".join(SCENES))
-    ap.add_argument("--repeats", type=int, default=2, help="rounds, methods alternating; each keeps its least disturbed run (most spp)")
+    ap.add_argument("--repeats", type=int, default=3, help="rounds (seeds), methods alternating; spp, time and relMSE are averaged")
     ap.add_argument("--svetlo", default=os.path.join(ROOT, "target", "release", "svetlo"))
     a = ap.parse_args()
     work = os.path.join(ROOT, "target", "bench-bidir")
@@ -84,33 +84,35 @@ def main():
             svetlo(a.svetlo, scene, tmp, ["--integrator", "bdpt", "--spp", str(a.ref_spp), "--seed", "987654321"])
             os.replace(tmp, ref_path)
         ref = read_exr(ref_path)
-        results = {}
+        runs = {}
+        mi_spp = None
         for rep in range(a.repeats):
             for m in METHODS:
                 out = os.path.join(work, f"{name}_{m}_{rep}.exr")
                 spp, secs = svetlo(a.svetlo, scene, out, ["--integrator", m, "--time", str(a.time), "--seed", str(1 + rep)])
-                key = f"svetlo {m}"
-                if key not in results or spp > results[key][0]:
-                    results[key] = (spp, secs, relmse(read_exr(out), ref))
-        if a.mitsuba != "none":
-            out = os.path.join(work, f"{name}_mitsuba_path.exr")
-            t4 = mitsuba_path(a.mitsuba, scene, 4, out)
-            spp = max(1, int(4 * a.time / max(t4, 1e-3)))
-            secs = mitsuba_path(a.mitsuba, scene, spp, out)
-            if abs(secs - a.time) > 0.1 * a.time:  # the short calibration run misjudges: rescale once
-                spp = max(1, int(spp * a.time / max(secs, 1e-3)))
-                secs = mitsuba_path(a.mitsuba, scene, spp, out)
-            results[f"mitsuba {a.mitsuba} path"] = (spp, secs, relmse(read_exr(out), ref))
+                runs.setdefault(f"svetlo {m}", []).append((spp, secs, relmse(read_exr(out), ref)))
+            if a.mitsuba != "none":
+                out = os.path.join(work, f"{name}_mitsuba_path_{rep}.exr")
+                if mi_spp is None:
+                    t4 = mitsuba_path(a.mitsuba, scene, 4, out)
+                    mi_spp = max(1, int(4 * a.time / max(t4, 1e-3)))
+                secs = mitsuba_path(a.mitsuba, scene, mi_spp, out, rep)
+                if rep == 0 and abs(secs - a.time) > 0.1 * a.time:  # the short calibration misjudges: rescale once
+                    mi_spp = max(1, int(mi_spp * a.time / max(secs, 1e-3)))
+                    secs = mitsuba_path(a.mitsuba, scene, mi_spp, out, rep)
+                runs.setdefault(f"mitsuba {a.mitsuba} path", []).append((mi_spp, secs, relmse(read_exr(out), ref)))
+        # Means over the rounds: relMSE is heavy-tailed (rare bright paths), one run says little.
+        results = {k: tuple(float(np.mean([r[i] for r in v])) for i in range(3)) for k, v in runs.items()}
         base = results["svetlo path"][2]
         for k, (spp, secs, e) in results.items():
             rows.append((name, k, spp, secs, e, base / e if e > 0 else float("inf")))
         # The reference's own error, for scale: bdpt's error at equal time shrinks by its spp ratio.
         bspp, _, be = results["svetlo bdpt"]
         rows.append((name, "(reference floor, est.)", a.ref_spp, float("nan"), be * bspp / a.ref_spp, float("nan")))
-    print(f"\nequal time: {a.time:g} s per method; reference: svetlo bdpt {a.ref_spp} spp")
+    print(f"\nequal time: {a.time:g} s per method, means of {a.repeats} runs; reference: svetlo bdpt {a.ref_spp} spp")
     print(f"{'scene':<15}{'method':<28}{'spp':>7}{'time (s)':>10}{'relMSE':>12}{'path / it':>11}")
     for r in rows:
-        print(f"{r[0]:<15}{r[1]:<28}{r[2]:>7}{r[3]:>10.2f}{r[4]:>12.3e}{r[5]:>11.2f}")
+        print(f"{r[0]:<15}{r[1]:<28}{r[2]:>7.0f}{r[3]:>10.2f}{r[4]:>12.3e}{r[5]:>11.2f}")
 
 
 if __name__ == "__main__":

@@ -7,7 +7,8 @@
 //!
 //! The Z-buffer is timed as an interactive program runs it: `prepare` once (triangles,
 //! shadow maps), then `frame` per frame (transform, rasterise, shade the visible
-//! subsamples, resolve); the median frame time is reported. Prints one JSON object a line.
+//! subsamples, resolve); the median frame time is reported, and its two parts: visibility
+//! (transform, rasterise, depth test) and shading (+ resolve). Prints one JSON object a line.
 
 use std::path::Path;
 use std::time::Instant;
@@ -126,17 +127,20 @@ fn bench_zbuffer(label: &str, scene: &Scene, args: &Args) {
     let t0 = Instant::now();
     let prepared = z.prepare(scene);
     let prepare_ms = t0.elapsed().as_secs_f64() * 1e3;
-    let mut times = Vec::with_capacity(args.frames);
+    let (mut times, mut vis, mut shade) = (Vec::new(), Vec::new(), Vec::new());
     let mut mean = 0.0;
     for _ in 0..args.frames.max(1) {
         let t = Instant::now();
         let f = prepared.frame(scene, &scene.camera, args.ss, false, 1).expect("frame");
         times.push(t.elapsed().as_secs_f64() * 1e3);
+        vis.push(f.visibility_time.as_secs_f64() * 1e3);
+        shade.push(f.shading_time.as_secs_f64() * 1e3);
         mean = f.image.mean().mean();
     }
     let ms = median(times);
+    let (vis, shade) = (median(vis), median(shade));
     println!(
-        "{{\"bench\": \"zbuffer\", \"scene\": \"{label}\", \"triangles\": {}, \"res\": {}, \"ss\": {}, \"threads\": 1, \"prepare_ms\": {prepare_ms:.1}, \"frame_ms\": {ms:.2}, \"fps\": {:.1}, \"image_mean\": {mean:.4}}}",
+        "{{\"bench\": \"zbuffer\", \"scene\": \"{label}\", \"triangles\": {}, \"res\": {}, \"ss\": {}, \"threads\": 1, \"prepare_ms\": {prepare_ms:.1}, \"frame_ms\": {ms:.2}, \"visibility_ms\": {vis:.2}, \"shading_ms\": {shade:.2}, \"fps\": {:.1}, \"image_mean\": {mean:.4}}}",
         prepared.triangle_count(),
         scene.camera.width,
         args.ss,

@@ -354,6 +354,68 @@ fn orthographic_camera_is_a_clear_error() {
     }
 }
 
+/// The densities a walk stores (forward and reverse, area measure) equal what
+/// `Vertex::pdf` / `pdf_light` / `pdf_light_origin` recompute from the vertices: the MIS
+/// weight relies on both agreeing.
+#[test]
+fn stored_densities_match_recomputed_ones() {
+    use svetlo::bsdf::TransportMode::{Importance, Radiance};
+    use svetlo::path::{camera_subpath, light_subpath, PathConfig, Vertex};
+    use svetlo::sampling::{IndependentSampler, Sampler};
+    let scene = glossy_scene(16, 12);
+    let cfg = PathConfig::new(&scene, 8, 100, false);
+    let mut sampler = IndependentSampler::new(1, 5);
+    let (mut cam, mut light) = (Vec::new(), Vec::new());
+    // 1 %: directions recomputed from the vertices differ from the sampled ones by the ray
+    // origin's offset, which matters for close vertices under glossy lobes.
+    let close = |a: f32, b: f32| (a - b).abs() <= 1e-2 * a.abs().max(b.abs()) + 1e-9;
+    let mut checked = 0;
+    let check = |path: &[Vertex], fwd_mode, rev_mode, what: &str, checked: &mut usize| {
+        for i in 2..path.len() {
+            if path[i - 1].delta || path[i].infinite {
+                continue;
+            }
+            let p = path[i - 1].pdf(&scene, Some(&path[i - 2]), &path[i], fwd_mode);
+            assert!(close(p, path[i].pdf_fwd), "{what} vertex {i}: stored pdf_fwd {} vs recomputed {p}", path[i].pdf_fwd);
+            *checked += 1;
+        }
+        for i in 1..path.len().saturating_sub(2) {
+            if path[i + 1].delta || path[i + 2].infinite {
+                continue;
+            }
+            let p = path[i + 1].pdf(&scene, Some(&path[i + 2]), &path[i], rev_mode);
+            assert!(close(p, path[i].pdf_rev), "{what} vertex {i}: stored pdf_rev {} vs recomputed {p}", path[i].pdf_rev);
+            *checked += 1;
+        }
+    };
+    for k in 0..1000u32 {
+        let (x, y) = (k % 16, (k / 16) % 12);
+        sampler.start_pixel_sample(x, y, k);
+        let raster = glam::Vec2::new(x as f32 + sampler.next_1d(), y as f32 + sampler.next_1d());
+        let ray = scene.camera.generate_ray(raster, glam::Vec2::splat(0.5), 0.0);
+        camera_subpath(&scene, &cfg, &ray, raster, &mut sampler, &mut cam);
+        check(&cam, Radiance, Importance, "camera path", &mut checked);
+        light_subpath(&scene, &cfg, 0.0, &mut sampler, &mut light);
+        check(&light, Importance, Radiance, "light path", &mut checked);
+        if light.len() >= 2 {
+            // The first hit from the light: its density from the light's emission, and the
+            // light's own origin density.
+            let p = light[0].pdf_light(&scene, &light[1]);
+            assert!(close(p, light[1].pdf_fwd), "light path vertex 1: stored {} vs pdf_light {p}", light[1].pdf_fwd);
+            checked += 1;
+            // (Delta lights: stored with sample_le's pdf_pos = 1, reported 0 by pdf_le; MIS
+            // never reads it, as no strategy can hit them.)
+            if !light[0].is_delta_light(&scene) {
+                let o = light[0].pdf_light_origin(&scene, &light[1]);
+                assert!(close(o, light[0].pdf_fwd), "light origin: stored {} vs {o}", light[0].pdf_fwd);
+                checked += 1;
+            }
+        }
+    }
+    println!("{checked} densities checked");
+    assert!(checked > 1000, "too few vertices to check: {checked}");
+}
+
 // ---------------------------------------------------------------- strategies
 
 /// BDPT's weighted strategy images sum to its image; per path length, the weighted sum and
@@ -430,6 +492,67 @@ fn consistency_matrix() {
             for j in i + 1..results.len() {
                 assert_pair(&results[i].1, &results[j].1, &format!("{label}: {} vs {}", results[i].0, results[j].0));
             }
+        }
+    }
+}
+
+/// The consistent but biased photon methods in the matrix, each with the relative bias it is
+/// allowed on top of the noise (see `assert_pair_biased`), and the spp (SPPM: iterations) it
+/// renders with. The allowances are what density estimation's blur costs on 24-pixel-wide
+/// images at these photon counts (measured: pixel differences beyond the noise stay under a
+/// third of them); they shrink with more photons / iterations (tests/photon.rs).
+const MATRIX_BIASED: &[(&str, f64, u32)] =
+    &[("sppm:photons=4000,radius=0.05", 0.15, 64), ("photon:photons=40000,caustic-photons=40000,gather=8,k=32,radius=0.15,caustic-radius=0.05", 0.15, 8)];
+/// Relative bias allowed on the image mean.
+const MEAN_BIAS: f64 = 0.02;
+
+/// Like `assert_pair`, for a biased estimate `a` of what `b` (path) estimates without bias:
+/// a pixel channel agrees when |a − b| ≤ z σ + `rel` |b|, the means when they differ by less
+/// than Z_MEAN σ + MEAN_BIAS |mean|.
+fn assert_pair_biased(a: &Batched, b: &Batched, rel: f64, what: &str) {
+    let floor = MIN_VARIANCE as f64 / a.spp.min(b.spp) as f64;
+    let alpha = sidak_alpha(SIGNIFICANCE, a.mean.len());
+    let z_crit = normal_isf(alpha / 2.0);
+    let (mut pass, mut total, mut worst) = (0usize, 0usize, 0.0f64);
+    for i in 0..a.mean.len() {
+        for j in 0..3 {
+            let sigma = (a.var[i][j] + b.var[i][j]).max(floor).sqrt();
+            let excess = ((a.mean[i][j] - b.mean[i][j]).abs() - z_crit * sigma).max(0.0) / b.mean[i][j].abs().max(1e-3);
+            worst = worst.max(excess);
+            if excess > rel && std::env::var("SVETLO_DEBUG").is_ok() {
+                println!("  pixel ({}, {}) ch {j}: {:.4} vs {:.4} (sigma {:.1e})", i % a.width, i / a.width, a.mean[i][j], b.mean[i][j], sigma);
+            }
+            total += 1;
+            if excess <= rel {
+                pass += 1;
+            }
+        }
+    }
+    let frac = pass as f64 / total as f64;
+    let ((ma, sa), (mb, sb)) = (a.image_mean(), b.image_mean());
+    let z = ((ma - mb).abs() - MEAN_BIAS * mb.abs()).max(0.0) / (sa * sa + sb * sb).sqrt().max(1e-9 * ma.abs());
+    println!(
+        "{what}: {:.3} % of pixel channels within noise + {:.0} % (largest excess {:.1} %); means {ma:.5} ± {sa:.1e} vs {mb:.5} ± {sb:.1e} ({:+.2} %)",
+        100.0 * frac,
+        100.0 * rel,
+        100.0 * worst,
+        100.0 * (ma / mb - 1.0)
+    );
+    assert!(frac >= MIN_PASS_FRACTION, "{what}: only {:.3} % of pixel channels agree", 100.0 * frac);
+    assert!(z < Z_MEAN, "{what}: image means differ by more than {:.0} % + {Z_MEAN} standard errors", 100.0 * MEAN_BIAS);
+}
+
+/// SPPM and photon mapping agree with path on the matrix scenes and through glass (caustics
+/// from the caustic map and SPPM's photons), within their noise plus a stated bias.
+#[test]
+fn consistency_matrix_photon_methods() {
+    let mut scenes: Vec<_> = matrix_scenes().into_iter().filter(|s| std::env::var("SVETLO_SCENE").map_or(true, |n| n == s.0)).collect();
+    scenes.push(("glass", glass_scene(24, 16), settings(32, 6)));
+    for (label, scene, st) in scenes {
+        let path = batches(&scene, "path", &RenderSettings { spp: 64, ..st.clone() }, 16);
+        for &(name, rel, spp) in MATRIX_BIASED {
+            let b = batches(&scene, name, &RenderSettings { spp, ..st.clone() }, 16);
+            assert_pair_biased(&b, &path, rel, &format!("{label}: {name} vs path"));
         }
     }
 }

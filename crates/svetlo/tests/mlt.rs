@@ -410,3 +410,15 @@ fn mlt_stationarity_test_detects_wrong_ratios() {
         assert!(!t_sum_ok(sum, max, cells, renders), "{name}: an inverted transition ratio went unnoticed");
     }
 }
+
+/// The image depends on the seed, not on the number of threads.
+#[test]
+fn deterministic_for_any_thread_count() {
+    let target = Synthetic { large_step: 0.3, lie: 1.0 };
+    let cfg = ChainSettings { chains: 8, bootstrap: 500 };
+    let img = |threads: usize| {
+        let settings = RenderSettings { spp: 64, seed: 3, threads, ..Default::default() };
+        metropolis::run(&target, W, H, &settings, &cfg, &Progress::new()).expect("render").0.image().data
+    };
+    assert_eq!(img(1), img(3));
+}

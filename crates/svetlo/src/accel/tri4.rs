@@ -116,6 +116,7 @@ pub struct TriRay {
 }
 
 impl TriRay {
+    #[inline(always)]
     pub fn new(o: Vec3, d: Vec3) -> TriRay {
         let w = WatertightRay::new(o, d);
         let oa = o.to_array();

@@ -48,22 +48,64 @@ impl TriangleMesh {
             }
         }
     }
+    /// dp/du of a triangle (constant over it): from the uvs, or the first edge without them.
+    fn dpdu(&self, [i0, i1, i2]: [usize; 3]) -> Vec3 {
+        let (p0, p1, p2) = (self.positions[i0], self.positions[i1], self.positions[i2]);
+        if self.uvs.is_empty() {
+            return p1 - p0;
+        }
+        let (t0, t1, t2) = (self.uvs[i0], self.uvs[i1], self.uvs[i2]);
+        let (du1, du2) = (t1 - t0, t2 - t0);
+        let det = du1.x * du2.y - du1.y * du2.x;
+        if det.abs() > 1e-12 {
+            ((p1 - p0) * du2.y - (p2 - p0) * du1.y) / det
+        } else {
+            p1 - p0
+        }
+    }
+
+    /// Texture coordinates at barycentrics (b1, b2); the barycentrics themselves without uvs.
+    #[inline]
+    pub fn uv(&self, tri: usize, b1: f32, b2: f32) -> Vec2 {
+        if self.uvs.is_empty() {
+            return Vec2::new(b1, b2);
+        }
+        let [i0, i1, i2] = self.indices[tri].map(|i| i as usize);
+        self.uvs[i0] * (1.0 - b1 - b2) + self.uvs[i1] * b1 + self.uvs[i2] * b2
+    }
+
+    /// (geometric normal, shading frame) of a triangle whose shading does not vary over it (no
+    /// vertex normals, or three equal ones), as [`Self::surface`] gives them at any point of it:
+    /// hits then need no interpolation or normalisation. `None` for smooth-shaded triangles.
+    pub fn flat_shading(&self, tri: usize) -> Option<(Vec3, crate::math::Frame)> {
+        let idx = self.indices[tri].map(|i| i as usize);
+        let [p0, p1, p2] = idx.map(|i| self.positions[i]);
+        let ng = (p1 - p0).cross(p2 - p0).normalize_or_zero();
+        let ns = if self.normals.is_empty() {
+            ng
+        } else {
+            let [n0, n1, n2] = idx.map(|i| self.normals[i]);
+            if n0 != n1 || n0 != n2 {
+                return None;
+            }
+            let n = n0.normalize_or_zero();
+            if n == Vec3::ZERO {
+                ng
+            } else {
+                n
+            }
+        };
+        let ng = if !self.normals.is_empty() && ng.dot(ns) < 0.0 { -ng } else { ng };
+        Some((ng, crate::math::Frame::from_normal_tangent(ns, self.dpdu(idx))))
+    }
+
     /// Interpolated attributes at barycentrics (b1, b2): (geometric normal, shading normal, uv, dp/du).
     pub fn surface(&self, tri: usize, b1: f32, b2: f32) -> (Vec3, Vec3, Vec2, Vec3) {
         let [i0, i1, i2] = self.indices[tri].map(|i| i as usize);
         let (p0, p1, p2) = (self.positions[i0], self.positions[i1], self.positions[i2]);
         let b0 = 1.0 - b1 - b2;
         let ng = (p1 - p0).cross(p2 - p0).normalize_or_zero();
-        let (uv, dpdu) = if self.uvs.is_empty() {
-            (Vec2::new(b1, b2), p1 - p0)
-        } else {
-            let (t0, t1, t2) = (self.uvs[i0], self.uvs[i1], self.uvs[i2]);
-            let uv = t0 * b0 + t1 * b1 + t2 * b2;
-            let (du1, du2) = (t1 - t0, t2 - t0);
-            let det = du1.x * du2.y - du1.y * du2.x;
-            let dpdu = if det.abs() > 1e-12 { ((p1 - p0) * du2.y - (p2 - p0) * du1.y) / det } else { p1 - p0 };
-            (uv, dpdu)
-        };
+        let (uv, dpdu) = (self.uv(tri, b1, b2), self.dpdu([i0, i1, i2]));
         let ns = if self.normals.is_empty() {
             ng
         } else {

@@ -18,7 +18,7 @@ pub struct WatertightRay {
 }
 
 impl WatertightRay {
-    #[inline]
+    #[inline(always)]
     pub fn new(o: Vec3, d: Vec3) -> Self {
         let a = d.abs();
         let kz = if a.x > a.y {

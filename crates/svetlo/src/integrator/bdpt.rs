@@ -128,6 +128,14 @@ impl Bdpt {
     }
 }
 
+/// A BDPT estimator whose strategy (1, 2) feeds channels 1 and 2 (for the driver's tests).
+#[cfg(test)]
+pub(crate) fn test_estimator(scene: &Scene, settings: &RenderSettings) -> impl SplatEstimator {
+    let mut index = vec![vec![None; 3]; 3];
+    index[1][2] = Some(0);
+    Estimator { cfg: PathConfig::new(scene, settings.max_depth, settings.rr_depth, settings.hide_emitters), index }
+}
+
 impl Integrator for Bdpt {
     fn render(&self, scene: &Scene, settings: &RenderSettings, progress: &Progress) -> Result<Film> {
         require_connectible_camera(scene, "bdpt")?;

@@ -281,3 +281,18 @@ impl MetropolisTarget for BdptTarget<'_> {
         st.sampler.reject();
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn options_parse_and_reject_bad_input() {
+        let o = PssmltOptions::parse("large-step=0.2, sigma=0.05,chains=8,bootstrap=100,target=path").unwrap();
+        assert_eq!((o.large_step_probability, o.sigma, o.chain.chains, o.chain.bootstrap, o.target), (0.2, 0.05, 8, 100, PssTargetKind::Path));
+        for bad in ["large-step=2", "sigma=0", "chains=0", "bootstrap=-1", "target=photon", "nonsense=1", "sigma", "sigma=abc"] {
+            assert!(PssmltOptions::parse(bad).is_err(), "{bad} accepted");
+        }
+        assert!(crate::integrator::by_name("pssmlt:sigma=x").is_err());
+    }
+}

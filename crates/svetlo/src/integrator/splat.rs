@@ -1,7 +1,8 @@
 //! The driver of methods that also write away from their own pixel (light tracing, BDPT's
 //! t = 1): like [`render_pixels`](super::render_pixels), passes over tiles in parallel, but
-//! each pixel sample may also emit splats. Tiles keep their splats in lists that are added
-//! to the film in tile order after the pass, so the image does not depend on the number of
+//! each pixel sample may also emit splats. Tiles keep their splats in lists, added to
+//! pass-local buffers in tile order (tiles run in chunks, bounding the lists' memory) that
+//! join the film when the pass is complete, so the image does not depend on the number of
 //! threads or on scheduling. Besides the film, an estimator may feed extra images
 //! ("channels", box reconstruction, divided by the spp at the end), e.g. one per strategy.
 
@@ -18,7 +19,7 @@ use std::sync::atomic::Ordering;
 use std::time::Instant;
 
 const TILE: u32 = 16;
-/// Pixel samples per pass at most, bounding the memory splat lists take.
+/// Pixel samples per chunk of tiles, bounding the memory splat lists take.
 const MAX_PASS_SAMPLES: u64 = 1 << 19;
 
 /// A contribution away from the filtered pixel sample: channel 0 is the film's splat
@@ -75,6 +76,18 @@ pub struct SplatRender {
 
 /// Render with an estimator that splats; `channels` extra images of the film's size.
 pub fn render_splatting<E: SplatEstimator>(scene: &Scene, settings: &RenderSettings, progress: &Progress, est: &E, channels: usize) -> Result<SplatRender> {
+    render_chunked(scene, settings, progress, est, channels, MAX_PASS_SAMPLES)
+}
+
+/// `render_splatting` with at most about `chunk_samples` pixel samples per chunk of tiles.
+fn render_chunked<E: SplatEstimator>(
+    scene: &Scene,
+    settings: &RenderSettings,
+    progress: &Progress,
+    est: &E,
+    channels: usize,
+    chunk_samples: u64,
+) -> Result<SplatRender> {
     settings.validate()?;
     let cam = &scene.camera;
     let (w, h) = (cam.width, cam.height);
@@ -87,60 +100,86 @@ pub fn render_splatting<E: SplatEstimator>(scene: &Scene, settings: &RenderSetti
     let pool = rayon::ThreadPoolBuilder::new().num_threads(settings.threads).build().map_err(|e| Error::Settings(format!("thread pool: {e}")))?;
     let start = Instant::now();
     let proto = make_sampler(settings.sampler, settings.spp, settings.seed);
-    let max_pass = ((MAX_PASS_SAMPLES / (w as u64 * h as u64).max(1)) as u32).max(1);
     let mut spp_done = 0u32;
     let mut pass_spp = 1u32;
     while spp_done < settings.spp {
         if progress.cancelled() || settings.time_limit.is_some_and(|t| start.elapsed() >= t) {
             break;
         }
-        let n = pass_spp.min(settings.spp - spp_done).min(max_pass);
+        let n = pass_spp.min(settings.spp - spp_done);
         let s0 = spp_done;
         let film_ref = &film;
-        let results: Vec<Option<(FilmTile, Vec<Splat>)>> = pool.install(|| {
-            tiles
-                .par_iter()
-                .map(|&(x0, y0, x1, y1)| {
-                    if progress.cancelled() {
-                        return None;
-                    }
-                    let mut tile = film_ref.tile(x0, y0, x1, y1);
-                    let mut splats = Vec::new();
-                    let mut sampler = proto.clone_box();
-                    let mut scratch = est.scratch();
-                    for y in y0..y1 {
-                        for x in x0..x1 {
-                            for s in s0..s0 + n {
-                                sampler.start_pixel_sample(x, y, s);
-                                let pf = sampler.next_2d();
-                                let lens = sampler.next_2d();
-                                let time = sampler.next_1d();
-                                let raster = Vec2::new(x as f32 + pf.x, y as f32 + pf.y);
-                                let ray = cam.generate_ray(raster, lens, time);
-                                let mut out = SampleOut { splats: &mut splats };
-                                let l = est.sample(scene, settings, &ray, raster, sampler.as_mut(), &mut scratch, &mut out);
-                                tile.add_sample(raster, l);
+        // Tiles go in chunks so that the splat lists in memory stay bounded on large films;
+        // each chunk's splats land in pass-local dense buffers, in chunk and tile order.
+        let tiles_per_chunk = ((chunk_samples / (n as u64 * (TILE * TILE) as u64)).max(1) as usize).min(tiles.len().max(1));
+        let mut pass_tiles: Vec<FilmTile> = Vec::with_capacity(tiles.len());
+        let mut pass_splats: Vec<Vec<Rgb>> = vec![Vec::new(); 1 + channels];
+        let mut cancelled = false;
+        for chunk in tiles.chunks(tiles_per_chunk) {
+            let results: Vec<Option<(FilmTile, Vec<Splat>)>> = pool.install(|| {
+                chunk
+                    .par_iter()
+                    .map(|&(x0, y0, x1, y1)| {
+                        if progress.cancelled() {
+                            return None;
+                        }
+                        let mut tile = film_ref.tile(x0, y0, x1, y1);
+                        let mut splats = Vec::new();
+                        let mut sampler = proto.clone_box();
+                        let mut scratch = est.scratch();
+                        for y in y0..y1 {
+                            for x in x0..x1 {
+                                for s in s0..s0 + n {
+                                    sampler.start_pixel_sample(x, y, s);
+                                    let pf = sampler.next_2d();
+                                    let lens = sampler.next_2d();
+                                    let time = sampler.next_1d();
+                                    let raster = Vec2::new(x as f32 + pf.x, y as f32 + pf.y);
+                                    let ray = cam.generate_ray(raster, lens, time);
+                                    let mut out = SampleOut { splats: &mut splats };
+                                    let l = est.sample(scene, settings, &ray, raster, sampler.as_mut(), &mut scratch, &mut out);
+                                    tile.add_sample(raster, l);
+                                }
                             }
                         }
+                        progress.done.fetch_add(n as u64 * ((x1 - x0) * (y1 - y0)) as u64, Ordering::Relaxed);
+                        Some((tile, splats))
+                    })
+                    .collect()
+            });
+            if results.iter().any(|t| t.is_none()) {
+                cancelled = true;
+                break;
+            }
+            for (t, splats) in results.into_iter().flatten() {
+                pass_tiles.push(t);
+                for sp in splats {
+                    let (x, y) = (sp.raster.x.floor(), sp.raster.y.floor());
+                    if !(x >= 0.0 && y >= 0.0 && (x as u32) < w && (y as u32) < h) {
+                        continue;
                     }
-                    progress.done.fetch_add(n as u64 * ((x1 - x0) * (y1 - y0)) as u64, Ordering::Relaxed);
-                    Some((tile, splats))
-                })
-                .collect()
-        });
-        if results.iter().any(|t| t.is_none()) {
+                    if let Some(buf) = pass_splats.get_mut(sp.channel as usize) {
+                        if buf.is_empty() {
+                            *buf = vec![Rgb::BLACK; (w * h) as usize];
+                        }
+                        buf[(y as u32 * w + x as u32) as usize] += sp.value;
+                    }
+                }
+            }
+        }
+        if cancelled {
             break; // cancelled mid-pass: drop the incomplete pass
         }
-        for (t, splats) in results.iter().flatten() {
+        for t in &pass_tiles {
             film.merge_tile(t);
-            for sp in splats {
-                if sp.channel == 0 {
-                    film.splat(sp.raster, sp.value);
-                } else if let Some(img) = extra.get_mut(sp.channel as usize - 1) {
-                    let (x, y) = (sp.raster.x.floor(), sp.raster.y.floor());
-                    if x >= 0.0 && y >= 0.0 && (x as u32) < w && (y as u32) < h {
-                        img[(y as u32 * w + x as u32) as usize] += sp.value;
-                    }
+        }
+        for (c, buf) in pass_splats.iter().enumerate() {
+            for (i, v) in buf.iter().enumerate().filter(|(_, v)| !v.is_black()) {
+                let (x, y) = ((i as u32 % w) as f32 + 0.5, (i as u32 / w) as f32 + 0.5);
+                if c == 0 {
+                    film.splat(Vec2::new(x, y), *v);
+                } else {
+                    extra[c - 1][i] += *v;
                 }
             }
         }
@@ -166,4 +205,43 @@ pub fn render_splatting<E: SplatEstimator>(scene: &Scene, settings: &RenderSetti
         }
     }
     Ok(SplatRender { film, channels: extra })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::bsdf::Material;
+    use crate::camera::{Camera, Projection};
+    use crate::geometry::{Geometry, Sphere};
+    use crate::light::Light;
+    use crate::scene::SceneBuilder;
+    use crate::texture::Texture;
+    use glam::{Mat4, Vec3};
+
+    /// Splitting the tiles into chunks changes neither the image nor the channels.
+    #[test]
+    fn chunking_does_not_change_the_image() {
+        let mut b = SceneBuilder::new();
+        let m = b.add_material(Material::Diffuse { reflectance: Texture::Constant(Rgb::splat(0.6)) });
+        b.add_shape(Geometry::Sphere(Sphere { center: Vec3::new(0.0, 0.0, 4.0), radius: 1.5, flip_normals: false }), m, None, "ball").unwrap();
+        b.add_light(Light::Point { position: Vec3::new(1.0, 2.0, 0.0), intensity: Rgb::splat(10.0) });
+        b.set_camera(Camera {
+            to_world: Mat4::IDENTITY,
+            projection: Projection::Perspective { fov_x_deg: 50.0, aperture_radius: 0.0, focus_distance: 1.0 },
+            width: 40,
+            height: 36,
+            near_clip: 0.01,
+            far_clip: 100.0,
+            shutter_open: 0.0,
+            shutter_close: 0.0,
+        });
+        let scene = b.build().unwrap();
+        let settings = RenderSettings { spp: 3, max_depth: 3, ..Default::default() };
+        let est = crate::integrator::bdpt::test_estimator(&scene, &settings);
+        let big = render_chunked(&scene, &settings, &Progress::new(), &est, 2, u64::MAX).unwrap();
+        let small = render_chunked(&scene, &settings, &Progress::new(), &est, 2, 1).unwrap();
+        assert!(big.film.image().mean().max_component() > 0.0);
+        assert_eq!(big.film.image().data, small.film.image().data);
+        assert_eq!(big.channels, small.channels);
+    }
 }

@@ -257,6 +257,10 @@ pub struct FrameImage {
     pub ss: u32,
     pub subsamples: Vec<Rgb>,
     pub image: crate::film::Image,
+    /// Wall time of the visibility pass (transform, rasterise, depth test) and of the rest
+    /// (shading the visible subsamples, resolve), for benchmarks.
+    pub visibility_time: std::time::Duration,
+    pub shading_time: std::time::Duration,
 }
 
 impl ZBuffer {
@@ -296,6 +300,7 @@ impl Prepared {
 
         // Visibility pass: the depth key and the nearest triangle of every subsample; nothing
         // else is computed for fragments that may be hidden later.
+        let start = std::time::Instant::now();
         let far_key = view.key(cam.far_clip);
         let mut depth = vec![far_key; (w * h) as usize];
         let mut ids = vec![u32::MAX; (w * h) as usize];
@@ -310,6 +315,7 @@ impl Prepared {
             });
         }
 
+        let visibility_time = start.elapsed();
         // Shading pass: only the visible fragment of each subsample, rows in parallel.
         let eye = cam.to_world.transform_point3(Vec3::ZERO);
         let view_dir = cam.to_world.transform_vector3(Vec3::Z).normalize();
@@ -317,8 +323,9 @@ impl Prepared {
         // direction (c, 1) from the eye (perspective) or origin (c, 0) along +z (orthographic).
         let half = cam.film_half_extent();
         let lin = Mat3::from_mat4(cam.to_world);
+        let step = Vec2::new(-2.0 * half.x / w as f32, -2.0 * half.y / h as f32);
         let line = |x: u32, y: u32| -> (Vec3, Vec3) {
-            let c = (Vec2::ONE - 2.0 * Vec2::new((x as f32 + 0.5) / w as f32, (y as f32 + 0.5) / h as f32)) * half;
+            let c = half + Vec2::new(x as f32 + 0.5, y as f32 + 0.5) * step;
             match projection {
                 ViewProjection::Perspective { .. } => (eye, lin * Vec3::new(c.x, c.y, 1.0)),
                 ViewProjection::Orthographic { .. } => (cam.to_world.transform_point3(Vec3::new(c.x, c.y, 0.0)), view_dir),
@@ -387,7 +394,7 @@ impl Prepared {
                 out[x / ss as usize] += *c * norm;
             }
         }
-        Ok(FrameImage { ss, subsamples, image })
+        Ok(FrameImage { ss, subsamples, image, visibility_time, shading_time: start.elapsed() - visibility_time })
     }
 }
 
@@ -442,9 +449,10 @@ fn barycentrics(v: [Vec3; 3], o: Vec3, d: Vec3) -> [f32; 3] {
     if det == 0.0 {
         return [1.0 / 3.0; 3];
     }
+    let inv = 1.0 / det;
     let s = o - v[0];
-    let b1 = s.dot(p) / det;
-    let b2 = d.dot(s.cross(e1)) / det;
+    let b1 = s.dot(p) * inv;
+    let b2 = d.dot(s.cross(e1)) * inv;
     [1.0 - b1 - b2, b1, b2]
 }
 

@@ -185,10 +185,10 @@ impl View {
         }
         let lo = s[0].min(s[1]).min(s[2]);
         let hi = s[0].max(s[1]).max(s[2]);
-        let x0 = (lo.x - 0.5).ceil().max(0.0);
-        let y0 = (lo.y - 0.5).ceil().max(0.0);
-        let x1 = (hi.x - 0.5).floor().min(self.width as f32 - 1.0);
-        let y1 = (hi.y - 0.5).floor().min(self.height as f32 - 1.0);
+        let x0 = ceil_i(lo.x - 0.5).max(0);
+        let y0 = ceil_i(lo.y - 0.5).max(0);
+        let x1 = floor_i(hi.x - 0.5).min(self.width as i32 - 1);
+        let y1 = floor_i(hi.y - 0.5).min(self.height as i32 - 1);
         if x0 > x1 || y0 > y1 {
             return;
         }
@@ -203,27 +203,28 @@ impl View {
             (a, b, c)
         };
         let e = [edge(s[1], s[2]), edge(s[2], s[0]), edge(s[0], s[1])];
+        let inv_a = e.map(|(a, _, _)| if a != 0.0 { 1.0 / a } else { 0.0 });
         let k = v.map(|p| self.key(p.z));
         let (ka, kb, kc) =
             (e[0].0 * k[0] + e[1].0 * k[1] + e[2].0 * k[2], e[0].1 * k[0] + e[1].1 * k[1] + e[2].1 * k[2], e[0].2 * k[0] + e[1].2 * k[1] + e[2].2 * k[2]);
         let width = self.width as usize;
-        let (xs, xe) = (x0 as i32, x1 as i32);
-        for y in y0 as i32..=y1 as i32 {
+        let (xs, xe) = (x0, x1);
+        for y in y0..=y1 {
             let py = y as f32 + 0.5;
             // The span of pixel centres inside all three edges on this row.
-            let (mut l, mut r) = (xs as f32, xe as f32);
-            for &(a, b, c) in &e {
+            let (mut l, mut r) = (xs, xe);
+            for (&(a, b, c), &ia) in e.iter().zip(&inv_a) {
                 let w = b * py + c; // value at x = 0 (pixel centre x + 0.5 below)
                 if a > 0.0 {
-                    l = l.max((-w / a - 0.5).ceil());
+                    l = l.max(ceil_i(-w * ia - 0.5));
                 } else if a < 0.0 {
-                    r = r.min((-w / a - 0.5).floor());
+                    r = r.min(floor_i(-w * ia - 0.5));
                 } else if w < 0.0 {
-                    r = l - 1.0;
+                    r = l - 1;
                 }
             }
             // Rounding of the span is checked exactly below, one pixel either side.
-            let (l, r) = ((l as i32 - 1).max(xs), (r as i32 + 1).min(xe));
+            let (l, r) = ((l - 1).max(xs), (r + 1).min(xe));
             if l > r {
                 continue;
             }
@@ -241,6 +242,27 @@ impl View {
                 key += ka;
             }
         }
+    }
+}
+
+/// Floor and ceiling to integers without a libm call (saturating far outside the image).
+#[inline(always)]
+fn floor_i(v: f32) -> i32 {
+    let i = v as i32;
+    if (i as f32) > v {
+        i - 1
+    } else {
+        i
+    }
+}
+
+#[inline(always)]
+fn ceil_i(v: f32) -> i32 {
+    let i = v as i32;
+    if (i as f32) < v {
+        i + 1
+    } else {
+        i
     }
 }
 

@@ -50,6 +50,13 @@ impl Sampler for IndependentSampler {
     fn next_1d(&mut self) -> f32 {
         self.rng.next_f32()
     }
+    /// Both draws in one virtual call (same order as two `next_1d`).
+    #[inline]
+    fn next_2d(&mut self) -> Vec2 {
+        let a = self.rng.next_f32();
+        let b = self.rng.next_f32();
+        Vec2::new(a, b)
+    }
     fn samples_per_pixel(&self) -> u32 {
         self.spp
     }

@@ -153,7 +153,7 @@ impl SceneBuilder {
                 lights.push(Light::Area(AreaLight::new(i as u32, g.clone(), e)));
                 (lights.len() - 1) as u32
             });
-            shapes.push(Shape { geometry: g, material, light, name, motion: animation.map(|a| Arc::new(Motion::new(a))) });
+            shapes.push(Shape::new(g, material, light, name, animation.map(|a| Arc::new(Motion::new(a)))));
         }
         let static_ids: Vec<u32> = (0..shapes.len() as u32).filter(|&i| shapes[i as usize].motion.is_none()).collect();
         let geoms: Vec<&Geometry> = static_ids.iter().map(|&i| &*shapes[i as usize].geometry).collect();

@@ -26,6 +26,19 @@ pub struct Shape {
     pub name: String,
     /// Animated to_world (motion blur); `geometry` is then its pose at the first keyframe.
     pub motion: Option<Arc<Motion>>,
+    /// Per triangle of a mesh, its shading when constant over it (`TriangleMesh::flat_shading`),
+    /// computed once so that a hit costs no normalisation; empty for other shapes.
+    pub flat: Vec<Option<(Vec3, Frame)>>,
+}
+
+impl Shape {
+    pub fn new(geometry: Arc<Geometry>, material: u32, light: Option<u32>, name: String, motion: Option<Arc<Motion>>) -> Shape {
+        let flat = match &*geometry {
+            Geometry::Mesh(m) => (0..m.triangle_count()).map(|t| m.flat_shading(t)).collect(),
+            Geometry::Sphere(_) => Vec::new(),
+        };
+        Shape { geometry, material, light, name, motion, flat }
+    }
 }
 
 /// A shape that moves during the shutter: its own accelerator over its reference pose, into
@@ -170,6 +183,10 @@ impl Scene {
                 let [p0, p1, p2] = m.vertices(hit.prim as usize);
                 // Barycentric position is more accurate than o + t d far from the origin.
                 let p = p0 * (1.0 - hit.b1 - hit.b2) + p1 * hit.b1 + p2 * hit.b2;
+                if let Some(Some((ng, shading))) = shape.flat.get(hit.prim as usize) {
+                    let uv = m.uv(hit.prim as usize, hit.b1, hit.b2);
+                    return SurfaceInteraction { p, t: hit.t, ng: *ng, shading: *shading, uv, shape: hit.shape, prim: hit.prim, wo: -ray.d, time: ray.time };
+                }
                 let (ng, ns, uv, dpdu) = m.surface(hit.prim as usize, hit.b1, hit.b2);
                 (p, ng, ns, uv, dpdu)
             }

@@ -81,7 +81,17 @@ fn wrap(i: i64, n: usize, mode: WrapMode) -> usize {
 }
 
 impl Texture {
+    /// Value at `uv`; constants (the common case) inline at the call site.
+    #[inline]
     pub fn eval(&self, uv: Vec2) -> Rgb {
+        match self {
+            Texture::Constant(c) => *c,
+            _ => self.eval_varying(uv),
+        }
+    }
+
+    #[inline(never)]
+    fn eval_varying(&self, uv: Vec2) -> Rgb {
         match self {
             Texture::Constant(c) => *c,
             Texture::Checkerboard { color0, color1, to_uv } => {

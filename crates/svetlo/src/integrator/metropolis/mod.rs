@@ -81,6 +81,12 @@ pub trait MetropolisTarget: Sync {
     fn propose(&self, state: &mut Self::State, out: &mut Contribution) -> Proposal;
     fn accept(&self, state: &mut Self::State);
     fn reject(&self, state: &mut Self::State);
+    /// An unbiased estimate of b from one independent sample drawn with `rng`, for a target
+    /// with a better estimator of b than its bootstrap weights (Veach MLT: bidirectional
+    /// path tracing); None: b comes from the bootstrap weights.
+    fn estimate_b(&self, _rng: Pcg32) -> Option<f64> {
+        None
+    }
 }
 
 /// Settings of the driver.
@@ -203,6 +209,10 @@ fn boot_rng(seed: u64, i: usize) -> Pcg32 {
     Pcg32::new(hash_seed(&[seed, 0x626f_6f74, i as u64]), 0)
 }
 
+fn b_rng(seed: u64, i: usize) -> Pcg32 {
+    Pcg32::new(hash_seed(&[seed, 0x6e6f_726d, i as u64]), 0)
+}
+
 fn chain_rng(seed: u64, c: usize, stream: u64) -> Pcg32 {
     Pcg32::new(hash_seed(&[seed, 0x6368_6169, c as u64]), stream)
 }
@@ -273,6 +283,12 @@ pub fn run<T: MetropolisTarget>(
     let nb = cfg.bootstrap as f64;
     stats.b = sum / nb;
     stats.b_stderr = ((sum2 / nb - stats.b * stats.b).max(0.0) / nb).sqrt();
+    if sum > 0.0 && target.estimate_b(b_rng(seed, 0)).is_some() {
+        let est: Vec<f64> = pool.install(|| (0..cfg.bootstrap).into_par_iter().map(|i| target.estimate_b(b_rng(seed, i)).unwrap_or(0.0)).collect());
+        let (s1, s2) = est.iter().fold((0.0, 0.0), |(a, b), &x| (a + x, b + x * x));
+        stats.b = s1 / nb;
+        stats.b_stderr = ((s2 / nb - stats.b * stats.b).max(0.0) / nb).sqrt();
+    }
     if stats.b <= 0.0 || progress.cancelled() {
         // Nothing reaches the camera: the black image is the answer.
         film.spp_done = settings.spp;
@@ -307,6 +323,9 @@ pub fn run<T: MetropolisTarget>(
 
     let mut done = 0u64;
     let names = target.mutation_names();
+    // Fixed rounds keep the image independent of timing; under a time limit rounds start
+    // small and grow to fill about a quarter of the time left.
+    let mut round = if settings.time_limit.is_some() { 16 } else { ROUND };
     loop {
         if progress.cancelled() || settings.time_limit.is_some_and(|t| start.elapsed() >= t) {
             break;
@@ -321,7 +340,7 @@ pub fn run<T: MetropolisTarget>(
                     let mut st = ChainStats::new(names.clone());
                     let mut splats = Vec::new();
                     let Some(ch) = slot.as_mut() else { return (splats, st) };
-                    let n = ch.left.min(ROUND);
+                    let n = ch.left.min(round);
                     let mut proposal = Contribution::default();
                     for _ in 0..n {
                         proposal.clear();
@@ -374,6 +393,12 @@ pub fn run<T: MetropolisTarget>(
             done += st.mutations;
         }
         progress.done.store(done, Ordering::Relaxed);
+        if let Some(t) = settings.time_limit {
+            let el = start.elapsed().as_secs_f64();
+            let per = el / done.max(1) as f64;
+            let left = (t.as_secs_f64() - el).max(0.0);
+            round = ((0.25 * left / per / cfg.chains as f64) as u64).clamp(4, 4 * ROUND);
+        }
     }
     // Chains that could not start (f = 0 at a candidate, which a consistent target never
     // offers) leave their share of mutations undone; normalise by what was done.

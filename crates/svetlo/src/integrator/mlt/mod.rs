@@ -128,21 +128,36 @@ impl Mlt {
         metropolis::run(&t, scene.camera.width, scene.camera.height, settings, &self.options.chain, progress)
     }
 
-    /// The complement: BDPT over the paths with a delta vertex.
+    /// The complement: BDPT over the paths with a delta vertex, at `complement-spp` (default
+    /// a quarter of the render's spp) or until the time limit.
     pub fn render_complement(&self, scene: &Scene, settings: &RenderSettings, progress: &Progress) -> Result<Film> {
         let cfg = PathConfig::new(scene, settings.max_depth, settings.rr_depth, settings.hide_emitters);
         let mut s = settings.clone();
-        s.spp = self.options.complement_spp.unwrap_or((settings.spp / 4).max(1));
+        s.spp = match (self.options.complement_spp, settings.time_limit) {
+            (Some(n), _) => n,
+            // Time-limited: the time left decides (settings.spp is then the CLI's "unbounded").
+            (None, Some(_)) => settings.spp,
+            (None, None) => (settings.spp / 4).max(1),
+        };
         Ok(render_splatting(scene, &s, progress, &Complement { cfg }, 0)?.film)
     }
 
-    /// The whole image and the chains' statistics.
+    /// The whole image and the chains' statistics. With a time limit and delta lobes in the
+    /// scene, the chains get 70 % of the time and the complement what is left.
     pub fn render_with_stats(&self, scene: &Scene, settings: &RenderSettings, progress: &Progress) -> Result<(Film, ChainStats)> {
-        let (chains, stats) = self.render_chains(scene, settings, progress)?;
-        if !has_delta_lobes(scene) {
+        let start = std::time::Instant::now();
+        let delta = has_delta_lobes(scene);
+        let mut cs = settings.clone();
+        if delta {
+            cs.time_limit = settings.time_limit.map(|t| t.mul_f64(0.7));
+        }
+        let (chains, stats) = self.render_chains(scene, &cs, progress)?;
+        if !delta {
             return Ok((chains, stats));
         }
-        let mut film = self.render_complement(scene, settings, progress)?;
+        let mut s = settings.clone();
+        s.time_limit = settings.time_limit.map(|t| t.saturating_sub(start.elapsed()).max(std::time::Duration::from_millis(1)));
+        let mut film = self.render_complement(scene, &s, progress)?;
         // Add the chains' developed image as splats of the complement's scale.
         let img = chains.image();
         let scale = film.splat_scale;
@@ -172,6 +187,8 @@ impl Integrator for Mlt {
 /// The chains' target: a path and its contribution splatted at its film position.
 pub struct Target<'a> {
     pub space: Space<'a>,
+    /// Bidirectional walks for the estimate of b.
+    cfg: PathConfig,
     /// Probabilities of the mutations, in `MUTATIONS` order.
     pub probs: [f64; 3],
     /// Powers of each mutation's T(y→x)/T(x→y): 1 for rendering; tests set -1 (the ratio
@@ -188,7 +205,12 @@ impl<'a> Target<'a> {
         if total.is_nan() || total <= 0.0 {
             return Err(Error::Settings("mlt: no mutation has a positive probability".into()));
         }
-        Ok(Target { space: Space::new(scene, settings.max_depth, settings.hide_emitters), probs: weights.map(|w| w / total), ratio_power: [1.0; 3] })
+        Ok(Target {
+            space: Space::new(scene, settings.max_depth, settings.hide_emitters),
+            cfg: PathConfig::new(scene, settings.max_depth, settings.rr_depth, settings.hide_emitters),
+            probs: weights.map(|w| w / total),
+            ratio_power: [1.0; 3],
+        })
     }
 }
 
@@ -260,6 +282,50 @@ impl MetropolisTarget for Target<'_> {
     fn reject(&self, st: &mut State) {
         st.y = None;
     }
+    /// b by one bidirectional sample (a film position anywhere on the image), counting the
+    /// strategies whose path has no delta vertex: far less noisy than the independent
+    /// paths' weights where light comes through narrow openings.
+    fn estimate_b(&self, rng: Pcg32) -> Option<f64> {
+        let scene = self.space.scene;
+        let cam = &scene.camera;
+        let mut sampler = RngSampler(rng);
+        let u = sampler.next_2d();
+        let raster = Vec2::new(u.x * cam.width as f32, u.y * cam.height as f32);
+        let lens = sampler.next_2d();
+        let ray = cam.generate_ray(raster, lens, sampler.next_1d());
+        let (mut camera, mut light) = (Vec::new(), Vec::new());
+        camera_subpath(scene, &self.cfg, &ray, raster, &mut sampler, &mut camera);
+        light_subpath(scene, &self.cfg, ray.time, &mut sampler, &mut light);
+        let mut sum = 0.0f64;
+        for t in 1..=camera.len() {
+            for s in 0..=light.len() {
+                if s + t < 2 || !self.cfg.allows(s + t) {
+                    continue;
+                }
+                let Some(c) = connect(scene, &self.cfg, &light, &camera, s, t, &mut sampler, true) else { continue };
+                if !light[..s].iter().any(|v| v.delta) && !camera[..t.min(camera.len())].iter().any(|v| v.delta) {
+                    sum += (c.l * c.weight).luminance() as f64;
+                }
+            }
+        }
+        Some(if sum.is_finite() { sum } else { 0.0 })
+    }
+}
+
+/// A sampler over one random stream (for the estimate of b).
+struct RngSampler(Pcg32);
+
+impl Sampler for RngSampler {
+    fn start_pixel_sample(&mut self, _x: u32, _y: u32, _index: u32) {}
+    fn next_1d(&mut self) -> f32 {
+        self.0.next_f32()
+    }
+    fn samples_per_pixel(&self) -> u32 {
+        1
+    }
+    fn clone_box(&self) -> Box<dyn Sampler> {
+        Box::new(RngSampler(self.0.clone()))
+    }
 }
 
 /// BDPT restricted to the paths with at least one delta vertex.
@@ -310,5 +376,32 @@ impl SplatEstimator for Complement {
             }
         }
         l
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn options_parse_and_reject_bad_input() {
+        let o = MltOptions::parse("bidir=1,lens=0,caustic=2,chains=4,bootstrap=10,complement-spp=3").unwrap();
+        assert_eq!((o.weights, o.chain.chains, o.chain.bootstrap, o.complement_spp), ([1.0, 0.0, 2.0], 4, 10, Some(3)));
+        for bad in ["bidir=0", "lens=-1", "caustic=nan", "complement-spp=0", "chains=x", "multi=1", "lens"] {
+            assert!(MltOptions::parse(bad).is_err(), "{bad} accepted");
+        }
+        assert!(crate::integrator::by_name("mlt:lens=x").is_err());
+    }
+
+    #[test]
+    fn transition_choice_probabilities_are_normalised() {
+        use super::mutations::{n_pos, pd};
+        for k in 1..8 {
+            let s: f64 = (1..=k + 1).map(|kd| pd(kd, k)).sum();
+            assert!((s - 1.0).abs() < 1e-12);
+            for kd in 1..=k + 1 {
+                assert!(n_pos(kd, k) >= 1);
+            }
+        }
     }
 }

@@ -151,7 +151,7 @@ pub fn lens(sp: &Space, x: &MPath, rng: &mut Pcg32) -> Option<(MPath, f64)> {
         return None;
     }
     let ray = cam.generate_ray(raster, Vec2::splat(0.5), 0.0);
-    let si = sp.scene.intersect(&Ray::new(sp.cam_pos, ray.d))?;
+    let si = sp.scene.intersect(&ray)?;
     let hit = Vertex::surface(sp.scene, &si, Rgb::WHITE);
     if k >= 2 && !sp.visible(&x.v[k - 2], &hit) {
         return None;

@@ -234,9 +234,10 @@ impl<'a> Space<'a> {
             let v = &chain[n - 1];
             let next = if v.kind == VertexKind::Camera {
                 let raster = Vec2::new(rng.next_f32() * cam.width as f32, rng.next_f32() * cam.height as f32);
+                // The camera's own ray (from the near plane), as the path tracer's.
                 let ray = cam.generate_ray(raster, Vec2::splat(0.5), 0.0);
-                let Some(nv) = self.trace(v, ray.d) else { return false };
-                nv
+                let Some(si) = self.scene.intersect(&ray) else { return false };
+                Vertex::surface(self.scene, &si, Rgb::WHITE)
             } else {
                 let prev = &chain[n - 2];
                 let Some(b) = &v.bsdf else { return false };

@@ -49,6 +49,8 @@ pub struct PhotonOptions {
     /// Precompute the global map's radiance at every n-th photon on a Lambertian surface, read
     /// by final-gather rays (Christensen); 0: search the photons at every gather ray.
     pub precompute: u32,
+    /// Count only photons a lookup point sees (`map::visible`): no leaks through thin walls.
+    pub visibility: bool,
 }
 
 impl Default for PhotonOptions {
@@ -63,12 +65,13 @@ impl Default for PhotonOptions {
             gather: 16,
             kernel: Kernel::Cone { k: 1.0 },
             precompute: 4,
+            visibility: true,
         }
     }
 }
 
 impl PhotonOptions {
-    /// `photons=N,caustic-photons=N,k=K,radius=R,caustic-k=K,caustic-radius=R,gather=N,filter=box|cone|epanechnikov,precompute=N`.
+    /// `photons=N,caustic-photons=N,k=K,radius=R,caustic-k=K,caustic-radius=R,gather=N,filter=box|cone|epanechnikov,precompute=N,visibility=true|false`.
     pub fn parse(params: &str) -> Result<Self> {
         let m = "photon";
         let mut o = PhotonOptions::default();
@@ -83,9 +86,10 @@ impl PhotonOptions {
                 "gather" => o.gather = parse_count(m, k, v)?.min(1 << 16) as u32,
                 "filter" => o.kernel = Kernel::parse(v)?,
                 "precompute" => o.precompute = parse_count(m, k, v)?.min(1 << 20) as u32,
+                "visibility" => o.visibility = v.parse().map_err(|_| Error::Settings(format!("photon: visibility is true or false, got '{v}'")))?,
                 _ => {
                     return Err(Error::Settings(format!(
-                        "photon: unknown option '{k}' (photons, caustic-photons, k, radius, caustic-k, caustic-radius, gather, filter, precompute)"
+                        "photon: unknown option '{k}' (photons, caustic-photons, k, radius, caustic-k, caustic-radius, gather, filter, precompute, visibility)"
                     )))
                 }
             }
@@ -144,7 +148,8 @@ impl PhotonMapper {
         let px = pixel_footprint(scene);
         let global_lookup = Lookup { k: o.k, max_radius: o.radius.unwrap_or(24.0 * px), kernel: o.kernel };
         let global = PhotonMap::new(global);
-        let precomputed = (!sites.is_empty()).then(|| PrecomputedRadiance::new(&global, &sites, &global_lookup, max_seg.max(1) as usize, other_paths_scale));
+        let precomputed = (!sites.is_empty())
+            .then(|| PrecomputedRadiance::new(&global, o.visibility.then_some(scene), &sites, &global_lookup, max_seg.max(1) as usize, other_paths_scale));
         Maps {
             global,
             precomputed,
@@ -166,7 +171,7 @@ impl Integrator for PhotonMapper {
         if let Some(t) = s.time_limit {
             s.time_limit = Some(t.saturating_sub(start.elapsed()));
         }
-        let est = Estimator { maps, gather: self.options.gather };
+        let est = Estimator { maps, gather: self.options.gather, visibility: self.options.visibility };
         render_pixels(scene, &s, progress, &est)
     }
 }
@@ -174,6 +179,7 @@ impl Integrator for PhotonMapper {
 struct Estimator {
     maps: Maps,
     gather: u32,
+    visibility: bool,
 }
 
 impl Estimator {
@@ -181,9 +187,11 @@ impl Estimator {
     fn photons_at(&self, scene: &Scene, v: &DiffuseVertex, sampler: &mut dyn Sampler, settings: &RenderSettings) -> Rgb {
         let left = segments_left(settings.max_depth, v.depth);
         let m = &self.maps;
-        let mut l = m.caustic.radiance(v.si, v.bsdf, v.wo, &m.caustic_lookup, |p| (p.segments as i32) <= left);
+        let mut l = m.caustic.radiance(self.visibility.then_some(scene), v.si, v.bsdf, v.wo, &m.caustic_lookup, |p| (p.segments as i32) <= left);
         if self.gather == 0 {
-            l += m.global.radiance(v.si, v.bsdf, v.wo, &m.global_lookup, |p| !p.caustic && p.segments >= 2 && (p.segments as i32) <= left);
+            l += m.global.radiance(self.visibility.then_some(scene), v.si, v.bsdf, v.wo, &m.global_lookup, |p| {
+                !p.caustic && p.segments >= 2 && (p.segments as i32) <= left
+            });
             return l;
         }
         let mut g = Rgb::BLACK;
@@ -220,7 +228,8 @@ impl Estimator {
                     (Some(pc), Some(_)) => pc.radiance(si.p, n, left),
                     _ => None,
                 };
-                l += t * pre.unwrap_or_else(|| m.global.radiance(&si, &bsdf, wo, &m.global_lookup, |p| (p.segments as i32) <= left));
+                l += t * pre
+                    .unwrap_or_else(|| m.global.radiance(self.visibility.then_some(scene), &si, &bsdf, wo, &m.global_lookup, |p| (p.segments as i32) <= left));
             }
             if !flags.is_specular() {
                 break;

@@ -11,6 +11,7 @@ use crate::bsdf::{Bsdf, BsdfModel, TransportMode};
 use crate::error::{Error, Result};
 use crate::geometry::SurfaceInteraction;
 use crate::math::PI;
+use crate::scene::Scene;
 use crate::spectrum::Rgb;
 use glam::Vec3;
 
@@ -19,6 +20,8 @@ pub(crate) struct Photon {
     pub p: Vec3,
     pub wi: Vec3,
     pub power: Rgb,
+    /// Geometric normal of the surface it landed on, on the side it arrived from.
+    pub n: Vec3,
     pub segments: u16,
     pub caustic: bool,
     /// Its path gave the sites of the precomputed radiance (then it takes no part in it).
@@ -28,7 +31,15 @@ pub(crate) struct Photon {
 impl Photon {
     /// A stored photon from a landing, its power scaled (by 1 / number of emitted paths).
     pub fn from_deposit(d: &Deposit, scale: f32) -> Self {
-        Photon { p: d.p, wi: d.wi, power: d.power * scale, segments: d.segments.min(u16::MAX as u32) as u16, caustic: d.caustic, site_path: false }
+        Photon {
+            p: d.p,
+            wi: d.wi,
+            n: if d.wi.dot(d.ng) >= 0.0 { d.ng } else { -d.ng },
+            power: d.power * scale,
+            segments: d.segments.min(u16::MAX as u32) as u16,
+            caustic: d.caustic,
+            site_path: false,
+        }
     }
 }
 
@@ -90,8 +101,22 @@ impl PhotonMap {
     }
 
     /// Radiance reflected at `si` toward `wo` (local shading frame) by the non-delta part of
-    /// `bsdf`, from the photons `accept` lets through.
-    pub fn radiance(&self, si: &SurfaceInteraction, bsdf: &Bsdf, wo: Vec3, lookup: &Lookup, accept: impl Fn(&Photon) -> bool) -> Rgb {
+    /// `bsdf`, from the photons `accept` lets through that landed on a surface facing the same
+    /// way (Jensen's filter: no photons from the other side of a thin wall or a corner's
+    /// other face).
+    /// With `visibility`, only photons the point sees count (see [`visible`]).
+    #[allow(clippy::too_many_arguments)]
+    pub fn radiance(
+        &self,
+        visibility: Option<&Scene>,
+        si: &SurfaceInteraction,
+        bsdf: &Bsdf,
+        wo: Vec3,
+        lookup: &Lookup,
+        accept: impl Fn(&Photon) -> bool,
+    ) -> Rgb {
+        let n = if si.wo.dot(si.ng) >= 0.0 { si.ng } else { -si.ng };
+        let accept = |ph: &Photon| ph.n.dot(n) > SAME_ORIENTATION_COS && accept(ph) && visibility.is_none_or(|sc| visible(sc, si.p, n, ph.p, ph.n));
         let mut sum = Rgb::BLACK;
         let mut add = |ph: &Photon, d2: f32, r2: f32| {
             let wi = si.to_local(ph.wi);
@@ -113,7 +138,7 @@ impl PhotonMap {
             });
             r2
         } else {
-            let found = self.tree.k_nearest(si.p, lookup.k, lookup.max_radius, &accept);
+            let found = self.tree.k_nearest(si.p, lookup.k, lookup.max_radius, accept);
             let (inside, r2) = knn_disc(&found, lookup);
             if r2 <= 0.0 {
                 return Rgb::BLACK;
@@ -187,13 +212,28 @@ pub(crate) struct PrecomputedRadiance {
     max_radius: f32,
 }
 
+/// Whether a lookup point `p` (surface normal `n` on the seen side) sees a photon at `q`
+/// (normal `nq` on its lit side): a shadow ray between the two, each end lifted off its
+/// surface by a quarter of their distance (more than the sagitta of a sphere of radius half
+/// that distance, so curved surfaces do not shadow themselves). Without it light leaks through
+/// thin walls into the room beside, along the surfaces that run under them.
+pub(crate) fn visible(scene: &Scene, p: Vec3, n: Vec3, q: Vec3, nq: Vec3) -> bool {
+    let lift = VISIBILITY_LIFT * (q - p).length();
+    lift == 0.0 || !scene.occluded(p + n * lift, n, q + nq * lift)
+}
+
+const VISIBILITY_LIFT: f32 = 0.25;
+
+/// Orientation agreement of a photon's surface with the lookup point's (cos 60°).
+pub(crate) const SAME_ORIENTATION_COS: f32 = 0.5;
+
 /// Orientation agreement for a site to stand for a lookup point (cos 25°).
 const SITE_NORMAL_COS: f32 = 0.9;
 
 impl PrecomputedRadiance {
     /// `buckets`: photon segment counts told apart (1 when depth is unbounded);
     /// `other_paths_scale`: photon paths emitted over those that gave no site.
-    pub fn new(map: &PhotonMap, sites: &[RadianceSite], lookup: &Lookup, buckets: usize, other_paths_scale: f32) -> Self {
+    pub fn new(map: &PhotonMap, visibility: Option<&Scene>, sites: &[RadianceSite], lookup: &Lookup, buckets: usize, other_paths_scale: f32) -> Self {
         use rayon::prelude::*;
         let buckets = buckets.max(1);
         let per_site: Vec<Vec<Rgb>> = sites
@@ -203,7 +243,9 @@ impl PrecomputedRadiance {
                 // Only photons of other paths than the sites': a density estimated where a photon
                 // is known to be (or read at the site nearest a point, whose cell is larger
                 // where photons are sparser) would be biased by that photon's own position.
-                let found = map.tree.k_nearest(s.p, lookup.k, lookup.max_radius, |ph| !ph.site_path && ph.wi.dot(s.n) > 0.0);
+                let found = map.tree.k_nearest(s.p, lookup.k, lookup.max_radius, |ph| {
+                    !ph.site_path && ph.n.dot(s.n) > SAME_ORIENTATION_COS && visibility.is_none_or(|sc| visible(sc, s.p, s.n, ph.p, ph.n))
+                });
                 let (inside, r2) = knn_disc(&found, lookup);
                 if r2 > 0.0 {
                     for &(i, d2) in inside {

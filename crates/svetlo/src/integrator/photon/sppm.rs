@@ -15,7 +15,7 @@
 //! of iterations; a time budget stops after a whole iteration.
 
 use super::camera::camera_walk;
-use super::map::Photon;
+use super::map::{visible, Photon, SAME_ORIENTATION_COS};
 use super::trace::trace_photons;
 use super::{parse_count, parse_pairs, parse_positive, pixel_footprint, segments_left};
 use crate::accel::KdTree;
@@ -45,16 +45,19 @@ pub struct SppmOptions {
     /// Visible points per pixel: the first this many diffuse vertices of a camera path (more
     /// come only through delta lobes of diffuse-and-specular surfaces, such as plastic).
     pub max_visible: u32,
+    /// Count only photons the visible point sees (`map::visible`): no light leaks through thin
+    /// walls. Photons on surfaces facing another way are left out in any case.
+    pub visibility: bool,
 }
 
 impl Default for SppmOptions {
     fn default() -> Self {
-        SppmOptions { photons: None, radius: None, alpha: 2.0 / 3.0, max_visible: 3 }
+        SppmOptions { photons: None, radius: None, alpha: 2.0 / 3.0, max_visible: 3, visibility: true }
     }
 }
 
 impl SppmOptions {
-    /// `photons=N,radius=R,alpha=A,visible=N`.
+    /// `photons=N,radius=R,alpha=A,visible=N,visibility=true|false`.
     pub fn parse(params: &str) -> Result<Self> {
         let m = "sppm";
         let mut o = SppmOptions::default();
@@ -70,7 +73,8 @@ impl SppmOptions {
                     o.alpha = a;
                 }
                 "visible" => o.max_visible = parse_count(m, k, v)?.clamp(1, 16) as u32,
-                _ => return Err(Error::Settings(format!("sppm: unknown option '{k}' (photons, radius, alpha, visible)"))),
+                "visibility" => o.visibility = v.parse().map_err(|_| Error::Settings(format!("sppm: visibility is true or false, got '{v}'")))?,
+                _ => return Err(Error::Settings(format!("sppm: unknown option '{k}' (photons, radius, alpha, visible, visibility)"))),
             }
         }
         Ok(o)
@@ -172,6 +176,7 @@ impl Integrator for Sppm {
             }
             let tree = pool.install(|| self.photon_pass(scene, settings, it as u64, per_iter));
             let alpha = o.alpha;
+            let visibility = o.visibility;
             let max_depth = settings.max_depth;
             pool.install(|| {
                 stats.par_chunks_mut(w * slots).zip(rows.par_iter()).for_each(|(srow, vrow)| {
@@ -182,6 +187,8 @@ impl Integrator for Sppm {
                             let left = segments_left(max_depth, vp.depth);
                             let mut phi = Rgb::BLACK;
                             let mut m = 0u32;
+                            // Lifted off the surface on the seen side, for the visibility test.
+                            let n = if vp.si.wo.dot(vp.si.ng) >= 0.0 { vp.si.ng } else { -vp.si.ng };
                             tree.for_each_in_radius(vp.si.p, st.r, |ph, _| {
                                 if (ph.segments as i32) > left {
                                     return;
@@ -192,7 +199,7 @@ impl Integrator for Sppm {
                                     return;
                                 }
                                 let f = vp.bsdf.eval(vp.wo, wi, TransportMode::Radiance);
-                                if f.is_black() {
+                                if f.is_black() || ph.n.dot(n) <= SAME_ORIENTATION_COS || (visibility && !visible(scene, vp.si.p, n, ph.p, ph.n)) {
                                     return;
                                 }
                                 phi += f * ph.power * (wi.z.abs() / cos_g);
@@ -246,9 +253,10 @@ mod tests {
     #[test]
     fn options_parse() {
         let o = SppmOptions::parse("photons=5000,radius=0.25,alpha=0.5,visible=2").unwrap();
-        assert_eq!(o, SppmOptions { photons: Some(5000), radius: Some(0.25), alpha: 0.5, max_visible: 2 });
+        assert_eq!(o, SppmOptions { photons: Some(5000), radius: Some(0.25), alpha: 0.5, max_visible: 2, visibility: true });
+        assert!(!SppmOptions::parse("visibility=false").unwrap().visibility);
         assert_eq!(SppmOptions::parse("").unwrap(), SppmOptions::default());
-        for bad in ["alpha=1", "alpha=0", "alpha=-1", "radius=inf", "photons=x", "k=3", "photons"] {
+        for bad in ["alpha=1", "alpha=0", "alpha=-1", "radius=inf", "photons=x", "k=3", "photons", "visibility=maybe"] {
             assert!(SppmOptions::parse(bad).is_err(), "{bad}");
         }
     }
