@@ -1,6 +1,6 @@
 //! Light tracing and bidirectional path tracing: analytic scenes, determinism, BDPT's
 //! strategies, Mitsuba's Z-test on the shared scenes, and the consistency matrix of the
-//! unbiased integrators.
+//! unbiased integrators (and of the photon methods against path, with a bias allowance).
 //!
 //! Statistics. Splats make neighbouring pixels correlated and the per-sample variance of a
 //! pixel is not what the film records, so these tests estimate each render's noise from K
@@ -457,9 +457,6 @@ fn assert_pair_biased(a: &Batched, b: &Batched, rel: f64, what: &str) {
             let sigma = (a.var[i][j] + b.var[i][j]).max(floor).sqrt();
             let excess = ((a.mean[i][j] - b.mean[i][j]).abs() - z_crit * sigma).max(0.0) / b.mean[i][j].abs().max(1e-3);
             worst = worst.max(excess);
-            if excess > rel && std::env::var("SVETLO_DEBUG").is_ok() {
-                println!("  pixel ({}, {}) ch {j}: {:.4} vs {:.4} (sigma {:.1e})", i % a.width, i / a.width, a.mean[i][j], b.mean[i][j], sigma);
-            }
             total += 1;
             if excess <= rel {
                 pass += 1;
@@ -482,14 +479,16 @@ fn assert_pair_biased(a: &Batched, b: &Batched, rel: f64, what: &str) {
 
 /// SPPM and photon mapping agree with path on the matrix scenes and through glass (caustics
 /// from the caustic map and SPPM's photons), within their noise plus a stated bias.
+/// indirect-room is the hard case for density estimation: its walls have no thickness and the
+/// rooms on either side differ a hundredfold in brightness.
 #[test]
 fn consistency_matrix_photon_methods() {
-    let mut scenes: Vec<_> = matrix_scenes().into_iter().filter(|s| std::env::var("SVETLO_SCENE").map_or(true, |n| n == s.0)).collect();
+    let mut scenes = matrix_scenes();
     scenes.push(("glass", glass_scene(24, 16), settings(32, 6)));
     for (label, scene, st) in scenes {
         let path = batches(&scene, "path", &RenderSettings { spp: 64, ..st.clone() }, 16);
         for &(name, rel, spp) in MATRIX_BIASED {
-            let b = batches(&scene, name, &RenderSettings { spp, ..st.clone() }, 16);
+            let b = batches(&scene, name, &RenderSettings { spp, ..st.clone() }, 8);
             assert_pair_biased(&b, &path, rel, &format!("{label}: {name} vs path"));
         }
     }
