@@ -435,12 +435,15 @@ fn consistency_matrix() {
 }
 
 /// The consistent but biased photon methods in the matrix, each with the relative bias it is
-/// allowed on top of the noise (see `assert_pair_biased`), and the spp (SPPM: iterations) it
-/// renders with. The allowances are what density estimation's blur costs on 24-pixel-wide
-/// images at these photon counts (measured: pixel differences beyond the noise stay under a
-/// third of them); they shrink with more photons / iterations (tests/photon.rs).
+/// allowed per pixel on top of the noise (see `assert_pair_biased`), and the spp (SPPM:
+/// iterations) it renders with (8 batches). Density estimation blurs over the lookup radius
+/// (given here in scene units: the four scenes are 2 to 6 units across); at these photon
+/// counts the measured excess over the noise was 0 % on every pixel, so 10 % leaves room for
+/// the blur at edges without letting a real error pass (light leaking through indirect-room's
+/// wall, before the visibility test, was 200 % and more). The bias shrinks with more photons
+/// and iterations (tests/photon.rs).
 const MATRIX_BIASED: &[(&str, f64, u32)] =
-    &[("sppm:photons=4000,radius=0.05", 0.15, 64), ("photon:photons=40000,caustic-photons=40000,gather=8,k=32,radius=0.15,caustic-radius=0.05", 0.15, 8)];
+    &[("sppm:photons=4000,radius=0.05", 0.10, 64), ("photon:photons=40000,caustic-photons=40000,gather=8,k=32,radius=0.15,caustic-radius=0.05", 0.10, 8)];
 /// Relative bias allowed on the image mean.
 const MEAN_BIAS: f64 = 0.02;
 
