@@ -1,6 +1,6 @@
 //! Light tracing and bidirectional path tracing: analytic scenes, determinism, BDPT's
 //! strategies, Mitsuba's Z-test on the shared scenes, and the consistency matrix of the
-//! unbiased integrators.
+//! unbiased integrators (and of the photon methods against path, with a bias allowance).
 //!
 //! Statistics. Splats make neighbouring pixels correlated and the per-sample variance of a
 //! pixel is not what the film records, so these tests estimate each render's noise from K
@@ -497,12 +497,15 @@ fn consistency_matrix() {
 }
 
 /// The consistent but biased photon methods in the matrix, each with the relative bias it is
-/// allowed on top of the noise (see `assert_pair_biased`), and the spp (SPPM: iterations) it
-/// renders with. The allowances are what density estimation's blur costs on 24-pixel-wide
-/// images at these photon counts (measured: pixel differences beyond the noise stay under a
-/// third of them); they shrink with more photons / iterations (tests/photon.rs).
+/// allowed per pixel on top of the noise (see `assert_pair_biased`), and the spp (SPPM:
+/// iterations) it renders with (8 batches). Density estimation blurs over the lookup radius
+/// (given here in scene units: the four scenes are 2 to 6 units across); at these photon
+/// counts the measured excess over the noise was 0 % on every pixel, so 10 % leaves room for
+/// the blur at edges without letting a real error pass (light leaking through indirect-room's
+/// wall, before the visibility test, was 200 % and more). The bias shrinks with more photons
+/// and iterations (tests/photon.rs).
 const MATRIX_BIASED: &[(&str, f64, u32)] =
-    &[("sppm:photons=4000,radius=0.05", 0.15, 64), ("photon:photons=40000,caustic-photons=40000,gather=8,k=32,radius=0.15,caustic-radius=0.05", 0.15, 8)];
+    &[("sppm:photons=4000,radius=0.05", 0.10, 64), ("photon:photons=40000,caustic-photons=40000,gather=8,k=32,radius=0.15,caustic-radius=0.05", 0.10, 8)];
 /// Relative bias allowed on the image mean.
 const MEAN_BIAS: f64 = 0.02;
 
@@ -519,9 +522,6 @@ fn assert_pair_biased(a: &Batched, b: &Batched, rel: f64, what: &str) {
             let sigma = (a.var[i][j] + b.var[i][j]).max(floor).sqrt();
             let excess = ((a.mean[i][j] - b.mean[i][j]).abs() - z_crit * sigma).max(0.0) / b.mean[i][j].abs().max(1e-3);
             worst = worst.max(excess);
-            if excess > rel && std::env::var("SVETLO_DEBUG").is_ok() {
-                println!("  pixel ({}, {}) ch {j}: {:.4} vs {:.4} (sigma {:.1e})", i % a.width, i / a.width, a.mean[i][j], b.mean[i][j], sigma);
-            }
             total += 1;
             if excess <= rel {
                 pass += 1;
@@ -544,14 +544,16 @@ fn assert_pair_biased(a: &Batched, b: &Batched, rel: f64, what: &str) {
 
 /// SPPM and photon mapping agree with path on the matrix scenes and through glass (caustics
 /// from the caustic map and SPPM's photons), within their noise plus a stated bias.
+/// indirect-room is the hard case for density estimation: its walls have no thickness and the
+/// rooms on either side differ a hundredfold in brightness.
 #[test]
 fn consistency_matrix_photon_methods() {
-    let mut scenes: Vec<_> = matrix_scenes().into_iter().filter(|s| std::env::var("SVETLO_SCENE").map_or(true, |n| n == s.0)).collect();
+    let mut scenes = matrix_scenes();
     scenes.push(("glass", glass_scene(24, 16), settings(32, 6)));
     for (label, scene, st) in scenes {
         let path = batches(&scene, "path", &RenderSettings { spp: 64, ..st.clone() }, 16);
         for &(name, rel, spp) in MATRIX_BIASED {
-            let b = batches(&scene, name, &RenderSettings { spp, ..st.clone() }, 16);
+            let b = batches(&scene, name, &RenderSettings { spp, ..st.clone() }, 8);
             assert_pair_biased(&b, &path, rel, &format!("{label}: {name} vs path"));
         }
     }

@@ -169,7 +169,14 @@ impl Integrator for PhotonMapper {
         // The photon passes count against a time budget.
         let mut s = settings.clone();
         if let Some(t) = s.time_limit {
-            s.time_limit = Some(t.saturating_sub(start.elapsed()));
+            let left = t.saturating_sub(start.elapsed());
+            if left.is_zero() {
+                // The photon passes took the budget: one pass, so that there is an image.
+                s.spp = 1;
+                s.time_limit = None;
+            } else {
+                s.time_limit = Some(left);
+            }
         }
         let est = Estimator { maps, gather: self.options.gather, visibility: self.options.visibility };
         render_pixels(scene, &s, progress, &est)
@@ -225,7 +232,7 @@ impl Estimator {
                 let left = segments_left(settings.max_depth, depth);
                 let n = if si.wo.dot(si.ng) >= 0.0 { si.ng } else { -si.ng };
                 let pre = match (&m.precomputed, lambertian_albedo(&bsdf, wo)) {
-                    (Some(pc), Some(_)) => pc.radiance(si.p, n, left),
+                    (Some(pc), Some(_)) => pc.radiance(self.visibility.then_some(scene), si.p, n, left),
                     _ => None,
                 };
                 l += t * pre

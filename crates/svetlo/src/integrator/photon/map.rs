@@ -116,7 +116,10 @@ impl PhotonMap {
         accept: impl Fn(&Photon) -> bool,
     ) -> Rgb {
         let n = if si.wo.dot(si.ng) >= 0.0 { si.ng } else { -si.ng };
-        let accept = |ph: &Photon| ph.n.dot(n) > SAME_ORIENTATION_COS && accept(ph) && visibility.is_none_or(|sc| visible(sc, si.p, n, ph.p, ph.n));
+        let accept = |ph: &Photon| ph.n.dot(n) > SAME_ORIENTATION_COS && accept(ph);
+        // Visibility is tested on the photons found only (not on every candidate of the
+        // search): hidden ones do not count, and the disc stays the one the k reached.
+        let seen = |ph: &Photon| visibility.is_none_or(|sc| visible(sc, si.p, n, ph.p, ph.n));
         let mut sum = Rgb::BLACK;
         let mut add = |ph: &Photon, d2: f32, r2: f32| {
             let wi = si.to_local(ph.wi);
@@ -132,7 +135,7 @@ impl PhotonMap {
         let r2 = if lookup.k == 0 {
             let r2 = lookup.max_radius * lookup.max_radius;
             self.tree.for_each_in_radius(si.p, lookup.max_radius, |ph, d2| {
-                if accept(ph) {
+                if accept(ph) && seen(ph) {
                     add(ph, d2, r2)
                 }
             });
@@ -144,7 +147,10 @@ impl PhotonMap {
                 return Rgb::BLACK;
             }
             for &(i, d2) in inside {
-                add(&self.tree.items()[i], d2, r2);
+                let ph = &self.tree.items()[i];
+                if seen(ph) {
+                    add(ph, d2, r2);
+                }
             }
             r2
         };
@@ -243,13 +249,14 @@ impl PrecomputedRadiance {
                 // Only photons of other paths than the sites': a density estimated where a photon
                 // is known to be (or read at the site nearest a point, whose cell is larger
                 // where photons are sparser) would be biased by that photon's own position.
-                let found = map.tree.k_nearest(s.p, lookup.k, lookup.max_radius, |ph| {
-                    !ph.site_path && ph.n.dot(s.n) > SAME_ORIENTATION_COS && visibility.is_none_or(|sc| visible(sc, s.p, s.n, ph.p, ph.n))
-                });
+                let found = map.tree.k_nearest(s.p, lookup.k, lookup.max_radius, |ph| !ph.site_path && ph.n.dot(s.n) > SAME_ORIENTATION_COS);
                 let (inside, r2) = knn_disc(&found, lookup);
                 if r2 > 0.0 {
                     for &(i, d2) in inside {
                         let ph = &map.tree.items()[i];
+                        if visibility.is_some_and(|sc| !visible(sc, s.p, s.n, ph.p, ph.n)) {
+                            continue;
+                        }
                         let cos_g = ph.wi.dot(s.n);
                         let k = (ph.segments as usize).clamp(1, buckets) - 1;
                         b[k] += ph.power * (ph.wi.dot(s.ns).abs() / cos_g * lookup.kernel.weight(d2, r2));
@@ -270,8 +277,8 @@ impl PrecomputedRadiance {
 
     /// Radiance leaving a Lambertian point `p` on the side of geometric normal `n`, from
     /// photons of at most `segments` segments; None where no site is near enough.
-    pub fn radiance(&self, p: Vec3, n: Vec3, segments: i32) -> Option<Rgb> {
-        let found = self.tree.k_nearest(p, 1, self.max_radius, |s| s.n.dot(n) > SITE_NORMAL_COS);
+    pub fn radiance(&self, visibility: Option<&Scene>, p: Vec3, n: Vec3, segments: i32) -> Option<Rgb> {
+        let found = self.tree.k_nearest(p, 1, self.max_radius, |s| s.n.dot(n) > SITE_NORMAL_COS && visibility.is_none_or(|sc| visible(sc, p, n, s.p, s.n)));
         let &(i, _) = found.first()?;
         let b = (segments.max(1) as usize).min(self.buckets) - 1;
         Some(self.values[self.tree.items()[i].first as usize + b])
