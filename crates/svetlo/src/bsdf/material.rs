@@ -202,6 +202,8 @@ impl Material {
     /// BSDF that lets every ray pass (opacity 0).
     pub fn bsdf(&self, uv: Vec2) -> Bsdf {
         match self {
+            // The common case built in place, without the Option of `model`.
+            Material::Diffuse { reflectance } => Bsdf::new(BsdfModel::Diffuse(Diffuse { reflectance: reflectance.eval(uv).clamp(0.0, 1.0) })),
             Material::Null => Bsdf { front: BsdfModel::Diffuse(Diffuse { reflectance: Rgb::BLACK }), back: None, opacity: 0.0 },
             Material::TwoSided { front, back } => {
                 let mut b = front.bsdf(uv);

@@ -159,6 +159,14 @@ impl Scene {
 
     /// Closest surface along the ray.
     pub fn intersect(&self, ray: &Ray) -> Option<SurfaceInteraction> {
+        if self.moving.is_empty() {
+            // Static scenes (the common case): no pose transform to carry through `closest`.
+            let mut hit = self.accel.intersect(ray)?;
+            if !self.static_shapes.is_empty() {
+                hit.shape = self.static_shapes[hit.shape as usize];
+            }
+            return Some(self.interaction(&hit, ray));
+        }
         let (hit, moving) = self.closest(ray)?;
         match moving {
             None => Some(self.interaction(&hit, ray)),
