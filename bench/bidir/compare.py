@@ -69,9 +69,13 @@ def main():
     ap.add_argument("--ref-spp", type=int, default=1024)
     ap.add_argument("--mitsuba", default="scalar_rgb", help="Mitsuba 3 variant, or 'none'")
     ap.add_argument("--scenes", default=",".join(SCENES))
+    ap.add_argument("--methods", default=",".join(METHODS), help="svetlo integrators, e.g. path,bdpt,sppm,photon (path is the baseline)")
     ap.add_argument("--repeats", type=int, default=3, help="rounds (seeds), methods alternating; spp, time and relMSE are averaged")
     ap.add_argument("--svetlo", default=os.path.join(ROOT, "target", "release", "svetlo"))
     a = ap.parse_args()
+    methods = a.methods.split(",")
+    if "path" not in methods:
+        methods.insert(0, "path")
     work = os.path.join(ROOT, "target", "bench-bidir")
     os.makedirs(work, exist_ok=True)
     rows = []
@@ -87,7 +91,7 @@ def main():
         runs = {}
         mi_spp = None
         for rep in range(a.repeats):
-            for m in METHODS:
+            for m in methods:
                 out = os.path.join(work, f"{name}_{m}_{rep}.exr")
                 spp, secs = svetlo(a.svetlo, scene, out, ["--integrator", m, "--time", str(a.time), "--seed", str(1 + rep)])
                 runs.setdefault(f"svetlo {m}", []).append((spp, secs, relmse(read_exr(out), ref)))
@@ -107,8 +111,9 @@ def main():
         for k, (spp, secs, e) in results.items():
             rows.append((name, k, spp, secs, e, base / e if e > 0 else float("inf")))
         # The reference's own error, for scale: bdpt's error at equal time shrinks by its spp ratio.
-        bspp, _, be = results["svetlo bdpt"]
-        rows.append((name, "(reference floor, est.)", a.ref_spp, float("nan"), be * bspp / a.ref_spp, float("nan")))
+        if "svetlo bdpt" in results:
+            bspp, _, be = results["svetlo bdpt"]
+            rows.append((name, "(reference floor, est.)", a.ref_spp, float("nan"), be * bspp / a.ref_spp, float("nan")))
     print(f"\nequal time: {a.time:g} s per method, means of {a.repeats} runs; reference: svetlo bdpt {a.ref_spp} spp")
     print(f"{'scene':<15}{'method':<28}{'spp':>7}{'time (s)':>10}{'relMSE':>12}{'path / it':>11}")
     for r in rows:
