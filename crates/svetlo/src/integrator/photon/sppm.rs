@@ -36,7 +36,8 @@ use std::time::Instant;
 
 #[derive(Clone, Debug, PartialEq)]
 pub struct SppmOptions {
-    /// Photon paths per iteration; None: one per pixel.
+    /// Photon paths per iteration; None: four per pixel (on bench/photon's indirect-room one per
+    /// pixel left SPPM variance-limited: relMSE 6.5e-4 against 3.9e-4 with four, at equal time).
     pub photons: Option<u64>,
     /// Initial gather radius (scene units); None: 2 pixel footprints.
     pub radius: Option<f32>,
@@ -123,7 +124,7 @@ impl Integrator for Sppm {
         let cam = &scene.camera;
         let (w, h) = (cam.width as usize, cam.height as usize);
         let slots = o.max_visible as usize;
-        let per_iter = o.photons.unwrap_or((w * h) as u64).max(1);
+        let per_iter = o.photons.unwrap_or(4 * (w * h) as u64).max(1);
         let r0 = o.radius.unwrap_or(2.0 * pixel_footprint(scene));
         let pool = rayon::ThreadPoolBuilder::new().num_threads(settings.threads).build().map_err(|e| Error::Settings(format!("thread pool: {e}")))?;
         let mut stats = vec![Stats { r: r0, n: 0.0, tau: Rgb::BLACK }; w * h * slots];
