@@ -74,6 +74,7 @@ impl LocalLights {
 
     /// Light `i` seen from `p` as a point or a direction; `None` when it sends nothing toward
     /// `p` (or has no position, as environment lights).
+    #[inline]
     pub fn sample(&self, scene: &Scene, i: usize, p: Vec3) -> Option<PointLightSample> {
         let light = &scene.lights[i];
         match light {

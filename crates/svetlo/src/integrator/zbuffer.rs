@@ -19,7 +19,7 @@
 
 use super::local::LocalLights;
 use super::{Integrator, Progress, RenderSettings};
-use crate::bsdf::Bsdf;
+use crate::bsdf::{Bsdf, BsdfModel};
 use crate::error::Result;
 use crate::film::Film;
 use crate::geometry::Geometry;
@@ -218,6 +218,26 @@ impl ZBuffer {
         if !self.ambient.is_black() {
             l += self.ambient * bsdf.diffuse_albedo();
         }
+        if let Some(lb) = &prepared.lambert[sh.material as usize] {
+            // Only the cosines to the shading normal matter: no frame, no BSDF dispatch.
+            // The same products as `Bsdf::eval` in the frame (its z is the dot with `ns`).
+            let cos_o = wo_w.dot(s.ns);
+            for (i, map) in maps.iter().enumerate() {
+                let Some(ls) = lights.sample(scene, i, s.p) else { continue };
+                let cos_i = ls.wi.dot(s.ns);
+                let f = lb.eval(cos_o, cos_i);
+                if f.is_black() {
+                    continue;
+                }
+                if let Some(m) = map {
+                    if !m.lit(s.p, s.ng) {
+                        continue;
+                    }
+                }
+                l += f * ls.li * cos_i.abs();
+            }
+            return l;
+        }
         let frame = Frame::from_normal_tangent(s.ns, s.dpdu);
         let wo = frame.to_local(wo_w);
         for (i, map) in maps.iter().enumerate() {
@@ -249,6 +269,50 @@ pub struct Prepared {
     maps: Vec<Option<ShadowMap>>,
     /// The BSDF of each material that has no texture (the same at every point).
     bsdfs: Vec<Option<Bsdf>>,
+    /// Those of them that are Lambertian on each side, as their constant f.
+    lambert: Vec<Option<Lambert>>,
+}
+
+/// A uniform BSDF that is Lambertian on each side it reflects from (`diffuse`, `twosided`
+/// diffuse): f = ρ/π (times the opacity) when wo and wi lie on one side of the shading
+/// normal, so shading needs two cosines, not a shading frame.
+#[derive(Clone, Copy, Debug)]
+struct Lambert {
+    front: Rgb,
+    back: Option<Rgb>,
+}
+
+impl Lambert {
+    fn of(b: &Bsdf) -> Option<Self> {
+        // As `Diffuse::eval` then `* opacity` in `Bsdf::eval`, in that order.
+        let f = |m: &BsdfModel| match m {
+            BsdfModel::Diffuse(d) => Some(d.reflectance * crate::math::INV_PI * b.opacity),
+            _ => None,
+        };
+        let front = f(&b.front)?;
+        let back = match &b.back {
+            None => None,
+            Some(m) => Some(f(m)?),
+        };
+        Some(Lambert { front, back })
+    }
+
+    /// `Bsdf::eval` for local directions with z = `cos_o`, `cos_i` (the back side mirrored).
+    #[inline]
+    fn eval(&self, cos_o: f32, cos_i: f32) -> Rgb {
+        if cos_o >= 0.0 {
+            if cos_o > 0.0 && cos_i > 0.0 {
+                self.front
+            } else {
+                Rgb::BLACK
+            }
+        } else {
+            match self.back {
+                Some(b) if cos_i < 0.0 => b,
+                _ => Rgb::BLACK,
+            }
+        }
+    }
 }
 
 /// One frame: the colour of every subsample (`ss` x `ss` per pixel) and the image that
@@ -270,8 +334,9 @@ impl ZBuffer {
         let poses = poses(scene);
         let tris = self.triangles(scene, &poses);
         let maps = self.shadow_maps(scene, &lights, &tris);
-        let bsdfs = scene.materials.iter().map(|m| m.is_uniform().then(|| m.bsdf(Vec2::ZERO))).collect();
-        Prepared { zbuffer: *self, lights, poses, tris, maps, bsdfs }
+        let bsdfs: Vec<Option<Bsdf>> = scene.materials.iter().map(|m| m.is_uniform().then(|| m.bsdf(Vec2::ZERO))).collect();
+        let lambert = bsdfs.iter().map(|b| b.as_ref().and_then(Lambert::of)).collect();
+        Prepared { zbuffer: *self, lights, poses, tris, maps, bsdfs, lambert }
     }
 }
 
@@ -331,10 +396,9 @@ impl Prepared {
                 ViewProjection::Orthographic { .. } => (cam.to_world.transform_point3(Vec3::new(c.x, c.y, 0.0)), view_dir),
             }
         };
-        let shade_row = |y: u32| -> Vec<Rgb> {
-            let mut cached: Option<MeshTri> = None;
-            (0..w)
-                .map(|x| {
+        let pixel = |x: u32, y: u32, cached: &mut Option<MeshTri>| -> Rgb {
+            {
+                {
                     let k = ids[(y * w + x) as usize];
                     let (o, d) = line(x, y);
                     if k == u32::MAX {
@@ -352,7 +416,7 @@ impl Prepared {
                         Shading::Phong => {
                             let s = match (&*scene.shapes[t.shape as usize].geometry, self.poses[t.shape as usize]) {
                                 (Geometry::Mesh(m), None) => {
-                                    let mt = match cached {
+                                    let mt = match *cached {
                                         Some(c) if c.id == k => c,
                                         _ => *cached.insert(MeshTri::new(k, m, t.prim as usize)),
                                     };
@@ -376,15 +440,23 @@ impl Prepared {
                             })
                             .sum(),
                     }
-                })
-                .collect()
+                }
+            }
         };
-        let subsamples: Vec<Rgb> = if threads == 1 {
-            (0..h).flat_map(shade_row).collect()
+        let shade_row = |y: u32, row: &mut [Rgb]| {
+            let mut cached: Option<MeshTri> = None;
+            for (x, out) in (0..w).zip(row.iter_mut()) {
+                *out = pixel(x, y, &mut cached);
+            }
+        };
+        // Written in place, row by row: no per-row vectors to allocate and concatenate.
+        let mut subsamples = vec![Rgb::BLACK; (w * h) as usize];
+        if threads == 1 {
+            subsamples.chunks_mut(w as usize).enumerate().for_each(|(y, row)| shade_row(y as u32, row));
         } else {
             let pool = rayon::ThreadPoolBuilder::new().num_threads(threads).build().map_err(|e| crate::error::Error::Settings(format!("thread pool: {e}")))?;
-            pool.install(|| (0..h).into_par_iter().flat_map_iter(shade_row).collect())
-        };
+            pool.install(|| subsamples.par_chunks_mut(w as usize).enumerate().for_each(|(y, row)| shade_row(y as u32, row)));
+        }
         let mut image = crate::film::Image::new(cam.width as usize, cam.height as usize, vec![Rgb::BLACK; (cam.width * cam.height) as usize]);
         let norm = 1.0 / (ss * ss) as f32;
         for y in 0..h {
