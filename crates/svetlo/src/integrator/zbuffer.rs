@@ -219,24 +219,7 @@ impl ZBuffer {
             l += self.ambient * bsdf.diffuse_albedo();
         }
         if let Some(lb) = &prepared.lambert[sh.material as usize] {
-            // Only the cosines to the shading normal matter: no frame, no BSDF dispatch.
-            // The same products as `Bsdf::eval` in the frame (its z is the dot with `ns`).
-            let cos_o = wo_w.dot(s.ns);
-            for (i, map) in maps.iter().enumerate() {
-                let Some(ls) = lights.sample(scene, i, s.p) else { continue };
-                let cos_i = ls.wi.dot(s.ns);
-                let f = lb.eval(cos_o, cos_i);
-                if f.is_black() {
-                    continue;
-                }
-                if let Some(m) = map {
-                    if !m.lit(s.p, s.ng) {
-                        continue;
-                    }
-                }
-                l += f * ls.li * cos_i.abs();
-            }
-            return l;
+            return l + lb.lights(scene, prepared, s.p, s.ng, s.ns, wo_w);
         }
         let frame = Frame::from_normal_tangent(s.ns, s.dpdu);
         let wo = frame.to_local(wo_w);
@@ -295,6 +278,30 @@ impl Lambert {
             Some(m) => Some(f(m)?),
         };
         Some(Lambert { front, back })
+    }
+
+    /// Σ over lights of f L |cos θi| at `p` seen from direction `wo` (world space), with
+    /// shadow maps. Only the cosines to the shading normal matter: no frame, no BSDF
+    /// dispatch (the z of the frame's local directions is the dot with `ns`).
+    #[inline(always)]
+    fn lights(&self, scene: &Scene, prepared: &Prepared, p: Vec3, ng: Vec3, ns: Vec3, wo: Vec3) -> Rgb {
+        let mut l = Rgb::BLACK;
+        let cos_o = wo.dot(ns);
+        for (i, map) in prepared.maps.iter().enumerate() {
+            let Some(ls) = prepared.lights.sample(scene, i, p) else { continue };
+            let cos_i = ls.wi.dot(ns);
+            let f = self.eval(cos_o, cos_i);
+            if f.is_black() {
+                continue;
+            }
+            if let Some(m) = map {
+                if !m.lit(p, ng) {
+                    continue;
+                }
+            }
+            l += f * ls.li * cos_i.abs();
+        }
+        l
     }
 
     /// `Bsdf::eval` for local directions with z = `cos_o`, `cos_i` (the back side mirrored).
@@ -396,7 +403,8 @@ impl Prepared {
                 ViewProjection::Orthographic { .. } => (cam.to_world.transform_point3(Vec3::new(c.x, c.y, 0.0)), view_dir),
             }
         };
-        let pixel = |x: u32, y: u32, cached: &mut Option<MeshTri>| -> Rgb {
+        let fast_ok = self.zbuffer.shading == Shading::Phong && matches!(projection, ViewProjection::Perspective { .. });
+        let pixel = |x: u32, y: u32, cached: &mut Option<MeshTri>, fast: &mut (u32, Option<FastTri>)| -> Rgb {
             {
                 {
                     let k = ids[(y * w + x) as usize];
@@ -404,6 +412,14 @@ impl Prepared {
                     if k == u32::MAX {
                         let d = d.normalize();
                         return if hide_emitters { Rgb::BLACK } else { scene.environment_lights.iter().map(|&e| scene.lights[e as usize].le_escaped(d)).sum() };
+                    }
+                    if fast_ok {
+                        if fast.0 != k {
+                            *fast = (k, FastTri::new(self, scene, k, eye));
+                        }
+                        if let Some(c) = fast.1.as_ref().and_then(|ft| ft.shade(scene, self, eye, d)) {
+                            return c;
+                        }
                     }
                     let t = &self.tris[k as usize];
                     let b = barycentrics(t.v, o, d);
@@ -416,10 +432,11 @@ impl Prepared {
                         Shading::Phong => {
                             let s = match (&*scene.shapes[t.shape as usize].geometry, self.poses[t.shape as usize]) {
                                 (Geometry::Mesh(m), None) => {
-                                    let mt = match *cached {
-                                        Some(c) if c.id == k => c,
-                                        _ => *cached.insert(MeshTri::new(k, m, t.prim as usize)),
-                                    };
+                                    // By reference: a MeshTri is too big to copy per subsample.
+                                    if cached.as_ref().is_none_or(|c| c.id != k) {
+                                        *cached = Some(MeshTri::new(k, m, t.prim as usize));
+                                    }
+                                    let Some(mt) = cached.as_ref() else { unreachable!("just cached") };
                                     mt.surface(t.v[0] * b[0] + t.v[1] * b[1] + t.v[2] * b[2], b)
                                 }
                                 _ => ZBuffer::surface(scene, &self.poses, t, b),
@@ -445,8 +462,9 @@ impl Prepared {
         };
         let shade_row = |y: u32, row: &mut [Rgb]| {
             let mut cached: Option<MeshTri> = None;
+            let mut fast = (u32::MAX, None);
             for (x, out) in (0..w).zip(row.iter_mut()) {
-                *out = pixel(x, y, &mut cached);
+                *out = pixel(x, y, &mut cached, &mut fast);
             }
         };
         // Written in place, row by row: no per-row vectors to allocate and concatenate.
@@ -467,6 +485,65 @@ impl Prepared {
             }
         }
         Ok(FrameImage { ss, subsamples, image, visibility_time, shading_time: start.elapsed() - visibility_time })
+    }
+}
+
+/// The fast path of Phong shading under a perspective camera: a static mesh triangle with
+/// a Lambertian material that does not emit. The camera ray's barycentrics become three
+/// dot products with per-triangle vectors (the scalar triple products of the ray-plane
+/// intersection, with the eye fixed), and shading is the Lambert light loop inline.
+struct FastTri {
+    v: [Vec3; 3],
+    /// e2 x e1, e2 x s, s x e1 with s = eye - v0: det, b1 det and b2 det are their dots with d.
+    n12: Vec3,
+    q1: Vec3,
+    q2: Vec3,
+    ng: Vec3,
+    normals: Option<[Vec3; 3]>,
+    lambert: Lambert,
+    ambient: Rgb,
+}
+
+impl FastTri {
+    fn new(prepared: &Prepared, scene: &Scene, k: u32, eye: Vec3) -> Option<Self> {
+        let t = &prepared.tris[k as usize];
+        let sh = &scene.shapes[t.shape as usize];
+        let lambert = prepared.lambert[sh.material as usize]?;
+        if sh.light.is_some() || prepared.poses[t.shape as usize].is_some() {
+            return None;
+        }
+        let Geometry::Mesh(m) = &*sh.geometry else { return None };
+        let mt = MeshTri::new(k, m, t.prim as usize);
+        let ambient = &prepared.zbuffer.ambient;
+        let ambient = if ambient.is_black() { Rgb::BLACK } else { *ambient * prepared.bsdfs[sh.material as usize].as_ref()?.diffuse_albedo() };
+        let (e1, e2) = (t.v[1] - t.v[0], t.v[2] - t.v[0]);
+        let s = eye - t.v[0];
+        Some(FastTri { v: t.v, n12: e2.cross(e1), q1: e2.cross(s), q2: s.cross(e1), ng: mt.ng, normals: mt.normals, lambert, ambient })
+    }
+
+    /// The colour seen along direction `d` from the eye; `None` for a ray parallel to the plane.
+    #[inline(always)]
+    fn shade(&self, scene: &Scene, prepared: &Prepared, eye: Vec3, d: Vec3) -> Option<Rgb> {
+        let det = d.dot(self.n12);
+        if det == 0.0 {
+            return None;
+        }
+        let inv = 1.0 / det;
+        let b1 = d.dot(self.q1) * inv;
+        let b2 = d.dot(self.q2) * inv;
+        let b0 = 1.0 - b1 - b2;
+        let p = self.v[0] * b0 + self.v[1] * b1 + self.v[2] * b2;
+        // As MeshTri::surface.
+        let (ng, ns) = match self.normals {
+            None => (self.ng, self.ng),
+            Some(n) => {
+                let ns = (n[0] * b0 + n[1] * b1 + n[2] * b2).normalize_or_zero();
+                let ns = if ns == Vec3::ZERO { self.ng } else { ns };
+                (if self.ng.dot(ns) < 0.0 { -self.ng } else { self.ng }, ns)
+            }
+        };
+        let wo = (eye - p).normalize_or_zero();
+        Some(self.ambient + self.lambert.lights(scene, prepared, p, ng, ns, wo))
     }
 }
 
