@@ -97,7 +97,7 @@ impl LocalLights {
 
     /// Light `i` seen from `p` as a point or a direction; `None` when it sends nothing toward
     /// `p` (or has no position, as environment lights).
-    #[inline]
+    #[inline(always)]
     pub fn sample(&self, scene: &Scene, i: usize, p: Vec3) -> Option<PointLightSample> {
         // The same arithmetic as `Light::sample_li` and the mesh proxy below, in order.
         match self.quick[i] {

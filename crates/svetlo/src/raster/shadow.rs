@@ -78,7 +78,7 @@ impl ShadowMap {
     }
 
     /// Whether `p` (surface normal `n`) sees the light according to the map.
-    #[inline]
+    #[inline(always)]
     pub fn lit(&self, p: Vec3, n: Vec3) -> bool {
         let (view, buf, to_light) = match self {
             ShadowMap::Cube { position, faces } => {
