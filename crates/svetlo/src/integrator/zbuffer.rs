@@ -630,3 +630,77 @@ impl Integrator for ZBuffer {
         Ok(film)
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::bsdf::diffuse::Diffuse;
+    use crate::bsdf::TransportMode;
+
+    /// Unit vectors spread over the sphere, plus the cases on the horizon.
+    fn directions() -> Vec<Vec3> {
+        let mut state = 0x9e37_79b9_7f4a_7c15u64;
+        let mut u = || {
+            state ^= state << 13;
+            state ^= state >> 7;
+            state ^= state << 17;
+            (state >> 40) as f32 / (1u64 << 24) as f32
+        };
+        let mut v: Vec<Vec3> = (0..200).map(|_| Vec3::new(2.0 * u() - 1.0, 2.0 * u() - 1.0, 2.0 * u() - 1.0).normalize()).collect();
+        v.extend([Vec3::X, Vec3::Z, Vec3::NEG_Z, Vec3::new(0.6, 0.8, -0.0)]);
+        v
+    }
+
+    #[test]
+    fn lambert_equals_bsdf_eval_bitwise() {
+        let d = |r: f32, g: f32, b: f32| BsdfModel::Diffuse(Diffuse { reflectance: Rgb::new(r, g, b) });
+        let bsdfs = [
+            Bsdf::new(d(0.7, 0.5, 0.3)),
+            Bsdf { front: d(0.7, 0.5, 0.3), back: Some(d(0.1, 0.9, 0.4)), opacity: 1.0 },
+            Bsdf { front: d(0.7, 0.5, 0.3), back: Some(d(0.2, 0.2, 0.2)), opacity: 0.37 },
+        ];
+        let dirs = directions();
+        for b in &bsdfs {
+            let lb = Lambert::of(b).expect("diffuse is Lambertian");
+            for wo in &dirs {
+                for wi in &dirs {
+                    let want = b.eval(*wo, *wi, TransportMode::Radiance);
+                    let got = lb.eval(wo.z, wi.z);
+                    assert_eq!((got.r.to_bits(), got.g.to_bits(), got.b.to_bits()), (want.r.to_bits(), want.g.to_bits(), want.b.to_bits()), "wo {wo} wi {wi}");
+                }
+            }
+        }
+        // A non-Lambertian side keeps the general path.
+        let blinn = BsdfModel::BlinnPhong(crate::bsdf::blinn::BlinnPhong {
+            diffuse_reflectance: Rgb::splat(0.5),
+            specular_reflectance: Rgb::splat(0.2),
+            exponent: 20.0,
+            specular_sampling_weight: 0.5,
+        });
+        assert!(Lambert::of(&Bsdf::new(blinn.clone())).is_none());
+        assert!(Lambert::of(&Bsdf { front: d(0.5, 0.5, 0.5), back: Some(blinn), opacity: 1.0 }).is_none());
+    }
+
+    /// The fast path's barycentrics (triple products cached per triangle) agree with the
+    /// ray-plane intersection of the general path to float rounding.
+    #[test]
+    fn fast_barycentrics_match_ray_plane() {
+        let dirs = directions();
+        let eye = Vec3::new(0.3, -0.2, 4.0);
+        for (i, w) in dirs.windows(3).enumerate().take(60) {
+            let v = [w[0] * 2.0, w[1] * 2.0 + Vec3::X, w[2] * 2.0 - Vec3::Y];
+            let (e1, e2) = (v[1] - v[0], v[2] - v[0]);
+            let s = eye - v[0];
+            let (n12, q1, q2) = (e2.cross(e1), e2.cross(s), s.cross(e1));
+            let target = v[0] * 0.2 + v[1] * 0.3 + v[2] * 0.5 + dirs[i] * 1e-3;
+            let d = target - eye;
+            let want = barycentrics(v, eye, d);
+            let det = d.dot(n12);
+            let got = [1.0 - d.dot(q1) / det - d.dot(q2) / det, d.dot(q1) / det, d.dot(q2) / det];
+            let scale = e1.length().max(e2.length()) * s.length();
+            for k in 0..3 {
+                assert!((got[k] - want[k]).abs() <= 1e-4 * scale.max(1.0), "{got:?} vs {want:?}");
+            }
+        }
+    }
+}
