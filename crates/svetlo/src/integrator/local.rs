@@ -36,11 +36,22 @@ pub struct PointLightSample {
 #[derive(Clone, Debug)]
 pub struct LocalLights {
     areas: Vec<Option<AreaProxy>>,
+    /// The common lights in a form [`LocalLights::sample`] evaluates without dispatch.
+    quick: Vec<Quick>,
+}
+
+/// A point light or a planar mesh emitter's proxy (one vector area), copied out of the
+/// scene so that sampling it is a few products; `Other` goes the general way.
+#[derive(Clone, Copy, Debug)]
+enum Quick {
+    Point { position: Vec3, intensity: Rgb },
+    Planar { centre: Vec3, radiance: Rgb, vector_area: Vec3 },
+    Other,
 }
 
 impl LocalLights {
     pub fn new(scene: &Scene) -> Self {
-        let areas = scene
+        let areas: Vec<Option<AreaProxy>> = scene
             .lights
             .iter()
             .map(|l| match l {
@@ -69,12 +80,54 @@ impl LocalLights {
                 _ => None,
             })
             .collect();
-        LocalLights { areas }
+        let quick = scene
+            .lights
+            .iter()
+            .zip(&areas)
+            .map(|(l, a)| match (l, a) {
+                (Light::Point { position, intensity }, _) => Quick::Point { position: *position, intensity: *intensity },
+                (_, Some(AreaProxy::Mesh { centre, radiance, vector_areas })) if vector_areas.len() == 1 => {
+                    Quick::Planar { centre: *centre, radiance: *radiance, vector_area: vector_areas[0] }
+                }
+                _ => Quick::Other,
+            })
+            .collect();
+        LocalLights { areas, quick }
     }
 
     /// Light `i` seen from `p` as a point or a direction; `None` when it sends nothing toward
     /// `p` (or has no position, as environment lights).
+    #[inline(always)]
     pub fn sample(&self, scene: &Scene, i: usize, p: Vec3) -> Option<PointLightSample> {
+        // The same arithmetic as `Light::sample_li` and the mesh proxy below, in order.
+        match self.quick[i] {
+            Quick::Point { position, intensity } => {
+                let d = position - p;
+                let dist2 = d.length_squared();
+                if dist2 == 0.0 {
+                    return None;
+                }
+                Some(PointLightSample { wi: d / dist2.sqrt(), li: intensity / dist2, p: Some(position) })
+            }
+            Quick::Planar { centre, radiance, vector_area } => {
+                let d = centre - p;
+                let r2 = d.length_squared();
+                if r2 <= 0.0 {
+                    return None;
+                }
+                let wi = d / r2.sqrt();
+                let projected = vector_area.dot(-wi).max(0.0);
+                if projected <= 0.0 {
+                    return None;
+                }
+                Some(PointLightSample { wi, li: radiance * (projected / r2), p: Some(centre) })
+            }
+            Quick::Other => self.sample_general(scene, i, p),
+        }
+    }
+
+    #[inline(never)]
+    fn sample_general(&self, scene: &Scene, i: usize, p: Vec3) -> Option<PointLightSample> {
         let light = &scene.lights[i];
         match light {
             Light::Point { .. } | Light::Spot { .. } => {

@@ -19,7 +19,7 @@
 
 use super::local::LocalLights;
 use super::{Integrator, Progress, RenderSettings};
-use crate::bsdf::Bsdf;
+use crate::bsdf::{Bsdf, BsdfModel};
 use crate::error::Result;
 use crate::film::Film;
 use crate::geometry::Geometry;
@@ -218,6 +218,9 @@ impl ZBuffer {
         if !self.ambient.is_black() {
             l += self.ambient * bsdf.diffuse_albedo();
         }
+        if let Some(lb) = &prepared.lambert[sh.material as usize] {
+            return l + lb.lights(scene, prepared, s.p, s.ng, s.ns, wo_w);
+        }
         let frame = Frame::from_normal_tangent(s.ns, s.dpdu);
         let wo = frame.to_local(wo_w);
         for (i, map) in maps.iter().enumerate() {
@@ -249,6 +252,74 @@ pub struct Prepared {
     maps: Vec<Option<ShadowMap>>,
     /// The BSDF of each material that has no texture (the same at every point).
     bsdfs: Vec<Option<Bsdf>>,
+    /// Those of them that are Lambertian on each side, as their constant f.
+    lambert: Vec<Option<Lambert>>,
+}
+
+/// A uniform BSDF that is Lambertian on each side it reflects from (`diffuse`, `twosided`
+/// diffuse): f = ρ/π (times the opacity) when wo and wi lie on one side of the shading
+/// normal, so shading needs two cosines, not a shading frame.
+#[derive(Clone, Copy, Debug)]
+struct Lambert {
+    front: Rgb,
+    back: Option<Rgb>,
+}
+
+impl Lambert {
+    fn of(b: &Bsdf) -> Option<Self> {
+        // As `Diffuse::eval` then `* opacity` in `Bsdf::eval`, in that order.
+        let f = |m: &BsdfModel| match m {
+            BsdfModel::Diffuse(d) => Some(d.reflectance * crate::math::INV_PI * b.opacity),
+            _ => None,
+        };
+        let front = f(&b.front)?;
+        let back = match &b.back {
+            None => None,
+            Some(m) => Some(f(m)?),
+        };
+        Some(Lambert { front, back })
+    }
+
+    /// Σ over lights of f L |cos θi| at `p` seen from direction `wo` (world space), with
+    /// shadow maps. Only the cosines to the shading normal matter: no frame, no BSDF
+    /// dispatch (the z of the frame's local directions is the dot with `ns`).
+    #[inline(always)]
+    fn lights(&self, scene: &Scene, prepared: &Prepared, p: Vec3, ng: Vec3, ns: Vec3, wo: Vec3) -> Rgb {
+        let mut l = Rgb::BLACK;
+        let cos_o = wo.dot(ns);
+        for (i, map) in prepared.maps.iter().enumerate() {
+            let Some(ls) = prepared.lights.sample(scene, i, p) else { continue };
+            let cos_i = ls.wi.dot(ns);
+            let f = self.eval(cos_o, cos_i);
+            if f.is_black() {
+                continue;
+            }
+            if let Some(m) = map {
+                if !m.lit(p, ng) {
+                    continue;
+                }
+            }
+            l += f * ls.li * cos_i.abs();
+        }
+        l
+    }
+
+    /// `Bsdf::eval` for local directions with z = `cos_o`, `cos_i` (the back side mirrored).
+    #[inline]
+    fn eval(&self, cos_o: f32, cos_i: f32) -> Rgb {
+        if cos_o >= 0.0 {
+            if cos_o > 0.0 && cos_i > 0.0 {
+                self.front
+            } else {
+                Rgb::BLACK
+            }
+        } else {
+            match self.back {
+                Some(b) if cos_i < 0.0 => b,
+                _ => Rgb::BLACK,
+            }
+        }
+    }
 }
 
 /// One frame: the colour of every subsample (`ss` x `ss` per pixel) and the image that
@@ -270,8 +341,9 @@ impl ZBuffer {
         let poses = poses(scene);
         let tris = self.triangles(scene, &poses);
         let maps = self.shadow_maps(scene, &lights, &tris);
-        let bsdfs = scene.materials.iter().map(|m| m.is_uniform().then(|| m.bsdf(Vec2::ZERO))).collect();
-        Prepared { zbuffer: *self, lights, poses, tris, maps, bsdfs }
+        let bsdfs: Vec<Option<Bsdf>> = scene.materials.iter().map(|m| m.is_uniform().then(|| m.bsdf(Vec2::ZERO))).collect();
+        let lambert = bsdfs.iter().map(|b| b.as_ref().and_then(Lambert::of)).collect();
+        Prepared { zbuffer: *self, lights, poses, tris, maps, bsdfs, lambert }
     }
 }
 
@@ -331,15 +403,23 @@ impl Prepared {
                 ViewProjection::Orthographic { .. } => (cam.to_world.transform_point3(Vec3::new(c.x, c.y, 0.0)), view_dir),
             }
         };
-        let shade_row = |y: u32| -> Vec<Rgb> {
-            let mut cached: Option<MeshTri> = None;
-            (0..w)
-                .map(|x| {
+        let fast_ok = self.zbuffer.shading == Shading::Phong && matches!(projection, ViewProjection::Perspective { .. });
+        let pixel = |x: u32, y: u32, cached: &mut Option<MeshTri>, fast: &mut (u32, Option<FastTri>)| -> Rgb {
+            {
+                {
                     let k = ids[(y * w + x) as usize];
                     let (o, d) = line(x, y);
                     if k == u32::MAX {
                         let d = d.normalize();
                         return if hide_emitters { Rgb::BLACK } else { scene.environment_lights.iter().map(|&e| scene.lights[e as usize].le_escaped(d)).sum() };
+                    }
+                    if fast_ok {
+                        if fast.0 != k {
+                            *fast = (k, FastTri::new(self, scene, k, eye));
+                        }
+                        if let Some(c) = fast.1.as_ref().and_then(|ft| ft.shade(scene, self, eye, d)) {
+                            return c;
+                        }
                     }
                     let t = &self.tris[k as usize];
                     let b = barycentrics(t.v, o, d);
@@ -352,10 +432,11 @@ impl Prepared {
                         Shading::Phong => {
                             let s = match (&*scene.shapes[t.shape as usize].geometry, self.poses[t.shape as usize]) {
                                 (Geometry::Mesh(m), None) => {
-                                    let mt = match cached {
-                                        Some(c) if c.id == k => c,
-                                        _ => *cached.insert(MeshTri::new(k, m, t.prim as usize)),
-                                    };
+                                    // By reference: a MeshTri is too big to copy per subsample.
+                                    if cached.as_ref().is_none_or(|c| c.id != k) {
+                                        *cached = Some(MeshTri::new(k, m, t.prim as usize));
+                                    }
+                                    let Some(mt) = cached.as_ref() else { unreachable!("just cached") };
                                     mt.surface(t.v[0] * b[0] + t.v[1] * b[1] + t.v[2] * b[2], b)
                                 }
                                 _ => ZBuffer::surface(scene, &self.poses, t, b),
@@ -376,15 +457,24 @@ impl Prepared {
                             })
                             .sum(),
                     }
-                })
-                .collect()
+                }
+            }
         };
-        let subsamples: Vec<Rgb> = if threads == 1 {
-            (0..h).flat_map(shade_row).collect()
+        let shade_row = |y: u32, row: &mut [Rgb]| {
+            let mut cached: Option<MeshTri> = None;
+            let mut fast = (u32::MAX, None);
+            for (x, out) in (0..w).zip(row.iter_mut()) {
+                *out = pixel(x, y, &mut cached, &mut fast);
+            }
+        };
+        // Written in place, row by row: no per-row vectors to allocate and concatenate.
+        let mut subsamples = vec![Rgb::BLACK; (w * h) as usize];
+        if threads == 1 {
+            subsamples.chunks_mut(w as usize).enumerate().for_each(|(y, row)| shade_row(y as u32, row));
         } else {
             let pool = rayon::ThreadPoolBuilder::new().num_threads(threads).build().map_err(|e| crate::error::Error::Settings(format!("thread pool: {e}")))?;
-            pool.install(|| (0..h).into_par_iter().flat_map_iter(shade_row).collect())
-        };
+            pool.install(|| subsamples.par_chunks_mut(w as usize).enumerate().for_each(|(y, row)| shade_row(y as u32, row)));
+        }
         let mut image = crate::film::Image::new(cam.width as usize, cam.height as usize, vec![Rgb::BLACK; (cam.width * cam.height) as usize]);
         let norm = 1.0 / (ss * ss) as f32;
         for y in 0..h {
@@ -395,6 +485,65 @@ impl Prepared {
             }
         }
         Ok(FrameImage { ss, subsamples, image, visibility_time, shading_time: start.elapsed() - visibility_time })
+    }
+}
+
+/// The fast path of Phong shading under a perspective camera: a static mesh triangle with
+/// a Lambertian material that does not emit. The camera ray's barycentrics become three
+/// dot products with per-triangle vectors (the scalar triple products of the ray-plane
+/// intersection, with the eye fixed), and shading is the Lambert light loop inline.
+struct FastTri {
+    v: [Vec3; 3],
+    /// e2 x e1, e2 x s, s x e1 with s = eye - v0: det, b1 det and b2 det are their dots with d.
+    n12: Vec3,
+    q1: Vec3,
+    q2: Vec3,
+    ng: Vec3,
+    normals: Option<[Vec3; 3]>,
+    lambert: Lambert,
+    ambient: Rgb,
+}
+
+impl FastTri {
+    fn new(prepared: &Prepared, scene: &Scene, k: u32, eye: Vec3) -> Option<Self> {
+        let t = &prepared.tris[k as usize];
+        let sh = &scene.shapes[t.shape as usize];
+        let lambert = prepared.lambert[sh.material as usize]?;
+        if sh.light.is_some() || prepared.poses[t.shape as usize].is_some() {
+            return None;
+        }
+        let Geometry::Mesh(m) = &*sh.geometry else { return None };
+        let mt = MeshTri::new(k, m, t.prim as usize);
+        let ambient = &prepared.zbuffer.ambient;
+        let ambient = if ambient.is_black() { Rgb::BLACK } else { *ambient * prepared.bsdfs[sh.material as usize].as_ref()?.diffuse_albedo() };
+        let (e1, e2) = (t.v[1] - t.v[0], t.v[2] - t.v[0]);
+        let s = eye - t.v[0];
+        Some(FastTri { v: t.v, n12: e2.cross(e1), q1: e2.cross(s), q2: s.cross(e1), ng: mt.ng, normals: mt.normals, lambert, ambient })
+    }
+
+    /// The colour seen along direction `d` from the eye; `None` for a ray parallel to the plane.
+    #[inline(always)]
+    fn shade(&self, scene: &Scene, prepared: &Prepared, eye: Vec3, d: Vec3) -> Option<Rgb> {
+        let det = d.dot(self.n12);
+        if det == 0.0 {
+            return None;
+        }
+        let inv = 1.0 / det;
+        let b1 = d.dot(self.q1) * inv;
+        let b2 = d.dot(self.q2) * inv;
+        let b0 = 1.0 - b1 - b2;
+        let p = self.v[0] * b0 + self.v[1] * b1 + self.v[2] * b2;
+        // As MeshTri::surface.
+        let (ng, ns) = match self.normals {
+            None => (self.ng, self.ng),
+            Some(n) => {
+                let ns = (n[0] * b0 + n[1] * b1 + n[2] * b2).normalize_or_zero();
+                let ns = if ns == Vec3::ZERO { self.ng } else { ns };
+                (if self.ng.dot(ns) < 0.0 { -self.ng } else { self.ng }, ns)
+            }
+        };
+        let wo = (eye - p).normalize_or_zero();
+        Some(self.ambient + self.lambert.lights(scene, prepared, p, ng, ns, wo))
     }
 }
 
@@ -479,5 +628,79 @@ impl Integrator for ZBuffer {
         }
         film.spp_done = ss * ss;
         Ok(film)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::bsdf::diffuse::Diffuse;
+    use crate::bsdf::TransportMode;
+
+    /// Unit vectors spread over the sphere, plus the cases on the horizon.
+    fn directions() -> Vec<Vec3> {
+        let mut state = 0x9e37_79b9_7f4a_7c15u64;
+        let mut u = || {
+            state ^= state << 13;
+            state ^= state >> 7;
+            state ^= state << 17;
+            (state >> 40) as f32 / (1u64 << 24) as f32
+        };
+        let mut v: Vec<Vec3> = (0..200).map(|_| Vec3::new(2.0 * u() - 1.0, 2.0 * u() - 1.0, 2.0 * u() - 1.0).normalize()).collect();
+        v.extend([Vec3::X, Vec3::Z, Vec3::NEG_Z, Vec3::new(0.6, 0.8, -0.0)]);
+        v
+    }
+
+    #[test]
+    fn lambert_equals_bsdf_eval_bitwise() {
+        let d = |r: f32, g: f32, b: f32| BsdfModel::Diffuse(Diffuse { reflectance: Rgb::new(r, g, b) });
+        let bsdfs = [
+            Bsdf::new(d(0.7, 0.5, 0.3)),
+            Bsdf { front: d(0.7, 0.5, 0.3), back: Some(d(0.1, 0.9, 0.4)), opacity: 1.0 },
+            Bsdf { front: d(0.7, 0.5, 0.3), back: Some(d(0.2, 0.2, 0.2)), opacity: 0.37 },
+        ];
+        let dirs = directions();
+        for b in &bsdfs {
+            let lb = Lambert::of(b).expect("diffuse is Lambertian");
+            for wo in &dirs {
+                for wi in &dirs {
+                    let want = b.eval(*wo, *wi, TransportMode::Radiance);
+                    let got = lb.eval(wo.z, wi.z);
+                    assert_eq!((got.r.to_bits(), got.g.to_bits(), got.b.to_bits()), (want.r.to_bits(), want.g.to_bits(), want.b.to_bits()), "wo {wo} wi {wi}");
+                }
+            }
+        }
+        // A non-Lambertian side keeps the general path.
+        let blinn = BsdfModel::BlinnPhong(crate::bsdf::blinn::BlinnPhong {
+            diffuse_reflectance: Rgb::splat(0.5),
+            specular_reflectance: Rgb::splat(0.2),
+            exponent: 20.0,
+            specular_sampling_weight: 0.5,
+        });
+        assert!(Lambert::of(&Bsdf::new(blinn.clone())).is_none());
+        assert!(Lambert::of(&Bsdf { front: d(0.5, 0.5, 0.5), back: Some(blinn), opacity: 1.0 }).is_none());
+    }
+
+    /// The fast path's barycentrics (triple products cached per triangle) agree with the
+    /// ray-plane intersection of the general path to float rounding.
+    #[test]
+    fn fast_barycentrics_match_ray_plane() {
+        let dirs = directions();
+        let eye = Vec3::new(0.3, -0.2, 4.0);
+        for (i, w) in dirs.windows(3).enumerate().take(60) {
+            let v = [w[0] * 2.0, w[1] * 2.0 + Vec3::X, w[2] * 2.0 - Vec3::Y];
+            let (e1, e2) = (v[1] - v[0], v[2] - v[0]);
+            let s = eye - v[0];
+            let (n12, q1, q2) = (e2.cross(e1), e2.cross(s), s.cross(e1));
+            let target = v[0] * 0.2 + v[1] * 0.3 + v[2] * 0.5 + dirs[i] * 1e-3;
+            let d = target - eye;
+            let want = barycentrics(v, eye, d);
+            let det = d.dot(n12);
+            let got = [1.0 - d.dot(q1) / det - d.dot(q2) / det, d.dot(q1) / det, d.dot(q2) / det];
+            let scale = e1.length().max(e2.length()) * s.length();
+            for k in 0..3 {
+                assert!((got[k] - want[k]).abs() <= 1e-4 * scale.max(1.0), "{got:?} vs {want:?}");
+            }
+        }
     }
 }

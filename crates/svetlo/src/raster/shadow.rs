@@ -78,6 +78,7 @@ impl ShadowMap {
     }
 
     /// Whether `p` (surface normal `n`) sees the light according to the map.
+    #[inline(always)]
     pub fn lit(&self, p: Vec3, n: Vec3) -> bool {
         let (view, buf, to_light) = match self {
             ShadowMap::Cube { position, faces } => {
@@ -109,8 +110,9 @@ impl ShadowMap {
             return true;
         }
         let r = view.project(pc);
-        let x = (r.x.floor() as i64).clamp(0, view.width as i64 - 1) as u32;
-        let y = (r.y.floor() as i64).clamp(0, view.height as i64 - 1) as u32;
+        // floor_i saturates out of range (and maps NaN to 0), as `floor() as i64` then the clamp.
+        let x = super::floor_i(r.x).clamp(0, view.width as i32 - 1) as u32;
+        let y = super::floor_i(r.y).clamp(0, view.height as i32 - 1) as u32;
         let stored = buf.z[(y * view.width + x) as usize];
         // One texel's footprint at the point, grown as the surface turns away from the light.
         let texel = match view.projection {
