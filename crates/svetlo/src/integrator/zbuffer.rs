@@ -544,12 +544,17 @@ impl FastTri {
             return None;
         }
         let Geometry::Mesh(m) = &*sh.geometry else { return None };
-        let mt = MeshTri::new(k, m, t.prim as usize);
+        // As MeshTri::new, without dp/du (not needed here; it costs a full `surface` call,
+        // which tiny triangles of big meshes pay almost per subsample).
+        let prim = t.prim as usize;
+        let [p0, p1, p2] = m.vertices(prim);
+        let ng = (p1 - p0).cross(p2 - p0).normalize_or_zero();
+        let normals = (!m.normals.is_empty()).then(|| m.indices[prim].map(|i| m.normals[i as usize]));
         let ambient = &prepared.zbuffer.ambient;
         let ambient = if ambient.is_black() { Rgb::BLACK } else { *ambient * prepared.bsdfs[sh.material as usize].as_ref()?.diffuse_albedo() };
         let (e1, e2) = (t.v[1] - t.v[0], t.v[2] - t.v[0]);
         let s = eye - t.v[0];
-        Some(FastTri { v: t.v, n12: e2.cross(e1), q1: e2.cross(s), q2: s.cross(e1), ng: mt.ng, normals: mt.normals, lambert, ambient })
+        Some(FastTri { v: t.v, n12: e2.cross(e1), q1: e2.cross(s), q2: s.cross(e1), ng, normals, lambert, ambient })
     }
 
     /// The colour seen along direction `d` from the eye; `None` for a ray parallel to the plane.
