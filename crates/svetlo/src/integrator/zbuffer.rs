@@ -258,15 +258,43 @@ pub struct Prepared {
 
 /// A uniform BSDF that is Lambertian on each side it reflects from (`diffuse`, `twosided`
 /// diffuse): f = ρ/π (times the opacity) when wo and wi lie on one side of the shading
-/// normal, so shading needs two cosines, not a shading frame.
+/// normal, so shading needs two cosines, not a shading frame; or a one-sided Blinn-Phong,
+/// which needs the half vector too (still no frame).
 #[derive(Clone, Copy, Debug)]
 struct Lambert {
     front: Rgb,
     back: Option<Rgb>,
+    /// A one-sided Blinn-Phong instead (`front` unused): its specular lobe needs the half
+    /// vector, which is taken in world space (equal to the frame's to float rounding).
+    blinn: Option<BlinnLocal>,
+}
+
+#[derive(Clone, Copy, Debug)]
+struct BlinnLocal {
+    model: crate::bsdf::blinn::BlinnPhong,
+    opacity: f32,
+}
+
+impl BlinnLocal {
+    /// As `BlinnPhong::eval` then `* opacity`, with wo, wi in world space and their cosines.
+    #[inline(always)]
+    fn eval(&self, cos_o: f32, cos_i: f32, wo: Vec3, wi: Vec3, ns: Vec3) -> Rgb {
+        if cos_o <= 0.0 || cos_i <= 0.0 {
+            return Rgb::BLACK;
+        }
+        let m = &self.model;
+        let n = m.exponent;
+        let hz = (wo + wi).normalize().dot(ns);
+        let lobe = (n + 1.0) / (8.0 * crate::math::PI) * hz.max(0.0).powf(n) / cos_o.max(cos_i);
+        (m.diffuse_reflectance * crate::math::INV_PI + m.specular_reflectance * lobe) * self.opacity
+    }
 }
 
 impl Lambert {
     fn of(b: &Bsdf) -> Option<Self> {
+        if let (BsdfModel::BlinnPhong(m), None) = (&b.front, &b.back) {
+            return Some(Lambert { front: Rgb::BLACK, back: None, blinn: Some(BlinnLocal { model: *m, opacity: b.opacity }) });
+        }
         // As `Diffuse::eval` then `* opacity` in `Bsdf::eval`, in that order.
         let f = |m: &BsdfModel| match m {
             BsdfModel::Diffuse(d) => Some(d.reflectance * crate::math::INV_PI * b.opacity),
@@ -277,7 +305,7 @@ impl Lambert {
             None => None,
             Some(m) => Some(f(m)?),
         };
-        Some(Lambert { front, back })
+        Some(Lambert { front, back, blinn: None })
     }
 
     /// Σ over lights of f L |cos θi| at `p` seen from direction `wo` (world space), with
@@ -290,7 +318,10 @@ impl Lambert {
         for (i, map) in prepared.maps.iter().enumerate() {
             let Some(ls) = prepared.lights.sample(scene, i, p) else { continue };
             let cos_i = ls.wi.dot(ns);
-            let f = self.eval(cos_o, cos_i);
+            let f = match &self.blinn {
+                None => self.eval(cos_o, cos_i),
+                Some(b) => b.eval(cos_o, cos_i, wo, ls.wi, ns),
+            };
             if f.is_black() {
                 continue;
             }
@@ -513,12 +544,17 @@ impl FastTri {
             return None;
         }
         let Geometry::Mesh(m) = &*sh.geometry else { return None };
-        let mt = MeshTri::new(k, m, t.prim as usize);
+        // As MeshTri::new, without dp/du (not needed here; it costs a full `surface` call,
+        // which tiny triangles of big meshes pay almost per subsample).
+        let prim = t.prim as usize;
+        let [p0, p1, p2] = m.vertices(prim);
+        let ng = (p1 - p0).cross(p2 - p0).normalize_or_zero();
+        let normals = (!m.normals.is_empty()).then(|| m.indices[prim].map(|i| m.normals[i as usize]));
         let ambient = &prepared.zbuffer.ambient;
         let ambient = if ambient.is_black() { Rgb::BLACK } else { *ambient * prepared.bsdfs[sh.material as usize].as_ref()?.diffuse_albedo() };
         let (e1, e2) = (t.v[1] - t.v[0], t.v[2] - t.v[0]);
         let s = eye - t.v[0];
-        Some(FastTri { v: t.v, n12: e2.cross(e1), q1: e2.cross(s), q2: s.cross(e1), ng: mt.ng, normals: mt.normals, lambert, ambient })
+        Some(FastTri { v: t.v, n12: e2.cross(e1), q1: e2.cross(s), q2: s.cross(e1), ng, normals, lambert, ambient })
     }
 
     /// The colour seen along direction `d` from the eye; `None` for a ray parallel to the plane.
@@ -662,6 +698,7 @@ mod tests {
         let dirs = directions();
         for b in &bsdfs {
             let lb = Lambert::of(b).expect("diffuse is Lambertian");
+            assert!(lb.blinn.is_none());
             for wo in &dirs {
                 for wi in &dirs {
                     let want = b.eval(*wo, *wi, TransportMode::Radiance);
@@ -677,8 +714,20 @@ mod tests {
             exponent: 20.0,
             specular_sampling_weight: 0.5,
         });
-        assert!(Lambert::of(&Bsdf::new(blinn.clone())).is_none());
-        assert!(Lambert::of(&Bsdf { front: d(0.5, 0.5, 0.5), back: Some(blinn), opacity: 1.0 }).is_none());
+        assert!(Lambert::of(&Bsdf { front: d(0.5, 0.5, 0.5), back: Some(blinn.clone()), opacity: 1.0 }).is_none());
+        // Blinn-Phong in world space equals the BSDF in the shading frame to rounding.
+        let bsdf = Bsdf { front: blinn, back: None, opacity: 0.8 };
+        let local = Lambert::of(&bsdf).and_then(|l| l.blinn).expect("one-sided Blinn-Phong");
+        let ns = Vec3::new(0.2, -0.5, 0.8).normalize();
+        let frame = crate::math::Frame::from_normal_tangent(ns, Vec3::X);
+        for wo in &dirs {
+            for wi in &dirs {
+                let want = bsdf.eval(frame.to_local(*wo), frame.to_local(*wi), TransportMode::Radiance);
+                let got = local.eval(wo.dot(ns), wi.dot(ns), *wo, *wi, ns);
+                let tol = 1e-3 * want.max_component().max(1e-3);
+                assert!((got - want).max_component().abs() <= tol && (want - got).max_component().abs() <= tol, "wo {wo} wi {wi}: {got:?} vs {want:?}");
+            }
+        }
     }
 
     /// The fast path's barycentrics (triple products cached per triangle) agree with the
