@@ -15,7 +15,7 @@ use super::{Integrator, Progress, RenderSettings};
 use crate::error::Result;
 use crate::film::{Film, Image};
 use crate::geometry::Ray;
-use crate::path::{camera_subpath, connect, light_subpath, PathConfig, Vertex};
+use crate::path::{camera_subpath, connect, light_subpath, Connection, PathConfig, Vertex};
 use crate::sampling::Sampler;
 use crate::scene::Scene;
 use crate::spectrum::Rgb;
@@ -36,7 +36,7 @@ pub struct StrategyImage {
 }
 
 #[derive(Default)]
-pub struct Scratch {
+pub(crate) struct Scratch {
     camera: Vec<Vertex>,
     light: Vec<Vertex>,
 }
@@ -68,29 +68,54 @@ impl SplatEstimator for Estimator {
         sc: &mut Scratch,
         out: &mut SampleOut,
     ) -> Rgb {
-        camera_subpath(scene, &self.cfg, ray, raster, sampler, &mut sc.camera);
-        light_subpath(scene, &self.cfg, ray.time, sampler, &mut sc.light);
-        let mut l = Rgb::BLACK;
-        for t in 1..=sc.camera.len() {
-            for s in 0..=sc.light.len() {
-                if s + t < 2 || !self.cfg.allows(s + t) {
-                    continue;
-                }
-                let Some(c) = connect(scene, &self.cfg, &sc.light, &sc.camera, s, t, sampler, true) else { continue };
-                let v = c.l * c.weight;
-                match c.raster {
-                    Some(r) => out.splat(r, v),
-                    None => l += v,
-                }
-                if let Some(k) = self.strategy(s, t) {
-                    let at = c.raster.unwrap_or(raster);
-                    out.push(1 + 2 * k, at, v);
-                    out.push(2 + 2 * k, at, c.l);
-                }
+        sample_bdpt(scene, &self.cfg, ray, raster, sampler, sc, out, |_, _, s, t, c, v, out| {
+            if let Some(k) = self.strategy(s, t) {
+                let at = c.raster.unwrap_or(raster);
+                out.push(1 + 2 * k, at, v);
+                out.push(2 + 2 * k, at, c.l);
+            }
+            true
+        })
+    }
+}
+
+/// One BDPT sample: a camera and a light subpath, every strategy (s, t) connected and
+/// MIS-weighted; t = 1 strategies are splatted, the others returned as the pixel's value.
+/// `visit(light, camera, s, t, connection, weighted value, out)` sees each connection first
+/// and says whether it counts (BDPT's strategy images; MLT's complement keeps only paths
+/// through delta vertices). Every connection is made whether or not it counts, so the
+/// sample dimensions consumed do not depend on `visit`.
+#[allow(clippy::too_many_arguments)]
+pub(crate) fn sample_bdpt(
+    scene: &Scene,
+    cfg: &PathConfig,
+    ray: &Ray,
+    raster: Vec2,
+    sampler: &mut dyn Sampler,
+    sc: &mut Scratch,
+    out: &mut SampleOut,
+    mut visit: impl FnMut(&[Vertex], &[Vertex], usize, usize, &Connection, Rgb, &mut SampleOut) -> bool,
+) -> Rgb {
+    camera_subpath(scene, cfg, ray, raster, sampler, &mut sc.camera);
+    light_subpath(scene, cfg, ray.time, sampler, &mut sc.light);
+    let mut l = Rgb::BLACK;
+    for t in 1..=sc.camera.len() {
+        for s in 0..=sc.light.len() {
+            if s + t < 2 || !cfg.allows(s + t) {
+                continue;
+            }
+            let Some(c) = connect(scene, cfg, &sc.light, &sc.camera, s, t, sampler, true) else { continue };
+            let v = c.l * c.weight;
+            if !visit(&sc.light, &sc.camera, s, t, &c, v, out) {
+                continue;
+            }
+            match c.raster {
+                Some(r) => out.splat(r, v),
+                None => l += v,
             }
         }
-        l
     }
+    l
 }
 
 impl Bdpt {

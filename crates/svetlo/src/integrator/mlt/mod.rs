@@ -18,6 +18,7 @@ pub mod mutations;
 pub mod space;
 
 use self::space::{MPath, Space};
+use super::bdpt::{sample_bdpt, Scratch};
 use super::metropolis::{self, ChainSettings, ChainStats, Contribution, MetropolisTarget, Proposal};
 use super::pssmlt::parse_chain_option;
 use super::splat::{render_splatting, SampleOut, SplatEstimator};
@@ -27,7 +28,7 @@ use crate::error::{Error, Result};
 use crate::film::Film;
 use crate::geometry::Ray;
 use crate::light::Light;
-use crate::path::{camera_subpath, connect, light_subpath, PathConfig, Vertex};
+use crate::path::{camera_subpath, connect, light_subpath, PathConfig};
 use crate::sampling::{Pcg32, Sampler};
 use crate::scene::Scene;
 use crate::spectrum::Rgb;
@@ -333,12 +334,6 @@ struct Complement {
     cfg: PathConfig,
 }
 
-#[derive(Default)]
-struct Scratch {
-    camera: Vec<Vertex>,
-    light: Vec<Vertex>,
-}
-
 impl SplatEstimator for Complement {
     type Scratch = Scratch;
     fn scratch(&self) -> Scratch {
@@ -354,28 +349,10 @@ impl SplatEstimator for Complement {
         sc: &mut Scratch,
         out: &mut SampleOut,
     ) -> Rgb {
-        camera_subpath(scene, &self.cfg, ray, raster, sampler, &mut sc.camera);
-        light_subpath(scene, &self.cfg, ray.time, sampler, &mut sc.light);
-        let mut l = Rgb::BLACK;
-        for t in 1..=sc.camera.len() {
-            for s in 0..=sc.light.len() {
-                if s + t < 2 || !self.cfg.allows(s + t) {
-                    continue;
-                }
-                // Consume the connection's dimensions whether or not the path counts.
-                let Some(c) = connect(scene, &self.cfg, &sc.light, &sc.camera, s, t, sampler, true) else { continue };
-                let delta = sc.light[..s].iter().any(|v| v.delta) || sc.camera[..t.min(sc.camera.len())].iter().any(|v| v.delta);
-                if !delta {
-                    continue;
-                }
-                let v = c.l * c.weight;
-                match c.raster {
-                    Some(r) => out.splat(r, v),
-                    None => l += v,
-                }
-            }
-        }
-        l
+        // Every connection is made (the sample's dimensions stay aligned); only paths through a delta vertex count.
+        sample_bdpt(scene, &self.cfg, ray, raster, sampler, sc, out, |light, camera, s, t, _, _, _| {
+            light[..s].iter().any(|v| v.delta) || camera[..t.min(camera.len())].iter().any(|v| v.delta)
+        })
     }
 }
 
