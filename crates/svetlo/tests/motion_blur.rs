@@ -100,7 +100,15 @@ fn time_average_of(
 
 /// Channels failing the two-sample Z-test of a film against (mean, variance of the mean).
 fn failures(label: &str, film: &svetlo::film::Film, reference: &(Image, Image)) -> usize {
-    let (img, var) = (film.image(), film.variance_image());
+    let mut var = film.variance_image();
+    for v in var.data.iter_mut() {
+        *v = *v * (1.0 / film.spp_done as f32);
+    }
+    failures_of(label, &film.image(), &var, reference)
+}
+
+/// The same test for an image and the variance of its mean.
+fn failures_of(label: &str, img: &Image, var_mean: &Image, reference: &(Image, Image)) -> usize {
     let n = img.data.len() * 3;
     let level = svetlo::sampling::stats::sidak_alpha(0.01, n);
     let mut failed = 0;
@@ -108,7 +116,7 @@ fn failures(label: &str, film: &svetlo::film::Film, reference: &(Image, Image)) 
     for p in 0..img.data.len() {
         for ch in 0..3 {
             let (a, r) = (img.data[p][ch] as f64, reference.0.data[p][ch] as f64);
-            let v = var.data[p][ch] as f64 / film.spp_done as f64 + reference.1.data[p][ch] as f64;
+            let v = var_mean.data[p][ch] as f64 + reference.1.data[p][ch] as f64;
             da += a - r;
             sv += v;
             if v <= 1e-12 {
@@ -122,7 +130,7 @@ fn failures(label: &str, film: &svetlo::film::Film, reference: &(Image, Image)) 
             }
             let bad = svetlo::sampling::stats::two_sided_p((a - r).abs() / v.sqrt()) < level;
             if bad && std::env::var("SVETLO_DEBUG_COMPARE").is_ok() {
-                eprintln!("pixel {p} ch {ch}: {a} (var {}) vs {r} (var of mean {})", var.data[p][ch], reference.1.data[p][ch]);
+                eprintln!("pixel {p} ch {ch}: {a} (var of mean {}) vs {r} (var of mean {})", var_mean.data[p][ch], reference.1.data[p][ch]);
             }
             failed += usize::from(bad);
         }
@@ -303,4 +311,31 @@ fn zbuffer_draws_the_middle_of_the_shutter() {
         |a: &Image, b: &Image| a.data.iter().zip(&b.data).filter(|(x, y)| (**x - **y).max_component().abs() > 1e-3 * x.max_component().max(1e-3)).count();
     assert_eq!(differ(&moving, &still), 0);
     assert!(differ(&moving, &start) > 20);
+}
+
+/// The bidirectional methods connect subpaths at the camera ray's time: BDPT's blurred
+/// shadow is the time average of static scenes too (a connection tested at time 0 would
+/// leave the shadow sharp where the ball starts).
+#[test]
+fn bdpt_connections_see_the_scene_at_the_path_time() {
+    let d = Vec3::new(1.5, 0.0, 0.0);
+    let reference = time_average_of(|t, f| f(&sphere_scene_at((0.0, 0.0), t * d, None)), "direct", 2, 256, None, 31);
+    // BDPT splats (t = 1) are not in the film's per-sample variance: take the variance of
+    // the mean from 16 independent renders instead.
+    let scene = sphere_scene((0.0, 1.0), Some(d));
+    let renders: Vec<Image> = (0..16).map(|k| render(&scene, "bdpt", &settings(16, 2, 100 + k)).image()).collect();
+    let mut mean = renders[0].clone();
+    let mut var = renders[0].clone();
+    for p in 0..mean.data.len() {
+        let (mut m3, mut v3) = ([0.0f32; 3], [0.0f32; 3]);
+        for ch in 0..3 {
+            let xs: Vec<f64> = renders.iter().map(|im| im.data[p][ch] as f64).collect();
+            let m = xs.iter().sum::<f64>() / 16.0;
+            m3[ch] = m as f32;
+            v3[ch] = (xs.iter().map(|x| (x - m) * (x - m)).sum::<f64>() / 15.0 / 16.0) as f32;
+        }
+        mean.data[p] = svetlo::Rgb::new(m3[0], m3[1], m3[2]);
+        var.data[p] = svetlo::Rgb::new(v3[0], v3[1], v3[2]);
+    }
+    assert_eq!(failures_of("ball over the floor, bdpt", &mean, &var, &reference), 0);
 }

@@ -71,10 +71,11 @@ pub fn connect(
         if cs.pdf <= 0.0 || cs.we <= 0.0 {
             return None;
         }
-        let cam = Vertex::camera(cs.p_lens, cs.raster, Rgb::splat(cs.we / cs.pdf));
+        let mut cam = Vertex::camera(cs.p_lens, cs.raster, Rgb::splat(cs.we / cs.pdf));
+        cam.time = qs.time;
         let f = if s == 1 { qs.le(scene, &cam) } else { qs.f(&cam, TransportMode::Importance) };
         let l = qs.beta * f * cam.beta * qs.abs_cos_to(&cam);
-        if l.is_black() || scene.occluded(qs.p, qs.ng, cs.p_lens) {
+        if l.is_black() || scene.occluded_at(qs.p, qs.ng, cs.p_lens, qs.time) {
             return None;
         }
         raster = Some(cs.raster);
@@ -102,11 +103,12 @@ pub fn connect(
             Vertex::light_point(li as u32, ls.p, ls.n, ls.li, beta, 0.0)
         };
         v.pdf_fwd = v.pdf_light_origin(scene, pt);
+        v.time = pt.time;
         let l = pt.beta * pt.f(&v, TransportMode::Radiance) * v.beta * pt.abs_cos_to(&v);
         if l.is_black() {
             return None;
         }
-        let blocked = if ls.infinite { scene.occluded_dir(pt.p, pt.ng, ls.wi) } else { scene.occluded(pt.p, pt.ng, ls.p) };
+        let blocked = if ls.infinite { scene.occluded_dir_at(pt.p, pt.ng, ls.wi, pt.time) } else { scene.occluded_at(pt.p, pt.ng, ls.p, pt.time) };
         if blocked {
             return None;
         }

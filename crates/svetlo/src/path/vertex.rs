@@ -103,6 +103,9 @@ pub struct Vertex {
     pub event: Event,
     /// Camera vertices: where on the film.
     pub raster: Vec2,
+    /// The path's time in the shutter interval (the camera ray's): connections test
+    /// visibility against moving shapes at this time.
+    pub time: f32,
 }
 
 #[inline]
@@ -149,6 +152,7 @@ impl Vertex {
             delta: false,
             event: if kind == VertexKind::Camera { Event::CAMERA } else { Event::LIGHT },
             raster: Vec2::ZERO,
+            time: 0.0,
         }
     }
 
@@ -172,7 +176,18 @@ impl Vertex {
     pub fn surface(scene: &Scene, si: &SurfaceInteraction, beta: Rgb) -> Self {
         let bsdf = scene.material(si).bsdf(si.uv);
         let light = scene.area_light(si).map(|(i, _)| i);
-        Vertex { p: si.p, ng: si.ng, shading: si.shading, uv: si.uv, wo: si.wo, bsdf: Some(bsdf), light, beta, ..Self::blank(VertexKind::Surface) }
+        Vertex {
+            p: si.p,
+            ng: si.ng,
+            shading: si.shading,
+            uv: si.uv,
+            wo: si.wo,
+            bsdf: Some(bsdf),
+            light,
+            beta,
+            time: si.time,
+            ..Self::blank(VertexKind::Surface)
+        }
     }
 
     #[inline]
@@ -360,7 +375,7 @@ pub(crate) fn geometry_term(scene: &Scene, a: &Vertex, b: &Vertex) -> f32 {
         return 0.0;
     }
     let g = a.abs_cos_to(b) * b.abs_cos_to(a) / d2;
-    if g == 0.0 || scene.occluded(a.p, a.ng, b.p) {
+    if g == 0.0 || scene.occluded_at(a.p, a.ng, b.p, a.time) {
         return 0.0;
     }
     g

@@ -30,7 +30,9 @@ pub fn camera_subpath(scene: &Scene, cfg: &PathConfig, ray: &Ray, raster: Vec2, 
     if cfg.max_camera_vertices == 0 {
         return;
     }
-    path.push(Vertex::camera(lens_point(scene, ray), raster, Rgb::WHITE));
+    let mut cam = Vertex::camera(lens_point(scene, ray), raster, Rgb::WHITE);
+    cam.time = ray.time;
+    path.push(cam);
     let (_, pdf_dir) = scene.camera.pdf_we(ray);
     random_walk(scene, *ray, sampler, Rgb::WHITE, pdf_dir, cfg.max_camera_vertices, cfg.rr_depth, TransportMode::Radiance, path);
 }
@@ -62,6 +64,9 @@ pub fn light_subpath(scene: &Scene, cfg: &PathConfig, time: f32, sampler: &mut d
     } else {
         let n = if matches!(light, crate::light::Light::Area(_)) { es.n } else { Vec3::ZERO };
         path.push(Vertex::light_point(li as u32, es.ray.o, n, es.le, Rgb::splat(1.0 / (pmf * es.pdf_pos)), pmf * es.pdf_pos));
+    }
+    if let Some(v) = path.last_mut() {
+        v.time = time;
     }
     let beta = es.le * (es.n.dot(d).abs() / (pmf * es.pdf_pos * es.pdf_dir));
     random_walk(scene, es.ray, sampler, beta, es.pdf_dir, cfg.max_light_vertices, cfg.rr_depth, TransportMode::Importance, path);
