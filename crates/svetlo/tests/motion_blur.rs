@@ -102,7 +102,7 @@ fn time_average_of(
 fn failures(label: &str, film: &svetlo::film::Film, reference: &(Image, Image)) -> usize {
     let mut var = film.variance_image();
     for v in var.data.iter_mut() {
-        *v = *v * (1.0 / film.spp_done as f32);
+        *v *= 1.0 / film.spp_done as f32;
     }
     failures_of(label, &film.image(), &var, reference)
 }
