@@ -202,16 +202,7 @@ impl<'a> Space<'a> {
                 let Some(nv) = self.trace(v, w) else { return false };
                 nv
             } else {
-                let (v, prev) = (&chain[n - 1], &chain[n - 2]);
-                let Some(b) = &v.bsdf else { return false };
-                let (wp, _) = dir(v, prev);
-                let Some(bs) = b.sample(v.shading.to_local(wp), rng.next_f32(), Vec2::new(rng.next_f32(), rng.next_f32()), TransportMode::Importance) else {
-                    return false;
-                };
-                if bs.lobe.is_specular() || bs.pdf <= 0.0 {
-                    return false;
-                }
-                let Some(nv) = self.trace(v, v.shading.to_world(bs.wi)) else { return false };
+                let Some(nv) = self.scatter(&chain[n - 1], &chain[n - 2], TransportMode::Importance, rng) else { return false };
                 nv
             };
             out.push(next.clone());
@@ -221,6 +212,18 @@ impl<'a> Space<'a> {
             }
         }
         true
+    }
+
+    /// The next vertex after `v` (reached from `prev`) by sampling its BSDF in `mode`; None
+    /// where the walk ends (no BSDF, a specular lobe the chains do not hold, nothing hit).
+    fn scatter(&self, v: &Vertex, prev: &Vertex, mode: TransportMode, rng: &mut Pcg32) -> Option<Vertex> {
+        let b = v.bsdf.as_ref()?;
+        let (wp, _) = dir(v, prev);
+        let bs = b.sample(v.shading.to_local(wp), rng.next_f32(), Vec2::new(rng.next_f32(), rng.next_f32()), mode)?;
+        if bs.lobe.is_specular() || bs.pdf <= 0.0 {
+            return None;
+        }
+        self.trace(v, v.shading.to_world(bs.wi))
     }
 
     /// Grow `count` vertices from the camera side before `suffix` (`suffix[0]` the vertex
@@ -239,16 +242,7 @@ impl<'a> Space<'a> {
                 let Some(si) = self.scene.intersect(&ray) else { return false };
                 Vertex::surface(self.scene, &si, Rgb::WHITE)
             } else {
-                let prev = &chain[n - 2];
-                let Some(b) = &v.bsdf else { return false };
-                let (wp, _) = dir(v, prev);
-                let Some(bs) = b.sample(v.shading.to_local(wp), rng.next_f32(), Vec2::new(rng.next_f32(), rng.next_f32()), TransportMode::Radiance) else {
-                    return false;
-                };
-                if bs.lobe.is_specular() || bs.pdf <= 0.0 {
-                    return false;
-                }
-                let Some(nv) = self.trace(v, v.shading.to_world(bs.wi)) else { return false };
+                let Some(nv) = self.scatter(v, &chain[n - 2], TransportMode::Radiance, rng) else { return false };
                 nv
             };
             out.push(next.clone());
