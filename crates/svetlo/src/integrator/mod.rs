@@ -145,6 +145,17 @@ const TILE: u32 = 16;
 /// Run a pixel estimator over the film: passes of a few samples per pixel over all tiles in
 /// parallel, tiles merged in a fixed order (deterministic for any thread count), stopping early
 /// on cancellation or when the time budget is spent. Each pass is kept whole.
+/// Starts sample `s` of pixel (x, y) and draws its camera ray: film position, lens point and
+/// time, the first five dimensions of every camera-side method, in this order.
+pub(crate) fn camera_sample(cam: &crate::camera::Camera, sampler: &mut dyn Sampler, x: u32, y: u32, s: u32) -> (Vec2, crate::geometry::Ray) {
+    sampler.start_pixel_sample(x, y, s);
+    let pf = sampler.next_2d();
+    let lens = sampler.next_2d();
+    let time = sampler.next_1d();
+    let raster = Vec2::new(x as f32 + pf.x, y as f32 + pf.y);
+    (raster, cam.generate_ray(raster, lens, time))
+}
+
 pub fn render_pixels(scene: &Scene, settings: &RenderSettings, progress: &Progress, est: &dyn PixelEstimator) -> Result<Film> {
     settings.validate()?;
     let cam = &scene.camera;
@@ -178,12 +189,7 @@ pub fn render_pixels(scene: &Scene, settings: &RenderSettings, progress: &Progre
                     for y in y0..y1 {
                         for x in x0..x1 {
                             for s in s0..s0 + n {
-                                sampler.start_pixel_sample(x, y, s);
-                                let pf = sampler.next_2d();
-                                let lens = sampler.next_2d();
-                                let time = sampler.next_1d();
-                                let raster = Vec2::new(x as f32 + pf.x, y as f32 + pf.y);
-                                let ray = cam.generate_ray(raster, lens, time);
+                                let (raster, ray) = camera_sample(cam, sampler.as_mut(), x, y, s);
                                 let l = est.li(scene, &ray, sampler.as_mut(), settings);
                                 tile.add_sample(raster, l);
                             }

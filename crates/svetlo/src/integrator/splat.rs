@@ -130,12 +130,7 @@ fn render_chunked<E: SplatEstimator>(
                         for y in y0..y1 {
                             for x in x0..x1 {
                                 for s in s0..s0 + n {
-                                    sampler.start_pixel_sample(x, y, s);
-                                    let pf = sampler.next_2d();
-                                    let lens = sampler.next_2d();
-                                    let time = sampler.next_1d();
-                                    let raster = Vec2::new(x as f32 + pf.x, y as f32 + pf.y);
-                                    let ray = cam.generate_ray(raster, lens, time);
+                                    let (raster, ray) = super::camera_sample(cam, sampler.as_mut(), x, y, s);
                                     let mut out = SampleOut { splats: &mut splats };
                                     let l = est.sample(scene, settings, &ray, raster, sampler.as_mut(), &mut scratch, &mut out);
                                     tile.add_sample(raster, l);

@@ -154,11 +154,7 @@ impl Integrator for Sppm {
                         let mut sampler = proto.clone_box();
                         (0..w)
                             .map(|x| {
-                                sampler.start_pixel_sample(x as u32, y as u32, it);
-                                let pf = sampler.next_2d();
-                                let lens = sampler.next_2d();
-                                let time = sampler.next_1d();
-                                let ray = cam.generate_ray(Vec2::new(x as f32 + pf.x, y as f32 + pf.y), lens, time);
+                                let (_, ray) = crate::integrator::camera_sample(cam, sampler.as_mut(), x as u32, y as u32, it);
                                 let mut vps: Vec<Option<VisiblePoint>> = (0..slots).map(|_| None).collect();
                                 let l = camera_walk(scene, &ray, sampler.as_mut(), settings, &mut |v, _| {
                                     if let Some(slot) = vps.get_mut(v.index as usize) {
