@@ -63,6 +63,10 @@ impl Distribution1D {
     /// Discrete sample: (index, pmf, u remapped to [0,1) within the chosen interval).
     #[inline]
     pub fn sample_discrete(&self, u: f32) -> (usize, f32, f32) {
+        if self.func.len() == 1 {
+            // One entry (a scene's only light): nothing to search.
+            return (0, 1.0, u);
+        }
         let i = self.find(u);
         let p = self.pmf(i);
         let ur = if p > 0.0 { ((u - self.cdf[i]) / p).clamp(0.0, crate::math::ONE_MINUS_EPSILON) } else { 0.0 };
