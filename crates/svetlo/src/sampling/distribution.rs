@@ -52,6 +52,9 @@ impl Distribution1D {
         // Largest i with cdf[i] <= u, and a non-empty interval.
         let mut i = self.cdf.partition_point(|&c| c <= u).saturating_sub(1);
         i = i.min(self.func.len() - 1);
+        if self.cdf[i + 1] > self.cdf[i] {
+            return i; // the common case: the interval found is not empty
+        }
         while i > 0 && self.pmf(i) == 0.0 {
             i -= 1;
         }
