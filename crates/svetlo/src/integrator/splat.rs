@@ -1,6 +1,7 @@
-//! The driver of methods that also write away from their own pixel (light tracing, BDPT's
-//! t = 1): like [`render_pixels`](super::render_pixels), passes over tiles in parallel, but
-//! each pixel sample may also emit splats. Tiles keep their splats in lists, added to
+//! The pixel-sample driver of every camera-side method: passes over tiles in parallel, each
+//! pixel sample filtered into its tile and, for methods that also write away from their own
+//! pixel (light tracing, BDPT's t = 1), emitting splats ([`render_pixels`](super::render_pixels)
+//! is this driver with nothing to splat). Tiles keep their splats in lists, added to
 //! pass-local buffers in tile order (tiles run in chunks, bounding the lists' memory) that
 //! join the film when the pass is complete, so the image does not depend on the number of
 //! threads or on scheduling. Besides the film, an estimator may feed extra images
@@ -80,7 +81,7 @@ pub fn render_splatting<E: SplatEstimator>(scene: &Scene, settings: &RenderSetti
 }
 
 /// `render_splatting` with at most about `chunk_samples` pixel samples per chunk of tiles.
-fn render_chunked<E: SplatEstimator>(
+pub(super) fn render_chunked<E: SplatEstimator>(
     scene: &Scene,
     settings: &RenderSettings,
     progress: &Progress,
@@ -111,7 +112,7 @@ fn render_chunked<E: SplatEstimator>(
         let film_ref = &film;
         // Tiles go in chunks so that the splat lists in memory stay bounded on large films;
         // each chunk's splats land in pass-local dense buffers, in chunk and tile order.
-        let tiles_per_chunk = ((chunk_samples / (n as u64 * (TILE * TILE) as u64)).max(1) as usize).min(tiles.len().max(1));
+        let tiles_per_chunk = ((chunk_samples / (n as u64 * (TILE * TILE) as u64)).max(1)).min(tiles.len().max(1) as u64) as usize;
         let mut pass_tiles: Vec<FilmTile> = Vec::with_capacity(tiles.len());
         let mut pass_splats: Vec<Vec<Rgb>> = vec![Vec::new(); 1 + channels];
         let mut cancelled = false;
