@@ -6,7 +6,7 @@ use super::build::{build_wide, LeafParams};
 use super::tri4::{intersect_half, TriRay};
 #[cfg(target_arch = "x86_64")]
 use super::tri8::TriRay8;
-use super::tri8::{Tri8, LANES, NO_TRI};
+use super::tri8::{Hit, Tri8, LANES, NO_TRI};
 use super::wide::{leaf_code, leaf_range, prefetch, traverse, BoxRay, Node};
 use super::PrimHit;
 use crate::geometry::triangle::WatertightRay;
@@ -26,11 +26,16 @@ pub struct Accel {
     /// Shape index of each sphere of `spheres`.
     sph_shapes: Vec<u32>,
     bounds: Aabb,
+    /// The hierarchy is larger than the caches: traversal prefetches what it pushes.
+    pub(super) prefetch: bool,
     /// The CPU has AVX: node tests take all eight children at once.
     pub(super) avx: bool,
 }
 
 const TRI_LEAF: LeafParams = LeafParams { group: LANES, max_leaf: 16, traversal_cost: 0.3 };
+/// Hierarchies smaller than this (about an L2 cache) are not prefetched: in cache, the
+/// prefetch instructions cost more than they save.
+const PREFETCH_MIN_BYTES: usize = 1 << 20;
 const SPHERE_LEAF: LeafParams = LeafParams { group: 1, max_leaf: 4, traversal_cost: 1.0 };
 
 impl Accel {
@@ -94,7 +99,12 @@ impl Accel {
                 bounds = bounds.union(root.bounds());
             }
         }
-        Accel { tri_nodes, tris, meshes, tri_mesh, sph_nodes, spheres, sph_shapes, bounds, avx: has_avx() }
+        let bytes = std::mem::size_of_val(&tri_nodes[..])
+            + std::mem::size_of_val(&tris[..])
+            + std::mem::size_of_val(&sph_nodes[..])
+            + std::mem::size_of_val(&spheres[..]);
+        let prefetch = bytes > PREFETCH_MIN_BYTES;
+        Accel { tri_nodes, tris, meshes, tri_mesh, sph_nodes, spheres, sph_shapes, bounds, prefetch, avx: has_avx() }
     }
 
     pub fn bounds(&self) -> Aabb {
@@ -138,18 +148,18 @@ impl Accel {
         let mut t_max = ray.t_max;
         let mut best: Option<PrimHit> = None;
         if !self.tri_nodes.is_empty() {
-            let mut hit: Option<(usize, usize)> = None;
+            let mut hit: Option<(usize, usize, f32, f32)> = None;
             let prefetch_leaf = |code| {
                 // The first block only (a constant length, so no loop): further blocks are often not reached.
                 prefetch(self.tris.as_ptr().wrapping_add(leaf_range(code).0), std::mem::size_of::<Tri8>());
             };
-            traverse::<ANY, AVX>(&self.tri_nodes, &bray, &mut t_max, prefetch_leaf, |code, t_max| {
+            traverse::<ANY, AVX>(&self.tri_nodes, &bray, &mut t_max, self.prefetch, prefetch_leaf, |code, t_max| {
                 let (start, count) = leaf_range(code);
                 let mut found = false;
                 for (i, block) in self.tris[start..start + count].iter().enumerate() {
-                    if let Some((lane, t)) = tray.test(block, w, *t_max) {
+                    if let Some((lane, t, b1, b2)) = tray.test(block, w, *t_max) {
                         *t_max = t;
-                        hit = Some((start + i, lane));
+                        hit = Some((start + i, lane, b1, b2));
                         found = true;
                         if ANY {
                             break;
@@ -158,14 +168,11 @@ impl Accel {
                 }
                 found
             });
-            if let Some((b, lane)) = hit {
+            if let Some((b, lane, b1, b2)) = hit {
                 if ANY {
                     return Some(PrimHit { t: t_max, shape: 0, prim: 0, b1: 0.0, b2: 0.0 });
                 }
-                let block = &self.tris[b];
-                let id = block.ids[lane];
-                // Barycentrics of the final hit only: the scalar test gives the SIMD lane's result bit for bit.
-                let (b1, b2) = block.barycentrics(lane, w);
+                let id = self.tris[b].ids[lane];
                 let (first, shape) = self.meshes[self.tri_mesh.get(id as usize).map_or(0, |&k| k as usize)];
                 best = Some(PrimHit { t: t_max, shape, prim: id - first, b1, b2 });
             }
@@ -176,6 +183,7 @@ impl Accel {
                 &self.sph_nodes,
                 &bray,
                 &mut t_max,
+                self.prefetch,
                 |_| {},
                 |code, t_max| {
                     let (start, count) = leaf_range(code);
@@ -203,13 +211,13 @@ impl Accel {
 
 /// The triangle block test of one ray, by instruction set.
 trait TriKernel {
-    /// Nearest hit of the block in `(0, t_max]`: (lane, t).
-    fn test(&self, block: &Tri8, w: &WatertightRay, t_max: f32) -> Option<(usize, f32)>;
+    /// Nearest hit of the block in `(0, t_max]`: (lane, t, b1, b2).
+    fn test(&self, block: &Tri8, w: &WatertightRay, t_max: f32) -> Option<Hit>;
 }
 
 impl TriKernel for TriRay {
     #[inline(always)]
-    fn test(&self, block: &Tri8, w: &WatertightRay, t_max: f32) -> Option<(usize, f32)> {
+    fn test(&self, block: &Tri8, w: &WatertightRay, t_max: f32) -> Option<Hit> {
         let lo = intersect_half(block, 0, self, w, t_max);
         if block.ids[4] == NO_TRI {
             return lo;
@@ -225,7 +233,7 @@ impl TriKernel for TriRay {
 #[cfg(target_arch = "x86_64")]
 impl TriKernel for TriRay8 {
     #[inline(always)]
-    fn test(&self, block: &Tri8, w: &WatertightRay, t_max: f32) -> Option<(usize, f32)> {
+    fn test(&self, block: &Tri8, w: &WatertightRay, t_max: f32) -> Option<Hit> {
         // SAFETY: a TriRay8 exists only on CPUs with AVX (its constructor's contract), and it is
         // used only inside `trace_avx`, which is compiled with AVX enabled.
         unsafe { block.intersect_avx(self, w, t_max) }

@@ -136,8 +136,9 @@ fn scene_rays(rng: &mut Pcg32, n: usize) -> Vec<Ray> {
     rays
 }
 
-/// Checks every ray against brute force, with the SIMD node test this CPU picks and with
-/// the 4-lane SSE one (both must agree with brute force, so with each other).
+/// Checks every ray against brute force, with the SIMD node and triangle tests this CPU
+/// picks and with the 4-lane SSE ones (both must agree with brute force, so with each
+/// other), the second time with the prefetching traversal that large scenes use.
 fn run(shapes: &[Geometry], rays: &[Ray]) -> usize {
     let refs: Vec<&Geometry> = shapes.iter().collect();
     let mut accel = Accel::build(&refs);
@@ -147,6 +148,7 @@ fn run(shapes: &[Geometry], rays: &[Ray]) -> usize {
         hits += accel.intersect(r).is_some() as usize;
     }
     accel.avx = false;
+    accel.prefetch = !accel.prefetch;
     for r in rays {
         check(shapes, &accel, r);
     }

@@ -2,14 +2,14 @@
 //! test of `geometry::triangle`, operation for operation in the same order, so that
 //! each lane's result is bit-identical to the scalar test (no FMA, IEEE SSE).
 
-use super::tri8::{nearest_lane, Tri8};
+use super::tri8::{nearest_lane, Hit, Tri8};
 use crate::geometry::triangle::WatertightRay;
 use glam::Vec4;
 
 /// Four lanes (`half` 0: lanes 0..4, 1: lanes 4..8) of a [`Tri8`], tested at once.
-/// Nearest hit in `(0, t_max]`: (lane of the block, t). On equal t the lowest lane wins.
+/// Nearest hit in `(0, t_max]`: (lane of the block, t, b1, b2). On equal t the lowest lane wins.
 #[inline(always)]
-pub fn intersect_half(tri: &Tri8, half: usize, r: &TriRay, wr: &WatertightRay, t_max: f32) -> Option<(usize, f32)> {
+pub fn intersect_half(tri: &Tri8, half: usize, r: &TriRay, wr: &WatertightRay, t_max: f32) -> Option<Hit> {
     let [kx, ky, kz] = r.k;
     let off = 4 * (half & 1);
     let p = |v: usize, a: usize| {
@@ -39,13 +39,14 @@ pub fn intersect_half(tri: &Tri8, half: usize, r: &TriRay, wr: &WatertightRay, t
     let front = det.cmplt(zero) & t_scaled.cmplt(zero) & t_scaled.cmpge(tmd);
     let back = det.cmpgt(zero) & t_scaled.cmpgt(zero) & t_scaled.cmple(tmd);
     let valid = !(neg & pos) & (front | back) & !edge;
-    let mut best: Option<(usize, f32)> = None;
+    let mut best: Option<Hit> = None;
     if valid.any() {
-        let t = t_scaled * det.recip();
+        let inv = det.recip();
+        let t = t_scaled * inv;
         let mask = (valid & t.cmpgt(zero)).bitmask();
         if mask != 0 {
             let (lane, t) = nearest_lane(mask, &t.to_array());
-            best = Some((off + lane, t));
+            best = Some((off + lane, t, (v * inv).to_array()[lane & 3], (w * inv).to_array()[lane & 3]));
         }
     }
     let on_edge = edge.bitmask() << off;

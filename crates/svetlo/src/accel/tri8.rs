@@ -2,11 +2,14 @@
 //! are tested against one ray at once; without it, `tri4` tests each half of four.
 //! Either way the test is the watertight one of `geometry::triangle`, operation for
 //! operation in the same order (no FMA), so a lane's accept/reject and its t are
-//! bit-identical to the scalar test's. Barycentrics are not computed here: the
-//! traversal recomputes them with the scalar test for the final hit only.
+//! bit-identical to the scalar test's. Barycentrics are computed for a block's
+//! nearest lane only, from the 1 / det the test has at hand.
 
 use crate::geometry::triangle::WatertightRay;
 use glam::Vec3;
+
+/// A block's nearest hit: (lane, t, b1, b2).
+pub type Hit = (usize, f32, f32, f32);
 
 /// Triangles per block.
 pub const LANES: usize = 8;
@@ -45,42 +48,14 @@ impl Tri8 {
         [0, 1, 2].map(|v| Vec3::new(p[v][0][lane], p[v][1][lane], p[v][2][lane]))
     }
 
-    /// Barycentrics (b1, b2) of the hit of `lane`, as the scalar test computes them (same
-    /// operations), for the final hit of a traversal only.
-    #[inline(always)]
-    pub fn barycentrics(&self, lane: usize, r: &WatertightRay) -> (f32, f32) {
-        let lane = lane & (LANES - 1);
-        let (kx, ky, kz) = (r.kx.min(2), r.ky.min(2), r.kz.min(2));
-        let o = r.o.to_array();
-        let p = &self.p;
-        let rel = |v: usize, k: usize| p[v][k][lane] - o[k];
-        let (az, bz, cz) = (rel(0, kz), rel(1, kz), rel(2, kz));
-        let ax = rel(0, kx) - r.sx * az;
-        let ay = rel(0, ky) - r.sy * az;
-        let bx = rel(1, kx) - r.sx * bz;
-        let by = rel(1, ky) - r.sy * bz;
-        let cx = rel(2, kx) - r.sx * cz;
-        let cy = rel(2, ky) - r.sy * cz;
-        let u = cx * by - cy * bx;
-        let v = ax * cy - ay * cx;
-        let w = bx * ay - by * ax;
-        if u == 0.0 || v == 0.0 || w == 0.0 {
-            // An edge lane: the scalar test's f64 fallback decides.
-            let [p0, p1, p2] = self.vertices(lane);
-            return r.intersect(p0, p1, p2, f32::INFINITY).map_or((0.0, 0.0), |h| (h.1, h.2));
-        }
-        let inv = 1.0 / (u + v + w);
-        (v * inv, w * inv)
-    }
-
-    /// Nearest hit among the eight in `(0, t_max]`: (lane, t). On equal t the lowest lane wins.
+    /// Nearest hit among the eight in `(0, t_max]`: (lane, t, b1, b2). On equal t the lowest lane wins.
     ///
     /// # Safety
     /// The CPU must support AVX, and the caller must be compiled with it enabled
     /// (`#[target_feature(enable = "avx")]`) so that this inlines into AVX code.
     #[cfg(target_arch = "x86_64")]
     #[inline(always)]
-    pub unsafe fn intersect_avx(&self, r: &TriRay8, wr: &WatertightRay, t_max: f32) -> Option<(usize, f32)> {
+    pub unsafe fn intersect_avx(&self, r: &TriRay8, wr: &WatertightRay, t_max: f32) -> Option<Hit> {
         use std::arch::x86_64::*;
         let base = self.p.as_ptr() as *const f32;
         // SAFETY: `r.k*` are axis * LANES with axis < 3, so every offset stays inside `p`;
@@ -113,15 +88,21 @@ impl Tri8 {
         let ok = _mm256_and_ps(_mm256_cmp_ps::<_CMP_GT_OQ>(ts, zero), _mm256_cmp_ps::<_CMP_LE_OQ>(ts, tmd));
         let on_edge = _mm256_movemask_ps(edge) as u32;
         let mut mask = _mm256_movemask_ps(ok) as u32 & !(_mm256_movemask_ps(mixed) as u32) & !on_edge;
-        let mut best: Option<(usize, f32)> = None;
+        let mut best: Option<Hit> = None;
         if mask != 0 {
             // As the scalar test: t = t_scaled * (1 / det), and t must be > 0 (it may underflow).
-            let t = mul(t_scaled, _mm256_div_ps(_mm256_set1_ps(1.0), det));
+            let inv = _mm256_div_ps(_mm256_set1_ps(1.0), det);
+            let t = mul(t_scaled, inv);
             mask &= _mm256_movemask_ps(_mm256_cmp_ps::<_CMP_GT_OQ>(t, zero)) as u32;
             if mask != 0 {
                 let mut ta = [0.0f32; LANES];
                 _mm256_storeu_ps(ta.as_mut_ptr(), t);
-                best = Some(nearest_lane(mask, &ta));
+                let (lane, t) = nearest_lane(mask, &ta);
+                // Barycentrics of the nearest lane only (dead code for occlusion rays).
+                let (mut b1, mut b2) = ([0.0f32; LANES], [0.0f32; LANES]);
+                _mm256_storeu_ps(b1.as_mut_ptr(), mul(v, inv));
+                _mm256_storeu_ps(b2.as_mut_ptr(), mul(w, inv));
+                best = Some((lane, t, b1[lane & (LANES - 1)], b2[lane & (LANES - 1)]));
             }
         }
         if on_edge != 0 {
@@ -133,14 +114,14 @@ impl Tri8 {
     /// Lanes whose u, v or w is exactly zero: the scalar test, which falls back to f64 there.
     #[cold]
     #[inline(never)]
-    pub(super) fn edge_lanes(&self, mut lanes: u32, r: &WatertightRay, t_max: f32, mut best: Option<(usize, f32)>) -> Option<(usize, f32)> {
+    pub(super) fn edge_lanes(&self, mut lanes: u32, r: &WatertightRay, t_max: f32, mut best: Option<Hit>) -> Option<Hit> {
         while lanes != 0 {
             let lane = lanes.trailing_zeros() as usize;
             lanes &= lanes - 1;
             let [p0, p1, p2] = self.vertices(lane);
-            if let Some((t, _, _)) = r.intersect(p0, p1, p2, t_max) {
+            if let Some((t, b1, b2)) = r.intersect(p0, p1, p2, t_max) {
                 if best.is_none_or(|b| t < b.1 || (t == b.1 && lane < b.0)) {
-                    best = Some((lane, t));
+                    best = Some((lane, t, b1, b2));
                 }
             }
         }

@@ -186,7 +186,10 @@ pub fn prefetch<T>(p: *const T, len: usize) {
 }
 
 #[inline(always)]
-fn prefetch_child(nodes: &[Node], code: u32, leaf: &impl Fn(u32)) {
+fn prefetch_child(enabled: bool, nodes: &[Node], code: u32, leaf: &impl Fn(u32)) {
+    if !enabled {
+        return;
+    }
     if code & LEAF_BIT == 0 {
         prefetch(nodes.as_ptr().wrapping_add(code as usize), std::mem::size_of::<Node>());
     } else {
@@ -197,12 +200,14 @@ fn prefetch_child(nodes: &[Node], code: u32, leaf: &impl Fn(u32)) {
 /// Walks the tree rooted at `nodes[0]`, calling `leaf(code, t_max)` on every leaf the
 /// ray reaches. The callback returns whether it found a hit (and then has lowered
 /// `t_max` to it). With `ANY`, stops at the first hit. Returns whether any leaf hit.
-/// `prefetch_leaf(code)` may prefetch a leaf's primitives when it is pushed.
+/// With `prefetch`, pushed nodes are prefetched and `prefetch_leaf(code)` may prefetch a
+/// pushed leaf's primitives: worth it only when the tree does not fit in the caches.
 #[inline(always)]
 pub fn traverse<const ANY: bool, const AVX: bool>(
     nodes: &[Node],
     ray: &BoxRay,
     t_max: &mut f32,
+    prefetch: bool,
     prefetch_leaf: impl Fn(u32),
     mut leaf: impl FnMut(u32, &mut f32) -> bool,
 ) -> bool {
@@ -229,7 +234,7 @@ pub fn traverse<const ANY: bool, const AVX: bool>(
                 mask &= mask - 1;
                 if mask == 0 {
                     let (near, far) = if tn[first] <= tn[second] { (first, second) } else { (second, first) };
-                    prefetch_child(nodes, c[far], &prefetch_leaf);
+                    prefetch_child(prefetch, nodes, c[far], &prefetch_leaf);
                     stack[sp].write((c[far], tn[far]));
                     sp += 1;
                     cur = c[near];
@@ -240,12 +245,12 @@ pub fn traverse<const ANY: bool, const AVX: bool>(
                 stack[sp].write((c[first], tn[first]));
                 stack[sp + 1].write((c[second], tn[second]));
                 sp += 2;
-                prefetch_child(nodes, c[first], &prefetch_leaf);
-                prefetch_child(nodes, c[second], &prefetch_leaf);
+                prefetch_child(prefetch, nodes, c[first], &prefetch_leaf);
+                prefetch_child(prefetch, nodes, c[second], &prefetch_leaf);
                 while mask != 0 {
                     let k = mask.trailing_zeros() as usize;
                     mask &= mask - 1;
-                    prefetch_child(nodes, c[k], &prefetch_leaf);
+                    prefetch_child(prefetch, nodes, c[k], &prefetch_leaf);
                     stack[sp].write((c[k], tn[k]));
                     sp += 1;
                 }
