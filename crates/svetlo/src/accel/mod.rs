@@ -5,6 +5,7 @@ mod build;
 mod bvh;
 mod kdtree;
 mod tri4;
+mod tri8;
 mod wide;
 
 #[cfg(test)]
