@@ -427,6 +427,67 @@ fn mlt_stationarity_test_detects_wrong_ratios() {
     }
 }
 
+/// `scenes/caustic.xml` (a glass sphere focusing a small light onto the floor: LSSDE paths):
+/// the chains alone carry the caustic. Eight MLT renders against eight BDPT renders, block by
+/// block (4x4 blocks of 6x6 pixels, the caustic among them), a two-sample t-test per block.
+#[test]
+fn mlt_caustic_scene_matches_bdpt() {
+    let path = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../../scenes/caustic.xml");
+    let defaults: Vec<(String, String)> = [("res", "24"), ("max_depth", "6")].iter().map(|(a, b)| (a.to_string(), b.to_string())).collect();
+    let scene = load_scene(&path, &defaults).expect("scenes/caustic.xml");
+    let renders = 8u64;
+    let blocks = |img: &Image| block_average(img, 6).data;
+    let stats = |name: &str, spp: u32| {
+        let (mut s1, mut s2) = (vec![[0.0f64; 3]; 16], vec![[0.0f64; 3]; 16]);
+        for r in 0..renders {
+            let mut s = RenderSettings::from_scene(&scene);
+            s.spp = spp;
+            s.seed = 40 + r;
+            s.threads = 2;
+            let img = if name == "mlt" {
+                let o = MltOptions { chain: ChainSettings { chains: 64, bootstrap: 20_000 }, ..Default::default() };
+                Mlt::new(o).render_with_stats(&scene, &s, &Progress::new()).expect("mlt").0.image()
+            } else {
+                svetlo::integrator::by_name(name).expect(name).render(&scene, &s, &Progress::new()).expect(name).image()
+            };
+            for (j, p) in blocks(&img).iter().enumerate() {
+                for k in 0..3 {
+                    s1[j][k] += p[k] as f64;
+                    s2[j][k] += (p[k] as f64).powi(2);
+                }
+            }
+        }
+        let n = renders as f64;
+        let mean: Vec<[f64; 3]> = s1.iter().map(|v| v.map(|x| x / n)).collect();
+        let var: Vec<[f64; 3]> = (0..16).map(|j| std::array::from_fn(|k| ((s2[j][k] - n * mean[j][k].powi(2)) / (n - 1.0)).max(0.0) / n)).collect();
+        (mean, var)
+    };
+    let (m_mlt, v_mlt) = stats("mlt", 128);
+    let (m_bdpt, v_bdpt) = stats("bdpt", 32);
+    let (mut sum, mut max, mut cells) = (0.0, 0.0f64, 0);
+    let brightest = (0..16).max_by(|&a, &b| m_bdpt[a][0].total_cmp(&m_bdpt[b][0])).expect("blocks");
+    for j in 0..16 {
+        for k in 0..3 {
+            let se = (v_mlt[j][k] + v_bdpt[j][k]).sqrt();
+            if se == 0.0 {
+                continue;
+            }
+            let t = (m_mlt[j][k] - m_bdpt[j][k]) / se;
+            sum += t * t;
+            max = max.max(t.abs());
+            cells += 1;
+        }
+    }
+    println!(
+        "caustic block {brightest}: mlt {:.4} ± {:.4}, bdpt {:.4} ± {:.4}",
+        m_mlt[brightest][0],
+        v_mlt[brightest][0].sqrt(),
+        m_bdpt[brightest][0],
+        v_bdpt[brightest][0].sqrt()
+    );
+    assert!(t_sum_ok(sum, max, cells, renders), "MLT departs from BDPT on the caustic scene");
+}
+
 /// The image depends on the seed, not on the number of threads.
 #[test]
 fn deterministic_for_any_thread_count() {
