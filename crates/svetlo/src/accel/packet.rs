@@ -12,6 +12,7 @@
 use crate::geometry::triangle::WatertightRay;
 use crate::geometry::Aabb;
 use glam::Vec3;
+use std::mem::MaybeUninit;
 
 /// Lanes per packet.
 pub const LANES: usize = 8;
@@ -57,8 +58,8 @@ pub struct PacketBvh {
     nodes: Vec<Node>,
     /// Root code (an inner node 0, or a leaf when the tree is one leaf); None when empty.
     root: Option<u32>,
-    /// Triangle vertices in leaf order: p0, p1, p2 (x, y, z each).
-    verts: Vec<[f32; 9]>,
+    /// Triangle vertices in leaf order: p0, p1, p2 (x, y, z, 0 each: one 128-bit load).
+    verts: Vec<[[f32; 4]; 3]>,
     /// Input index of each triangle of `verts`.
     ids: Vec<u32>,
     avx2: bool,
@@ -79,10 +80,12 @@ struct Prep {
     /// Permutation (kx, ky, kz) per lane and the shear.
     k: [[i32; LANES]; 3],
     s: [[f32; LANES]; 3],
+    /// The origin's components in that order (o[kx], o[ky], o[kz]).
+    ok: [[f32; LANES]; 3],
 }
 
 fn prep(r: &Rays8, active: u8) -> Prep {
-    let mut p = Prep { inv: [[0.0; LANES]; 3], k: [[0; LANES]; 3], s: [[0.0; LANES]; 3] };
+    let mut p = Prep { inv: [[0.0; LANES]; 3], k: [[0; LANES]; 3], s: [[0.0; LANES]; 3], ok: [[0.0; LANES]; 3] };
     for l in 0..LANES {
         let d = Vec3::new(r.d[0][l], r.d[1][l], r.d[2][l]);
         if active & (1 << l) == 0 {
@@ -99,6 +102,9 @@ fn prep(r: &Rays8, active: u8) -> Prep {
         let w = WatertightRay::new(Vec3::ZERO, d);
         for a in 0..3 {
             p.inv[a][l] = inv[a];
+        }
+        for (a, k) in [w.kx, w.ky, w.kz].into_iter().enumerate() {
+            p.ok[a][l] = r.o[k][l];
         }
         p.k[0][l] = w.kx as i32;
         p.k[1][l] = w.ky as i32;
@@ -195,10 +201,7 @@ impl PacketBvh {
         let centroids = bounds.iter().map(|b| b.center()).collect();
         let mut b = Build { bounds: &bounds, centroids, nodes: Vec::new(), order: (0..tris.len() as u32).collect() };
         let root = if tris.is_empty() { None } else { Some(b.rec(0, tris.len(), 0)) };
-        let verts = b.order.iter().map(|&i| {
-            let [p0, p1, p2] = tris[i as usize];
-            [p0.x, p0.y, p0.z, p1.x, p1.y, p1.z, p2.x, p2.y, p2.z]
-        });
+        let verts = b.order.iter().map(|&i| tris[i as usize].map(|p| [p.x, p.y, p.z, 0.0]));
         PacketBvh { verts: verts.collect(), ids: b.order, nodes: b.nodes, root, avx2: has_avx2() }
     }
 
@@ -261,7 +264,7 @@ impl PacketBvh {
                     let (start, count) = leaf_range(code);
                     for i in start..start + count {
                         let v = &self.verts[i];
-                        let pt = |k: usize| Vec3::new(v[3 * k], v[3 * k + 1], v[3 * k + 2]);
+                        let pt = |k: usize| Vec3::new(v[k][0], v[k][1], v[k][2]);
                         if let Some((t, b1, b2)) = w.intersect(pt(0), pt(1), pt(2), h.t[l]) {
                             if ANY {
                                 blocked |= 1 << l;
@@ -310,45 +313,50 @@ impl PacketBvh {
         let o = [ld(&r.o[0]), ld(&r.o[1]), ld(&r.o[2])];
         let inv = [ld(&p.inv[0]), ld(&p.inv[1]), ld(&p.inv[2])];
         let (kx, ky, kz) = (ldi(&p.k[0]), ldi(&p.k[1]), ldi(&p.k[2]));
+        let (okx, oky, okz) = (ld(&p.ok[0]), ld(&p.ok[1]), ld(&p.ok[2]));
         let (sx, sy, sz) = (ld(&p.s[0]), ld(&p.s[1]), ld(&p.s[2]));
-        // Lane masks of each permutation index: component k of a vector is picked by them.
-        let one = _mm256_set1_epi32(1);
         let zero_i = _mm256_setzero_si256();
-        let is = |k: __m256i, v: __m256i| _mm256_castsi256_ps(_mm256_cmpeq_epi32(k, v));
-        let (kx0, kx1, ky0, ky1, kz0, kz1) = (is(kx, zero_i), is(kx, one), is(ky, zero_i), is(ky, one), is(kz, zero_i), is(kz, one));
-        let pick = |m0: __m256, m1: __m256, v: &[__m256; 3]| _mm256_blendv_ps(_mm256_blendv_ps(v[2], v[1], m1), v[0], m0);
         let lane_bits = _mm256_setr_epi32(1, 2, 4, 8, 16, 32, 64, 128);
         let mut live = _mm256_castsi256_ps(_mm256_cmpgt_epi32(_mm256_and_si256(_mm256_set1_epi32(active as i32), lane_bits), zero_i));
         let mut t_max = ld(&h.t);
         let zero = _mm256_setzero_ps();
         let slack = _mm256_set1_ps(FAR_SLACK);
+        let inf = _mm256_set1_ps(f32::INFINITY);
         let (mut prim, mut b1, mut b2) = (_mm256_set1_epi32(-1), zero, zero);
         let mut hit_mask = 0u8;
+        // Entries: a code and, for closest hits, the entry distances of the lanes that met
+        // its box (a popped entry that no lane can still improve on is skipped).
         let mut stack = [0u32; STACK];
+        let mut tns = [MaybeUninit::<__m256>::uninit(); STACK];
         let mut sp = 1;
         stack[0] = root;
+        tns[0].write(zero);
         while sp > 0 {
             sp -= 1;
             let code = stack[sp];
+            if !ANY && _mm256_movemask_ps(_mm256_and_ps(_mm256_cmp_ps::<_CMP_LE_OQ>(tns[sp].assume_init(), _mm256_mul_ps(t_max, slack)), live)) == 0 {
+                continue;
+            }
             if code & LEAF_BIT != 0 {
                 let (start, count) = leaf_range(code);
                 for i in start..start + count {
-                    let v = &self.verts[i];
+                    let v = self.verts.get_unchecked(i);
+                    // One vertex, its components in each lane's order, relative to the origin.
                     let rel = |k: usize| {
-                        [
-                            _mm256_sub_ps(_mm256_set1_ps(v[3 * k]), o[0]),
-                            _mm256_sub_ps(_mm256_set1_ps(v[3 * k + 1]), o[1]),
-                            _mm256_sub_ps(_mm256_set1_ps(v[3 * k + 2]), o[2]),
-                        ]
+                        let pv = _mm256_castps128_ps256(_mm_loadu_ps(v[k].as_ptr()));
+                        (
+                            _mm256_sub_ps(_mm256_permutevar8x32_ps(pv, kx), okx),
+                            _mm256_sub_ps(_mm256_permutevar8x32_ps(pv, ky), oky),
+                            _mm256_sub_ps(_mm256_permutevar8x32_ps(pv, kz), okz),
+                        )
                     };
-                    let (a, b, c) = (rel(0), rel(1), rel(2));
-                    let (akz, bkz, ckz) = (pick(kz0, kz1, &a), pick(kz0, kz1, &b), pick(kz0, kz1, &c));
-                    let ax = _mm256_sub_ps(pick(kx0, kx1, &a), _mm256_mul_ps(sx, akz));
-                    let ay = _mm256_sub_ps(pick(ky0, ky1, &a), _mm256_mul_ps(sy, akz));
-                    let bx = _mm256_sub_ps(pick(kx0, kx1, &b), _mm256_mul_ps(sx, bkz));
-                    let by = _mm256_sub_ps(pick(ky0, ky1, &b), _mm256_mul_ps(sy, bkz));
-                    let cx = _mm256_sub_ps(pick(kx0, kx1, &c), _mm256_mul_ps(sx, ckz));
-                    let cy = _mm256_sub_ps(pick(ky0, ky1, &c), _mm256_mul_ps(sy, ckz));
+                    let ((akx, aky, akz), (bkx, bky, bkz), (ckx, cky, ckz)) = (rel(0), rel(1), rel(2));
+                    let ax = _mm256_sub_ps(akx, _mm256_mul_ps(sx, akz));
+                    let ay = _mm256_sub_ps(aky, _mm256_mul_ps(sy, akz));
+                    let bx = _mm256_sub_ps(bkx, _mm256_mul_ps(sx, bkz));
+                    let by = _mm256_sub_ps(bky, _mm256_mul_ps(sy, bkz));
+                    let cx = _mm256_sub_ps(ckx, _mm256_mul_ps(sx, ckz));
+                    let cy = _mm256_sub_ps(cky, _mm256_mul_ps(sy, ckz));
                     let mut u = _mm256_sub_ps(_mm256_mul_ps(cx, by), _mm256_mul_ps(cy, bx));
                     let mut vv = _mm256_sub_ps(_mm256_mul_ps(ax, cy), _mm256_mul_ps(ay, cx));
                     let mut w = _mm256_sub_ps(_mm256_mul_ps(bx, ay), _mm256_mul_ps(by, ax));
@@ -379,6 +387,10 @@ impl PacketBvh {
                     let gt = |x: __m256| _mm256_cmp_ps::<_CMP_GT_OQ>(x, zero);
                     let any_neg = _mm256_or_ps(_mm256_or_ps(lt(u), lt(vv)), lt(w));
                     let any_pos = _mm256_or_ps(_mm256_or_ps(gt(u), gt(vv)), gt(w));
+                    let inside = _mm256_andnot_ps(_mm256_and_ps(any_neg, any_pos), live);
+                    if _mm256_movemask_ps(inside) == 0 {
+                        continue;
+                    }
                     let det = _mm256_add_ps(_mm256_add_ps(u, vv), w);
                     let t_scaled = _mm256_add_ps(
                         _mm256_add_ps(_mm256_mul_ps(u, _mm256_mul_ps(sz, akz)), _mm256_mul_ps(vv, _mm256_mul_ps(sz, bkz))),
@@ -388,8 +400,8 @@ impl PacketBvh {
                     // Rejections of the scalar test, in its terms.
                     let neg_bad = _mm256_and_ps(lt(det), _mm256_or_ps(_mm256_cmp_ps::<_CMP_GE_OQ>(t_scaled, zero), _mm256_cmp_ps::<_CMP_LT_OQ>(t_scaled, tmd)));
                     let pos_bad = _mm256_and_ps(gt(det), _mm256_or_ps(_mm256_cmp_ps::<_CMP_LE_OQ>(t_scaled, zero), _mm256_cmp_ps::<_CMP_GT_OQ>(t_scaled, tmd)));
-                    let bad = _mm256_or_ps(_mm256_or_ps(_mm256_and_ps(any_neg, any_pos), eq0(det)), _mm256_or_ps(neg_bad, pos_bad));
-                    let mut ok = _mm256_andnot_ps(bad, live);
+                    let bad = _mm256_or_ps(eq0(det), _mm256_or_ps(neg_bad, pos_bad));
+                    let mut ok = _mm256_andnot_ps(bad, inside);
                     if _mm256_movemask_ps(ok) == 0 {
                         continue;
                     }
@@ -428,7 +440,8 @@ impl PacketBvh {
                 let tn = _mm256_max_ps(_mm256_max_ps(nx, ny), _mm256_max_ps(nz, zero));
                 let tf = _mm256_mul_ps(_mm256_min_ps(_mm256_min_ps(fx, fy), _mm256_min_ps(fz, t_max)), slack);
                 let m = _mm256_and_ps(_mm256_cmp_ps::<_CMP_LE_OQ>(tn, tf), live);
-                (_mm256_movemask_ps(m), tn)
+                // Lanes that miss the box enter it at infinity.
+                (_mm256_movemask_ps(m), _mm256_blendv_ps(inf, tn, m))
             };
             let (m0, tn0) = test(&node.boxes[0]);
             let (m1, tn1) = test(&node.boxes[1]);
@@ -438,16 +451,21 @@ impl PacketBvh {
                     let both = (m0 & m1) as u32;
                     let first = (_mm256_movemask_ps(_mm256_cmp_ps::<_CMP_LE_OQ>(tn0, tn1)) as u32 & both).count_ones();
                     let (near, far) = if 2 * first >= both.count_ones() { (node.child[0], node.child[1]) } else { (node.child[1], node.child[0]) };
+                    let (tnear, tfar) = if 2 * first >= both.count_ones() { (tn0, tn1) } else { (tn1, tn0) };
                     stack[sp] = far;
+                    tns[sp].write(tfar);
                     stack[sp + 1] = near;
+                    tns[sp + 1].write(tnear);
                     sp += 2;
                 }
                 (true, false) => {
                     stack[sp] = node.child[0];
+                    tns[sp].write(tn0);
                     sp += 1;
                 }
                 (false, true) => {
                     stack[sp] = node.child[1];
+                    tns[sp].write(tn1);
                     sp += 1;
                 }
                 (false, false) => {}

@@ -11,6 +11,7 @@ pub mod local;
 pub mod metropolis;
 pub mod mlt;
 pub mod path;
+pub mod path_simd;
 pub mod photon;
 pub mod pssmlt;
 pub mod splat;
@@ -157,6 +158,31 @@ pub(crate) fn camera_sample(cam: &crate::camera::Camera, sampler: &mut dyn Sampl
 }
 
 pub fn render_pixels(scene: &Scene, settings: &RenderSettings, progress: &Progress, est: &dyn PixelEstimator) -> Result<Film> {
+    let proto = make_sampler(settings.sampler, settings.spp, settings.seed);
+    let cam = &scene.camera;
+    render_tiles(scene, settings, progress, &|tile: &mut crate::film::FilmTile, s0: u32, n: u32| {
+        let mut sampler = proto.clone_box();
+        for y in tile.y0..tile.y1 {
+            for x in tile.x0..tile.x1 {
+                for s in s0..s0 + n {
+                    let (raster, ray) = camera_sample(cam, sampler.as_mut(), x, y, s);
+                    let l = est.li(scene, &ray, sampler.as_mut(), settings);
+                    tile.add_sample(raster, l);
+                }
+            }
+        }
+    })
+}
+
+/// The pass and tile driver of [`render_pixels`]: `render_tile(tile, s0, n)` adds samples
+/// `s0..s0 + n` of every pixel of `tile` (pixels in rows, samples innermost, for the same
+/// image whatever the thread count).
+pub(crate) fn render_tiles(
+    scene: &Scene,
+    settings: &RenderSettings,
+    progress: &Progress,
+    render_tile: &(dyn Fn(&mut crate::film::FilmTile, u32, u32) + Sync),
+) -> Result<Film> {
     settings.validate()?;
     let cam = &scene.camera;
     let (w, h) = (cam.width, cam.height);
@@ -167,7 +193,6 @@ pub fn render_pixels(scene: &Scene, settings: &RenderSettings, progress: &Progre
     progress.total.store(settings.spp as u64 * w as u64 * h as u64, Ordering::Relaxed);
     let pool = rayon::ThreadPoolBuilder::new().num_threads(settings.threads).build().map_err(|e| Error::Settings(format!("thread pool: {e}")))?;
     let start = Instant::now();
-    let proto = make_sampler(settings.sampler, settings.spp, settings.seed);
     let mut spp_done = 0u32;
     let mut pass_spp = 1u32;
     while spp_done < settings.spp {
@@ -185,16 +210,7 @@ pub fn render_pixels(scene: &Scene, settings: &RenderSettings, progress: &Progre
                         return None;
                     }
                     let mut tile = film_ref.tile(x0, y0, x1, y1);
-                    let mut sampler = proto.clone_box();
-                    for y in y0..y1 {
-                        for x in x0..x1 {
-                            for s in s0..s0 + n {
-                                let (raster, ray) = camera_sample(cam, sampler.as_mut(), x, y, s);
-                                let l = est.li(scene, &ray, sampler.as_mut(), settings);
-                                tile.add_sample(raster, l);
-                            }
-                        }
-                    }
+                    render_tile(&mut tile, s0, n);
                     progress.done.fetch_add(n as u64 * ((x1 - x0) * (y1 - y0)) as u64, Ordering::Relaxed);
                     Some(tile)
                 })
@@ -225,7 +241,9 @@ pub fn render_pixels(scene: &Scene, settings: &RenderSettings, progress: &Progre
 /// The integrator a name selects (scene file `<integrator type=...>` or `--integrator`).
 pub fn by_name(name: &str) -> Result<Box<dyn Integrator>> {
     match name {
-        "path" => Ok(Box::new(path::PathTracer)),
+        "path" => Ok(Box::new(path_simd::SimdPathTracer::default())),
+        // `path:simd=false` forces the scalar tracer (see `path_simd`).
+        other if other.starts_with("path:") => Ok(Box::new(path_simd::SimdPathTracer::parse(&other["path:".len()..])?)),
         "light" | "ptracer" => Ok(Box::new(light::LightTracer)),
         "bdpt" => Ok(Box::new(bdpt::Bdpt)),
         "direct" => Ok(Box::new(direct::DirectIntegrator::default())),
