@@ -74,44 +74,23 @@ fn leaf_range(code: u32) -> (usize, usize) {
     ((c >> LEAF_COUNT_BITS) as usize, (c & ((1 << LEAF_COUNT_BITS) - 1)) as usize + 1)
 }
 
-/// Per-lane data of the watertight test and the slab test, derived once per packet.
+/// Inverse directions for the portable walk's slab test (tiny components kept finite).
 struct Prep {
     inv: [[f32; LANES]; 3],
-    /// Permutation (kx, ky, kz) per lane and the shear.
-    k: [[i32; LANES]; 3],
-    s: [[f32; LANES]; 3],
-    /// The origin's components in that order (o[kx], o[ky], o[kz]).
-    ok: [[f32; LANES]; 3],
 }
 
 fn prep(r: &Rays8, active: u8) -> Prep {
-    let mut p = Prep { inv: [[0.0; LANES]; 3], k: [[0; LANES]; 3], s: [[0.0; LANES]; 3], ok: [[0.0; LANES]; 3] };
+    let mut p = Prep { inv: [[0.0; LANES]; 3] };
     for l in 0..LANES {
-        let d = Vec3::new(r.d[0][l], r.d[1][l], r.d[2][l]);
         if active & (1 << l) == 0 {
-            // Inactive lanes get a harmless ray (never reported).
-            p.k[0][l] = 1;
-            p.k[1][l] = 2;
-            p.k[2][l] = 0;
-            p.s[2][l] = 1.0;
             continue;
         }
+        let d = Vec3::new(r.d[0][l], r.d[1][l], r.d[2][l]);
         const TINY: f32 = 1e-30;
-        let dt = Vec3::select(d.abs().cmplt(Vec3::splat(TINY)), Vec3::splat(TINY).copysign(d), d);
-        let inv = dt.recip();
-        let w = WatertightRay::new(Vec3::ZERO, d);
+        let inv = Vec3::select(d.abs().cmplt(Vec3::splat(TINY)), Vec3::splat(TINY).copysign(d), d).recip();
         for a in 0..3 {
             p.inv[a][l] = inv[a];
         }
-        for (a, k) in [w.kx, w.ky, w.kz].into_iter().enumerate() {
-            p.ok[a][l] = r.o[k][l];
-        }
-        p.k[0][l] = w.kx as i32;
-        p.k[1][l] = w.ky as i32;
-        p.k[2][l] = w.kz as i32;
-        p.s[0][l] = w.sx;
-        p.s[1][l] = w.sy;
-        p.s[2][l] = w.sz;
     }
     p
 }
@@ -217,14 +196,13 @@ impl PacketBvh {
         if active == 0 {
             return h;
         }
-        let p = prep(r, active);
         #[cfg(target_arch = "x86_64")]
         if self.avx2 {
             // SAFETY: AVX2 was detected at run time.
-            unsafe { self.walk_avx2::<false>(root, r, &p, active, &mut h) };
+            unsafe { self.walk_avx2::<false>(root, r, active, &mut h) };
             return h;
         }
-        self.walk_lanes::<false>(root, r, &p, active, &mut h);
+        self.walk_lanes::<false>(root, r, &prep(r, active), active, &mut h);
         h
     }
 
@@ -235,13 +213,12 @@ impl PacketBvh {
         if active == 0 {
             return 0;
         }
-        let p = prep(r, active);
         #[cfg(target_arch = "x86_64")]
         if self.avx2 {
             // SAFETY: AVX2 was detected at run time.
-            return unsafe { self.walk_avx2::<true>(root, r, &p, active, &mut h) };
+            return unsafe { self.walk_avx2::<true>(root, r, active, &mut h) };
         }
-        self.walk_lanes::<true>(root, r, &p, active, &mut h)
+        self.walk_lanes::<true>(root, r, &prep(r, active), active, &mut h)
     }
 
     /// Portable fallback: each lane walks the tree on its own with the scalar tests.
@@ -306,15 +283,43 @@ impl PacketBvh {
     /// The CPU must support AVX2.
     #[cfg(target_arch = "x86_64")]
     #[target_feature(enable = "avx2")]
-    unsafe fn walk_avx2<const ANY: bool>(&self, root: u32, r: &Rays8, p: &Prep, active: u8, h: &mut Hits8) -> u8 {
+    unsafe fn walk_avx2<const ANY: bool>(&self, root: u32, r: &Rays8, active: u8, h: &mut Hits8) -> u8 {
         use std::arch::x86_64::*;
         let ld = |a: &[f32; LANES]| _mm256_loadu_ps(a.as_ptr());
-        let ldi = |a: &[i32; LANES]| _mm256_loadu_si256(a.as_ptr() as *const __m256i);
         let o = [ld(&r.o[0]), ld(&r.o[1]), ld(&r.o[2])];
-        let inv = [ld(&p.inv[0]), ld(&p.inv[1]), ld(&p.inv[2])];
-        let (kx, ky, kz) = (ldi(&p.k[0]), ldi(&p.k[1]), ldi(&p.k[2]));
-        let (okx, oky, okz) = (ld(&p.ok[0]), ld(&p.ok[1]), ld(&p.ok[2]));
-        let (sx, sy, sz) = (ld(&p.s[0]), ld(&p.s[1]), ld(&p.s[2]));
+        let d = [ld(&r.d[0]), ld(&r.d[1]), ld(&r.d[2])];
+        // `prep` in eight lanes: the slab test's inverse direction (tiny components kept
+        // finite), and `WatertightRay::new`'s permutation and shear, operation for operation.
+        let sign = _mm256_set1_ps(-0.0);
+        let abs = |x: __m256| _mm256_andnot_ps(sign, x);
+        let tiny = _mm256_set1_ps(1e-30);
+        let one = _mm256_set1_ps(1.0);
+        let inv = d.map(|x| {
+            let t = _mm256_or_ps(tiny, _mm256_and_ps(sign, x));
+            _mm256_div_ps(one, _mm256_blendv_ps(x, t, _mm256_cmp_ps::<_CMP_LT_OQ>(abs(x), tiny)))
+        });
+        let a = d.map(abs);
+        let gt = |x: __m256, y: __m256| _mm256_cmp_ps::<_CMP_GT_OQ>(x, y);
+        let (xy, xz, yz) = (gt(a[0], a[1]), gt(a[0], a[2]), gt(a[1], a[2]));
+        let kz_is0 = _mm256_and_ps(xy, xz);
+        let kz_is1 = _mm256_andnot_ps(xy, yz);
+        let ki = |m: __m256, k: i32| _mm256_and_si256(_mm256_castps_si256(m), _mm256_set1_epi32(k));
+        // kz = 0, 1 or 2; kx = next(kz), ky = next(kx), swapped when d[kz] < 0.
+        let kz_m2 = _mm256_andnot_ps(_mm256_or_ps(kz_is0, kz_is1), _mm256_castsi256_ps(_mm256_set1_epi32(-1)));
+        let kz = _mm256_or_si256(ki(kz_is1, 1), ki(kz_m2, 2));
+        let kx0 = _mm256_or_si256(_mm256_or_si256(ki(kz_is0, 1), ki(kz_is1, 2)), _mm256_setzero_si256());
+        let ky0 = _mm256_or_si256(ki(kz_is0, 2), ki(kz_m2, 1));
+        let pick = |m0: __m256, m1: __m256, v: &[__m256; 3]| _mm256_blendv_ps(_mm256_blendv_ps(v[2], v[1], m1), v[0], m0);
+        let dkz = pick(kz_is0, kz_is1, &d);
+        let swap = _mm256_castps_si256(_mm256_cmp_ps::<_CMP_LT_OQ>(dkz, _mm256_setzero_ps()));
+        let kx = _mm256_blendv_epi8(kx0, ky0, swap);
+        let ky = _mm256_blendv_epi8(ky0, kx0, swap);
+        let is_k = |k: __m256i, v: i32| _mm256_castsi256_ps(_mm256_cmpeq_epi32(k, _mm256_set1_epi32(v)));
+        let (kx_is0, kx_is1, ky_is0, ky_is1) = (is_k(kx, 0), is_k(kx, 1), is_k(ky, 0), is_k(ky, 1));
+        let sz = _mm256_div_ps(one, dkz);
+        let sx = _mm256_div_ps(pick(kx_is0, kx_is1, &d), dkz);
+        let sy = _mm256_div_ps(pick(ky_is0, ky_is1, &d), dkz);
+        let (okx, oky, okz) = (pick(kx_is0, kx_is1, &o), pick(ky_is0, ky_is1, &o), pick(kz_is0, kz_is1, &o));
         let zero_i = _mm256_setzero_si256();
         let lane_bits = _mm256_setr_epi32(1, 2, 4, 8, 16, 32, 64, 128);
         let mut live = _mm256_castsi256_ps(_mm256_cmpgt_epi32(_mm256_and_si256(_mm256_set1_epi32(active as i32), lane_bits), zero_i));
