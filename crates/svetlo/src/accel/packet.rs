@@ -19,7 +19,7 @@ pub const LANES: usize = 8;
 const LEAF_BIT: u32 = 1 << 31;
 const LEAF_COUNT_BITS: u32 = 3;
 /// Most triangles per leaf.
-const MAX_LEAF: usize = 4;
+const MAX_LEAF: usize = 2;
 const BINS: usize = 16;
 /// Depth bound: below it splits are median splits (bounded stack).
 const MAX_DEPTH: usize = 48;
