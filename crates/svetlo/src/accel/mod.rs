@@ -4,6 +4,7 @@
 mod build;
 mod bvh;
 mod kdtree;
+pub mod packet;
 mod tri4;
 mod tri8;
 mod wide;

@@ -11,6 +11,7 @@ pub mod local;
 pub mod metropolis;
 pub mod mlt;
 pub mod path;
+pub mod path_simd;
 pub mod photon;
 pub mod pssmlt;
 pub mod splat;
@@ -158,6 +159,32 @@ pub fn render_pixels(scene: &Scene, settings: &RenderSettings, progress: &Progre
     Ok(splat::render_chunked(scene, settings, progress, &NoSplats(est), 0, u64::MAX)?.film)
 }
 
+/// The pass and tile driver of [`render_pixels`] for kernels that take a whole tile at once:
+/// `render_tile(tile, s0, n)` adds samples `s0..s0 + n` of every pixel of `tile` (pixels in
+/// rows, samples innermost, for the same image whatever the thread count).
+pub(crate) fn render_tiles(
+    scene: &Scene,
+    settings: &RenderSettings,
+    progress: &Progress,
+    render_tile: &(dyn Fn(&mut crate::film::FilmTile, u32, u32) + Sync),
+) -> Result<Film> {
+    Ok(splat::render_chunked(scene, settings, progress, &TileKernel(render_tile), 0, u64::MAX)?.film)
+}
+
+/// A whole-tile kernel seen as a splatting estimator that never splats.
+struct TileKernel<'a>(&'a (dyn Fn(&mut crate::film::FilmTile, u32, u32) + Sync));
+
+impl splat::SplatEstimator for TileKernel<'_> {
+    type Scratch = ();
+    fn scratch(&self) {}
+    fn sample(&self, _: &Scene, _: &RenderSettings, _: &crate::geometry::Ray, _: Vec2, _: &mut dyn Sampler, _: &mut (), _: &mut splat::SampleOut) -> Rgb {
+        unreachable!("TileKernel renders whole tiles")
+    }
+    fn render_tile(&self, t: splat::TileJob, _: &mut dyn Sampler, _: &mut (), _: &mut Vec<splat::Splat>) {
+        (self.0)(t.tile, t.s0, t.n)
+    }
+}
+
 /// A pixel estimator seen as a splatting one that never splats.
 struct NoSplats<'a>(&'a dyn PixelEstimator);
 
@@ -181,7 +208,9 @@ impl splat::SplatEstimator for NoSplats<'_> {
 /// The integrator a name selects (scene file `<integrator type=...>` or `--integrator`).
 pub fn by_name(name: &str) -> Result<Box<dyn Integrator>> {
     match name {
-        "path" => Ok(Box::new(path::PathTracer)),
+        "path" => Ok(Box::new(path_simd::SimdPathTracer::default())),
+        // `path:simd=false` forces the scalar tracer (see `path_simd`).
+        other if other.starts_with("path:") => Ok(Box::new(path_simd::SimdPathTracer::parse(&other["path:".len()..])?)),
         "light" | "ptracer" => Ok(Box::new(light::LightTracer)),
         "bdpt" => Ok(Box::new(bdpt::Bdpt)),
         "direct" => Ok(Box::new(direct::DirectIntegrator::default())),

@@ -67,6 +67,32 @@ pub trait SplatEstimator: Sync {
         scratch: &mut Self::Scratch,
         out: &mut SampleOut,
     ) -> Rgb;
+
+    /// Samples `s0..s0 + n` of every pixel of the tile, pixels in rows and samples innermost
+    /// (the order that makes the image independent of the thread count). The default draws
+    /// each camera sample and calls [`Self::sample`]; kernels that trace many paths at once
+    /// take the whole tile.
+    fn render_tile(&self, t: TileJob, sampler: &mut dyn Sampler, scratch: &mut Self::Scratch, splats: &mut Vec<Splat>) {
+        for y in t.tile.y0..t.tile.y1 {
+            for x in t.tile.x0..t.tile.x1 {
+                for s in t.s0..t.s0 + t.n {
+                    let (raster, ray) = super::camera_sample(&t.scene.camera, sampler, x, y, s);
+                    let mut out = SampleOut { splats };
+                    let l = self.sample(t.scene, t.settings, &ray, raster, sampler, scratch, &mut out);
+                    t.tile.add_sample(raster, l);
+                }
+            }
+        }
+    }
+}
+
+/// One tile's share of a pass: samples `s0..s0 + n` of its pixels.
+pub struct TileJob<'a> {
+    pub scene: &'a Scene,
+    pub settings: &'a RenderSettings,
+    pub tile: &'a mut FilmTile,
+    pub s0: u32,
+    pub n: u32,
 }
 
 /// The film (splats scaled by the spp done) and the extra channels (already divided by it).
@@ -128,16 +154,8 @@ pub(super) fn render_chunked<E: SplatEstimator>(
                         let mut splats = Vec::new();
                         let mut sampler = proto.clone_box();
                         let mut scratch = est.scratch();
-                        for y in y0..y1 {
-                            for x in x0..x1 {
-                                for s in s0..s0 + n {
-                                    let (raster, ray) = super::camera_sample(cam, sampler.as_mut(), x, y, s);
-                                    let mut out = SampleOut { splats: &mut splats };
-                                    let l = est.sample(scene, settings, &ray, raster, sampler.as_mut(), &mut scratch, &mut out);
-                                    tile.add_sample(raster, l);
-                                }
-                            }
-                        }
+                        let job = TileJob { scene, settings, tile: &mut tile, s0, n };
+                        est.render_tile(job, sampler.as_mut(), &mut scratch, &mut splats);
                         progress.done.fetch_add(n as u64 * ((x1 - x0) * (y1 - y0)) as u64, Ordering::Relaxed);
                         Some((tile, splats))
                     })
