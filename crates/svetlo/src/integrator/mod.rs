@@ -159,29 +159,27 @@ pub fn render_pixels(scene: &Scene, settings: &RenderSettings, progress: &Progre
     Ok(splat::render_chunked(scene, settings, progress, &NoSplats(est), 0, u64::MAX)?.film)
 }
 
-/// The pass and tile driver of [`render_pixels`] for kernels that take a whole tile at once:
-/// `render_tile(tile, s0, n)` adds samples `s0..s0 + n` of every pixel of `tile` (pixels in
-/// rows, samples innermost, for the same image whatever the thread count).
-pub(crate) fn render_tiles(
-    scene: &Scene,
-    settings: &RenderSettings,
-    progress: &Progress,
-    render_tile: &(dyn Fn(&mut crate::film::FilmTile, u32, u32) + Sync),
-) -> Result<Film> {
+/// A kernel that renders a whole tile at once: `(film tile, [x0, y0, x1, y1) of the tile's own
+/// pixels, s0, n)` adds samples `s0..s0 + n` of every pixel of the rectangle (pixels in rows,
+/// samples innermost, for the same image whatever the thread count).
+pub(crate) type TileFn<'a> = dyn Fn(&mut crate::film::FilmTile, [u32; 4], u32, u32) + Sync + 'a;
+
+/// The pass and tile driver of [`render_pixels`] for kernels that take a whole tile at once.
+pub(crate) fn render_tiles(scene: &Scene, settings: &RenderSettings, progress: &Progress, render_tile: &TileFn) -> Result<Film> {
     Ok(splat::render_chunked(scene, settings, progress, &TileKernel(render_tile), 0, u64::MAX)?.film)
 }
 
 /// A whole-tile kernel seen as a splatting estimator that never splats.
-struct TileKernel<'a>(&'a (dyn Fn(&mut crate::film::FilmTile, u32, u32) + Sync));
+struct TileKernel<'a, 'b>(&'a TileFn<'b>);
 
-impl splat::SplatEstimator for TileKernel<'_> {
+impl splat::SplatEstimator for TileKernel<'_, '_> {
     type Scratch = ();
     fn scratch(&self) {}
     fn sample(&self, _: &Scene, _: &RenderSettings, _: &crate::geometry::Ray, _: Vec2, _: &mut dyn Sampler, _: &mut (), _: &mut splat::SampleOut) -> Rgb {
         unreachable!("TileKernel renders whole tiles")
     }
     fn render_tile(&self, t: splat::TileJob, _: &mut dyn Sampler, _: &mut (), _: &mut Vec<splat::Splat>) {
-        (self.0)(t.tile, t.s0, t.n)
+        (self.0)(t.tile, t.rect, t.s0, t.n)
     }
 }
 

@@ -154,14 +154,16 @@ impl SimdKernel {
     }
 
     pub fn render(&self, scene: &Scene, settings: &RenderSettings, progress: &Progress) -> Result<Film> {
-        render_tiles(scene, settings, progress, &|tile: &mut FilmTile, s0: u32, n: u32| self.render_tile(scene, settings, tile, s0, n))
+        render_tiles(scene, settings, progress, &|tile: &mut FilmTile, rect: [u32; 4], s0: u32, n: u32| self.render_tile(scene, settings, tile, rect, s0, n))
     }
 
-    /// Samples `s0..s0 + n` of every pixel of the tile, eight paths in lockstep; a lane
-    /// whose path ends takes the next camera sample.
-    fn render_tile(&self, scene: &Scene, settings: &RenderSettings, tile: &mut FilmTile, s0: u32, n: u32) {
-        let (x0, y0, w) = (tile.x0, tile.y0, tile.x1 - tile.x0);
-        let jobs = (w * (tile.y1 - tile.y0) * n) as usize;
+    /// Samples `s0..s0 + n` of every pixel of `rect` (the tile's own pixels; the film tile
+    /// extends past them by the filter radius), eight paths in lockstep; a lane whose path
+    /// ends takes the next camera sample.
+    fn render_tile(&self, scene: &Scene, settings: &RenderSettings, tile: &mut FilmTile, rect: [u32; 4], s0: u32, n: u32) {
+        let [x0, y0, x1, y1] = rect;
+        let w = x1 - x0;
+        let jobs = (w * (y1 - y0) * n) as usize;
         let job_xys = |j: usize| {
             let j = j as u32;
             let (pix, s) = (j / n, j % n);

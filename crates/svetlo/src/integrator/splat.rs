@@ -73,8 +73,9 @@ pub trait SplatEstimator: Sync {
     /// each camera sample and calls [`Self::sample`]; kernels that trace many paths at once
     /// take the whole tile.
     fn render_tile(&self, t: TileJob, sampler: &mut dyn Sampler, scratch: &mut Self::Scratch, splats: &mut Vec<Splat>) {
-        for y in t.tile.y0..t.tile.y1 {
-            for x in t.tile.x0..t.tile.x1 {
+        let [x0, y0, x1, y1] = t.rect;
+        for y in y0..y1 {
+            for x in x0..x1 {
                 for s in t.s0..t.s0 + t.n {
                     let (raster, ray) = super::camera_sample(&t.scene.camera, sampler, x, y, s);
                     let mut out = SampleOut { splats };
@@ -90,6 +91,9 @@ pub trait SplatEstimator: Sync {
 pub struct TileJob<'a> {
     pub scene: &'a Scene,
     pub settings: &'a RenderSettings,
+    /// The tile's own pixels `[x0, y0, x1, y1)`. The film tile is larger by the filter's
+    /// radius (samples near the border reach the neighbours): only `rect` is sampled.
+    pub rect: [u32; 4],
     pub tile: &'a mut FilmTile,
     pub s0: u32,
     pub n: u32,
@@ -154,7 +158,7 @@ pub(super) fn render_chunked<E: SplatEstimator>(
                         let mut splats = Vec::new();
                         let mut sampler = proto.clone_box();
                         let mut scratch = est.scratch();
-                        let job = TileJob { scene, settings, tile: &mut tile, s0, n };
+                        let job = TileJob { scene, settings, rect: [x0, y0, x1, y1], tile: &mut tile, s0, n };
                         est.render_tile(job, sampler.as_mut(), &mut scratch, &mut splats);
                         progress.done.fetch_add(n as u64 * ((x1 - x0) * (y1 - y0)) as u64, Ordering::Relaxed);
                         Some((tile, splats))
