@@ -262,4 +262,43 @@ mod tests {
         assert_eq!(big.film.image().data, small.film.image().data);
         assert_eq!(big.channels, small.channels);
     }
+
+    /// Counts the pixel samples it is asked for, per pixel.
+    struct CountingEstimator(Vec<std::sync::atomic::AtomicU32>, u32);
+    impl SplatEstimator for CountingEstimator {
+        type Scratch = ();
+        fn scratch(&self) {}
+        fn sample(&self, _: &Scene, _: &RenderSettings, _: &Ray, raster: Vec2, _: &mut dyn Sampler, _: &mut (), _: &mut SampleOut) -> Rgb {
+            self.0[(raster.y as u32 * self.1 + raster.x as u32) as usize].fetch_add(1, Ordering::Relaxed);
+            Rgb::BLACK
+        }
+    }
+
+    /// Every pixel gets exactly spp samples whatever the filter (film tiles extend past their
+    /// pixels by the filter radius; those borders belong to the neighbours).
+    #[test]
+    fn each_pixel_is_sampled_spp_times() {
+        let mut b = SceneBuilder::new();
+        let m = b.add_material(Material::Diffuse { reflectance: Texture::Constant(Rgb::splat(0.5)) });
+        b.add_shape(Geometry::Sphere(Sphere { center: Vec3::new(0.0, 0.0, 4.0), radius: 1.0, flip_normals: false }), m, None, "ball").unwrap();
+        b.add_light(Light::Point { position: Vec3::ZERO, intensity: Rgb::splat(1.0) });
+        let (w, h) = (37, 21);
+        b.set_camera(Camera {
+            to_world: Mat4::IDENTITY,
+            projection: Projection::Perspective { fov_x_deg: 50.0, aperture_radius: 0.0, focus_distance: 1.0 },
+            width: w,
+            height: h,
+            near_clip: 0.01,
+            far_clip: 100.0,
+            shutter_open: 0.0,
+            shutter_close: 0.0,
+        });
+        let scene = b.build().unwrap();
+        for filter in [crate::film::Filter::Box, crate::film::Filter::Tent { radius: 1.5 }, crate::film::Filter::Gaussian { stddev: 0.5 }] {
+            let settings = RenderSettings { spp: 3, filter, ..Default::default() };
+            let est = CountingEstimator((0..w * h).map(|_| Default::default()).collect(), w);
+            render_chunked(&scene, &settings, &Progress::new(), &est, 0, u64::MAX).unwrap();
+            assert!(est.0.iter().all(|c| c.load(Ordering::Relaxed) == 3), "{filter:?}: some pixel not sampled exactly 3 times");
+        }
+    }
 }
