@@ -398,8 +398,8 @@ fn mlt_specular_scene_keeps_f_stationary() {
 }
 
 /// Each mutation through specular chains (lens through the glass and in the mirror, caustics
-/// from the light through the glass and off the mirror, multi-chain for caustics seen in the
-/// mirror box) keeps f stationary. Ignored by default (about a minute): run with `-- --ignored`.
+/// from the light through the glass and off the mirror, multi-chain for the light of the mirror
+/// ceiling seen in the mirror wall of the mirror box) keeps f stationary. Ignored by default (about a minute): run with `-- --ignored`.
 #[test]
 #[ignore]
 fn mlt_specular_mutations_keep_f_stationary() {
