@@ -4,7 +4,9 @@
 mod build;
 mod bvh;
 mod kdtree;
+pub mod packet;
 mod tri4;
+mod tri8;
 mod wide;
 
 #[cfg(test)]

@@ -1,0 +1,127 @@
+//! The eight-wide path tracer (`path`, integrator/path_simd.rs) against the scalar one
+//! (`path:simd=false`): same random numbers in the same order, so the images agree pixel by
+//! pixel up to float rounding (a path meeting a shared edge may take the other triangle and
+//! go its own way: a few pixels may differ by noise). The Z-test against Mitsuba is
+//! `references.rs`'s `cbox_rgb_measured`, which renders through `path` and so through the kernel.
+
+mod common;
+
+use common::scenes::shared;
+use std::path::{Path, PathBuf};
+use svetlo::film::Image;
+use svetlo::integrator::path_simd::SimdKernel;
+use svetlo::integrator::{self, Progress, RenderSettings};
+use svetlo::io::load_scene;
+use svetlo::scene::Scene;
+
+fn repo_scene(name: &str) -> PathBuf {
+    Path::new(env!("CARGO_MANIFEST_DIR")).join("../../scenes").join(name)
+}
+
+fn load(path: &Path, defaults: &[(&str, &str)], size: u32) -> Scene {
+    let defaults: Vec<(String, String)> = defaults.iter().map(|(a, b)| (a.to_string(), b.to_string())).collect();
+    let mut scene = load_scene(path, &defaults).unwrap_or_else(|e| panic!("{}: {e}", path.display()));
+    scene.camera.width = size;
+    scene.camera.height = size;
+    scene
+}
+
+fn render(scene: &Scene, name: &str, settings: &RenderSettings) -> Image {
+    integrator::by_name(name).expect("integrator").render(scene, settings, &Progress::new()).expect("render").image()
+}
+
+fn avx2() -> bool {
+    #[cfg(target_arch = "x86_64")]
+    {
+        std::arch::is_x86_feature_detected!("avx2")
+    }
+    #[cfg(not(target_arch = "x86_64"))]
+    false
+}
+
+/// Renders with the kernel and with the scalar tracer and compares pixel channels: at least
+/// 99 % within 1e-4 relative (most are bit-identical), and the image means within 1 %.
+fn compare(scene: &Scene, settings: &RenderSettings, what: &str) {
+    assert!(SimdKernel::new(scene, settings).is_some(), "{what}: the scene should qualify for the kernel");
+    if !avx2() {
+        eprintln!("SKIPPED {what}: no AVX2, the kernel falls back to the scalar tracer");
+        return;
+    }
+    let a = render(scene, "path", settings);
+    let b = render(scene, "path:simd=false", settings);
+    let (mut close, mut exact, mut n) = (0usize, 0usize, 0usize);
+    for (pa, pb) in a.data.iter().zip(&b.data) {
+        for c in 0..3 {
+            let (x, y) = (pa[c], pb[c]);
+            n += 1;
+            exact += (x == y) as usize;
+            close += ((x - y).abs() <= 1e-4 * x.abs().max(y.abs()).max(1e-3)) as usize;
+        }
+    }
+    let (ma, mb) = (a.mean(), b.mean());
+    println!("{what}: {exact}/{n} channels bit-identical, {close} within 1e-4; means {ma:?} vs {mb:?}");
+    assert!(close as f64 >= 0.99 * n as f64, "{what}: only {close} of {n} pixel channels agree");
+    assert!(exact > 0, "{what}: no channel is bit-identical: the kernel does not follow the scalar tracer");
+    for c in 0..3 {
+        assert!((ma[c] - mb[c]).abs() <= 0.01 * mb[c].abs().max(1e-3), "{what}: means differ in channel {c}: {ma:?} vs {mb:?}");
+    }
+}
+
+#[test]
+fn cornell_box_matches_scalar() {
+    let scene = load(&repo_scene("cornell-box.xml"), &[], 48);
+    let mut s = RenderSettings::from_scene(&scene);
+    s.spp = 8;
+    s.seed = 3;
+    compare(&scene, &s, "cornell-box");
+    // Short paths, hidden emitters, Russian roulette from the first bounce.
+    s.max_depth = 2;
+    s.hide_emitters = true;
+    compare(&scene, &s, "cornell-box depth 2, hidden emitters");
+    s.max_depth = -1;
+    s.hide_emitters = false;
+    s.rr_depth = 1;
+    compare(&scene, &s, "cornell-box unbounded depth, rr from 1");
+}
+
+#[test]
+fn cbox_rgb_matches_scalar() {
+    let Some(root) = shared() else { return };
+    let scene = load(&root.join("mitsuba-data/scenes/cbox/cbox-rgb.xml"), &[], 64);
+    let mut s = RenderSettings::from_scene(&scene);
+    s.spp = 8;
+    s.max_depth = 6;
+    compare(&scene, &s, "cbox-rgb");
+}
+
+#[test]
+fn same_image_for_any_thread_count() {
+    if !avx2() {
+        eprintln!("SKIPPED: no AVX2");
+        return;
+    }
+    let scene = load(&repo_scene("cornell-box.xml"), &[], 40);
+    let mut s = RenderSettings::from_scene(&scene);
+    s.spp = 4;
+    s.threads = 1;
+    let a = render(&scene, "path", &s);
+    s.threads = 3;
+    let b = render(&scene, "path", &s);
+    assert!(a.data == b.data, "the kernel's image depends on the thread count");
+}
+
+#[test]
+fn out_of_scope_scenes_fall_back() {
+    // Spheres and a dielectric: the scalar tracer's.
+    for name in ["caustic.xml", "cornell-spheres.xml", "motion-blur.xml"] {
+        let scene = load(&repo_scene(name), &[], 16);
+        let s = RenderSettings::from_scene(&scene);
+        assert!(SimdKernel::new(&scene, &s).is_none(), "{name} should not qualify");
+    }
+    let scene = load(&repo_scene("cornell-box.xml"), &[], 16);
+    let mut s = RenderSettings::from_scene(&scene);
+    s.sampler = svetlo::sampling::SamplerKind::Sobol;
+    assert!(SimdKernel::new(&scene, &s).is_none(), "the Sobol sampler is out of scope");
+    assert!(integrator::by_name("path:simd=maybe").is_err());
+    assert!(integrator::by_name("path:fast=true").is_err());
+}
