@@ -304,6 +304,12 @@ fn tiny_spheres() -> svetlo::scene::Scene {
     tiny("cornell-spheres.xml", "4")
 }
 
+/// Light through mirrors only (`scenes/mirror-box.xml`), four segments at most: the floor lit
+/// through the mirror ceiling (LSDE) and seen in the back mirror (LSDSE, two chains).
+fn tiny_mirror_box() -> svetlo::scene::Scene {
+    tiny("mirror-box.xml", "4")
+}
+
 /// Sum of squared t-statistics of `renders` Veach-MLT chain renders of `scene` (mutation
 /// weights `weights`, acceptance ratios raised to `power`, `spp` mutations per pixel) against
 /// a path-traced reference with its own standard error, the largest |t|, and the cell count.
@@ -392,8 +398,8 @@ fn mlt_specular_scene_keeps_f_stationary() {
 }
 
 /// Each mutation through specular chains (lens through the glass and in the mirror, caustics
-/// from the light through the glass and off the mirror, multi-chain for caustics seen in the
-/// mirror) keeps f stationary. Ignored by default (about 30 s): run with `-- --ignored`.
+/// from the light through the glass and off the mirror, multi-chain for the light of the mirror
+/// ceiling seen in the mirror wall of the mirror box) keeps f stationary. Ignored by default (about a minute): run with `-- --ignored`.
 #[test]
 #[ignore]
 fn mlt_specular_mutations_keep_f_stationary() {
@@ -403,10 +409,16 @@ fn mlt_specular_mutations_keep_f_stationary() {
         print!("{name} (specular scene): ");
         assert!(t_sum_ok(sum, max, cells, 16), "{name}: the chain's image departs from the path tracer's on the specular scene");
     }
+    // Where two-chain paths (LSDSE) light much of the image; only camera-side walks that hit
+    // the light through both mirrors make them otherwise, so the chains need long runs.
+    let (sum, max, cells) = mlt_stationary(&tiny_mirror_box(), DOMINANT_SPECULAR[3].1, [1.0; 4], 16, 32768);
+    print!("multi-chain (mirror box): ");
+    assert!(t_sum_ok(sum, max, cells, 16), "multi-chain: the chain's image departs from the path tracer's on the mirror box");
 }
 
 /// The same tests see a wrong acceptance ratio (T(x→y)/T(y→x) in place of T(y→x)/T(x→y)) in
-/// each mutation, on both scenes. Ignored by default (about a minute): run with `-- --ignored`.
+/// each mutation, on the box, the spheres and (multi-chain) the mirror box. Ignored by
+/// default (about two minutes): run with `-- --ignored`.
 #[test]
 #[ignore]
 fn mlt_stationarity_test_detects_wrong_ratios() {
@@ -414,8 +426,7 @@ fn mlt_stationarity_test_detects_wrong_ratios() {
         for (i, (name, w)) in mixes.iter().enumerate() {
             if i == 3 {
                 // No specular chains in the plain box; on the spheres scene the paths with two
-                // chains (LSDSE) carry too little of the image for 16 short renders to see an
-                // inverted multi-chain ratio.
+                // chains carry too little of the image: the mirror box below.
                 continue;
             }
             let mut p = [1.0; 4];
@@ -425,6 +436,11 @@ fn mlt_stationarity_test_detects_wrong_ratios() {
             assert!(!t_sum_ok(sum, max, cells, 16), "{name} on {label}: an inverted transition ratio went unnoticed");
         }
     }
+    let mut p = [1.0; 4];
+    p[3] = -1.0;
+    let (sum, max, cells) = mlt_stationary(&tiny_mirror_box(), DOMINANT_SPECULAR[3].1, p, 16, 16384);
+    print!("multi-chain on the mirror box (ratio upside down): ");
+    assert!(!t_sum_ok(sum, max, cells, 16), "multi-chain: an inverted transition ratio went unnoticed");
 }
 
 /// `scenes/caustic.xml` (a glass sphere focusing a small light onto the floor: LSSDE paths):

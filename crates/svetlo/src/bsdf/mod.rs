@@ -333,3 +333,41 @@ impl Bsdf {
         None
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// `sample_delta` gives each delta lobe's own weight and its choice probability: their
+    /// ratio is what `sample` reports, and the probabilities of a model's lobes sum to one.
+    #[test]
+    fn sample_delta_splits_weight_and_choice() {
+        let glass = Bsdf::new(BsdfModel::SmoothDielectric(dielectric::SmoothDielectric {
+            eta: 1.5,
+            specular_reflectance: Rgb::WHITE,
+            specular_transmittance: Rgb::WHITE,
+        }));
+        let masked = Bsdf { opacity: 0.7, ..glass.clone() };
+        for b in [&glass, &masked] {
+            for wo in [Vec3::new(0.3, 0.1, 0.9).normalize(), Vec3::new(-0.5, 0.2, -0.6).normalize()] {
+                for mode in [TransportMode::Radiance, TransportMode::Importance] {
+                    let mut total = 0.0;
+                    for lobe in [LobeFlags::SPECULAR_REFLECTION, LobeFlags::SPECULAR_TRANSMISSION, LobeFlags::NULL_TRANSMISSION] {
+                        let Some(s) = b.sample_delta(wo, lobe, mode) else { continue };
+                        total += s.pdf;
+                        // The same lobe drawn by `sample`: weight = coefficient / probability.
+                        let drawn = (0..64).filter_map(|i| b.sample(wo, (i as f32 + 0.5) / 64.0, Vec2::splat(0.5), mode)).find(|d| d.lobe == lobe);
+                        if let Some(d) = drawn {
+                            let (w_drawn, w_split) = (d.weight(), s.f * (s.wi.z.abs() / s.pdf));
+                            assert!((w_drawn - w_split).map(f32::abs).max_component() < 1e-4, "{lobe:?}: {w_drawn:?} vs {w_split:?}");
+                            assert!((d.wi - s.wi).length() < 1e-6);
+                        }
+                    }
+                    assert!((total - 1.0).abs() < 1e-5, "lobe probabilities sum to {total}");
+                }
+            }
+        }
+        // A lobe the model does not have.
+        assert!(glass.sample_delta(Vec3::Z, LobeFlags::NULL_TRANSMISSION, TransportMode::Radiance).is_none());
+    }
+}
