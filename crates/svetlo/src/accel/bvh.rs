@@ -126,6 +126,13 @@ impl Accel {
             // SAFETY: `avx` is set only when the CPU reports AVX.
             return unsafe { self.trace_avx::<ANY>(ray) };
         }
+        self.trace_sse::<ANY>(ray)
+    }
+
+    /// Out of line, so that `intersect` and `occluded` stay small wrappers around the AVX
+    /// path (this one's stack frame would otherwise be set up on every call).
+    #[inline(never)]
+    fn trace_sse<const ANY: bool>(&self, ray: &Ray) -> Option<PrimHit> {
         let w = WatertightRay::new(ray.o, ray.d);
         self.trace_with::<ANY, false, _>(ray, &TriRay::new(&w), &w)
     }
