@@ -217,7 +217,7 @@ impl Accel {
 }
 
 /// The triangle block test of one ray, by instruction set.
-trait TriKernel {
+pub(super) trait TriKernel {
     /// Nearest hit of the block in `(0, t_max]`: (lane, t, b1, b2).
     fn test(&self, block: &Tri8, w: &WatertightRay, t_max: f32) -> Option<Hit>;
 }
