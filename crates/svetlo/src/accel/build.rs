@@ -1,5 +1,5 @@
 //! Binary binned-SAH build (all three axes, parallel over subtrees), then collapse
-//! into a 4-wide tree. Knows nothing of what a primitive is: it sees boxes only.
+//! into the wide (WIDTH-ary) tree. Knows nothing of what a primitive is: it sees boxes only.
 //! Leaves are emitted through a callback that packs the primitives however the
 //! caller stores them and returns the leaf's child code.
 

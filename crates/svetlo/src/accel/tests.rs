@@ -269,3 +269,86 @@ fn accel_is_send_and_sync() {
     fn assert_send_sync<T: Send + Sync>() {}
     assert_send_sync::<Accel>();
 }
+
+/// The nearest lane of a block by the scalar test, lane by lane (ties: the lowest lane).
+fn scalar_block(tris: &[([Vec3; 3], u32)], w: &WatertightRay, t_max: f32) -> Option<(usize, f32, f32, f32)> {
+    let mut best: Option<(usize, f32, f32, f32)> = None;
+    for (lane, ([p0, p1, p2], _)) in tris.iter().enumerate() {
+        if let Some((t, b1, b2)) = w.intersect(*p0, *p1, *p2, t_max) {
+            if best.is_none_or(|b| t < b.1) {
+                best = Some((lane, t, b1, b2));
+            }
+        }
+    }
+    best
+}
+
+#[test]
+fn block_kernels_match_scalar_test_bit_for_bit() {
+    use super::bvh::TriKernel;
+    use super::tri4::TriRay;
+    use super::tri8::Tri8;
+    let mut rng = Pcg32::new(6, 7);
+    // Vertices on a coarse grid and rays aimed at grid points, often along an axis: u, v or w is
+    // then exactly zero in many lanes (the edge fallback), and equal distances tie.
+    let grid = |rng: &mut Pcg32| (rng.next_u32() % 9) as f32 * 0.125;
+    let gpt = |rng: &mut Pcg32| Vec3::new(grid(rng), grid(rng), grid(rng));
+    let (mut hits, mut edge_cases) = (0, 0);
+    for case in 0..20000u32 {
+        let n = 1 + case as usize % 8;
+        let mut tris: Vec<([Vec3; 3], u32)> = Vec::new();
+        for k in 0..n {
+            let mut t = [gpt(&mut rng), gpt(&mut rng), gpt(&mut rng)];
+            if k > 0 && rng.next_f32() < 0.4 {
+                // Share an edge with the previous triangle, reversed (a mesh neighbour), or copy it.
+                let prev = tris[k - 1].0;
+                t = if rng.next_f32() < 0.5 { [prev[1], prev[0], t[2]] } else { prev };
+            }
+            tris.push((t, 100 + k as u32));
+        }
+        let block = Tri8::new(&tris);
+        let target = if rng.next_f32() < 0.5 { gpt(&mut rng) } else { v3(&mut rng) };
+        let mut d = dir(&mut rng);
+        match case % 4 {
+            1 => d = Vec3::new(0.0, 0.0, if d.z < 0.0 { -1.0 } else { 1.0 }),
+            2 => d = Vec3::new(d.x, 0.0, d.z).normalize(),
+            _ => {}
+        }
+        let o = target - d * (0.5 + grid(&mut rng));
+        let w = WatertightRay::new(o, d);
+        let t_max = if case % 3 == 0 { 0.25 + rng.next_f32() } else { f32::INFINITY };
+        let want = scalar_block(&tris, &w, t_max);
+        hits += want.is_some() as usize;
+        edge_cases += (0..n)
+            .filter(|&l| {
+                let [p0, p1, p2] = tris[l].0;
+                let s = |p: Vec3| (p - o).to_array();
+                let (a, b, c) = (s(p0), s(p1), s(p2));
+                let xy = |q: [f32; 3]| (q[w.kx] - w.sx * q[w.kz], q[w.ky] - w.sy * q[w.kz]);
+                let ((ax, ay), (bx, by), (cx, cy)) = (xy(a), xy(b), xy(c));
+                cx * by - cy * bx == 0.0 || ax * cy - ay * cx == 0.0 || bx * ay - by * ax == 0.0
+            })
+            .count();
+        let bits = |h: Option<(usize, f32, f32, f32)>| h.map(|(l, t, b1, b2)| (l, t.to_bits(), b1.to_bits(), b2.to_bits()));
+        assert_eq!(bits(TriRay::new(&w).test(&block, &w, t_max)), bits(want), "SSE kernel, case {case}: {tris:?} {o:?} {d:?}");
+        #[cfg(target_arch = "x86_64")]
+        if std::is_x86_feature_detected!("avx") {
+            // SAFETY: AVX was just detected.
+            let got = unsafe { avx_test(&block, &w, t_max) };
+            assert_eq!(bits(got), bits(want), "AVX kernel, case {case}: {tris:?} {o:?} {d:?}");
+        }
+    }
+    // Guard against a test that passes by never hitting, or never taking the edge path.
+    assert!(hits > 2000 && edge_cases > 1000, "{hits} hits, {edge_cases} edge lanes");
+}
+
+/// # Safety
+/// The CPU must support AVX.
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx")]
+unsafe fn avx_test(block: &super::tri8::Tri8, w: &WatertightRay, t_max: f32) -> Option<(usize, f32, f32, f32)> {
+    use super::bvh::TriKernel;
+    // SAFETY: the caller checked AVX.
+    let r = unsafe { super::tri8::TriRay8::new(w) };
+    r.test(block, w, t_max)
+}

@@ -224,13 +224,14 @@ pub fn traverse<const ANY: bool, const AVX: bool>(
             let (tn, mut mask) = ray.test_dispatch::<AVX>(node, *t_max);
             if mask != 0 {
                 let c = &node.children;
-                let first = mask.trailing_zeros() as usize;
+                // `& (WIDTH - 1)`: the mask has WIDTH bits, and saying so drops the bounds checks.
+                let first = mask.trailing_zeros() as usize & (WIDTH - 1);
                 mask &= mask - 1;
                 if mask == 0 {
                     cur = c[first];
                     continue;
                 }
-                let second = mask.trailing_zeros() as usize;
+                let second = mask.trailing_zeros() as usize & (WIDTH - 1);
                 mask &= mask - 1;
                 if mask == 0 {
                     let (near, far) = if tn[first] <= tn[second] { (first, second) } else { (second, first) };
@@ -248,7 +249,7 @@ pub fn traverse<const ANY: bool, const AVX: bool>(
                 prefetch_child(prefetch, nodes, c[first], &prefetch_leaf);
                 prefetch_child(prefetch, nodes, c[second], &prefetch_leaf);
                 while mask != 0 {
-                    let k = mask.trailing_zeros() as usize;
+                    let k = mask.trailing_zeros() as usize & (WIDTH - 1);
                     mask &= mask - 1;
                     prefetch_child(prefetch, nodes, c[k], &prefetch_leaf);
                     stack[sp].write((c[k], tn[k]));
