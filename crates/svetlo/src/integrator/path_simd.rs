@@ -19,11 +19,11 @@ use crate::bsdf::Material;
 use crate::error::{Error, Result};
 use crate::film::{Film, FilmTile};
 use crate::geometry::ray::{offset_ray_origin, SHADOW_EPSILON};
-use crate::geometry::Geometry;
-use crate::light::{AreaLight, Light};
+use crate::geometry::{Geometry, TriangleMesh};
+use crate::light::{AreaLight, Light, LightSample};
 use crate::math::{warp, Frame, INV_PI};
 use crate::sampling::sampler::IndependentSampler;
-use crate::sampling::{power_heuristic, Sampler, SamplerKind};
+use crate::sampling::{power_heuristic, Distribution1D, Sampler, SamplerKind};
 use crate::scene::Scene;
 use crate::spectrum::Rgb;
 use crate::texture::Texture;
@@ -90,11 +90,44 @@ struct ShapeData {
     light: Option<(u32, Rgb)>,
 }
 
+/// A mesh area light as `AreaLight::sample_li` samples it, unpacked: its triangles' vertices
+/// and the normals it gives sampled points.
+struct MeshLight {
+    /// 1 / area (0 for a light without area).
+    pdf_area: f32,
+    tri_distribution: Distribution1D,
+    /// Vertices and, when constant over the triangle, the sampled point's normal.
+    tris: Vec<([Vec3; 3], Option<Vec3>)>,
+    radiance: Rgb,
+    /// The light's index, for the normals of `TriangleMesh::surface` where not constant.
+    light: u32,
+}
+
 /// Everything the kernel needs of a qualifying scene.
 pub struct SimdKernel {
     bvh: PacketBvh,
     tris: Vec<Tri>,
     shapes: Vec<ShapeData>,
+    /// Per light of the scene.
+    lights: Vec<MeshLight>,
+}
+
+/// `AreaLight`'s per-triangle normal: the geometric normal on the side all vertex normals
+/// face, None when they disagree (then interpolated at the point).
+fn constant_normal(m: &TriangleMesh, t: usize) -> Option<Vec3> {
+    let [p0, p1, p2] = m.vertices(t);
+    let ng = (p1 - p0).cross(p2 - p0).normalize_or_zero();
+    if m.normals.is_empty() {
+        return Some(ng);
+    }
+    let sides = m.indices[t].map(|i| ng.dot(m.normals[i as usize]));
+    if sides.iter().all(|&d| d > 0.0) {
+        Some(ng)
+    } else if sides.iter().all(|&d| d < 0.0) {
+        Some(-ng)
+    } else {
+        None
+    }
 }
 
 /// The constant reflectance of a diffuse model, clamped as `Material::bsdf` does.
@@ -118,12 +151,16 @@ impl SimdKernel {
         if settings.sampler != SamplerKind::Independent || !scene.moving.is_empty() || !scene.static_shapes.is_empty() || !scene.environment_lights.is_empty() {
             return None;
         }
-        for l in &scene.lights {
+        let mut lights = Vec::with_capacity(scene.lights.len());
+        for (li, l) in scene.lights.iter().enumerate() {
             let Light::Area(a) = l else { return None };
-            let ok = matches!(&*a.geometry, Geometry::Mesh(_)) && a.radiance.is_constant() && a.tri_distribution.is_some();
-            if !ok {
+            let (Geometry::Mesh(m), Texture::Constant(radiance), Some(dist)) = (&*a.geometry, &a.radiance, &a.tri_distribution) else { return None };
+            if dist.is_empty() {
                 return None;
             }
+            let tris = (0..m.triangle_count()).map(|t| (m.vertices(t), constant_normal(m, t))).collect();
+            let pdf_area = if a.area > 0.0 { 1.0 / a.area } else { 0.0 };
+            lights.push(MeshLight { pdf_area, tri_distribution: dist.clone(), tris, radiance: *radiance, light: li as u32 });
         }
         let mut shapes = Vec::with_capacity(scene.shapes.len());
         let mut tris = Vec::new();
@@ -150,7 +187,7 @@ impl SimdKernel {
                 tris.push(Tri { p, flat: s.flat.get(t).copied().flatten(), shape: si as u32, prim: t as u32 });
             }
         }
-        Some(SimdKernel { bvh: PacketBvh::build(&verts), tris, shapes })
+        Some(SimdKernel { bvh: PacketBvh::build(&verts), tris, shapes, lights })
     }
 
     pub fn render(&self, scene: &Scene, settings: &RenderSettings, progress: &Progress) -> Result<Film> {
@@ -324,8 +361,7 @@ impl SimdKernel {
         if pmf <= 0.0 {
             return Nee::None;
         }
-        let Some(light) = area_of(scene, li as u32) else { return Nee::None };
-        let Some(ls) = light.sample_li(p, u) else { return Nee::None };
+        let Some(ls) = self.lights.get(li).and_then(|ml| ml.sample_li(scene, p, u)) else { return Nee::None };
         if ls.pdf <= 0.0 || ls.li.is_black() {
             return Nee::None;
         }
@@ -352,6 +388,39 @@ impl SimdKernel {
             return Nee::Free(c);
         }
         Nee::Shadow { o, d: d / dist, t_max: dist * (1.0 - SHADOW_EPSILON), c }
+    }
+}
+
+impl MeshLight {
+    /// `AreaLight::sample_li` (mesh, constant radiance), step for step.
+    #[inline(always)]
+    fn sample_li(&self, scene: &Scene, p_ref: Vec3, u: Vec2) -> Option<LightSample> {
+        let (t, _, ur) = self.tri_distribution.sample_discrete(u.x);
+        let b = warp::square_to_uniform_triangle(Vec2::new(ur, u.y));
+        let ([p0, p1, p2], n) = self.tris[t];
+        let p = p0 * (1.0 - b.x - b.y) + p1 * b.x + p2 * b.y;
+        let n = match n {
+            Some(n) => n,
+            None => {
+                let Light::Area(a) = &scene.lights[self.light as usize] else { return None };
+                let Geometry::Mesh(m) = &*a.geometry else { return None };
+                m.surface(t, b.x, b.y).0
+            }
+        };
+        if self.pdf_area <= 0.0 {
+            return None;
+        }
+        let d = p - p_ref;
+        let dist2 = d.length_squared();
+        if dist2 == 0.0 {
+            return None;
+        }
+        let wi = d / dist2.sqrt();
+        let cos_l = n.dot(-wi);
+        if cos_l <= 0.0 {
+            return None;
+        }
+        Some(LightSample { wi, li: self.radiance, pdf: self.pdf_area * dist2 / cos_l, p, n, infinite: false })
     }
 }
 
