@@ -191,11 +191,30 @@ impl SimdKernel {
     }
 
     pub fn render(&self, scene: &Scene, settings: &RenderSettings, progress: &Progress) -> Result<Film> {
-        render_tiles(scene, settings, progress, &|tile: &mut FilmTile, s0: u32, n: u32| self.render_tile(scene, settings, tile, s0, n))
+        render_tiles(scene, settings, progress, &|tile: &mut FilmTile, s0: u32, n: u32| {
+            #[cfg(target_arch = "x86_64")]
+            if self.bvh.simd() {
+                // SAFETY: `simd()` is true only where AVX2 was detected at run time.
+                return unsafe { self.render_tile_avx2(scene, settings, tile, s0, n) };
+            }
+            self.render_tile(scene, settings, tile, s0, n)
+        })
     }
 
     /// Samples `s0..s0 + n` of every pixel of the tile, eight paths in lockstep; a lane
     /// whose path ends takes the next camera sample.
+    /// `render_tile` compiled for AVX2 (the lanes' scalar shading too: VEX code, no FMA
+    /// contraction, so the same results).
+    ///
+    /// # Safety
+    /// The CPU must support AVX2.
+    #[cfg(target_arch = "x86_64")]
+    #[target_feature(enable = "avx2")]
+    unsafe fn render_tile_avx2(&self, scene: &Scene, settings: &RenderSettings, tile: &mut FilmTile, s0: u32, n: u32) {
+        self.render_tile(scene, settings, tile, s0, n)
+    }
+
+    #[inline(always)]
     fn render_tile(&self, scene: &Scene, settings: &RenderSettings, tile: &mut FilmTile, s0: u32, n: u32) {
         let (x0, y0, w) = (tile.x0, tile.y0, tile.x1 - tile.x0);
         let jobs = (w * (tile.y1 - tile.y0) * n) as usize;
