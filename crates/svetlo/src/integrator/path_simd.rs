@@ -58,11 +58,9 @@ impl SimdPathTracer {
 
 impl Integrator for SimdPathTracer {
     fn render(&self, scene: &Scene, settings: &RenderSettings, progress: &Progress) -> Result<Film> {
-        if self.simd {
+        if self.simd && crate::accel::packet::avx2() {
             if let Some(k) = SimdKernel::new(scene, settings) {
-                if k.bvh.simd() {
-                    return k.render(scene, settings, progress);
-                }
+                return k.render(scene, settings, progress);
             }
         }
         PathTracer.render(scene, settings, progress)
