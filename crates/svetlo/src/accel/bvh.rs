@@ -1,29 +1,41 @@
-//! The scene's accelerator: an 8-wide BVH over triangles (stored by value, four to a
+//! The scene's accelerator: an 8-wide BVH over triangles (stored by value, eight to a
 //! SIMD block, in leaf order) and a second, small one over analytic spheres. A ray
 //! walks both; the nearer hit wins.
 
 use super::build::{build_wide, LeafParams};
-use super::tri4::{Tri4, TriRay};
+use super::tri4::{intersect_half, TriRay};
+#[cfg(target_arch = "x86_64")]
+use super::tri8::TriRay8;
+use super::tri8::{Hit, Tri8, LANES, NO_TRI};
 use super::wide::{leaf_code, leaf_range, prefetch, traverse, BoxRay, Node};
 use super::PrimHit;
+use crate::geometry::triangle::WatertightRay;
 use crate::geometry::{Aabb, Geometry, Ray, Sphere};
 use glam::Vec3;
 
 pub struct Accel {
     tri_nodes: Vec<Node>,
-    tris: Vec<Tri4>,
+    tris: Vec<Tri8>,
     /// (first triangle id, shape) per mesh, by first id: triangle ids number all meshes' triangles in turn.
     meshes: Vec<(u32, u32)>,
+    /// Index into `meshes` of each triangle id (empty when there is at most one mesh): a
+    /// hit's shape without a search.
+    tri_mesh: Vec<u32>,
     sph_nodes: Vec<Node>,
     spheres: Vec<Sphere>,
     /// Shape index of each sphere of `spheres`.
     sph_shapes: Vec<u32>,
     bounds: Aabb,
+    /// The hierarchy is larger than the caches: traversal prefetches what it pushes.
+    pub(super) prefetch: bool,
     /// The CPU has AVX: node tests take all eight children at once.
     pub(super) avx: bool,
 }
 
-const TRI_LEAF: LeafParams = LeafParams { group: 4, max_leaf: 16, traversal_cost: 0.3 };
+const TRI_LEAF: LeafParams = LeafParams { group: LANES, max_leaf: 16, traversal_cost: 0.3 };
+/// Hierarchies smaller than this (about an L2 cache) are not prefetched: in cache, the
+/// prefetch instructions cost more than they save.
+const PREFETCH_MIN_BYTES: usize = 1 << 20;
 const SPHERE_LEAF: LeafParams = LeafParams { group: 1, max_leaf: 4, traversal_cost: 1.0 };
 
 impl Accel {
@@ -47,14 +59,24 @@ impl Accel {
             }
         }
 
+        let tri_mesh: Vec<u32> = if meshes.len() > 1 {
+            let mut v = Vec::with_capacity(tri_v.len());
+            for (k, &(first, _)) in meshes.iter().enumerate() {
+                let end = meshes.get(k + 1).map_or(tri_v.len(), |m| m.0 as usize);
+                v.extend(std::iter::repeat_n(k as u32, end - first as usize));
+            }
+            v
+        } else {
+            Vec::new()
+        };
         let tri_bounds: Vec<Aabb> = tri_v.iter().map(|t| Aabb::from_points(t)).collect();
         assert!(tri_v.len() < u32::MAX as usize, "too many triangles");
         let mut tris = Vec::with_capacity(tri_v.len() / 3);
         let (tri_nodes, _) = build_wide(&tri_bounds, TRI_LEAF, |prims| {
             let start = tris.len();
-            for chunk in prims.chunks(4) {
+            for chunk in prims.chunks(LANES) {
                 let lanes: Vec<([Vec3; 3], u32)> = chunk.iter().map(|&i| (tri_v[i as usize], i)).collect();
-                tris.push(Tri4::new(&lanes));
+                tris.push(Tri8::new(&lanes));
             }
             leaf_code(start, tris.len() - start)
         });
@@ -77,7 +99,12 @@ impl Accel {
                 bounds = bounds.union(root.bounds());
             }
         }
-        Accel { tri_nodes, tris, meshes, sph_nodes, spheres, sph_shapes, bounds, avx: has_avx() }
+        let bytes = std::mem::size_of_val(&tri_nodes[..])
+            + std::mem::size_of_val(&tris[..])
+            + std::mem::size_of_val(&sph_nodes[..])
+            + std::mem::size_of_val(&spheres[..]);
+        let prefetch = bytes > PREFETCH_MIN_BYTES;
+        Accel { tri_nodes, tris, meshes, tri_mesh, sph_nodes, spheres, sph_shapes, bounds, prefetch, avx: has_avx() }
     }
 
     pub fn bounds(&self) -> Aabb {
@@ -99,7 +126,8 @@ impl Accel {
             // SAFETY: `avx` is set only when the CPU reports AVX.
             return unsafe { self.trace_avx::<ANY>(ray) };
         }
-        self.trace_with::<ANY, false>(ray)
+        let w = WatertightRay::new(ray.o, ray.d);
+        self.trace_with::<ANY, false, _>(ray, &TriRay::new(&w), &w)
     }
 
     /// # Safety
@@ -107,28 +135,31 @@ impl Accel {
     #[cfg(target_arch = "x86_64")]
     #[target_feature(enable = "avx")]
     unsafe fn trace_avx<const ANY: bool>(&self, ray: &Ray) -> Option<PrimHit> {
-        self.trace_with::<ANY, true>(ray)
+        let w = WatertightRay::new(ray.o, ray.d);
+        // SAFETY: this function runs only on CPUs with AVX (see `trace`).
+        let tray = unsafe { TriRay8::new(&w) };
+        self.trace_with::<ANY, true, _>(ray, &tray, &w)
     }
 
+    /// With `ANY`, returns `Some` (with no meaningful content) at the first hit found.
     #[inline(always)]
-    fn trace_with<const ANY: bool, const AVX: bool>(&self, ray: &Ray) -> Option<PrimHit> {
+    fn trace_with<const ANY: bool, const AVX: bool, K: TriKernel>(&self, ray: &Ray, tray: &K, w: &WatertightRay) -> Option<PrimHit> {
         let bray = BoxRay::new(ray.o, ray.d);
         let mut t_max = ray.t_max;
         let mut best: Option<PrimHit> = None;
         if !self.tri_nodes.is_empty() {
-            let tray = TriRay::new(ray.o, ray.d);
-            let mut hit: Option<(u32, f32, f32)> = None;
+            let mut hit: Option<(usize, usize, f32, f32)> = None;
             let prefetch_leaf = |code| {
-                let (start, count) = leaf_range(code);
-                prefetch(self.tris.as_ptr().wrapping_add(start), count * std::mem::size_of::<Tri4>());
+                // The first block only (a constant length, so no loop): further blocks are often not reached.
+                prefetch(self.tris.as_ptr().wrapping_add(leaf_range(code).0), std::mem::size_of::<Tri8>());
             };
-            traverse::<ANY, AVX>(&self.tri_nodes, &bray, &mut t_max, prefetch_leaf, |code, t_max| {
+            traverse::<ANY, AVX>(&self.tri_nodes, &bray, &mut t_max, self.prefetch, prefetch_leaf, |code, t_max| {
                 let (start, count) = leaf_range(code);
                 let mut found = false;
-                for block in &self.tris[start..start + count] {
-                    if let Some((lane, t, b1, b2)) = block.intersect(&tray, *t_max) {
+                for (i, block) in self.tris[start..start + count].iter().enumerate() {
+                    if let Some((lane, t, b1, b2)) = tray.test(block, w, *t_max) {
                         *t_max = t;
-                        hit = Some((block.ids[lane], b1, b2));
+                        hit = Some((start + i, lane, b1, b2));
                         found = true;
                         if ANY {
                             break;
@@ -137,12 +168,13 @@ impl Accel {
                 }
                 found
             });
-            if let Some((id, b1, b2)) = hit {
-                let (first, shape) = self.meshes[self.meshes.partition_point(|m| m.0 <= id) - 1];
-                best = Some(PrimHit { t: t_max, shape, prim: id - first, b1, b2 });
+            if let Some((b, lane, b1, b2)) = hit {
                 if ANY {
-                    return best;
+                    return Some(PrimHit { t: t_max, shape: 0, prim: 0, b1: 0.0, b2: 0.0 });
                 }
+                let id = self.tris[b].ids[lane];
+                let (first, shape) = self.meshes[self.tri_mesh.get(id as usize).map_or(0, |&k| k as usize)];
+                best = Some(PrimHit { t: t_max, shape, prim: id - first, b1, b2 });
             }
         }
         if !self.sph_nodes.is_empty() {
@@ -151,6 +183,7 @@ impl Accel {
                 &self.sph_nodes,
                 &bray,
                 &mut t_max,
+                self.prefetch,
                 |_| {},
                 |code, t_max| {
                     let (start, count) = leaf_range(code);
@@ -173,6 +206,37 @@ impl Accel {
             }
         }
         best
+    }
+}
+
+/// The triangle block test of one ray, by instruction set.
+trait TriKernel {
+    /// Nearest hit of the block in `(0, t_max]`: (lane, t, b1, b2).
+    fn test(&self, block: &Tri8, w: &WatertightRay, t_max: f32) -> Option<Hit>;
+}
+
+impl TriKernel for TriRay {
+    #[inline(always)]
+    fn test(&self, block: &Tri8, w: &WatertightRay, t_max: f32) -> Option<Hit> {
+        let lo = intersect_half(block, 0, self, w, t_max);
+        if block.ids[4] == NO_TRI {
+            return lo;
+        }
+        // The upper half wins only when strictly nearer: on a tie the lowest lane wins, as with AVX.
+        match intersect_half(block, 1, self, w, lo.map_or(t_max, |h| h.1)) {
+            Some(hi) if lo.is_none_or(|l| hi.1 < l.1) => Some(hi),
+            _ => lo,
+        }
+    }
+}
+
+#[cfg(target_arch = "x86_64")]
+impl TriKernel for TriRay8 {
+    #[inline(always)]
+    fn test(&self, block: &Tri8, w: &WatertightRay, t_max: f32) -> Option<Hit> {
+        // SAFETY: a TriRay8 exists only on CPUs with AVX (its constructor's contract), and it is
+        // used only inside `trace_avx`, which is compiled with AVX enabled.
+        unsafe { block.intersect_avx(self, w, t_max) }
     }
 }
 

@@ -6,6 +6,7 @@ mod bvh;
 mod kdtree;
 pub mod packet;
 mod tri4;
+mod tri8;
 mod wide;
 
 #[cfg(test)]

@@ -136,8 +136,9 @@ fn scene_rays(rng: &mut Pcg32, n: usize) -> Vec<Ray> {
     rays
 }
 
-/// Checks every ray against brute force, with the SIMD node test this CPU picks and with
-/// the 4-lane SSE one (both must agree with brute force, so with each other).
+/// Checks every ray against brute force, with the SIMD node and triangle tests this CPU
+/// picks and with the 4-lane SSE ones (both must agree with brute force, so with each
+/// other), the second time with the prefetching traversal that large scenes use.
 fn run(shapes: &[Geometry], rays: &[Ray]) -> usize {
     let refs: Vec<&Geometry> = shapes.iter().collect();
     let mut accel = Accel::build(&refs);
@@ -147,6 +148,7 @@ fn run(shapes: &[Geometry], rays: &[Ray]) -> usize {
         hits += accel.intersect(r).is_some() as usize;
     }
     accel.avx = false;
+    accel.prefetch = !accel.prefetch;
     for r in rays {
         check(shapes, &accel, r);
     }
@@ -229,31 +231,35 @@ fn no_cracks_between_leaves() {
         }
     }
     let shapes = [Geometry::Mesh(m)];
-    let accel = Accel::build(&[&shapes[0]]);
-    let mut rng = Pcg32::new(5, 7);
-    for k in 0..20000 {
-        let (i, j) = (1 + (rng.next_u32() % (n as u32 - 1)), 1 + (rng.next_u32() % (n as u32 - 1)));
-        // A grid vertex, or a point on a horizontal, vertical or diagonal edge.
-        let s = rng.next_f32();
-        let target = match k % 4 {
-            0 => Vec3::new(i as f32, j as f32, 0.0),
-            1 => Vec3::new(i as f32 + s, j as f32, 0.0),
-            2 => Vec3::new(i as f32, j as f32 + s, 0.0),
-            _ => Vec3::new(i as f32 + s, j as f32 + s, 0.0),
-        } / n as f32
-            + Vec3::new(0.0, 0.0, 0.5);
-        let mut d = dir(&mut rng);
-        if k % 5 == 0 {
-            d = Vec3::new(0.0, 0.0, if k % 2 == 0 { -1.0 } else { 1.0 });
-        }
-        if d.z.abs() < 0.05 {
-            continue;
-        }
-        let ray = Ray::new(target - d * (0.3 + rng.next_f32()), d);
-        assert!(accel.intersect(&ray).is_some(), "ray {k} slipped through: {ray:?}");
-        assert!(accel.occluded(&ray), "ray {k} not occluded: {ray:?}");
-        if k % 8 == 0 {
-            check(&shapes, &accel, &ray);
+    let mut accel = Accel::build(&[&shapes[0]]);
+    // With the kernels this CPU picks, then with the SSE ones (4-lane node and triangle tests).
+    for avx in [accel.avx, false] {
+        accel.avx = avx;
+        let mut rng = Pcg32::new(5, 7);
+        for k in 0..20000 {
+            let (i, j) = (1 + (rng.next_u32() % (n as u32 - 1)), 1 + (rng.next_u32() % (n as u32 - 1)));
+            // A grid vertex, or a point on a horizontal, vertical or diagonal edge.
+            let s = rng.next_f32();
+            let target = match k % 4 {
+                0 => Vec3::new(i as f32, j as f32, 0.0),
+                1 => Vec3::new(i as f32 + s, j as f32, 0.0),
+                2 => Vec3::new(i as f32, j as f32 + s, 0.0),
+                _ => Vec3::new(i as f32 + s, j as f32 + s, 0.0),
+            } / n as f32
+                + Vec3::new(0.0, 0.0, 0.5);
+            let mut d = dir(&mut rng);
+            if k % 5 == 0 {
+                d = Vec3::new(0.0, 0.0, if k % 2 == 0 { -1.0 } else { 1.0 });
+            }
+            if d.z.abs() < 0.05 {
+                continue;
+            }
+            let ray = Ray::new(target - d * (0.3 + rng.next_f32()), d);
+            assert!(accel.intersect(&ray).is_some(), "ray {k} slipped through (avx {avx}): {ray:?}");
+            assert!(accel.occluded(&ray), "ray {k} not occluded (avx {avx}): {ray:?}");
+            if k % 8 == 0 {
+                check(&shapes, &accel, &ray);
+            }
         }
     }
 }

@@ -73,15 +73,13 @@ impl Node {
     }
 }
 
-/// Per-ray data for the slab test.
+/// Per-ray data for the slab test: origin and inverse direction, broadcast by the SIMD
+/// tests at use (a broadcast costs what reloading a spilled splat costs).
 #[derive(Clone, Copy, Debug)]
 pub struct BoxRay {
-    o: [Vec4; 3],
-    inv: [Vec4; 3],
-    /// The same origin and inverse direction as scalars, broadcast by the AVX test.
-    o1: [f32; 3],
-    inv1: [f32; 3],
-    /// Plane index (into `Node4::planes`) of the near and far slab per axis.
+    o: [f32; 3],
+    inv: [f32; 3],
+    /// Plane index (into `Node::planes`) of the near and far slab per axis.
     near: [usize; 3],
     far: [usize; 3],
 }
@@ -91,24 +89,21 @@ pub struct BoxRay {
 const FAR_SLACK: f32 = 1.0 + 2.0 * (3.0 * f32::EPSILON * 0.5) / (1.0 - 3.0 * f32::EPSILON * 0.5);
 
 impl BoxRay {
+    #[inline(always)]
     pub fn new(o: Vec3, d: Vec3) -> BoxRay {
         // A zero component becomes a tiny one of the same sign: the slab products stay
         // finite (no 0 * inf = NaN) and the ray is still effectively parallel to that slab.
         const TINY: f32 = 1e-30;
         let d = Vec3::select(d.abs().cmplt(Vec3::splat(TINY)), Vec3::splat(TINY).copysign(d), d);
         let inv = d.recip();
-        let mut near = [0; 3];
-        let mut far = [0; 3];
-        for a in 0..3 {
-            (near[a], far[a]) = if inv[a] >= 0.0 { (a, a + 3) } else { (a + 3, a) };
-        }
+        // A negative inverse swaps the slab's near and far planes.
+        let neg = inv.cmplt(Vec3::ZERO).bitmask() as usize;
+        let flip = [neg & 1, (neg >> 1) & 1, (neg >> 2) & 1];
         BoxRay {
-            o: [Vec4::splat(o.x), Vec4::splat(o.y), Vec4::splat(o.z)],
-            inv: [Vec4::splat(inv.x), Vec4::splat(inv.y), Vec4::splat(inv.z)],
-            o1: o.to_array(),
-            inv1: inv.to_array(),
-            near,
-            far,
+            o: o.to_array(),
+            inv: inv.to_array(),
+            near: [3 * flip[0], 1 + 3 * flip[1], 2 + 3 * flip[2]],
+            far: [3 - 3 * flip[0], 4 - 3 * flip[1], 5 - 3 * flip[2]],
         }
     }
 
@@ -124,8 +119,8 @@ impl BoxRay {
         use std::arch::x86_64::*;
         // `planes[k]` is eight contiguous floats (two Vec4 groups), 32-byte aligned by the node's alignment.
         let plane = |k: usize| _mm256_load_ps(n.planes[k].as_ptr() as *const f32);
-        let o = |a: usize| _mm256_set1_ps(self.o1[a]);
-        let inv = |a: usize| _mm256_set1_ps(self.inv1[a]);
+        let o = |a: usize| _mm256_set1_ps(self.o[a]);
+        let inv = |a: usize| _mm256_set1_ps(self.inv[a]);
         let slab = |k: usize, a: usize| _mm256_mul_ps(_mm256_sub_ps(plane(k), o(a)), inv(a));
         let (tnx, tny, tnz) = (slab(self.near[0], 0), slab(self.near[1], 1), slab(self.near[2], 2));
         let (tfx, tfy, tfz) = (slab(self.far[0], 0), slab(self.far[1], 1), slab(self.far[2], 2));
@@ -152,15 +147,17 @@ impl BoxRay {
     #[inline(always)]
     fn test(&self, n: &Node, t_max: f32) -> ([f32; WIDTH], u32) {
         let p = &n.planes;
+        let o = self.o.map(Vec4::splat);
+        let inv = self.inv.map(Vec4::splat);
         let mut tn_all = [0.0; WIDTH];
         let mut mask = 0;
         for g in 0..GROUPS {
-            let tnx = (p[self.near[0]][g] - self.o[0]) * self.inv[0];
-            let tny = (p[self.near[1]][g] - self.o[1]) * self.inv[1];
-            let tnz = (p[self.near[2]][g] - self.o[2]) * self.inv[2];
-            let tfx = (p[self.far[0]][g] - self.o[0]) * self.inv[0];
-            let tfy = (p[self.far[1]][g] - self.o[1]) * self.inv[1];
-            let tfz = (p[self.far[2]][g] - self.o[2]) * self.inv[2];
+            let tnx = (p[self.near[0]][g] - o[0]) * inv[0];
+            let tny = (p[self.near[1]][g] - o[1]) * inv[1];
+            let tnz = (p[self.near[2]][g] - o[2]) * inv[2];
+            let tfx = (p[self.far[0]][g] - o[0]) * inv[0];
+            let tfy = (p[self.far[1]][g] - o[1]) * inv[1];
+            let tfz = (p[self.far[2]][g] - o[2]) * inv[2];
             let tn = tnx.max(tny).max(tnz.max(Vec4::ZERO));
             let tf = tfx.min(tfy).min(tfz.min(Vec4::splat(t_max))) * FAR_SLACK;
             mask |= tn.cmple(tf).bitmask() << (4 * g);
@@ -189,7 +186,10 @@ pub fn prefetch<T>(p: *const T, len: usize) {
 }
 
 #[inline(always)]
-fn prefetch_child(nodes: &[Node], code: u32, leaf: &impl Fn(u32)) {
+fn prefetch_child(enabled: bool, nodes: &[Node], code: u32, leaf: &impl Fn(u32)) {
+    if !enabled {
+        return;
+    }
     if code & LEAF_BIT == 0 {
         prefetch(nodes.as_ptr().wrapping_add(code as usize), std::mem::size_of::<Node>());
     } else {
@@ -200,12 +200,14 @@ fn prefetch_child(nodes: &[Node], code: u32, leaf: &impl Fn(u32)) {
 /// Walks the tree rooted at `nodes[0]`, calling `leaf(code, t_max)` on every leaf the
 /// ray reaches. The callback returns whether it found a hit (and then has lowered
 /// `t_max` to it). With `ANY`, stops at the first hit. Returns whether any leaf hit.
-/// `prefetch_leaf(code)` may prefetch a leaf's primitives when it is pushed.
+/// With `prefetch`, pushed nodes are prefetched and `prefetch_leaf(code)` may prefetch a
+/// pushed leaf's primitives: worth it only when the tree does not fit in the caches.
 #[inline(always)]
 pub fn traverse<const ANY: bool, const AVX: bool>(
     nodes: &[Node],
     ray: &BoxRay,
     t_max: &mut f32,
+    prefetch: bool,
     prefetch_leaf: impl Fn(u32),
     mut leaf: impl FnMut(u32, &mut f32) -> bool,
 ) -> bool {
@@ -232,7 +234,7 @@ pub fn traverse<const ANY: bool, const AVX: bool>(
                 mask &= mask - 1;
                 if mask == 0 {
                     let (near, far) = if tn[first] <= tn[second] { (first, second) } else { (second, first) };
-                    prefetch_child(nodes, c[far], &prefetch_leaf);
+                    prefetch_child(prefetch, nodes, c[far], &prefetch_leaf);
                     stack[sp].write((c[far], tn[far]));
                     sp += 1;
                     cur = c[near];
@@ -243,12 +245,12 @@ pub fn traverse<const ANY: bool, const AVX: bool>(
                 stack[sp].write((c[first], tn[first]));
                 stack[sp + 1].write((c[second], tn[second]));
                 sp += 2;
-                prefetch_child(nodes, c[first], &prefetch_leaf);
-                prefetch_child(nodes, c[second], &prefetch_leaf);
+                prefetch_child(prefetch, nodes, c[first], &prefetch_leaf);
+                prefetch_child(prefetch, nodes, c[second], &prefetch_leaf);
                 while mask != 0 {
                     let k = mask.trailing_zeros() as usize;
                     mask &= mask - 1;
-                    prefetch_child(nodes, c[k], &prefetch_leaf);
+                    prefetch_child(prefetch, nodes, c[k], &prefetch_leaf);
                     stack[sp].write((c[k], tn[k]));
                     sp += 1;
                 }

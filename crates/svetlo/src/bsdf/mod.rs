@@ -271,4 +271,65 @@ impl Bsdf {
     pub fn diffuse_albedo(&self) -> Rgb {
         self.front.diffuse_albedo() * self.opacity
     }
+
+    /// Probability with which `sample` from `wo` picks the delta lobe `lobe` (specular
+    /// reflection or transmission, or the mask's null transmission); 0 for other lobes.
+    pub fn delta_probability(&self, wo: Vec3, lobe: LobeFlags) -> f32 {
+        if lobe == LobeFlags::NULL_TRANSMISSION {
+            return 1.0 - self.opacity;
+        }
+        let Some((m, flipped)) = self.side(wo) else { return 0.0 };
+        let wo = if flipped { flip(wo) } else { wo };
+        let p = match m {
+            BsdfModel::SmoothDielectric(d) => {
+                let f = fresnel::dielectric(wo.z, d.eta).0;
+                if lobe == LobeFlags::SPECULAR_REFLECTION {
+                    f
+                } else if lobe == LobeFlags::SPECULAR_TRANSMISSION {
+                    1.0 - f
+                } else {
+                    0.0
+                }
+            }
+            BsdfModel::ThinDielectric(d) => {
+                let r = d.reflectance(wo.z);
+                if lobe == LobeFlags::SPECULAR_REFLECTION {
+                    r
+                } else if lobe == LobeFlags::SPECULAR_TRANSMISSION {
+                    1.0 - r
+                } else {
+                    0.0
+                }
+            }
+            BsdfModel::SmoothConductor(_) => f32::from(lobe == LobeFlags::SPECULAR_REFLECTION && wo.z > 0.0),
+            BsdfModel::SmoothPlastic(p) if lobe == LobeFlags::SPECULAR_REFLECTION && wo.z > 0.0 => p.prob_specular(fresnel::dielectric(wo.z, p.eta).0),
+            _ => 0.0,
+        };
+        p * self.opacity
+    }
+
+    /// The delta lobe `lobe` seen from `wo`, without its random choice: its direction, the
+    /// lobe's own coefficient in `f` (f |cos wi| is the lobe's full weight, e.g. F for the
+    /// reflection of a dielectric, not F divided by the probability of choosing it) and in
+    /// `pdf` the probability with which `sample` chooses it. None: no such lobe from `wo`.
+    /// Path-space Metropolis needs the two apart (perturbations follow a lobe, they do not
+    /// choose it).
+    pub fn sample_delta(&self, wo: Vec3, lobe: LobeFlags, mode: TransportMode) -> Option<BsdfSample> {
+        let p = self.delta_probability(wo, lobe);
+        if !positive_finite(p) {
+            return None;
+        }
+        // Every delta sampler here picks its lobe by a threshold on uc: the ends of the
+        // model's range and the mask's range reach each lobe that has a positive probability.
+        let top = 1.0 - f32::EPSILON / 2.0;
+        for uc in [0.0, self.opacity * top, top] {
+            if let Some(s) = self.sample(wo, uc, Vec2::splat(0.5), mode) {
+                if s.lobe == lobe && s.pdf > 0.0 {
+                    let w = s.f * (s.wi.z.abs() / s.pdf) * p;
+                    return Some(BsdfSample { f: w / s.wi.z.abs().max(1e-12), pdf: p, ..s });
+                }
+            }
+        }
+        None
+    }
 }

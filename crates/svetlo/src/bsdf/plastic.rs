@@ -64,7 +64,7 @@ impl SmoothPlastic {
     pub fn flags(&self) -> LobeFlags {
         LobeFlags::SPECULAR_REFLECTION | LobeFlags::DIFFUSE_REFLECTION
     }
-    fn prob_specular(&self, f_o: f32) -> f32 {
+    pub(crate) fn prob_specular(&self, f_o: f32) -> f32 {
         specular_probability(f_o, 1.0 - f_o, self.specular_sampling_weight)
     }
     pub fn eval(&self, wo: Vec3, wi: Vec3, _mode: TransportMode) -> Rgb {

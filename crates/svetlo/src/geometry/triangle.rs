@@ -32,16 +32,23 @@ impl WatertightRay {
         } else {
             2
         };
-        // Indices into a plain array (the permutation is always in 0..3): no bounds checks in the hot path.
-        const NEXT: [usize; 3] = [1, 2, 0];
-        let mut kx = NEXT[kz];
-        let mut ky = NEXT[kx];
-        let dv = d.to_array();
-        if dv[kz] < 0.0 {
+        // Matches rather than table look-ups: they compile to selects, with no bounds checks.
+        let (mut kx, mut ky) = match kz {
+            0 => (1, 2),
+            1 => (2, 0),
+            _ => (0, 1),
+        };
+        let comp = |k: usize| match k {
+            0 => d.x,
+            1 => d.y,
+            _ => d.z,
+        };
+        let dz = comp(kz);
+        if dz < 0.0 {
             std::mem::swap(&mut kx, &mut ky);
         }
-        let sz = 1.0 / dv[kz];
-        WatertightRay { o, kx, ky, kz, sx: dv[kx] / dv[kz], sy: dv[ky] / dv[kz], sz }
+        let sz = 1.0 / dz;
+        WatertightRay { o, kx, ky, kz, sx: comp(kx) / dz, sy: comp(ky) / dz, sz }
     }
 
     /// Returns (t, b1, b2) with the hit point `(1-b1-b2) p0 + b1 p1 + b2 p2`.

@@ -82,8 +82,7 @@ impl SplatEstimator for Estimator {
 /// One BDPT sample: a camera and a light subpath, every strategy (s, t) connected and
 /// MIS-weighted; t = 1 strategies are splatted, the others returned as the pixel's value.
 /// `visit(light, camera, s, t, connection, weighted value, out)` sees each connection first
-/// and says whether it counts (BDPT's strategy images; MLT's complement keeps only paths
-/// through delta vertices). Every connection is made whether or not it counts, so the
+/// and says whether it counts (BDPT's strategy images). Every connection is made whether or not it counts, so the
 /// sample dimensions consumed do not depend on `visit`.
 #[allow(clippy::too_many_arguments)]
 pub(crate) fn sample_bdpt(

@@ -20,13 +20,12 @@ pub mod zbuffer;
 
 use crate::error::{Error, Result};
 use crate::film::{Film, Filter};
-use crate::sampling::{sampler::make_sampler, Sampler, SamplerKind};
+use crate::sampling::{Sampler, SamplerKind};
 use crate::scene::Scene;
 use crate::spectrum::Rgb;
 use glam::Vec2;
-use rayon::prelude::*;
 use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
-use std::time::{Duration, Instant};
+use std::time::Duration;
 
 /// Settings every Monte Carlo integrator shares, so that they solve the same problem.
 #[derive(Clone, Debug)]
@@ -141,8 +140,6 @@ pub trait PixelEstimator: Sync {
     fn li(&self, scene: &Scene, ray: &crate::geometry::Ray, sampler: &mut dyn Sampler, settings: &RenderSettings) -> Rgb;
 }
 
-const TILE: u32 = 16;
-
 /// Run a pixel estimator over the film: passes of a few samples per pixel over all tiles in
 /// parallel, tiles merged in a fixed order (deterministic for any thread count), stopping early
 /// on cancellation or when the time budget is spent. Each pass is kept whole.
@@ -158,84 +155,54 @@ pub(crate) fn camera_sample(cam: &crate::camera::Camera, sampler: &mut dyn Sampl
 }
 
 pub fn render_pixels(scene: &Scene, settings: &RenderSettings, progress: &Progress, est: &dyn PixelEstimator) -> Result<Film> {
-    let proto = make_sampler(settings.sampler, settings.spp, settings.seed);
-    let cam = &scene.camera;
-    render_tiles(scene, settings, progress, &|tile: &mut crate::film::FilmTile, s0: u32, n: u32| {
-        let mut sampler = proto.clone_box();
-        for y in tile.y0..tile.y1 {
-            for x in tile.x0..tile.x1 {
-                for s in s0..s0 + n {
-                    let (raster, ray) = camera_sample(cam, sampler.as_mut(), x, y, s);
-                    let l = est.li(scene, &ray, sampler.as_mut(), settings);
-                    tile.add_sample(raster, l);
-                }
-            }
-        }
-    })
+    // The splatting driver with nothing to splat: one chunk of all tiles per pass.
+    Ok(splat::render_chunked(scene, settings, progress, &NoSplats(est), 0, u64::MAX)?.film)
 }
 
-/// The pass and tile driver of [`render_pixels`]: `render_tile(tile, s0, n)` adds samples
-/// `s0..s0 + n` of every pixel of `tile` (pixels in rows, samples innermost, for the same
-/// image whatever the thread count).
+/// The pass and tile driver of [`render_pixels`] for kernels that take a whole tile at once:
+/// `render_tile(tile, s0, n)` adds samples `s0..s0 + n` of every pixel of `tile` (pixels in
+/// rows, samples innermost, for the same image whatever the thread count).
 pub(crate) fn render_tiles(
     scene: &Scene,
     settings: &RenderSettings,
     progress: &Progress,
     render_tile: &(dyn Fn(&mut crate::film::FilmTile, u32, u32) + Sync),
 ) -> Result<Film> {
-    settings.validate()?;
-    let cam = &scene.camera;
-    let (w, h) = (cam.width, cam.height);
-    let mut film = Film::new(w, h, settings.filter);
-    let tiles: Vec<(u32, u32, u32, u32)> = (0..h.div_ceil(TILE))
-        .flat_map(|ty| (0..w.div_ceil(TILE)).map(move |tx| (tx * TILE, ty * TILE, ((tx + 1) * TILE).min(w), ((ty + 1) * TILE).min(h))))
-        .collect();
-    progress.total.store(settings.spp as u64 * w as u64 * h as u64, Ordering::Relaxed);
-    let pool = rayon::ThreadPoolBuilder::new().num_threads(settings.threads).build().map_err(|e| Error::Settings(format!("thread pool: {e}")))?;
-    let start = Instant::now();
-    let mut spp_done = 0u32;
-    let mut pass_spp = 1u32;
-    while spp_done < settings.spp {
-        if progress.cancelled() || settings.time_limit.is_some_and(|t| start.elapsed() >= t) {
-            break;
-        }
-        let n = pass_spp.min(settings.spp - spp_done);
-        let s0 = spp_done;
-        let film_ref = &film;
-        let results: Vec<Option<crate::film::FilmTile>> = pool.install(|| {
-            tiles
-                .par_iter()
-                .map(|&(x0, y0, x1, y1)| {
-                    if progress.cancelled() {
-                        return None;
-                    }
-                    let mut tile = film_ref.tile(x0, y0, x1, y1);
-                    render_tile(&mut tile, s0, n);
-                    progress.done.fetch_add(n as u64 * ((x1 - x0) * (y1 - y0)) as u64, Ordering::Relaxed);
-                    Some(tile)
-                })
-                .collect()
-        });
-        if results.iter().any(|t| t.is_none()) {
-            break; // cancelled mid-pass: drop the incomplete pass
-        }
-        for t in results.iter().flatten() {
-            film.merge_tile(t);
-        }
-        spp_done += n;
-        film.spp_done = spp_done;
-        // Grow passes so that per-pass overhead vanishes, while keeping cancellation responsive.
-        let elapsed = start.elapsed().as_secs_f64();
-        let per_spp = elapsed / spp_done as f64;
-        pass_spp = if per_spp > 0.0 { ((0.5 / per_spp) as u32).clamp(1, 64) } else { 64 };
-        if let Some(t) = settings.time_limit {
-            let left = t.as_secs_f64() - elapsed;
-            if per_spp > 0.0 {
-                pass_spp = pass_spp.min(((left / per_spp) as u32).max(1));
-            }
-        }
+    Ok(splat::render_chunked(scene, settings, progress, &TileKernel(render_tile), 0, u64::MAX)?.film)
+}
+
+/// A whole-tile kernel seen as a splatting estimator that never splats.
+struct TileKernel<'a>(&'a (dyn Fn(&mut crate::film::FilmTile, u32, u32) + Sync));
+
+impl splat::SplatEstimator for TileKernel<'_> {
+    type Scratch = ();
+    fn scratch(&self) {}
+    fn sample(&self, _: &Scene, _: &RenderSettings, _: &crate::geometry::Ray, _: Vec2, _: &mut dyn Sampler, _: &mut (), _: &mut splat::SampleOut) -> Rgb {
+        unreachable!("TileKernel renders whole tiles")
     }
-    Ok(film)
+    fn render_tile(&self, t: splat::TileJob, _: &mut dyn Sampler, _: &mut (), _: &mut Vec<splat::Splat>) {
+        (self.0)(t.tile, t.s0, t.n)
+    }
+}
+
+/// A pixel estimator seen as a splatting one that never splats.
+struct NoSplats<'a>(&'a dyn PixelEstimator);
+
+impl splat::SplatEstimator for NoSplats<'_> {
+    type Scratch = ();
+    fn scratch(&self) {}
+    fn sample(
+        &self,
+        scene: &Scene,
+        settings: &RenderSettings,
+        ray: &crate::geometry::Ray,
+        _raster: Vec2,
+        sampler: &mut dyn Sampler,
+        _scratch: &mut (),
+        _out: &mut splat::SampleOut,
+    ) -> Rgb {
+        self.0.li(scene, ray, sampler, settings)
+    }
 }
 
 /// The integrator a name selects (scene file `<integrator type=...>` or `--integrator`).

@@ -5,10 +5,10 @@
 //! strategy's density is `pmf(light) * pdf_li` in solid angle.
 
 use super::{render_pixels, Integrator, PixelEstimator, Progress, RenderSettings};
-use crate::bsdf::TransportMode;
+use crate::bsdf::{Bsdf, LobeFlags, TransportMode};
 use crate::error::Result;
 use crate::film::Film;
-use crate::geometry::Ray;
+use crate::geometry::{Ray, SurfaceInteraction};
 use crate::sampling::{power_heuristic, Sampler};
 use crate::scene::Scene;
 use crate::spectrum::Rgb;
@@ -67,77 +67,124 @@ pub(crate) fn sample_light_mis(
 
 impl PixelEstimator for PathTracer {
     fn li(&self, scene: &Scene, camera_ray: &Ray, sampler: &mut dyn Sampler, settings: &RenderSettings) -> Rgb {
-        let mut l = Rgb::BLACK;
-        let mut beta = Rgb::WHITE;
-        let mut ray = *camera_ray;
-        // Segments traced so far; the camera ray is segment 1.
-        let mut depth = 0i32;
-        // State of the previous vertex, for MIS on emitters found by BSDF sampling.
-        let mut prev_specular = true;
-        let mut prev_pdf = 0.0f32;
-        let mut prev_p = ray.o;
-        let mut eta_scale = 1.0f32;
-        loop {
-            depth += 1;
-            let hide = depth == 1 && settings.hide_emitters;
-            let Some(si) = scene.intersect(&ray) else {
-                if !hide {
-                    for &ei in &scene.environment_lights {
-                        let light = &scene.lights[ei as usize];
-                        let le = light.le_escaped(ray.d);
-                        if le.is_black() {
-                            continue;
-                        }
-                        let w = if prev_specular { 1.0 } else { power_heuristic(1.0, prev_pdf, 1.0, scene.light_pmf(ei) * light.pdf_li_escaped(ray.d)) };
-                        l += beta * le * w;
+        camera_walk(scene, camera_ray, sampler, settings, &mut PathRules)
+    }
+}
+
+/// A camera-path vertex where the walk is about to scatter.
+pub(crate) struct WalkVertex<'a> {
+    pub si: &'a SurfaceInteraction,
+    pub bsdf: &'a Bsdf,
+    /// The BSDF's lobes.
+    pub flags: LobeFlags,
+    /// Toward the camera, local shading frame.
+    pub wo: Vec3,
+    /// Camera path throughput up to here.
+    pub beta: Rgb,
+    /// Path segments from the camera to here.
+    pub depth: i32,
+}
+
+/// What a camera walk adds to path tracing's own rules (emission and next-event estimation
+/// under MIS, BSDF sampling, Russian roulette): the methods built on it (`path`,
+/// `distributed`, the photon methods' camera side) differ only here.
+pub(crate) trait WalkRules {
+    /// Radiance the method estimates at a vertex by other means, without the throughput;
+    /// called after next-event estimation and before the BSDF sample.
+    fn at_vertex(&mut self, _v: &WalkVertex, _sampler: &mut dyn Sampler) -> Rgb {
+        Rgb::BLACK
+    }
+    /// Whether the walk ends at the next hit (which then adds only its emission, to complete
+    /// the MIS estimate of direct light) after the BSDF at a vertex with lobes `flags`
+    /// sampled lobe `lobe`.
+    fn ends_after(&self, _flags: LobeFlags, _lobe: LobeFlags) -> bool {
+        false
+    }
+}
+
+/// Plain path tracing: nothing added, never ends early.
+struct PathRules;
+impl WalkRules for PathRules {}
+
+/// Radiance along `camera_ray` by path tracing under `rules`. Sample dimensions per vertex, in
+/// order: light choice, light point (2), whatever `rules.at_vertex` draws, BSDF lobe, BSDF
+/// direction (2), Russian roulette.
+pub(crate) fn camera_walk<R: WalkRules + ?Sized>(scene: &Scene, camera_ray: &Ray, sampler: &mut dyn Sampler, settings: &RenderSettings, rules: &mut R) -> Rgb {
+    let mut l = Rgb::BLACK;
+    let mut beta = Rgb::WHITE;
+    let mut ray = *camera_ray;
+    // Segments traced so far; the camera ray is segment 1.
+    let mut depth = 0i32;
+    // State of the previous vertex, for MIS on emitters found by BSDF sampling.
+    let mut prev_specular = true;
+    let mut prev_pdf = 0.0f32;
+    let mut prev_p = ray.o;
+    let mut eta_scale = 1.0f32;
+    // The rules ended the walk at this hit: only its emission counts.
+    let mut last = false;
+    loop {
+        depth += 1;
+        let hide = depth == 1 && settings.hide_emitters;
+        let Some(si) = scene.intersect(&ray) else {
+            if !hide {
+                for &ei in &scene.environment_lights {
+                    let light = &scene.lights[ei as usize];
+                    let le = light.le_escaped(ray.d);
+                    if le.is_black() {
+                        continue;
                     }
-                }
-                break;
-            };
-            if let Some((li, area)) = scene.area_light(&si) {
-                let le = area.l(si.ng, si.uv, si.wo);
-                if !le.is_black() && !hide {
-                    let w = if prev_specular { 1.0 } else { power_heuristic(1.0, prev_pdf, 1.0, scene.light_pmf(li) * area.pdf_li(prev_p, si.p, si.ng)) };
+                    let w = if prev_specular { 1.0 } else { power_heuristic(1.0, prev_pdf, 1.0, scene.light_pmf(ei) * light.pdf_li_escaped(ray.d)) };
                     l += beta * le * w;
                 }
             }
-            // Another segment must fit in max_depth for anything more to count.
-            if !settings.depth_allows(depth + 1) {
-                break;
-            }
-            let bsdf = scene.material(&si).bsdf(si.uv);
-            let wo = si.to_local(si.wo);
-            let u_light = sampler.next_1d();
-            let u_l2 = sampler.next_2d();
-            if bsdf.flags().has_non_specular() {
-                l += beta * sample_light_mis(scene, si.p, si.ng, &si.shading, wo, &bsdf, u_light, u_l2, (1.0, 1.0), si.time);
-            }
-            let uc = sampler.next_1d();
-            let u = sampler.next_2d();
-            let Some(bs) = bsdf.sample(wo, uc, u, TransportMode::Radiance) else { break };
-            if bs.pdf <= 0.0 || bs.f.is_black() {
-                break;
-            }
-            beta *= bs.weight();
-            if bs.lobe.contains(crate::bsdf::LobeFlags::TRANSMISSION) {
-                eta_scale *= bs.eta * bs.eta;
-            }
-            prev_specular = bs.lobe.is_specular();
-            prev_pdf = bs.pdf;
-            prev_p = si.p;
-            ray = si.spawn_ray(si.to_world(bs.wi));
-            let u_rr = sampler.next_1d();
-            if depth >= settings.rr_depth {
-                let q = (beta * eta_scale).max_component().min(0.95);
-                if u_rr >= q {
-                    break;
-                }
-                beta /= q;
-            }
-            if beta.is_black() {
-                break;
+            break;
+        };
+        if let Some((li, area)) = scene.area_light(&si) {
+            let le = area.l(si.ng, si.uv, si.wo);
+            if !le.is_black() && !hide {
+                let w = if prev_specular { 1.0 } else { power_heuristic(1.0, prev_pdf, 1.0, scene.light_pmf(li) * area.pdf_li(prev_p, si.p, si.ng)) };
+                l += beta * le * w;
             }
         }
-        l
+        // Another segment must fit in max_depth for anything more to count.
+        if last || !settings.depth_allows(depth + 1) {
+            break;
+        }
+        let bsdf = scene.material(&si).bsdf(si.uv);
+        let wo = si.to_local(si.wo);
+        let flags = bsdf.flags();
+        let u_light = sampler.next_1d();
+        let u_l2 = sampler.next_2d();
+        if flags.has_non_specular() {
+            l += beta * sample_light_mis(scene, si.p, si.ng, &si.shading, wo, &bsdf, u_light, u_l2, (1.0, 1.0), si.time);
+        }
+        l += beta * rules.at_vertex(&WalkVertex { si: &si, bsdf: &bsdf, flags, wo, beta, depth }, sampler);
+        let uc = sampler.next_1d();
+        let u = sampler.next_2d();
+        let Some(bs) = bsdf.sample(wo, uc, u, TransportMode::Radiance) else { break };
+        if bs.pdf <= 0.0 || bs.f.is_black() {
+            break;
+        }
+        beta *= bs.weight();
+        if bs.lobe.contains(LobeFlags::TRANSMISSION) {
+            eta_scale *= bs.eta * bs.eta;
+        }
+        prev_specular = bs.lobe.is_specular();
+        prev_pdf = bs.pdf;
+        prev_p = si.p;
+        last = rules.ends_after(flags, bs.lobe);
+        ray = si.spawn_ray(si.to_world(bs.wi));
+        let u_rr = sampler.next_1d();
+        if depth >= settings.rr_depth && !last {
+            let q = (beta * eta_scale).max_component().min(0.95);
+            if u_rr >= q {
+                break;
+            }
+            beta /= q;
+        }
+        if beta.is_black() {
+            break;
+        }
     }
+    l
 }

@@ -1,6 +1,7 @@
-//! The driver of methods that also write away from their own pixel (light tracing, BDPT's
-//! t = 1): like [`render_pixels`](super::render_pixels), passes over tiles in parallel, but
-//! each pixel sample may also emit splats. Tiles keep their splats in lists, added to
+//! The pixel-sample driver of every camera-side method: passes over tiles in parallel, each
+//! pixel sample filtered into its tile and, for methods that also write away from their own
+//! pixel (light tracing, BDPT's t = 1), emitting splats ([`render_pixels`](super::render_pixels)
+//! is this driver with nothing to splat). Tiles keep their splats in lists, added to
 //! pass-local buffers in tile order (tiles run in chunks, bounding the lists' memory) that
 //! join the film when the pass is complete, so the image does not depend on the number of
 //! threads or on scheduling. Besides the film, an estimator may feed extra images
@@ -66,6 +67,32 @@ pub trait SplatEstimator: Sync {
         scratch: &mut Self::Scratch,
         out: &mut SampleOut,
     ) -> Rgb;
+
+    /// Samples `s0..s0 + n` of every pixel of the tile, pixels in rows and samples innermost
+    /// (the order that makes the image independent of the thread count). The default draws
+    /// each camera sample and calls [`Self::sample`]; kernels that trace many paths at once
+    /// take the whole tile.
+    fn render_tile(&self, t: TileJob, sampler: &mut dyn Sampler, scratch: &mut Self::Scratch, splats: &mut Vec<Splat>) {
+        for y in t.tile.y0..t.tile.y1 {
+            for x in t.tile.x0..t.tile.x1 {
+                for s in t.s0..t.s0 + t.n {
+                    let (raster, ray) = super::camera_sample(&t.scene.camera, sampler, x, y, s);
+                    let mut out = SampleOut { splats };
+                    let l = self.sample(t.scene, t.settings, &ray, raster, sampler, scratch, &mut out);
+                    t.tile.add_sample(raster, l);
+                }
+            }
+        }
+    }
+}
+
+/// One tile's share of a pass: samples `s0..s0 + n` of its pixels.
+pub struct TileJob<'a> {
+    pub scene: &'a Scene,
+    pub settings: &'a RenderSettings,
+    pub tile: &'a mut FilmTile,
+    pub s0: u32,
+    pub n: u32,
 }
 
 /// The film (splats scaled by the spp done) and the extra channels (already divided by it).
@@ -80,7 +107,7 @@ pub fn render_splatting<E: SplatEstimator>(scene: &Scene, settings: &RenderSetti
 }
 
 /// `render_splatting` with at most about `chunk_samples` pixel samples per chunk of tiles.
-fn render_chunked<E: SplatEstimator>(
+pub(super) fn render_chunked<E: SplatEstimator>(
     scene: &Scene,
     settings: &RenderSettings,
     progress: &Progress,
@@ -111,7 +138,7 @@ fn render_chunked<E: SplatEstimator>(
         let film_ref = &film;
         // Tiles go in chunks so that the splat lists in memory stay bounded on large films;
         // each chunk's splats land in pass-local dense buffers, in chunk and tile order.
-        let tiles_per_chunk = ((chunk_samples / (n as u64 * (TILE * TILE) as u64)).max(1) as usize).min(tiles.len().max(1));
+        let tiles_per_chunk = ((chunk_samples / (n as u64 * (TILE * TILE) as u64)).max(1)).min(tiles.len().max(1) as u64) as usize;
         let mut pass_tiles: Vec<FilmTile> = Vec::with_capacity(tiles.len());
         let mut pass_splats: Vec<Vec<Rgb>> = vec![Vec::new(); 1 + channels];
         let mut cancelled = false;
@@ -127,16 +154,8 @@ fn render_chunked<E: SplatEstimator>(
                         let mut splats = Vec::new();
                         let mut sampler = proto.clone_box();
                         let mut scratch = est.scratch();
-                        for y in y0..y1 {
-                            for x in x0..x1 {
-                                for s in s0..s0 + n {
-                                    let (raster, ray) = super::camera_sample(cam, sampler.as_mut(), x, y, s);
-                                    let mut out = SampleOut { splats: &mut splats };
-                                    let l = est.sample(scene, settings, &ray, raster, sampler.as_mut(), &mut scratch, &mut out);
-                                    tile.add_sample(raster, l);
-                                }
-                            }
-                        }
+                        let job = TileJob { scene, settings, tile: &mut tile, s0, n };
+                        est.render_tile(job, sampler.as_mut(), &mut scratch, &mut splats);
                         progress.done.fetch_add(n as u64 * ((x1 - x0) * (y1 - y0)) as u64, Ordering::Relaxed);
                         Some((tile, splats))
                     })

@@ -29,6 +29,9 @@ pub struct AreaLight {
     /// the same over the whole triangle (all vertex normals on one side): light sampling then
     /// needs no interpolation. `None` falls back to `TriangleMesh::surface` at the point.
     tri_normals: Vec<Option<Vec3>>,
+    /// Per triangle, its first vertex and two edges (p0, p1 - p0, p2 - p0): sampling a point
+    /// reads one record instead of three indexed positions.
+    tri_edges: Vec<[Vec3; 3]>,
 }
 
 /// The geometric normal of triangle `t` as `TriangleMesh::surface` orients it, if that is the
@@ -78,16 +81,22 @@ impl SphereCone {
 
 impl AreaLight {
     pub fn new(shape: u32, geometry: Arc<Geometry>, radiance: Texture) -> Self {
-        let (tri_distribution, area, tri_normals) = match &*geometry {
+        let (tri_distribution, area, tri_normals, tri_edges) = match &*geometry {
             Geometry::Mesh(m) => {
                 let areas: Vec<f32> = (0..m.triangle_count()).map(|t| m.triangle_area(t)).collect();
                 let area = areas.iter().sum();
                 let normals = (0..m.triangle_count()).map(|t| constant_normal(m, t)).collect();
-                (Some(Distribution1D::new(&areas)), area, normals)
+                let edges = (0..m.triangle_count())
+                    .map(|t| {
+                        let [p0, p1, p2] = m.vertices(t);
+                        [p0, p1 - p0, p2 - p0]
+                    })
+                    .collect();
+                (Some(Distribution1D::new(&areas)), area, normals, edges)
             }
-            Geometry::Sphere(s) => (None, s.area(), Vec::new()),
+            Geometry::Sphere(s) => (None, s.area(), Vec::new(), Vec::new()),
         };
-        AreaLight { shape, geometry, radiance, tri_distribution, area, tri_normals }
+        AreaLight { shape, geometry, radiance, tri_distribution, area, tri_normals, tri_edges }
     }
 
     /// Radiance leaving point with normal `n` and uv toward direction `w`.
@@ -108,8 +117,8 @@ impl AreaLight {
             (Geometry::Mesh(m), Some(dist)) if !dist.is_empty() => {
                 let (t, _, ur) = dist.sample_discrete(u.x);
                 let b = warp::square_to_uniform_triangle(Vec2::new(ur, u.y));
-                let [p0, p1, p2] = m.vertices(t);
-                let p = p0 * (1.0 - b.x - b.y) + p1 * b.x + p2 * b.y;
+                let Some([p0, e1, e2]) = self.tri_edges.get(t) else { return (Vec3::ZERO, Vec3::Z, Vec2::ZERO, 0.0) };
+                let p = *p0 + *e1 * b.x + *e2 * b.y;
                 match self.tri_normals.get(t) {
                     // A constant texture needs no uv.
                     Some(Some(ng)) if self.radiance.is_constant() => (p, *ng, Vec2::ZERO, pdf),

@@ -10,8 +10,25 @@ pub fn square_to_uniform_disk_concentric(u: Vec2) -> Vec2 {
     if o.x == 0.0 && o.y == 0.0 {
         return Vec2::ZERO;
     }
-    let (r, theta) = if o.x.abs() > o.y.abs() { (o.x, (PI / 4.0) * (o.y / o.x)) } else { (o.y, PI / 2.0 - (PI / 4.0) * (o.x / o.y)) };
-    Vec2::new(r * theta.cos(), r * theta.sin())
+    // Shirley-Chiu: the angle is a quarter of pi times the ratio of the coordinates, so only
+    // angles in [-pi/4, pi/4] need sine and cosine (the other sector swaps them).
+    if o.x.abs() > o.y.abs() {
+        let (s, c) = sin_cos_quarter((PI / 4.0) * (o.y / o.x));
+        Vec2::new(o.x * c, o.x * s)
+    } else {
+        let (s, c) = sin_cos_quarter((PI / 4.0) * (o.x / o.y));
+        Vec2::new(o.y * s, o.y * c)
+    }
+}
+
+/// Sine and cosine of an angle in [-pi/4, pi/4] by their Taylor polynomials (relative error
+/// below 4e-8 there, under one float ulp), much cheaper than a general `sin_cos`.
+#[inline]
+pub fn sin_cos_quarter(x: f32) -> (f32, f32) {
+    let x2 = x * x;
+    let s = x * (1.0 + x2 * (-1.0 / 6.0 + x2 * (1.0 / 120.0 + x2 * (-1.0 / 5040.0 + x2 * (1.0 / 362_880.0)))));
+    let c = 1.0 + x2 * (-0.5 + x2 * (1.0 / 24.0 + x2 * (-1.0 / 720.0 + x2 * (1.0 / 40_320.0 + x2 * (-1.0 / 3_628_800.0)))));
+    (s, c)
 }
 
 pub fn square_to_uniform_disk_concentric_pdf(p: Vec2) -> f32 {
@@ -106,6 +123,17 @@ mod tests {
             }
         }
         sum * 4.0 * std::f64::consts::PI / (nt * np) as f64
+    }
+
+    #[test]
+    fn quarter_sin_cos_is_accurate_to_an_ulp() {
+        for i in 0..=10_000 {
+            let x = -PI / 4.0 + (PI / 2.0) * i as f32 / 10_000.0;
+            let (s, c) = sin_cos_quarter(x);
+            let (se, ce) = (x as f64).sin_cos();
+            assert!((s as f64 - se).abs() <= 1.2e-7 * se.abs().max(1e-30) + 1e-12, "sin({x}) = {s} vs {se}");
+            assert!((c as f64 - ce).abs() <= 1.2e-7, "cos({x}) = {c} vs {ce}");
+        }
     }
 
     #[test]

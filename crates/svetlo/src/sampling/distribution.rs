@@ -52,6 +52,9 @@ impl Distribution1D {
         // Largest i with cdf[i] <= u, and a non-empty interval.
         let mut i = self.cdf.partition_point(|&c| c <= u).saturating_sub(1);
         i = i.min(self.func.len() - 1);
+        if self.cdf[i + 1] > self.cdf[i] {
+            return i; // the common case: the interval found is not empty
+        }
         while i > 0 && self.pmf(i) == 0.0 {
             i -= 1;
         }
@@ -63,6 +66,10 @@ impl Distribution1D {
     /// Discrete sample: (index, pmf, u remapped to [0,1) within the chosen interval).
     #[inline]
     pub fn sample_discrete(&self, u: f32) -> (usize, f32, f32) {
+        if self.func.len() == 1 {
+            // One entry (a scene's only light): nothing to search.
+            return (0, 1.0, u);
+        }
         let i = self.find(u);
         let p = self.pmf(i);
         let ur = if p > 0.0 { ((u - self.cdf[i]) / p).clamp(0.0, crate::math::ONE_MINUS_EPSILON) } else { 0.0 };

@@ -1,55 +1,49 @@
 //! Veach's Metropolis light transport (Veach & Guibas 1997; Veach's thesis, ch. 11): Markov
 //! chains over light paths (`path::Vertex` lists, light to camera) with the bidirectional
-//! mutation and the lens and caustic perturbations, run by the shared Metropolis driver
-//! (bootstrap for b and the starts, chains over threads, expected-value splats).
+//! mutation and the lens, caustic and multi-chain perturbations, run by the shared
+//! Metropolis driver (bootstrap for b and the starts, chains over threads, expected-value
+//! splats).
 //!
-//! The chains cover the paths with an area-light end, a pinhole camera and non-delta
-//! scattering (`space.rs`). What goes through a delta lobe (mirrors, glass, the coat of
-//! plastic) is added by a **complement**: bidirectional path tracing that keeps only the
-//! connections with at least one delta vertex. The two partition path space, so their sum
-//! is the whole image; on a scene without delta lobes the complement is skipped.
+//! The chains cover every path from an area light to a pinhole camera, specular vertices
+//! (mirrors, glass, the coat of plastic, mask pass-through) included (`space.rs`): the
+//! bidirectional mutation alone reaches all of them (it can regenerate a whole path, and a
+//! camera-side walk makes any path that ends on a light), so nothing is left to a second
+//! estimator.
 //!
-//! Options (`mlt:key=value,...`): `bidir`, `lens`, `caustic` (relative probabilities of
-//! the mutations, 0 switches one off; defaults 0.4, 0.3, 0.3), `chains` (256), `bootstrap`
-//! (100000 independent paths), `complement-spp` (samples per pixel of the complement,
-//! default a quarter of `--spp`, at least 1).
+//! Options (`mlt:key=value,...`): `bidir`, `lens`, `caustic`, `multi` (relative
+//! probabilities of the mutations, 0 switches one off; defaults 0.4, 0.25, 0.25, 0.1),
+//! `chains` (256), `bootstrap` (100000 independent paths).
 
 pub mod mutations;
 pub mod space;
 
 use self::space::{MPath, Space};
-use super::bdpt::{sample_bdpt, Scratch};
 use super::metropolis::{self, ChainSettings, ChainStats, Contribution, MetropolisTarget, Proposal};
 use super::pssmlt::parse_chain_option;
-use super::splat::{render_splatting, SampleOut, SplatEstimator};
 use super::{Integrator, Progress, RenderSettings};
 use crate::camera::Projection;
 use crate::error::{Error, Result};
 use crate::film::Film;
-use crate::geometry::Ray;
 use crate::light::Light;
 use crate::path::{camera_subpath, connect, light_subpath, PathConfig};
 use crate::sampling::{Pcg32, Sampler};
 use crate::scene::Scene;
-use crate::spectrum::Rgb;
 use glam::Vec2;
 use std::sync::Mutex;
 
 /// Mutation kinds, in `Proposal::kind` order.
-pub const MUTATIONS: [&str; 3] = ["bidirectional", "lens", "caustic"];
+pub const MUTATIONS: [&str; 4] = ["bidirectional", "lens", "caustic", "multi-chain"];
 
 #[derive(Clone, Debug)]
 pub struct MltOptions {
     /// Relative probabilities of the mutations, in `MUTATIONS` order.
-    pub weights: [f64; 3],
+    pub weights: [f64; 4],
     pub chain: ChainSettings,
-    /// Samples per pixel of the complement (None: a quarter of the render's).
-    pub complement_spp: Option<u32>,
 }
 
 impl Default for MltOptions {
     fn default() -> Self {
-        MltOptions { weights: [0.4, 0.3, 0.3], chain: ChainSettings::default(), complement_spp: None }
+        MltOptions { weights: [0.4, 0.25, 0.25, 0.1], chain: ChainSettings::default() }
     }
 }
 
@@ -66,15 +60,8 @@ impl MltOptions {
                 "bidir" | "bidirectional" => o.weights[0] = num(v)?,
                 "lens" => o.weights[1] = num(v)?,
                 "caustic" => o.weights[2] = num(v)?,
-                "complement-spp" => {
-                    o.complement_spp = Some(
-                        v.parse::<u32>()
-                            .ok()
-                            .filter(|&n| n > 0)
-                            .ok_or_else(|| Error::Settings(format!("mlt: complement-spp needs a whole number >= 1, got '{v}'")))?,
-                    )
-                }
-                _ => return Err(Error::Settings(format!("mlt: unknown option '{k}' (bidir, lens, caustic, chains, bootstrap, complement-spp)"))),
+                "multi" | "multi-chain" => o.weights[3] = num(v)?,
+                _ => return Err(Error::Settings(format!("mlt: unknown option '{k}' (bidir, lens, caustic, multi, chains, bootstrap)"))),
             }
         }
         o.validate()?;
@@ -112,63 +99,16 @@ fn check_scene(scene: &Scene) -> Result<()> {
     Ok(())
 }
 
-/// Whether any material has a delta lobe (then the complement has light to add).
-pub fn has_delta_lobes(scene: &Scene) -> bool {
-    scene.materials.iter().any(|m| m.bsdf(Vec2::ZERO).flags().is_specular())
-}
-
 impl Mlt {
     pub fn new(options: MltOptions) -> Self {
         Mlt { options, last: Mutex::new(None) }
     }
 
-    /// The Metropolis part alone (paths without delta vertices) and its statistics.
-    pub fn render_chains(&self, scene: &Scene, settings: &RenderSettings, progress: &Progress) -> Result<(Film, ChainStats)> {
+    /// The render and the chains' statistics.
+    pub fn render_with_stats(&self, scene: &Scene, settings: &RenderSettings, progress: &Progress) -> Result<(Film, ChainStats)> {
         self.options.validate()?;
         let t = Target::new(scene, settings, self.options.weights)?;
         metropolis::run(&t, scene.camera.width, scene.camera.height, settings, &self.options.chain, progress)
-    }
-
-    /// The complement: BDPT over the paths with a delta vertex, at `complement-spp` (default
-    /// a quarter of the render's spp) or until the time limit.
-    pub fn render_complement(&self, scene: &Scene, settings: &RenderSettings, progress: &Progress) -> Result<Film> {
-        let cfg = PathConfig::new(scene, settings.max_depth, settings.rr_depth, settings.hide_emitters);
-        let mut s = settings.clone();
-        s.spp = match (self.options.complement_spp, settings.time_limit) {
-            (Some(n), _) => n,
-            // Time-limited: the time left decides (settings.spp is then the CLI's "unbounded").
-            (None, Some(_)) => settings.spp,
-            (None, None) => (settings.spp / 4).max(1),
-        };
-        Ok(render_splatting(scene, &s, progress, &Complement { cfg }, 0)?.film)
-    }
-
-    /// The whole image and the chains' statistics. With a time limit and delta lobes in the
-    /// scene, the chains get 70 % of the time and the complement what is left.
-    pub fn render_with_stats(&self, scene: &Scene, settings: &RenderSettings, progress: &Progress) -> Result<(Film, ChainStats)> {
-        let start = std::time::Instant::now();
-        let delta = has_delta_lobes(scene);
-        let mut cs = settings.clone();
-        if delta {
-            cs.time_limit = settings.time_limit.map(|t| t.mul_f64(0.7));
-        }
-        let (chains, stats) = self.render_chains(scene, &cs, progress)?;
-        if !delta {
-            return Ok((chains, stats));
-        }
-        let mut s = settings.clone();
-        s.time_limit = settings.time_limit.map(|t| t.saturating_sub(start.elapsed()).max(std::time::Duration::from_millis(1)));
-        let mut film = self.render_complement(scene, &s, progress)?;
-        // Add the chains' developed image as splats of the complement's scale.
-        let img = chains.image();
-        let scale = film.splat_scale;
-        for y in 0..img.height {
-            for x in 0..img.width {
-                film.splat(Vec2::new(x as f32 + 0.5, y as f32 + 0.5), img.get(x, y) * scale);
-            }
-        }
-        film.spp_done = chains.spp_done;
-        Ok((film, stats))
     }
 }
 
@@ -191,16 +131,16 @@ pub struct Target<'a> {
     /// Bidirectional walks for the estimate of b.
     cfg: PathConfig,
     /// Probabilities of the mutations, in `MUTATIONS` order.
-    pub probs: [f64; 3],
+    pub probs: [f64; 4],
     /// Powers of each mutation's T(y→x)/T(x→y): 1 for rendering; tests set -1 (the ratio
     /// upside down) to check that a wrong acceptance ratio is detected.
     #[doc(hidden)]
-    pub ratio_power: [f64; 3],
+    pub ratio_power: [f64; 4],
 }
 
 impl<'a> Target<'a> {
     /// The chains' target for `scene` with mutation probabilities `weights` (any scale).
-    pub fn new(scene: &'a Scene, settings: &RenderSettings, weights: [f64; 3]) -> Result<Self> {
+    pub fn new(scene: &'a Scene, settings: &RenderSettings, weights: [f64; 4]) -> Result<Self> {
         check_scene(scene)?;
         let total: f64 = weights.iter().sum();
         if total.is_nan() || total <= 0.0 {
@@ -210,7 +150,7 @@ impl<'a> Target<'a> {
             space: Space::new(scene, settings.max_depth, settings.hide_emitters),
             cfg: PathConfig::new(scene, settings.max_depth, settings.rr_depth, settings.hide_emitters),
             probs: weights.map(|w| w / total),
-            ratio_power: [1.0; 3],
+            ratio_power: [1.0; 4],
         })
     }
 }
@@ -232,7 +172,8 @@ impl Target<'_> {
         match kind {
             0 => mutations::bidirectional(&self.space, x, rng),
             1 => mutations::lens(&self.space, x, rng),
-            _ => mutations::caustic(&self.space, x, rng),
+            2 => mutations::caustic(&self.space, x, rng),
+            _ => mutations::multi_chain(&self.space, x, rng),
         }
     }
 }
@@ -256,13 +197,15 @@ impl MetropolisTarget for Target<'_> {
     }
     fn propose(&self, st: &mut State, out: &mut Contribution) -> Proposal {
         let u = st.rng.next_f64();
-        let kind = if u < self.probs[0] {
-            0
-        } else if u < self.probs[0] + self.probs[1] {
-            1
-        } else {
-            2
-        };
+        let mut acc = 0.0;
+        let mut kind = MUTATIONS.len() - 1;
+        for (i, p) in self.probs.iter().enumerate() {
+            acc += p;
+            if u < acc && *p > 0.0 {
+                kind = i;
+                break;
+            }
+        }
         match self.mutate(kind, &st.x, &mut st.rng) {
             Some((y, ratio)) => {
                 self.contribution(&y, out);
@@ -283,9 +226,9 @@ impl MetropolisTarget for Target<'_> {
     fn reject(&self, st: &mut State) {
         st.y = None;
     }
-    /// b by one bidirectional sample (a film position anywhere on the image), counting the
-    /// strategies whose path has no delta vertex: far less noisy than the independent
-    /// paths' weights where light comes through narrow openings.
+    /// b by one bidirectional sample (a film position anywhere on the image), every strategy
+    /// counted: far less noisy than the independent paths' weights where light comes through
+    /// narrow openings.
     fn estimate_b(&self, rng: Pcg32) -> Option<f64> {
         let scene = self.space.scene;
         let cam = &scene.camera;
@@ -304,9 +247,7 @@ impl MetropolisTarget for Target<'_> {
                     continue;
                 }
                 let Some(c) = connect(scene, &self.cfg, &light, &camera, s, t, &mut sampler, true) else { continue };
-                if !light[..s].iter().any(|v| v.delta) && !camera[..t.min(camera.len())].iter().any(|v| v.delta) {
-                    sum += (c.l * c.weight).luminance() as f64;
-                }
+                sum += (c.l * c.weight).luminance() as f64;
             }
         }
         Some(if sum.is_finite() { sum } else { 0.0 })
@@ -329,42 +270,15 @@ impl Sampler for RngSampler {
     }
 }
 
-/// BDPT restricted to the paths with at least one delta vertex.
-struct Complement {
-    cfg: PathConfig,
-}
-
-impl SplatEstimator for Complement {
-    type Scratch = Scratch;
-    fn scratch(&self) -> Scratch {
-        Scratch::default()
-    }
-    fn sample(
-        &self,
-        scene: &Scene,
-        _settings: &RenderSettings,
-        ray: &Ray,
-        raster: Vec2,
-        sampler: &mut dyn Sampler,
-        sc: &mut Scratch,
-        out: &mut SampleOut,
-    ) -> Rgb {
-        // Every connection is made (the sample's dimensions stay aligned); only paths through a delta vertex count.
-        sample_bdpt(scene, &self.cfg, ray, raster, sampler, sc, out, |light, camera, s, t, _, _, _| {
-            light[..s].iter().any(|v| v.delta) || camera[..t.min(camera.len())].iter().any(|v| v.delta)
-        })
-    }
-}
-
 #[cfg(test)]
 mod tests {
     use super::*;
 
     #[test]
     fn options_parse_and_reject_bad_input() {
-        let o = MltOptions::parse("bidir=1,lens=0,caustic=2,chains=4,bootstrap=10,complement-spp=3").unwrap();
-        assert_eq!((o.weights, o.chain.chains, o.chain.bootstrap, o.complement_spp), ([1.0, 0.0, 2.0], 4, 10, Some(3)));
-        for bad in ["bidir=0", "lens=-1", "caustic=nan", "complement-spp=0", "chains=x", "multi=1", "lens"] {
+        let o = MltOptions::parse("bidir=1,lens=0,caustic=2,multi=0.5,chains=4,bootstrap=10").unwrap();
+        assert_eq!((o.weights, o.chain.chains, o.chain.bootstrap), ([1.0, 0.0, 2.0, 0.5], 4, 10));
+        for bad in ["bidir=0", "lens=-1", "caustic=nan", "multi=x", "chains=x", "complement-spp=1", "lens"] {
             assert!(MltOptions::parse(bad).is_err(), "{bad} accepted");
         }
         assert!(crate::integrator::by_name("mlt:lens=x").is_err());

@@ -2,9 +2,10 @@
 //! as `path::Vertex`es, its measurement contribution f in the area-product measure, and the
 //! densities with which the bidirectional samplers produce its vertices.
 //!
-//! The chains live on paths whose light end is on an area light, whose camera is a pinhole,
-//! and whose every scattering vertex scatters by a non-delta lobe; the rest of path space
-//! (anything through a specular lobe) is rendered by the complement estimator of `mod.rs`.
+//! The chains live on every path whose light end is on an area light and whose camera is a
+//! pinhole. A scattering vertex is either non-delta (its BSDF's non-delta part, evaluated by
+//! `eval`) or delta (`Vertex::delta`, scattering by the specular or null lobe named by its
+//! `event`): a mixed BSDF such as plastic makes two distinct kinds of vertex.
 //!
 //! f(x) = Le(x0→x1) · Π_{i=1}^{k-1} fs(x_{i+1}←x_i←x_{i-1}) |ns_i·ω_{i→i-1}|
 //!        · Π_{i=0}^{k-2} |ng_i·ω| / |x_i − x_{i+1}|² · c(x_{k-1})
@@ -12,12 +13,23 @@
 //! c(x_{k-1}) the camera's area density of x_{k-1} for a uniform film sample (its We makes
 //! the path tracer's camera-ray weight 1), so that f / p is exactly what the path tracer
 //! and BDPT estimate.
+//!
+//! **Delta vertices.** At a delta vertex fs |cos| is ρ δ, with ρ the lobe's weight (the
+//! Fresnel factor, the radiance scaling of refraction) and δ a Dirac in the solid angle of
+//! the direction toward the light, ω_in (the radiance form of the lobe). f and every density
+//! of a path are kept as coefficients of the same product of such Diracs, which then cancel
+//! in every ratio f/T (Veach §8.3, §10.3.5). A camera-side walk through a delta vertex
+//! samples ω_in given ω_out with probability P_E (the lobe's choice): coefficient P_E. A
+//! light-side walk samples ω_out given ω_in: its Dirac is in ω_out, δ_out = δ_in / |J| with
+//! J = dω_out/dω_in = (η_in/η_out)² cos_in / cos_out (1 for reflection), so its coefficient is
+//! P_L / |J|. The perturbations follow a lobe without choosing it: no P there. Connections
+//! join two non-delta vertices only.
 
-use crate::bsdf::TransportMode;
+use crate::bsdf::{BsdfSample, LobeFlags, TransportMode};
 use crate::geometry::Ray;
 use crate::light::Light;
 use crate::math::{warp, Frame};
-use crate::path::{Vertex, VertexKind};
+use crate::path::{Event, EventKind, Vertex, VertexKind};
 use crate::sampling::Pcg32;
 use crate::scene::Scene;
 use crate::spectrum::Rgb;
@@ -76,9 +88,25 @@ impl<'a> Space<'a> {
         !v.infinite && v.light.is_some_and(|i| matches!(self.scene.lights[i as usize], Light::Area(_)))
     }
 
-    /// Whether `v` can scatter in this space: a surface with a non-delta lobe.
+    /// Whether `v` can scatter in this space as it is marked: a surface with a non-delta
+    /// lobe, or (marked delta) with the delta lobe of its event.
     pub fn scatters(v: &Vertex) -> bool {
-        v.kind == VertexKind::Surface && v.bsdf.as_ref().is_some_and(|b| b.flags().has_non_specular())
+        v.kind == VertexKind::Surface
+            && v.bsdf.as_ref().is_some_and(|b| if v.delta { b.flags().contains(lobe_of(v.event)) } else { b.flags().has_non_specular() })
+    }
+
+    /// The delta lobe of vertex p[i] followed from the neighbour `from` (i+1: radiance, from
+    /// the camera side; i-1: importance, from the light side), checked against the path's
+    /// other neighbour: its weight, choice probability and relative IOR.
+    pub fn delta_lobe(&self, p: &[Vertex], i: usize, from_camera: bool) -> Option<BsdfSample> {
+        let v = &p[i];
+        let b = v.bsdf.as_ref()?;
+        let (a, c) = if from_camera { (i + 1, i - 1) } else { (i - 1, i + 1) };
+        let (wo, _) = dir(v, &p[a]);
+        let (wi, _) = dir(v, &p[c]);
+        let mode = if from_camera { TransportMode::Radiance } else { TransportMode::Importance };
+        let s = b.sample_delta(v.shading.to_local(wo), lobe_of(v.event), mode)?;
+        (v.shading.to_world(s.wi).dot(wi) > 0.999).then_some(s)
     }
 
     /// The camera vertex seeing `x` (the last scattering vertex), with its raster position;
@@ -119,8 +147,14 @@ impl<'a> Space<'a> {
             if !Self::scatters(&p[i]) {
                 return Rgb::BLACK;
             }
-            let (wl, _) = dir(&p[i], &p[i - 1]);
-            f *= self.fs(p, i) * p[i].shading.n.dot(wl).abs();
+            if p[i].delta {
+                // ρ: the lobe's coefficient of δ_in.
+                let Some(s) = self.delta_lobe(p, i, true) else { return Rgb::BLACK };
+                f *= s.f * s.wi.z.abs();
+            } else {
+                let (wl, _) = dir(&p[i], &p[i - 1]);
+                f *= self.fs(p, i) * p[i].shading.n.dot(wl).abs();
+            }
         }
         for i in 0..k - 1 {
             let (w, d2) = dir(&p[i], &p[i + 1]);
@@ -139,6 +173,16 @@ impl<'a> Space<'a> {
         let d = match i {
             0 => p[0].pdf_light_origin(s, &p[1]),
             1 => p[0].pdf_light(s, &p[1]),
+            _ if p[i - 1].delta => {
+                let Some(l) = self.delta_lobe(p, i - 1, false) else { return 0.0 };
+                // 1/|J| = η_rel² cos_out / cos_in, η_rel = η_out/η_in (the sample's eta).
+                let wo_z = p[i - 1].shading.n.dot(dir(&p[i - 1], &p[i - 2]).0).abs();
+                if wo_z == 0.0 {
+                    return 0.0;
+                }
+                let inv_j = l.eta * l.eta * l.wi.z.abs() / wo_z;
+                l.pdf * inv_j * p[i - 1].convert_density(1.0, &p[i])
+            }
             _ => p[i - 1].pdf(s, Some(&p[i - 2]), &p[i], TransportMode::Importance),
         };
         d as f64
@@ -149,43 +193,91 @@ impl<'a> Space<'a> {
         let k = p.len() - 1;
         let d = if i + 1 == k {
             p[k].pdf(self.scene, None, &p[i], TransportMode::Radiance)
+        } else if p[i + 1].delta {
+            let Some(l) = self.delta_lobe(p, i + 1, true) else { return 0.0 };
+            l.pdf * p[i + 1].convert_density(1.0, &p[i])
         } else {
             p[i + 1].pdf(self.scene, Some(&p[i + 2]), &p[i], TransportMode::Radiance)
         };
         d as f64
     }
 
+    /// Area density at p[i] of a walk from the camera side that follows the delta lobes
+    /// without choosing them (the perturbations): the camera's density for i = k-1, the
+    /// geometric conversion after a delta vertex, 0 after a non-delta one.
+    pub fn pe_follow(&self, p: &[Vertex], i: usize) -> f64 {
+        let k = p.len() - 1;
+        if i + 1 == k {
+            return self.pe(p, i);
+        }
+        f64::from(p[i + 1].convert_density(1.0, &p[i]))
+    }
+
+    /// The same from the light side: 1/|J| times the geometric conversion.
+    pub fn pl_follow(&self, p: &[Vertex], i: usize) -> f64 {
+        if i >= 2 && p[i - 1].delta {
+            let Some(l) = self.delta_lobe(p, i - 1, false) else { return 0.0 };
+            let wo_z = p[i - 1].shading.n.dot(dir(&p[i - 1], &p[i - 2]).0).abs();
+            if wo_z == 0.0 {
+                return 0.0;
+            }
+            return f64::from(l.eta * l.eta * l.wi.z.abs() / wo_z * p[i - 1].convert_density(1.0, &p[i]));
+        }
+        f64::from(p[i - 1].convert_density(1.0, &p[i]))
+    }
+
     /// Density with which vertices n0..n0+m-1 of `p` are regenerated between the kept ends,
     /// summed over the m + 1 ways to split them between a light-side and a camera-side walk
-    /// (each chosen with probability 1/(m+1)). 1 when m = 0 (a bare connection).
+    /// (each chosen with probability 1/(m+1)); a split whose connection would touch a delta
+    /// vertex cannot make the path. For m = 0 (a bare connection): 1, or 0 if an end is delta.
     pub fn regen_density(&self, p: &[Vertex], n0: usize, m: usize) -> f64 {
+        let joinable = |s: usize| n0 + s == 0 || (!p[n0 + s - 1].delta && !p[n0 + s].delta);
         if m == 0 {
-            return 1.0;
+            return if joinable(0) { 1.0 } else { 0.0 };
         }
         let pl: Vec<f64> = (n0..n0 + m).map(|i| self.pl(p, i)).collect();
         let pe: Vec<f64> = (n0..n0 + m).map(|i| self.pe(p, i)).collect();
         let mut sum = 0.0;
         for s in 0..=m {
-            let prod: f64 = pl[..s].iter().product::<f64>() * pe[s..].iter().product::<f64>();
-            sum += prod;
+            if joinable(s) {
+                sum += pl[..s].iter().product::<f64>() * pe[s..].iter().product::<f64>();
+            }
         }
         sum / (m + 1) as f64
     }
 
+    /// Where rays leaving `from` toward `w` start (surfaces: offset off the surface).
+    fn origin(from: &Vertex, w: Vec3) -> Vec3 {
+        if from.kind == VertexKind::Camera {
+            from.p
+        } else {
+            crate::geometry::ray::offset_ray_origin(from.p, from.ng, w)
+        }
+    }
+
     /// Trace from `from` along `w` to a new surface vertex.
-    fn trace(&self, from: &Vertex, w: Vec3) -> Option<Vertex> {
-        let o = if from.kind == VertexKind::Camera { from.p } else { crate::geometry::ray::offset_ray_origin(from.p, from.ng, w) };
-        let si = self.scene.intersect(&Ray::new(o, w))?;
+    pub fn trace(&self, from: &Vertex, w: Vec3) -> Option<Vertex> {
+        let si = self.scene.intersect(&Ray::new(Self::origin(from, w), w))?;
         Some(Vertex::surface(self.scene, &si, Rgb::WHITE))
     }
 
-    /// Grow `count` vertices from the light side after `prefix` (empty: start on a light),
-    /// appending to `out`. False when the walk dies (escape, delta lobe, no light).
-    pub fn walk_light(&self, prefix: &[Vertex], count: usize, rng: &mut Pcg32, out: &mut Vec<Vertex>) -> bool {
+    /// The direction from where rays leaving `from` start to `to`. The angular perturbations
+    /// turn this one: a ray traced along it from that origin lands on `to` exactly, so the
+    /// angle between the old and the new direction is the same in both directions of a move
+    /// (measured from `from.p` they would differ by the offset over the distance, which at
+    /// Veach's smallest angles, 1e-4 rad, would break the kernel's symmetry).
+    pub fn pivot_dir(&self, from: &Vertex, to: &Vertex) -> Vec3 {
+        let o = Self::origin(from, to.p - from.p);
+        (to.p - o).normalize_or_zero()
+    }
+
+    /// Extend `v` (the kept light side of a path, possibly empty: then start on a light) by
+    /// `count` vertices of a light-side walk. The vertex each step scatters from is marked
+    /// delta or not by the lobe it chose. False when the walk dies (escape, absorption).
+    pub fn walk_light(&self, v: &mut Vec<Vertex>, count: usize, rng: &mut Pcg32) -> bool {
         let s = self.scene;
-        let mut chain: Vec<Vertex> = prefix.iter().rev().take(2).rev().cloned().collect();
         for _ in 0..count {
-            let n = chain.len();
+            let n = v.len();
             let next = if n == 0 {
                 let (li, pmf, _) = s.light_distribution.sample_discrete(rng.next_f32());
                 if pmf <= 0.0 || !matches!(s.lights[li], Light::Area(_)) {
@@ -194,64 +286,66 @@ impl<'a> Space<'a> {
                 let (u1, u2) = (Vec2::new(rng.next_f32(), rng.next_f32()), Vec2::new(rng.next_f32(), rng.next_f32()));
                 let Some(es) = s.lights[li].sample_le(u1, u2, 0.0, &s.bounds) else { return false };
                 Vertex::light_point(li as u32, es.ray.o, es.n, es.le, Rgb::WHITE, 0.0)
-            } else if n == 1 && prefix.len() <= 1 {
+            } else if n == 1 {
                 // Leave the light end by its emission (cosine about the normal).
-                let v = &chain[0];
                 let local = warp::square_to_cosine_hemisphere(Vec2::new(rng.next_f32(), rng.next_f32()));
-                let w = Frame::from_normal(v.ng).to_world(local);
-                let Some(nv) = self.trace(v, w) else { return false };
+                let w = Frame::from_normal(v[0].ng).to_world(local);
+                let Some(nv) = self.trace(&v[0], w) else { return false };
                 nv
             } else {
-                let Some(nv) = self.scatter(&chain[n - 1], &chain[n - 2], TransportMode::Importance, rng) else { return false };
+                let (head, tail) = v.split_at_mut(n - 1);
+                let Some(nv) = self.scatter(&mut tail[0], &head[n - 2], TransportMode::Importance, rng) else { return false };
                 nv
             };
-            out.push(next.clone());
-            chain.push(next);
-            if chain.len() > 2 {
-                chain.remove(0);
-            }
+            v.push(next);
         }
         true
     }
 
-    /// The next vertex after `v` (reached from `prev`) by sampling its BSDF in `mode`; None
-    /// where the walk ends (no BSDF, a specular lobe the chains do not hold, nothing hit).
-    fn scatter(&self, v: &Vertex, prev: &Vertex, mode: TransportMode, rng: &mut Pcg32) -> Option<Vertex> {
+    /// The next vertex after `v` (reached from `prev`) by sampling its BSDF in `mode`,
+    /// marking `v` delta or not by the lobe chosen; None where the walk ends.
+    fn scatter(&self, v: &mut Vertex, prev: &Vertex, mode: TransportMode, rng: &mut Pcg32) -> Option<Vertex> {
         let b = v.bsdf.as_ref()?;
         let (wp, _) = dir(v, prev);
         let bs = b.sample(v.shading.to_local(wp), rng.next_f32(), Vec2::new(rng.next_f32(), rng.next_f32()), mode)?;
-        if bs.lobe.is_specular() || bs.pdf <= 0.0 {
+        if bs.pdf <= 0.0 || bs.f.is_black() {
             return None;
         }
+        v.delta = bs.lobe.is_specular();
+        v.event = Event::from_lobe(bs.lobe);
         self.trace(v, v.shading.to_world(bs.wi))
     }
 
-    /// Grow `count` vertices from the camera side before `suffix` (`suffix[0]` the vertex
-    /// next to the new ones, `suffix[1]` its neighbour toward the camera; the camera alone
-    /// samples a uniform film position), appending them to `out` in walk order.
-    pub fn walk_eye(&self, suffix: &[Vertex], count: usize, rng: &mut Pcg32, out: &mut Vec<Vertex>) -> bool {
+    /// Extend `r` (the kept camera side of a path in reverse order: the camera first) by
+    /// `count` vertices of a camera-side walk; the camera alone samples a uniform film
+    /// position. The vertex each step scatters from is marked delta or not.
+    pub fn walk_eye(&self, r: &mut Vec<Vertex>, count: usize, rng: &mut Pcg32) -> bool {
         let cam = &self.scene.camera;
-        let mut chain: Vec<Vertex> = suffix.iter().take(2).rev().cloned().collect(); // [.., toward camera, current]
         for _ in 0..count {
-            let n = chain.len();
-            let v = &chain[n - 1];
-            let next = if v.kind == VertexKind::Camera {
+            let n = r.len();
+            let next = if r[n - 1].kind == VertexKind::Camera {
                 let raster = Vec2::new(rng.next_f32() * cam.width as f32, rng.next_f32() * cam.height as f32);
                 // The camera's own ray (from the near plane), as the path tracer's.
                 let ray = cam.generate_ray(raster, Vec2::splat(0.5), 0.0);
                 let Some(si) = self.scene.intersect(&ray) else { return false };
                 Vertex::surface(self.scene, &si, Rgb::WHITE)
             } else {
-                let Some(nv) = self.scatter(v, &chain[n - 2], TransportMode::Radiance, rng) else { return false };
+                let (head, tail) = r.split_at_mut(n - 1);
+                let Some(nv) = self.scatter(&mut tail[0], &head[n - 2], TransportMode::Radiance, rng) else { return false };
                 nv
             };
-            out.push(next.clone());
-            chain.push(next);
-            if chain.len() > 2 {
-                chain.remove(0);
-            }
+            r.push(next);
         }
         true
+    }
+
+    /// Follow the delta lobe `v` is marked with from `prev` (light-side walks: importance,
+    /// camera-side: radiance) to the next surface.
+    pub fn follow(&self, v: &Vertex, prev: &Vertex, mode: TransportMode) -> Option<Vertex> {
+        let b = v.bsdf.as_ref()?;
+        let (wp, _) = dir(v, prev);
+        let s = b.sample_delta(v.shading.to_local(wp), lobe_of(v.event), mode)?;
+        self.trace(v, v.shading.to_world(s.wi))
     }
 
     /// Whether the segment a–b is unblocked.
@@ -265,8 +359,8 @@ impl<'a> Space<'a> {
         !self.scene.occluded(a.p, a.ng, b.p)
     }
 
-    /// Check the structure of a path: area emitter at 0, scattering vertices inside, the
-    /// camera at the end with the raster position of x_{k-1}.
+    /// Check the structure of a path: area emitter at 0, scattering vertices inside (as
+    /// marked), the camera at the end with the raster position of x_{k-1}.
     pub fn finish(&self, v: Vec<Vertex>) -> Option<MPath> {
         let k = v.len().checked_sub(1)?;
         if k < self.min_k || k > self.max_k || !self.is_area_emitter(&v[0]) || v[1..k].iter().any(|x| !Self::scatters(x)) {
@@ -276,5 +370,14 @@ impl<'a> Space<'a> {
         let cam = self.camera_vertex(&v[k - 1])?;
         v[k] = cam;
         Some(MPath { v })
+    }
+}
+
+/// The lobe a delta vertex's event names.
+pub fn lobe_of(e: Event) -> LobeFlags {
+    match (e.kind, e.transmission) {
+        (EventKind::Null, _) => LobeFlags::NULL_TRANSMISSION,
+        (_, true) => LobeFlags::SPECULAR_TRANSMISSION,
+        _ => LobeFlags::SPECULAR_REFLECTION,
     }
 }

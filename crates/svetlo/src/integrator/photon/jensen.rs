@@ -232,7 +232,7 @@ impl Estimator {
                 let left = segments_left(settings.max_depth, depth);
                 let n = if si.wo.dot(si.ng) >= 0.0 { si.ng } else { -si.ng };
                 let pre = match (&m.precomputed, lambertian_albedo(&bsdf, wo)) {
-                    (Some(pc), Some(_)) => pc.radiance(self.visibility.then_some(scene), si.p, n, left),
+                    (Some(pc), Some(_)) => pc.radiance(self.visibility.then_some(scene), si.p, n, left, si.time),
                     _ => None,
                 };
                 l += t * pre

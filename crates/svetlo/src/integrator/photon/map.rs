@@ -119,7 +119,7 @@ impl PhotonMap {
         let accept = |ph: &Photon| ph.n.dot(n) > SAME_ORIENTATION_COS && accept(ph);
         // Visibility is tested on the photons found only (not on every candidate of the
         // search): hidden ones do not count, and the disc stays the one the k reached.
-        let seen = |ph: &Photon| visibility.is_none_or(|sc| visible(sc, si.p, n, ph.p, ph.n));
+        let seen = |ph: &Photon| visibility.is_none_or(|sc| visible(sc, si.p, n, ph.p, ph.n, si.time));
         let mut sum = Rgb::BLACK;
         let mut add = |ph: &Photon, d2: f32, r2: f32| {
             let wi = si.to_local(ph.wi);
@@ -223,9 +223,9 @@ pub(crate) struct PrecomputedRadiance {
 /// surface by a quarter of their distance (more than the sagitta of a sphere of radius half
 /// that distance, so curved surfaces do not shadow themselves). Without it light leaks through
 /// thin walls into the room beside, along the surfaces that run under them.
-pub(crate) fn visible(scene: &Scene, p: Vec3, n: Vec3, q: Vec3, nq: Vec3) -> bool {
+pub(crate) fn visible(scene: &Scene, p: Vec3, n: Vec3, q: Vec3, nq: Vec3, time: f32) -> bool {
     let lift = VISIBILITY_LIFT * (q - p).length();
-    lift == 0.0 || !scene.occluded(p + n * lift, n, q + nq * lift)
+    lift == 0.0 || !scene.occluded_at(p + n * lift, n, q + nq * lift, time)
 }
 
 const VISIBILITY_LIFT: f32 = 0.25;
@@ -254,7 +254,8 @@ impl PrecomputedRadiance {
                 if r2 > 0.0 {
                     for &(i, d2) in inside {
                         let ph = &map.tree.items()[i];
-                        if visibility.is_some_and(|sc| !visible(sc, s.p, s.n, ph.p, ph.n)) {
+                        // Photons carry no time (the map averages the shutter): test at its start.
+                        if visibility.is_some_and(|sc| !visible(sc, s.p, s.n, ph.p, ph.n, 0.0)) {
                             continue;
                         }
                         let cos_g = ph.wi.dot(s.n);
@@ -276,9 +277,11 @@ impl PrecomputedRadiance {
     }
 
     /// Radiance leaving a Lambertian point `p` on the side of geometric normal `n`, from
-    /// photons of at most `segments` segments; None where no site is near enough.
-    pub fn radiance(&self, visibility: Option<&Scene>, p: Vec3, n: Vec3, segments: i32) -> Option<Rgb> {
-        let found = self.tree.k_nearest(p, 1, self.max_radius, |s| s.n.dot(n) > SITE_NORMAL_COS && visibility.is_none_or(|sc| visible(sc, p, n, s.p, s.n)));
+    /// photons of at most `segments` segments, sites tested for visibility at `time`; None where
+    /// no site is near enough.
+    pub fn radiance(&self, visibility: Option<&Scene>, p: Vec3, n: Vec3, segments: i32, time: f32) -> Option<Rgb> {
+        let found =
+            self.tree.k_nearest(p, 1, self.max_radius, |s| s.n.dot(n) > SITE_NORMAL_COS && visibility.is_none_or(|sc| visible(sc, p, n, s.p, s.n, time)));
         let &(i, _) = found.first()?;
         let b = (segments.max(1) as usize).min(self.buckets) - 1;
         Some(self.values[self.tree.items()[i].first as usize + b])

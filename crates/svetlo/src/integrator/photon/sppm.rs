@@ -196,7 +196,7 @@ impl Integrator for Sppm {
                                     return;
                                 }
                                 let f = vp.bsdf.eval(vp.wo, wi, TransportMode::Radiance);
-                                if f.is_black() || ph.n.dot(n) <= SAME_ORIENTATION_COS || (visibility && !visible(scene, vp.si.p, n, ph.p, ph.n)) {
+                                if f.is_black() || ph.n.dot(n) <= SAME_ORIENTATION_COS || (visibility && !visible(scene, vp.si.p, n, ph.p, ph.n, vp.si.time)) {
                                     return;
                                 }
                                 phi += f * ph.power * (wi.z.abs() / cos_g);
