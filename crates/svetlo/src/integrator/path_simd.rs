@@ -94,7 +94,8 @@ struct MeshLight {
     /// 1 / area (0 for a light without area).
     pdf_area: f32,
     tri_distribution: Distribution1D,
-    /// Vertices and, when constant over the triangle, the sampled point's normal.
+    /// First vertex and edges (p0, p1 - p0, p2 - p0) and, when constant over the triangle,
+    /// the sampled point's normal.
     tris: Vec<([Vec3; 3], Option<Vec3>)>,
     radiance: Rgb,
     /// The light's index, for the normals of `TriangleMesh::surface` where not constant.
@@ -156,7 +157,12 @@ impl SimdKernel {
             if dist.is_empty() {
                 return None;
             }
-            let tris = (0..m.triangle_count()).map(|t| (m.vertices(t), constant_normal(m, t))).collect();
+            let tris = (0..m.triangle_count())
+                .map(|t| {
+                    let [p0, p1, p2] = m.vertices(t);
+                    ([p0, p1 - p0, p2 - p0], constant_normal(m, t))
+                })
+                .collect();
             let pdf_area = if a.area > 0.0 { 1.0 / a.area } else { 0.0 };
             lights.push(MeshLight { pdf_area, tri_distribution: dist.clone(), tris, radiance: *radiance, light: li as u32 });
         }
@@ -414,8 +420,8 @@ impl MeshLight {
     fn sample_li(&self, scene: &Scene, p_ref: Vec3, u: Vec2) -> Option<LightSample> {
         let (t, _, ur) = self.tri_distribution.sample_discrete(u.x);
         let b = warp::square_to_uniform_triangle(Vec2::new(ur, u.y));
-        let ([p0, p1, p2], n) = self.tris[t];
-        let p = p0 * (1.0 - b.x - b.y) + p1 * b.x + p2 * b.y;
+        let ([p0, e1, e2], n) = self.tris[t];
+        let p = p0 + e1 * b.x + e2 * b.y;
         let n = match n {
             Some(n) => n,
             None => {
