@@ -24,7 +24,7 @@ use crate::film::{Film, FilmTile};
 use crate::geometry::ray::SHADOW_EPSILON;
 use crate::geometry::{Geometry, TriangleMesh};
 use crate::light::{AreaLight, Light};
-use crate::math::{warp, Frame, INV_PI};
+use crate::math::{warp, Frame, INV_PI, PI};
 use crate::sampling::sampler::IndependentSampler;
 use crate::sampling::{power_heuristic, Distribution1D, Sampler, SamplerKind};
 use crate::scene::Scene;
@@ -381,7 +381,8 @@ impl SimdKernel {
         putc(&mut v.back, sh.back.unwrap_or(Rgb::BLACK));
         v.has_back[l] = sh.back.is_some();
         putc(&mut v.beta, lane.beta);
-        put(&mut v.wim, warp::square_to_cosine_hemisphere(u));
+        v.u[0][l] = u.x;
+        v.u[1][l] = u.y;
         // The light point (as `MeshLight::sample_li` up to the distance test).
         v.nee_ok[l] = false;
         if !scene.lights.is_empty() {
@@ -428,8 +429,8 @@ struct Soa {
     back: [[f32; LANES]; 3],
     has_back: [bool; LANES],
     beta: [[f32; LANES]; 3],
-    /// The cosine-warped BSDF direction (local, before the side's mirroring).
-    wim: [[f32; LANES]; 3],
+    /// The BSDF sample's square point (cosine-warped in `shade8`).
+    u: [[f32; LANES]; 2],
     u_rr: [f32; LANES],
     depth: [i32; LANES],
     nee_ok: [bool; LANES],
@@ -462,6 +463,23 @@ struct Out {
 #[inline(always)]
 fn dot3(a: [f32; 3], b: [f32; 3]) -> f32 {
     (a[0] * b[0] + a[1] * b[1]) + a[2] * b[2]
+}
+
+/// `warp::square_to_cosine_hemisphere`, operation for operation, its branches as selects.
+#[inline(always)]
+fn cosine_hemisphere(ux: f32, uy: f32) -> [f32; 3] {
+    let (ox, oy) = (2.0 * ux - 1.0, 2.0 * uy - 1.0);
+    let x_major = ox.abs() > oy.abs();
+    let ratio = if x_major { oy / ox } else { ox / oy };
+    let (sn, cs) = warp::sin_cos_quarter((PI / 4.0) * ratio);
+    let (dx, dy) = if ox == 0.0 && oy == 0.0 {
+        (0.0, 0.0)
+    } else if x_major {
+        (ox * cs, ox * sn)
+    } else {
+        (oy * sn, oy * cs)
+    };
+    [dx, dy, (1.0 - (dx * dx + dy * dy)).max(0.0).sqrt()]
 }
 
 /// `geometry::ray::offset_ray_origin`, operation for operation.
@@ -537,7 +555,7 @@ fn shade8(v: &Soa, rr_depth: i32, o: &mut Out) {
             2
         };
         // BSDF sample.
-        let wim = g(&v.wim);
+        let wim = cosine_hemisphere(v.u[0][l], v.u[1][l]);
         let bpdf = wim[2].max(0.0) * INV_PI;
         let wi = [wim[0], wim[1], wim[2] * flip];
         let moved = side_ok && wo_up && bpdf > 0.0 && !f_black;
