@@ -181,7 +181,7 @@ impl PacketBvh {
         let mut b = Build { bounds: &bounds, centroids, nodes: Vec::new(), order: (0..tris.len() as u32).collect() };
         let root = if tris.is_empty() { None } else { Some(b.rec(0, tris.len(), 0)) };
         let verts = b.order.iter().map(|&i| tris[i as usize].map(|p| [p.x, p.y, p.z, 0.0]));
-        PacketBvh { verts: verts.collect(), ids: b.order, nodes: b.nodes, root, avx2: has_avx2() }
+        PacketBvh { verts: verts.collect(), ids: b.order, nodes: b.nodes, root, avx2: avx2() }
     }
 
     /// Whether the eight-wide AVX2 path is used (else each lane walks the tree alone).
@@ -492,7 +492,8 @@ impl PacketBvh {
     }
 }
 
-fn has_avx2() -> bool {
+/// Whether this CPU runs the eight-wide paths (AVX2, detected at run time).
+pub fn avx2() -> bool {
     #[cfg(target_arch = "x86_64")]
     {
         std::arch::is_x86_feature_detected!("avx2")

@@ -1,6 +1,9 @@
 //! The path tracer of `path.rs`, eight paths at a time: the same estimator (next-event
 //! estimation and BSDF sampling combined by the power heuristic, Russian roulette, Mitsuba's
-//! `max_depth`), with the rays of eight paths traced as one packet (`accel::packet`).
+//! `max_depth`), with the rays of eight paths traced as one packet (`accel::packet`). Per
+//! vertex, `gather` does each lane's branchy part (emission found, random numbers, light and
+//! triangle choice, the cosine warp) and `shade8` the arithmetic of all eight lanes in
+//! structure-of-arrays form (compiled to AVX2 vector code).
 //!
 //! Scope: static scenes of triangle meshes, (two-sided) Lambertian
 //! materials of constant reflectance, area lights of constant radiance on meshes, no
@@ -18,12 +21,12 @@ use crate::accel::packet::{PacketBvh, Rays8, LANES};
 use crate::bsdf::Material;
 use crate::error::{Error, Result};
 use crate::film::{Film, FilmTile};
-use crate::geometry::ray::{offset_ray_origin, SHADOW_EPSILON};
-use crate::geometry::Geometry;
+use crate::geometry::ray::SHADOW_EPSILON;
+use crate::geometry::{Geometry, TriangleMesh};
 use crate::light::{AreaLight, Light};
-use crate::math::{warp, Frame, INV_PI};
+use crate::math::{warp, Frame, INV_PI, PI};
 use crate::sampling::sampler::IndependentSampler;
-use crate::sampling::{power_heuristic, Sampler, SamplerKind};
+use crate::sampling::{power_heuristic, Distribution1D, Sampler, SamplerKind};
 use crate::scene::Scene;
 use crate::spectrum::Rgb;
 use crate::texture::Texture;
@@ -58,11 +61,9 @@ impl SimdPathTracer {
 
 impl Integrator for SimdPathTracer {
     fn render(&self, scene: &Scene, settings: &RenderSettings, progress: &Progress) -> Result<Film> {
-        if self.simd {
+        if self.simd && crate::accel::packet::avx2() {
             if let Some(k) = SimdKernel::new(scene, settings) {
-                if k.bvh.simd() {
-                    return k.render(scene, settings, progress);
-                }
+                return k.render(scene, settings, progress);
             }
         }
         PathTracer.render(scene, settings, progress)
@@ -90,11 +91,45 @@ struct ShapeData {
     light: Option<(u32, Rgb)>,
 }
 
+/// A mesh area light as `AreaLight::sample_li` samples it, unpacked: its triangles' vertices
+/// and the normals it gives sampled points.
+struct MeshLight {
+    /// 1 / area (0 for a light without area).
+    pdf_area: f32,
+    tri_distribution: Distribution1D,
+    /// First vertex and edges (p0, p1 - p0, p2 - p0) and, when constant over the triangle,
+    /// the sampled point's normal.
+    tris: Vec<([Vec3; 3], Option<Vec3>)>,
+    radiance: Rgb,
+    /// The light's index, for the normals of `TriangleMesh::surface` where not constant.
+    light: u32,
+}
+
 /// Everything the kernel needs of a qualifying scene.
 pub struct SimdKernel {
     bvh: PacketBvh,
     tris: Vec<Tri>,
     shapes: Vec<ShapeData>,
+    /// Per light of the scene.
+    lights: Vec<MeshLight>,
+}
+
+/// `AreaLight`'s per-triangle normal: the geometric normal on the side all vertex normals
+/// face, None when they disagree (then interpolated at the point).
+fn constant_normal(m: &TriangleMesh, t: usize) -> Option<Vec3> {
+    let [p0, p1, p2] = m.vertices(t);
+    let ng = (p1 - p0).cross(p2 - p0).normalize_or_zero();
+    if m.normals.is_empty() {
+        return Some(ng);
+    }
+    let sides = m.indices[t].map(|i| ng.dot(m.normals[i as usize]));
+    if sides.iter().all(|&d| d > 0.0) {
+        Some(ng)
+    } else if sides.iter().all(|&d| d < 0.0) {
+        Some(-ng)
+    } else {
+        None
+    }
 }
 
 /// The constant reflectance of a diffuse model, clamped as `Material::bsdf` does.
@@ -118,12 +153,21 @@ impl SimdKernel {
         if settings.sampler != SamplerKind::Independent || !scene.moving.is_empty() || !scene.static_shapes.is_empty() || !scene.environment_lights.is_empty() {
             return None;
         }
-        for l in &scene.lights {
+        let mut lights = Vec::with_capacity(scene.lights.len());
+        for (li, l) in scene.lights.iter().enumerate() {
             let Light::Area(a) = l else { return None };
-            let ok = matches!(&*a.geometry, Geometry::Mesh(_)) && a.radiance.is_constant() && a.tri_distribution.is_some();
-            if !ok {
+            let (Geometry::Mesh(m), Texture::Constant(radiance), Some(dist)) = (&*a.geometry, &a.radiance, &a.tri_distribution) else { return None };
+            if dist.is_empty() {
                 return None;
             }
+            let tris = (0..m.triangle_count())
+                .map(|t| {
+                    let [p0, p1, p2] = m.vertices(t);
+                    ([p0, p1 - p0, p2 - p0], constant_normal(m, t))
+                })
+                .collect();
+            let pdf_area = if a.area > 0.0 { 1.0 / a.area } else { 0.0 };
+            lights.push(MeshLight { pdf_area, tri_distribution: dist.clone(), tris, radiance: *radiance, light: li as u32 });
         }
         let mut shapes = Vec::with_capacity(scene.shapes.len());
         let mut tris = Vec::new();
@@ -150,16 +194,35 @@ impl SimdKernel {
                 tris.push(Tri { p, flat: s.flat.get(t).copied().flatten(), shape: si as u32, prim: t as u32 });
             }
         }
-        Some(SimdKernel { bvh: PacketBvh::build(&verts), tris, shapes })
+        Some(SimdKernel { bvh: PacketBvh::build(&verts), tris, shapes, lights })
     }
 
     pub fn render(&self, scene: &Scene, settings: &RenderSettings, progress: &Progress) -> Result<Film> {
-        render_tiles(scene, settings, progress, &|tile: &mut FilmTile, rect: [u32; 4], s0: u32, n: u32| self.render_tile(scene, settings, tile, rect, s0, n))
+        render_tiles(scene, settings, progress, &|tile: &mut FilmTile, rect: [u32; 4], s0: u32, n: u32| {
+            #[cfg(target_arch = "x86_64")]
+            if self.bvh.simd() {
+                // SAFETY: `simd()` is true only where AVX2 was detected at run time.
+                return unsafe { self.render_tile_avx2(scene, settings, tile, rect, s0, n) };
+            }
+            self.render_tile(scene, settings, tile, rect, s0, n)
+        })
+    }
+
+    /// `render_tile` compiled for AVX2 (the lanes' scalar shading too: VEX code, no FMA
+    /// contraction, so the same results).
+    ///
+    /// # Safety
+    /// The CPU must support AVX2.
+    #[cfg(target_arch = "x86_64")]
+    #[target_feature(enable = "avx2")]
+    unsafe fn render_tile_avx2(&self, scene: &Scene, settings: &RenderSettings, tile: &mut FilmTile, rect: [u32; 4], s0: u32, n: u32) {
+        self.render_tile(scene, settings, tile, rect, s0, n)
     }
 
     /// Samples `s0..s0 + n` of every pixel of `rect` (the tile's own pixels; the film tile
     /// extends past them by the filter radius), eight paths in lockstep; a lane whose path
     /// ends takes the next camera sample.
+    #[inline(always)]
     fn render_tile(&self, scene: &Scene, settings: &RenderSettings, tile: &mut FilmTile, rect: [u32; 4], s0: u32, n: u32) {
         let [x0, y0, x1, y1] = rect;
         let w = x1 - x0;
@@ -175,6 +238,9 @@ impl SimdKernel {
         let mut rays = Rays8::default();
         let mut next = 0usize;
         let mut active = 0u8;
+        // Reused every step: lanes outside this step's mask hold stale values nobody reads.
+        let mut v = Soa::default();
+        let mut o = Out::default();
         loop {
             for (l, lane) in lanes.iter_mut().enumerate() {
                 if active & (1 << l) != 0 || next >= jobs {
@@ -195,28 +261,47 @@ impl SimdKernel {
             let mut smask = 0u8;
             let mut pending = [Rgb::BLACK; LANES];
             let mut ends = 0u8;
+            let mut go = 0u8;
             for (l, lane) in lanes.iter_mut().enumerate() {
                 if active & (1 << l) == 0 {
                     continue;
                 }
                 let d = Vec3::new(rays.d[0][l], rays.d[1][l], rays.d[2][l]);
-                match self.shade(scene, settings, lane, hits.prim[l], hits.b1[l], hits.b2[l], d) {
-                    Step::End => ends |= 1 << l,
-                    Step::Go { nee, next } => {
-                        match nee {
-                            Nee::None => {}
-                            Nee::Free(c) => lane.l += c,
-                            Nee::Shadow { o, d, t_max, c } => {
-                                set_ray(&mut shadow, l, o, d, t_max);
-                                smask |= 1 << l;
-                                pending[l] = c;
-                            }
-                        }
-                        match next {
-                            Some((o, d)) => set_ray(&mut rays, l, o, d, f32::INFINITY),
-                            None => ends |= 1 << l,
-                        }
+                if self.gather(scene, settings, lane, hits.prim[l], hits.b1[l], hits.b2[l], d, &mut v, l) {
+                    go |= 1 << l;
+                } else {
+                    ends |= 1 << l;
+                }
+            }
+            shade8(&v, settings.rr_depth, &mut o);
+            let o = &o;
+            for (l, lane) in lanes.iter_mut().enumerate() {
+                if go & (1 << l) == 0 {
+                    continue;
+                }
+                let c = Rgb::new(o.c[0][l], o.c[1][l], o.c[2][l]);
+                match o.nee[l] {
+                    1 => lane.l += c,
+                    2 => {
+                        set_ray(&mut shadow, l, Vec3::new(o.so[0][l], o.so[1][l], o.so[2][l]), Vec3::new(o.sd[0][l], o.sd[1][l], o.sd[2][l]), o.st[l]);
+                        smask |= 1 << l;
+                        pending[l] = c;
                     }
+                    _ => {}
+                }
+                lane.beta = Rgb::new(o.beta[0][l], o.beta[1][l], o.beta[2][l]);
+                if o.cont[l] {
+                    lane.prev_specular = false;
+                    lane.prev_pdf = o.pdf[l];
+                    lane.prev_p = Vec3::new(v.p[0][l], v.p[1][l], v.p[2][l]);
+                    set_ray(&mut rays, l, Vec3::new(o.no[0][l], o.no[1][l], o.no[2][l]), Vec3::new(o.nd[0][l], o.nd[1][l], o.nd[2][l]), f32::INFINITY);
+                } else {
+                    if o.moved[l] {
+                        lane.prev_specular = false;
+                        lane.prev_pdf = o.pdf[l];
+                        lane.prev_p = Vec3::new(v.p[0][l], v.p[1][l], v.p[2][l]);
+                    }
+                    ends |= 1 << l;
                 }
             }
             let blocked = self.bvh.occluded(&shadow, smask);
@@ -235,21 +320,20 @@ impl SimdKernel {
         }
     }
 
-    /// One vertex of a lane's path, as one iteration of the scalar tracer's loop: emission
-    /// found, the light sample (its shadow ray left to the packet), the BSDF sample and
-    /// Russian roulette.
+    /// The per-lane part of one vertex (as `shade`): emission found, the depth test, the
+    /// random numbers, the light and its triangle chosen, the cosine warp; the arithmetic
+    /// is left in `v` for `shade8`. False when the path ends here.
     #[allow(clippy::too_many_arguments)]
     #[inline(always)]
-    fn shade(&self, scene: &Scene, settings: &RenderSettings, lane: &mut Lane, prim: u32, b1: f32, b2: f32, d: Vec3) -> Step {
+    fn gather(&self, scene: &Scene, settings: &RenderSettings, lane: &mut Lane, prim: u32, b1: f32, b2: f32, d: Vec3, v: &mut Soa, l: usize) -> bool {
         lane.depth += 1;
-        let Some(tri) = self.tris.get(prim as usize) else { return Step::End };
+        let Some(tri) = self.tris.get(prim as usize) else { return false };
         let sh = &self.shapes[tri.shape as usize];
         let p = tri.p[0] * (1.0 - b1 - b2) + tri.p[1] * b1 + tri.p[2] * b2;
         let (ng, frame) = match tri.flat {
             Some(f) => f,
             None => {
-                // As `Scene::interaction`: interpolated normal, tangent along dp/du.
-                let Geometry::Mesh(m) = &*scene.shapes[tri.shape as usize].geometry else { return Step::End };
+                let Geometry::Mesh(m) = &*scene.shapes[tri.shape as usize].geometry else { return false };
                 let (ng, ns, _uv, dpdu) = m.surface(tri.prim as usize, b1, b2);
                 (ng, Frame::from_normal_tangent(ns, dpdu))
             }
@@ -269,115 +353,241 @@ impl SimdKernel {
             }
         }
         if !settings.depth_allows(lane.depth + 1) {
-            return Step::End;
+            return false;
         }
-        let wo = frame.to_local(wo_w);
-        // The model of the side wo is on, and whether directions are mirrored to +z for it.
-        let side = if wo.z >= 0.0 { Some((sh.front, 1.0f32)) } else { sh.back.map(|b| (b, -1.0f32)) };
+        // All of the vertex's numbers, in the scalar order (u_rr is drawn even where the path
+        // ends before it: the lane's sampler restarts with its next camera sample).
         let u_light = lane.sampler.next_1d();
         let u_l2 = lane.sampler.next_2d();
-        let nee = self.sample_light(scene, lane, p, ng, &frame, wo, side, u_light, u_l2);
-        // The component choice (one lobe: unused).
         let _uc = lane.sampler.next_1d();
         let u = lane.sampler.next_2d();
-        let Some((refl, flip)) = side else { return Step::Go { nee, next: None } };
-        if wo.z * flip <= 0.0 {
-            return Step::Go { nee, next: None };
-        }
-        let wi_m = warp::square_to_cosine_hemisphere(u);
-        let pdf = warp::square_to_cosine_hemisphere_pdf(wi_m);
-        if pdf <= 0.0 {
-            return Step::Go { nee, next: None };
-        }
-        let f = refl * INV_PI;
-        let wi = Vec3::new(wi_m.x, wi_m.y, wi_m.z * flip);
-        if f.is_black() {
-            return Step::Go { nee, next: None };
-        }
-        lane.beta *= f * (wi.z.abs() / pdf);
-        lane.prev_specular = false;
-        lane.prev_pdf = pdf;
-        lane.prev_p = p;
-        let dir = frame.to_world(wi);
-        let o = offset_ray_origin(p, ng, dir);
-        let u_rr = lane.sampler.next_1d();
-        if lane.depth >= settings.rr_depth {
-            let q = lane.beta.max_component().min(0.95);
-            if u_rr >= q {
-                return Step::Go { nee, next: None };
+        v.u_rr[l] = lane.sampler.next_1d();
+        v.depth[l] = lane.depth;
+        let put = |a: &mut [[f32; LANES]; 3], x: Vec3| {
+            a[0][l] = x.x;
+            a[1][l] = x.y;
+            a[2][l] = x.z;
+        };
+        let putc = |a: &mut [[f32; LANES]; 3], x: Rgb| {
+            a[0][l] = x.r;
+            a[1][l] = x.g;
+            a[2][l] = x.b;
+        };
+        put(&mut v.p, p);
+        put(&mut v.ng, ng);
+        put(&mut v.fs, frame.s);
+        put(&mut v.ft, frame.t);
+        put(&mut v.fnn, frame.n);
+        put(&mut v.wo, wo_w);
+        putc(&mut v.front, sh.front);
+        putc(&mut v.back, sh.back.unwrap_or(Rgb::BLACK));
+        v.has_back[l] = sh.back.is_some();
+        putc(&mut v.beta, lane.beta);
+        v.u[0][l] = u.x;
+        v.u[1][l] = u.y;
+        // The light point (as `MeshLight::sample_li` up to the distance test).
+        v.nee_ok[l] = false;
+        if !scene.lights.is_empty() {
+            let (li, pmf, _) = scene.light_distribution.sample_discrete(u_light);
+            if let Some(ml) = self.lights.get(li).filter(|ml| pmf > 0.0 && ml.pdf_area > 0.0 && !ml.radiance.is_black()) {
+                let (t, _, ur) = ml.tri_distribution.sample_discrete(u_l2.x);
+                let b = warp::square_to_uniform_triangle(Vec2::new(ur, u_l2.y));
+                let ([p0, e1, e2], n) = ml.tris[t];
+                let n = match n {
+                    Some(n) => Some(n),
+                    None => match &scene.lights[ml.light as usize] {
+                        Light::Area(a) => match &*a.geometry {
+                            Geometry::Mesh(m) => Some(m.surface(t, b.x, b.y).0),
+                            _ => None,
+                        },
+                        _ => None,
+                    },
+                };
+                if let Some(n) = n {
+                    put(&mut v.lp, p0 + e1 * b.x + e2 * b.y);
+                    put(&mut v.ln, n);
+                    putc(&mut v.lrad, ml.radiance);
+                    v.pmf[l] = pmf;
+                    v.pdf_area[l] = ml.pdf_area;
+                    v.nee_ok[l] = true;
+                }
             }
-            lane.beta /= q;
         }
-        if lane.beta.is_black() {
-            return Step::Go { nee, next: None };
-        }
-        Step::Go { nee, next: Some((o, dir)) }
-    }
-
-    /// `path::sample_light_mis` for a Lambertian side, times the path throughput, with the
-    /// shadow ray returned instead of traced.
-    #[allow(clippy::too_many_arguments)]
-    #[inline(always)]
-    fn sample_light(&self, scene: &Scene, lane: &Lane, p: Vec3, ng: Vec3, frame: &Frame, wo: Vec3, side: Option<(Rgb, f32)>, u_light: f32, u: Vec2) -> Nee {
-        if scene.lights.is_empty() {
-            return Nee::None;
-        }
-        let (li, pmf, _) = scene.light_distribution.sample_discrete(u_light);
-        if pmf <= 0.0 {
-            return Nee::None;
-        }
-        let Some(light) = area_of(scene, li as u32) else { return Nee::None };
-        let Some(ls) = light.sample_li(p, u) else { return Nee::None };
-        if ls.pdf <= 0.0 || ls.li.is_black() {
-            return Nee::None;
-        }
-        let wi = frame.to_local(ls.wi);
-        let Some((refl, flip)) = side else { return Nee::None };
-        // Lambert in the side's frame: both directions above it.
-        if wo.z * flip <= 0.0 || wi.z * flip <= 0.0 {
-            return Nee::None;
-        }
-        let f = refl * INV_PI;
-        if f.is_black() {
-            return Nee::None;
-        }
-        let pdf_light = pmf * ls.pdf;
-        let bsdf_pdf = (wi.z * flip).max(0.0) * INV_PI;
-        let w = power_heuristic(1.0, pdf_light, 1.0, bsdf_pdf);
-        let c = lane.beta * (f * ls.li * (wi.z.abs() * w / pdf_light));
-        // `Scene::occluded_at`'s segment.
-        let d = ls.p - p;
-        let o = offset_ray_origin(p, ng, d);
-        let d = ls.p - o;
-        let dist = d.length();
-        if dist == 0.0 {
-            return Nee::Free(c);
-        }
-        Nee::Shadow { o, d: d / dist, t_max: dist * (1.0 - SHADOW_EPSILON), c }
+        true
     }
 }
 
-/// Next-event estimation's outcome at one vertex.
-enum Nee {
-    None,
-    /// Counts without a shadow ray (zero-length segment).
-    Free(Rgb),
-    /// Counts when the segment is clear.
-    Shadow {
-        o: Vec3,
-        d: Vec3,
-        t_max: f32,
-        c: Rgb,
-    },
+/// One vertex of eight paths, structure of arrays: what `gather` collected.
+#[derive(Default)]
+struct Soa {
+    p: [[f32; LANES]; 3],
+    ng: [[f32; LANES]; 3],
+    fs: [[f32; LANES]; 3],
+    ft: [[f32; LANES]; 3],
+    fnn: [[f32; LANES]; 3],
+    /// Toward the previous vertex (world).
+    wo: [[f32; LANES]; 3],
+    front: [[f32; LANES]; 3],
+    back: [[f32; LANES]; 3],
+    has_back: [bool; LANES],
+    beta: [[f32; LANES]; 3],
+    /// The BSDF sample's square point (cosine-warped in `shade8`).
+    u: [[f32; LANES]; 2],
+    u_rr: [f32; LANES],
+    depth: [i32; LANES],
+    nee_ok: [bool; LANES],
+    lp: [[f32; LANES]; 3],
+    ln: [[f32; LANES]; 3],
+    lrad: [[f32; LANES]; 3],
+    pmf: [f32; LANES],
+    pdf_area: [f32; LANES],
 }
 
-enum Step {
-    End,
-    /// The light sample, and the next ray (None: the path ends after the light sample).
-    Go {
-        nee: Nee,
-        next: Option<(Vec3, Vec3)>,
-    },
+/// What `shade8` decided per lane.
+#[derive(Default)]
+struct Out {
+    /// 0: no light sample, 1: counts without a shadow ray, 2: counts when the shadow ray is clear.
+    nee: [u8; LANES],
+    c: [[f32; LANES]; 3],
+    so: [[f32; LANES]; 3],
+    sd: [[f32; LANES]; 3],
+    st: [f32; LANES],
+    beta: [[f32; LANES]; 3],
+    /// The BSDF sample was taken (prev_* updated) / the path continues along (no, nd).
+    moved: [bool; LANES],
+    cont: [bool; LANES],
+    pdf: [f32; LANES],
+    no: [[f32; LANES]; 3],
+    nd: [[f32; LANES]; 3],
+}
+
+/// `glam`'s `a.dot(b)`, operation for operation.
+#[inline(always)]
+fn dot3(a: [f32; 3], b: [f32; 3]) -> f32 {
+    (a[0] * b[0] + a[1] * b[1]) + a[2] * b[2]
+}
+
+/// `warp::square_to_cosine_hemisphere`, operation for operation, its branches as selects.
+#[inline(always)]
+fn cosine_hemisphere(ux: f32, uy: f32) -> [f32; 3] {
+    let (ox, oy) = (2.0 * ux - 1.0, 2.0 * uy - 1.0);
+    let x_major = ox.abs() > oy.abs();
+    let ratio = if x_major { oy / ox } else { ox / oy };
+    let (sn, cs) = warp::sin_cos_quarter((PI / 4.0) * ratio);
+    let (dx, dy) = if ox == 0.0 && oy == 0.0 {
+        (0.0, 0.0)
+    } else if x_major {
+        (ox * cs, ox * sn)
+    } else {
+        (oy * sn, oy * cs)
+    };
+    [dx, dy, (1.0 - (dx * dx + dy * dy)).max(0.0).sqrt()]
+}
+
+/// `geometry::ray::offset_ray_origin`, operation for operation.
+#[inline(always)]
+fn offset3(p: [f32; 3], ng: [f32; 3], w: [f32; 3]) -> [f32; 3] {
+    let m = |a: f32, b: f32| if a > b { a } else { b };
+    let mag = m(m(p[0].abs(), p[1].abs()), p[2].abs()).max(1.0);
+    let eps = mag * 2e-6;
+    if dot3(w, ng) >= 0.0 {
+        [p[0] + ng[0] * eps, p[1] + ng[1] * eps, p[2] + ng[2] * eps]
+    } else {
+        [p[0] - ng[0] * eps, p[1] - ng[1] * eps, p[2] - ng[2] * eps]
+    }
+}
+
+/// The arithmetic of one vertex for eight lanes (`shade`'s light sample, BSDF sample and
+/// Russian roulette), branch-free per lane so that it compiles to vector code; the same
+/// operations in the same order as the scalar tracer.
+#[inline(always)]
+fn shade8(v: &Soa, rr_depth: i32, o: &mut Out) {
+    for l in 0..LANES {
+        let g = |a: &[[f32; LANES]; 3]| [a[0][l], a[1][l], a[2][l]];
+        let (p, ng, fs, ft, fnn) = (g(&v.p), g(&v.ng), g(&v.fs), g(&v.ft), g(&v.fnn));
+        let wo_w = g(&v.wo);
+        let wo = [dot3(wo_w, fs), dot3(wo_w, ft), dot3(wo_w, fnn)];
+        let front_side = wo[2] >= 0.0;
+        let side_ok = front_side || v.has_back[l];
+        let flip = if front_side { 1.0f32 } else { -1.0 };
+        let refl = if front_side { g(&v.front) } else { g(&v.back) };
+        let f = [refl[0] * INV_PI, refl[1] * INV_PI, refl[2] * INV_PI];
+        let f_black = f[0] == 0.0 && f[1] == 0.0 && f[2] == 0.0;
+        let wo_up = wo[2] * flip > 0.0;
+        let beta = g(&v.beta);
+        // Light sample.
+        let lp = g(&v.lp);
+        let dl = [lp[0] - p[0], lp[1] - p[1], lp[2] - p[2]];
+        let dist2 = dot3(dl, dl);
+        let r = dist2.sqrt();
+        let wi_w = [dl[0] / r, dl[1] / r, dl[2] / r];
+        let ln = g(&v.ln);
+        let cos_l = dot3(ln, [-wi_w[0], -wi_w[1], -wi_w[2]]);
+        let pdf = v.pdf_area[l] * dist2 / cos_l;
+        let wi = [dot3(wi_w, fs), dot3(wi_w, ft), dot3(wi_w, fnn)];
+        let nee = v.nee_ok[l] && dist2 != 0.0 && cos_l > 0.0 && pdf > 0.0 && side_ok && wo_up && wi[2] * flip > 0.0 && !f_black;
+        let pdf_light = v.pmf[l] * pdf;
+        let bsdf_pdf = (wi[2] * flip).max(0.0) * INV_PI;
+        let (f2, g2) = (pdf_light * pdf_light, bsdf_pdf * bsdf_pdf);
+        let w = if pdf_light.is_infinite() {
+            1.0
+        } else if f2 + g2 == 0.0 {
+            0.0
+        } else {
+            f2 / (f2 + g2)
+        };
+        let s = wi[2].abs() * w / pdf_light;
+        let li = g(&v.lrad);
+        for k in 0..3 {
+            o.c[k][l] = beta[k] * ((f[k] * li[k]) * s);
+        }
+        let so = offset3(p, ng, dl);
+        let d2 = [lp[0] - so[0], lp[1] - so[1], lp[2] - so[2]];
+        let dist = dot3(d2, d2).sqrt();
+        for k in 0..3 {
+            o.so[k][l] = so[k];
+            o.sd[k][l] = d2[k] / dist;
+        }
+        o.st[l] = dist * (1.0 - SHADOW_EPSILON);
+        o.nee[l] = if !nee {
+            0
+        } else if dist == 0.0 {
+            1
+        } else {
+            2
+        };
+        // BSDF sample.
+        let wim = cosine_hemisphere(v.u[0][l], v.u[1][l]);
+        let bpdf = wim[2].max(0.0) * INV_PI;
+        let wi = [wim[0], wim[1], wim[2] * flip];
+        let moved = side_ok && wo_up && bpdf > 0.0 && !f_black;
+        let sc = wi[2].abs() / bpdf;
+        let mut nb = [beta[0] * (f[0] * sc), beta[1] * (f[1] * sc), beta[2] * (f[2] * sc)];
+        let dir = [
+            (fs[0] * wi[0] + ft[0] * wi[1]) + fnn[0] * wi[2],
+            (fs[1] * wi[0] + ft[1] * wi[1]) + fnn[1] * wi[2],
+            (fs[2] * wi[0] + ft[2] * wi[1]) + fnn[2] * wi[2],
+        ];
+        let no = offset3(p, ng, dir);
+        let mut cont = moved;
+        if v.depth[l] >= rr_depth {
+            let q = nb[0].max(nb[1]).max(nb[2]).min(0.95);
+            let survive = v.u_rr[l] < q;
+            cont &= survive;
+            if survive {
+                nb = [nb[0] / q, nb[1] / q, nb[2] / q];
+            }
+        }
+        cont &= !(nb[0] == 0.0 && nb[1] == 0.0 && nb[2] == 0.0);
+        for k in 0..3 {
+            o.beta[k][l] = if moved { nb[k] } else { beta[k] };
+            o.no[k][l] = no[k];
+            o.nd[k][l] = dir[k];
+        }
+        o.moved[l] = moved;
+        o.cont[l] = cont;
+        o.pdf[l] = bpdf;
+    }
 }
 
 /// One path in flight.
