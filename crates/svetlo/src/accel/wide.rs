@@ -234,7 +234,8 @@ pub fn traverse<const ANY: bool, const AVX: bool>(
                 let second = mask.trailing_zeros() as usize & (WIDTH - 1);
                 mask &= mask - 1;
                 if mask == 0 {
-                    let (near, far) = if tn[first] <= tn[second] { (first, second) } else { (second, first) };
+                    // Occlusion needs no order: any hit ends the walk.
+                    let (near, far) = if ANY || tn[first] <= tn[second] { (first, second) } else { (second, first) };
                     prefetch_child(prefetch, nodes, c[far], &prefetch_leaf);
                     stack[sp].write((c[far], tn[far]));
                     sp += 1;
@@ -281,7 +282,8 @@ pub fn traverse<const ANY: bool, const AVX: bool>(
             sp -= 1;
             // SAFETY: every entry below sp was written by a push.
             let (n, t) = unsafe { stack[sp].assume_init() };
-            if t <= *t_max * FAR_SLACK {
+            // With ANY, t_max stays put until the walk ends, so every pushed entry qualifies.
+            if ANY || t <= *t_max * FAR_SLACK {
                 cur = n;
                 break;
             }
