@@ -22,7 +22,7 @@ use crate::bsdf::Material;
 use crate::error::{Error, Result};
 use crate::film::{Film, FilmTile};
 use crate::geometry::ray::SHADOW_EPSILON;
-use crate::geometry::{Geometry, TriangleMesh};
+use crate::geometry::Geometry;
 use crate::light::{AreaLight, Light};
 use crate::math::{warp, Frame, INV_PI, PI};
 use crate::sampling::sampler::IndependentSampler;
@@ -114,24 +114,6 @@ pub struct SimdKernel {
     lights: Vec<MeshLight>,
 }
 
-/// `AreaLight`'s per-triangle normal: the geometric normal on the side all vertex normals
-/// face, None when they disagree (then interpolated at the point).
-fn constant_normal(m: &TriangleMesh, t: usize) -> Option<Vec3> {
-    let [p0, p1, p2] = m.vertices(t);
-    let ng = (p1 - p0).cross(p2 - p0).normalize_or_zero();
-    if m.normals.is_empty() {
-        return Some(ng);
-    }
-    let sides = m.indices[t].map(|i| ng.dot(m.normals[i as usize]));
-    if sides.iter().all(|&d| d > 0.0) {
-        Some(ng)
-    } else if sides.iter().all(|&d| d < 0.0) {
-        Some(-ng)
-    } else {
-        None
-    }
-}
-
 /// The constant reflectance of a diffuse model, clamped as `Material::bsdf` does.
 fn diffuse_constant(m: &Material) -> Option<Rgb> {
     match m {
@@ -163,7 +145,7 @@ impl SimdKernel {
             let tris = (0..m.triangle_count())
                 .map(|t| {
                     let [p0, p1, p2] = m.vertices(t);
-                    ([p0, p1 - p0, p2 - p0], constant_normal(m, t))
+                    ([p0, p1 - p0, p2 - p0], crate::light::area::constant_normal(m, t))
                 })
                 .collect();
             let pdf_area = if a.area > 0.0 { 1.0 / a.area } else { 0.0 };

@@ -36,7 +36,7 @@ pub struct AreaLight {
 
 /// The geometric normal of triangle `t` as `TriangleMesh::surface` orients it, if that is the
 /// same at every point of the triangle: no shading normals, or all three on one side.
-fn constant_normal(m: &crate::geometry::TriangleMesh, t: usize) -> Option<Vec3> {
+pub(crate) fn constant_normal(m: &crate::geometry::TriangleMesh, t: usize) -> Option<Vec3> {
     let [p0, p1, p2] = m.vertices(t);
     let ng = (p1 - p0).cross(p2 - p0).normalize_or_zero();
     if m.normals.is_empty() {
