@@ -66,11 +66,14 @@ impl Distribution1D {
     /// Discrete sample: (index, pmf, u remapped to [0,1) within the chosen interval).
     #[inline]
     pub fn sample_discrete(&self, u: f32) -> (usize, f32, f32) {
-        if self.func.len() == 1 {
+        let i = match self.func.len() {
             // One entry (a scene's only light): nothing to search.
-            return (0, 1.0, u);
-        }
-        let i = self.find(u);
+            1 => return (0, 1.0, u),
+            // Two (a quad light's triangles): one comparison. Neither interval can be empty
+            // where u lands, since u < 1.
+            2 => usize::from(u >= self.cdf[1]),
+            _ => self.find(u),
+        };
         let p = self.pmf(i);
         let ur = if p > 0.0 { ((u - self.cdf[i]) / p).clamp(0.0, crate::math::ONE_MINUS_EPSILON) } else { 0.0 };
         (i, p, ur)
