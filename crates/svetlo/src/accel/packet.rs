@@ -453,10 +453,11 @@ impl PacketBvh {
             match (m0 != 0, m1 != 0) {
                 (true, true) => {
                     // Nearer child on top: the one most of the lanes meeting both enter first.
+                    // (Any hit: order does not matter.)
                     let both = (m0 & m1) as u32;
-                    let first = (_mm256_movemask_ps(_mm256_cmp_ps::<_CMP_LE_OQ>(tn0, tn1)) as u32 & both).count_ones();
-                    let (near, far) = if 2 * first >= both.count_ones() { (node.child[0], node.child[1]) } else { (node.child[1], node.child[0]) };
-                    let (tnear, tfar) = if 2 * first >= both.count_ones() { (tn0, tn1) } else { (tn1, tn0) };
+                    let first_near = ANY || 2 * (_mm256_movemask_ps(_mm256_cmp_ps::<_CMP_LE_OQ>(tn0, tn1)) as u32 & both).count_ones() >= both.count_ones();
+                    let (near, far) = if first_near { (node.child[0], node.child[1]) } else { (node.child[1], node.child[0]) };
+                    let (tnear, tfar) = if first_near { (tn0, tn1) } else { (tn1, tn0) };
                     stack[sp] = far;
                     tns[sp].write(tfar);
                     stack[sp + 1] = near;
