@@ -31,7 +31,6 @@ use crate::path::{camera_subpath, connect, light_subpath, PathConfig, Vertex};
 use crate::sampling::{Pcg32, Sampler};
 use crate::scene::Scene;
 use glam::Vec2;
-use std::sync::Mutex;
 
 /// Which sampling method the primary samples drive.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Default)]
@@ -107,12 +106,12 @@ impl PssmltOptions {
 #[derive(Debug, Default)]
 pub struct Pssmlt {
     pub options: PssmltOptions,
-    last: Mutex<Option<ChainStats>>,
+    last: metropolis::LastStats,
 }
 
 impl Pssmlt {
     pub fn new(options: PssmltOptions) -> Self {
-        Pssmlt { options, last: Mutex::new(None) }
+        Pssmlt { options, last: Default::default() }
     }
 
     /// Render and return the chain statistics as well.
@@ -135,14 +134,10 @@ impl Pssmlt {
 
 impl Integrator for Pssmlt {
     fn render(&self, scene: &Scene, settings: &RenderSettings, progress: &Progress) -> Result<Film> {
-        let (film, stats) = self.render_with_stats(scene, settings, progress)?;
-        if let Ok(mut l) = self.last.lock() {
-            *l = Some(stats);
-        }
-        Ok(film)
+        Ok(self.last.keep(self.render_with_stats(scene, settings, progress)?))
     }
     fn report(&self) -> Option<String> {
-        self.last.lock().ok()?.as_ref().map(|s| s.report())
+        self.last.report()
     }
 }
 

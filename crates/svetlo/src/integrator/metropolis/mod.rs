@@ -114,6 +114,24 @@ impl ChainSettings {
     }
 }
 
+/// The statistics of an integrator's last render, kept for its report.
+#[derive(Debug, Default)]
+pub struct LastStats(std::sync::Mutex<Option<ChainStats>>);
+
+impl LastStats {
+    /// Keep the statistics of a render and pass its film on.
+    pub fn keep(&self, (film, stats): (Film, ChainStats)) -> Film {
+        if let Ok(mut l) = self.0.lock() {
+            *l = Some(stats);
+        }
+        film
+    }
+    /// The acceptance table of the last render kept, if any.
+    pub fn report(&self) -> Option<String> {
+        self.0.lock().ok()?.as_ref().map(|s| s.report())
+    }
+}
+
 /// Acceptance statistics and the normalisation of a Metropolis render.
 #[derive(Clone, Debug, Default)]
 pub struct ChainStats {

@@ -29,7 +29,6 @@ use crate::path::{camera_subpath, connect, light_subpath, PathConfig};
 use crate::sampling::{Pcg32, Sampler};
 use crate::scene::Scene;
 use glam::Vec2;
-use std::sync::Mutex;
 
 /// Mutation kinds, in `Proposal::kind` order.
 pub const MUTATIONS: [&str; 4] = ["bidirectional", "lens", "caustic", "multi-chain"];
@@ -84,7 +83,7 @@ impl MltOptions {
 #[derive(Debug, Default)]
 pub struct Mlt {
     pub options: MltOptions,
-    last: Mutex<Option<ChainStats>>,
+    last: metropolis::LastStats,
 }
 
 /// Whether Veach MLT can render `scene` (area lights only, a pinhole camera).
@@ -101,7 +100,7 @@ fn check_scene(scene: &Scene) -> Result<()> {
 
 impl Mlt {
     pub fn new(options: MltOptions) -> Self {
-        Mlt { options, last: Mutex::new(None) }
+        Mlt { options, last: Default::default() }
     }
 
     /// The render and the chains' statistics.
@@ -114,14 +113,10 @@ impl Mlt {
 
 impl Integrator for Mlt {
     fn render(&self, scene: &Scene, settings: &RenderSettings, progress: &Progress) -> Result<Film> {
-        let (film, stats) = self.render_with_stats(scene, settings, progress)?;
-        if let Ok(mut l) = self.last.lock() {
-            *l = Some(stats);
-        }
-        Ok(film)
+        Ok(self.last.keep(self.render_with_stats(scene, settings, progress)?))
     }
     fn report(&self) -> Option<String> {
-        self.last.lock().ok()?.as_ref().map(|s| s.report())
+        self.last.report()
     }
 }
 
