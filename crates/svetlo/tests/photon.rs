@@ -16,7 +16,7 @@ mod common;
 use common::scenes::shared;
 use glam::{Mat4, Vec3};
 use svetlo::bsdf::Material;
-use svetlo::camera::{Camera, Projection};
+use svetlo::camera::Camera;
 use svetlo::film::compare::rel_mse;
 use svetlo::film::{Filter, Image};
 use svetlo::geometry::{Geometry, Sphere};
@@ -34,16 +34,7 @@ fn furnace(rho: f32) -> Scene {
     let m = b.add_material(Material::Diffuse { reflectance: Texture::Constant(Rgb::splat(rho)) });
     let s = Sphere { center: Vec3::ZERO, radius: 1.0, flip_normals: true };
     b.add_shape(Geometry::Sphere(s), m, Some(Texture::Constant(Rgb::WHITE)), "furnace").expect("shape");
-    b.set_camera(Camera {
-        to_world: Mat4::IDENTITY,
-        projection: Projection::Perspective { fov_x_deg: 60.0, aperture_radius: 0.0, focus_distance: 1.0 },
-        width: 8,
-        height: 8,
-        near_clip: 1e-3,
-        far_clip: 1e4,
-        shutter_open: 0.0,
-        shutter_close: 0.0,
-    });
+    b.set_camera(Camera::pinhole(Mat4::IDENTITY, 60.0, 8, 8));
     b.build().expect("scene")
 }
 

@@ -4,7 +4,7 @@
 
 use glam::{Mat4, Vec3};
 use svetlo::bsdf::Material;
-use svetlo::camera::{Camera, Projection};
+use svetlo::camera::Camera;
 use svetlo::geometry::{Geometry, TriangleMesh};
 use svetlo::radiosity::form_factor::{analytic::closed_form, FormFactors, Method, RowSource};
 use svetlo::radiosity::mesh::{MeshOptions, RadiosityMesh};
@@ -14,16 +14,7 @@ use svetlo::texture::Texture;
 use svetlo::Rgb;
 
 fn camera() -> Camera {
-    Camera {
-        to_world: Mat4::IDENTITY,
-        projection: Projection::Perspective { fov_x_deg: 60.0, aperture_radius: 0.0, focus_distance: 1.0 },
-        width: 8,
-        height: 8,
-        near_clip: 1e-3,
-        far_clip: 1e4,
-        shutter_open: 0.0,
-        shutter_close: 0.0,
-    }
+    Camera::pinhole(Mat4::IDENTITY, 60.0, 8, 8)
 }
 
 /// Planar polygon (convex, corners in order) as a triangle fan; its front is the side of (b − a) × (c − a).

@@ -5,7 +5,7 @@
 
 use glam::{Mat4, Vec3};
 use svetlo::bsdf::Material;
-use svetlo::camera::{Camera, Projection};
+use svetlo::camera::Camera;
 use svetlo::geometry::{Geometry, TriangleMesh};
 use svetlo::radiosity::{solve, RadiosityOptions};
 use svetlo::scene::{Scene, SceneBuilder};
@@ -15,17 +15,8 @@ use svetlo::Rgb;
 const SOLVERS: [&str; 9] = ["auto", "jacobi", "gauss-seidel", "southwell", "progressive", "ssg", "two-level", "hierarchical", "progressive,omega=adaptive"];
 
 fn camera() -> Camera {
-    Camera {
-        // Inside the box, at its centre.
-        to_world: Mat4::IDENTITY,
-        projection: Projection::Perspective { fov_x_deg: 60.0, aperture_radius: 0.0, focus_distance: 1.0 },
-        width: 8,
-        height: 8,
-        near_clip: 1e-3,
-        far_clip: 1e4,
-        shutter_open: 0.0,
-        shutter_close: 0.0,
-    }
+    // Inside the box, at its centre.
+    Camera::pinhole(Mat4::IDENTITY, 60.0, 8, 8)
 }
 
 fn mesh(positions: Vec<Vec3>, indices: Vec<[u32; 3]>) -> TriangleMesh {

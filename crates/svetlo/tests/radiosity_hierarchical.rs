@@ -78,17 +78,8 @@ fn explore() {
 }
 
 fn camera() -> svetlo::camera::Camera {
-    use svetlo::camera::{Camera, Projection};
-    Camera {
-        to_world: glam::Mat4::IDENTITY,
-        projection: Projection::Perspective { fov_x_deg: 60.0, aperture_radius: 0.0, focus_distance: 1.0 },
-        width: 8,
-        height: 8,
-        near_clip: 1e-3,
-        far_clip: 1e4,
-        shutter_open: 0.0,
-        shutter_close: 0.0,
-    }
+    use svetlo::camera::Camera;
+    Camera::pinhole(glam::Mat4::IDENTITY, 60.0, 8, 8)
 }
 
 /// Closed unit box of one-sided inward quads, all grey ρ, all emitting Le.

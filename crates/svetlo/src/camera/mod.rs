@@ -39,6 +39,20 @@ pub struct Camera {
 }
 
 impl Camera {
+    /// A pinhole camera with Mitsuba's default clip planes (1e-2, 1e4) and an instant shutter.
+    pub fn pinhole(to_world: Mat4, fov_x_deg: f32, width: u32, height: u32) -> Camera {
+        Camera {
+            to_world,
+            projection: Projection::Perspective { fov_x_deg, aperture_radius: 0.0, focus_distance: 1.0 },
+            width,
+            height,
+            near_clip: 1e-2,
+            far_clip: 1e4,
+            shutter_open: 0.0,
+            shutter_close: 0.0,
+        }
+    }
+
     pub fn aspect(&self) -> f32 {
         self.width as f32 / self.height as f32
     }

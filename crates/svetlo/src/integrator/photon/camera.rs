@@ -11,27 +11,27 @@
 //!
 //! Vertices with only glossy or only specular lobes are path-traced through.
 
-use crate::bsdf::{Bsdf, LobeFlags};
-use crate::geometry::{Ray, SurfaceInteraction};
+use crate::bsdf::LobeFlags;
+use crate::geometry::Ray;
 use crate::integrator::path::{self, WalkRules, WalkVertex};
 use crate::integrator::RenderSettings;
 use crate::sampling::Sampler;
 use crate::scene::Scene;
 use crate::spectrum::Rgb;
-use glam::Vec3;
 
-/// A camera-path vertex whose BSDF has a diffuse lobe.
+/// A camera-path vertex whose BSDF has a diffuse lobe: the walk's vertex (dereferences to
+/// it) and its place among the path's diffuse vertices.
 pub(crate) struct DiffuseVertex<'a> {
-    pub si: &'a SurfaceInteraction,
-    pub bsdf: &'a Bsdf,
-    /// Toward the camera, local shading frame.
-    pub wo: Vec3,
-    /// Camera path throughput up to here.
-    pub beta: Rgb,
-    /// Path segments from the camera to here.
-    pub depth: i32,
+    pub vertex: &'a WalkVertex<'a>,
     /// How many diffuse vertices came before this one on the path.
     pub index: u32,
+}
+
+impl<'a> std::ops::Deref for DiffuseVertex<'a> {
+    type Target = WalkVertex<'a>;
+    fn deref(&self) -> &WalkVertex<'a> {
+        self.vertex
+    }
 }
 
 /// Radiance along `camera_ray` from emission and NEE; `at_diffuse` returns the photon part at
@@ -58,7 +58,7 @@ impl WalkRules for PhotonRules<'_> {
         if !v.flags.intersects(LobeFlags::DIFFUSE) {
             return Rgb::BLACK;
         }
-        let d = DiffuseVertex { si: v.si, bsdf: v.bsdf, wo: v.wo, beta: v.beta, depth: v.depth, index: self.index };
+        let d = DiffuseVertex { vertex: v, index: self.index };
         self.index += 1;
         (self.at_diffuse)(&d, sampler)
     }
