@@ -58,11 +58,48 @@ pub struct PacketBvh {
     nodes: Vec<Node>,
     /// Root code (an inner node 0, or a leaf when the tree is one leaf); None when empty.
     root: Option<u32>,
-    /// Triangle vertices in leaf order: p0, p1, p2 (x, y, z, 0 each: one 128-bit load).
-    verts: Vec<[[f32; 4]; 3]>,
-    /// Input index of each triangle of `verts`.
+    /// Triangle vertices in leaf order, three a triangle (x, y, z, 0 each), and one vertex
+    /// of padding: the SIMD test loads 256 bits from each vertex.
+    verts: Vec<[f32; 4]>,
+    /// Input index of each triangle.
     ids: Vec<u32>,
-    avx2: bool,
+    isa: Isa,
+}
+
+/// The instruction set of the walk (chosen at build from what the CPU has; tests lower it).
+#[derive(Clone, Copy, Debug, PartialEq, Eq, PartialOrd, Ord)]
+enum Isa {
+    /// Each lane walks the tree alone with the scalar tests.
+    Portable,
+    /// The eight-wide walk.
+    Avx2,
+    /// The same walk with AVX-512VL encodings: 32 vector registers and broadcast operands.
+    Avx512,
+}
+
+impl Isa {
+    /// The best this CPU runs, lowered by `SVETLO_PACKET_ISA=portable|avx2` (for comparisons).
+    fn detect() -> Isa {
+        let cap = match std::env::var("SVETLO_PACKET_ISA").as_deref() {
+            Ok("portable") => Isa::Portable,
+            Ok("avx2") => Isa::Avx2,
+            _ => Isa::Avx512,
+        };
+        Isa::cpu().min(cap)
+    }
+
+    fn cpu() -> Isa {
+        #[cfg(target_arch = "x86_64")]
+        {
+            if std::arch::is_x86_feature_detected!("avx512f") && std::arch::is_x86_feature_detected!("avx512vl") {
+                return Isa::Avx512;
+            }
+            if std::arch::is_x86_feature_detected!("avx2") {
+                return Isa::Avx2;
+            }
+        }
+        Isa::Portable
+    }
 }
 
 fn leaf(start: usize, count: usize) -> u32 {
@@ -180,13 +217,14 @@ impl PacketBvh {
         let centroids = bounds.iter().map(|b| b.center()).collect();
         let mut b = Build { bounds: &bounds, centroids, nodes: Vec::new(), order: (0..tris.len() as u32).collect() };
         let root = if tris.is_empty() { None } else { Some(b.rec(0, tris.len(), 0)) };
-        let verts = b.order.iter().map(|&i| tris[i as usize].map(|p| [p.x, p.y, p.z, 0.0]));
-        PacketBvh { verts: verts.collect(), ids: b.order, nodes: b.nodes, root, avx2: avx2() }
+        let mut verts: Vec<[f32; 4]> = b.order.iter().flat_map(|&i| tris[i as usize].map(|p| [p.x, p.y, p.z, 0.0])).collect();
+        verts.push([0.0; 4]);
+        PacketBvh { verts, ids: b.order, nodes: b.nodes, root, isa: Isa::detect() }
     }
 
-    /// Whether the eight-wide AVX2 path is used (else each lane walks the tree alone).
+    /// Whether an eight-wide path (AVX2 or AVX-512VL) is used (else each lane walks the tree alone).
     pub fn simd(&self) -> bool {
-        self.avx2
+        self.isa > Isa::Portable
     }
 
     /// Closest hits of the rays of the lanes set in `active` (other lanes report a miss).
@@ -197,10 +235,17 @@ impl PacketBvh {
             return h;
         }
         #[cfg(target_arch = "x86_64")]
-        if self.avx2 {
-            // SAFETY: AVX2 was detected at run time.
-            unsafe { self.walk_avx2::<false>(root, r, active, &mut h) };
-            return h;
+        match self.isa {
+            // SAFETY: the instruction set was detected at run time.
+            Isa::Avx512 => {
+                unsafe { self.walk_avx512::<false>(root, r, active, &mut h) };
+                return h;
+            }
+            Isa::Avx2 => {
+                unsafe { self.walk_avx2::<false>(root, r, active, &mut h) };
+                return h;
+            }
+            Isa::Portable => {}
         }
         self.walk_lanes::<false>(root, r, &prep(r, active), active, &mut h);
         h
@@ -214,9 +259,11 @@ impl PacketBvh {
             return 0;
         }
         #[cfg(target_arch = "x86_64")]
-        if self.avx2 {
-            // SAFETY: AVX2 was detected at run time.
-            return unsafe { self.walk_avx2::<true>(root, r, active, &mut h) };
+        match self.isa {
+            // SAFETY: the instruction set was detected at run time.
+            Isa::Avx512 => return unsafe { self.walk_avx512::<true>(root, r, active, &mut h) },
+            Isa::Avx2 => return unsafe { self.walk_avx2::<true>(root, r, active, &mut h) },
+            Isa::Portable => {}
         }
         self.walk_lanes::<true>(root, r, &prep(r, active), active, &mut h)
     }
@@ -240,7 +287,7 @@ impl PacketBvh {
                 if code & LEAF_BIT != 0 {
                     let (start, count) = leaf_range(code);
                     for i in start..start + count {
-                        let v = &self.verts[i];
+                        let v = &self.verts[3 * i..3 * i + 3];
                         let pt = |k: usize| Vec3::new(v[k][0], v[k][1], v[k][2]);
                         if let Some((t, b1, b2)) = w.intersect(pt(0), pt(1), pt(2), h.t[l]) {
                             if ANY {
@@ -276,222 +323,258 @@ impl PacketBvh {
         blocked
     }
 
-    /// The eight-wide walk. With `ANY`, lanes retire at their first hit and the walk ends
-    /// when none is left; returns the mask of lanes that hit.
-    ///
-    /// # Safety
-    /// The CPU must support AVX2.
-    #[cfg(target_arch = "x86_64")]
-    #[target_feature(enable = "avx2")]
-    unsafe fn walk_avx2<const ANY: bool>(&self, root: u32, r: &Rays8, active: u8, h: &mut Hits8) -> u8 {
-        use std::arch::x86_64::*;
-        let ld = |a: &[f32; LANES]| _mm256_loadu_ps(a.as_ptr());
-        let o = [ld(&r.o[0]), ld(&r.o[1]), ld(&r.o[2])];
-        let d = [ld(&r.d[0]), ld(&r.d[1]), ld(&r.d[2])];
-        // `prep` in eight lanes: the slab test's inverse direction (tiny components kept
-        // finite), and `WatertightRay::new`'s permutation and shear, operation for operation.
-        let sign = _mm256_set1_ps(-0.0);
-        let abs = |x: __m256| _mm256_andnot_ps(sign, x);
-        let tiny = _mm256_set1_ps(1e-30);
-        let one = _mm256_set1_ps(1.0);
-        let inv = d.map(|x| {
-            let t = _mm256_or_ps(tiny, _mm256_and_ps(sign, x));
-            _mm256_div_ps(one, _mm256_blendv_ps(x, t, _mm256_cmp_ps::<_CMP_LT_OQ>(abs(x), tiny)))
-        });
-        let a = d.map(abs);
-        let gt = |x: __m256, y: __m256| _mm256_cmp_ps::<_CMP_GT_OQ>(x, y);
-        let (xy, xz, yz) = (gt(a[0], a[1]), gt(a[0], a[2]), gt(a[1], a[2]));
-        let kz_is0 = _mm256_and_ps(xy, xz);
-        let kz_is1 = _mm256_andnot_ps(xy, yz);
-        let ki = |m: __m256, k: i32| _mm256_and_si256(_mm256_castps_si256(m), _mm256_set1_epi32(k));
-        // kz = 0, 1 or 2; kx = next(kz), ky = next(kx), swapped when d[kz] < 0.
-        let kz_m2 = _mm256_andnot_ps(_mm256_or_ps(kz_is0, kz_is1), _mm256_castsi256_ps(_mm256_set1_epi32(-1)));
-        let kz = _mm256_or_si256(ki(kz_is1, 1), ki(kz_m2, 2));
-        let kx0 = _mm256_or_si256(_mm256_or_si256(ki(kz_is0, 1), ki(kz_is1, 2)), _mm256_setzero_si256());
-        let ky0 = _mm256_or_si256(ki(kz_is0, 2), ki(kz_m2, 1));
-        let pick = |m0: __m256, m1: __m256, v: &[__m256; 3]| _mm256_blendv_ps(_mm256_blendv_ps(v[2], v[1], m1), v[0], m0);
-        let dkz = pick(kz_is0, kz_is1, &d);
-        let swap = _mm256_castps_si256(_mm256_cmp_ps::<_CMP_LT_OQ>(dkz, _mm256_setzero_ps()));
-        let kx = _mm256_blendv_epi8(kx0, ky0, swap);
-        let ky = _mm256_blendv_epi8(ky0, kx0, swap);
-        let is_k = |k: __m256i, v: i32| _mm256_castsi256_ps(_mm256_cmpeq_epi32(k, _mm256_set1_epi32(v)));
-        let (kx_is0, kx_is1, ky_is0, ky_is1) = (is_k(kx, 0), is_k(kx, 1), is_k(ky, 0), is_k(ky, 1));
-        let sz = _mm256_div_ps(one, dkz);
-        let sx = _mm256_div_ps(pick(kx_is0, kx_is1, &d), dkz);
-        let sy = _mm256_div_ps(pick(ky_is0, ky_is1, &d), dkz);
-        let (okx, oky, okz) = (pick(kx_is0, kx_is1, &o), pick(ky_is0, ky_is1, &o), pick(kz_is0, kz_is1, &o));
-        let zero_i = _mm256_setzero_si256();
-        let lane_bits = _mm256_setr_epi32(1, 2, 4, 8, 16, 32, 64, 128);
-        let mut live = _mm256_castsi256_ps(_mm256_cmpgt_epi32(_mm256_and_si256(_mm256_set1_epi32(active as i32), lane_bits), zero_i));
-        let mut t_max = ld(&h.t);
-        let zero = _mm256_setzero_ps();
-        let slack = _mm256_set1_ps(FAR_SLACK);
-        let inf = _mm256_set1_ps(f32::INFINITY);
-        let (mut prim, mut b1, mut b2) = (_mm256_set1_epi32(-1), zero, zero);
-        let mut hit_mask = 0u8;
-        // Entries: a code and, for closest hits, the entry distances of the lanes that met
-        // its box (a popped entry that no lane can still improve on is skipped).
-        let mut stack = [0u32; STACK];
-        let mut tns = [MaybeUninit::<__m256>::uninit(); STACK];
-        let mut sp = 1;
-        stack[0] = root;
-        tns[0].write(zero);
-        while sp > 0 {
-            sp -= 1;
-            let code = stack[sp];
-            if !ANY && _mm256_movemask_ps(_mm256_and_ps(_mm256_cmp_ps::<_CMP_LE_OQ>(tns[sp].assume_init(), _mm256_mul_ps(t_max, slack)), live)) == 0 {
-                continue;
+    /// The exact test of the scalar tracer for the lanes of `lanes` (those where u, v or w
+    /// came out zero: the scalar test goes to double precision there).
+    #[cold]
+    #[inline(never)]
+    fn edge_lanes(&self, r: &Rays8, tri: usize, lanes: u8, t_max: &[f32; LANES]) -> [Option<(f32, f32, f32)>; LANES] {
+        let v = &self.verts[3 * tri..3 * tri + 3];
+        let pt = |k: usize| Vec3::new(v[k][0], v[k][1], v[k][2]);
+        std::array::from_fn(|l| {
+            if lanes & (1 << l) == 0 {
+                return None;
             }
-            if code & LEAF_BIT != 0 {
-                let (start, count) = leaf_range(code);
-                for i in start..start + count {
-                    let v = self.verts.get_unchecked(i);
-                    // One vertex, its components in each lane's order, relative to the origin.
-                    let rel = |k: usize| {
-                        let pv = _mm256_castps128_ps256(_mm_loadu_ps(v[k].as_ptr()));
-                        (
-                            _mm256_sub_ps(_mm256_permutevar8x32_ps(pv, kx), okx),
-                            _mm256_sub_ps(_mm256_permutevar8x32_ps(pv, ky), oky),
-                            _mm256_sub_ps(_mm256_permutevar8x32_ps(pv, kz), okz),
-                        )
-                    };
-                    let ((akx, aky, akz), (bkx, bky, bkz), (ckx, cky, ckz)) = (rel(0), rel(1), rel(2));
-                    let ax = _mm256_sub_ps(akx, _mm256_mul_ps(sx, akz));
-                    let ay = _mm256_sub_ps(aky, _mm256_mul_ps(sy, akz));
-                    let bx = _mm256_sub_ps(bkx, _mm256_mul_ps(sx, bkz));
-                    let by = _mm256_sub_ps(bky, _mm256_mul_ps(sy, bkz));
-                    let cx = _mm256_sub_ps(ckx, _mm256_mul_ps(sx, ckz));
-                    let cy = _mm256_sub_ps(cky, _mm256_mul_ps(sy, ckz));
-                    let mut u = _mm256_sub_ps(_mm256_mul_ps(cx, by), _mm256_mul_ps(cy, bx));
-                    let mut vv = _mm256_sub_ps(_mm256_mul_ps(ax, cy), _mm256_mul_ps(ay, cx));
-                    let mut w = _mm256_sub_ps(_mm256_mul_ps(bx, ay), _mm256_mul_ps(by, ax));
-                    let eq0 = |x: __m256| _mm256_cmp_ps::<_CMP_EQ_OQ>(x, zero);
-                    let zmask = _mm256_movemask_ps(_mm256_and_ps(live, _mm256_or_ps(_mm256_or_ps(eq0(u), eq0(vv)), eq0(w))));
-                    if zmask != 0 {
-                        // On an edge: double precision for those lanes, as the scalar test.
-                        let st = |x: __m256| {
-                            let mut a = [0.0f32; LANES];
-                            _mm256_storeu_ps(a.as_mut_ptr(), x);
-                            a
-                        };
-                        let (axs, ays, bxs, bys, cxs, cys) = (st(ax), st(ay), st(bx), st(by), st(cx), st(cy));
-                        let (mut us, mut vs, mut ws) = (st(u), st(vv), st(w));
-                        for l in 0..LANES {
-                            if zmask & (1 << l) != 0 {
-                                let (cxd, cyd, bxd, byd, axd, ayd) = (cxs[l] as f64, cys[l] as f64, bxs[l] as f64, bys[l] as f64, axs[l] as f64, ays[l] as f64);
-                                us[l] = (cxd * byd - cyd * bxd) as f32;
-                                vs[l] = (axd * cyd - ayd * cxd) as f32;
-                                ws[l] = (bxd * ayd - byd * axd) as f32;
-                            }
-                        }
-                        u = ld(&us);
-                        vv = ld(&vs);
-                        w = ld(&ws);
-                    }
-                    let lt = |x: __m256| _mm256_cmp_ps::<_CMP_LT_OQ>(x, zero);
-                    let gt = |x: __m256| _mm256_cmp_ps::<_CMP_GT_OQ>(x, zero);
-                    let any_neg = _mm256_or_ps(_mm256_or_ps(lt(u), lt(vv)), lt(w));
-                    let any_pos = _mm256_or_ps(_mm256_or_ps(gt(u), gt(vv)), gt(w));
-                    let inside = _mm256_andnot_ps(_mm256_and_ps(any_neg, any_pos), live);
-                    if _mm256_movemask_ps(inside) == 0 {
-                        continue;
-                    }
-                    let det = _mm256_add_ps(_mm256_add_ps(u, vv), w);
-                    let t_scaled = _mm256_add_ps(
-                        _mm256_add_ps(_mm256_mul_ps(u, _mm256_mul_ps(sz, akz)), _mm256_mul_ps(vv, _mm256_mul_ps(sz, bkz))),
-                        _mm256_mul_ps(w, _mm256_mul_ps(sz, ckz)),
-                    );
-                    let tmd = _mm256_mul_ps(t_max, det);
-                    // Rejections of the scalar test, in its terms.
-                    let neg_bad = _mm256_and_ps(lt(det), _mm256_or_ps(_mm256_cmp_ps::<_CMP_GE_OQ>(t_scaled, zero), _mm256_cmp_ps::<_CMP_LT_OQ>(t_scaled, tmd)));
-                    let pos_bad = _mm256_and_ps(gt(det), _mm256_or_ps(_mm256_cmp_ps::<_CMP_LE_OQ>(t_scaled, zero), _mm256_cmp_ps::<_CMP_GT_OQ>(t_scaled, tmd)));
-                    let bad = _mm256_or_ps(eq0(det), _mm256_or_ps(neg_bad, pos_bad));
-                    let mut ok = _mm256_andnot_ps(bad, inside);
-                    if _mm256_movemask_ps(ok) == 0 {
-                        continue;
-                    }
-                    let invd = _mm256_div_ps(_mm256_set1_ps(1.0), det);
-                    let t = _mm256_mul_ps(t_scaled, invd);
-                    // t > 0 also rejects NaN.
-                    ok = _mm256_and_ps(ok, gt(t));
-                    let m = _mm256_movemask_ps(ok) as u8;
-                    if m == 0 {
-                        continue;
-                    }
-                    if ANY {
-                        hit_mask |= m;
-                        live = _mm256_andnot_ps(ok, live);
-                        if _mm256_movemask_ps(live) == 0 {
-                            return hit_mask;
-                        }
-                        continue;
-                    }
-                    t_max = _mm256_blendv_ps(t_max, t, ok);
-                    b1 = _mm256_blendv_ps(b1, _mm256_mul_ps(vv, invd), ok);
-                    b2 = _mm256_blendv_ps(b2, _mm256_mul_ps(w, invd), ok);
-                    prim = _mm256_castps_si256(_mm256_blendv_ps(_mm256_castsi256_ps(prim), _mm256_castsi256_ps(_mm256_set1_epi32(self.ids[i] as i32)), ok));
-                    hit_mask |= m;
-                }
-                continue;
-            }
-            let node = self.nodes.get_unchecked(code as usize);
-            let test = |b: &[f32; 6]| {
-                let slab = |a: usize| {
-                    let t0 = _mm256_mul_ps(_mm256_sub_ps(_mm256_set1_ps(b[a]), o[a]), inv[a]);
-                    let t1 = _mm256_mul_ps(_mm256_sub_ps(_mm256_set1_ps(b[a + 3]), o[a]), inv[a]);
-                    (_mm256_min_ps(t0, t1), _mm256_max_ps(t0, t1))
-                };
-                let ((nx, fx), (ny, fy), (nz, fz)) = (slab(0), slab(1), slab(2));
-                let tn = _mm256_max_ps(_mm256_max_ps(nx, ny), _mm256_max_ps(nz, zero));
-                let tf = _mm256_mul_ps(_mm256_min_ps(_mm256_min_ps(fx, fy), _mm256_min_ps(fz, t_max)), slack);
-                let m = _mm256_and_ps(_mm256_cmp_ps::<_CMP_LE_OQ>(tn, tf), live);
-                // Lanes that miss the box enter it at infinity.
-                (_mm256_movemask_ps(m), _mm256_blendv_ps(inf, tn, m))
-            };
-            let (m0, tn0) = test(&node.boxes[0]);
-            let (m1, tn1) = test(&node.boxes[1]);
-            match (m0 != 0, m1 != 0) {
-                (true, true) => {
-                    // Nearer child on top: the one most of the lanes meeting both enter first.
-                    // (Any hit: order does not matter.)
-                    let both = (m0 & m1) as u32;
-                    let first_near = ANY || 2 * (_mm256_movemask_ps(_mm256_cmp_ps::<_CMP_LE_OQ>(tn0, tn1)) as u32 & both).count_ones() >= both.count_ones();
-                    let (near, far) = if first_near { (node.child[0], node.child[1]) } else { (node.child[1], node.child[0]) };
-                    let (tnear, tfar) = if first_near { (tn0, tn1) } else { (tn1, tn0) };
-                    stack[sp] = far;
-                    tns[sp].write(tfar);
-                    stack[sp + 1] = near;
-                    tns[sp + 1].write(tnear);
-                    sp += 2;
-                }
-                (true, false) => {
-                    stack[sp] = node.child[0];
-                    tns[sp].write(tn0);
-                    sp += 1;
-                }
-                (false, true) => {
-                    stack[sp] = node.child[1];
-                    tns[sp].write(tn1);
-                    sp += 1;
-                }
-                (false, false) => {}
-            }
-        }
-        if !ANY {
-            _mm256_storeu_ps(h.t.as_mut_ptr(), t_max);
-            _mm256_storeu_ps(h.b1.as_mut_ptr(), b1);
-            _mm256_storeu_ps(h.b2.as_mut_ptr(), b2);
-            _mm256_storeu_si256(h.prim.as_mut_ptr() as *mut __m256i, prim);
-            for l in 0..LANES {
-                if hit_mask & (1 << l) == 0 {
-                    h.prim[l] = u32::MAX;
-                    h.t[l] = r.t_max[l];
-                }
-            }
-        }
-        hit_mask
+            let w = WatertightRay::new(Vec3::new(r.o[0][l], r.o[1][l], r.o[2][l]), Vec3::new(r.d[0][l], r.d[1][l], r.d[2][l]));
+            w.intersect(pt(0), pt(1), pt(2), t_max[l])
+        })
     }
 }
+
+/// The eight-wide walk, compiled once per instruction set (`$feat`). With `ANY`, lanes
+/// retire at their first hit and the walk ends when none is left; returns the mask of
+/// lanes that hit. Lanes that are not live carry t_max = -inf, which fails every box and
+/// stack test, so only the triangle test needs the live mask.
+#[cfg(target_arch = "x86_64")]
+macro_rules! walk_simd {
+    ($name:ident, $feat:literal) => {
+        impl PacketBvh {
+            /// # Safety
+            /// The CPU must support the target features of this function.
+            #[target_feature(enable = $feat)]
+            unsafe fn $name<const ANY: bool>(&self, root: u32, r: &Rays8, active: u8, h: &mut Hits8) -> u8 {
+                use std::arch::x86_64::*;
+                let ld = |a: &[f32; LANES]| _mm256_loadu_ps(a.as_ptr());
+                let o = [ld(&r.o[0]), ld(&r.o[1]), ld(&r.o[2])];
+                let d = [ld(&r.d[0]), ld(&r.d[1]), ld(&r.d[2])];
+                // `prep` in eight lanes: the slab test's inverse direction (tiny components kept
+                // finite), and `WatertightRay::new`'s permutation and shear, operation for operation.
+                let sign = _mm256_set1_ps(-0.0);
+                let abs = |x: __m256| _mm256_andnot_ps(sign, x);
+                let tiny = _mm256_set1_ps(1e-30);
+                let one = _mm256_set1_ps(1.0);
+                let inv = d.map(|x| {
+                    let t = _mm256_or_ps(tiny, _mm256_and_ps(sign, x));
+                    _mm256_div_ps(one, _mm256_blendv_ps(x, t, _mm256_cmp_ps::<_CMP_LT_OQ>(abs(x), tiny)))
+                });
+                let a = d.map(abs);
+                let gt = |x: __m256, y: __m256| _mm256_cmp_ps::<_CMP_GT_OQ>(x, y);
+                let (xy, xz, yz) = (gt(a[0], a[1]), gt(a[0], a[2]), gt(a[1], a[2]));
+                let kz_is0 = _mm256_and_ps(xy, xz);
+                let kz_is1 = _mm256_andnot_ps(xy, yz);
+                let ki = |m: __m256, k: i32| _mm256_and_si256(_mm256_castps_si256(m), _mm256_set1_epi32(k));
+                // kz = 0, 1 or 2; kx = next(kz), ky = next(kx), swapped when d[kz] < 0.
+                let kz_m2 = _mm256_andnot_ps(_mm256_or_ps(kz_is0, kz_is1), _mm256_castsi256_ps(_mm256_set1_epi32(-1)));
+                let kz = _mm256_or_si256(ki(kz_is1, 1), ki(kz_m2, 2));
+                let kx0 = _mm256_or_si256(ki(kz_is0, 1), ki(kz_is1, 2));
+                let ky0 = _mm256_or_si256(ki(kz_is0, 2), ki(kz_m2, 1));
+                let pick = |m0: __m256, m1: __m256, v: &[__m256; 3]| _mm256_blendv_ps(_mm256_blendv_ps(v[2], v[1], m1), v[0], m0);
+                let dkz = pick(kz_is0, kz_is1, &d);
+                let swap = _mm256_castps_si256(_mm256_cmp_ps::<_CMP_LT_OQ>(dkz, _mm256_setzero_ps()));
+                let kx = _mm256_blendv_epi8(kx0, ky0, swap);
+                let ky = _mm256_blendv_epi8(ky0, kx0, swap);
+                let is_k = |k: __m256i, v: i32| _mm256_castsi256_ps(_mm256_cmpeq_epi32(k, _mm256_set1_epi32(v)));
+                let (kx_is0, kx_is1, ky_is0, ky_is1) = (is_k(kx, 0), is_k(kx, 1), is_k(ky, 0), is_k(ky, 1));
+                let sz = _mm256_div_ps(one, dkz);
+                let sx = _mm256_div_ps(pick(kx_is0, kx_is1, &d), dkz);
+                let sy = _mm256_div_ps(pick(ky_is0, ky_is1, &d), dkz);
+                let (okx, oky, okz) = (pick(kx_is0, kx_is1, &o), pick(ky_is0, ky_is1, &o), pick(kz_is0, kz_is1, &o));
+                let zero_i = _mm256_setzero_si256();
+                let lane_bits = _mm256_setr_epi32(1, 2, 4, 8, 16, 32, 64, 128);
+                let mut live = _mm256_castsi256_ps(_mm256_cmpgt_epi32(_mm256_and_si256(_mm256_set1_epi32(active as i32), lane_bits), zero_i));
+                let zero = _mm256_setzero_ps();
+                let slack = _mm256_set1_ps(FAR_SLACK);
+                let inf = _mm256_set1_ps(f32::INFINITY);
+                let mut t_max = _mm256_blendv_ps(_mm256_set1_ps(f32::NEG_INFINITY), ld(&h.t), live);
+                let mut hit_mask = 0u8;
+                let verts = self.verts.as_ptr() as *const f32;
+                // Entries: a code and the entry distances of the lanes that met its box (a
+                // popped entry that no lane can still improve on is skipped).
+                let mut stack = [0u32; STACK];
+                let mut tns = [MaybeUninit::<__m256>::uninit(); STACK];
+                let mut sp = 1;
+                stack[0] = root;
+                tns[0].write(zero);
+                while sp > 0 {
+                    sp -= 1;
+                    let code = *stack.get_unchecked(sp);
+                    if _mm256_movemask_ps(_mm256_cmp_ps::<_CMP_LE_OQ>(tns.get_unchecked(sp).assume_init(), _mm256_mul_ps(t_max, slack))) == 0 {
+                        continue;
+                    }
+                    if code & LEAF_BIT != 0 {
+                        let (start, count) = leaf_range(code);
+                        for i in start..start + count {
+                            // One vertex's components in each lane's order, relative to the
+                            // origin (a 256-bit load from the vertex: the padding keeps it in bounds).
+                            let rel = |k: usize| {
+                                let pv = _mm256_loadu_ps(verts.add(4 * (3 * i + k)));
+                                (
+                                    _mm256_sub_ps(_mm256_permutevar8x32_ps(pv, kx), okx),
+                                    _mm256_sub_ps(_mm256_permutevar8x32_ps(pv, ky), oky),
+                                    _mm256_sub_ps(_mm256_permutevar8x32_ps(pv, kz), okz),
+                                )
+                            };
+                            let ((akx, aky, akz), (bkx, bky, bkz), (ckx, cky, ckz)) = (rel(0), rel(1), rel(2));
+                            let ax = _mm256_sub_ps(akx, _mm256_mul_ps(sx, akz));
+                            let ay = _mm256_sub_ps(aky, _mm256_mul_ps(sy, akz));
+                            let bx = _mm256_sub_ps(bkx, _mm256_mul_ps(sx, bkz));
+                            let by = _mm256_sub_ps(bky, _mm256_mul_ps(sy, bkz));
+                            let cx = _mm256_sub_ps(ckx, _mm256_mul_ps(sx, ckz));
+                            let cy = _mm256_sub_ps(cky, _mm256_mul_ps(sy, ckz));
+                            let u = _mm256_sub_ps(_mm256_mul_ps(cx, by), _mm256_mul_ps(cy, bx));
+                            let vv = _mm256_sub_ps(_mm256_mul_ps(ax, cy), _mm256_mul_ps(ay, cx));
+                            let w = _mm256_sub_ps(_mm256_mul_ps(bx, ay), _mm256_mul_ps(by, ax));
+                            // Off the edges (u, v, w all non-zero) the ray is inside iff their
+                            // signs agree; a zero (or an underflowed product: harmless) sends the
+                            // lane to the exact scalar test.
+                            let on_edge = _mm256_cmp_ps::<_CMP_EQ_OQ>(_mm256_mul_ps(_mm256_mul_ps(u, vv), w), zero);
+                            let mixed = _mm256_or_ps(_mm256_or_ps(_mm256_xor_ps(u, vv), _mm256_xor_ps(u, w)), on_edge);
+                            let cand = _mm256_movemask_ps(_mm256_andnot_ps(mixed, live)) as u8;
+                            let edge = _mm256_movemask_ps(_mm256_and_ps(on_edge, live)) as u8;
+                            if cand | edge == 0 {
+                                continue;
+                            }
+                            let mut m = 0u8;
+                            let (mut t, mut b1, mut b2) = (zero, zero, zero);
+                            if cand != 0 {
+                                // det has the common sign; flipping t_scaled and t_max * det by it
+                                // turns the scalar test's two cases into 0 < t_scaled' <= t_max * |det|.
+                                let det = _mm256_add_ps(_mm256_add_ps(u, vv), w);
+                                let t_scaled = _mm256_add_ps(
+                                    _mm256_add_ps(_mm256_mul_ps(u, _mm256_mul_ps(sz, akz)), _mm256_mul_ps(vv, _mm256_mul_ps(sz, bkz))),
+                                    _mm256_mul_ps(w, _mm256_mul_ps(sz, ckz)),
+                                );
+                                let sgn = _mm256_and_ps(det, sign);
+                                let ts = _mm256_xor_ps(t_scaled, sgn);
+                                let tmd = _mm256_xor_ps(_mm256_mul_ps(t_max, det), sgn);
+                                let ok = _mm256_and_ps(_mm256_cmp_ps::<_CMP_GT_OQ>(ts, zero), _mm256_cmp_ps::<_CMP_LE_OQ>(ts, tmd));
+                                m = _mm256_movemask_ps(ok) as u8 & cand;
+                                if m != 0 {
+                                    let invd = _mm256_div_ps(one, det);
+                                    t = _mm256_mul_ps(t_scaled, invd);
+                                    // t > 0 (it may underflow).
+                                    m &= _mm256_movemask_ps(_mm256_cmp_ps::<_CMP_GT_OQ>(t, zero)) as u8;
+                                    b1 = _mm256_mul_ps(vv, invd);
+                                    b2 = _mm256_mul_ps(w, invd);
+                                }
+                            }
+                            if edge != 0 {
+                                let mut tm = [0.0f32; LANES];
+                                _mm256_storeu_ps(tm.as_mut_ptr(), t_max);
+                                let ex = self.edge_lanes(r, i, edge, &tm);
+                                let (mut ta, mut b1a, mut b2a) = ([0.0f32; LANES], [0.0f32; LANES], [0.0f32; LANES]);
+                                _mm256_storeu_ps(ta.as_mut_ptr(), t);
+                                _mm256_storeu_ps(b1a.as_mut_ptr(), b1);
+                                _mm256_storeu_ps(b2a.as_mut_ptr(), b2);
+                                for (l, e) in ex.iter().enumerate() {
+                                    if let Some((te, b1e, b2e)) = *e {
+                                        (ta[l], b1a[l], b2a[l]) = (te, b1e, b2e);
+                                        m |= 1 << l;
+                                    }
+                                }
+                                t = ld(&ta);
+                                b1 = ld(&b1a);
+                                b2 = ld(&b2a);
+                            }
+                            if m == 0 {
+                                continue;
+                            }
+                            let ok = _mm256_castsi256_ps(_mm256_cmpgt_epi32(_mm256_and_si256(_mm256_set1_epi32(m as i32), lane_bits), zero_i));
+                            hit_mask |= m;
+                            if ANY {
+                                live = _mm256_andnot_ps(ok, live);
+                                t_max = _mm256_blendv_ps(t_max, _mm256_set1_ps(f32::NEG_INFINITY), ok);
+                                if hit_mask == active {
+                                    return hit_mask;
+                                }
+                                continue;
+                            }
+                            t_max = _mm256_blendv_ps(t_max, t, ok);
+                            // Barycentrics and ids live in memory: hits are rare, registers are not.
+                            let keep = |dst: &mut [f32; LANES], x: __m256| _mm256_storeu_ps(dst.as_mut_ptr(), _mm256_blendv_ps(ld(dst), x, ok));
+                            keep(&mut h.b1, b1);
+                            keep(&mut h.b2, b2);
+                            let id = _mm256_castsi256_ps(_mm256_set1_epi32(*self.ids.get_unchecked(i) as i32));
+                            let pp = h.prim.as_mut_ptr() as *mut f32;
+                            _mm256_storeu_ps(pp, _mm256_blendv_ps(_mm256_loadu_ps(pp), id, ok));
+                        }
+                        continue;
+                    }
+                    let node = self.nodes.get_unchecked(code as usize);
+                    let tms = _mm256_mul_ps(t_max, slack);
+                    let test = |b: &[f32; 6]| {
+                        let slab = |a: usize| {
+                            let t0 = _mm256_mul_ps(_mm256_sub_ps(_mm256_set1_ps(b[a]), o[a]), inv[a]);
+                            let t1 = _mm256_mul_ps(_mm256_sub_ps(_mm256_set1_ps(b[a + 3]), o[a]), inv[a]);
+                            (_mm256_min_ps(t0, t1), _mm256_max_ps(t0, t1))
+                        };
+                        let ((nx, fx), (ny, fy), (nz, fz)) = (slab(0), slab(1), slab(2));
+                        let tn = _mm256_max_ps(_mm256_max_ps(nx, ny), _mm256_max_ps(nz, zero));
+                        let tf = _mm256_min_ps(_mm256_mul_ps(_mm256_min_ps(_mm256_min_ps(fx, fy), fz), slack), tms);
+                        let m = _mm256_cmp_ps::<_CMP_LE_OQ>(tn, tf);
+                        // Lanes that miss the box enter it at infinity.
+                        (_mm256_movemask_ps(m), _mm256_blendv_ps(inf, tn, m))
+                    };
+                    let (m0, tn0) = test(&node.boxes[0]);
+                    let (m1, tn1) = test(&node.boxes[1]);
+                    match (m0 != 0, m1 != 0) {
+                        (true, true) => {
+                            // Nearer child on top: the one most of the lanes meeting both enter first.
+                            // (Any hit: order does not matter.)
+                            let both = (m0 & m1) as u32;
+                            let first_near =
+                                ANY || 2 * (_mm256_movemask_ps(_mm256_cmp_ps::<_CMP_LE_OQ>(tn0, tn1)) as u32 & both).count_ones() >= both.count_ones();
+                            let (near, far) = if first_near { (node.child[0], node.child[1]) } else { (node.child[1], node.child[0]) };
+                            let (tnear, tfar) = if first_near { (tn0, tn1) } else { (tn1, tn0) };
+                            *stack.get_unchecked_mut(sp) = far;
+                            tns.get_unchecked_mut(sp).write(tfar);
+                            *stack.get_unchecked_mut(sp + 1) = near;
+                            tns.get_unchecked_mut(sp + 1).write(tnear);
+                            sp += 2;
+                        }
+                        (true, false) => {
+                            *stack.get_unchecked_mut(sp) = node.child[0];
+                            tns.get_unchecked_mut(sp).write(tn0);
+                            sp += 1;
+                        }
+                        (false, true) => {
+                            *stack.get_unchecked_mut(sp) = node.child[1];
+                            tns.get_unchecked_mut(sp).write(tn1);
+                            sp += 1;
+                        }
+                        (false, false) => {}
+                    }
+                }
+                if !ANY {
+                    _mm256_storeu_ps(h.t.as_mut_ptr(), t_max);
+                    for l in 0..LANES {
+                        if hit_mask & (1 << l) == 0 {
+                            h.prim[l] = u32::MAX;
+                            h.t[l] = r.t_max[l];
+                            h.b1[l] = 0.0;
+                            h.b2[l] = 0.0;
+                        }
+                    }
+                }
+                hit_mask
+            }
+        }
+    };
+}
+
+#[cfg(target_arch = "x86_64")]
+walk_simd!(walk_avx2, "avx2");
+#[cfg(target_arch = "x86_64")]
+walk_simd!(walk_avx512, "avx2,avx512f,avx512vl");
 
 /// Whether this CPU runs the eight-wide paths (AVX2, detected at run time).
 pub fn avx2() -> bool {
@@ -583,10 +666,13 @@ mod tests {
         for n in [1, 3, 40, 600] {
             let tris = random_mesh(&mut rng, n);
             let mut bvh = PacketBvh::build(&tris);
-            run(&bvh, &tris, &mut rng, 300);
-            // The portable path too.
-            bvh.avx2 = false;
-            run(&bvh, &tris, &mut rng, 100);
+            // Every path this CPU runs, down to the portable one.
+            for isa in [Isa::Avx512, Isa::Avx2, Isa::Portable] {
+                if isa <= Isa::cpu() {
+                    bvh.isa = isa;
+                    run(&bvh, &tris, &mut rng, if isa == Isa::Portable { 100 } else { 300 });
+                }
+            }
         }
     }
 
