@@ -552,29 +552,41 @@ macro_rules! walk_simd {
                         };
                         let (m0, tn0) = test(&node.boxes[0]);
                         let (m1, tn1) = test(&node.boxes[1]);
-                        match (m0 != 0, m1 != 0) {
-                            (true, true) => {
-                                // Nearer child first: the one most of the lanes meeting both enter
-                                // first. (Any hit: order does not matter.)
-                                let both = (m0 & m1) as u32;
-                                let first_near =
-                                    ANY || 2 * (_mm256_movemask_ps(_mm256_cmp_ps::<_CMP_LE_OQ>(tn0, tn1)) as u32 & both).count_ones() >= both.count_ones();
-                                let (near, far) = if first_near { (node.child[0], node.child[1]) } else { (node.child[1], node.child[0]) };
-                                *stack.get_unchecked_mut(sp) = far;
-                                tns.get_unchecked_mut(sp).write(if first_near { tn1 } else { tn0 });
-                                sp += 1;
-                                code = near;
-                                continue 'walk;
+                        if ANY {
+                            // Shadow rays toward one light take much the same way through the
+                            // tree: here branches predict well, and beat the selects below.
+                            match (m0 != 0, m1 != 0) {
+                                (true, true) => {
+                                    *stack.get_unchecked_mut(sp) = node.child[1];
+                                    tns.get_unchecked_mut(sp).write(tn1);
+                                    sp += 1;
+                                    code = node.child[0];
+                                    continue 'walk;
+                                }
+                                (true, false) => {
+                                    code = node.child[0];
+                                    continue 'walk;
+                                }
+                                (false, true) => {
+                                    code = node.child[1];
+                                    continue 'walk;
+                                }
+                                (false, false) => {}
                             }
-                            (true, false) => {
-                                code = node.child[0];
-                                continue 'walk;
-                            }
-                            (false, true) => {
-                                code = node.child[1];
-                                continue 'walk;
-                            }
-                            (false, false) => {}
+                        } else if m0 | m1 != 0 {
+                            // Into the nearer child entered (the one most of the lanes meeting
+                            // both enter first); the other is pushed, and kept when entered too.
+                            // Selects, not branches: which children incoherent rays enter is a
+                            // coin toss.
+                            let both = (m0 & m1) as u32;
+                            let first1 =
+                                m0 == 0 || 2 * (_mm256_movemask_ps(_mm256_cmp_ps::<_CMP_LT_OQ>(tn1, tn0)) as u32 & both).count_ones() > both.count_ones();
+                            let (near, far) = if first1 { (node.child[1], node.child[0]) } else { (node.child[0], node.child[1]) };
+                            *stack.get_unchecked_mut(sp) = far;
+                            tns.get_unchecked_mut(sp).write(_mm256_blendv_ps(tn1, tn0, _mm256_castsi256_ps(_mm256_set1_epi32(-(first1 as i32)))));
+                            sp += (m0 != 0 && m1 != 0) as usize;
+                            code = near;
+                            continue 'walk;
                         }
                     }
                     // Pop the next entry that some lane can still improve on.
