@@ -602,15 +602,10 @@ macro_rules! walk_simd {
                     }
                 }
                 if !ANY {
-                    _mm256_storeu_ps(h.t.as_mut_ptr(), t_max);
-                    for l in 0..LANES {
-                        if hit_mask & (1 << l) == 0 {
-                            h.prim[l] = u32::MAX;
-                            h.t[l] = r.t_max[l];
-                            h.b1[l] = 0.0;
-                            h.b2[l] = 0.0;
-                        }
-                    }
+                    // Lanes without a hit keep their own t_max (inactive ones went to -inf);
+                    // `prim`, `b1` and `b2` were only ever written where a lane hit.
+                    let hit = _mm256_castsi256_ps(_mm256_cmpgt_epi32(_mm256_and_si256(_mm256_set1_epi32(hit_mask as i32), lane_bits), zero_i));
+                    _mm256_storeu_ps(h.t.as_mut_ptr(), _mm256_blendv_ps(ld(&r.t_max), t_max, hit));
                 }
                 hit_mask
             }
