@@ -137,19 +137,67 @@ fn prep(r: &Rays8, active: u8) -> Prep {
     p
 }
 
+/// Subtrees of at least this many triangles build their two halves in parallel.
+const PARALLEL_MIN: usize = 16 * 1024;
+
+/// The subtree over `order` (bounds `bb`; `order[0]` is at `base` in the whole order):
+/// its nodes (root first) and its code, node indices relative to the returned vector.
+fn build_par(bounds: &[Aabb], centroids: &[Vec3], order: &mut [u32], base: usize, bb: Aabb, depth: usize) -> (Vec<Node>, u32) {
+    let n = order.len();
+    let mut b = Build { bounds, centroids, nodes: Vec::new(), order, base };
+    if n < PARALLEL_MIN {
+        let code = b.rec(0, n, bb, depth);
+        return (b.nodes, code);
+    }
+    let Some(mid) = b.split(0, n, bb, depth) else { return (Vec::new(), leaf(base, n)) };
+    let (l, r) = order.split_at_mut(mid);
+    let fold = |o: &[u32]| o.iter().fold(Aabb::EMPTY, |acc, &i| acc.union(bounds[i as usize]));
+    let (lbb, rbb) = (fold(l), fold(r));
+    let ((ln, lc), (rn, rc)) =
+        rayon::join(|| build_par(bounds, centroids, l, base, lbb, depth + 1), || build_par(bounds, centroids, r, base + mid, rbb, depth + 1));
+    // Parent first, then the left subtree, then the right: inner codes move by their offset.
+    let reloc = |code: u32, off: usize| if code & LEAF_BIT != 0 { code } else { code + off as u32 };
+    let mut nodes = Vec::with_capacity(1 + ln.len() + rn.len());
+    nodes.push(Node { boxes: [box6(lbb), box6(rbb)], child: [reloc(lc, 1), reloc(rc, 1 + ln.len())] });
+    for (sub, off) in [(&ln, 1), (&rn, 1 + ln.len())] {
+        nodes.extend(sub.iter().map(|nd| Node { boxes: nd.boxes, child: nd.child.map(|c| reloc(c, off)) }));
+    }
+    (nodes, 0)
+}
+
+fn box6(b: Aabb) -> [f32; 6] {
+    [b.min.x, b.min.y, b.min.z, b.max.x, b.max.y, b.max.z]
+}
+
 struct Build<'a> {
     bounds: &'a [Aabb],
-    centroids: Vec<Vec3>,
+    centroids: &'a [Vec3],
     nodes: Vec<Node>,
-    order: Vec<u32>,
+    order: &'a mut [u32],
+    /// Position of `order[0]` in the whole order (leaf codes are absolute).
+    base: usize,
 }
 
 impl Build<'_> {
     /// Builds the subtree over `order[lo..hi]` (bounds `bb`); returns its code.
     fn rec(&mut self, lo: usize, hi: usize, bb: Aabb, depth: usize) -> u32 {
+        let Some(mid) = self.split(lo, hi, bb, depth) else { return leaf(self.base + lo, hi - lo) };
+        let idx = self.nodes.len();
+        self.nodes.push(Node { boxes: [[0.0; 6]; 2], child: [0; 2] });
+        for (k, (a, b)) in [(lo, mid), (mid, hi)].into_iter().enumerate() {
+            let cbb = self.order[a..b].iter().fold(Aabb::EMPTY, |acc, &i| acc.union(self.bounds[i as usize]));
+            let code = self.rec(a, b, cbb, depth + 1);
+            self.nodes[idx].boxes[k] = box6(cbb);
+            self.nodes[idx].child[k] = code;
+        }
+        idx as u32
+    }
+
+    /// Where to split `order[lo..hi]` (bounds `bb`), reordering it; None for a leaf.
+    fn split(&mut self, lo: usize, hi: usize, bb: Aabb, depth: usize) -> Option<usize> {
         let n = hi - lo;
         if n <= 1 {
-            return leaf(lo, n);
+            return None;
         }
         let cb = self.order[lo..hi].iter().fold(Aabb::EMPTY, |b, &i| b.grow(self.centroids[i as usize]));
         let split = if depth >= MAX_DEPTH { None } else { self.best_split(lo, hi, &cb) };
@@ -159,7 +207,7 @@ impl Build<'_> {
                 // triangles weighted by the chance that a ray meeting the parent meets it.
                 let split_cost = NODE_COST + cost / bb.surface_area().max(f32::MIN_POSITIVE);
                 if n <= MAX_LEAF && n as f32 <= split_cost {
-                    return leaf(lo, n);
+                    return None;
                 }
                 let (cmin, scale) = (cb.min[axis], BINS as f32 / cb.extent()[axis]);
                 let mut l = lo;
@@ -173,24 +221,16 @@ impl Build<'_> {
             }
             None => {
                 if n <= MAX_LEAF {
-                    return leaf(lo, n);
+                    return None;
                 }
                 // Median along the widest centroid axis (coincident centroids, or too deep).
                 let axis = cb.extent().max_position();
-                let c = &self.centroids;
+                let c = self.centroids;
                 self.order[lo..hi].select_nth_unstable_by(n / 2, |&a, &b| c[a as usize][axis].total_cmp(&c[b as usize][axis]));
                 lo + n / 2
             }
         };
-        let idx = self.nodes.len();
-        self.nodes.push(Node { boxes: [[0.0; 6]; 2], child: [0; 2] });
-        for (k, (a, b)) in [(lo, mid), (mid, hi)].into_iter().enumerate() {
-            let cbb = self.order[a..b].iter().fold(Aabb::EMPTY, |acc, &i| acc.union(self.bounds[i as usize]));
-            let code = self.rec(a, b, cbb, depth + 1);
-            self.nodes[idx].boxes[k] = [cbb.min.x, cbb.min.y, cbb.min.z, cbb.max.x, cbb.max.y, cbb.max.z];
-            self.nodes[idx].child[k] = code;
-        }
-        idx as u32
+        Some(mid)
     }
 
     /// Best binned SAH split over the three axes of `order[lo..hi]`: (sum of area * count,
@@ -243,13 +283,18 @@ impl PacketBvh {
     /// The tree over triangles `tris` (vertices p0, p1, p2); hits name indices into it.
     pub fn build(tris: &[[Vec3; 3]]) -> PacketBvh {
         let bounds: Vec<Aabb> = tris.iter().map(|t| Aabb::from_points(t)).collect();
-        let centroids = bounds.iter().map(|b| b.center()).collect();
-        let mut b = Build { bounds: &bounds, centroids, nodes: Vec::new(), order: (0..tris.len() as u32).collect() };
+        let centroids: Vec<Vec3> = bounds.iter().map(|b| b.center()).collect();
+        let mut order: Vec<u32> = (0..tris.len() as u32).collect();
         let root_bb = bounds.iter().fold(Aabb::EMPTY, |a, b| a.union(*b));
-        let root = if tris.is_empty() { None } else { Some(b.rec(0, tris.len(), root_bb, 0)) };
-        let mut verts: Vec<[f32; 4]> = b.order.iter().flat_map(|&i| tris[i as usize].map(|p| [p.x, p.y, p.z, 0.0])).collect();
+        let (nodes, root) = if tris.is_empty() {
+            (Vec::new(), None)
+        } else {
+            let (nodes, code) = build_par(&bounds, &centroids, &mut order, 0, root_bb, 0);
+            (nodes, Some(code))
+        };
+        let mut verts: Vec<[f32; 4]> = order.iter().flat_map(|&i| tris[i as usize].map(|p| [p.x, p.y, p.z, 0.0])).collect();
         verts.push([0.0; 4]);
-        PacketBvh { verts, ids: b.order, nodes: b.nodes, root, isa: Isa::detect() }
+        PacketBvh { verts, ids: order, nodes, root, isa: Isa::detect() }
     }
 
     /// Whether an eight-wide path (AVX2 or AVX-512VL) is used (else each lane walks the tree alone).
@@ -716,12 +761,14 @@ mod tests {
     #[test]
     fn packets_match_brute_force() {
         let mut rng = Pcg32::new(7, 3);
-        for n in [1, 3, 40, 600] {
+        // The last is built in parallel halves (over PARALLEL_MIN triangles).
+        for n in [1, 3, 40, 600, PARALLEL_MIN + 3000] {
             let tris = random_mesh(&mut rng, n);
             let mut bvh = PacketBvh::build(&tris);
+            let packets = if n > 1000 { 10 } else { 300 };
             for isa in isas() {
                 bvh.isa = isa;
-                run(&bvh, &tris, &mut rng, if isa == Isa::Portable { 100 } else { 300 });
+                run(&bvh, &tris, &mut rng, if isa == Isa::Portable { packets / 3 } else { packets });
             }
         }
     }
