@@ -92,16 +92,31 @@ impl Camera {
 
     /// `generate_ray` with the camera's constants computed once, for drawing many rays.
     pub fn ray_generator(&self) -> RayGenerator<'_> {
-        RayGenerator { cam: self, half: self.film_half_extent() }
+        let half = self.film_half_extent();
+        let m = self.to_world;
+        RayGenerator {
+            cam: self,
+            half,
+            pinhole: matches!(self.projection, Projection::Perspective { aperture_radius, .. } if aperture_radius <= 0.0),
+            film_scale: Vec2::new(-2.0 * half.x / self.width as f32, -2.0 * half.y / self.height as f32),
+            axes: [m.x_axis.truncate(), m.y_axis.truncate(), m.z_axis.truncate()],
+            position: m.w_axis.truncate(),
+        }
     }
 }
 
-/// A camera with what its rays share computed once (the film's extent takes a tangent):
-/// the same rays as [`Camera::generate_ray`], bit for bit.
+/// A camera with what its rays share computed once (the film's extent takes a tangent, and
+/// a pinhole's rays need only their direction in world space).
 #[derive(Clone, Copy, Debug)]
 pub struct RayGenerator<'a> {
     cam: &'a Camera,
     half: Vec2,
+    pinhole: bool,
+    /// Camera-space film position per raster unit (the film's +x is the image's left).
+    film_scale: Vec2,
+    /// `to_world`'s linear part (columns) and translation.
+    axes: [Vec3; 3],
+    position: Vec3,
 }
 
 impl RayGenerator<'_> {
@@ -109,6 +124,17 @@ impl RayGenerator<'_> {
     #[inline]
     pub fn generate_ray(&self, raster: Vec2, lens: Vec2, time: f32) -> Ray {
         let cam = self.cam;
+        if self.pinhole {
+            // v = (c, 1) in camera space has z = 1, so the clip planes along the optical
+            // axis sit at near v and far v; all of it maps to world space linearly.
+            let c = self.half + raster * self.film_scale;
+            let [ax, ay, az] = self.axes;
+            let v = ax * c.x + ay * c.y + az;
+            let len = v.length();
+            let mut ray = Ray::with_max(self.position + v * cam.near_clip, v / len, (cam.far_clip - cam.near_clip) * len);
+            ray.time = cam.shutter_open + time * (cam.shutter_close - cam.shutter_open);
+            return ray;
+        }
         let c = cam.raster_to_camera(raster, self.half);
         let (o, d) = match cam.projection {
             Projection::Perspective { aperture_radius, focus_distance, .. } => {
