@@ -253,22 +253,22 @@ impl SimdKernel {
         };
         let mut results: Vec<(Vec2, Rgb)> = vec![(Vec2::ZERO, Rgb::BLACK); jobs];
         let cam = scene.camera.ray_generator();
-        let proto = IndependentSampler::new(settings.spp, settings.seed);
-        let mut lanes: [Lane; LANES] = std::array::from_fn(|_| Lane::new(proto.clone()));
+        let mut st = Paths::new(IndependentSampler::new(settings.spp, settings.seed));
         let mut rays = Rays8::default();
+        let mut shadow = Rays8::default();
         let mut next = 0usize;
         let mut active = 0u8;
         // Reused every step: lanes outside this step's mask hold stale values nobody reads.
         let mut v = Soa::default();
         let mut o = Out::default();
         loop {
-            for (l, lane) in lanes.iter_mut().enumerate() {
+            for l in 0..LANES {
                 if active & (1 << l) != 0 || next >= jobs {
                     continue;
                 }
                 let (x, y, s) = job_xys(next);
-                let (raster, ray) = camera_sample(&cam, &mut lane.sampler, x, y, s);
-                lane.start(next, raster);
+                let (raster, ray) = camera_sample(&cam, &mut st.sampler[l], x, y, s);
+                st.start(l, next, raster);
                 set_ray(&mut rays, l, ray.o, ray.d, ray.t_max);
                 active |= 1 << l;
                 next += 1;
@@ -277,60 +277,42 @@ impl SimdKernel {
                 break;
             }
             let hits = self.bvh.intersect(&rays, active);
-            let mut shadow = Rays8::default();
-            let mut smask = 0u8;
-            let mut pending = [Rgb::BLACK; LANES];
             let mut ends = 0u8;
             let mut go = 0u8;
-            for (l, lane) in lanes.iter_mut().enumerate() {
+            for l in 0..LANES {
                 if active & (1 << l) == 0 {
                     continue;
                 }
                 let d = Vec3::new(rays.d[0][l], rays.d[1][l], rays.d[2][l]);
-                if self.gather(scene, settings, lane, hits.prim[l], hits.b1[l], hits.b2[l], d, &mut v, l) {
+                if self.gather(scene, settings, &mut st, l, hits.prim[l], hits.b1[l], hits.b2[l], d, &mut v) {
                     go |= 1 << l;
                 } else {
                     ends |= 1 << l;
                 }
             }
-            shade8(&v, settings.rr_depth, &mut o);
-            let o = &o;
-            for (l, lane) in lanes.iter_mut().enumerate() {
+            // Writes every lane's next ray, shadow ray and state; only `go` lanes' count.
+            shade8(&v, settings.rr_depth, &mut st, &mut rays, &mut shadow, &mut o);
+            let mut smask = 0u8;
+            for l in 0..LANES {
                 if go & (1 << l) == 0 {
                     continue;
                 }
-                let c = Rgb::new(o.c[0][l], o.c[1][l], o.c[2][l]);
                 match o.nee[l] {
-                    1 => lane.l += c,
-                    2 => {
-                        set_ray(&mut shadow, l, Vec3::new(o.so[0][l], o.so[1][l], o.so[2][l]), Vec3::new(o.sd[0][l], o.sd[1][l], o.sd[2][l]), o.st[l]);
-                        smask |= 1 << l;
-                        pending[l] = c;
-                    }
+                    1 => st.add(l, o.contribution(l)),
+                    2 => smask |= 1 << l,
                     _ => {}
                 }
-                lane.beta = Rgb::new(o.beta[0][l], o.beta[1][l], o.beta[2][l]);
-                if o.cont[l] {
-                    lane.prev_specular = false;
-                    lane.prev_pdf = o.pdf[l];
-                    lane.prev_p = Vec3::new(v.p[0][l], v.p[1][l], v.p[2][l]);
-                    set_ray(&mut rays, l, Vec3::new(o.no[0][l], o.no[1][l], o.no[2][l]), Vec3::new(o.nd[0][l], o.nd[1][l], o.nd[2][l]), f32::INFINITY);
-                } else {
-                    if o.moved[l] {
-                        lane.prev_specular = false;
-                        lane.prev_pdf = o.pdf[l];
-                        lane.prev_p = Vec3::new(v.p[0][l], v.p[1][l], v.p[2][l]);
-                    }
+                if !o.cont[l] {
                     ends |= 1 << l;
                 }
             }
-            let blocked = self.bvh.occluded(&shadow, smask);
-            for (l, lane) in lanes.iter_mut().enumerate() {
-                if smask & !blocked & (1 << l) != 0 {
-                    lane.l += pending[l];
+            let clear = smask & !self.bvh.occluded(&shadow, smask);
+            for l in 0..LANES {
+                if clear & (1 << l) != 0 {
+                    st.add(l, o.contribution(l));
                 }
                 if ends & (1 << l) != 0 {
-                    results[lane.job] = (lane.raster, lane.l);
+                    results[st.job[l]] = (st.raster[l], Rgb::new(st.l[0][l], st.l[1][l], st.l[2][l]));
                 }
             }
             active &= !ends;
@@ -345,8 +327,9 @@ impl SimdKernel {
     /// is left in `v` for `shade8`. False when the path ends here.
     #[allow(clippy::too_many_arguments)]
     #[inline(always)]
-    fn gather(&self, scene: &Scene, settings: &RenderSettings, lane: &mut Lane, prim: u32, b1: f32, b2: f32, d: Vec3, v: &mut Soa, l: usize) -> bool {
-        lane.depth += 1;
+    fn gather(&self, scene: &Scene, settings: &RenderSettings, st: &mut Paths, l: usize, prim: u32, b1: f32, b2: f32, d: Vec3, v: &mut Soa) -> bool {
+        st.depth[l] += 1;
+        let depth = st.depth[l];
         let Some(tri) = self.tris.get(prim as usize) else { return false };
         let sh = &self.shapes[tri.shape as usize];
         let p = tri.p[0] * (1.0 - b1 - b2) + tri.p[1] * b1 + tri.p[2] * b2;
@@ -359,29 +342,31 @@ impl SimdKernel {
         };
         let wo_w = -d;
         if let Some((li, le)) = sh.light {
-            let hide = lane.depth == 1 && settings.hide_emitters;
+            let hide = depth == 1 && settings.hide_emitters;
             let le = if ng.dot(wo_w) <= 0.0 { Rgb::BLACK } else { le };
             if !le.is_black() && !hide {
-                let w = if lane.prev_specular {
+                let w = if st.prev_specular[l] {
                     1.0
                 } else {
-                    let pdf_li = area_of(scene, li).map_or(0.0, |a| a.pdf_li(lane.prev_p, p, ng));
-                    power_heuristic(1.0, lane.prev_pdf, 1.0, scene.light_pmf(li) * pdf_li)
+                    let prev_p = Vec3::new(st.prev_p[0][l], st.prev_p[1][l], st.prev_p[2][l]);
+                    let pdf_li = area_of(scene, li).map_or(0.0, |a| a.pdf_li(prev_p, p, ng));
+                    power_heuristic(1.0, st.prev_pdf[l], 1.0, scene.light_pmf(li) * pdf_li)
                 };
-                lane.l += lane.beta * le * w;
+                let beta = Rgb::new(st.beta[0][l], st.beta[1][l], st.beta[2][l]);
+                st.add(l, beta * le * w);
             }
         }
-        if !settings.depth_allows(lane.depth + 1) {
+        if !settings.depth_allows(depth + 1) {
             return false;
         }
         // All of the vertex's numbers, in the scalar order (u_rr is drawn even where the path
         // ends before it: the lane's sampler restarts with its next camera sample).
-        let u_light = lane.sampler.next_1d();
-        let u_l2 = lane.sampler.next_2d();
-        let _uc = lane.sampler.next_1d();
-        let u = lane.sampler.next_2d();
-        v.u_rr[l] = lane.sampler.next_1d();
-        v.depth[l] = lane.depth;
+        let sampler = &mut st.sampler[l];
+        let u_light = sampler.next_1d();
+        let u_l2 = sampler.next_2d();
+        let _uc = sampler.next_1d();
+        let u = sampler.next_2d();
+        v.u_rr[l] = sampler.next_1d();
         let put = |a: &mut [[f32; LANES]; 3], x: Vec3| {
             a[0][l] = x.x;
             a[1][l] = x.y;
@@ -401,7 +386,6 @@ impl SimdKernel {
         putc(&mut v.front, sh.front);
         putc(&mut v.back, sh.back.unwrap_or(Rgb::BLACK));
         v.has_back[l] = sh.back.is_some();
-        putc(&mut v.beta, lane.beta);
         v.u[0][l] = u.x;
         v.u[1][l] = u.y;
         // The light point (as `MeshLight::sample_li` up to the distance test).
@@ -441,11 +425,9 @@ struct Soa {
     front: [[f32; LANES]; 3],
     back: [[f32; LANES]; 3],
     has_back: [bool; LANES],
-    beta: [[f32; LANES]; 3],
     /// The BSDF sample's square point (cosine-warped in `shade8`).
     u: [[f32; LANES]; 2],
     u_rr: [f32; LANES],
-    depth: [i32; LANES],
     nee_ok: [bool; LANES],
     lp: [[f32; LANES]; 3],
     ln: [[f32; LANES]; 3],
@@ -459,17 +441,16 @@ struct Soa {
 struct Out {
     /// 0: no light sample, 1: counts without a shadow ray, 2: counts when the shadow ray is clear.
     nee: [u8; LANES],
+    /// The light sample's contribution.
     c: [[f32; LANES]; 3],
-    so: [[f32; LANES]; 3],
-    sd: [[f32; LANES]; 3],
-    st: [f32; LANES],
-    beta: [[f32; LANES]; 3],
-    /// The BSDF sample was taken (prev_* updated) / the path continues along (no, nd).
-    moved: [bool; LANES],
+    /// The path continues along its next ray.
     cont: [bool; LANES],
-    pdf: [f32; LANES],
-    no: [[f32; LANES]; 3],
-    nd: [[f32; LANES]; 3],
+}
+
+impl Out {
+    fn contribution(&self, l: usize) -> Rgb {
+        Rgb::new(self.c[0][l], self.c[1][l], self.c[2][l])
+    }
 }
 
 /// `glam`'s `a.dot(b)`, operation for operation.
@@ -512,7 +493,7 @@ fn offset3(p: [f32; 3], ng: [f32; 3], w: [f32; 3]) -> [f32; 3] {
 /// Russian roulette), branch-free per lane so that it compiles to vector code; the same
 /// operations in the same order as the scalar tracer.
 #[inline(always)]
-fn shade8(v: &Soa, rr_depth: i32, o: &mut Out) {
+fn shade8(v: &Soa, rr_depth: i32, st: &mut Paths, rays: &mut Rays8, shadow: &mut Rays8, o: &mut Out) {
     for l in 0..LANES {
         let g = |a: &[[f32; LANES]; 3]| [a[0][l], a[1][l], a[2][l]];
         let (p, ng, fs, ft, fnn) = (g(&v.p), g(&v.ng), g(&v.fs), g(&v.ft), g(&v.fnn));
@@ -525,7 +506,7 @@ fn shade8(v: &Soa, rr_depth: i32, o: &mut Out) {
         let f = [refl[0] * INV_PI, refl[1] * INV_PI, refl[2] * INV_PI];
         let f_black = f[0] == 0.0 && f[1] == 0.0 && f[2] == 0.0;
         let wo_up = wo[2] * flip > 0.0;
-        let beta = g(&v.beta);
+        let beta = g(&st.beta);
         // Light sample.
         let lp = g(&v.lp);
         let dl = [lp[0] - p[0], lp[1] - p[1], lp[2] - p[2]];
@@ -556,10 +537,10 @@ fn shade8(v: &Soa, rr_depth: i32, o: &mut Out) {
         let d2 = [lp[0] - so[0], lp[1] - so[1], lp[2] - so[2]];
         let dist = dot3(d2, d2).sqrt();
         for k in 0..3 {
-            o.so[k][l] = so[k];
-            o.sd[k][l] = d2[k] / dist;
+            shadow.o[k][l] = so[k];
+            shadow.d[k][l] = d2[k] / dist;
         }
-        o.st[l] = dist * (1.0 - SHADOW_EPSILON);
+        shadow.t_max[l] = dist * (1.0 - SHADOW_EPSILON);
         o.nee[l] = if !nee {
             0
         } else if dist == 0.0 {
@@ -581,7 +562,7 @@ fn shade8(v: &Soa, rr_depth: i32, o: &mut Out) {
         ];
         let no = offset3(p, ng, dir);
         let mut cont = moved;
-        if v.depth[l] >= rr_depth {
+        if st.depth[l] >= rr_depth {
             let q = nb[0].max(nb[1]).max(nb[2]).min(0.95);
             let survive = v.u_rr[l] < q;
             cont &= survive;
@@ -590,43 +571,70 @@ fn shade8(v: &Soa, rr_depth: i32, o: &mut Out) {
             }
         }
         cont &= !(nb[0] == 0.0 && nb[1] == 0.0 && nb[2] == 0.0);
+        // A BSDF sample taken becomes the previous vertex of the next one (for MIS).
         for k in 0..3 {
-            o.beta[k][l] = if moved { nb[k] } else { beta[k] };
-            o.no[k][l] = no[k];
-            o.nd[k][l] = dir[k];
+            st.beta[k][l] = if moved { nb[k] } else { beta[k] };
+            st.prev_p[k][l] = if moved { p[k] } else { st.prev_p[k][l] };
+            rays.o[k][l] = no[k];
+            rays.d[k][l] = dir[k];
         }
-        o.moved[l] = moved;
+        rays.t_max[l] = f32::INFINITY;
+        st.prev_pdf[l] = if moved { bpdf } else { st.prev_pdf[l] };
+        st.prev_specular[l] &= !moved;
         o.cont[l] = cont;
-        o.pdf[l] = bpdf;
     }
 }
 
-/// One path in flight.
-struct Lane {
-    sampler: IndependentSampler,
-    job: usize,
-    raster: Vec2,
-    l: Rgb,
-    beta: Rgb,
-    depth: i32,
-    prev_specular: bool,
-    prev_pdf: f32,
-    prev_p: Vec3,
+/// The eight paths in flight: each lane's sampler and film sample, and the state that
+/// `shade8` reads and updates, as structure of arrays.
+struct Paths {
+    sampler: [IndependentSampler; LANES],
+    job: [usize; LANES],
+    raster: [Vec2; LANES],
+    /// Radiance gathered so far.
+    l: [[f32; LANES]; 3],
+    beta: [[f32; LANES]; 3],
+    depth: [i32; LANES],
+    prev_specular: [bool; LANES],
+    prev_pdf: [f32; LANES],
+    prev_p: [[f32; LANES]; 3],
 }
 
-impl Lane {
-    fn new(sampler: IndependentSampler) -> Lane {
-        Lane { sampler, job: 0, raster: Vec2::ZERO, l: Rgb::BLACK, beta: Rgb::WHITE, depth: 0, prev_specular: true, prev_pdf: 0.0, prev_p: Vec3::ZERO }
+impl Paths {
+    fn new(sampler: IndependentSampler) -> Paths {
+        Paths {
+            sampler: std::array::from_fn(|_| sampler.clone()),
+            job: [0; LANES],
+            raster: [Vec2::ZERO; LANES],
+            l: [[0.0; LANES]; 3],
+            beta: [[1.0; LANES]; 3],
+            depth: [0; LANES],
+            prev_specular: [true; LANES],
+            prev_pdf: [0.0; LANES],
+            prev_p: [[0.0; LANES]; 3],
+        }
     }
-    fn start(&mut self, job: usize, raster: Vec2) {
-        self.job = job;
-        self.raster = raster;
-        self.l = Rgb::BLACK;
-        self.beta = Rgb::WHITE;
-        self.depth = 0;
-        self.prev_specular = true;
-        self.prev_pdf = 0.0;
-        self.prev_p = Vec3::ZERO;
+
+    /// Lane `l` starts camera sample `job` at `raster`.
+    fn start(&mut self, l: usize, job: usize, raster: Vec2) {
+        self.job[l] = job;
+        self.raster[l] = raster;
+        for k in 0..3 {
+            self.l[k][l] = 0.0;
+            self.beta[k][l] = 1.0;
+            self.prev_p[k][l] = 0.0;
+        }
+        self.depth[l] = 0;
+        self.prev_specular[l] = true;
+        self.prev_pdf[l] = 0.0;
+    }
+
+    /// Adds `c` to lane `l`'s radiance (as `Rgb`'s `+=`).
+    #[inline(always)]
+    fn add(&mut self, l: usize, c: Rgb) {
+        self.l[0][l] += c.r;
+        self.l[1][l] += c.g;
+        self.l[2][l] += c.b;
     }
 }
 
