@@ -58,6 +58,12 @@ fn compare(scene: &Scene, settings: &RenderSettings, what: &str) {
             close += ((x - y).abs() <= 1e-4 * x.abs().max(y.abs()).max(1e-3)) as usize;
         }
     }
+    // The AVX2-only build of the kernel (the one CPUs without AVX-512 run) gives the same image.
+    let mut k = SimdKernel::new(scene, settings).expect("kernel");
+    let wide = k.uses_avx512();
+    k.set_avx512(false);
+    let c = k.render(scene, settings, &Progress::new()).expect("render").image();
+    assert!(c.data == a.data, "{what}: the AVX2 build of the kernel differs from the default build (AVX-512: {wide})");
     let (ma, mb) = (a.mean(), b.mean());
     println!("{what}: {exact}/{n} channels bit-identical, {close} within 1e-4; means {ma:?} vs {mb:?}");
     assert!(close as f64 >= 0.99 * n as f64, "{what}: only {close} of {n} pixel channels agree");

@@ -197,6 +197,30 @@ fn spheres_only_and_empty_scene() {
 }
 
 #[test]
+fn rays_along_a_box_face_from_on_it() {
+    // Triangles whose top edges lie in the plane y = 1 (the top face of their boxes), and rays
+    // that start in that plane and run along it (d.y = +0 or -0): they meet the edges, so the
+    // boxes must not be culled. (A zero direction component used to be clamped to a tiny one,
+    // which put the far slab at t = 0 for an origin on the far plane.)
+    let mut m = TriangleMesh::default();
+    for k in 0..40u32 {
+        let (x, z) = ((k % 8) as f32 * 0.5, 2.0 + (k / 8) as f32);
+        m.positions.extend([Vec3::new(x - 0.2, 1.0, z), Vec3::new(x + 0.2, 1.0, z), Vec3::new(x, 0.0, z + 0.1)]);
+        m.indices.push([3 * k, 3 * k + 1, 3 * k + 2]);
+    }
+    let shapes = vec![Geometry::Mesh(m)];
+    let mut rays = Vec::new();
+    for k in 0..8 {
+        for (dy, dz) in [(0.0f32, 1.0f32), (-0.0, 1.0), (0.0, -1.0)] {
+            let z0 = if dz > 0.0 { 0.0 } else { 20.0 };
+            rays.push(Ray::new(Vec3::new(k as f32 * 0.5, 1.0, z0), Vec3::new(0.0, dy, dz)));
+        }
+    }
+    let hits = run(&shapes, &rays);
+    assert_eq!(hits, rays.len(), "a ray along the plane of the edges missed them");
+}
+
+#[test]
 fn coincident_triangles_and_single_triangle() {
     // 200 copies of one triangle: every centroid equal, so no SAH split exists.
     let tri = [Vec3::new(0.0, 0.0, 0.5), Vec3::new(1.0, 0.0, 0.5), Vec3::new(0.0, 1.0, 0.5)];

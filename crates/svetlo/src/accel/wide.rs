@@ -91,13 +91,12 @@ const FAR_SLACK: f32 = 1.0 + 2.0 * (3.0 * f32::EPSILON * 0.5) / (1.0 - 3.0 * f32
 impl BoxRay {
     #[inline(always)]
     pub fn new(o: Vec3, d: Vec3) -> BoxRay {
-        // A zero component becomes a tiny one of the same sign: the slab products stay
-        // finite (no 0 * inf = NaN) and the ray is still effectively parallel to that slab.
-        const TINY: f32 = 1e-30;
-        let d = Vec3::select(d.abs().cmplt(Vec3::splat(TINY)), Vec3::splat(TINY).copysign(d), d);
+        // A zero component gives an infinite inverse: the slab's distances are -inf and +inf
+        // for an origin inside it, and NaN (0 * inf) for one on its plane, which the tests'
+        // max/min chains pass over (the ray runs along the face: it may meet what lies there).
         let inv = d.recip();
-        // A negative inverse swaps the slab's near and far planes.
-        let neg = inv.cmplt(Vec3::ZERO).bitmask() as usize;
+        // A negative inverse (-0 included) swaps the slab's near and far planes.
+        let neg = inv.is_negative_bitmask() as usize;
         let flip = [neg & 1, (neg >> 1) & 1, (neg >> 2) & 1];
         BoxRay {
             o: o.to_array(),
@@ -124,8 +123,10 @@ impl BoxRay {
         let slab = |k: usize, a: usize| _mm256_mul_ps(_mm256_sub_ps(plane(k), o(a)), inv(a));
         let (tnx, tny, tnz) = (slab(self.near[0], 0), slab(self.near[1], 1), slab(self.near[2], 2));
         let (tfx, tfy, tfz) = (slab(self.far[0], 0), slab(self.far[1], 1), slab(self.far[2], 2));
-        let tn = _mm256_max_ps(_mm256_max_ps(tnx, tny), _mm256_max_ps(tnz, _mm256_setzero_ps()));
-        let tf = _mm256_mul_ps(_mm256_min_ps(_mm256_min_ps(tfx, tfy), _mm256_min_ps(tfz, _mm256_set1_ps(t_max))), _mm256_set1_ps(FAR_SLACK));
+        // max/min return their second operand when either is NaN: each slab's distance goes
+        // first, the running bound second, so that a NaN slab is skipped.
+        let tn = _mm256_max_ps(tnx, _mm256_max_ps(tny, _mm256_max_ps(tnz, _mm256_setzero_ps())));
+        let tf = _mm256_mul_ps(_mm256_min_ps(tfx, _mm256_min_ps(tfy, _mm256_min_ps(tfz, _mm256_set1_ps(t_max)))), _mm256_set1_ps(FAR_SLACK));
         let mask = _mm256_movemask_ps(_mm256_cmp_ps::<_CMP_LE_OQ>(tn, tf)) as u32;
         let mut tn_all = [0.0; WIDTH];
         _mm256_storeu_ps(tn_all.as_mut_ptr(), tn);
@@ -158,8 +159,10 @@ impl BoxRay {
             let tfx = (p[self.far[0]][g] - o[0]) * inv[0];
             let tfy = (p[self.far[1]][g] - o[1]) * inv[1];
             let tfz = (p[self.far[2]][g] - o[2]) * inv[2];
-            let tn = tnx.max(tny).max(tnz.max(Vec4::ZERO));
-            let tf = tfx.min(tfy).min(tfz.min(Vec4::splat(t_max))) * FAR_SLACK;
+            // As in `test_avx`: a NaN slab distance is passed over (glam's max/min on SSE
+            // keep the second operand then, as the portable ones keep the number).
+            let tn = tnx.max(tny.max(tnz.max(Vec4::ZERO)));
+            let tf = tfx.min(tfy.min(tfz.min(Vec4::splat(t_max)))) * FAR_SLACK;
             mask |= tn.cmple(tf).bitmask() << (4 * g);
             tn.write_to_slice(&mut tn_all[4 * g..4 * g + 4]);
         }

@@ -71,11 +71,11 @@ impl Camera {
     }
 
     /// Camera-space position on the film (plane z = 1, or z = 0 for orthographic) of a
-    /// raster point (pixels, origin top-left).
-    fn raster_to_camera(&self, raster: Vec2) -> Vec2 {
+    /// raster point (pixels, origin top-left), for a film of half extent `half`.
+    fn raster_to_camera(&self, raster: Vec2, half: Vec2) -> Vec2 {
         let ndc = Vec2::new(raster.x / self.width as f32, raster.y / self.height as f32);
         // +x of camera space is the image's left, +y its top.
-        (Vec2::ONE - 2.0 * ndc) * self.film_half_extent()
+        (Vec2::ONE - 2.0 * ndc) * half
     }
 
     /// Inverse of `raster_to_camera`.
@@ -87,8 +87,56 @@ impl Camera {
     /// The ray through raster position `raster`, lens sample `lens` in [0,1)^2 and time
     /// sample `time` in [0,1). Directions are unit length; `t_max` honours the far clip.
     pub fn generate_ray(&self, raster: Vec2, lens: Vec2, time: f32) -> Ray {
-        let c = self.raster_to_camera(raster);
-        let (o, d) = match self.projection {
+        self.ray_generator().generate_ray(raster, lens, time)
+    }
+
+    /// `generate_ray` with the camera's constants computed once, for drawing many rays.
+    pub fn ray_generator(&self) -> RayGenerator<'_> {
+        let half = self.film_half_extent();
+        let m = self.to_world;
+        RayGenerator {
+            cam: self,
+            half,
+            pinhole: matches!(self.projection, Projection::Perspective { aperture_radius, .. } if aperture_radius <= 0.0),
+            film_scale: Vec2::new(-2.0 * half.x / self.width as f32, -2.0 * half.y / self.height as f32),
+            axes: [m.x_axis.truncate(), m.y_axis.truncate(), m.z_axis.truncate()],
+            position: m.w_axis.truncate(),
+        }
+    }
+}
+
+/// A camera with what its rays share computed once (the film's extent takes a tangent, and
+/// a pinhole's rays need only their direction in world space).
+#[derive(Clone, Copy, Debug)]
+pub struct RayGenerator<'a> {
+    cam: &'a Camera,
+    half: Vec2,
+    pinhole: bool,
+    /// Camera-space film position per raster unit (the film's +x is the image's left).
+    film_scale: Vec2,
+    /// `to_world`'s linear part (columns) and translation.
+    axes: [Vec3; 3],
+    position: Vec3,
+}
+
+impl RayGenerator<'_> {
+    /// See [`Camera::generate_ray`].
+    #[inline]
+    pub fn generate_ray(&self, raster: Vec2, lens: Vec2, time: f32) -> Ray {
+        let cam = self.cam;
+        if self.pinhole {
+            // v = (c, 1) in camera space has z = 1, so the clip planes along the optical
+            // axis sit at near v and far v; all of it maps to world space linearly.
+            let c = self.half + raster * self.film_scale;
+            let [ax, ay, az] = self.axes;
+            let v = ax * c.x + ay * c.y + az;
+            let len = v.length();
+            let mut ray = Ray::with_max(self.position + v * cam.near_clip, v / len, (cam.far_clip - cam.near_clip) * len);
+            ray.time = cam.shutter_open + time * (cam.shutter_close - cam.shutter_open);
+            return ray;
+        }
+        let c = cam.raster_to_camera(raster, self.half);
+        let (o, d) = match cam.projection {
             Projection::Perspective { aperture_radius, focus_distance, .. } => {
                 let d = Vec3::new(c.x, c.y, 1.0).normalize();
                 if aperture_radius > 0.0 {
@@ -104,14 +152,14 @@ impl Camera {
             Projection::Orthographic => (Vec3::new(c.x, c.y, 0.0), Vec3::Z),
         };
         // Near and far clip are distances along the optical axis.
-        let near = self.near_clip / d.z;
-        let far = self.far_clip / d.z;
+        let near = cam.near_clip / d.z;
+        let far = cam.far_clip / d.z;
         let o_cam = o + d * near;
-        let ow = self.to_world.transform_point3(o_cam);
-        let dw = self.to_world.transform_vector3(d);
+        let ow = cam.to_world.transform_point3(o_cam);
+        let dw = cam.to_world.transform_vector3(d);
         let len = dw.length();
         let mut ray = Ray::with_max(ow, dw / len, (far - near) * len);
-        ray.time = self.shutter_open + time * (self.shutter_close - self.shutter_open);
+        ray.time = cam.shutter_open + time * (cam.shutter_close - cam.shutter_open);
         ray
     }
 }

@@ -101,24 +101,42 @@ impl TriangleMesh {
 
     /// Interpolated attributes at barycentrics (b1, b2): (geometric normal, shading normal, uv, dp/du).
     pub fn surface(&self, tri: usize, b1: f32, b2: f32) -> (Vec3, Vec3, Vec2, Vec3) {
-        let [i0, i1, i2] = self.indices[tri].map(|i| i as usize);
-        let (p0, p1, p2) = (self.positions[i0], self.positions[i1], self.positions[i2]);
-        let b0 = 1.0 - b1 - b2;
-        let ng = (p1 - p0).cross(p2 - p0).normalize_or_zero();
-        let (uv, dpdu) = (self.uv(tri, b1, b2), self.dpdu([i0, i1, i2]));
-        let ns = if self.normals.is_empty() {
-            ng
-        } else {
-            let n = (self.normals[i0] * b0 + self.normals[i1] * b1 + self.normals[i2] * b2).normalize_or_zero();
-            if n == Vec3::ZERO {
-                ng
-            } else {
-                n
-            }
-        };
+        let s = self.shading(tri);
+        let (ng, ns) = s.normals_at(b1, b2);
+        (ng, ns, self.uv(tri, b1, b2), s.dpdu)
+    }
+
+    /// What `surface` needs of a triangle whatever the point on it, for callers that hit the
+    /// same triangles again and again.
+    pub fn shading(&self, tri: usize) -> TriangleShading {
+        let idx = self.indices[tri].map(|i| i as usize);
+        let [p0, p1, p2] = idx.map(|i| self.positions[i]);
+        TriangleShading {
+            ng: (p1 - p0).cross(p2 - p0).normalize_or_zero(),
+            normals: if self.normals.is_empty() { None } else { Some(idx.map(|i| self.normals[i])) },
+            dpdu: self.dpdu(idx),
+        }
+    }
+}
+
+/// A triangle's geometric normal, vertex normals and dp/du (see [`TriangleMesh::shading`]).
+#[derive(Clone, Copy, Debug)]
+pub struct TriangleShading {
+    /// Unit normal of the vertices' winding (zero for a degenerate triangle).
+    pub ng: Vec3,
+    pub normals: Option<[Vec3; 3]>,
+    pub dpdu: Vec3,
+}
+
+impl TriangleShading {
+    /// (geometric normal, shading normal) at barycentrics (b1, b2), as `TriangleMesh::surface`.
+    #[inline]
+    pub fn normals_at(&self, b1: f32, b2: f32) -> (Vec3, Vec3) {
+        let Some([n0, n1, n2]) = self.normals else { return (self.ng, self.ng) };
+        let n = (n0 * (1.0 - b1 - b2) + n1 * b1 + n2 * b2).normalize_or_zero();
+        let ns = if n == Vec3::ZERO { self.ng } else { n };
         // The geometric normal follows the shading normal's side, as in Mitsuba, so that
         // one-sided materials and emitters face where the mesh's normals say.
-        let ng = if !self.normals.is_empty() && ng.dot(ns) < 0.0 { -ng } else { ng };
-        (ng, ns, uv, dpdu)
+        (if self.ng.dot(ns) < 0.0 { -self.ng } else { self.ng }, ns)
     }
 }

@@ -11,7 +11,7 @@ pub mod triangle;
 
 pub use aabb::Aabb;
 pub use interaction::SurfaceInteraction;
-pub use mesh::TriangleMesh;
+pub use mesh::{TriangleMesh, TriangleShading};
 pub use motion::{AnimatedTransform, Motion};
 pub use ray::Ray;
 pub use sphere::Sphere;

@@ -22,7 +22,7 @@ use crate::bsdf::Material;
 use crate::error::{Error, Result};
 use crate::film::{Film, FilmTile};
 use crate::geometry::ray::SHADOW_EPSILON;
-use crate::geometry::Geometry;
+use crate::geometry::{Geometry, TriangleShading};
 use crate::light::{AreaLight, Light};
 use crate::math::{warp, Frame, INV_PI, PI};
 use crate::sampling::sampler::IndependentSampler;
@@ -74,11 +74,16 @@ impl Integrator for SimdPathTracer {
 #[derive(Clone, Copy, Debug)]
 struct Tri {
     p: [Vec3; 3],
-    /// (geometric normal, shading frame) when constant over the triangle; else interpolated per hit.
-    flat: Option<(Vec3, Frame)>,
+    shading: Shading,
     shape: u32,
-    /// Index in its mesh.
-    prim: u32,
+}
+
+/// A triangle's normals: constant, or interpolated per hit (as `TriangleMesh::surface`).
+#[derive(Clone, Copy, Debug)]
+enum Shading {
+    /// Geometric normal and shading frame.
+    Flat(Vec3, Frame),
+    Smooth(TriangleShading),
 }
 
 /// A shape's material and emission.
@@ -97,12 +102,10 @@ struct MeshLight {
     /// 1 / area (0 for a light without area).
     pdf_area: f32,
     tri_distribution: Distribution1D,
-    /// First vertex and edges (p0, p1 - p0, p2 - p0) and, when constant over the triangle,
-    /// the sampled point's normal.
-    tris: Vec<([Vec3; 3], Option<Vec3>)>,
+    /// First vertex and edges (p0, p1 - p0, p2 - p0) and the sampled point's normal:
+    /// constant over the triangle, or the geometric normal of `TriangleMesh::surface`.
+    tris: Vec<([Vec3; 3], std::result::Result<Vec3, TriangleShading>)>,
     radiance: Rgb,
-    /// The light's index, for the normals of `TriangleMesh::surface` where not constant.
-    light: u32,
 }
 
 /// Everything the kernel needs of a qualifying scene.
@@ -112,6 +115,8 @@ pub struct SimdKernel {
     shapes: Vec<ShapeData>,
     /// Per light of the scene.
     lights: Vec<MeshLight>,
+    /// Run the AVX-512VL build of the kernel (detected at run time; tests may clear it).
+    avx512: bool,
 }
 
 /// The constant reflectance of a diffuse model, clamped as `Material::bsdf` does.
@@ -136,7 +141,7 @@ impl SimdKernel {
             return None;
         }
         let mut lights = Vec::with_capacity(scene.lights.len());
-        for (li, l) in scene.lights.iter().enumerate() {
+        for l in &scene.lights {
             let Light::Area(a) = l else { return None };
             let (Geometry::Mesh(m), Texture::Constant(radiance), Some(dist)) = (&*a.geometry, &a.radiance, &a.tri_distribution) else { return None };
             if dist.is_empty() {
@@ -145,11 +150,11 @@ impl SimdKernel {
             let tris = (0..m.triangle_count())
                 .map(|t| {
                     let [p0, p1, p2] = m.vertices(t);
-                    ([p0, p1 - p0, p2 - p0], crate::light::area::constant_normal(m, t))
+                    ([p0, p1 - p0, p2 - p0], crate::light::area::constant_normal(m, t).ok_or_else(|| m.shading(t)))
                 })
                 .collect();
             let pdf_area = if a.area > 0.0 { 1.0 / a.area } else { 0.0 };
-            lights.push(MeshLight { pdf_area, tri_distribution: dist.clone(), tris, radiance: *radiance, light: li as u32 });
+            lights.push(MeshLight { pdf_area, tri_distribution: dist.clone(), tris, radiance: *radiance });
         }
         let mut shapes = Vec::with_capacity(scene.shapes.len());
         let mut tris = Vec::new();
@@ -173,18 +178,39 @@ impl SimdKernel {
             for t in 0..m.triangle_count() {
                 let p = m.vertices(t);
                 verts.push(p);
-                tris.push(Tri { p, flat: s.flat.get(t).copied().flatten(), shape: si as u32, prim: t as u32 });
+                let shading = match s.flat.get(t).copied().flatten() {
+                    Some((ng, frame)) => Shading::Flat(ng, frame),
+                    None => Shading::Smooth(m.shading(t)),
+                };
+                tris.push(Tri { p, shading, shape: si as u32 });
             }
         }
-        Some(SimdKernel { bvh: PacketBvh::build(&verts), tris, shapes, lights })
+        Some(SimdKernel { bvh: PacketBvh::build(&verts), tris, shapes, lights, avx512: avx512() })
+    }
+
+    /// Whether the AVX-512VL build of the kernel runs.
+    pub fn uses_avx512(&self) -> bool {
+        self.avx512
+    }
+
+    /// Chooses the AVX-512VL build (when the CPU has it) or the AVX2 one.
+    pub fn set_avx512(&mut self, on: bool) {
+        self.avx512 = on && avx512();
     }
 
     pub fn render(&self, scene: &Scene, settings: &RenderSettings, progress: &Progress) -> Result<Film> {
         render_tiles(scene, settings, progress, &|tile: &mut FilmTile, rect: [u32; 4], s0: u32, n: u32| {
             #[cfg(target_arch = "x86_64")]
             if self.bvh.simd() {
-                // SAFETY: `simd()` is true only where AVX2 was detected at run time.
-                return unsafe { self.render_tile_avx2(scene, settings, tile, rect, s0, n) };
+                // SAFETY: `simd()` is true only where AVX2 was detected at run time, and
+                // `avx512` only where AVX-512F and VL were.
+                return unsafe {
+                    if self.avx512 {
+                        self.render_tile_avx512(scene, settings, tile, rect, s0, n)
+                    } else {
+                        self.render_tile_avx2(scene, settings, tile, rect, s0, n)
+                    }
+                };
             }
             self.render_tile(scene, settings, tile, rect, s0, n)
         })
@@ -198,6 +224,17 @@ impl SimdKernel {
     #[cfg(target_arch = "x86_64")]
     #[target_feature(enable = "avx2")]
     unsafe fn render_tile_avx2(&self, scene: &Scene, settings: &RenderSettings, tile: &mut FilmTile, rect: [u32; 4], s0: u32, n: u32) {
+        self.render_tile(scene, settings, tile, rect, s0, n)
+    }
+
+    /// `render_tile` compiled for AVX-512VL: the same 256-bit code with 32 vector registers
+    /// instead of 16 (fewer spills in the eight-lane arithmetic).
+    ///
+    /// # Safety
+    /// The CPU must support AVX2, AVX-512F and AVX-512VL.
+    #[cfg(target_arch = "x86_64")]
+    #[target_feature(enable = "avx2,avx512f,avx512vl")]
+    unsafe fn render_tile_avx512(&self, scene: &Scene, settings: &RenderSettings, tile: &mut FilmTile, rect: [u32; 4], s0: u32, n: u32) {
         self.render_tile(scene, settings, tile, rect, s0, n)
     }
 
@@ -215,22 +252,23 @@ impl SimdKernel {
             (x0 + pix % w, y0 + pix / w, s0 + s)
         };
         let mut results: Vec<(Vec2, Rgb)> = vec![(Vec2::ZERO, Rgb::BLACK); jobs];
-        let proto = IndependentSampler::new(settings.spp, settings.seed);
-        let mut lanes: [Lane; LANES] = std::array::from_fn(|_| Lane::new(proto.clone()));
+        let cam = scene.camera.ray_generator();
+        let mut st = Paths::new(IndependentSampler::new(settings.spp, settings.seed));
         let mut rays = Rays8::default();
+        let mut shadow = Rays8::default();
         let mut next = 0usize;
         let mut active = 0u8;
         // Reused every step: lanes outside this step's mask hold stale values nobody reads.
         let mut v = Soa::default();
         let mut o = Out::default();
         loop {
-            for (l, lane) in lanes.iter_mut().enumerate() {
+            for l in 0..LANES {
                 if active & (1 << l) != 0 || next >= jobs {
                     continue;
                 }
                 let (x, y, s) = job_xys(next);
-                let (raster, ray) = camera_sample(&scene.camera, &mut lane.sampler, x, y, s);
-                lane.start(next, raster);
+                let (raster, ray) = camera_sample(&cam, &mut st.sampler[l], x, y, s);
+                st.start(l, next, raster);
                 set_ray(&mut rays, l, ray.o, ray.d, ray.t_max);
                 active |= 1 << l;
                 next += 1;
@@ -239,60 +277,42 @@ impl SimdKernel {
                 break;
             }
             let hits = self.bvh.intersect(&rays, active);
-            let mut shadow = Rays8::default();
-            let mut smask = 0u8;
-            let mut pending = [Rgb::BLACK; LANES];
             let mut ends = 0u8;
             let mut go = 0u8;
-            for (l, lane) in lanes.iter_mut().enumerate() {
+            for l in 0..LANES {
                 if active & (1 << l) == 0 {
                     continue;
                 }
                 let d = Vec3::new(rays.d[0][l], rays.d[1][l], rays.d[2][l]);
-                if self.gather(scene, settings, lane, hits.prim[l], hits.b1[l], hits.b2[l], d, &mut v, l) {
+                if self.gather(scene, settings, &mut st, l, hits.prim[l], hits.b1[l], hits.b2[l], d, &mut v) {
                     go |= 1 << l;
                 } else {
                     ends |= 1 << l;
                 }
             }
-            shade8(&v, settings.rr_depth, &mut o);
-            let o = &o;
-            for (l, lane) in lanes.iter_mut().enumerate() {
+            // Writes every lane's next ray, shadow ray and state; only `go` lanes' count.
+            shade8(&v, settings.rr_depth, &mut st, &mut rays, &mut shadow, &mut o);
+            let mut smask = 0u8;
+            for l in 0..LANES {
                 if go & (1 << l) == 0 {
                     continue;
                 }
-                let c = Rgb::new(o.c[0][l], o.c[1][l], o.c[2][l]);
                 match o.nee[l] {
-                    1 => lane.l += c,
-                    2 => {
-                        set_ray(&mut shadow, l, Vec3::new(o.so[0][l], o.so[1][l], o.so[2][l]), Vec3::new(o.sd[0][l], o.sd[1][l], o.sd[2][l]), o.st[l]);
-                        smask |= 1 << l;
-                        pending[l] = c;
-                    }
+                    1 => st.add(l, o.contribution(l)),
+                    2 => smask |= 1 << l,
                     _ => {}
                 }
-                lane.beta = Rgb::new(o.beta[0][l], o.beta[1][l], o.beta[2][l]);
-                if o.cont[l] {
-                    lane.prev_specular = false;
-                    lane.prev_pdf = o.pdf[l];
-                    lane.prev_p = Vec3::new(v.p[0][l], v.p[1][l], v.p[2][l]);
-                    set_ray(&mut rays, l, Vec3::new(o.no[0][l], o.no[1][l], o.no[2][l]), Vec3::new(o.nd[0][l], o.nd[1][l], o.nd[2][l]), f32::INFINITY);
-                } else {
-                    if o.moved[l] {
-                        lane.prev_specular = false;
-                        lane.prev_pdf = o.pdf[l];
-                        lane.prev_p = Vec3::new(v.p[0][l], v.p[1][l], v.p[2][l]);
-                    }
+                if !o.cont[l] {
                     ends |= 1 << l;
                 }
             }
-            let blocked = self.bvh.occluded(&shadow, smask);
-            for (l, lane) in lanes.iter_mut().enumerate() {
-                if smask & !blocked & (1 << l) != 0 {
-                    lane.l += pending[l];
+            let clear = smask & !self.bvh.occluded(&shadow, smask);
+            for l in 0..LANES {
+                if clear & (1 << l) != 0 {
+                    st.add(l, o.contribution(l));
                 }
                 if ends & (1 << l) != 0 {
-                    results[lane.job] = (lane.raster, lane.l);
+                    results[st.job[l]] = (st.raster[l], Rgb::new(st.l[0][l], st.l[1][l], st.l[2][l]));
                 }
             }
             active &= !ends;
@@ -307,44 +327,46 @@ impl SimdKernel {
     /// is left in `v` for `shade8`. False when the path ends here.
     #[allow(clippy::too_many_arguments)]
     #[inline(always)]
-    fn gather(&self, scene: &Scene, settings: &RenderSettings, lane: &mut Lane, prim: u32, b1: f32, b2: f32, d: Vec3, v: &mut Soa, l: usize) -> bool {
-        lane.depth += 1;
+    fn gather(&self, scene: &Scene, settings: &RenderSettings, st: &mut Paths, l: usize, prim: u32, b1: f32, b2: f32, d: Vec3, v: &mut Soa) -> bool {
+        st.depth[l] += 1;
+        let depth = st.depth[l];
         let Some(tri) = self.tris.get(prim as usize) else { return false };
         let sh = &self.shapes[tri.shape as usize];
         let p = tri.p[0] * (1.0 - b1 - b2) + tri.p[1] * b1 + tri.p[2] * b2;
-        let (ng, frame) = match tri.flat {
-            Some(f) => f,
-            None => {
-                let Geometry::Mesh(m) = &*scene.shapes[tri.shape as usize].geometry else { return false };
-                let (ng, ns, _uv, dpdu) = m.surface(tri.prim as usize, b1, b2);
-                (ng, Frame::from_normal_tangent(ns, dpdu))
+        let (ng, frame) = match tri.shading {
+            Shading::Flat(ng, frame) => (ng, frame),
+            Shading::Smooth(s) => {
+                let (ng, ns) = s.normals_at(b1, b2);
+                (ng, Frame::from_normal_tangent(ns, s.dpdu))
             }
         };
         let wo_w = -d;
         if let Some((li, le)) = sh.light {
-            let hide = lane.depth == 1 && settings.hide_emitters;
+            let hide = depth == 1 && settings.hide_emitters;
             let le = if ng.dot(wo_w) <= 0.0 { Rgb::BLACK } else { le };
             if !le.is_black() && !hide {
-                let w = if lane.prev_specular {
+                let w = if st.prev_specular[l] {
                     1.0
                 } else {
-                    let pdf_li = area_of(scene, li).map_or(0.0, |a| a.pdf_li(lane.prev_p, p, ng));
-                    power_heuristic(1.0, lane.prev_pdf, 1.0, scene.light_pmf(li) * pdf_li)
+                    let prev_p = Vec3::new(st.prev_p[0][l], st.prev_p[1][l], st.prev_p[2][l]);
+                    let pdf_li = area_of(scene, li).map_or(0.0, |a| a.pdf_li(prev_p, p, ng));
+                    power_heuristic(1.0, st.prev_pdf[l], 1.0, scene.light_pmf(li) * pdf_li)
                 };
-                lane.l += lane.beta * le * w;
+                let beta = Rgb::new(st.beta[0][l], st.beta[1][l], st.beta[2][l]);
+                st.add(l, beta * le * w);
             }
         }
-        if !settings.depth_allows(lane.depth + 1) {
+        if !settings.depth_allows(depth + 1) {
             return false;
         }
         // All of the vertex's numbers, in the scalar order (u_rr is drawn even where the path
         // ends before it: the lane's sampler restarts with its next camera sample).
-        let u_light = lane.sampler.next_1d();
-        let u_l2 = lane.sampler.next_2d();
-        let _uc = lane.sampler.next_1d();
-        let u = lane.sampler.next_2d();
-        v.u_rr[l] = lane.sampler.next_1d();
-        v.depth[l] = lane.depth;
+        let sampler = &mut st.sampler[l];
+        let u_light = sampler.next_1d();
+        let u_l2 = sampler.next_2d();
+        let _uc = sampler.next_1d();
+        let u = sampler.next_2d();
+        v.u_rr[l] = sampler.next_1d();
         let put = |a: &mut [[f32; LANES]; 3], x: Vec3| {
             a[0][l] = x.x;
             a[1][l] = x.y;
@@ -364,7 +386,6 @@ impl SimdKernel {
         putc(&mut v.front, sh.front);
         putc(&mut v.back, sh.back.unwrap_or(Rgb::BLACK));
         v.has_back[l] = sh.back.is_some();
-        putc(&mut v.beta, lane.beta);
         v.u[0][l] = u.x;
         v.u[1][l] = u.y;
         // The light point (as `MeshLight::sample_li` up to the distance test).
@@ -376,23 +397,15 @@ impl SimdKernel {
                 let b = warp::square_to_uniform_triangle(Vec2::new(ur, u_l2.y));
                 let ([p0, e1, e2], n) = ml.tris[t];
                 let n = match n {
-                    Some(n) => Some(n),
-                    None => match &scene.lights[ml.light as usize] {
-                        Light::Area(a) => match &*a.geometry {
-                            Geometry::Mesh(m) => Some(m.surface(t, b.x, b.y).0),
-                            _ => None,
-                        },
-                        _ => None,
-                    },
+                    Ok(n) => n,
+                    Err(s) => s.normals_at(b.x, b.y).0,
                 };
-                if let Some(n) = n {
-                    put(&mut v.lp, p0 + e1 * b.x + e2 * b.y);
-                    put(&mut v.ln, n);
-                    putc(&mut v.lrad, ml.radiance);
-                    v.pmf[l] = pmf;
-                    v.pdf_area[l] = ml.pdf_area;
-                    v.nee_ok[l] = true;
-                }
+                put(&mut v.lp, p0 + e1 * b.x + e2 * b.y);
+                put(&mut v.ln, n);
+                putc(&mut v.lrad, ml.radiance);
+                v.pmf[l] = pmf;
+                v.pdf_area[l] = ml.pdf_area;
+                v.nee_ok[l] = true;
             }
         }
         true
@@ -412,11 +425,9 @@ struct Soa {
     front: [[f32; LANES]; 3],
     back: [[f32; LANES]; 3],
     has_back: [bool; LANES],
-    beta: [[f32; LANES]; 3],
     /// The BSDF sample's square point (cosine-warped in `shade8`).
     u: [[f32; LANES]; 2],
     u_rr: [f32; LANES],
-    depth: [i32; LANES],
     nee_ok: [bool; LANES],
     lp: [[f32; LANES]; 3],
     ln: [[f32; LANES]; 3],
@@ -430,17 +441,16 @@ struct Soa {
 struct Out {
     /// 0: no light sample, 1: counts without a shadow ray, 2: counts when the shadow ray is clear.
     nee: [u8; LANES],
+    /// The light sample's contribution.
     c: [[f32; LANES]; 3],
-    so: [[f32; LANES]; 3],
-    sd: [[f32; LANES]; 3],
-    st: [f32; LANES],
-    beta: [[f32; LANES]; 3],
-    /// The BSDF sample was taken (prev_* updated) / the path continues along (no, nd).
-    moved: [bool; LANES],
+    /// The path continues along its next ray.
     cont: [bool; LANES],
-    pdf: [f32; LANES],
-    no: [[f32; LANES]; 3],
-    nd: [[f32; LANES]; 3],
+}
+
+impl Out {
+    fn contribution(&self, l: usize) -> Rgb {
+        Rgb::new(self.c[0][l], self.c[1][l], self.c[2][l])
+    }
 }
 
 /// `glam`'s `a.dot(b)`, operation for operation.
@@ -483,7 +493,7 @@ fn offset3(p: [f32; 3], ng: [f32; 3], w: [f32; 3]) -> [f32; 3] {
 /// Russian roulette), branch-free per lane so that it compiles to vector code; the same
 /// operations in the same order as the scalar tracer.
 #[inline(always)]
-fn shade8(v: &Soa, rr_depth: i32, o: &mut Out) {
+fn shade8(v: &Soa, rr_depth: i32, st: &mut Paths, rays: &mut Rays8, shadow: &mut Rays8, o: &mut Out) {
     for l in 0..LANES {
         let g = |a: &[[f32; LANES]; 3]| [a[0][l], a[1][l], a[2][l]];
         let (p, ng, fs, ft, fnn) = (g(&v.p), g(&v.ng), g(&v.fs), g(&v.ft), g(&v.fnn));
@@ -496,7 +506,7 @@ fn shade8(v: &Soa, rr_depth: i32, o: &mut Out) {
         let f = [refl[0] * INV_PI, refl[1] * INV_PI, refl[2] * INV_PI];
         let f_black = f[0] == 0.0 && f[1] == 0.0 && f[2] == 0.0;
         let wo_up = wo[2] * flip > 0.0;
-        let beta = g(&v.beta);
+        let beta = g(&st.beta);
         // Light sample.
         let lp = g(&v.lp);
         let dl = [lp[0] - p[0], lp[1] - p[1], lp[2] - p[2]];
@@ -527,10 +537,10 @@ fn shade8(v: &Soa, rr_depth: i32, o: &mut Out) {
         let d2 = [lp[0] - so[0], lp[1] - so[1], lp[2] - so[2]];
         let dist = dot3(d2, d2).sqrt();
         for k in 0..3 {
-            o.so[k][l] = so[k];
-            o.sd[k][l] = d2[k] / dist;
+            shadow.o[k][l] = so[k];
+            shadow.d[k][l] = d2[k] / dist;
         }
-        o.st[l] = dist * (1.0 - SHADOW_EPSILON);
+        shadow.t_max[l] = dist * (1.0 - SHADOW_EPSILON);
         o.nee[l] = if !nee {
             0
         } else if dist == 0.0 {
@@ -552,7 +562,7 @@ fn shade8(v: &Soa, rr_depth: i32, o: &mut Out) {
         ];
         let no = offset3(p, ng, dir);
         let mut cont = moved;
-        if v.depth[l] >= rr_depth {
+        if st.depth[l] >= rr_depth {
             let q = nb[0].max(nb[1]).max(nb[2]).min(0.95);
             let survive = v.u_rr[l] < q;
             cont &= survive;
@@ -561,43 +571,70 @@ fn shade8(v: &Soa, rr_depth: i32, o: &mut Out) {
             }
         }
         cont &= !(nb[0] == 0.0 && nb[1] == 0.0 && nb[2] == 0.0);
+        // A BSDF sample taken becomes the previous vertex of the next one (for MIS).
         for k in 0..3 {
-            o.beta[k][l] = if moved { nb[k] } else { beta[k] };
-            o.no[k][l] = no[k];
-            o.nd[k][l] = dir[k];
+            st.beta[k][l] = if moved { nb[k] } else { beta[k] };
+            st.prev_p[k][l] = if moved { p[k] } else { st.prev_p[k][l] };
+            rays.o[k][l] = no[k];
+            rays.d[k][l] = dir[k];
         }
-        o.moved[l] = moved;
+        rays.t_max[l] = f32::INFINITY;
+        st.prev_pdf[l] = if moved { bpdf } else { st.prev_pdf[l] };
+        st.prev_specular[l] &= !moved;
         o.cont[l] = cont;
-        o.pdf[l] = bpdf;
     }
 }
 
-/// One path in flight.
-struct Lane {
-    sampler: IndependentSampler,
-    job: usize,
-    raster: Vec2,
-    l: Rgb,
-    beta: Rgb,
-    depth: i32,
-    prev_specular: bool,
-    prev_pdf: f32,
-    prev_p: Vec3,
+/// The eight paths in flight: each lane's sampler and film sample, and the state that
+/// `shade8` reads and updates, as structure of arrays.
+struct Paths {
+    sampler: [IndependentSampler; LANES],
+    job: [usize; LANES],
+    raster: [Vec2; LANES],
+    /// Radiance gathered so far.
+    l: [[f32; LANES]; 3],
+    beta: [[f32; LANES]; 3],
+    depth: [i32; LANES],
+    prev_specular: [bool; LANES],
+    prev_pdf: [f32; LANES],
+    prev_p: [[f32; LANES]; 3],
 }
 
-impl Lane {
-    fn new(sampler: IndependentSampler) -> Lane {
-        Lane { sampler, job: 0, raster: Vec2::ZERO, l: Rgb::BLACK, beta: Rgb::WHITE, depth: 0, prev_specular: true, prev_pdf: 0.0, prev_p: Vec3::ZERO }
+impl Paths {
+    fn new(sampler: IndependentSampler) -> Paths {
+        Paths {
+            sampler: std::array::from_fn(|_| sampler.clone()),
+            job: [0; LANES],
+            raster: [Vec2::ZERO; LANES],
+            l: [[0.0; LANES]; 3],
+            beta: [[1.0; LANES]; 3],
+            depth: [0; LANES],
+            prev_specular: [true; LANES],
+            prev_pdf: [0.0; LANES],
+            prev_p: [[0.0; LANES]; 3],
+        }
     }
-    fn start(&mut self, job: usize, raster: Vec2) {
-        self.job = job;
-        self.raster = raster;
-        self.l = Rgb::BLACK;
-        self.beta = Rgb::WHITE;
-        self.depth = 0;
-        self.prev_specular = true;
-        self.prev_pdf = 0.0;
-        self.prev_p = Vec3::ZERO;
+
+    /// Lane `l` starts camera sample `job` at `raster`.
+    fn start(&mut self, l: usize, job: usize, raster: Vec2) {
+        self.job[l] = job;
+        self.raster[l] = raster;
+        for k in 0..3 {
+            self.l[k][l] = 0.0;
+            self.beta[k][l] = 1.0;
+            self.prev_p[k][l] = 0.0;
+        }
+        self.depth[l] = 0;
+        self.prev_specular[l] = true;
+        self.prev_pdf[l] = 0.0;
+    }
+
+    /// Adds `c` to lane `l`'s radiance (as `Rgb`'s `+=`).
+    #[inline(always)]
+    fn add(&mut self, l: usize, c: Rgb) {
+        self.l[0][l] += c.r;
+        self.l[1][l] += c.g;
+        self.l[2][l] += c.b;
     }
 }
 
@@ -608,4 +645,14 @@ fn set_ray(r: &mut Rays8, l: usize, o: Vec3, d: Vec3, t_max: f32) {
         r.d[a][l] = d[a];
     }
     r.t_max[l] = t_max;
+}
+
+/// Whether this CPU has AVX-512F and AVX-512VL (the 32-register build of the kernel).
+fn avx512() -> bool {
+    #[cfg(target_arch = "x86_64")]
+    {
+        std::arch::is_x86_feature_detected!("avx512f") && std::arch::is_x86_feature_detected!("avx512vl")
+    }
+    #[cfg(not(target_arch = "x86_64"))]
+    false
 }

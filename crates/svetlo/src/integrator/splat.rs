@@ -74,10 +74,11 @@ pub trait SplatEstimator: Sync {
     /// take the whole tile.
     fn render_tile(&self, t: TileJob, sampler: &mut dyn Sampler, scratch: &mut Self::Scratch, splats: &mut Vec<Splat>) {
         let [x0, y0, x1, y1] = t.rect;
+        let cam = t.scene.camera.ray_generator();
         for y in y0..y1 {
             for x in x0..x1 {
                 for s in t.s0..t.s0 + t.n {
-                    let (raster, ray) = super::camera_sample(&t.scene.camera, sampler, x, y, s);
+                    let (raster, ray) = super::camera_sample(&cam, sampler, x, y, s);
                     let mut out = SampleOut { splats };
                     let l = self.sample(t.scene, t.settings, &ray, raster, sampler, scratch, &mut out);
                     t.tile.add_sample(raster, l);

@@ -47,7 +47,8 @@ impl Distribution1D {
     pub fn pmf(&self, i: usize) -> f32 {
         self.cdf[i + 1] - self.cdf[i]
     }
-    #[inline]
+    /// Out of line: the search is for long distributions; short ones stay inline.
+    #[inline(never)]
     fn find(&self, u: f32) -> usize {
         // Largest i with cdf[i] <= u, and a non-empty interval.
         let mut i = self.cdf.partition_point(|&c| c <= u).saturating_sub(1);
@@ -64,7 +65,7 @@ impl Distribution1D {
         i
     }
     /// Discrete sample: (index, pmf, u remapped to [0,1) within the chosen interval).
-    #[inline]
+    #[inline(always)]
     pub fn sample_discrete(&self, u: f32) -> (usize, f32, f32) {
         let i = match self.func.len() {
             // One entry (a scene's only light): nothing to search.

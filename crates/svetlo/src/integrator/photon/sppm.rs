@@ -121,8 +121,8 @@ impl Integrator for Sppm {
         settings.validate()?;
         let o = &self.options;
         let start = Instant::now();
-        let cam = &scene.camera;
-        let (w, h) = (cam.width as usize, cam.height as usize);
+        let cam = &scene.camera.ray_generator();
+        let (w, h) = (scene.camera.width as usize, scene.camera.height as usize);
         let slots = o.max_visible as usize;
         let per_iter = o.photons.unwrap_or(4 * (w * h) as u64).max(1);
         let r0 = o.radius.unwrap_or(2.0 * pixel_footprint(scene));
@@ -223,7 +223,7 @@ impl Integrator for Sppm {
             progress.done.fetch_add((w * h) as u64, Ordering::Relaxed);
         }
         // Develop: each pixel is its own measurement (box reconstruction).
-        let mut film = Film::new(cam.width, cam.height, Filter::Box);
+        let mut film = Film::new(scene.camera.width, scene.camera.height, Filter::Box);
         if iterations > 0 {
             let emitted = per_iter as f64 * iterations as f64;
             for y in 0..h {
