@@ -1,8 +1,8 @@
 //! Packet traversal: eight rays against one binary BVH over triangles at once (AVX2, or
 //! the same code in AVX-512VL encodings where the CPU has them: twice the vector registers
-//! and broadcast operands), for the lockstep path-tracing kernel. Each node holds its two children's boxes, so a
-//! visit tests both boxes against all eight rays; a child is entered when any active ray
-//! meets it. Triangles are stored by value in leaf order and tested against the eight rays
+//! and broadcast operands), for the lockstep path-tracing kernel. Each node holds its two
+//! children's boxes, so a visit tests both boxes against all eight rays; a child is entered
+//! when any active ray meets it. Triangles are stored by value in leaf order and tested against the eight rays
 //! with the watertight test of `geometry::triangle` (per-lane axis permutation), operation
 //! for operation, so that each lane's hit is bit-identical to the single-ray test's.
 //!
