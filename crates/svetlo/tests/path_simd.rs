@@ -64,6 +64,11 @@ fn compare(scene: &Scene, settings: &RenderSettings, what: &str) {
     k.set_avx512(false);
     let c = k.render(scene, settings, &Progress::new()).expect("render").image();
     assert!(c.data == a.data, "{what}: the AVX2 build of the kernel differs from the default build (AVX-512: {wide})");
+    // One ray at a time through the scene's BVH (large scenes): the scalar tracer's hits, so
+    // its image bit for bit.
+    k.use_single_rays(scene);
+    let d = k.render(scene, settings, &Progress::new()).expect("render").image();
+    assert!(d.data == b.data, "{what}: the kernel tracing single rays differs from the scalar tracer");
     let (ma, mb) = (a.mean(), b.mean());
     println!("{what}: {exact}/{n} channels bit-identical, {close} within 1e-4; means {ma:?} vs {mb:?}");
     assert!(close as f64 >= 0.99 * n as f64, "{what}: only {close} of {n} pixel channels agree");
@@ -130,4 +135,55 @@ fn out_of_scope_scenes_fall_back() {
     assert!(SimdKernel::new(&scene, &s).is_none(), "the Sobol sampler is out of scope");
     assert!(integrator::by_name("path:simd=maybe").is_err());
     assert!(integrator::by_name("path:fast=true").is_err());
+}
+
+/// A bumpy floor of 2 x 110 x 110 triangles under a quad light: past the kernel's packet
+/// limit, so it traces single rays through the scene's BVH (packets of incoherent rays pay
+/// for the union of eight walks there), and its image is the scalar tracer's.
+#[test]
+fn large_scenes_trace_single_rays() {
+    use glam::{Mat4, Vec3};
+    use svetlo::bsdf::Material;
+    use svetlo::camera::Camera;
+    use svetlo::geometry::{shapes, Geometry, TriangleMesh};
+    use svetlo::scene::SceneBuilder;
+    use svetlo::spectrum::Rgb;
+    use svetlo::texture::Texture;
+    let n = 110u32;
+    let mut floor = TriangleMesh::default();
+    for j in 0..=n {
+        for i in 0..=n {
+            let (x, z) = (i as f32 / n as f32 * 4.0 - 2.0, j as f32 / n as f32 * 4.0 - 2.0);
+            floor.positions.push(Vec3::new(x, 0.05 * (7.0 * x).sin() * (5.0 * z).cos(), z));
+        }
+    }
+    for j in 0..n {
+        for i in 0..n {
+            let v = |a: u32, b: u32| (j + b) * (n + 1) + i + a;
+            floor.indices.push([v(0, 0), v(0, 1), v(1, 0)]);
+            floor.indices.push([v(1, 0), v(0, 1), v(1, 1)]);
+        }
+    }
+    let mut b = SceneBuilder::new();
+    let white = b.add_material(Material::Diffuse { reflectance: Texture::Constant(Rgb::splat(0.7)) });
+    b.add_shape(Geometry::Mesh(floor), white, None, "floor").expect("floor");
+    // The rectangle faces +z; turned to face down, 1.5 above the floor.
+    let mut lamp = shapes::rectangle();
+    let to_lamp = Mat4::from_translation(Vec3::new(0.0, 1.5, 0.0)) * Mat4::from_rotation_x(std::f32::consts::FRAC_PI_2) * Mat4::from_scale(Vec3::splat(0.5));
+    for p in &mut lamp.positions {
+        *p = to_lamp.transform_point3(*p);
+    }
+    b.add_shape(Geometry::Mesh(lamp), white, Some(Texture::Constant(Rgb::splat(8.0))), "lamp").expect("lamp");
+    let to_world = svetlo::io::mitsuba::look_at(Vec3::new(0.0, 2.0, -3.0), Vec3::ZERO, Vec3::Y).expect("camera");
+    b.set_camera(Camera::pinhole(to_world, 50.0, 40, 40));
+    let scene = b.build().expect("scene");
+    let mut s = RenderSettings::from_scene(&scene);
+    s.spp = 4;
+    s.max_depth = 4;
+    let k = SimdKernel::new(&scene, &s).expect("the scene qualifies");
+    assert!(!k.uses_packets(), "24 200 triangles should trace single rays");
+    assert!(render(&scene, "path", &s).mean().max_component() > 0.0, "the lamp lights the floor");
+    compare(&scene, &s, "large floor");
+    let small = load(&repo_scene("cornell-box.xml"), &[], 16);
+    assert!(SimdKernel::new(&small, &RenderSettings::from_scene(&small)).expect("qualifies").uses_packets(), "the Cornell box should trace packets");
 }

@@ -1,9 +1,11 @@
 //! The path tracer of `path.rs`, eight paths at a time: the same estimator (next-event
 //! estimation and BSDF sampling combined by the power heuristic, Russian roulette, Mitsuba's
-//! `max_depth`), with the rays of eight paths traced as one packet (`accel::packet`). Per
+//! `max_depth`), with the rays of eight paths traced as one packet (`accel::packet`), or, in
+//! scenes of more than 20 000 triangles, one by one through the scene's BVH (`Tracer`). Per
 //! vertex, `gather` does each lane's branchy part (emission found, random numbers, light and
-//! triangle choice, the cosine warp) and `shade8` the arithmetic of all eight lanes in
-//! structure-of-arrays form (compiled to AVX2 vector code).
+//! triangle choice) and `shade8` the arithmetic of all eight lanes on the paths' state kept
+//! as structure of arrays (compiled to AVX2 vector code; an AVX-512VL build of the same code
+//! has 32 registers where the CPU has them).
 //!
 //! Scope: static scenes of triangle meshes, (two-sided) Lambertian
 //! materials of constant reflectance, area lights of constant radiance on meshes, no
@@ -17,11 +19,12 @@
 
 use super::path::PathTracer;
 use super::{camera_sample, render_tiles, Integrator, Progress, RenderSettings};
-use crate::accel::packet::{PacketBvh, Rays8, LANES};
+use crate::accel::packet::{Hits8, PacketBvh, Rays8, LANES};
 use crate::bsdf::Material;
 use crate::error::{Error, Result};
 use crate::film::{Film, FilmTile};
 use crate::geometry::ray::SHADOW_EPSILON;
+use crate::geometry::Ray;
 use crate::geometry::{Geometry, TriangleShading};
 use crate::light::{AreaLight, Light};
 use crate::math::{warp, Frame, INV_PI, PI};
@@ -108,9 +111,67 @@ struct MeshLight {
     radiance: Rgb,
 }
 
+/// Scenes with more triangles than this trace one ray at a time (see [`Tracer`]).
+const PACKET_MAX_TRIANGLES: usize = 20_000;
+
+/// How the kernel traces its eight rays.
+enum Tracer {
+    /// As one packet through a BVH of the kernel's own: wins while the eight walks share
+    /// most of their nodes (small scenes).
+    Packets(PacketBvh),
+    /// One by one through the scene's wide BVH: in a large scene eight incoherent rays share
+    /// few nodes, and a packet pays for the union of their walks. `first`: the kernel's
+    /// index of each shape's first triangle.
+    Single { first: Vec<u32> },
+}
+
+impl Tracer {
+    fn intersect(&self, scene: &Scene, rays: &Rays8, active: u8) -> Hits8 {
+        let first = match self {
+            Tracer::Packets(bvh) => return bvh.intersect(rays, active),
+            Tracer::Single { first } => first,
+        };
+        let mut h = Hits8 { t: rays.t_max, prim: [u32::MAX; LANES], b1: [0.0; LANES], b2: [0.0; LANES] };
+        for l in (0..LANES).filter(|l| active & (1 << l) != 0) {
+            if let Some(hit) = scene.accel.intersect(&lane_ray(rays, l)) {
+                h.t[l] = hit.t;
+                h.prim[l] = first[hit.shape as usize] + hit.prim;
+                h.b1[l] = hit.b1;
+                h.b2[l] = hit.b2;
+            }
+        }
+        h
+    }
+
+    /// Mask of the active lanes whose ray is blocked.
+    fn occluded(&self, scene: &Scene, rays: &Rays8, active: u8) -> u8 {
+        match self {
+            Tracer::Packets(bvh) => bvh.occluded(rays, active),
+            Tracer::Single { .. } => (0..LANES).filter(|l| active & (1 << l) != 0 && scene.accel.occluded(&lane_ray(rays, *l))).fold(0, |m, l| m | 1 << l),
+        }
+    }
+}
+
+fn single_tracer(scene: &Scene) -> Tracer {
+    let mut first = Vec::with_capacity(scene.shapes.len());
+    let mut n = 0u32;
+    for s in &scene.shapes {
+        first.push(n);
+        n += match &*s.geometry {
+            Geometry::Mesh(m) => m.triangle_count() as u32,
+            Geometry::Sphere(_) => 0,
+        };
+    }
+    Tracer::Single { first }
+}
+
+fn lane_ray(rays: &Rays8, l: usize) -> Ray {
+    Ray::with_max(Vec3::new(rays.o[0][l], rays.o[1][l], rays.o[2][l]), Vec3::new(rays.d[0][l], rays.d[1][l], rays.d[2][l]), rays.t_max[l])
+}
+
 /// Everything the kernel needs of a qualifying scene.
 pub struct SimdKernel {
-    bvh: PacketBvh,
+    tracer: Tracer,
     tris: Vec<Tri>,
     shapes: Vec<ShapeData>,
     /// Per light of the scene.
@@ -185,7 +246,19 @@ impl SimdKernel {
                 tris.push(Tri { p, shading, shape: si as u32 });
             }
         }
-        Some(SimdKernel { bvh: PacketBvh::build(&verts), tris, shapes, lights, avx512: avx512() })
+        let tracer = if verts.len() <= PACKET_MAX_TRIANGLES { Tracer::Packets(PacketBvh::build(&verts)) } else { single_tracer(scene) };
+        Some(SimdKernel { tracer, tris, shapes, lights, avx512: avx512() })
+    }
+
+    /// Whether rays go as packets (else one by one through the scene's BVH).
+    pub fn uses_packets(&self) -> bool {
+        matches!(self.tracer, Tracer::Packets(_))
+    }
+
+    /// Traces one ray at a time through the scene's BVH whatever the scene's size (for
+    /// comparisons; `scene` must be the one the kernel was made for).
+    pub fn use_single_rays(&mut self, scene: &Scene) {
+        self.tracer = single_tracer(scene);
     }
 
     /// Whether the AVX-512VL build of the kernel runs.
@@ -201,8 +274,8 @@ impl SimdKernel {
     pub fn render(&self, scene: &Scene, settings: &RenderSettings, progress: &Progress) -> Result<Film> {
         render_tiles(scene, settings, progress, &|tile: &mut FilmTile, rect: [u32; 4], s0: u32, n: u32| {
             #[cfg(target_arch = "x86_64")]
-            if self.bvh.simd() {
-                // SAFETY: `simd()` is true only where AVX2 was detected at run time, and
+            if crate::accel::packet::avx2() {
+                // SAFETY: `avx2()` detects AVX2 at run time, and
                 // `avx512` only where AVX-512F and VL were.
                 return unsafe {
                     if self.avx512 {
@@ -276,7 +349,7 @@ impl SimdKernel {
             if active == 0 {
                 break;
             }
-            let hits = self.bvh.intersect(&rays, active);
+            let hits = self.tracer.intersect(scene, &rays, active);
             let mut ends = 0u8;
             let mut go = 0u8;
             for l in 0..LANES {
@@ -306,7 +379,7 @@ impl SimdKernel {
                     ends |= 1 << l;
                 }
             }
-            let clear = smask & !self.bvh.occluded(&shadow, smask);
+            let clear = smask & !self.tracer.occluded(scene, &shadow, smask);
             for l in 0..LANES {
                 if clear & (1 << l) != 0 {
                     st.add(l, o.contribution(l));
