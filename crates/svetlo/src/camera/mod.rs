@@ -121,7 +121,7 @@ pub struct RayGenerator<'a> {
 
 impl RayGenerator<'_> {
     /// See [`Camera::generate_ray`].
-    #[inline]
+    #[inline(always)]
     pub fn generate_ray(&self, raster: Vec2, lens: Vec2, time: f32) -> Ray {
         let cam = self.cam;
         if self.pinhole {

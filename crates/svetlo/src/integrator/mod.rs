@@ -145,7 +145,7 @@ pub trait PixelEstimator: Sync {
 /// on cancellation or when the time budget is spent. Each pass is kept whole.
 /// Starts sample `s` of pixel (x, y) and draws its camera ray: film position, lens point and
 /// time, the first five dimensions of every camera-side method, in this order.
-#[inline]
+#[inline(always)]
 pub(crate) fn camera_sample<S: Sampler + ?Sized>(cam: &crate::camera::RayGenerator, sampler: &mut S, x: u32, y: u32, s: u32) -> (Vec2, crate::geometry::Ray) {
     sampler.start_pixel_sample(x, y, s);
     let pf = sampler.next_2d();
