@@ -44,9 +44,9 @@ impl FilmTile {
 
     /// Add a sample taken at raster position `p` (pixels, origin top-left). The filter spreads it
     /// over every pixel of this tile within its radius.
+    #[inline]
     pub fn add_sample(&mut self, p: Vec2, l: Rgb) {
         let l = if l.is_finite() { l } else { Rgb::BLACK };
-        let r = self.filter.radius();
         let (w, h) = (self.x1 - self.x0, self.y1 - self.y0);
         // The pixel that owns the sample, for variance statistics.
         let (ox, oy) = (floor_i(p.x) - self.x0 as i64, floor_i(p.y) - self.y0 as i64);
@@ -63,6 +63,14 @@ impl FilmTile {
                 return;
             }
         }
+        self.add_filtered(p, l);
+    }
+
+    /// The filter's share of a sample for every pixel of the tile within its radius.
+    #[inline(never)]
+    fn add_filtered(&mut self, p: Vec2, l: Rgb) {
+        let r = self.filter.radius();
+        let w = self.x1 - self.x0;
         let xmin = (-floor_i(-(p.x - 0.5 - r))).max(self.x0 as i64);
         let xmax = floor_i(p.x - 0.5 + r).min(self.x1 as i64 - 1);
         let ymin = (-floor_i(-(p.y - 0.5 - r))).max(self.y0 as i64);
