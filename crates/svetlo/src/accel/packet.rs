@@ -704,6 +704,15 @@ mod tests {
     }
 
     /// Every ISA path this CPU runs, down to the portable one.
+    /// Lane `l` of `r` becomes the ray (o, d) up to `t_max`.
+    fn set_lane(r: &mut Rays8, l: usize, o: Vec3, d: Vec3, t_max: f32) {
+        for a in 0..3 {
+            r.o[a][l] = o[a];
+            r.d[a][l] = d[a];
+        }
+        r.t_max[l] = t_max;
+    }
+
     fn isas() -> impl Iterator<Item = Isa> {
         [Isa::Avx512, Isa::Avx2, Isa::Portable].into_iter().filter(|&i| i <= Isa::cpu())
     }
@@ -748,11 +757,7 @@ mod tests {
                     d.y = 0.0; // axis-parallel components
                 }
                 let d = d.normalize();
-                for a in 0..3 {
-                    r.o[a][l] = o[a];
-                    r.d[a][l] = d[a];
-                }
-                r.t_max[l] = if rng.next_f32() < 0.3 { rng.next_f32() * 2.0 } else { f32::INFINITY };
+                set_lane(&mut r, l, o, d, if rng.next_f32() < 0.3 { rng.next_f32() * 2.0 } else { f32::INFINITY });
             }
             check(bvh, tris, &r, active);
         }
@@ -792,11 +797,7 @@ mod tests {
                 let y = ((k * 8 + l) / 9 % 9) as f32 * 0.25;
                 let d = Vec3::new(0.01 * (l as f32 - 4.0), -0.007 * (k % 5) as f32, 1.0).normalize();
                 let o = Vec3::new(x, y, 1.0) - d * 2.0;
-                for a in 0..3 {
-                    r.o[a][l] = o[a];
-                    r.d[a][l] = d[a];
-                }
-                r.t_max[l] = f32::INFINITY;
+                set_lane(&mut r, l, o, d, f32::INFINITY);
             }
             // Rays through vertices and along edges (u, v or w exactly zero for the
             // untilted ones): the exact path for those lanes, as the scalar test.
@@ -854,11 +855,7 @@ mod tests {
                 if l % 4 == 0 {
                     d[(k + l + 1) % 3] = 0.0 * s(&mut rng);
                 }
-                for a in 0..3 {
-                    r.o[a][l] = o[a];
-                    r.d[a][l] = d[a];
-                }
-                r.t_max[l] = f32::INFINITY;
+                set_lane(&mut r, l, o, d, f32::INFINITY);
             }
             for isa in isas() {
                 bvh.isa = isa;
