@@ -11,7 +11,7 @@ use std::sync::atomic::{AtomicBool, AtomicU32, Ordering};
 use std::sync::Arc;
 use std::time::{Duration, Instant};
 use svetlo::film::{Film, Filter};
-use svetlo::integrator::{self, Integrator, Progress, RenderSettings};
+use svetlo::integrator::{Integrator, Progress, RenderSettings};
 use svetlo::io::image_io::{write_exr, write_pfm, write_png};
 use svetlo::sampling::SamplerKind;
 use svetlo::scene::Scene;
@@ -154,7 +154,7 @@ pub struct Job {
 /// Apply the command line over the scene file's settings.
 pub fn configure(mut scene: Scene, a: &RenderArgs) -> Result<Job> {
     let integrator_name = a.integrator.clone().unwrap_or_else(|| scene.settings.integrator.clone());
-    let integrator = integrator::by_name(&integrator_name).map_err(|e| {
+    let integrator = svetlo::methods::by_name(&integrator_name).map_err(|e| {
         if a.integrator.is_some() {
             anyhow::Error::new(Usage(e.to_string()))
         } else {
@@ -358,7 +358,7 @@ pub fn render_loaded(scene: Scene, a: &RenderArgs, out: &OutputPaths, progress: 
 pub fn run(a: &RenderArgs) -> Result<ExitCode> {
     // Check what can be checked before a possibly slow scene load.
     if let Some(name) = &a.integrator {
-        integrator::by_name(name).map_err(|e| Usage(e.to_string()))?;
+        svetlo::methods::by_name(name).map_err(|e| Usage(e.to_string()))?;
         if a.strategies.is_some() && name != "bdpt" {
             return Err(Usage(format!("--strategies needs --integrator bdpt, not '{name}'")).into());
         }

@@ -14,7 +14,7 @@ use std::path::Path;
 use std::time::Instant;
 use svetlo::geometry::{Geometry, TriangleMesh};
 use svetlo::integrator::zbuffer::ZBuffer;
-use svetlo::integrator::{self, Progress, RenderSettings};
+use svetlo::integrator::{Progress, RenderSettings};
 use svetlo::light::Light;
 use svetlo::math::Vec3;
 use svetlo::scene::{Scene, SceneBuilder};
@@ -152,7 +152,7 @@ fn bench_mc(scene: &Scene, args: &Args) {
     let mut path_ms = 0.0;
     for name in ["path", "whitted", "distributed"] {
         let settings = RenderSettings { spp: args.mc_spp, threads: 1, max_depth: if name == "whitted" { 6 } else { -1 }, seed: 1, ..Default::default() };
-        let integrator = integrator::by_name(name).expect("integrator");
+        let integrator = svetlo::methods::by_name(name).expect("integrator");
         let t = Instant::now();
         let film = integrator.render(scene, &settings, &Progress::new()).expect("render");
         let ms = t.elapsed().as_secs_f64() * 1e3 / film.spp_done as f64;

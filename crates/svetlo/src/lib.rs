@@ -15,6 +15,7 @@ pub mod integrator;
 pub mod io;
 pub mod light;
 pub mod math;
+pub mod methods;
 pub mod path;
 pub mod radiosity;
 pub mod raster;

@@ -8,7 +8,7 @@ use svetlo::bsdf::Material;
 use svetlo::camera::{Camera, Projection};
 use svetlo::film::{Filter, Image};
 use svetlo::geometry::{Geometry, Sphere};
-use svetlo::integrator::{self, Progress, RenderSettings};
+use svetlo::integrator::{Progress, RenderSettings};
 use svetlo::light::Light;
 use svetlo::scene::{Scene, SceneBuilder};
 use svetlo::texture::Texture;
@@ -46,7 +46,7 @@ fn mean_and_stderr(img: &Image) -> (f64, f64) {
 
 fn render(scene: &Scene, name: &str, spp: u32, max_depth: i32) -> Image {
     let settings = RenderSettings { spp, max_depth, seed: 7, filter: Filter::Box, ..Default::default() };
-    integrator::by_name(name).expect("integrator").render(scene, &settings, &Progress::new()).expect("render").image()
+    svetlo::methods::by_name(name).expect("integrator").render(scene, &settings, &Progress::new()).expect("render").image()
 }
 
 fn assert_mean(img: &Image, expected: f64, what: &str) {
@@ -167,7 +167,7 @@ fn same_image_whatever_the_thread_count() {
     let mut imgs = Vec::new();
     for threads in [1, 2, 3] {
         let settings = RenderSettings { spp: 4, max_depth: -1, seed: 3, threads, ..Default::default() };
-        imgs.push(integrator::by_name("path").expect("path").render(&scene, &settings, &Progress::new()).expect("render").image());
+        imgs.push(svetlo::methods::by_name("path").expect("path").render(&scene, &settings, &Progress::new()).expect("render").image());
     }
     assert_eq!(imgs[0], imgs[1]);
     assert_eq!(imgs[0], imgs[2]);

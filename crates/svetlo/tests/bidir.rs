@@ -26,7 +26,7 @@ use svetlo::film::compare::{MIN_PASS_FRACTION, MIN_VARIANCE, SIGNIFICANCE};
 use svetlo::film::{Filter, Image};
 use svetlo::geometry::{Geometry, Sphere, TriangleMesh};
 use svetlo::integrator::bdpt::Bdpt;
-use svetlo::integrator::{self, Progress, RenderSettings};
+use svetlo::integrator::{Progress, RenderSettings};
 use svetlo::io::{load_scene, read_image};
 use svetlo::light::Light;
 use svetlo::sampling::stats::{normal_isf, sidak_alpha};
@@ -63,7 +63,7 @@ impl Batched {
 }
 
 fn render_one(scene: &Scene, name: &str, settings: &RenderSettings) -> Image {
-    integrator::by_name(name).expect("integrator").render(scene, settings, &Progress::new()).expect("render").image()
+    svetlo::methods::by_name(name).expect("integrator").render(scene, settings, &Progress::new()).expect("render").image()
 }
 
 fn batches(scene: &Scene, name: &str, settings: &RenderSettings, k: usize) -> Batched {
@@ -349,7 +349,7 @@ fn orthographic_camera_is_a_clear_error() {
     let mut scene = glossy_scene(8, 8);
     scene.camera.projection = Projection::Orthographic;
     for name in ["light", "bdpt"] {
-        let e = integrator::by_name(name).unwrap().render(&scene, &settings(1, 3), &Progress::new()).expect_err("an error");
+        let e = svetlo::methods::by_name(name).unwrap().render(&scene, &settings(1, 3), &Progress::new()).expect_err("an error");
         assert!(e.to_string().contains("orthographic"), "{name}: {e}");
     }
 }

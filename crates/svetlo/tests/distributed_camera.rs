@@ -18,7 +18,7 @@ use classic_scenes::*;
 use glam::{Mat4, Vec2};
 use svetlo::camera::{Camera, Projection};
 use svetlo::film::{Film, Filter};
-use svetlo::integrator::{self, Progress, RenderSettings};
+use svetlo::integrator::{Progress, RenderSettings};
 use svetlo::scene::{Scene, SceneBuilder};
 use svetlo::Rgb;
 
@@ -42,7 +42,7 @@ fn edge_scene(d: f32, n: Vec2, projection: Projection, height: u32) -> Scene {
 
 fn render_with(scene: &Scene, name: &str, spp: u32, seed: u64) -> Film {
     let settings = RenderSettings { spp, max_depth: 1, seed, filter: Filter::Box, ..Default::default() };
-    integrator::by_name(name).expect("integrator").render(scene, &settings, &Progress::new()).expect("render")
+    svetlo::methods::by_name(name).expect("integrator").render(scene, &settings, &Progress::new()).expect("render")
 }
 
 /// Part of the unit disc with x > a.

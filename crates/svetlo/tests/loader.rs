@@ -198,6 +198,21 @@ fn bundled_cornell_box() {
     assert!((b.min - Vec3::new(-1.0, 0.0, -1.0)).abs().max_element() < 1e-5 && (b.max - Vec3::new(1.0, 2.0, 1.0)).abs().max_element() < 1e-5, "{b:?}");
 }
 
+/// A scene held in memory loads as its file does; errors and relative paths use `origin`.
+#[test]
+fn scene_from_memory() {
+    let p = Path::new(env!("CARGO_MANIFEST_DIR")).join("../../scenes/cornell-box.xml");
+    let text = std::fs::read_to_string(&p).unwrap();
+    let (a, b) = (load_scene(&p, &[]).unwrap(), svetlo::io::load_scene_from_str(&text, &p, &[]).unwrap());
+    assert_eq!((a.shapes.len(), a.lights.len(), a.camera.width), (b.shapes.len(), b.lights.len(), b.camera.width));
+    assert_eq!(a.accel.bounds(), b.accel.bounds());
+    let e = svetlo::io::load_scene_from_str("<scene version=\"3.0.0\">\n  <shape type=\"obj\"/>\n</scene>", Path::new("/nowhere/dict.xml"), &[])
+        .err()
+        .expect("an error")
+        .to_string();
+    assert!(e.contains("dict.xml:2"), "{e}");
+}
+
 /// Transforms compose in file order (each operation applies after the previous ones).
 #[test]
 fn transform_composition_and_matrix() {

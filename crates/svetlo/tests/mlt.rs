@@ -323,7 +323,7 @@ fn mlt_stationary(scene: &svetlo::scene::Scene, weights: [f64; 4], power: [f64; 
     let mut pt = settings.clone();
     pt.spp = 8192;
     pt.seed = 99;
-    let film = svetlo::integrator::by_name("path").expect("path").render(scene, &pt, &Progress::new()).expect("path tracer");
+    let film = svetlo::methods::by_name("path").expect("path").render(scene, &pt, &Progress::new()).expect("path tracer");
     let (reference, var) = (film.image(), film.variance_image());
     let n = reference.data.len();
     let (mut s1, mut s2) = (vec![[0.0f64; 3]; n], vec![[0.0f64; 3]; n]);
@@ -464,7 +464,7 @@ fn mlt_caustic_scene_matches_bdpt() {
                 let o = MltOptions { chain: ChainSettings { chains: 64, bootstrap: 20_000 }, ..Default::default() };
                 Mlt::new(o).render_with_stats(&scene, &s, &Progress::new()).expect("mlt").0.image()
             } else {
-                svetlo::integrator::by_name(name).expect(name).render(&scene, &s, &Progress::new()).expect(name).image()
+                svetlo::methods::by_name(name).expect(name).render(&scene, &s, &Progress::new()).expect(name).image()
             };
             for (j, p) in blocks(&img).iter().enumerate() {
                 for k in 0..3 {

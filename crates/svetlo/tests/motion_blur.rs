@@ -14,7 +14,7 @@ use glam::{Mat4, Vec3};
 use std::path::{Path, PathBuf};
 use svetlo::film::{Filter, Image};
 use svetlo::geometry::AnimatedTransform;
-use svetlo::integrator::{self, Progress, RenderSettings};
+use svetlo::integrator::{Progress, RenderSettings};
 use svetlo::sampling::rng::Pcg32;
 use svetlo::scene::{Scene, SceneBuilder};
 use svetlo::{Error, Rgb};
@@ -36,7 +36,7 @@ fn settings(spp: u32, max_depth: i32, seed: u64) -> RenderSettings {
 }
 
 fn render(scene: &Scene, name: &str, s: &RenderSettings) -> svetlo::film::Film {
-    integrator::by_name(name).expect("integrator").render(scene, s, &Progress::new()).expect("render")
+    svetlo::methods::by_name(name).expect("integrator").render(scene, s, &Progress::new()).expect("render")
 }
 
 /// Per-pixel mean and variance of the mean over `k` one-sample renders, each of the scene

@@ -10,7 +10,7 @@ use common::scenes::shared;
 use std::path::{Path, PathBuf};
 use svetlo::film::Image;
 use svetlo::integrator::path_simd::SimdKernel;
-use svetlo::integrator::{self, Progress, RenderSettings};
+use svetlo::integrator::{Progress, RenderSettings};
 use svetlo::io::load_scene;
 use svetlo::scene::Scene;
 
@@ -27,7 +27,7 @@ fn load(path: &Path, defaults: &[(&str, &str)], size: u32) -> Scene {
 }
 
 fn render(scene: &Scene, name: &str, settings: &RenderSettings) -> Image {
-    integrator::by_name(name).expect("integrator").render(scene, settings, &Progress::new()).expect("render").image()
+    svetlo::methods::by_name(name).expect("integrator").render(scene, settings, &Progress::new()).expect("render").image()
 }
 
 fn avx2() -> bool {
@@ -133,8 +133,8 @@ fn out_of_scope_scenes_fall_back() {
     let mut s = RenderSettings::from_scene(&scene);
     s.sampler = svetlo::sampling::SamplerKind::Sobol;
     assert!(SimdKernel::new(&scene, &s).is_none(), "the Sobol sampler is out of scope");
-    assert!(integrator::by_name("path:simd=maybe").is_err());
-    assert!(integrator::by_name("path:fast=true").is_err());
+    assert!(svetlo::methods::by_name("path:simd=maybe").is_err());
+    assert!(svetlo::methods::by_name("path:fast=true").is_err());
 }
 
 /// A bumpy floor of 2 x 110 x 110 triangles under a quad light: past the kernel's packet

@@ -20,7 +20,7 @@ use svetlo::camera::Camera;
 use svetlo::film::compare::rel_mse;
 use svetlo::film::{Filter, Image};
 use svetlo::geometry::{Geometry, Sphere};
-use svetlo::integrator::{self, Progress, RenderSettings};
+use svetlo::integrator::{Progress, RenderSettings};
 use svetlo::io::{load_scene, read_image};
 use svetlo::scene::{Scene, SceneBuilder};
 use svetlo::texture::Texture;
@@ -40,7 +40,7 @@ fn furnace(rho: f32) -> Scene {
 
 fn render(scene: &Scene, integrator: &str, spp: u32, max_depth: i32, seed: u64, threads: usize) -> Image {
     let settings = RenderSettings { spp, max_depth, seed, threads, filter: Filter::Box, ..Default::default() };
-    integrator::by_name(integrator).expect("integrator").render(scene, &settings, &Progress::new()).expect("render").image()
+    svetlo::methods::by_name(integrator).expect("integrator").render(scene, &settings, &Progress::new()).expect("render").image()
 }
 
 fn mean_and_stderr(xs: &[f64]) -> (f64, f64) {

@@ -149,7 +149,7 @@ fn no_diffuse_surface() {
     let err = solve(&scene, &RadiosityOptions::default(), -1).err().expect("no diffuse surface is an error");
     assert!(err.to_string().contains("no diffuse or emitting surface"), "{err}");
     // The integrator says the same through the render entry point.
-    let integ = svetlo::integrator::by_name("radiosity").expect("integrator");
+    let integ = svetlo::methods::by_name("radiosity").expect("integrator");
     let settings = svetlo::integrator::RenderSettings::from_scene(&scene);
     assert!(integ.render(&scene, &settings, &svetlo::integrator::Progress::new()).is_err());
 }

@@ -16,7 +16,7 @@ fn scene() -> Scene {
 
 fn render(scene: &Scene, integrator: &str, spp: u32, seed: u64) -> Image {
     let settings = RenderSettings { spp, seed, filter: Filter::Box, ..RenderSettings::from_scene(scene) };
-    let i = svetlo::integrator::by_name(integrator).expect("integrator");
+    let i = svetlo::methods::by_name(integrator).expect("integrator");
     i.render(scene, &settings, &Progress::new()).expect("render").image()
 }
 

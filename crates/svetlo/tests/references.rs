@@ -11,7 +11,7 @@ use common::scenes::shared;
 use std::path::Path;
 use svetlo::film::compare::{rel_mse, z_test};
 use svetlo::film::{Filter, Image};
-use svetlo::integrator::{self, Progress, RenderSettings};
+use svetlo::integrator::{Progress, RenderSettings};
 use svetlo::io::{load_scene, read_image};
 
 fn render_file(scene_path: &Path, defaults: &[(&str, &str)], tweak: impl Fn(&mut RenderSettings)) -> (Image, u32) {
@@ -20,7 +20,7 @@ fn render_file(scene_path: &Path, defaults: &[(&str, &str)], tweak: impl Fn(&mut
     let mut settings = RenderSettings::from_scene(&scene);
     settings.seed = 1;
     tweak(&mut settings);
-    let integ = integrator::by_name(&scene.settings.integrator).expect("integrator");
+    let integ = svetlo::methods::by_name(&scene.settings.integrator).expect("integrator");
     let film = integ.render(&scene, &settings, &Progress::new()).expect("render");
     (film.image(), film.spp_done)
 }

@@ -203,37 +203,3 @@ impl splat::SplatEstimator for NoSplats<'_> {
         self.0.li(scene, ray, sampler, settings)
     }
 }
-
-/// The integrator a name selects (scene file `<integrator type=...>` or `--integrator`).
-pub fn by_name(name: &str) -> Result<Box<dyn Integrator>> {
-    match name {
-        "path" => Ok(Box::new(path_simd::SimdPathTracer::default())),
-        // `path:simd=false` forces the scalar tracer (see `path_simd`).
-        other if other.starts_with("path:") => Ok(Box::new(path_simd::SimdPathTracer::parse(&other["path:".len()..])?)),
-        "light" | "ptracer" => Ok(Box::new(light::LightTracer)),
-        "bdpt" => Ok(Box::new(bdpt::Bdpt)),
-        "direct" => Ok(Box::new(direct::DirectIntegrator::default())),
-        "whitted" => Ok(Box::new(whitted::Whitted)),
-        "distributed" => Ok(Box::new(distributed::Distributed)),
-        "zbuffer" => Ok(Box::new(zbuffer::ZBuffer::default())),
-        "radiosity" => Ok(Box::new(crate::radiosity::display::RadiosityIntegrator { options: Default::default() })),
-        // `radiosity:key=value,...` selects the method (see `RadiosityOptions::parse`).
-        other if other.starts_with("radiosity:") => {
-            Ok(Box::new(crate::radiosity::display::RadiosityIntegrator { options: crate::radiosity::RadiosityOptions::parse(&other["radiosity:".len()..])? }))
-        }
-        "photon" => Ok(Box::new(photon::PhotonMapper::default())),
-        "sppm" => Ok(Box::new(photon::Sppm::default())),
-        // `photon:key=value,...` and `sppm:key=value,...` (see `PhotonOptions::parse`, `SppmOptions::parse`).
-        other if other.starts_with("photon:") => Ok(Box::new(photon::PhotonMapper { options: photon::PhotonOptions::parse(&other["photon:".len()..])? })),
-        other if other.starts_with("sppm:") => Ok(Box::new(photon::Sppm { options: photon::SppmOptions::parse(&other["sppm:".len()..])? })),
-        "pssmlt" => Ok(Box::new(pssmlt::Pssmlt::default())),
-        "mlt" => Ok(Box::new(mlt::Mlt::default())),
-        // `mlt:key=value,...` (see `MltOptions::parse`).
-        other if other.starts_with("mlt:") => Ok(Box::new(mlt::Mlt::new(mlt::MltOptions::parse(&other["mlt:".len()..])?))),
-        // `pssmlt:key=value,...` (see `PssmltOptions::parse`).
-        other if other.starts_with("pssmlt:") => Ok(Box::new(pssmlt::Pssmlt::new(pssmlt::PssmltOptions::parse(&other["pssmlt:".len()..])?))),
-        other => Err(Error::Settings(format!(
-            "unknown integrator '{other}' (available: path, light, bdpt, direct, whitted, distributed, zbuffer, radiosity[:options], photon[:options], sppm[:options], pssmlt[:options], mlt[:options])"
-        ))),
-    }
-}

@@ -288,6 +288,6 @@ mod tests {
         for bad in ["large-step=2", "sigma=0", "chains=0", "bootstrap=-1", "target=photon", "nonsense=1", "sigma", "sigma=abc"] {
             assert!(PssmltOptions::parse(bad).is_err(), "{bad} accepted");
         }
-        assert!(crate::integrator::by_name("pssmlt:sigma=x").is_err());
+        assert!(crate::methods::by_name("pssmlt:sigma=x").is_err());
     }
 }

@@ -6,4 +6,4 @@ pub mod mitsuba;
 pub mod spectra;
 
 pub use image_io::{read_exr, read_image, read_pfm, write_exr, write_image, write_pfm, write_png};
-pub use mitsuba::load_scene;
+pub use mitsuba::{load_scene, load_scene_from_str};

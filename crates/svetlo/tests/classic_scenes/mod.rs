@@ -7,7 +7,7 @@ use svetlo::bsdf::Material;
 use svetlo::camera::{Camera, Projection};
 use svetlo::film::{Film, Filter};
 use svetlo::geometry::{Geometry, Sphere, TriangleMesh};
-use svetlo::integrator::{self, Progress, RenderSettings};
+use svetlo::integrator::{Progress, RenderSettings};
 use svetlo::scene::{Scene, SceneBuilder};
 use svetlo::texture::Texture;
 use svetlo::Rgb;
@@ -66,7 +66,7 @@ pub fn add(b: &mut SceneBuilder, g: Geometry, m: Material, emission: Option<Rgb>
 
 pub fn render(scene: &Scene, name: &str, spp: u32, max_depth: i32, seed: u64) -> Film {
     let settings = RenderSettings { spp, max_depth, seed, filter: Filter::Box, ..Default::default() };
-    integrator::by_name(name).expect("integrator").render(scene, &settings, &Progress::new()).expect("render")
+    svetlo::methods::by_name(name).expect("integrator").render(scene, &settings, &Progress::new()).expect("render")
 }
 
 /// Outcome of comparing two renders pixel by pixel.

@@ -276,7 +276,7 @@ mod tests {
         for bad in ["bidir=0", "lens=-1", "caustic=nan", "multi=x", "chains=x", "complement-spp=1", "lens"] {
             assert!(MltOptions::parse(bad).is_err(), "{bad} accepted");
         }
-        assert!(crate::integrator::by_name("mlt:lens=x").is_err());
+        assert!(crate::methods::by_name("mlt:lens=x").is_err());
     }
 
     #[test]

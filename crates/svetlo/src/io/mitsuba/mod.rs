@@ -31,7 +31,17 @@ use xml::Node;
 /// Load a Mitsuba XML scene; `defaults` fill `<default>` parameters (`-D name=value`) and
 /// take precedence over the file's own defaults.
 pub fn load_scene(path: &Path, defaults: &[(String, String)]) -> Result<Scene> {
-    let parsed = xml::parse(path, defaults)?;
+    load_parsed(xml::parse(path, defaults)?, path)
+}
+
+/// Load a Mitsuba XML scene held in memory (no file system needed unless it names files).
+/// `origin` stands for the file in error messages, and relative file names in the scene
+/// (includes, meshes, textures) are resolved against its folder.
+pub fn load_scene_from_str(text: &str, origin: &Path, defaults: &[(String, String)]) -> Result<Scene> {
+    load_parsed(xml::parse_str(text, origin, defaults)?, origin)
+}
+
+fn load_parsed(parsed: xml::Parsed, path: &Path) -> Result<Scene> {
     let mut ids = HashMap::new();
     collect_ids(&parsed.root, &mut ids)?;
     let mut loader = Loader {

@@ -70,13 +70,25 @@ struct Ctx {
 
 /// Parse `path` and everything it includes. `defaults` override `<default>` values.
 pub fn parse(path: &Path, defaults: &[(String, String)]) -> Result<Parsed> {
+    let canon = std::fs::canonicalize(path).map_err(|e| Error::Io { file: path.to_path_buf(), source: e })?;
+    let text = std::fs::read_to_string(path).map_err(|e| Error::Io { file: path.to_path_buf(), source: e })?;
+    parse_text(&text, path, Some(canon), defaults)
+}
+
+/// Parse a scene held in memory. `origin` names it in errors, and relative file names
+/// (includes, meshes, textures) are resolved against `origin`'s folder.
+pub fn parse_str(text: &str, origin: &Path, defaults: &[(String, String)]) -> Result<Parsed> {
+    parse_text(text, origin, None, defaults)
+}
+
+fn parse_text(text: &str, path: &Path, canon: Option<PathBuf>, defaults: &[(String, String)]) -> Result<Parsed> {
     let mut ctx = Ctx {
         params: defaults.iter().cloned().collect(),
         used: Default::default(),
         search_paths: vec![path.parent().map(Path::to_path_buf).unwrap_or_default()],
         stack: Vec::new(),
     };
-    let root = parse_file(path, &mut ctx)?;
+    let root = parse_document(text, path, canon, &mut ctx)?;
     let unused_params = defaults.iter().map(|(k, _)| k.clone()).filter(|k| !ctx.used.contains(k)).collect();
     Ok(Parsed { root, search_paths: ctx.search_paths, unused_params })
 }
@@ -88,8 +100,14 @@ fn parse_file(path: &Path, ctx: &mut Ctx) -> Result<Node> {
         return Err(Error::Scene { file: path.to_path_buf(), msg: format!("include cycle: {}", chain.join(" -> ")) });
     }
     let text = std::fs::read_to_string(path).map_err(|e| Error::Io { file: path.to_path_buf(), source: e })?;
+    parse_document(&text, path, Some(canon), ctx)
+}
+
+/// One document's root `<scene>`, its includes expanded; `canon` (the file's canonical path,
+/// `None` for a scene held in memory) joins the include stack that detects cycles.
+fn parse_document(text: &str, path: &Path, canon: Option<PathBuf>, ctx: &mut Ctx) -> Result<Node> {
     let opts = roxmltree::ParsingOptions { allow_dtd: true, ..Default::default() };
-    let doc = roxmltree::Document::parse_with_options(&text, opts).map_err(|e| {
+    let doc = roxmltree::Document::parse_with_options(text, opts).map_err(|e| {
         let p = e.pos();
         Error::SceneAt { file: path.to_path_buf(), line: p.row, col: p.col, msg: format!("malformed XML: {e}") }
     })?;
@@ -99,9 +117,12 @@ fn parse_file(path: &Path, ctx: &mut Ctx) -> Result<Node> {
     if root.tag_name().name() != "scene" {
         return Err(loc.err(format!("not a Mitsuba scene: the root element is <{}>, not <scene>", root.tag_name().name())));
     }
-    ctx.stack.push(canon);
+    let pushed = canon.is_some();
+    ctx.stack.extend(canon);
     let children = expand_children(&doc, root, &file, ctx);
-    ctx.stack.pop();
+    if pushed {
+        ctx.stack.pop();
+    }
     let attrs = root.attributes().map(|a| (a.name().to_string(), a.value().to_string())).collect();
     Ok(Node { tag: "scene".into(), attrs, children: children?, loc })
 }
