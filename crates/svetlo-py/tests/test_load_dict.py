@@ -189,9 +189,14 @@ def test_same_scene_as_xml(tmp_path):
     d = {"type": "scene", "sensor": s, "grey": {"type": "diffuse", "reflectance": rgb(0.4, 0.5, 0.6)},
          "ball": {"type": "sphere", "center": [0, 0.7, 0], "radius": 0.7, "bsdf": {"type": "ref", "id": "grey"}},
          "lamp": {"type": "point", "position": np.array([1.5, 3, 2]), "intensity": rgb(20)}}
-    a = svetlo.render(svetlo.load_file(xml), seed=1, progress=False)
-    b = svetlo.render(svetlo.load_dict(d), seed=1, progress=False)
-    assert np.array_equal(a, b)
+    sa, sb = svetlo.load_file(xml), svetlo.load_dict(d)
+    unnamed = lambda sc: [{k: v for k, v in sh.items() if k != "name"} for sh in sc.shapes]
+    assert unnamed(sa) == unnamed(sb) and sa.materials == sb.materials and sa.emitters == sb.emitters
+    # Mitsuba's look_at matrix and the XML loader's <lookat> may differ in the last bits only.
+    np.testing.assert_allclose(sa.camera["to_world"], sb.camera["to_world"], atol=1e-6)
+    a = svetlo.render(sa, integrator="direct", seed=1, progress=False)
+    b = svetlo.render(sb, integrator="direct", seed=1, progress=False)
+    np.testing.assert_allclose(a, b, rtol=1e-3, atol=1e-5)
 
 
 def test_strings_are_escaped(tmp_path):
@@ -217,7 +222,7 @@ def test_errors_name_the_key():
         svetlo.load_dict({"type": "sphere"})
     with pytest.raises(TypeError):
         svetlo.load_dict([1, 2])
-    with pytest.raises(svetlo.SceneError, match=r"scene\['ball'\]\['bsdf'\]"):
+    with pytest.raises(svetlo.SceneError, match=r"scene\['ball'\]\['bsdf'\]: reference to unknown id 'nowhere'"):
         svetlo.load_dict(lit({"ball": ball({"type": "ref", "id": "nowhere"})}))
     with pytest.raises(svetlo.SceneError, match="finite"):
         svetlo.load_dict(lit({"ball": ball({"type": "diffuse", "reflectance": rgb(float("nan"), 0, 0)})}))

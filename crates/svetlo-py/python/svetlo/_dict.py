@@ -75,8 +75,8 @@ class ScalarTransform4f:
         return self._then(np.diag([s[0], s[1], s[2], 1.0]))
 
     def rotate(self, axis: Sequence[float], angle: float) -> "ScalarTransform4f":
+        # The axis as given, not normalised: Mitsuba's rotate does the same.
         a = np.asarray(axis, dtype=np.float64).reshape(3)
-        a = a / np.linalg.norm(a)
         t = math.radians(angle)
         c, s = math.cos(t), math.sin(t)
         x, y, z = a
@@ -125,9 +125,11 @@ def _matrix(v: Any) -> Optional[np.ndarray]:
 class _Writer:
     """XML lines and, for each, the dictionary path that produced it."""
 
-    def __init__(self) -> None:
+    def __init__(self, ids: Dict[str, str]) -> None:
         self.lines: List[str] = []
         self.keys: List[str] = []
+        # id -> XML tag of every object that can be referenced.
+        self.ids = ids
 
     def emit(self, depth: int, text: str, key: str) -> None:
         self.lines.append("  " * depth + text)
@@ -191,6 +193,13 @@ def _object(w: _Writer, depth: int, name: Optional[str], d: Mapping[str, Any], w
         extra = sorted(set(d) - {"type", "id"})
         if not isinstance(ref, str) or extra:
             raise SceneError(f"load_dict: {where}: a reference is {{'type': 'ref', 'id': str}}" + (f"; unknown keys {extra}" if extra else ""))
+        tag = w.ids.get(ref)
+        if tag is None:
+            raise SceneError(f"load_dict: {where}: reference to unknown id '{ref}'")
+        # A reference to a texture is a named property; one to a bsdf or an emitter is a child
+        # object, which the XML writes without a name.
+        if tag != "texture" and name not in ("interior", "exterior"):
+            name_attr = ""
         w.emit(depth, f"<ref id={quoteattr(ref)}{name_attr}/>", where)
         return
     if t in ("rgb", "spectrum"):
@@ -234,13 +243,32 @@ def _object(w: _Writer, depth: int, name: Optional[str], d: Mapping[str, Any], w
     w.emit(depth, f"</{tag}>", where)
 
 
+def _collect_ids(scene: Mapping[str, Any]) -> Dict[str, str]:
+    """Every referable object's id and tag: top-level keys, and nested dicts' 'id' entries."""
+    ids: Dict[str, str] = {}
+
+    def walk(d: Mapping[str, Any], key: Optional[str]) -> None:
+        t = d.get("type")
+        own = d.get("id", key)
+        if isinstance(t, str) and t in _TAGS and isinstance(own, str):
+            ids.setdefault(own, _TAGS[t])
+        for k, v in d.items():
+            if isinstance(v, Mapping):
+                walk(v, None)
+
+    for k, v in scene.items():
+        if isinstance(v, Mapping):
+            walk(v, k)
+    return ids
+
+
 def to_xml(scene: Mapping[str, Any]) -> Tuple[str, List[str]]:
     """The XML for a scene dict and, per line (0-based), the dictionary path it came from."""
     if not isinstance(scene, Mapping):
         raise TypeError(f"load_dict: expected a dict, got {type(scene).__name__}")
     if scene.get("type") != "scene":
         raise SceneError(f"load_dict: the top-level dictionary must have 'type': 'scene', got {scene.get('type')!r}")
-    w = _Writer()
+    w = _Writer(_collect_ids(scene))
     w.emit(0, '<scene version="3.0.0">', "scene")
     for k, v in scene.items():
         if k == "type":
