@@ -4,8 +4,11 @@ against loading the same Cornell box from XML.
     python bench/python/overhead.py [--reps 200]
 
 Overhead of a render = the Python call's wall time less the library's render call inside it
-(`RenderResult.render_seconds`, timed on the render thread around `Integrator::render`): what
-keyword handling, settings, the render thread, the wake-up, the arrays and the result cost.
+(`RenderResult.render_seconds`, timed on the render thread around `Integrator::render`) and
+less `Film::image` (`develop_seconds`, which a Rust caller needs as well): what keyword
+handling, settings, the render thread, the wake-up, the arrays and the result cost. On a
+loaded machine the median is dominated by the wake-up of the calling thread once the render
+thread is done (the scheduler's latency); the minimum shows the binding's own cost.
 Loading: medians over alternating runs of `load_dict(d)` and `load_file(xml)` for the same
 scene (the dict's XML translation written to a file, and the bundled scenes/cornell-box.xml).
 """
@@ -61,19 +64,20 @@ def main():
     ap.add_argument("--reps", type=int, default=200)
     a = ap.parse_args()
 
-    print("render overhead (Python call wall time - library render call), medians over", a.reps, "calls")
-    print(f"{'scene':28s} {'call ms':>9s} {'render ms':>10s} {'overhead ms':>12s}")
+    print("render overhead (Python call wall time - library render call - Film::image), medians over", a.reps, "calls")
+    print(f"{'scene':28s} {'call ms':>9s} {'render ms':>10s} {'image ms':>9s} {'overhead ms':>12s} {'(min)':>7s}")
     scene = svetlo.load_file(ROOT / "scenes" / "cornell-box.xml")
     for res, spp in ((16, 1), (256, 1), (512, 4)):
         reps = a.reps if res < 512 else max(5, a.reps // 20)
-        calls, renders = [], []
+        calls, renders, develops = [], [], []
         for _ in range(reps):
             t0 = time.perf_counter()
             r = svetlo.render_result(scene, integrator="path", spp=spp, width=res, height=res, threads=1, progress=False)
             calls.append(time.perf_counter() - t0)
             renders.append(r.render_seconds)
-        over = [c - r for c, r in zip(calls, renders)]
-        print(f"{f'cornell-box {res}x{res} {spp} spp':28s} {med_ms(calls):9.3f} {med_ms(renders):10.3f} {med_ms(over):12.3f}")
+            develops.append(r.develop_seconds)
+        over = [c - r - d for c, r, d in zip(calls, renders, develops)]
+        print(f"{f'cornell-box {res}x{res} {spp} spp':28s} {med_ms(calls):9.3f} {med_ms(renders):10.3f} {med_ms(develops):9.3f} {med_ms(over):12.3f} {1e3 * min(over):7.3f}")
 
     d = cornell_dict(512)
     with tempfile.TemporaryDirectory() as tmp:

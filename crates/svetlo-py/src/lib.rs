@@ -16,6 +16,7 @@ fn _svetlo(m: &Bound<'_, PyModule>) -> PyResult<()> {
     errors::register(m)?;
     m.add_class::<scene::PyScene>()?;
     m.add_class::<radiosity::PyRadiosity>()?;
+    m.add_class::<render::PyFilm>()?;
     m.add_function(wrap_pyfunction!(scene::load_file, m)?)?;
     m.add_function(wrap_pyfunction!(scene::load_string, m)?)?;
     m.add_function(wrap_pyfunction!(render::render, m)?)?;

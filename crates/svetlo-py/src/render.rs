@@ -215,14 +215,38 @@ pub fn render<'py>(
     d.set_item("render_seconds", render_seconds)?;
     d.set_item("interrupted", interrupt.is_some() || progress.cancelled())?;
     d.set_item("report", method.report())?;
-    d.set_item("image", to_array(py, film.image())?)?;
-    d.set_item("variance", to_array(py, film.variance_image())?)?;
+    let t_image = Instant::now();
+    let image = film.image();
+    // Developing the film is part of any render through the library's API too.
+    d.set_item("develop_seconds", t_image.elapsed().as_secs_f64())?;
+    d.set_item("image", to_array(py, image)?)?;
+    // The variance image costs as much again: made when asked for.
+    d.set_item("film", PyFilm { film })?;
     let st = PyList::empty(py);
     for im in strategy_images {
         st.append((im.s, im.t, to_array(py, im.weighted)?, to_array(py, im.unweighted)?))?;
     }
     d.set_item("strategies", st)?;
     Ok(d)
+}
+
+/// A rendered film kept for what is developed on demand (the per-sample variance).
+#[pyclass(frozen, name = "Film", module = "svetlo")]
+pub struct PyFilm {
+    film: Film,
+}
+
+#[pymethods]
+impl PyFilm {
+    /// Per-sample variance of each pixel's own samples, (height, width, 3) float32.
+    fn variance<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, numpy::PyArray3<f32>>> {
+        to_array(py, self.film.variance_image())
+    }
+
+    #[getter]
+    fn spp(&self) -> u32 {
+        self.film.spp_done
+    }
 }
 
 /// The methods of the registry: (name, summary, takes options).

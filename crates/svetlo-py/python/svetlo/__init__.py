@@ -16,6 +16,7 @@ a tqdm bar when tqdm is installed (or calls ``progress``), and stops on Ctrl-C w
 from __future__ import annotations
 
 import dataclasses
+import functools
 import sys
 from typing import Any, Callable, Dict, List, Mapping, Optional, Tuple, Union
 
@@ -145,11 +146,12 @@ class RenderResult:
         image: (height, width, 3) float32 linear Rec.709 RGB; the array owns the renderer's
             buffer (no copy was made).
         variance: per-sample variance of each pixel's own samples (box filter), as Mitsuba's
-            ``_var`` references; splats of light paths are not in it.
+            ``_var`` references; splats of light paths are not in it. Computed on first use.
         spp: sample passes done (fewer than planned after Ctrl-C or a time limit).
         spp_planned: the samples per pixel asked for.
         seconds: wall time of the render.
         render_seconds: the library's render call alone (``seconds`` less thread start and wake-up).
+        develop_seconds: turning the film into the image (the library's ``Film::image``).
         interrupted: whether Ctrl-C (or a cancel) stopped it early.
         integrator: the method that ran, with its options.
         report: the method's own report (e.g. Metropolis acceptance), or None.
@@ -159,16 +161,21 @@ class RenderResult:
     """
 
     image: np.ndarray
-    variance: np.ndarray
+    film: Any = dataclasses.field(repr=False)
     spp: int
     spp_planned: int
     seconds: float
     render_seconds: float
+    develop_seconds: float
     interrupted: bool
     integrator: str
     report: Optional[str]
     aovs: Dict[str, np.ndarray] = dataclasses.field(default_factory=dict)
     strategies: Dict[Tuple[int, int], Tuple[np.ndarray, np.ndarray]] = dataclasses.field(default_factory=dict)
+
+    @functools.cached_property
+    def variance(self) -> np.ndarray:
+        return self.film.variance()
 
 
 class _Bar:
@@ -274,11 +281,12 @@ def render_result(
             bar.close()
     result = RenderResult(
         image=r["image"],
-        variance=r["variance"],
+        film=r["film"],
         spp=r["spp"],
         spp_planned=r["spp_planned"],
         seconds=r["seconds"],
         render_seconds=r["render_seconds"],
+        develop_seconds=r["develop_seconds"],
         interrupted=r["interrupted"],
         integrator=r["integrator"],
         report=r["report"],

@@ -13,8 +13,8 @@ from __future__ import annotations
 
 import math
 import os
-from typing import Any, Dict, List, Mapping, Optional, Sequence, Tuple
-from xml.sax.saxutils import quoteattr
+from collections.abc import Mapping
+from typing import Any, Dict, List, Optional, Sequence, Tuple
 
 import numpy as np
 
@@ -49,6 +49,25 @@ def _fmt(x: Any) -> str:
     if not math.isfinite(v):
         raise ValueError(f"{v} is not a finite number")
     return repr(v)
+
+
+def _fmt_all(a: np.ndarray) -> List[str]:
+    """Finite numbers as text (shortest round trip)."""
+    if not np.isfinite(a).all():
+        raise ValueError(f"{a[~np.isfinite(a)].reshape(-1)[0]} is not a finite number")
+    return [repr(v) for v in a.reshape(-1).tolist()]
+
+
+_ESCAPES = str.maketrans({"&": "&amp;", "<": "&lt;", ">": "&gt;", '"': "&quot;", "\n": "&#10;", "\r": "&#13;", "\t": "&#9;"})
+
+
+def quoteattr(s: str) -> str:
+    """An XML attribute value, quoted, with every character that could end or change it escaped."""
+    return '"' + s.translate(_ESCAPES) + '"'
+
+
+def _is_map(v: Any) -> bool:
+    return type(v) is dict or isinstance(v, Mapping)
 
 
 class ScalarTransform4f:
@@ -151,15 +170,24 @@ def _is_vec3(v: Any) -> bool:
 
 
 def _color_value(v: Any, where: str) -> str:
+    if type(v) in (float, int):
+        return _fmt(v)
     a = np.asarray(v, dtype=np.float64).reshape(-1)
     if a.size not in (1, 3):
         raise SceneError(f"load_dict: {where}: an rgb value is one number or three, got {a.size}")
-    return ", ".join(_fmt(x) for x in a)
+    return ", ".join(_fmt_all(a))
 
 
 def _property(w: _Writer, depth: int, name: str, v: Any, where: str) -> None:
     n = quoteattr(name)
-    if isinstance(v, Mapping):
+    tv = type(v)
+    if tv is float:
+        w.emit(depth, f"<float name={n} value=\"{_fmt(v)}\"/>", where)
+    elif tv is int:
+        w.emit(depth, f"<integer name={n} value=\"{v}\"/>", where)
+    elif tv is str:
+        w.emit(depth, f"<string name={n} value={quoteattr(v)}/>", where)
+    elif _is_map(v):
         _object(w, depth, name, v, where)
     elif isinstance(v, (bool, np.bool_)):
         w.emit(depth, f"<boolean name={n} value={quoteattr('true' if v else 'false')}/>", where)
@@ -172,12 +200,10 @@ def _property(w: _Writer, depth: int, name: str, v: Any, where: str) -> None:
     elif isinstance(v, os.PathLike):
         w.emit(depth, f"<string name={n} value={quoteattr(os.fspath(v))}/>", where)
     elif _is_vec3(v):
-        x, y, z = (_fmt(c) for c in np.asarray(v, dtype=np.float64))
-        w.emit(depth, f"<point name={n} value={quoteattr(f'{x}, {y}, {z}')}/>", where)
+        w.emit(depth, f"<point name={n} value=\"{', '.join(_fmt_all(np.asarray(v, dtype=np.float64)))}\"/>", where)
     elif _matrix(v) is not None:
-        m = _matrix(v)
         w.emit(depth, f"<transform name={n}>", where)
-        w.emit(depth + 1, f"<matrix value={quoteattr(' '.join(_fmt(x) for x in m.reshape(-1)))}/>", where)
+        w.emit(depth + 1, f"<matrix value=\"{' '.join(_fmt_all(_matrix(v)))}\"/>", where)
         w.emit(depth, "</transform>", where)
     else:
         raise SceneError(f"load_dict: {where}: cannot translate a value of type {type(v).__name__} ({v!r:.60})")
@@ -235,7 +261,7 @@ def _object(w: _Writer, depth: int, name: Optional[str], d: Mapping[str, Any], w
         if not isinstance(k, str) or not k:
             raise SceneError(f"load_dict: {where}: keys are non-empty strings, got {k!r}")
         sub = _path(where, k)
-        if isinstance(v, Mapping) and v.get("type") not in ("rgb", "spectrum", "ref"):
+        if _is_map(v) and v.get("type") not in ("rgb", "spectrum", "ref"):
             # A nested plugin: Mitsuba names it by its key (the emitter, bsdf, film, ...).
             _object(w, depth + 1, k, v, sub)
         else:
@@ -253,18 +279,18 @@ def _collect_ids(scene: Mapping[str, Any]) -> Dict[str, str]:
         if isinstance(t, str) and t in _TAGS and isinstance(own, str):
             ids.setdefault(own, _TAGS[t])
         for k, v in d.items():
-            if isinstance(v, Mapping):
+            if _is_map(v):
                 walk(v, None)
 
     for k, v in scene.items():
-        if isinstance(v, Mapping):
+        if _is_map(v):
             walk(v, k)
     return ids
 
 
 def to_xml(scene: Mapping[str, Any]) -> Tuple[str, List[str]]:
     """The XML for a scene dict and, per line (0-based), the dictionary path it came from."""
-    if not isinstance(scene, Mapping):
+    if not _is_map(scene):
         raise TypeError(f"load_dict: expected a dict, got {type(scene).__name__}")
     if scene.get("type") != "scene":
         raise SceneError(f"load_dict: the top-level dictionary must have 'type': 'scene', got {scene.get('type')!r}")
@@ -276,7 +302,7 @@ def to_xml(scene: Mapping[str, Any]) -> Tuple[str, List[str]]:
         if not isinstance(k, str) or not k:
             raise SceneError(f"load_dict: scene: keys are non-empty strings, got {k!r}")
         where = _path("scene", k)
-        if not isinstance(v, Mapping):
+        if not _is_map(v):
             raise SceneError(f"load_dict: {where}: a scene's entries are objects (dicts with a 'type'), got {type(v).__name__}")
         if v.get("type") in ("rgb", "spectrum", "ref"):
             raise SceneError(f"load_dict: {where}: a '{v.get('type')}' cannot stand at the top level of a scene")
