@@ -183,10 +183,13 @@ fn command(text: &str, session: &Session, conn: &Connection) {
             }
             None => session.say(format!("unknown layer in '{text}' (layers: {})", LAYERS.join(", "))),
         },
-        Some("restart") if session.info.mode == Mode::Serve => match parse_restart(words, &session.lock().config) {
-            Ok(c) => session.restart(c),
-            Err(e) => session.say(e),
-        },
+        Some("restart") if session.info.mode == Mode::Serve => {
+            let current = session.lock().config.clone();
+            match parse_restart(words, &current) {
+                Ok(c) => session.restart(c),
+                Err(e) => session.say(e),
+            }
+        }
         Some("restart") => session.say("this render was started by 'svetlo render': restart it from the command line, or use 'svetlo serve'".into()),
         _ => session.say(format!("unknown command '{}'", text.chars().take(40).collect::<String>())),
     }
