@@ -10,6 +10,8 @@ const BIN = process.env.SVETLO_BIN, SCENE = process.env.SVETLO_SCENE, OUT = proc
 const CHROMIUM = process.env.CHROMIUM || '/usr/bin/chromium';
 const T = 60_000; // per wait: generous for a loaded 2-core machine
 const result = {};
+const t0 = Date.now();
+const phase = (name) => { (result.seconds ||= {})[name] = (Date.now() - t0) / 1000; };
 
 function fail(msg) { throw new Error(msg); }
 
@@ -43,12 +45,14 @@ const canvasStats = (sel) => (s) => {
 
 const browser = await chromium.launch({ executablePath: CHROMIUM, args: ['--no-sandbox', '--disable-gpu'] });
 try {
+  phase('launch');
   // ---- 1. svetlo render --preview: the image appears and changes; Stop keeps the samples ----
   const stopExr = join(OUT, 'stopped.exr');
   const r = start(['render', SCENE, '--preview', '--spp', '1000000', '--width', '96', '--height', '96', '--max-depth', '5', '-o', stopExr]);
   const page = await browser.newPage({ viewport: { width: 1280, height: 900 } });
   await page.goto(await r.url);
   await page.waitForFunction(() => window.svetlo.framesReceived >= 1 && window.svetlo.drawn >= 1, null, { timeout: T });
+  phase('first image');
   const canvas = page.locator('.view canvas').first();
   const shot1 = await canvas.screenshot();
   const spp1 = await page.evaluate(() => window.svetlo.frames[0].spp);
@@ -60,6 +64,7 @@ try {
   if (!stats || stats.lit < stats.n / 4) fail(`the image is mostly black: ${JSON.stringify(stats)}`);
   result.render = { spp1, spp2: await page.evaluate(() => window.svetlo.frames[0].spp), lit: stats.lit / stats.n };
   await page.screenshot({ path: join(OUT, 'render.png') });
+  phase('changed');
   await page.click('#stop');
   const ended = await Promise.race([r.exited, new Promise((res) => setTimeout(() => res(null), T))]);
   if (!ended) { r.p.kill(); fail('the render did not stop after the Stop button'); }
@@ -68,6 +73,7 @@ try {
   if (!existsSync(stopExr)) fail('no EXR after stopping');
   // The page keeps the last image and says the render was stopped.
   await page.waitForFunction(() => window.svetlo.status && window.svetlo.status.slots[0].state === 'stopped', null, { timeout: T });
+  phase('stopped');
   result.stop = { exit: ended.code, spp: +m[1], of: +m[2], exr: stopExr };
   await page.close();
 
@@ -76,6 +82,7 @@ try {
   const p2 = await browser.newPage({ viewport: { width: 1280, height: 900 } });
   await p2.goto(await s.url);
   await p2.waitForFunction(() => { const st = window.svetlo.status; return st && st.slots.length === 2 && st.slots.every((x) => x.state === 'done') && window.svetlo.frames[1]; }, null, { timeout: T });
+  phase('compare done');
   await p2.check('input[name=layout][value=split]');
   await p2.waitForFunction(() => document.querySelectorAll('.view').length === 1 && document.getElementById('divider') && window.svetlo.drawn > 0, null, { timeout: T });
   await p2.waitForFunction(() => document.querySelectorAll('.view canvas').length === 2 && [...document.querySelectorAll('.view canvas')].every((c) => c.width > 0), null, { timeout: T });
@@ -103,6 +110,7 @@ try {
   await p2.screenshot({ path: join(OUT, 'compare-split.png') });
   result.compare = { split, curves, plotPixels, rows };
 
+  phase('split and plot');
   // Change the integrator from the page: the render restarts with it.
   const run0 = await p2.evaluate(() => window.svetlo.status.run);
   await p2.selectOption('#method-a', 'whitted');
@@ -112,6 +120,7 @@ try {
   await p2.waitForFunction((r0) => { const st = window.svetlo.status; return st.run > r0 && st.config.methods.join() === 'whitted' && st.config.spp === 4 && st.slots.length === 1; }, run0, { timeout: T });
   await p2.waitForFunction(() => { const st = window.svetlo.status, f = window.svetlo.frames[0]; return f && f.run === st.run && st.slots[0].state === 'done'; }, null, { timeout: T });
   await p2.screenshot({ path: join(OUT, 'restarted.png') });
+  phase('restarted');
   result.restart = { run0, run: await p2.evaluate(() => window.svetlo.status.run), exr: join(OUT, 'cmp-whitted.exr') };
   s.p.kill('SIGTERM');
   await s.exited;
