@@ -82,6 +82,9 @@ pub struct RenderArgs {
     /// With --strategies: the longest paths (in segments) that get their own images.
     #[arg(long, value_name = "N", default_value_t = 5, value_parser = value_parser!(u32).range(1..=32))]
     pub strategy_depth: u32,
+    /// Live preview in a browser, and tev streaming.
+    #[command(flatten)]
+    pub live: crate::preview::PreviewArgs,
 }
 
 fn parse_seconds(s: &str) -> std::result::Result<f64, String> {
@@ -368,9 +371,14 @@ pub fn run(a: &RenderArgs) -> Result<ExitCode> {
     for w in &scene.warnings {
         eprintln!("warning: {w}");
     }
-    let progress = Arc::new(Progress::new());
+    let live = crate::preview::Live::start(a, &scene)?;
+    let progress = live.as_ref().map_or_else(|| Arc::new(Progress::new()), |l| l.progress());
     install_ctrlc(progress.clone());
-    render_loaded(scene, a, &out, &progress)
+    let outcome = render_loaded(scene, a, &out, &progress);
+    if let Some(l) = live {
+        l.finish(&outcome, &out);
+    }
+    outcome
 }
 
 #[cfg(test)]
