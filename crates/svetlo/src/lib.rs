@@ -17,6 +17,7 @@ pub mod light;
 pub mod math;
 pub mod methods;
 pub mod path;
+pub mod photometry;
 pub mod radiosity;
 pub mod raster;
 pub mod sampling;
