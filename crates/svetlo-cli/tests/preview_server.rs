@@ -30,7 +30,8 @@ fn serve(name: &str, extra: &[&str]) -> Served {
     std::fs::create_dir_all(&dir).unwrap();
     let scene = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../../scenes/cornell-box.xml");
     let out = dir.join("s.exr");
-    let mut args = vec!["serve", scene.to_str().unwrap(), "--width", "32", "--height", "32", "--spp", "100000", "--max-depth", "4", "-o", out.to_str().unwrap()];
+    let mut args =
+        vec!["serve", scene.to_str().unwrap(), "--width", "32", "--height", "32", "--spp", "100000", "--max-depth", "4", "-o", out.to_str().unwrap()];
     args.extend_from_slice(extra);
     let mut child = Command::new(env!("CARGO_BIN_EXE_svetlo")).args(&args).stdout(Stdio::null()).stderr(Stdio::piped()).spawn().expect("svetlo runs");
     let mut err = BufReader::new(child.stderr.take().unwrap());
@@ -240,13 +241,13 @@ fn bad_frames_close_only_their_connection_and_two_pages_watch() {
     let mut huge = vec![0x81, 0x80 | 127];
     huge.extend_from_slice(&(1u64 << 40).to_be_bytes());
     let cases: Vec<(Vec<u8>, u16)> = vec![
-        (vec![0x81, 0x03, b'a', b'b', b'c'], 1002),  // unmasked
-        (huge, 1009),                                // 1 TiB announced
-        (masked(0x81, &[0xc3, 0x28]), 1007),         // not UTF-8
-        (masked(0x01, b"frag"), 1003),               // fragment
-        (masked(0x82, b"bin"), 1003),                // binary
-        (masked(0xC1, b"rsv"), 1002),                // reserved bit
-        (masked(0x8F, b""), 1002),                   // unknown opcode
+        (vec![0x81, 0x03, b'a', b'b', b'c'], 1002),    // unmasked
+        (huge, 1009),                                  // 1 TiB announced
+        (masked(0x81, &[0xc3, 0x28]), 1007),           // not UTF-8
+        (masked(0x01, b"frag"), 1003),                 // fragment
+        (masked(0x82, b"bin"), 1003),                  // binary
+        (masked(0xC1, b"rsv"), 1002),                  // reserved bit
+        (masked(0x8F, b""), 1002),                     // unknown opcode
         (masked(0x89, &[0u8; 125])[..20].to_vec(), 0), // truncated, then dropped
     ];
     for (bytes, code) in cases {

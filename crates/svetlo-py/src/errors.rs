@@ -60,7 +60,10 @@ pub fn to_py(e: svetlo::Error) -> PyErr {
             E::Scene { file, .. } | E::Mesh { file, .. } | E::Io { file, .. } => {
                 with_attrs::<SceneError>(msg, &[("file", s(file)), ("line", none()), ("column", none()), ("key", none())])
             }
+            E::Photometry { file, line, .. } => with_attrs::<SceneError>(msg, &[("file", s(file)), ("line", int(*line)), ("column", none()), ("key", none())]),
             E::Image { file, .. } => with_attrs::<ImageError>(msg, &[("file", s(file))]),
+            // Over the memory budget: not the scene's fault as such, nor an option's alone.
+            E::TooLarge { .. } => SvetloError::new_err(msg),
             E::Settings(_) => OptionError::new_err(msg),
             _ => with_attrs::<SceneError>(msg, &[("file", none()), ("line", none()), ("column", none()), ("key", none())]),
         }

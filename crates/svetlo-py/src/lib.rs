@@ -3,6 +3,7 @@
 //! the documentation; everything that renders is the library's, chosen through its one method
 //! registry (`svetlo::methods`).
 
+mod dict;
 mod errors;
 mod images;
 mod radiosity;
@@ -19,6 +20,7 @@ fn _svetlo(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_class::<render::PyFilm>()?;
     m.add_function(wrap_pyfunction!(scene::load_file, m)?)?;
     m.add_function(wrap_pyfunction!(scene::load_string, m)?)?;
+    m.add_function(wrap_pyfunction!(dict::dict_to_xml, m)?)?;
     m.add_function(wrap_pyfunction!(render::render, m)?)?;
     m.add_function(wrap_pyfunction!(render::methods, m)?)?;
     m.add_function(wrap_pyfunction!(images::write, m)?)?;

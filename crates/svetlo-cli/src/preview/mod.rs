@@ -52,10 +52,7 @@ fn scene_name(path: &Path) -> String {
 fn start_watchers(a: &PreviewArgs, session: &Arc<Session>, serve: bool) -> Result<(Option<server::Server>, Option<std::thread::JoinHandle<()>>)> {
     let server = if a.preview || serve {
         if !a.bind.is_loopback() {
-            eprintln!(
-                "warning: the preview listens on {} (not loopback): whoever can reach it and learns the token can watch the render and stop it",
-                a.bind
-            );
+            eprintln!("warning: the preview listens on {} (not loopback): whoever can reach it and learns the token can watch the render and stop it", a.bind);
         }
         let s = server::start(a.bind, a.port, session.clone())?;
         // On its own line and flushed: scripts (and the browser test) read it.

@@ -369,10 +369,8 @@ fn json_num(x: f64) -> String {
 
 /// The first message of a connection: what does not change.
 pub fn hello_json(info: &Info) -> String {
-    let methods: Vec<String> = svetlo::methods::METHODS
-        .iter()
-        .map(|m| format!("{{\"name\":{},\"summary\":{}}}", json_str(m.name), json_str(m.summary)))
-        .collect();
+    let methods: Vec<String> =
+        svetlo::methods::METHODS.iter().map(|m| format!("{{\"name\":{},\"summary\":{}}}", json_str(m.name), json_str(m.summary))).collect();
     let layers: Vec<String> = LAYERS.iter().map(|l| json_str(l)).collect();
     format!(
         "{{\"type\":\"hello\",\"mode\":{},\"scene\":{},\"reference\":{},\"methods\":[{}],\"layers\":[{}]}}",

@@ -17,6 +17,7 @@ from __future__ import annotations
 
 import dataclasses
 import functools
+import os
 import sys
 from typing import Any, Callable, Dict, List, Mapping, Optional, Tuple, Union
 
@@ -36,6 +37,7 @@ from ._svetlo import (
 from ._dict import ScalarTransform4f, load_dict
 
 __all__ = [
+    "__version__",
     "Scene",
     "RadiositySolution",
     "RenderResult",
