@@ -71,6 +71,14 @@ fn nums(v: &[f64], sep: &str, where_: &str) -> PyResult<String> {
     Ok(v.iter().map(|&x| num(x, where_)).collect::<PyResult<Vec<_>>>()?.join(sep))
 }
 
+/// `d[key]`, or None when absent (a dict is asked without raising KeyError).
+fn get<'py>(d: &Bound<'py, PyAny>, key: &str) -> Option<Bound<'py, PyAny>> {
+    match d.downcast::<PyDict>() {
+        Ok(dict) => dict.get_item(key).ok().flatten(),
+        Err(_) => d.get_item(key).ok(),
+    }
+}
+
 fn key_path(parent: &str, key: &str) -> String {
     // Python's repr of a plain key: 'name' (keys with quotes are rare; escape them as repr would).
     if key.contains('\'') || key.contains('\\') {
@@ -151,12 +159,13 @@ impl<'py> Writer<'py> {
             self.emit(depth, &format!("<string name={n} value={}/>", quote(&s.to_cow()?)), where_);
         } else if v.is_instance_of::<PyDict>() || v.downcast::<PyMapping>().is_ok() {
             self.object(depth, Some(name), v, where_, None)?;
-        } else if v.hasattr("__fspath__")? {
+        } else if !(v.is_instance_of::<PyList>() || v.is_instance_of::<PyTuple>()) && v.hasattr("__fspath__")? {
             let p: String = self.py.import("os")?.call_method1("fspath", (v,))?.extract()?;
             self.emit(depth, &format!("<string name={n} value={}/>", quote(&p)), where_);
         } else {
             // numpy scalars, 3-vectors, transforms (anything with a 4x4 `.matrix`, or 4x4 arrays).
-            let matrix = v.getattr("matrix").ok();
+            let seq = v.is_instance_of::<PyList>() || v.is_instance_of::<PyTuple>();
+            let matrix = if seq { None } else { v.getattr("matrix").ok() };
             let src = matrix.as_ref().unwrap_or(v);
             match self.numbers(src) {
                 Some((x, shape)) if shape.is_empty() => {
@@ -190,10 +199,10 @@ impl<'py> Writer<'py> {
 
     fn object(&mut self, depth: usize, name: Option<&str>, d: &Bound<'py, PyAny>, where_: &str, object_id: Option<&str>) -> PyResult<()> {
         let m = d.downcast::<PyMapping>()?;
-        let t: String = match m.get_item("type").ok().map(|t| t.extract::<String>()) {
+        let t: String = match get(d, "type").map(|t| t.extract::<String>()) {
             Some(Ok(t)) => t,
             Some(Err(_)) | None => {
-                let got = m.get_item("type").ok().and_then(|t| t.repr().ok()).map(|r| r.to_string()).unwrap_or_else(|| "None".into());
+                let got = get(d, "type").and_then(|t| t.repr().ok()).map(|r| r.to_string()).unwrap_or_else(|| "None".into());
                 return Err(err(format!("load_dict: {where_}: a nested dictionary needs a 'type' (str), got {got}")));
             }
         };
@@ -204,7 +213,7 @@ impl<'py> Writer<'py> {
         match t.as_str() {
             "ref" => {
                 let ex = extra(&["type", "id"]);
-                let id: Option<String> = m.get_item("id").ok().and_then(|i| i.extract().ok());
+                let id: Option<String> = get(d, "id").and_then(|i| i.extract().ok());
                 let Some(id) = id.filter(|_| ex.is_empty()) else {
                     let more = if ex.is_empty() { String::new() } else { format!("; unknown keys [{}]", ex.join(", ")) };
                     return Err(err(format!("load_dict: {where_}: a reference is {{'type': 'ref', 'id': str}}{more}")));
@@ -222,7 +231,7 @@ impl<'py> Writer<'py> {
             }
             "rgb" | "spectrum" => {
                 let ex = extra(&["type", "value"]);
-                let Some(v) = m.get_item("value").ok().filter(|_| ex.is_empty()) else {
+                let Some(v) = get(d, "value").filter(|_| ex.is_empty()) else {
                     let more = if ex.is_empty() { String::new() } else { format!("; unknown keys [{}]", ex.join(", ")) };
                     return Err(err(format!("load_dict: {where_}: an {t} value is {{'type': '{t}', 'value': ...}}{more}")));
                 };
@@ -241,9 +250,9 @@ impl<'py> Writer<'py> {
             _ => {}
         }
         let tag = tag_of(&t).ok_or_else(|| err(format!("load_dict: {where_}: unknown plugin type '{t}'")))?;
-        let own_id: Option<String> = match m.get_item("id") {
-            Ok(i) => Some(i.extract().map_err(|_| err(format!("load_dict: {where_}: 'id' must be a str")))?),
-            Err(_) => object_id.map(str::to_string),
+        let own_id: Option<String> = match get(d, "id") {
+            Some(i) => Some(i.extract().map_err(|_| err(format!("load_dict: {where_}: 'id' must be a str")))?),
+            None => object_id.map(str::to_string),
         };
         let id_attr = own_id.map(|i| format!(" id={}", quote(&i))).unwrap_or_default();
         self.emit(depth, &format!("<{tag} type={}{id_attr}{name_attr}>", quote(&t)), where_);
@@ -255,7 +264,7 @@ impl<'py> Writer<'py> {
                 return Err(err(format!("load_dict: {where_}: keys are non-empty strings")));
             }
             let sub = key_path(where_, k);
-            let v = m.get_item(k)?;
+            let v = get(d, k).ok_or_else(|| err(format!("load_dict: {sub}: vanished while read")))?;
             self.property(depth + 1, k, &v, &sub)?;
         }
         self.emit(depth, &format!("</{tag}>"), where_);
@@ -265,8 +274,8 @@ impl<'py> Writer<'py> {
 
 /// Every referable object's id and tag: top-level keys, and nested dicts' 'id' entries.
 fn collect_ids(d: &Bound<'_, PyMapping>, key: Option<String>, ids: &mut HashMap<String, &'static str>) -> PyResult<()> {
-    let tag = d.get_item("type").ok().and_then(|t| t.extract::<String>().ok()).and_then(|t| tag_of(&t));
-    let own: Option<String> = d.get_item("id").ok().and_then(|i| i.extract().ok()).or(key);
+    let tag = get(d.as_any(), "type").and_then(|t| t.extract::<String>().ok()).and_then(|t| tag_of(&t));
+    let own: Option<String> = get(d.as_any(), "id").and_then(|i| i.extract().ok()).or(key);
     if let (Some(tag), Some(id)) = (tag, own) {
         ids.entry(id).or_insert(tag);
     }
