@@ -76,6 +76,8 @@ def main():
             calls.append(time.perf_counter() - t0)
             renders.append(r.render_seconds)
             develops.append(r.develop_seconds)
+            # Freed here, not inside the next timed call.
+            del r
         over = [c - r - d for c, r, d in zip(calls, renders, develops)]
         print(f"{f'cornell-box {res}x{res} {spp} spp':28s} {med_ms(calls):9.3f} {med_ms(renders):10.3f} {med_ms(develops):9.3f} {med_ms(over):12.3f} {1e3 * min(over):7.3f}")
 
