@@ -52,10 +52,7 @@ fn scene_name(path: &Path) -> String {
 fn start_watchers(a: &PreviewArgs, session: &Arc<Session>, serve: bool) -> Result<(Option<server::Server>, Option<std::thread::JoinHandle<()>>)> {
     let server = if a.preview || serve {
         if !a.bind.is_loopback() {
-            eprintln!(
-                "warning: the preview listens on {} (not loopback): whoever can reach it and learns the token can watch the render and stop it",
-                a.bind
-            );
+            eprintln!("warning: the preview listens on {} (not loopback): whoever can reach it and learns the token can watch the render and stop it", a.bind);
         }
         let s = server::start(a.bind, a.port, session.clone())?;
         // On its own line and flushed: scripts (and the browser test) read it.
@@ -90,8 +87,11 @@ impl Live {
 
     /// The render's progress: observed by the preview, cancelled by its stop button.
     pub fn progress(&self) -> Arc<Progress> {
-        let run = self.session.lock().run;
-        let progress = Arc::new(Progress::observed(self.session.observer(run, 0)));
+        let (run, spp) = {
+            let s = self.session.lock();
+            (s.run, s.config.spp)
+        };
+        let progress = Arc::new(Progress::observed(self.session.observer(run, 0, spp)));
         self.session.start_slot(run, 0, progress.clone(), None);
         progress
     }
@@ -182,7 +182,7 @@ pub fn serve(a: &ServeArgs) -> Result<ExitCode> {
             let mut settings = job.settings.clone();
             settings.spp = config.spp;
             settings.max_depth = config.max_depth;
-            let progress = Arc::new(Progress::observed(session.observer(run, i)));
+            let progress = Arc::new(Progress::observed(session.observer(run, i, settings.spp)));
             session.start_slot(run, i, progress.clone(), settings.time_limit);
             let result = svetlo::methods::by_name(m).and_then(|integ| integ.render(&job.scene, &settings, &progress));
             match result {

@@ -101,7 +101,9 @@ impl<W: Write> TevStream<W> {
         for ty in (0..img.height).step_by(TILE) {
             for tx in (0..img.width).step_by(TILE) {
                 let (w, h) = (TILE.min(img.width - tx), TILE.min(img.height - ty));
-                let changed = old.is_none_or(|o| (ty..ty + h).any(|r| o.data[r * o.width + tx..r * o.width + tx + w] != img.data[r * img.width + tx..r * img.width + tx + w]));
+                let changed = old.is_none_or(|o| {
+                    (ty..ty + h).any(|r| o.data[r * o.width + tx..r * o.width + tx + w] != img.data[r * img.width + tx..r * img.width + tx + w])
+                });
                 if changed {
                     packets.push(update_image(name, img, tx, ty, w, h));
                     sent += 1;
