@@ -358,6 +358,15 @@ pub fn render_loaded(scene: Scene, a: &RenderArgs, out: &OutputPaths, progress: 
     Ok(ExitCode::SUCCESS)
 }
 
+/// `--threads N` holds for the whole process: loading, the BVH build and tables built on
+/// first use run on rayon's global pool, which gets N threads (the render makes its own pool
+/// of N). Only the first call in a process can size it; later ones keep that size.
+pub fn limit_global_threads(threads: usize) {
+    if threads > 0 {
+        let _ = rayon::ThreadPoolBuilder::new().num_threads(threads).build_global();
+    }
+}
+
 pub fn run(a: &RenderArgs) -> Result<ExitCode> {
     // Check what can be checked before a possibly slow scene load.
     if let Some(name) = &a.integrator {
@@ -367,6 +376,7 @@ pub fn run(a: &RenderArgs) -> Result<ExitCode> {
         }
     }
     let out = OutputPaths::new(&a.scene, a.output.as_deref())?;
+    limit_global_threads(a.threads);
     let scene = svetlo::io::load_scene(&a.scene, &a.define).context("cannot load the scene")?;
     for w in &scene.warnings {
         eprintln!("warning: {w}");

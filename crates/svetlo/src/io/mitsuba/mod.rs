@@ -12,6 +12,7 @@ mod bsdf;
 mod classic;
 mod emitter;
 mod props;
+mod refs;
 mod sensor;
 mod shape;
 mod texture;
@@ -44,6 +45,7 @@ pub fn load_scene_from_str(text: &str, origin: &Path, defaults: &[(String, Strin
 fn load_parsed(parsed: xml::Parsed, path: &Path) -> Result<Scene> {
     let mut ids = HashMap::new();
     collect_ids(&parsed.root, &mut ids)?;
+    refs::check_cycles(&ids)?;
     let mut loader = Loader {
         ids,
         search_paths: parsed.search_paths.clone(),
@@ -53,6 +55,8 @@ fn load_parsed(parsed: xml::Parsed, path: &Path) -> Result<Scene> {
         bitmaps: HashMap::new(),
         shape_count: 0,
         has_sensor: false,
+        plugin_depth: 0,
+        plugin_instances: 0,
     };
     for p in &parsed.unused_params {
         loader.warn(format!("parameter '{p}' given on the command line is not used by the scene"));
@@ -87,6 +91,9 @@ pub(crate) struct Loader<'a> {
     bitmaps: HashMap<(PathBuf, bool), Arc<Bitmap>>,
     shape_count: usize,
     has_sensor: bool,
+    /// Plugins being built (nested and referenced) and built so far: see [`Loader::nested`].
+    plugin_depth: usize,
+    plugin_instances: usize,
 }
 
 impl<'a> Loader<'a> {
@@ -111,6 +118,7 @@ impl<'a> Loader<'a> {
     }
 
     fn scene(&mut self, root: &'a Node) -> Result<()> {
+        self.check_version(root)?;
         for c in &root.children {
             match c.tag.as_str() {
                 "integrator" => self.integrator(c)?,

@@ -15,6 +15,10 @@ pub fn parse_f32(s: &str, loc: &Loc, what: &str) -> Result<f32> {
     if v.is_nan() {
         return Err(loc.err(format!("{what}: value is NaN")));
     }
+    // "inf", or 1e39 (beyond f32): no quantity of a scene means anything at infinity.
+    if v.is_infinite() {
+        return Err(loc.err(format!("{what}: '{}' is not a finite number", s.trim())));
+    }
     Ok(v)
 }
 
@@ -146,8 +150,21 @@ impl<'a> Loader<'a> {
     }
 }
 
-/// The RGB value of an `rgb`, `srgb`, `spectrum`, `float` or `integer` element.
+/// The RGB value of an `rgb`, `srgb`, `spectrum`, `float` or `integer` element. Radiance,
+/// intensity and reflectance must be finite and non-negative (a negative one gives negative
+/// pixels, or black from the Metropolis methods).
 pub fn color_of(p: &Node, name: &str, kind: SpectrumKind) -> Result<Rgb> {
+    let c = color_value(p, name, kind)?;
+    if !c.is_finite() {
+        return Err(p.loc.err(format!("{name}: {c:?} is not finite")));
+    }
+    if kind != SpectrumKind::Unbounded && c.min_component() < 0.0 {
+        return Err(p.loc.err(format!("{name}: {c:?} is negative (radiance, intensity and reflectance are at least 0)")));
+    }
+    Ok(c)
+}
+
+fn color_value(p: &Node, name: &str, kind: SpectrumKind) -> Result<Rgb> {
     let value = p.req("value")?;
     match p.tag.as_str() {
         "float" | "integer" => Ok(Rgb::splat(parse_f32(value, &p.loc, name)?)),
@@ -246,7 +263,11 @@ pub fn parse_transform(t: &Node) -> Result<Mat4> {
             "matrix" => {
                 let v = parse_list(op.req("value")?, &op.loc, "matrix")?;
                 match v.len() {
-                    // Row-major in the file; glam is column-major.
+                    // Row-major in the file; glam is column-major. Shapes, lights and cameras
+                    // are placed by affine maps: a projective last row has no meaning here.
+                    16 if v[12..] != [0.0, 0.0, 0.0, 1.0] => {
+                        return Err(op.loc.err(format!("<matrix>: the last row must be 0 0 0 1 (an affine transform), got {:?}", &v[12..])));
+                    }
                     16 => Mat4::from_cols_array(&v.try_into().expect("16 values")).transpose(),
                     9 => Mat4::from_cols(Vec4::new(v[0], v[3], v[6], 0.0), Vec4::new(v[1], v[4], v[7], 0.0), Vec4::new(v[2], v[5], v[8], 0.0), Vec4::W),
                     n => return Err(op.loc.err(format!("<matrix> needs 16 (or 9) values, got {n}"))),
