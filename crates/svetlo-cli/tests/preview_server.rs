@@ -36,16 +36,23 @@ fn serve(name: &str, extra: &[&str]) -> Served {
     let mut child = Command::new(env!("CARGO_BIN_EXE_svetlo")).args(&args).stdout(Stdio::null()).stderr(Stdio::piped()).spawn().expect("svetlo runs");
     let mut err = BufReader::new(child.stderr.take().unwrap());
     let mut line = String::new();
-    loop {
+    let url = loop {
         line.clear();
-        assert!(err.read_line(&mut line).unwrap() > 0, "svetlo serve exited without printing its address");
-        if let Some(url) = line.trim().strip_prefix("preview: http://") {
-            let (addr, token) = url.split_once("/?token=").expect("address with token");
-            // Keep draining stderr so that the server never blocks on a full pipe.
-            std::thread::spawn(move || std::io::copy(&mut err, &mut std::io::sink()));
-            return Served { child, addr: addr.parse().unwrap(), token: token.to_string(), _dir: dir };
+        if err.read_line(&mut line).unwrap_or(0) == 0 {
+            break None;
         }
-    }
+        if let Some(url) = line.trim().strip_prefix("preview: http://") {
+            break Some(url.to_string());
+        }
+    };
+    // From here the child is killed and reaped when `Served` drops, on every path.
+    let mut served = Served { child, addr: "127.0.0.1:1".parse().unwrap(), token: String::new(), _dir: dir };
+    let url = url.expect("svetlo serve exited without printing its address");
+    let (addr, token) = url.split_once("/?token=").expect("address with token");
+    (served.addr, served.token) = (addr.parse().unwrap(), token.to_string());
+    // Keep draining stderr so that the server never blocks on a full pipe.
+    std::thread::spawn(move || std::io::copy(&mut err, &mut std::io::sink()));
+    served
 }
 
 fn connect(addr: SocketAddr) -> TcpStream {

@@ -289,7 +289,8 @@ mod tests {
         let scene = b.build().unwrap();
         let settings = RenderSettings { spp: 6, max_depth: 3, ..Default::default() };
         let est = crate::integrator::bdpt::test_estimator(&scene, &settings);
-        let seen: Arc<Mutex<Vec<(u32, Vec<Rgb>)>>> = Arc::default();
+        type Passes = Mutex<Vec<(u32, Vec<Rgb>)>>;
+        let seen: Arc<Passes> = Arc::default();
         let log = seen.clone();
         let progress = Progress::observed(move |f: &Film| log.lock().unwrap().push((f.spp_done, f.image().data)));
         let watched = render_chunked(&scene, &settings, &progress, &est, 0, u64::MAX).unwrap();
