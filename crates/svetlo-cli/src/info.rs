@@ -1,7 +1,7 @@
 //! `svetlo info SCENE.xml`: what the loader made of a scene, and what it warned about.
 
 use crate::parse_define;
-use anyhow::{Context, Result};
+use anyhow::Result;
 use clap::Args;
 use glam::Vec3;
 use std::collections::BTreeMap;
@@ -139,8 +139,10 @@ pub fn describe(scene: &Scene) -> String {
 }
 
 pub fn run(a: &InfoArgs) -> Result<ExitCode> {
-    let scene = svetlo::io::load_scene(&a.scene, &a.define).context("cannot load the scene")?;
-    print!("{}", describe(&scene));
+    let scene = crate::load_scene(&a.scene, &a.define)?;
+    // A closed stdout (`svetlo info s.xml | head -1`) is not an error.
+    use std::io::Write as _;
+    let _ = write!(std::io::stdout(), "{}", describe(&scene));
     Ok(ExitCode::SUCCESS)
 }
 
