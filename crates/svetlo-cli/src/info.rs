@@ -16,7 +16,7 @@ use svetlo::scene::Scene;
 
 #[derive(Args, Debug)]
 pub struct InfoArgs {
-    /// Scene file (Mitsuba XML).
+    /// Scene file (Mitsuba XML), or a luminaire file (.ies, .ldt) for its photometric summary.
     pub scene: PathBuf,
     /// Scene parameter for <default> / $name substitution (repeatable).
     #[arg(short = 'D', value_name = "NAME=VALUE", value_parser = parse_define)]
@@ -139,9 +139,16 @@ pub fn describe(scene: &Scene) -> String {
 }
 
 pub fn run(a: &InfoArgs) -> Result<ExitCode> {
-    let scene = crate::load_scene(&a.scene, &a.define)?;
     // A closed stdout (`svetlo info s.xml | head -1`) is not an error.
     use std::io::Write as _;
+    // Luminaire files (IES LM-63, EULUMDAT) get their photometric summary.
+    let ext = a.scene.extension().and_then(|e| e.to_str()).map(|e| e.to_ascii_lowercase());
+    if matches!(ext.as_deref(), Some("ies" | "ldt")) {
+        let p = svetlo::photometry::load(&a.scene).map_err(|e| anyhow::Error::new(crate::SceneError(e)).context("cannot read the luminaire file"))?;
+        let _ = write!(std::io::stdout(), "{}", p.summary());
+        return Ok(ExitCode::SUCCESS);
+    }
+    let scene = crate::load_scene(&a.scene, &a.define)?;
     let _ = write!(std::io::stdout(), "{}", describe(&scene));
     Ok(ExitCode::SUCCESS)
 }

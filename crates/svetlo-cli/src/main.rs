@@ -23,6 +23,7 @@ macro_rules! tell {
 
 mod compare;
 mod info;
+mod preview;
 mod radiosity;
 mod render;
 mod signals;
@@ -55,6 +56,8 @@ pub enum Command {
     Info(info::InfoArgs),
     /// Solve a scene by radiosity: convergence report, solved mesh (PLY), progressive snapshots.
     Radiosity(radiosity::RadiosityArgs),
+    /// Render with a live browser view: compare methods, restart from the page (Ctrl-C ends).
+    Serve(preview::ServeArgs),
 }
 
 /// A mistake in what the user asked for (exit code 2), as opposed to a failure while doing it.
@@ -121,6 +124,7 @@ fn main() -> ExitCode {
         Command::Compare(a) => compare::run(&a),
         Command::Info(a) => info::run(&a),
         Command::Radiosity(a) => radiosity::run(&a),
+        Command::Serve(a) => preview::serve(&a),
     };
     match result {
         Ok(code) => code,

@@ -82,6 +82,9 @@ pub struct RenderArgs {
     /// With --strategies: the longest paths (in segments) that get their own images.
     #[arg(long, value_name = "N", default_value_t = 5, value_parser = value_parser!(u32).range(1..=32))]
     pub strategy_depth: u32,
+    /// Live preview in a browser, and tev streaming.
+    #[command(flatten)]
+    pub live: crate::preview::PreviewArgs,
 }
 
 fn parse_seconds(s: &str) -> std::result::Result<f64, String> {
@@ -350,6 +353,15 @@ pub fn render_loaded(scene: Scene, a: &RenderArgs, out: &OutputPaths, progress: 
     Ok(ExitCode::SUCCESS)
 }
 
+/// `--threads N` holds for the whole process: loading, the BVH build and tables built on
+/// first use run on rayon's global pool, which gets N threads (the render makes its own pool
+/// of N). Only the first call in a process can size it; later ones keep that size.
+pub fn limit_global_threads(threads: usize) {
+    if threads > 0 {
+        let _ = rayon::ThreadPoolBuilder::new().num_threads(threads).build_global();
+    }
+}
+
 pub fn run(a: &RenderArgs) -> Result<ExitCode> {
     // Check what can be checked before a possibly slow scene load.
     if let Some(name) = &a.integrator {
@@ -359,15 +371,21 @@ pub fn run(a: &RenderArgs) -> Result<ExitCode> {
         }
     }
     let out = OutputPaths::new(&a.scene, a.output.as_deref())?;
+    limit_global_threads(a.threads as usize);
     let scene = crate::load_scene(&a.scene, &a.define)?;
     for w in &scene.warnings {
         tell!("warning: {w}");
     }
-    let progress = Arc::new(Progress::new());
+    let live = crate::preview::Live::start(a, &scene)?;
+    let progress = live.as_ref().map_or_else(|| Arc::new(Progress::new()), |l| l.progress());
     for sig in crate::signals::install(progress.clone()) {
         tell!("warning: {sig} is ignored (as the parent process set it): it will not stop the render");
     }
-    render_loaded(scene, a, &out, &progress)
+    let outcome = render_loaded(scene, a, &out, &progress);
+    if let Some(l) = live {
+        l.finish(&outcome, &out);
+    }
+    outcome
 }
 
 #[cfg(test)]

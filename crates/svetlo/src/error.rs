@@ -14,6 +14,9 @@ pub enum Error {
     Mesh { file: PathBuf, msg: String },
     #[error("{file}: {msg}")]
     Image { file: PathBuf, msg: String },
+    /// A luminaire file (IES, EULUMDAT) or its tilt file; `line` is 1-based.
+    #[error("{file}:{line}: {msg}")]
+    Photometry { file: PathBuf, line: u32, msg: String },
     #[error("invalid setting: {0}")]
     Settings(String),
     #[error("invalid scene: {0}")]

@@ -40,6 +40,12 @@ pub fn image(data: &[u8]) {
     let _ = crate::io::image_io::decode_image(data, Path::new("fuzz.png"));
 }
 
+/// A luminaire file's bytes, through both parsers (IES LM-63 and EULUMDAT).
+pub fn photometry(data: &[u8]) {
+    let _ = crate::photometry::ies::parse(data, Path::new("fuzz.ies"));
+    let _ = crate::photometry::eulumdat::parse(data, Path::new("fuzz.ldt"));
+}
+
 /// A `--integrator` string (`name:key=value,...`).
 pub fn integrator_options(data: &[u8]) {
     if let Some(t) = text(data) {
@@ -49,4 +55,4 @@ pub fn integrator_options(data: &[u8]) {
 
 /// The targets by name, as `fuzz/corpus/<name>` and the reproducers' folders are named.
 pub const TARGETS: &[(&str, fn(&[u8]))] =
-    &[("mitsuba_xml", mitsuba_xml), ("obj", obj), ("ply", ply), ("image", image), ("integrator_options", integrator_options)];
+    &[("mitsuba_xml", mitsuba_xml), ("obj", obj), ("ply", ply), ("image", image), ("integrator_options", integrator_options), ("photometry", photometry)];

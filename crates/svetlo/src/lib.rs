@@ -20,6 +20,7 @@ pub mod limits;
 pub mod math;
 pub mod methods;
 pub mod path;
+pub mod photometry;
 pub mod radiosity;
 pub mod raster;
 pub mod sampling;

@@ -420,6 +420,11 @@ pub fn run<T: MetropolisTarget>(
             done += st.mutations;
         }
         progress.done.store(done, Ordering::Relaxed);
+        if progress.is_observed() && done > 0 {
+            film.splat_scale = (done as f64 / npix as f64) as f32;
+            film.spp_done = ((done as f64 / npix as f64).round() as u32).max(1);
+            progress.pass_done(&film);
+        }
         if let Some(t) = settings.time_limit {
             let el = start.elapsed().as_secs_f64();
             let per = el / done.max(1) as f64;
