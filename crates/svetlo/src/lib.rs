@@ -10,6 +10,8 @@ pub mod bsdf;
 pub mod camera;
 pub mod error;
 pub mod film;
+#[doc(hidden)]
+pub mod fuzzing;
 pub mod geometry;
 pub mod integrator;
 pub mod io;

@@ -149,7 +149,7 @@ pub fn serve(a: &ServeArgs) -> Result<ExitCode> {
         None => None,
     };
     render::limit_global_threads(r.threads);
-    let scene = svetlo::io::load_scene(&r.scene, &r.define).context("cannot load the scene")?;
+    let scene = crate::load_scene(&r.scene, &r.define)?;
     for w in &scene.warnings {
         eprintln!("warning: {w}");
     }
