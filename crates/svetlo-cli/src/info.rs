@@ -27,33 +27,11 @@ pub struct InfoArgs {
 const MAX_LISTED_SHAPES: usize = 40;
 
 pub fn material_kind(m: &Material) -> String {
-    let rough = |r: &Option<_>, smooth: &str, rough: &str| if r.is_some() { rough.to_string() } else { smooth.to_string() };
-    match m {
-        Material::Diffuse { .. } => "diffuse".into(),
-        Material::Conductor { roughness, .. } => rough(roughness, "conductor", "roughconductor"),
-        Material::Dielectric { roughness, .. } => rough(roughness, "dielectric", "roughdielectric"),
-        Material::ThinDielectric { .. } => "thindielectric".into(),
-        Material::Plastic { roughness, .. } => rough(roughness, "plastic", "roughplastic"),
-        Material::Phong { .. } => "phong".into(),
-        Material::BlinnPhong { .. } => "blinnphong".into(),
-        Material::CookTorrance { .. } => "cooktorrance".into(),
-        Material::OrenNayar { .. } => "roughdiffuse".into(),
-        Material::Ward { .. } => "ward".into(),
-        Material::TwoSided { front, .. } => format!("twosided({})", material_kind(front)),
-        Material::Mask { inner, .. } => format!("mask({})", material_kind(inner)),
-        Material::Null => "null".into(),
-    }
+    m.kind_name()
 }
 
 pub fn light_kind(l: &Light) -> &'static str {
-    match l {
-        Light::Area(_) => "area",
-        Light::Point { .. } => "point",
-        Light::Spot { .. } => "spot",
-        Light::Directional { .. } => "directional",
-        Light::Constant { .. } => "constant",
-        Light::EnvMap(_) => "envmap",
-    }
+    l.kind_name()
 }
 
 fn counts<I: IntoIterator<Item = String>>(items: I) -> String {
