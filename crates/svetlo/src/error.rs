@@ -18,6 +18,8 @@ pub enum Error {
     Settings(String),
     #[error("invalid scene: {0}")]
     Invalid(String),
+    #[error("light path expression: {0}")]
+    Lpe(#[from] crate::lpe::LpeError),
 }
 
 pub type Result<T> = std::result::Result<T, Error>;

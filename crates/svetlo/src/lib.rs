@@ -14,6 +14,7 @@ pub mod geometry;
 pub mod integrator;
 pub mod io;
 pub mod light;
+pub mod lpe;
 pub mod math;
 pub mod methods;
 pub mod path;
