@@ -17,6 +17,7 @@ pub mod integrator;
 pub mod io;
 pub mod light;
 pub mod limits;
+pub mod lpe;
 pub mod math;
 pub mod methods;
 pub mod path;
