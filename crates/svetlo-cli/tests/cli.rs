@@ -299,7 +299,7 @@ fn a_full_disk_leaves_no_partial_image() {
     let scene = d.join("tiny.xml");
     std::fs::write(&scene, TINY_XML).unwrap();
     let out = d.join("full.exr");
-    let cmd = format!("trap '' XFSZ; ulimit -f 128; exec \"$0\" render \"$1\" -o \"$2\" --spp 1 -D res=256");
+    let cmd = "trap '' XFSZ; ulimit -f 128; exec \"$0\" render \"$1\" -o \"$2\" --spp 1 -D res=256".to_string();
     let o = Command::new("sh").args(["-c", &cmd, env!("CARGO_BIN_EXE_svetlo"), s(&scene), s(&out)]).output().unwrap();
     let err = String::from_utf8_lossy(&o.stderr);
     assert!(!err.contains("panicked"), "{err}");

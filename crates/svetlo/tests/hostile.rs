@@ -279,7 +279,7 @@ fn headers_that_lie_are_refused_before_allocating() {
     let e = svetlo::io::mesh_files::load_ply_bytes(ply, Path::new("big.ply"), false).err().expect("refused").to_string();
     assert!(e.contains("big.ply") && e.contains("announces"), "{e}");
     // A PFM claiming 100 000 x 100 000 pixels: over the budget (or the bytes present).
-    let e = svetlo::io::image_io::decode_image(b"PF\n100000 100000\n-1\n\0\0\0\0", Path::new("big.pfm")).err().expect("refused").to_string();
+    let e = svetlo::io::image_io::decode_image(b"PF\n100000 100000\n-1\n\0\0\0\0", Path::new("big.pfm")).expect_err("refused").to_string();
     assert!(e.contains("big.pfm"), "{e}");
     // An EXR whose header claims 100 000 x 100 000: a real header, its size fields rewritten.
     let img = svetlo::film::Image::new(2, 2, vec![Rgb::splat(0.5); 4]);
@@ -290,7 +290,7 @@ fn headers_that_lie_are_refused_before_allocating() {
         bytes[at + 8..at + 12].copy_from_slice(&99_999i32.to_le_bytes());
         bytes[at + 12..at + 16].copy_from_slice(&99_999i32.to_le_bytes());
     }
-    let e = svetlo::io::image_io::decode_image(&bytes, Path::new("big.exr")).err().expect("refused");
+    let e = svetlo::io::image_io::decode_image(&bytes, Path::new("big.exr")).expect_err("refused");
     assert!(matches!(e, Error::TooLarge { .. }), "the memory check was bypassed: {e}");
     assert!(e.to_string().contains("100000x100000 EXR"), "{e}");
 }

@@ -148,7 +148,7 @@ pub fn serve(a: &ServeArgs) -> Result<ExitCode> {
         Some(p) => Some(svetlo::io::image_io::read_image(p).with_context(|| format!("cannot read the reference '{}'", p.display()))?),
         None => None,
     };
-    render::limit_global_threads(r.threads);
+    render::limit_global_threads(r.threads as usize);
     let scene = crate::load_scene(&r.scene, &r.define)?;
     for w in &scene.warnings {
         eprintln!("warning: {w}");
