@@ -36,16 +36,23 @@ fn serve(name: &str, extra: &[&str]) -> Served {
     let mut child = Command::new(env!("CARGO_BIN_EXE_svetlo")).args(&args).stdout(Stdio::null()).stderr(Stdio::piped()).spawn().expect("svetlo runs");
     let mut err = BufReader::new(child.stderr.take().unwrap());
     let mut line = String::new();
-    loop {
+    let url = loop {
         line.clear();
-        assert!(err.read_line(&mut line).unwrap() > 0, "svetlo serve exited without printing its address");
-        if let Some(url) = line.trim().strip_prefix("preview: http://") {
-            let (addr, token) = url.split_once("/?token=").expect("address with token");
-            // Keep draining stderr so that the server never blocks on a full pipe.
-            std::thread::spawn(move || std::io::copy(&mut err, &mut std::io::sink()));
-            return Served { child, addr: addr.parse().unwrap(), token: token.to_string(), _dir: dir };
+        if err.read_line(&mut line).unwrap_or(0) == 0 {
+            break None;
         }
-    }
+        if let Some(url) = line.trim().strip_prefix("preview: http://") {
+            break Some(url.to_string());
+        }
+    };
+    // From here the child is killed and reaped when `Served` drops, on every path.
+    let mut served = Served { child, addr: "127.0.0.1:1".parse().unwrap(), token: String::new(), _dir: dir };
+    let url = url.expect("svetlo serve exited without printing its address");
+    let (addr, token) = url.split_once("/?token=").expect("address with token");
+    (served.addr, served.token) = (addr.parse().unwrap(), token.to_string());
+    // Keep draining stderr so that the server never blocks on a full pipe.
+    std::thread::spawn(move || std::io::copy(&mut err, &mut std::io::sink()));
+    served
 }
 
 fn connect(addr: SocketAddr) -> TcpStream {
@@ -281,4 +288,55 @@ fn bad_frames_close_only_their_connection_and_two_pages_watch() {
     // Closing politely gets a close back.
     a.0.write_all(&masked(0x88, &[3, 232])).unwrap();
     assert_eq!(a.close_code(), 1000);
+}
+
+/// `svetlo render --tev`: a fake tev gets the image created once (32x32, R G B), then
+/// updates that stay inside it; the render ends normally and tev's socket is closed.
+#[test]
+fn render_streams_to_a_fake_tev() {
+    let listener = std::net::TcpListener::bind("127.0.0.1:0").unwrap();
+    let port = listener.local_addr().unwrap().port();
+    let fake = std::thread::spawn(move || {
+        let (mut s, _) = listener.accept().unwrap();
+        s.set_read_timeout(Some(TIMEOUT)).unwrap();
+        let mut all = Vec::new();
+        s.read_to_end(&mut all).unwrap();
+        all
+    });
+    let dir = std::env::temp_dir().join(format!("svetlo-preview-{}-tev", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    let scene = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../../scenes/cornell-box.xml");
+    let o = Command::new(env!("CARGO_BIN_EXE_svetlo"))
+        .args(["render", scene.to_str().unwrap(), "--width", "32", "--height", "32", "--spp", "8", "--max-depth", "3"])
+        .args(["-o", dir.join("t.exr").to_str().unwrap(), "--tev", &format!("127.0.0.1:{port}")])
+        .output()
+        .unwrap();
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let data = fake.join().unwrap();
+    let (mut at, mut kinds) = (0usize, Vec::new());
+    while at < data.len() {
+        let len = u32::from_le_bytes(data[at..at + 4].try_into().unwrap()) as usize;
+        assert!(len >= 5 && at + len <= data.len(), "packet length {len} at {at}");
+        let body = &data[at + 5..at + len];
+        let name_end = 1 + body[1..].iter().position(|&b| b == 0).unwrap();
+        assert_eq!(&body[1..name_end], b"svetlo cornell-box path");
+        let ints = |i: usize| i32::from_le_bytes(body[name_end + 1 + 4 * i..name_end + 5 + 4 * i].try_into().unwrap());
+        match data[at + 4] {
+            4 => assert_eq!((ints(0), ints(1), ints(2)), (32, 32, 3), "CreateImage 32x32 RGB"),
+            6 => {
+                // After the count and "R\0G\0B\0": x, y, w, h, then offsets and strides.
+                let rect = &body[name_end + 1 + 4 + 6..];
+                let r: Vec<i32> = (0..4).map(|i| i32::from_le_bytes(rect[4 * i..4 * i + 4].try_into().unwrap())).collect();
+                assert_eq!(r, [0, 0, 32, 32], "one tile covers the 32x32 image");
+                assert_eq!(rect.len(), 16 + 48 + 32 * 32 * 12, "header and the tile's floats");
+            }
+            k => panic!("packet type {k}"),
+        }
+        kinds.push(data[at + 4]);
+        at += len;
+    }
+    assert_eq!(kinds.first(), Some(&4), "created first");
+    assert_eq!(kinds.iter().filter(|&&k| k == 4).count(), 1, "created once");
+    assert!(kinds.iter().filter(|&&k| k == 6).count() >= 1, "{kinds:?}");
+    let _ = std::fs::remove_dir_all(&dir);
 }

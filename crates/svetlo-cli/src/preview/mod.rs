@@ -87,8 +87,11 @@ impl Live {
 
     /// The render's progress: observed by the preview, cancelled by its stop button.
     pub fn progress(&self) -> Arc<Progress> {
-        let run = self.session.lock().run;
-        let progress = Arc::new(Progress::observed(self.session.observer(run, 0)));
+        let (run, spp) = {
+            let s = self.session.lock();
+            (s.run, s.config.spp)
+        };
+        let progress = Arc::new(Progress::observed(self.session.observer(run, 0, spp)));
         self.session.start_slot(run, 0, progress.clone(), None);
         progress
     }
@@ -145,7 +148,8 @@ pub fn serve(a: &ServeArgs) -> Result<ExitCode> {
         Some(p) => Some(svetlo::io::image_io::read_image(p).with_context(|| format!("cannot read the reference '{}'", p.display()))?),
         None => None,
     };
-    let scene = svetlo::io::load_scene(&r.scene, &r.define).context("cannot load the scene")?;
+    render::limit_global_threads(r.threads as usize);
+    let scene = crate::load_scene(&r.scene, &r.define)?;
     for w in &scene.warnings {
         eprintln!("warning: {w}");
     }
@@ -179,7 +183,7 @@ pub fn serve(a: &ServeArgs) -> Result<ExitCode> {
             let mut settings = job.settings.clone();
             settings.spp = config.spp;
             settings.max_depth = config.max_depth;
-            let progress = Arc::new(Progress::observed(session.observer(run, i)));
+            let progress = Arc::new(Progress::observed(session.observer(run, i, settings.spp)));
             session.start_slot(run, i, progress.clone(), settings.time_limit);
             let result = svetlo::methods::by_name(m).and_then(|integ| integ.render(&job.scene, &settings, &progress));
             match result {

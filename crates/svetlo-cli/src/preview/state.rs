@@ -12,6 +12,9 @@ use svetlo::integrator::Progress;
 /// and in [`Frame::develop`].
 pub const LAYERS: &[&str] = &["color", "variance"];
 
+/// Largest share of the render's time the observer may spend developing films.
+pub const WATCH_BUDGET: f64 = 0.02;
+
 /// Most points kept per error curve (halved by dropping every other one when reached).
 const MAX_CURVE: usize = 2048;
 
@@ -244,10 +247,24 @@ impl Session {
     }
 
     /// The pass observer of method `slot` of `run`: develops the film (on the render thread:
-    /// two passes over the pixels), measures its error and publishes it.
-    pub fn observer(self: &Arc<Self>, run: u64, slot: usize) -> impl Fn(&Film) + Send + Sync + 'static {
+    /// two passes over the pixels), measures its error and publishes it. Passes that come
+    /// sooner after the last development than [`WATCH_BUDGET`] allows are skipped (only on
+    /// large films: at 512² a development takes milliseconds), except the one that completes
+    /// `planned_spp`.
+    pub fn observer(self: &Arc<Self>, run: u64, slot: usize, planned_spp: u32) -> impl Fn(&Film) + Send + Sync + 'static {
         let session = self.clone();
-        move |film: &Film| session.publish(run, slot, Frame::develop(film))
+        let last: Mutex<Option<(Instant, Duration)>> = Mutex::new(None);
+        move |film: &Film| {
+            let start = Instant::now();
+            let previous = *last.lock().unwrap_or_else(|e| e.into_inner());
+            if let Some((at, cost)) = previous {
+                if film.spp_done != planned_spp && start.duration_since(at).as_secs_f64() * WATCH_BUDGET < cost.as_secs_f64() {
+                    return;
+                }
+            }
+            session.publish(run, slot, Frame::develop(film));
+            *last.lock().unwrap_or_else(|e| e.into_inner()) = Some((start, start.elapsed()));
+        }
     }
 
     /// A new frame for method `slot` of `run`, with its point on the error curve.
@@ -540,6 +557,33 @@ mod tests {
         assert!((e - 0.01 / 1.01).abs() < 1e-9, "{e}");
         assert_eq!(estimated_rel_mse(&c, &v, 1), None, "one sample has no variance");
         assert_eq!(estimated_rel_mse(&c, &Image::new(1, 1, vec![Rgb::BLACK]), 4), None, "lit but no variance kept");
+    }
+
+    /// A run as the page sees it: queued, running with an error curve, then done.
+    #[test]
+    fn session_states_reach_the_status() {
+        let info = Info { mode: Mode::Serve, scene: "s".into(), reference: None };
+        let s = Session::new(info, Config { methods: vec!["path".into(), "bdpt".into()], spp: 4, max_depth: 3 });
+        let run = s.begin_run(Config { methods: vec!["path".into()], spp: 4, max_depth: 3 });
+        assert!(status_json(&s.lock()).contains("\"state\":\"queued\""));
+        let p = Arc::new(Progress::new());
+        s.start_slot(run, 0, p.clone(), None);
+        let mut film = Film::new(2, 1, svetlo::film::Filter::Box);
+        for (i, v) in [1.0f32, 1.2, 0.8, 1.1].iter().enumerate() {
+            film.add_sample(glam::Vec2::new(0.5 + (i % 2) as f32, 0.5), Rgb::splat(*v));
+        }
+        film.spp_done = 2;
+        std::thread::sleep(Duration::from_millis(2));
+        s.publish(run, 0, Frame::develop(&film));
+        s.publish(run + 1, 0, Frame::develop(&film)); // a stale run: ignored
+        let st = status_json(&s.lock());
+        assert!(st.contains("\"state\":\"running\"") && st.contains("\"spp\":2") && st.contains("\"curve\":[["), "{st}");
+        assert_eq!(s.lock().slots[0].frame_version, 1);
+        s.stop();
+        assert!(p.cancelled(), "stop cancels the running render");
+        s.finish_slot(run, 0, Some(&film), vec!["a.exr".into()], None);
+        let st = status_json(&s.lock());
+        assert!(st.contains("\"state\":\"stopped\"") && st.contains("\"written\":[\"a.exr\"]") && st.contains("\"running\":false"), "{st}");
     }
 
     #[test]

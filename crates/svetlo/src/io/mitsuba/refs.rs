@@ -9,6 +9,9 @@ use crate::error::Result;
 use crate::limits::{MAX_PLUGIN_DEPTH, MAX_PLUGIN_INSTANCES};
 use std::collections::HashMap;
 
+/// A node of the depth-first walk: its id, its edges, and the next edge to follow.
+type Walk<'a> = (&'a str, Vec<(&'a str, &'a Node)>, usize);
+
 /// The newest scene format this loader reads.
 const MAX_VERSION_MAJOR: u32 = 3;
 
@@ -45,7 +48,7 @@ pub(super) fn check_cycles(ids: &HashMap<&str, &Node>) -> Result<()> {
             continue;
         }
         // (id, its edges, the next edge to follow)
-        let mut stack: Vec<(&str, Vec<(&str, &Node)>, usize)> = Vec::new();
+        let mut stack: Vec<Walk> = Vec::new();
         let mut out = Vec::new();
         edges(ids[root], &mut out);
         mark.insert(root, Mark::Open);
