@@ -150,6 +150,8 @@ pub fn render<'py>(
     let o = Overrides { spp, time, seed, max_depth, width, height, filter, threads, sampler, rr_depth, hide_emitters };
     let settings = settings(&scene.scene, &o)?;
     let the_scene = resized(&scene.scene, o.width, o.height)?;
+    // The CLI's check: a film over the memory budget is refused before any allocation.
+    svetlo::limits::check_film(the_scene.camera.width, the_scene.camera.height).map_err(to_py)?;
     let progress = Progress::new();
     let start = Instant::now();
     // The worker wakes the waiting thread when it is done.

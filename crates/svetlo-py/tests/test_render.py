@@ -208,6 +208,11 @@ def test_bad_arguments(cbox_path):
         svetlo.render(scene, time=float("nan"))
     with pytest.raises(svetlo.OptionError, match="max_depth"):
         svetlo.render(scene, max_depth=-3)
+    with pytest.raises(svetlo.OptionError, match="threads"):
+        svetlo.render(scene, threads=5000)
+    # A film over the memory budget is refused before anything is allocated.
+    with pytest.raises(svetlo.SvetloError, match="memory"):
+        svetlo.render(scene, width=65536, height=65536)
     with pytest.raises(svetlo.OptionError, match="filter"):
         svetlo.render(scene, filter="lanczos")
     with pytest.raises(svetlo.OptionError, match="unknown integrator 'nope'"):

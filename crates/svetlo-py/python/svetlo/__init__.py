@@ -242,8 +242,8 @@ def render_result(
         raise OptionError(f"seed must be a non-negative integer, got {seed}")
     if spp is not None and spp < 1:
         raise OptionError(f"spp must be at least 1, got {spp}")
-    if threads < 0:
-        raise OptionError(f"threads must be >= 0 (0: all cores), got {threads}")
+    if not 0 <= threads <= 1024:
+        raise OptionError(f"threads must be in 0..=1024 (0: all cores), got {threads}")
     if time is not None:
         if isinstance(time, bool) or not isinstance(time, (int, float, np.integer, np.floating)):
             raise TypeError(f"render: time must be a number of seconds, got {type(time).__name__}")
@@ -341,7 +341,7 @@ def render(
             directly, 2 direct light, -1 unbounded).
         width, height: image size in pixels; one alone keeps the scene's aspect ratio.
         filter: pixel reconstruction filter, "box", "tent" (radius 1) or "gaussian" (sigma 0.5).
-        threads: worker threads, 0 for all cores.
+        threads: worker threads, 0 for all cores (at most 1024).
         sampler: "independent" or "sobol".
         rr_depth: depth at which Russian roulette starts.
         hide_emitters: do not show emitters seen directly by the camera.
