@@ -25,7 +25,7 @@ pub fn mitsuba_xml(data: &[u8]) {
 /// An OBJ file's bytes, with and without the texture-coordinate flip.
 pub fn obj(data: &[u8]) {
     crate::limits::set_max_memory(FUZZ_MEMORY);
-    let _ = crate::io::mesh_files::load_obj_bytes(data, Path::new("fuzz.obj"), data.len() % 2 == 0);
+    let _ = crate::io::mesh_files::load_obj_bytes(data, Path::new("fuzz.obj"), data.len().is_multiple_of(2));
 }
 
 /// A PLY file's bytes.
@@ -53,6 +53,9 @@ pub fn integrator_options(data: &[u8]) {
     }
 }
 
+/// A target's entry point.
+pub type Entry = fn(&[u8]);
+
 /// The targets by name, as `fuzz/corpus/<name>` and the reproducers' folders are named.
-pub const TARGETS: &[(&str, fn(&[u8]))] =
+pub const TARGETS: &[(&str, Entry)] =
     &[("mitsuba_xml", mitsuba_xml), ("obj", obj), ("ply", ply), ("image", image), ("integrator_options", integrator_options), ("photometry", photometry)];

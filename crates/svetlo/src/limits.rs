@@ -70,7 +70,7 @@ pub fn parse_size(s: &str) -> Option<u64> {
         _ => return None,
     };
     let bytes = v * mult as f64;
-    (bytes.is_finite() && bytes >= 1.0 && bytes < 1.8e19).then_some(bytes as u64)
+    (1.0..1.8e19).contains(&bytes).then_some(bytes as u64)
 }
 
 /// A size for messages: 40000000000 -> "37.3 GiB".
@@ -96,7 +96,7 @@ pub fn check(what: impl Into<String>, bytes: u64) -> Result<()> {
 
 /// `count` items of `size` bytes each, checked (an overflowing product is over budget).
 pub fn check_items(what: impl Into<String>, count: u64, size: u64) -> Result<()> {
-    check(what, count.checked_mul(size).unwrap_or(u64::MAX))
+    check(what, count.saturating_mul(size))
 }
 
 /// The film of a `width` x `height` render.

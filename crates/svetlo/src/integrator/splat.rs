@@ -289,6 +289,7 @@ mod tests {
         let scene = b.build().unwrap();
         let settings = RenderSettings { spp: 6, max_depth: 3, ..Default::default() };
         let est = crate::integrator::bdpt::test_estimator(&scene, &settings);
+        #[allow(clippy::type_complexity)]
         let seen: Arc<Mutex<Vec<(u32, Vec<Rgb>)>>> = Arc::default();
         let log = seen.clone();
         let progress = Progress::observed(move |f: &Film| log.lock().unwrap().push((f.spp_done, f.image().data)));

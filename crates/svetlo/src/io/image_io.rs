@@ -288,10 +288,10 @@ pub fn read_image(path: &Path) -> Result<Image> {
 /// without a magic number, gives the extension.
 pub fn decode_image(bytes: &[u8], path: &Path) -> Result<Image> {
     if bytes.starts_with(&[0x76, 0x2f, 0x31, 0x01]) {
-        return decode_exr(&bytes, path);
+        return decode_exr(bytes, path);
     }
     if bytes.starts_with(b"PF") || bytes.starts_with(b"Pf") {
-        return decode_pfm(&bytes, path);
+        return decode_pfm(bytes, path);
     }
     match ext(path).as_str() {
         "exr" => Err(img_err(path, "not an OpenEXR file (bad magic number)")),

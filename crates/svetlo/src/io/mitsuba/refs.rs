@@ -28,6 +28,9 @@ fn edges<'a>(n: &'a Node, out: &mut Vec<(&'a str, &'a Node)>) {
     }
 }
 
+/// One id on the search stack: the id, the ids it uses (with where), the next one to follow.
+type Frame<'a> = (&'a str, Vec<(&'a str, &'a Node)>, usize);
+
 /// Fail on a cycle of references (a `twosided` whose nested BSDF refers back to it, a
 /// shapegroup that instances itself), naming the chain.
 pub(super) fn check_cycles(ids: &HashMap<&str, &Node>) -> Result<()> {
@@ -45,7 +48,7 @@ pub(super) fn check_cycles(ids: &HashMap<&str, &Node>) -> Result<()> {
             continue;
         }
         // (id, its edges, the next edge to follow)
-        let mut stack: Vec<(&str, Vec<(&str, &Node)>, usize)> = Vec::new();
+        let mut stack: Vec<Frame> = Vec::new();
         let mut out = Vec::new();
         edges(ids[root], &mut out);
         mark.insert(root, Mark::Open);
