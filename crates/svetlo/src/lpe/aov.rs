@@ -74,6 +74,21 @@ impl AovSet {
         Ok(AovSet { names, lpes, beauty_filter, labels, shape_labels: Vec::new() })
     }
 
+    /// Compile `name = expression` pairs and the beauty's optional restriction; an error
+    /// names the AOV whose expression is wrong.
+    pub fn compile(aovs: &[(String, String)], beauty: Option<&str>) -> Result<AovSet, LpeError> {
+        let mut list = Vec::new();
+        for (n, e) in aovs {
+            let l = Lpe::new(e).map_err(|mut err| {
+                err.msg = format!("AOV '{n}': {}", err.msg);
+                err
+            })?;
+            list.push((n.clone(), l));
+        }
+        let b = beauty.map(Lpe::new).transpose()?;
+        AovSet::new(list, b)
+    }
+
     /// Resolve labels against the scene's shape ids; returns a warning per label that names
     /// nothing and per expression that can match no path.
     pub fn bind(&mut self, scene: &Scene) -> Vec<String> {
@@ -118,6 +133,27 @@ impl AovSet {
     #[inline]
     pub fn light_event(&self, shape: Option<u32>) -> Event {
         Event { labels: shape.map_or(0, |s| self.shape_labels(s)), ..Event::LIGHT }
+    }
+
+    /// The event of reaching emitter `light` (by sampling it or by hitting it): B for the
+    /// environment (what escaped rays see), L with its shape's labels otherwise.
+    #[inline]
+    pub fn emitter_event(&self, light: &crate::light::Light) -> Event {
+        use crate::light::Light;
+        match light {
+            Light::Area(a) => self.light_event(Some(a.shape)),
+            Light::Constant { .. } | Light::EnvMap(_) => Event::BACKGROUND,
+            _ => Event::LIGHT,
+        }
+    }
+
+    /// The event of scattering at a surface of shape `shape` with BSDF lobes `flags`:
+    /// `lobe` the lobe sampled (None: an evaluated direction, next-event estimation or a
+    /// connection), `transmission` whether the directions lie on opposite sides.
+    #[inline]
+    pub fn scatter_event(&self, shape: u32, flags: crate::bsdf::LobeFlags, lobe: Option<crate::bsdf::LobeFlags>, transmission: bool) -> Event {
+        let singular = lobe.is_some_and(|l| l.contains(crate::bsdf::LobeFlags::SPECULAR));
+        Event::scatter(flags, singular, transmission, self.shape_labels(shape))
     }
 
     #[inline]
