@@ -156,6 +156,35 @@ impl AovSet {
         Event::scatter(flags, singular, transmission, self.shape_labels(shape))
     }
 
+    /// The event of a path endpoint on an emitter: a light subpath's first vertex, or a
+    /// camera subpath that ended on an emitter or escaped (no light: the environment).
+    #[inline]
+    pub fn endpoint_event(&self, scene: &Scene, v: &crate::path::Vertex) -> Event {
+        match v.light {
+            Some(li) => self.emitter_event(&scene.lights[li as usize]),
+            None => Event::BACKGROUND,
+        }
+    }
+
+    /// The event of scattering at subpath vertex `v` as its walk sampled it; None for a
+    /// null interaction (a mask let the path through: not a vertex of the expression).
+    #[inline]
+    pub fn sampled_event(&self, v: &crate::path::Vertex) -> Option<Event> {
+        if v.event.kind == crate::path::EventKind::Null {
+            return None;
+        }
+        let flags = v.bsdf.as_ref().map_or(crate::bsdf::LobeFlags::NONE, |b| b.flags());
+        Some(Event::scatter(flags, v.delta, v.event.transmission, self.shape_labels(v.shape)))
+    }
+
+    /// The event of scattering at subpath vertex `v` toward point `q` (a connection).
+    #[inline]
+    pub fn connected_event(&self, v: &crate::path::Vertex, q: glam::Vec3) -> Event {
+        let flags = v.bsdf.as_ref().map_or(crate::bsdf::LobeFlags::NONE, |b| b.flags());
+        let through = (v.wo.dot(v.ng) > 0.0) != ((q - v.p).dot(v.ng) > 0.0);
+        Event::scatter(flags, false, through, self.shape_labels(v.shape))
+    }
+
     #[inline]
     fn bit(&self, i: usize) -> LayerMask {
         if i < self.names.len() {
@@ -227,6 +256,18 @@ pub struct LightTracker<'a> {
 }
 
 impl<'a> LightTracker<'a> {
+    /// A subpath whose events so far are `path`'s first `n` vertices as sampled (vertex 0 the
+    /// light endpoint).
+    pub fn along(set: &'a AovSet, scene: &Scene, path: &[crate::path::Vertex], n: usize) -> Self {
+        let mut t = LightTracker::light(set, set.endpoint_event(scene, &path[0]));
+        for v in &path[1..n] {
+            if let Some(e) = set.sampled_event(v) {
+                t.push(e);
+            }
+        }
+        t
+    }
+
     /// A subpath that starts at a light with event `e` (L or B).
     #[inline]
     pub fn light(set: &'a AovSet, e: Event) -> Self {
