@@ -127,6 +127,28 @@ pub struct TileJob<'a> {
     pub n: u32,
 }
 
+/// Pixel samples of one pass at most (without a time limit): bounds the work a cancel drops.
+const PASS_PIXEL_SAMPLES: u64 = 1 << 22;
+
+/// Samples per pixel of the next pass after one of `last`. Passes are summed into the film
+/// one after another, so their sizes fix the float summation order: without a time limit
+/// they double (1, 2, 4, ... up to 64 and about `PASS_PIXEL_SAMPLES`) whatever the timing,
+/// which keeps the image independent of the machine's speed and the thread count. With one
+/// (`(limit, elapsed, spp_done)` in seconds) they aim at half-second passes that end at the limit.
+fn next_pass_spp(last: u32, pixels: u64, timed: Option<(f64, f64, u32)>) -> u32 {
+    match timed {
+        None => (last.saturating_mul(2)).min((PASS_PIXEL_SAMPLES / pixels.max(1)).clamp(1, 64) as u32),
+        Some((limit, elapsed, done)) => {
+            let per_spp = elapsed / done.max(1) as f64;
+            if per_spp > 0.0 {
+                ((0.5 / per_spp) as u32).clamp(1, 64).min((((limit - elapsed) / per_spp) as u32).max(1))
+            } else {
+                64
+            }
+        }
+    }
+}
+
 /// The film (splats scaled by the spp done) and the extra channels (already divided by it).
 pub struct SplatRender {
     pub film: Film,
@@ -237,15 +259,10 @@ pub(super) fn render_chunked<E: SplatEstimator>(
         }
         spp_done += n;
         film.spp_done = spp_done;
-        let elapsed = start.elapsed().as_secs_f64();
-        let per_spp = elapsed / spp_done as f64;
-        pass_spp = if per_spp > 0.0 { ((0.5 / per_spp) as u32).clamp(1, 64) } else { 64 };
-        if let Some(t) = settings.time_limit {
-            let left = t.as_secs_f64() - elapsed;
-            if per_spp > 0.0 {
-                pass_spp = pass_spp.min(((left / per_spp) as u32).max(1));
-            }
-        }
+        // The splats' scale so far, so that an observer sees a developed image.
+        film.splat_scale = spp_done as f32;
+        progress.pass_done(&film);
+        pass_spp = next_pass_spp(pass_spp, w as u64 * h as u64, settings.time_limit.map(|t| (t.as_secs_f64(), start.elapsed().as_secs_f64(), spp_done)));
     }
     // Each pixel sample traced one light path: N = W H spp paths, and the camera's
     // importance is normalised so that splats scale by W H / N = 1 / spp.
@@ -272,6 +289,21 @@ mod tests {
 
     /// Splitting the tiles into chunks changes neither the image nor the channels.
     #[test]
+    fn pass_sizes_without_time_limit_depend_on_nothing_but_the_film() {
+        // The image is the sum of its passes in order: their sizes must not follow timing.
+        let mut seq = vec![1u32];
+        while seq.len() < 9 {
+            seq.push(next_pass_spp(*seq.last().unwrap_or(&1), 256 * 256, None));
+        }
+        assert_eq!(seq, [1, 2, 4, 8, 16, 32, 64, 64, 64]);
+        assert_eq!(next_pass_spp(8, 1920 * 1080, None), 2, "large films take small passes");
+        assert_eq!(next_pass_spp(8, 8000 * 8000, None), 1);
+        // With a time limit the passes end near it.
+        assert_eq!(next_pass_spp(1, 100, Some((10.0, 9.9, 100))), 1);
+        assert_eq!(next_pass_spp(1, 100, Some((10.0, 1.0, 100))), 50);
+    }
+
+    #[test]
     fn chunking_does_not_change_the_image() {
         let mut b = SceneBuilder::new();
         let m = b.add_material(Material::Diffuse { reflectance: Texture::Constant(Rgb::splat(0.6)) });
@@ -295,6 +327,43 @@ mod tests {
         assert!(big.film.image().mean().max_component() > 0.0);
         assert_eq!(big.film.image().data, small.film.image().data);
         assert_eq!(big.channels, small.channels);
+    }
+
+    /// An observer sees every pass, in order, with developed splats; the last film it sees is
+    /// the render's result; watching changes nothing in the image.
+    #[test]
+    fn observer_sees_each_pass_and_changes_nothing() {
+        use std::sync::{Arc, Mutex};
+        let mut b = SceneBuilder::new();
+        let m = b.add_material(Material::Diffuse { reflectance: Texture::Constant(Rgb::splat(0.6)) });
+        b.add_shape(Geometry::Sphere(Sphere { center: Vec3::new(0.0, 0.0, 4.0), radius: 1.5, flip_normals: false }), m, None, "ball").unwrap();
+        b.add_light(Light::Point { position: Vec3::new(1.0, 2.0, 0.0), intensity: Rgb::splat(10.0) });
+        b.set_camera(Camera {
+            to_world: Mat4::IDENTITY,
+            projection: Projection::Perspective { fov_x_deg: 50.0, aperture_radius: 0.0, focus_distance: 1.0 },
+            width: 24,
+            height: 20,
+            near_clip: 0.01,
+            far_clip: 100.0,
+            shutter_open: 0.0,
+            shutter_close: 0.0,
+        });
+        let scene = b.build().unwrap();
+        let settings = RenderSettings { spp: 6, max_depth: 3, ..Default::default() };
+        let est = crate::integrator::bdpt::test_estimator(&scene, &settings);
+        type Passes = Mutex<Vec<(u32, Vec<Rgb>)>>;
+        let seen: Arc<Passes> = Arc::default();
+        let log = seen.clone();
+        let progress = Progress::observed(move |f: &Film| log.lock().unwrap().push((f.spp_done, f.image().data)));
+        let watched = render_chunked(&scene, &settings, &progress, &est, 0, u64::MAX).unwrap();
+        let plain = render_chunked(&scene, &settings, &Progress::new(), &est, 0, u64::MAX).unwrap();
+        assert_eq!(watched.film.image().data, plain.film.image().data);
+        let seen = seen.lock().unwrap();
+        assert!(!seen.is_empty());
+        assert!(seen.windows(2).all(|w| w[0].0 < w[1].0), "passes in order");
+        let (spp, last) = seen.last().unwrap();
+        assert_eq!(*spp, 6);
+        assert_eq!(*last, plain.film.image().data, "the last pass shown is the result, splats scaled");
     }
 
     /// Counts the pixel samples it is asked for, per pixel.
