@@ -50,6 +50,7 @@ pub fn light_kind(l: &Light) -> &'static str {
         Light::Area(_) => "area",
         Light::Point { .. } => "point",
         Light::Spot { .. } => "spot",
+        Light::Projector(_) => "projector",
         Light::Directional { .. } => "directional",
         Light::Constant { .. } => "constant",
         Light::EnvMap(_) => "envmap",
