@@ -105,7 +105,7 @@ mod tests {
     #[test]
     fn intensity_matches_mitsuba_constant() {
         let p = Projector::new(&look_down(), 90.0, 1.0, Texture::from(1.0), 1.0).unwrap();
-        for (x, want) in [(Vec3::ZERO, 3.14159), (Vec3::new(0.1, 0.05, 0.0), 3.16117), (Vec3::new(0.3, 0.0, 0.5), 14.6548)] {
+        for (x, want) in [(Vec3::ZERO, PI), (Vec3::new(0.1, 0.05, 0.0), 3.16117), (Vec3::new(0.3, 0.0, 0.5), 14.6548)] {
             let d = x - p.position;
             let w = p.intensity(d.normalize()) / d.length_squared();
             assert!((w.r - want).abs() < 1e-4 * want, "{x}: {w:?} vs {want}");
