@@ -104,11 +104,11 @@ fn shared_scenes_load_or_fail_clearly() {
         (format!("{t}orthographic_sensor/test_orthographic_path.xml"), Ok(1, 1, 200, 120)),
         (format!("{t}participating_media/test_homo_area_light_volpath.xml"), Err("participating media")),
         (format!("{t}participating_media/test_surf_area_light_volpath.xml"), Ok(4, 2, 48, 48)),
-        (format!("{t}projector/test_projector_constant_direct.xml"), Ok(1, 0, 48, 48)),
-        (format!("{t}projector/test_projector_textured_direct.xml"), Ok(1, 0, 48, 48)),
+        (format!("{t}projector/test_projector_constant_direct.xml"), Ok(1, 1, 48, 48)),
+        (format!("{t}projector/test_projector_textured_direct.xml"), Ok(1, 1, 48, 48)),
         (format!("{t}spot_light/test_spot_direct.xml"), Ok(1, 2, 48, 48)),
         (format!("{t}texture_interp/test_texture_interp_direct.xml"), Ok(6, 1, 128, 128)),
-        (format!("{t}various_emitters/test_various_emitters_ptracer.xml"), Ok(6, 7, 512, 64)),
+        (format!("{t}various_emitters/test_various_emitters_ptracer.xml"), Ok(6, 8, 512, 64)),
         (format!("{t}various_shapes/test_various_shapes_path.xml"), Ok(9, 1, 480, 480)),
         ("viewfactors/ovf-test-xmls/par-plates/par-plate-001.xml".into(), Err("not a Mitsuba scene")),
     ];
@@ -434,10 +434,10 @@ fn bad_meshes_give_typed_errors() {
     write(&d, "flat.obj", "v 0 0 0\nv 1 0 0\nv 2 0 0\nf 1 2 3\n");
     let e = load_str(&d, &shape("flat.obj")).err_only();
     assert!(matches!(&e, Error::Invalid(m) if m.contains("obj#1") && m.contains("non-zero area")), "{e:?}");
-    // A serialized mesh without a twin.
+    // A file that is not a serialized mesh: an error naming it.
     write(&d, "lonely.serialized", "not really");
     let e = load_str(&d, r#"<shape type="serialized"><string name="filename" value="lonely.serialized"/></shape>"#).err_only();
-    assert_at(&e, "scene.xml", 4, "no .obj/.ply twin");
+    assert!(matches!(&e, Error::Mesh { file, msg } if file.ends_with("lonely.serialized") && msg.contains("not a Mitsuba serialized mesh")), "{e:?}");
     // A good OBJ with a quad: fan-triangulated, normals computed, v flipped.
     write(&d, "quad.obj", "v 0 0 0\nv 1 0 0\nv 1 1 0\nv 0 1 0\nvt 0 0\nvt 1 0\nvt 1 1\nvt 0 1\nf 1/1 2/2 3/3 4/4\n");
     let s = load_str(&d, &format!("{}<emitter type=\"constant\"/>", shape("quad.obj"))).unwrap();

@@ -302,6 +302,7 @@ impl Vertex {
                 }
             }
             l @ Light::Spot { .. } => l.spot_intensity(w),
+            Light::Projector(pr) => pr.intensity(w),
             Light::Point { .. } => self.le,
             _ => Rgb::BLACK,
         }
