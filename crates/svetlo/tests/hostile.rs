@@ -225,3 +225,81 @@ fn films_over_the_memory_budget_are_refused_before_allocating() {
     assert!(svetlo::limits::check_film(4096, 4096).is_ok());
     assert!(matches!(svetlo::limits::check_film(65536, 65536), Err(Error::TooLarge { .. })));
 }
+
+#[test]
+fn photon_mapping_is_deterministic_across_runs_and_thread_counts() {
+    use svetlo::integrator::{Progress, RenderSettings};
+    let text = r#"<scene version="3.0.0">
+<sensor type="perspective"><transform name="to_world"><lookat origin="0, 1, -4" target="0, 0, 0" up="0, 1, 0"/></transform>
+<film type="hdrfilm"><integer name="width" value="24"/><integer name="height" value="16"/></film>
+<sampler type="independent"><integer name="sample_count" value="2"/></sampler></sensor>
+<emitter type="point"><point name="position" value="0, 3, 0"/><rgb name="intensity" value="20"/></emitter>
+<shape type="sphere"><bsdf type="dielectric"/></shape>
+<shape type="rectangle"><transform name="to_world"><rotate x="1" angle="-90"/><scale value="4"/><translate y="-1"/></transform><bsdf type="diffuse"/></shape>
+</scene>"#;
+    let render = |threads: usize| {
+        let scene = load(text).unwrap();
+        let mut s = RenderSettings::from_scene(&scene);
+        s.threads = threads;
+        let m = svetlo::methods::by_name("photon:photons=20000,caustic-photons=20000").unwrap();
+        m.render(&scene, &s, &Progress::new()).unwrap().image()
+    };
+    let first = render(1);
+    assert!(first.mean().max_component() > 0.0);
+    for threads in [1, 2, 3] {
+        let again = render(threads);
+        let differ = first.data.iter().zip(&again.data).filter(|(a, b)| a.to_array().map(f32::to_bits) != b.to_array().map(f32::to_bits)).count();
+        assert_eq!(differ, 0, "{threads} threads: {differ} pixels differ");
+    }
+}
+
+#[test]
+fn obj_indices_that_overflow_are_errors() {
+    for (face, needle) in [
+        ("f 2/-11 2 3", "texture coordinate index '-11'"),
+        ("f 1 2 99", "vertex index '99'"),
+        ("f 0 1 2", "vertex index '0'"),
+        ("f -4 1 2", "vertex index '-4'"),
+    ] {
+        let text = format!("v 0 0 0\nv 1 0 0\nv 0 1 0\nvt 0 0\n{face}\n");
+        let e = match svetlo::io::mesh_files::load_obj_bytes(text.as_bytes(), Path::new("m.obj"), true) {
+            Ok(_) => panic!("{face}: loaded"),
+            Err(e) => e.to_string(),
+        };
+        assert!(e.contains("m.obj: line 5:") && e.contains(needle), "{face}: {e}");
+    }
+    let ok = svetlo::io::mesh_files::load_obj_bytes(b"v 0 0 0\nv 1 0 0\nv 0 1 0\nf -3 -2 -1\n", Path::new("m.obj"), true).unwrap();
+    assert_eq!(ok.mesh.indices.len(), 1);
+}
+
+#[test]
+fn headers_that_lie_are_refused_before_allocating() {
+    // A PLY announcing 2^40 vertices in a few bytes.
+    let ply = b"ply\nformat binary_little_endian 1.0\nelement vertex 1099511627776\nproperty float x\nproperty float y\nproperty float z\nend_header\n\0\0\0\0";
+    let e = svetlo::io::mesh_files::load_ply_bytes(ply, Path::new("big.ply"), false).err().expect("refused").to_string();
+    assert!(e.contains("big.ply") && e.contains("announces"), "{e}");
+    // A PFM claiming 100 000 x 100 000 pixels: over the budget (or the bytes present).
+    let e = svetlo::io::image_io::decode_image(b"PF\n100000 100000\n-1\n\0\0\0\0", Path::new("big.pfm")).expect_err("refused").to_string();
+    assert!(e.contains("big.pfm"), "{e}");
+    // An EXR whose header claims 100 000 x 100 000: a real header, its size fields rewritten.
+    let img = svetlo::film::Image::new(2, 2, vec![Rgb::splat(0.5); 4]);
+    let mut bytes = svetlo::io::image_io::encode_exr(&img).unwrap();
+    let find = |bytes: &[u8], name: &[u8]| bytes.windows(name.len()).position(|w| w == name).unwrap() + name.len();
+    for attr in [&b"dataWindow\0box2i\0"[..], &b"displayWindow\0box2i\0"[..]] {
+        let at = find(&bytes, attr) + 4; // skip the attribute size
+        bytes[at + 8..at + 12].copy_from_slice(&99_999i32.to_le_bytes());
+        bytes[at + 12..at + 16].copy_from_slice(&99_999i32.to_le_bytes());
+    }
+    let e = svetlo::io::image_io::decode_image(&bytes, Path::new("big.exr")).expect_err("refused");
+    assert!(matches!(e, Error::TooLarge { .. }), "the memory check was bypassed: {e}");
+    assert!(e.to_string().contains("100000x100000 EXR"), "{e}");
+}
+
+#[test]
+fn unused_properties_are_reported() {
+    let s = load(&scene(r#"<shape type="sphere"><float name="wibble" value="3"/><bsdf type="diffuse"><rgb name="reflectance" value="0.5"/><string name="colour" value="red"/></bsdf></shape>"#)).unwrap();
+    let w = s.warnings.join("\n");
+    assert!(w.contains("<float name=\"wibble\"> of <shape type=\"sphere\"> is not used"), "{w}");
+    assert!(w.contains("<string name=\"colour\"> of <bsdf type=\"diffuse\"> is not used"), "{w}");
+    assert!(!w.contains("reflectance"), "{w}");
+}

@@ -148,8 +148,8 @@ pub fn serve(a: &ServeArgs) -> Result<ExitCode> {
         Some(p) => Some(svetlo::io::image_io::read_image(p).with_context(|| format!("cannot read the reference '{}'", p.display()))?),
         None => None,
     };
-    render::limit_global_threads(r.threads);
-    let scene = svetlo::io::load_scene(&r.scene, &r.define).context("cannot load the scene")?;
+    render::limit_global_threads(r.threads as usize);
+    let scene = crate::load_scene(&r.scene, &r.define)?;
     for w in &scene.warnings {
         eprintln!("warning: {w}");
     }

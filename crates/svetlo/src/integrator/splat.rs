@@ -100,6 +100,28 @@ pub struct TileJob<'a> {
     pub n: u32,
 }
 
+/// Pixel samples of one pass at most (without a time limit): bounds the work a cancel drops.
+const PASS_PIXEL_SAMPLES: u64 = 1 << 22;
+
+/// Samples per pixel of the next pass after one of `last`. Passes are summed into the film
+/// one after another, so their sizes fix the float summation order: without a time limit
+/// they double (1, 2, 4, ... up to 64 and about `PASS_PIXEL_SAMPLES`) whatever the timing,
+/// which keeps the image independent of the machine's speed and the thread count. With one
+/// (`(limit, elapsed, spp_done)` in seconds) they aim at half-second passes that end at the limit.
+fn next_pass_spp(last: u32, pixels: u64, timed: Option<(f64, f64, u32)>) -> u32 {
+    match timed {
+        None => (last.saturating_mul(2)).min((PASS_PIXEL_SAMPLES / pixels.max(1)).clamp(1, 64) as u32),
+        Some((limit, elapsed, done)) => {
+            let per_spp = elapsed / done.max(1) as f64;
+            if per_spp > 0.0 {
+                ((0.5 / per_spp) as u32).clamp(1, 64).min((((limit - elapsed) / per_spp) as u32).max(1))
+            } else {
+                64
+            }
+        }
+    }
+}
+
 /// The film (splats scaled by the spp done) and the extra channels (already divided by it).
 pub struct SplatRender {
     pub film: Film,
@@ -207,15 +229,7 @@ pub(super) fn render_chunked<E: SplatEstimator>(
         // The splats' scale so far, so that an observer sees a developed image.
         film.splat_scale = spp_done as f32;
         progress.pass_done(&film);
-        let elapsed = start.elapsed().as_secs_f64();
-        let per_spp = elapsed / spp_done as f64;
-        pass_spp = if per_spp > 0.0 { ((0.5 / per_spp) as u32).clamp(1, 64) } else { 64 };
-        if let Some(t) = settings.time_limit {
-            let left = t.as_secs_f64() - elapsed;
-            if per_spp > 0.0 {
-                pass_spp = pass_spp.min(((left / per_spp) as u32).max(1));
-            }
-        }
+        pass_spp = next_pass_spp(pass_spp, w as u64 * h as u64, settings.time_limit.map(|t| (t.as_secs_f64(), start.elapsed().as_secs_f64(), spp_done)));
     }
     // Each pixel sample traced one light path: N = W H spp paths, and the camera's
     // importance is normalised so that splats scale by W H / N = 1 / spp.
@@ -241,6 +255,21 @@ mod tests {
     use glam::{Mat4, Vec3};
 
     /// Splitting the tiles into chunks changes neither the image nor the channels.
+    #[test]
+    fn pass_sizes_without_time_limit_depend_on_nothing_but_the_film() {
+        // The image is the sum of its passes in order: their sizes must not follow timing.
+        let mut seq = vec![1u32];
+        while seq.len() < 9 {
+            seq.push(next_pass_spp(*seq.last().unwrap_or(&1), 256 * 256, None));
+        }
+        assert_eq!(seq, [1, 2, 4, 8, 16, 32, 64, 64, 64]);
+        assert_eq!(next_pass_spp(8, 1920 * 1080, None), 2, "large films take small passes");
+        assert_eq!(next_pass_spp(8, 8000 * 8000, None), 1);
+        // With a time limit the passes end near it.
+        assert_eq!(next_pass_spp(1, 100, Some((10.0, 9.9, 100))), 1);
+        assert_eq!(next_pass_spp(1, 100, Some((10.0, 1.0, 100))), 50);
+    }
+
     #[test]
     fn chunking_does_not_change_the_image() {
         let mut b = SceneBuilder::new();

@@ -67,7 +67,7 @@ pub fn connect(
         if !cfg.camera_connectible || !qs.connectible(scene) || (s == 1 && !qs.is_area_light(scene)) {
             return None;
         }
-        let cs = scene.camera.sample_wi(qs.p, u)?;
+        let cs = cfg.lens.as_ref()?.sample_wi(qs.p, u)?;
         if cs.pdf <= 0.0 || cs.we <= 0.0 {
             return None;
         }

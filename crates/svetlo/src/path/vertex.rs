@@ -1,6 +1,7 @@
 //! One vertex of a path, and the densities and throughputs between two vertices.
 
 use crate::bsdf::{Bsdf, LobeFlags, TransportMode};
+use crate::camera::LensConnector;
 use crate::geometry::SurfaceInteraction;
 use crate::light::Light;
 use crate::math::{Frame, PI};
@@ -305,6 +306,15 @@ impl Vertex {
     /// Area density at `next` of a walk at this vertex that arrived from `prev` and samples
     /// `next` (`mode`: the direction of that walk). Light endpoints sample by emission.
     pub fn pdf(&self, scene: &Scene, prev: Option<&Vertex>, next: &Vertex, mode: TransportMode) -> f32 {
+        if self.kind == VertexKind::Camera {
+            return self.pdf_with_lens(scene, scene.camera.lens_connector().as_ref(), prev, next, mode);
+        }
+        self.pdf_with_lens(scene, None, prev, next, mode)
+    }
+
+    /// [`Self::pdf`] with the camera's constants computed beforehand (`PathConfig::lens`;
+    /// only camera vertices read it), for the connections that ask per sample.
+    pub fn pdf_with_lens(&self, scene: &Scene, lens: Option<&LensConnector>, prev: Option<&Vertex>, next: &Vertex, mode: TransportMode) -> f32 {
         if self.kind == VertexKind::Light {
             return self.pdf_light(scene, next);
         }
@@ -313,7 +323,7 @@ impl Vertex {
             return 0.0;
         }
         let pdf = match self.kind {
-            VertexKind::Camera => scene.camera.pdf_we(&crate::geometry::Ray::new(self.p, wn)).1,
+            VertexKind::Camera => lens.map_or(0.0, |l| l.pdf_we(&crate::geometry::Ray::new(self.p, wn)).1),
             _ => {
                 let (Some(bsdf), Some(prev)) = (&self.bsdf, prev) else { return 0.0 };
                 let (wp, dp2) = self.direction_to(prev);

@@ -246,6 +246,15 @@ struct Chain<S> {
 
 /// Render `target` on a `width` x `height` film by Metropolis sampling: `settings.spp`
 /// mutations per pixel (or until the time limit), `cfg.chains` chains.
+/// The render of a scene without emitters: black, exactly (the bootstrap would have nothing
+/// to find), with all samples counted as done.
+pub fn black(width: u32, height: u32, settings: &RenderSettings) -> Result<(Film, ChainStats)> {
+    settings.validate()?;
+    let mut film = Film::new(width, height, settings.filter);
+    film.spp_done = settings.spp;
+    Ok((film, ChainStats::default()))
+}
+
 pub fn run<T: MetropolisTarget>(
     target: &T,
     width: u32,

@@ -57,11 +57,15 @@ fn load_parsed(parsed: xml::Parsed, path: &Path) -> Result<Scene> {
         has_sensor: false,
         plugin_depth: 0,
         plugin_instances: 0,
+        queried: Default::default(),
     };
     for p in &parsed.unused_params {
         loader.warn(format!("parameter '{p}' given on the command line is not used by the scene"));
     }
     loader.scene(&parsed.root)?;
+    let mut unused = Vec::new();
+    loader.queried.borrow().unused(&parsed.root, &mut unused);
+    loader.b.warnings.extend(unused);
     if !loader.has_sensor {
         return Err(Error::Scene { file: path.to_path_buf(), msg: "the scene has no <sensor>".into() });
     }
@@ -94,6 +98,8 @@ pub(crate) struct Loader<'a> {
     /// Plugins being built (nested and referenced) and built so far: see [`Loader::nested`].
     plugin_depth: usize,
     plugin_instances: usize,
+    /// Properties asked for, to report the ones nobody read.
+    queried: std::cell::RefCell<props::Queried>,
 }
 
 impl<'a> Loader<'a> {

@@ -27,10 +27,56 @@ pub fn parse_list(s: &str, loc: &Loc, what: &str) -> Result<Vec<f32>> {
     s.split(|c: char| c == ',' || c.is_whitespace()).filter(|t| !t.is_empty()).map(|t| parse_f32(t, loc, what)).collect()
 }
 
+/// Which plugins asked for properties, and which properties were asked for: what a plugin
+/// that was read holds but nobody asked for is reported (Mitsuba rejects such "unreferenced
+/// properties"; svetlo warns, since it reads a subset of Mitsuba's plugins).
+#[derive(Default)]
+pub struct Queried {
+    plugins: std::collections::HashSet<usize>,
+    props: std::collections::HashSet<usize>,
+}
+
+/// The property elements that are checked for use.
+const PROPERTY_TAGS: &[&str] = &["float", "integer", "boolean", "string", "rgb", "srgb", "spectrum", "point", "vector", "transform", "texture"];
+
+impl Queried {
+    fn note(&mut self, plugin: &Node, prop: Option<&Node>) {
+        self.plugins.insert(plugin as *const Node as usize);
+        if let Some(p) = prop {
+            self.props.insert(p as *const Node as usize);
+        }
+    }
+
+    /// Warnings for the unused properties of every plugin that was read, in file order.
+    pub fn unused(&self, n: &Node, out: &mut Vec<String>) {
+        if self.plugins.contains(&(n as *const Node as usize)) {
+            for c in &n.children {
+                if PROPERTY_TAGS.contains(&c.tag.as_str()) && !self.props.contains(&(c as *const Node as usize)) {
+                    if let Some(name) = c.name() {
+                        out.push(format!(
+                            "{}:{}: <{} name=\"{name}\"> of <{} type=\"{}\"> is not used (svetlo does not read it)",
+                            c.loc.file.display(),
+                            c.loc.line,
+                            c.tag,
+                            n.tag,
+                            n.attr("type").unwrap_or("?")
+                        ));
+                    }
+                }
+            }
+        }
+        for c in &n.children {
+            self.unused(c, out);
+        }
+    }
+}
+
 impl<'a> Loader<'a> {
     /// The child property `name` of a plugin; a `<ref name=.. id=..>` resolves to its target.
     pub fn prop(&self, node: &'a Node, name: &str) -> Result<Option<&'a Node>> {
-        match node.children.iter().find(|c| c.name() == Some(name)) {
+        let found = node.children.iter().find(|c| c.name() == Some(name));
+        self.queried.borrow_mut().note(node, found);
+        match found {
             Some(c) if c.tag == "ref" => Ok(Some(self.lookup(c)?)),
             other => Ok(other),
         }
