@@ -1,7 +1,7 @@
 //! `svetlo info SCENE.xml`: what the loader made of a scene, and what it warned about.
 
 use crate::parse_define;
-use anyhow::{Context, Result};
+use anyhow::Result;
 use clap::Args;
 use glam::Vec3;
 use std::collections::BTreeMap;
@@ -16,7 +16,7 @@ use svetlo::scene::Scene;
 
 #[derive(Args, Debug)]
 pub struct InfoArgs {
-    /// Scene file (Mitsuba XML).
+    /// Scene file (Mitsuba XML), or a luminaire file (.ies, .ldt) for its photometric summary.
     pub scene: PathBuf,
     /// Scene parameter for <default> / $name substitution (repeatable).
     #[arg(short = 'D', value_name = "NAME=VALUE", value_parser = parse_define)]
@@ -27,33 +27,11 @@ pub struct InfoArgs {
 const MAX_LISTED_SHAPES: usize = 40;
 
 pub fn material_kind(m: &Material) -> String {
-    let rough = |r: &Option<_>, smooth: &str, rough: &str| if r.is_some() { rough.to_string() } else { smooth.to_string() };
-    match m {
-        Material::Diffuse { .. } => "diffuse".into(),
-        Material::Conductor { roughness, .. } => rough(roughness, "conductor", "roughconductor"),
-        Material::Dielectric { roughness, .. } => rough(roughness, "dielectric", "roughdielectric"),
-        Material::ThinDielectric { .. } => "thindielectric".into(),
-        Material::Plastic { roughness, .. } => rough(roughness, "plastic", "roughplastic"),
-        Material::Phong { .. } => "phong".into(),
-        Material::BlinnPhong { .. } => "blinnphong".into(),
-        Material::CookTorrance { .. } => "cooktorrance".into(),
-        Material::OrenNayar { .. } => "roughdiffuse".into(),
-        Material::Ward { .. } => "ward".into(),
-        Material::TwoSided { front, .. } => format!("twosided({})", material_kind(front)),
-        Material::Mask { inner, .. } => format!("mask({})", material_kind(inner)),
-        Material::Null => "null".into(),
-    }
+    m.kind_name()
 }
 
 pub fn light_kind(l: &Light) -> &'static str {
-    match l {
-        Light::Area(_) => "area",
-        Light::Point { .. } => "point",
-        Light::Spot { .. } => "spot",
-        Light::Directional { .. } => "directional",
-        Light::Constant { .. } => "constant",
-        Light::EnvMap(_) => "envmap",
-    }
+    l.kind_name()
 }
 
 fn counts<I: IntoIterator<Item = String>>(items: I) -> String {
@@ -139,8 +117,17 @@ pub fn describe(scene: &Scene) -> String {
 }
 
 pub fn run(a: &InfoArgs) -> Result<ExitCode> {
-    let scene = svetlo::io::load_scene(&a.scene, &a.define).context("cannot load the scene")?;
-    print!("{}", describe(&scene));
+    // A closed stdout (`svetlo info s.xml | head -1`) is not an error.
+    use std::io::Write as _;
+    // Luminaire files (IES LM-63, EULUMDAT) get their photometric summary.
+    let ext = a.scene.extension().and_then(|e| e.to_str()).map(|e| e.to_ascii_lowercase());
+    if matches!(ext.as_deref(), Some("ies" | "ldt")) {
+        let p = svetlo::photometry::load(&a.scene).map_err(|e| anyhow::Error::new(crate::SceneError(e)).context("cannot read the luminaire file"))?;
+        let _ = write!(std::io::stdout(), "{}", p.summary());
+        return Ok(ExitCode::SUCCESS);
+    }
+    let scene = crate::load_scene(&a.scene, &a.define)?;
+    let _ = write!(std::io::stdout(), "{}", describe(&scene));
     Ok(ExitCode::SUCCESS)
 }
 

@@ -7,7 +7,7 @@ use clap::{value_parser, Args, ValueEnum};
 use indicatif::{ProgressBar, ProgressStyle};
 use std::path::{Path, PathBuf};
 use std::process::ExitCode;
-use std::sync::atomic::{AtomicBool, AtomicU32, Ordering};
+use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::Arc;
 use std::time::{Duration, Instant};
 use svetlo::film::{Film, Filter};
@@ -63,9 +63,9 @@ pub struct RenderArgs {
     /// Pixel reconstruction filter (tent radius 1, Gaussian sigma 0.5).
     #[arg(long, value_enum)]
     pub filter: Option<FilterArg>,
-    /// Worker threads (0: all cores).
-    #[arg(long, value_name = "N", default_value_t = 0)]
-    pub threads: usize,
+    /// Worker threads (0: all cores; at most 1024).
+    #[arg(long, value_name = "N", default_value_t = 0, allow_negative_numbers = true, value_parser = value_parser!(u16).range(0..=1024))]
+    pub threads: u16,
     /// Sample generator.
     #[arg(long, value_enum)]
     pub sampler: Option<SamplerArg>,
@@ -82,6 +82,9 @@ pub struct RenderArgs {
     /// With --strategies: the longest paths (in segments) that get their own images.
     #[arg(long, value_name = "N", default_value_t = 5, value_parser = value_parser!(u32).range(1..=32))]
     pub strategy_depth: u32,
+    /// Live preview in a browser, and tev streaming.
+    #[command(flatten)]
+    pub live: crate::preview::PreviewArgs,
 }
 
 fn parse_seconds(s: &str) -> std::result::Result<f64, String> {
@@ -114,6 +117,9 @@ impl OutputPaths {
             None => {
                 let stem = scene.file_stem().ok_or_else(|| Usage(format!("scene path '{}' has no file name", scene.display())))?;
                 (PathBuf::from(stem), false)
+            }
+            Some(o) if o.is_dir() => {
+                return Err(Usage(format!("output '{}' is a folder; name a file in it (e.g. {}/image.exr)", o.display(), o.display())).into());
             }
             Some(o) => {
                 let ext = o.extension().map(|e| e.to_string_lossy().to_ascii_lowercase());
@@ -158,7 +164,7 @@ pub fn configure(mut scene: Scene, a: &RenderArgs) -> Result<Job> {
         if a.integrator.is_some() {
             anyhow::Error::new(Usage(e.to_string()))
         } else {
-            anyhow::Error::new(e).context(format!("the scene asks for integrator '{integrator_name}'; choose another with --integrator"))
+            anyhow::Error::new(crate::SceneError(e)).context(format!("the scene asks for integrator '{integrator_name}'; choose another with --integrator"))
         }
     })?;
     if a.strategies.is_some() && integrator_name != "bdpt" {
@@ -177,7 +183,7 @@ pub fn configure(mut scene: Scene, a: &RenderArgs) -> Result<Job> {
     if let Some(d) = a.max_depth {
         s.max_depth = d;
     }
-    s.threads = a.threads;
+    s.threads = a.threads as usize;
     if let Some(f) = a.filter {
         s.filter = match f {
             FilterArg::Box => Filter::Box,
@@ -200,6 +206,14 @@ pub fn configure(mut scene: Scene, a: &RenderArgs) -> Result<Job> {
         (None, None) => {}
     }
     s.validate().context("render settings")?;
+    svetlo::limits::check_film(cam.width, cam.height).map_err(|e| Usage(e.to_string()))?;
+    if scene.lights.is_empty() {
+        tell!("warning: the scene has no emitter: the image is black");
+    } else if matches!(integrator_name.as_str(), "light" | "ptracer") && !scene.environment_lights.is_empty() {
+        tell!(
+            "warning: light tracing does not see environment emitters (envmap, constant) from the camera; they are missing from the image (use path or bdpt)"
+        );
+    }
     Ok(Job { scene, settings: s, integrator_name, integrator })
 }
 
@@ -297,22 +311,6 @@ pub fn si(x: f64) -> String {
     format!("{v:.2} {p}")
 }
 
-/// First Ctrl-C: cancel the render (it returns the passes done). Second: exit at once.
-fn install_ctrlc(progress: Arc<Progress>) {
-    let presses = AtomicU32::new(0);
-    let r = ctrlc::try_set_handler(move || {
-        if presses.fetch_add(1, Ordering::SeqCst) == 0 {
-            progress.cancel.store(true, Ordering::SeqCst);
-            eprintln!("\ninterrupt: finishing the current pass and writing the image (Ctrl-C again to quit now)");
-        } else {
-            std::process::exit(EXIT_INTERRUPTED as i32);
-        }
-    });
-    if let Err(e) = r {
-        eprintln!("warning: Ctrl-C will not stop the render cleanly: {e}");
-    }
-}
-
 /// Write the images; returns the paths written.
 pub fn write_outputs(film: &Film, out: &OutputPaths, variance: bool) -> Result<Vec<PathBuf>> {
     let img = film.image();
@@ -334,10 +332,7 @@ pub fn write_outputs(film: &Film, out: &OutputPaths, variance: bool) -> Result<V
 pub fn render_loaded(scene: Scene, a: &RenderArgs, out: &OutputPaths, progress: &Progress) -> Result<ExitCode> {
     let job = configure(scene, a)?;
     if a.variance && matches!(job.integrator_name.as_str(), "light" | "ptracer" | "bdpt") {
-        eprintln!(
-            "warning: --variance counts only what each pixel's own samples add; the {} integrator's splats (light paths) are not in it",
-            job.integrator_name
-        );
+        tell!("warning: --variance counts only what each pixel's own samples add; the {} integrator's splats (light paths) are not in it", job.integrator_name);
     }
     let (w, h) = (job.scene.camera.width, job.scene.camera.height);
     let cpu0 = process_cpu_seconds();
@@ -352,27 +347,30 @@ pub fn render_loaded(scene: Scene, a: &RenderArgs, out: &OutputPaths, progress: 
     let written = write_outputs(&film, out, a.variance)?;
     let secs = elapsed.as_secs_f64();
     let samples = film.spp_done as f64 * w as f64 * h as f64;
-    println!("integrator  {}", job.integrator_name);
-    println!("resolution  {w}x{h}");
+    say!("integrator  {}", job.integrator_name);
+    say!("resolution  {w}x{h}");
     let planned = if a.spp.is_none() && a.time.is_some() { "time-limited".to_string() } else { format!("of {}", job.settings.spp) };
-    println!("spp         {} ({planned})", film.spp_done);
-    println!("time        {secs:.2} s");
+    say!("spp         {} ({planned})", film.spp_done);
+    say!("time        {secs:.2} s");
     if let Some(c) = cpu {
         // All threads' CPU time in the render call: what benchmarks on a busy machine compare.
-        println!("cpu         {c:.2} s");
+        say!("cpu         {c:.2} s");
     }
-    println!("samples/s   {}", si(samples / secs.max(1e-9)));
+    say!("samples/s   {}", si(samples / secs.max(1e-9)));
     for p in &written {
-        println!("wrote       {}", p.display());
+        say!("wrote       {}", p.display());
     }
     if let (Some(dir), false) = (&a.strategies, strategy_files.is_empty()) {
-        println!("strategies  {} images in {}", strategy_files.len(), dir.display());
+        say!("strategies  {} images in {}", strategy_files.len(), dir.display());
     }
     if let Some(r) = job.integrator.report() {
-        eprint!("{r}");
+        {
+            use std::io::Write as _;
+            let _ = write!(std::io::stderr(), "{r}");
+        }
     }
     if progress.cancelled() {
-        eprintln!("interrupted after {} spp", film.spp_done);
+        tell!("interrupted after {} spp", film.spp_done);
         return Ok(ExitCode::from(EXIT_INTERRUPTED));
     }
     if film.spp_done == 0 {
@@ -399,14 +397,21 @@ pub fn run(a: &RenderArgs) -> Result<ExitCode> {
         }
     }
     let out = OutputPaths::new(&a.scene, a.output.as_deref())?;
-    limit_global_threads(a.threads);
-    let scene = svetlo::io::load_scene(&a.scene, &a.define).context("cannot load the scene")?;
+    limit_global_threads(a.threads as usize);
+    let scene = crate::load_scene(&a.scene, &a.define)?;
     for w in &scene.warnings {
-        eprintln!("warning: {w}");
+        tell!("warning: {w}");
     }
-    let progress = Arc::new(Progress::new());
-    install_ctrlc(progress.clone());
-    render_loaded(scene, a, &out, &progress)
+    let live = crate::preview::Live::start(a, &scene)?;
+    let progress = live.as_ref().map_or_else(|| Arc::new(Progress::new()), |l| l.progress());
+    for sig in crate::signals::install(progress.clone()) {
+        tell!("warning: {sig} is ignored (as the parent process set it): it will not stop the render");
+    }
+    let outcome = render_loaded(scene, a, &out, &progress);
+    if let Some(l) = live {
+        l.finish(&outcome, &out);
+    }
+    outcome
 }
 
 #[cfg(test)]

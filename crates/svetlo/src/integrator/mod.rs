@@ -99,19 +99,51 @@ impl RenderSettings {
     }
 }
 
+/// Called with the film as it stands after each complete pass (camera methods), round of
+/// mutations (Metropolis) or iteration (SPPM), on the render's own thread: it should copy what
+/// it needs and return quickly (the preview develops the image and hands it to its server).
+pub type PassObserver = dyn Fn(&Film) + Send + Sync;
+
 /// Progress of a render, shared with whoever shows it; setting `cancel` stops the render
 /// after the current pass, keeping the samples done.
-#[derive(Debug, Default)]
+#[derive(Default)]
 pub struct Progress {
     /// Work units done and planned (samples x pixels, or the method's own unit).
     pub done: AtomicU64,
     pub total: AtomicU64,
     pub cancel: AtomicBool,
+    /// Who watches the film form; `None` costs one branch per pass.
+    observer: Option<Box<PassObserver>>,
+}
+
+impl std::fmt::Debug for Progress {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("Progress")
+            .field("done", &self.done)
+            .field("total", &self.total)
+            .field("cancel", &self.cancel)
+            .field("observed", &self.observer.is_some())
+            .finish()
+    }
 }
 
 impl Progress {
     pub fn new() -> Self {
         Self::default()
+    }
+    /// Progress whose film is shown to `observer` after every pass.
+    pub fn observed(observer: impl Fn(&Film) + Send + Sync + 'static) -> Self {
+        Progress { observer: Some(Box::new(observer)), ..Self::default() }
+    }
+    /// Whether anyone watches (methods whose intermediate film costs work to develop ask).
+    pub fn is_observed(&self) -> bool {
+        self.observer.is_some()
+    }
+    /// A pass is complete: show the film to the observer, if any.
+    pub fn pass_done(&self, film: &Film) {
+        if let Some(o) = &self.observer {
+            o(film);
+        }
     }
     pub fn cancelled(&self) -> bool {
         self.cancel.load(Ordering::Relaxed)

@@ -226,6 +226,9 @@ pub(super) fn render_chunked<E: SplatEstimator>(
         }
         spp_done += n;
         film.spp_done = spp_done;
+        // The splats' scale so far, so that an observer sees a developed image.
+        film.splat_scale = spp_done as f32;
+        progress.pass_done(&film);
         pass_spp = next_pass_spp(pass_spp, w as u64 * h as u64, settings.time_limit.map(|t| (t.as_secs_f64(), start.elapsed().as_secs_f64(), spp_done)));
     }
     // Each pixel sample traced one light path: N = W H spp paths, and the camera's
@@ -291,6 +294,43 @@ mod tests {
         assert!(big.film.image().mean().max_component() > 0.0);
         assert_eq!(big.film.image().data, small.film.image().data);
         assert_eq!(big.channels, small.channels);
+    }
+
+    /// An observer sees every pass, in order, with developed splats; the last film it sees is
+    /// the render's result; watching changes nothing in the image.
+    #[test]
+    fn observer_sees_each_pass_and_changes_nothing() {
+        use std::sync::{Arc, Mutex};
+        let mut b = SceneBuilder::new();
+        let m = b.add_material(Material::Diffuse { reflectance: Texture::Constant(Rgb::splat(0.6)) });
+        b.add_shape(Geometry::Sphere(Sphere { center: Vec3::new(0.0, 0.0, 4.0), radius: 1.5, flip_normals: false }), m, None, "ball").unwrap();
+        b.add_light(Light::Point { position: Vec3::new(1.0, 2.0, 0.0), intensity: Rgb::splat(10.0) });
+        b.set_camera(Camera {
+            to_world: Mat4::IDENTITY,
+            projection: Projection::Perspective { fov_x_deg: 50.0, aperture_radius: 0.0, focus_distance: 1.0 },
+            width: 24,
+            height: 20,
+            near_clip: 0.01,
+            far_clip: 100.0,
+            shutter_open: 0.0,
+            shutter_close: 0.0,
+        });
+        let scene = b.build().unwrap();
+        let settings = RenderSettings { spp: 6, max_depth: 3, ..Default::default() };
+        let est = crate::integrator::bdpt::test_estimator(&scene, &settings);
+        type Passes = Mutex<Vec<(u32, Vec<Rgb>)>>;
+        let seen: Arc<Passes> = Arc::default();
+        let log = seen.clone();
+        let progress = Progress::observed(move |f: &Film| log.lock().unwrap().push((f.spp_done, f.image().data)));
+        let watched = render_chunked(&scene, &settings, &progress, &est, 0, u64::MAX).unwrap();
+        let plain = render_chunked(&scene, &settings, &Progress::new(), &est, 0, u64::MAX).unwrap();
+        assert_eq!(watched.film.image().data, plain.film.image().data);
+        let seen = seen.lock().unwrap();
+        assert!(!seen.is_empty());
+        assert!(seen.windows(2).all(|w| w[0].0 < w[1].0), "passes in order");
+        let (spp, last) = seen.last().unwrap();
+        assert_eq!(*spp, 6);
+        assert_eq!(*last, plain.film.image().data, "the last pass shown is the result, splats scaled");
     }
 
     /// Counts the pixel samples it is asked for, per pixel.

@@ -663,6 +663,7 @@ impl Integrator for ZBuffer {
             }
         }
         film.spp_done = ss * ss;
+        progress.pass_done(&film);
         Ok(film)
     }
 }

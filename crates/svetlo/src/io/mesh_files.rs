@@ -20,8 +20,53 @@ pub struct LoadedMesh {
 
 /// Read an OBJ file. Materials (`mtllib`) are ignored: the scene file gives the BSDF.
 pub fn load_obj(path: &Path, flip_tex_coords: bool) -> Result<LoadedMesh> {
-    let file = std::fs::File::open(path).map_err(|e| Error::Io { file: path.to_path_buf(), source: e })?;
-    let mut reader = std::io::BufReader::new(file);
+    load_obj_bytes(&crate::limits::read_file(path)?, path, flip_tex_coords)
+}
+
+/// Check an OBJ's face indices before the OBJ reader sees them (a relative index past the
+/// first vertex overflows inside it), and its size against the memory budget.
+fn check_obj(bytes: &[u8], path: &Path) -> Result<()> {
+    // Vertices, texture coordinates and normals defined so far, and face corners in all.
+    let (mut counts, mut corners) = ([0i64; 3], 0u64);
+    for (ln, line) in bytes.split(|&b| b == b'\n').enumerate() {
+        let line = String::from_utf8_lossy(line);
+        let mut tok = line.split_whitespace();
+        match tok.next() {
+            Some("v") => counts[0] += 1,
+            Some("vt") => counts[1] += 1,
+            Some("vn") => counts[2] += 1,
+            Some("f") | Some("l") | Some("p") => {
+                for corner in tok {
+                    corners += 1;
+                    for (k, idx) in corner.split('/').enumerate().take(3) {
+                        if idx.is_empty() && k > 0 {
+                            continue;
+                        }
+                        let n = counts[k];
+                        let ok = match idx.parse::<i64>() {
+                            Ok(i) if i > 0 => i <= n,
+                            Ok(i) if i < 0 => -i <= n,
+                            _ => false,
+                        };
+                        if !ok {
+                            let what = ["vertex", "texture coordinate", "normal"][k];
+                            return Err(mesh_err(path, format!("line {}: {what} index '{idx}' is out of range ({n} defined so far)", ln + 1)));
+                        }
+                    }
+                }
+            }
+            _ => {}
+        }
+    }
+    // Unindexed, every corner may become its own vertex (position, normal, uv, index).
+    let bytes_needed = corners.saturating_mul(4 + 32).saturating_add((counts[0] as u64 + counts[2] as u64) * 12 + counts[1] as u64 * 8);
+    crate::limits::check(format!("{}: a mesh of {corners} face corners", path.display()), bytes_needed)
+}
+
+/// [`load_obj`] for a file held in memory; `path` names it in errors.
+pub fn load_obj_bytes(bytes: &[u8], path: &Path, flip_tex_coords: bool) -> Result<LoadedMesh> {
+    check_obj(bytes, path)?;
+    let mut reader = std::io::Cursor::new(bytes);
     let opts = tobj::LoadOptions { single_index: true, triangulate: true, ignore_points: true, ignore_lines: true };
     let (models, _) =
         tobj::load_obj_buf(&mut reader, &opts, |_| Ok((Vec::new(), Default::default()))).map_err(|e| mesh_err(path, format!("invalid OBJ: {e}")))?;
@@ -68,6 +113,48 @@ pub fn load_obj(path: &Path, flip_tex_coords: bool) -> Result<LoadedMesh> {
         return Err(mesh_err(path, "the OBJ file has no faces"));
     }
     Ok(LoadedMesh { mesh, warnings })
+}
+
+/// Read a PLY file (ASCII or binary). Vertex properties x, y, z; optional nx, ny, nz; uvs as
+/// u, v or texture_u, texture_v or s, t. Faces from `vertex_indices` or `vertex_index`.
+pub fn load_ply(path: &Path, flip_tex_coords: bool) -> Result<LoadedMesh> {
+    load_ply_bytes(&crate::limits::read_file(path)?, path, flip_tex_coords)
+}
+
+/// The element counts a PLY header announces, checked before the PLY reader allocates for
+/// them: a binary file must hold at least one byte per property of every element, a text
+/// file two (a digit and a separator), and the parsed elements must fit the budget.
+fn check_ply_header(bytes: &[u8], path: &Path) -> Result<()> {
+    let end = bytes.windows(10).position(|w| w == b"end_header").ok_or_else(|| mesh_err(path, "invalid PLY: no end_header"))?;
+    let header = String::from_utf8_lossy(&bytes[..end]);
+    let ascii = header.lines().any(|l| l.trim().starts_with("format ascii"));
+    // (count, properties) per element
+    let mut elements: Vec<(u64, u64)> = Vec::new();
+    for line in header.lines() {
+        let t: Vec<&str> = line.split_whitespace().collect();
+        match t.as_slice() {
+            ["element", _, n] => {
+                let n: u64 = n.parse().map_err(|_| mesh_err(path, format!("invalid PLY: element count '{n}'")))?;
+                elements.push((n, 0));
+            }
+            ["property", ..] => {
+                if let Some(e) = elements.last_mut() {
+                    e.1 += 1;
+                }
+            }
+            _ => {}
+        }
+    }
+    let per_prop = if ascii { 2 } else { 1 };
+    let min_len: u64 = elements.iter().map(|&(n, p)| n.saturating_mul(p * per_prop)).fold(0, u64::saturating_add);
+    let data = (bytes.len() - end) as u64;
+    if min_len > data {
+        return Err(mesh_err(path, format!("invalid PLY: the header announces at least {min_len} bytes of elements, the file holds {data}")));
+    }
+    // Bounded by ~64 bytes per property of every element (vertices and faces are read into
+    // fixed structs, face lists into vectors: less than that).
+    let parsed: u64 = elements.iter().map(|&(n, p)| n.saturating_mul(64 * p + 64)).fold(0, u64::saturating_add);
+    crate::limits::check(format!("{}: a PLY of {} elements", path.display(), elements.iter().map(|e| e.0).sum::<u64>()), parsed)
 }
 
 /// Vertex properties a PLY mesh may give, in the order of [`PlyVertex::values`].
@@ -126,13 +213,12 @@ impl ply_rs_bw::ply::PropertyAccess for PlySkipped {
     }
 }
 
-/// Read a PLY file (ASCII or binary). Vertex properties x, y, z; optional nx, ny, nz; uvs as
-/// u, v or texture_u, texture_v or s, t. Faces from `vertex_indices` or `vertex_index`.
-pub fn load_ply(path: &Path, flip_tex_coords: bool) -> Result<LoadedMesh> {
+/// [`load_ply`] for a file held in memory; `path` names it in errors.
+pub fn load_ply_bytes(bytes: &[u8], path: &Path, flip_tex_coords: bool) -> Result<LoadedMesh> {
     use ply_rs_bw::parser::{Parser, Reader};
     use ply_rs_bw::ply::Property;
-    let file = std::fs::File::open(path).map_err(|e| Error::Io { file: path.to_path_buf(), source: e })?;
-    let mut reader = Reader::new(std::io::BufReader::new(file));
+    check_ply_header(bytes, path)?;
+    let mut reader = Reader::new(std::io::Cursor::new(bytes));
     let invalid = |e: ply_rs_bw::parser::ParseError| mesh_err(path, format!("invalid PLY: {e}"));
     let header = Parser::<PlySkipped>::new().read_header(&mut reader).map_err(invalid)?;
     let (mut verts, mut faces): (Option<Vec<PlyVertex>>, Option<Vec<PlyFace>>) = (None, None);

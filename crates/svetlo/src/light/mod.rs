@@ -110,6 +110,18 @@ impl SceneBounds {
 }
 
 impl Light {
+    /// The Mitsuba plugin name of this emitter.
+    pub fn kind_name(&self) -> &'static str {
+        match self {
+            Light::Area(_) => "area",
+            Light::Point { .. } => "point",
+            Light::Spot { .. } => "spot",
+            Light::Directional { .. } => "directional",
+            Light::Constant { .. } => "constant",
+            Light::EnvMap(_) => "envmap",
+        }
+    }
+
     pub fn is_delta(&self) -> bool {
         matches!(self, Light::Point { .. } | Light::Spot { .. } | Light::Directional { .. })
     }

@@ -27,6 +27,10 @@ fn uniform_scale(m: &Mat4) -> Option<f32> {
 impl<'a> Loader<'a> {
     /// Add the geometry of a `<shape>` (placed by `parent`, for instances) to the scene.
     pub(super) fn shape(&mut self, node: &'a Node, parent: Mat4) -> Result<()> {
+        self.nested(node, |l| l.shape_plugin(node, parent))
+    }
+
+    fn shape_plugin(&mut self, node: &'a Node, parent: Mat4) -> Result<()> {
         let ty = node.type_()?;
         let animation = self.animation(node, parent)?;
         let to_world = match &animation {
@@ -47,13 +51,11 @@ impl<'a> Loader<'a> {
         let (mut material, mut emission) = (None, None);
         for c in &node.children {
             let target = match c.tag.as_str() {
-                "ref" if c.name().is_none() => self.lookup(c)?,
-                "ref" => {
-                    if matches!(c.name(), Some("interior") | Some("exterior")) {
-                        return Err(c.loc.err("participating media (interior/exterior) are not supported"));
-                    }
-                    continue;
+                "ref" if matches!(c.name(), Some("interior") | Some("exterior")) => {
+                    return Err(c.loc.err("participating media (interior/exterior) are not supported"));
                 }
+                // Named or not (Mitsuba's writer emits `<ref name="bsdf" id=..>`): the target's kind decides.
+                "ref" => self.lookup(c)?,
                 "bsdf" | "emitter" | "medium" => c,
                 _ => continue,
             };
