@@ -8,7 +8,7 @@ For every scene: both renderers in fresh processes, alternating, pinned to one c
 and each renderer's relMSE at equal spp against the scene's reference. CPU time of one
 thread is what stays comparable on a busy machine; quote the ratios, not the seconds.
 
-    python3 bench/mitsuba/compare.py [--repeats 3] [--only NAME,...] [--variant scalar_rgb]
+    python3 bench/mitsuba/compare.py [--repeats 3] [--only NAME,...] [--variant scalar_rgb] [--spp N --res N]
 """
 import argparse
 import os
@@ -99,9 +99,12 @@ def main():
     ap.add_argument("--repeats", type=int, default=3)
     ap.add_argument("--only", default="", help="comma-separated scene names (prefixes)")
     ap.add_argument("--variant", default="llvm_ad_rgb")
+    ap.add_argument("--spp", type=int, default=0, help="override every scene's spp (quick runs)")
+    ap.add_argument("--res", type=int, default=0, help="override every scene's resolution (quick runs)")
     ap.add_argument("--svetlo", default=os.path.join(ROOT, "target", "release", "svetlo"))
     a = ap.parse_args()
     scenes = [s for s in SCENES if not a.only or any(s[0].startswith(o) for o in a.only.split(","))]
+    scenes = [s[:5] + (a.spp or s[5], a.res or s[6], s[7]) for s in scenes]
     tmp = tempfile.mkdtemp(prefix="svetlo-bench-")
     print(f"Mitsuba {a.variant}, one thread each, {a.repeats} alternating runs, medians of CPU time")
     print(f"{'scene':<22}{'spp':>5}{'render CPU ratio':>18}{'process CPU ratio':>19}{'relMSE svetlo':>15}{'relMSE Mitsuba':>16}")
