@@ -2,7 +2,8 @@
 """svetlo against Mitsuba 3 on several scenes, one render thread each, CPU time.
 
 For every scene: both renderers in fresh processes, alternating, pinned to one core
-(`taskset -c 0`, and one Dr.Jit thread); prints the median ratio svetlo / Mitsuba of
+(`taskset -c 0`; Dr.Jit's own thread count left alone: set to 1 the LLVM
+variant hung in 3.9.1); prints the median ratio svetlo / Mitsuba of
  - the render call's CPU time (svetlo's `cpu` line; Mitsuba's process_time around mi.render),
  - the whole process's CPU time (load + build + render + write, from wait4),
 and each renderer's relMSE at equal spp against the scene's reference. CPU time of one
@@ -80,7 +81,6 @@ def mitsuba(variant, sc, out):
     integ = f"mi.load_dict({{'type': '{minteg}', 'max_depth': {depth or -1}}})" if minteg else "None"
     code = (
         "import drjit as dr, mitsuba as mi, time;"
-        "dr.set_thread_count(1);"
         f"mi.set_variant('{variant}');"
         f"s = mi.load_file(r'{scene}', {', '.join(kw)});"
         f"integ = {integ};"
