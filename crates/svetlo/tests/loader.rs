@@ -321,6 +321,42 @@ fn obj_and_ply_round_trip() {
     }
 }
 
+/// Binary and ASCII PLY give the same mesh, whatever the property types (double uvs,
+/// unsigned indices), with an element the loader does not use between vertices and faces,
+/// and a quad split into a fan.
+#[test]
+fn ply_binary_and_ascii_agree() {
+    let d = scratch("plybin");
+    let verts = [([0.0f32, 0.0, 0.0], [0.0f64, 0.0]), ([1.0, 0.0, 0.0], [1.0, 0.0]), ([1.0, 1.0, 0.5], [1.0, 1.0]), ([0.0, 1.0, 0.5], [0.0, 0.75])];
+    let head = |format: &str| {
+        format!(
+            "ply\nformat {format} 1.0\nelement vertex 4\nproperty float x\nproperty float y\nproperty float z\nproperty double u\nproperty double v\n\
+             element material 1\nproperty uchar red\nelement face 1\nproperty list uchar uint vertex_indices\nend_header\n"
+        )
+    };
+    let mut ascii = head("ascii");
+    let mut bin = head("binary_little_endian").into_bytes();
+    for (p, uv) in &verts {
+        ascii += &format!("{} {} {} {} {}\n", p[0], p[1], p[2], uv[0], uv[1]);
+        p.iter().for_each(|x| bin.extend(x.to_le_bytes()));
+        uv.iter().for_each(|x| bin.extend(x.to_le_bytes()));
+    }
+    ascii += "200\n4 0 1 2 3\n";
+    bin.push(200);
+    bin.push(4);
+    [0u32, 1, 2, 3].iter().for_each(|i| bin.extend(i.to_le_bytes()));
+    write(&d, "quad_ascii.ply", &ascii);
+    std::fs::write(d.join("quad_bin.ply"), &bin).unwrap();
+    let shape = |f: &str| format!(r#"<shape type="ply"><string name="filename" value="{f}"/></shape>"#);
+    let s = load_str(&d, &format!("{}{}<emitter type=\"constant\"/>", shape("quad_ascii.ply"), shape("quad_bin.ply"))).unwrap();
+    let (a, b) = (mesh(&s, 0), mesh(&s, 1));
+    assert_eq!(a.positions, b.positions);
+    assert_eq!(a.uvs, b.uvs);
+    assert_eq!(a.indices, b.indices);
+    assert_eq!(a.triangle_count(), 2);
+    assert_eq!(a.uvs[3], glam::Vec2::new(0.0, 0.75));
+}
+
 fn assert_at(e: &Error, file: &str, line: u32, says: &str) {
     match e {
         Error::SceneAt { file: f, line: l, msg, .. } => {
