@@ -21,6 +21,10 @@ pub struct InfoArgs {
     /// Scene parameter for <default> / $name substitution (repeatable).
     #[arg(short = 'D', value_name = "NAME=VALUE", value_parser = parse_define)]
     pub define: Vec<(String, String)>,
+    /// Also compile a light path expression: its automaton's size and the event symbols it
+    /// uses against those the scene can produce.
+    #[arg(long, value_name = "EXPR")]
+    pub lpe: Option<String>,
 }
 
 /// Shapes listed one by one up to this many; beyond, only the totals.
@@ -128,7 +132,69 @@ pub fn run(a: &InfoArgs) -> Result<ExitCode> {
     }
     let scene = crate::load_scene(&a.scene, &a.define)?;
     let _ = write!(std::io::stdout(), "{}", describe(&scene));
+    if let Some(e) = &a.lpe {
+        let _ = write!(std::io::stdout(), "{}", describe_lpe(&scene, e).map_err(|e| crate::Usage(format!("light path expression: {e}")))?);
+    }
     Ok(ExitCode::SUCCESS)
+}
+
+/// The event symbols a scene can produce: C, L or B by its lights, and per material the
+/// scattering events its lobes make (as path vertices label them).
+pub fn scene_symbols(scene: &Scene) -> Vec<&'static str> {
+    use svetlo::bsdf::LobeFlags;
+    use svetlo::lpe::Event;
+    let mut out = vec!["C"];
+    if scene.lights.iter().any(|l| !matches!(l, Light::Constant { .. } | Light::EnvMap(_))) {
+        out.push("L");
+    }
+    if !scene.environment_lights.is_empty() {
+        out.push("B");
+    }
+    for m in &scene.materials {
+        let f = m.bsdf(glam::Vec2::ZERO).flags();
+        for t in [false, true] {
+            let side = if t { LobeFlags::TRANSMISSION } else { LobeFlags::REFLECTION };
+            if !f.intersects(side) {
+                continue;
+            }
+            let mut evs = Vec::new();
+            if f.intersects(LobeFlags::SPECULAR) {
+                evs.push(Event::scatter(f, true, t, 0));
+            }
+            if f.has_non_specular() {
+                evs.push(Event::scatter(f, false, t, 0));
+            }
+            for e in evs {
+                if !out.contains(&e.symbol()) {
+                    out.push(e.symbol());
+                }
+            }
+        }
+    }
+    out
+}
+
+fn describe_lpe(scene: &Scene, expr: &str) -> std::result::Result<String, svetlo::lpe::LpeError> {
+    let mut set = svetlo::lpe::AovSet::compile(&[("lpe".into(), expr.into())], None)?;
+    let warnings = set.bind(scene);
+    let l = &set.expressions()[0];
+    let (states, rev, classes) = l.size();
+    let have = scene_symbols(scene);
+    let used = l.useful_symbols();
+    let mut s = String::new();
+    let order = if l.light_first { "light first, reversed" } else { "camera first" };
+    let _ = writeln!(s, "lpe         '{expr}' ({order})");
+    let _ = writeln!(s, "automaton   {states} states (minimised), reverse {rev} states, {classes} event classes");
+    let _ = writeln!(s, "expression  uses {}", used.join(" "));
+    let _ = writeln!(s, "scene       produces {}", have.join(" "));
+    let missing: Vec<&str> = used.iter().copied().filter(|u| !have.contains(u)).collect();
+    if !missing.is_empty() {
+        let _ = writeln!(s, "note        the scene produces no {} events", missing.join(" "));
+    }
+    for w in warnings {
+        let _ = writeln!(s, "warning     {w}");
+    }
+    Ok(s)
 }
 
 #[cfg(test)]

@@ -79,12 +79,30 @@ pub struct RenderArgs {
     /// (s<S>_t<T>_weighted.exr, they sum to the image) and unweighted (s<S>_t<T>_unweighted.exr).
     #[arg(long, value_name = "DIR")]
     pub strategies: Option<PathBuf>,
+    /// An AOV: the paths a light path expression matches, as its own layer NAME.R/G/B of
+    /// the EXR and OUT_NAME.png (repeatable; e.g. --aov caustic='C D S+ L').
+    #[arg(long, value_name = "NAME=EXPR", value_parser = parse_aov)]
+    pub aov: Vec<(String, String)>,
+    /// Restrict the beauty to the paths a light path expression matches (e.g. 'L D* E').
+    #[arg(long, value_name = "EXPR")]
+    pub lpe: Option<String>,
+    /// Add a preset of AOVs: `lecture` writes one per method class of the lecture (local,
+    /// whitted, cook, radiosity, rest).
+    #[arg(long, value_name = "NAME", value_parser = ["lecture"])]
+    pub aov_preset: Option<String>,
     /// With --strategies: the longest paths (in segments) that get their own images.
     #[arg(long, value_name = "N", default_value_t = 5, value_parser = value_parser!(u32).range(1..=32))]
     pub strategy_depth: u32,
     /// Live preview in a browser, and tev streaming.
     #[command(flatten)]
     pub live: crate::preview::PreviewArgs,
+}
+
+fn parse_aov(s: &str) -> std::result::Result<(String, String), String> {
+    match s.split_once('=') {
+        Some((n, e)) if !n.trim().is_empty() => Ok((n.trim().to_string(), e.to_string())),
+        _ => Err(format!("'{s}' is not NAME=EXPRESSION")),
+    }
 }
 
 fn parse_seconds(s: &str) -> std::result::Result<f64, String> {
@@ -214,6 +232,17 @@ pub fn configure(mut scene: Scene, a: &RenderArgs) -> Result<Job> {
             "warning: light tracing does not see environment emitters (envmap, constant) from the camera; they are missing from the image (use path or bdpt)"
         );
     }
+    let mut aovs = a.aov.clone();
+    if a.aov_preset.as_deref() == Some("lecture") {
+        aovs.extend(svetlo::lpe::LECTURE_PRESET.iter().map(|(n, e)| (n.to_string(), e.to_string())));
+    }
+    if !aovs.is_empty() || a.lpe.is_some() {
+        let mut set = svetlo::lpe::AovSet::compile(&aovs, a.lpe.as_deref()).map_err(|e| Usage(format!("light path expression: {e}")))?;
+        for w in set.bind(&scene) {
+            tell!("warning: {w}");
+        }
+        s.lpe = Some(Arc::new(set));
+    }
     Ok(Job { scene, settings: s, integrator_name, integrator })
 }
 
@@ -314,9 +343,20 @@ pub fn si(x: f64) -> String {
 /// Write the images; returns the paths written.
 pub fn write_outputs(film: &Film, out: &OutputPaths, variance: bool) -> Result<Vec<PathBuf>> {
     let img = film.image();
-    write_exr(&out.exr, &img)?;
+    let layers = film.layer_images();
+    if layers.is_empty() {
+        write_exr(&out.exr, &img)?;
+    } else {
+        svetlo::io::image_io::write_exr_layers(&out.exr, &img, &layers)?;
+    }
     write_png(&out.png, &img)?;
     let mut written = vec![out.exr.clone(), out.png.clone()];
+    // One PNG per AOV beside the beauty's: OUT_NAME.png.
+    for (name, layer) in &layers {
+        let p = with_suffix(&out.exr.with_extension(""), &format!("_{name}.png"));
+        write_png(&p, layer)?;
+        written.push(p);
+    }
     if let Some(p) = &out.pfm {
         write_pfm(p, &img)?;
         written.push(p.clone());

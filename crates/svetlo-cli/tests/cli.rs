@@ -332,3 +332,15 @@ fn render_without_emitters_is_black_with_a_warning() {
         assert!(img.data.iter().all(|c| *c == Rgb::BLACK), "{m}");
     }
 }
+
+#[test]
+fn light_tracing_warns_about_environment_emitters() {
+    let d = tmp("envlight");
+    let scene = d.join("env.xml");
+    std::fs::write(&scene, TINY_XML.replace("<emitter type=\"point\">", "<emitter type=\"constant\"/><emitter type=\"point\">")).unwrap();
+    let (code, _, err) = run(&["render", s(&scene), "-o", s(&d.join("e.exr")), "--integrator", "light", "-D", "res=8", "--spp", "1"]);
+    assert_eq!(code, 0, "{err}");
+    assert!(err.contains("light tracing does not see environment emitters"), "{err}");
+    let (_, _, err) = run(&["render", s(&scene), "-o", s(&d.join("p.exr")), "--integrator", "path", "-D", "res=8", "--spp", "1"]);
+    assert!(!err.contains("environment emitters"), "{err}");
+}

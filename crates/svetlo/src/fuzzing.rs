@@ -53,9 +53,9 @@ pub fn integrator_options(data: &[u8]) {
     }
 }
 
-/// A fuzz target's entry point: any bytes, never a panic.
-pub type Target = fn(&[u8]);
+/// A target's entry point.
+pub type Entry = fn(&[u8]);
 
 /// The targets by name, as `fuzz/corpus/<name>` and the reproducers' folders are named.
-pub const TARGETS: &[(&str, Target)] =
+pub const TARGETS: &[(&str, Entry)] =
     &[("mitsuba_xml", mitsuba_xml), ("obj", obj), ("ply", ply), ("image", image), ("integrator_options", integrator_options), ("photometry", photometry)];

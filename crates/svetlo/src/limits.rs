@@ -70,7 +70,7 @@ pub fn parse_size(s: &str) -> Option<u64> {
         _ => return None,
     };
     let bytes = v * mult as f64;
-    (bytes.is_finite() && (1.0..1.8e19).contains(&bytes)).then_some(bytes as u64)
+    (1.0..1.8e19).contains(&bytes).then_some(bytes as u64)
 }
 
 /// A size for messages: 40000000000 -> "37.3 GiB".

@@ -455,9 +455,10 @@ pub fn encode_frame(frame: &Frame, slot: usize, layer: usize, run: u64) -> Vec<u
     out.extend_from_slice(&frame.height.to_le_bytes());
     out.extend_from_slice(&frame.spp.to_le_bytes());
     out.extend_from_slice(&(run as u32).to_le_bytes());
-    for c in &img.data {
+    out.resize(FRAME_HEADER + img.data.len() * 6, 0);
+    for (dst, c) in out[FRAME_HEADER..].chunks_exact_mut(6).zip(&img.data) {
         for k in 0..3 {
-            out.extend_from_slice(&f16_bits(c[k]).to_le_bytes());
+            dst[2 * k..2 * k + 2].copy_from_slice(&f16_bits(c[k]).to_le_bytes());
         }
     }
     out

@@ -45,6 +45,8 @@ pub struct RenderSettings {
     pub filter: Filter,
     /// Do not show emitters seen directly by the camera.
     pub hide_emitters: bool,
+    /// AOVs by light path expression and the beauty's restriction (None: neither).
+    pub lpe: Option<std::sync::Arc<crate::lpe::AovSet>>,
 }
 
 impl Default for RenderSettings {
@@ -59,6 +61,7 @@ impl Default for RenderSettings {
             sampler: SamplerKind::Independent,
             filter: Filter::default(),
             hide_emitters: false,
+            lpe: None,
         }
     }
 }
@@ -88,6 +91,21 @@ impl RenderSettings {
         }
         if self.rr_depth < 1 {
             return Err(Error::Settings(format!("rr_depth must be >= 1, got {}", self.rr_depth)));
+        }
+        Ok(())
+    }
+
+    /// The render's AOVs (the empty set when there are none).
+    #[inline]
+    pub fn aovs(&self) -> &crate::lpe::AovSet {
+        self.lpe.as_deref().unwrap_or(crate::lpe::AovSet::empty())
+    }
+
+    /// An error when AOVs or a beauty restriction are asked of a method that cannot route
+    /// its contributions by path.
+    pub fn check_lpe_support(&self, method: &str, supported: bool) -> Result<()> {
+        if !supported && !self.aovs().is_empty() {
+            return Err(Error::Settings(format!("{method} does not support light path expressions (AOVs or --lpe)")));
         }
         Ok(())
     }
@@ -170,6 +188,21 @@ pub trait Integrator: Sync {
 /// Radiance along one camera ray: the core of every camera-side method.
 pub trait PixelEstimator: Sync {
     fn li(&self, scene: &Scene, ray: &crate::geometry::Ray, sampler: &mut dyn Sampler, settings: &RenderSettings) -> Rgb;
+    /// [`Self::li`] that also reports each contribution with the layers its path matches
+    /// (`settings.aovs()`); estimators that do say so in [`Self::supports_lpe`].
+    fn li_layers(
+        &self,
+        scene: &Scene,
+        ray: &crate::geometry::Ray,
+        sampler: &mut dyn Sampler,
+        settings: &RenderSettings,
+        _layers: &mut crate::lpe::aov::LayerSample,
+    ) -> Rgb {
+        self.li(scene, ray, sampler, settings)
+    }
+    fn supports_lpe(&self) -> bool {
+        false
+    }
 }
 
 /// Run a pixel estimator over the film: passes of a few samples per pixel over all tiles in
@@ -214,6 +247,9 @@ impl splat::SplatEstimator for TileKernel<'_, '_> {
     fn render_tile(&self, t: splat::TileJob, _: &mut dyn Sampler, _: &mut (), _: &mut Vec<splat::Splat>) {
         (self.0)(t.tile, t.rect, t.s0, t.n)
     }
+    fn supports_lpe(&self) -> bool {
+        false
+    }
 }
 
 /// A pixel estimator seen as a splatting one that never splats.
@@ -230,8 +266,15 @@ impl splat::SplatEstimator for NoSplats<'_> {
         _raster: Vec2,
         sampler: &mut dyn Sampler,
         _scratch: &mut (),
-        _out: &mut splat::SampleOut,
+        out: &mut splat::SampleOut,
     ) -> Rgb {
-        self.0.li(scene, ray, sampler, settings)
+        if settings.aovs().is_empty() {
+            self.0.li(scene, ray, sampler, settings)
+        } else {
+            self.0.li_layers(scene, ray, sampler, settings, &mut out.layers)
+        }
+    }
+    fn supports_lpe(&self) -> bool {
+        self.0.supports_lpe()
     }
 }

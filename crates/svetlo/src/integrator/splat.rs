@@ -32,12 +32,29 @@ pub struct Splat {
     pub value: Rgb,
 }
 
+/// Splat channels from here on are AOV layers (layer = channel - LAYER_CHANNEL).
+pub const LAYER_CHANNEL: u32 = 1 << 16;
+
 /// What one pixel sample produced.
 pub struct SampleOut<'a> {
     pub splats: &'a mut Vec<Splat>,
+    /// The sample's own-pixel contributions per AOV layer (and to a restricted beauty).
+    pub layers: crate::lpe::aov::LayerSample,
 }
 
 impl SampleOut<'_> {
+    /// Splat `value` to the beauty and the AOV layers of `mask`.
+    #[inline]
+    pub fn splat_layers(&mut self, mask: crate::lpe::LayerMask, raster: Vec2, value: Rgb) {
+        if mask & crate::lpe::aov::BEAUTY != 0 {
+            self.push(0, raster, value);
+        }
+        let mut m = mask & !crate::lpe::aov::BEAUTY;
+        while m != 0 {
+            self.push(LAYER_CHANNEL + m.trailing_zeros(), raster, value);
+            m &= m - 1;
+        }
+    }
     #[inline]
     pub fn splat(&mut self, raster: Vec2, value: Rgb) {
         self.push(0, raster, value);
@@ -55,6 +72,10 @@ pub trait SplatEstimator: Sync {
     /// Per-thread scratch space (subpath buffers), reused across samples.
     type Scratch: Send;
     fn scratch(&self) -> Self::Scratch;
+    /// Whether the estimator reports its contributions by path (AOVs, `--lpe`).
+    fn supports_lpe(&self) -> bool {
+        false
+    }
     /// Radiance to add at `raster` through the pixel filter; light-side results go to `out`.
     #[allow(clippy::too_many_arguments)]
     fn sample(
@@ -75,13 +96,19 @@ pub trait SplatEstimator: Sync {
     fn render_tile(&self, t: TileJob, sampler: &mut dyn Sampler, scratch: &mut Self::Scratch, splats: &mut Vec<Splat>) {
         let [x0, y0, x1, y1] = t.rect;
         let cam = t.scene.camera.ray_generator();
+        let aovs = t.settings.aovs();
         for y in y0..y1 {
             for x in x0..x1 {
                 for s in t.s0..t.s0 + t.n {
                     let (raster, ray) = super::camera_sample(&cam, sampler, x, y, s);
-                    let mut out = SampleOut { splats };
+                    let mut out = SampleOut { splats, layers: Default::default() };
                     let l = self.sample(t.scene, t.settings, &ray, raster, sampler, scratch, &mut out);
-                    t.tile.add_sample(raster, l);
+                    if aovs.is_empty() {
+                        t.tile.add_sample(raster, l);
+                    } else {
+                        let beauty = if aovs.restricts_beauty() { out.layers.beauty } else { l };
+                        t.tile.add_sample_layers(raster, beauty, &out.layers.aov[..aovs.aov_count()]);
+                    }
                 }
             }
         }
@@ -143,9 +170,11 @@ pub(super) fn render_chunked<E: SplatEstimator>(
     chunk_samples: u64,
 ) -> Result<SplatRender> {
     settings.validate()?;
+    settings.check_lpe_support("this method", est.supports_lpe())?;
     let cam = &scene.camera;
     let (w, h) = (cam.width, cam.height);
-    let mut film = Film::new(w, h, settings.filter);
+    let n_layers = settings.aovs().aov_count();
+    let mut film = Film::with_layers(w, h, settings.filter, settings.aovs().names());
     let mut extra: Vec<Vec<Rgb>> = vec![vec![Rgb::BLACK; (w * h) as usize]; channels];
     let tiles: Vec<(u32, u32, u32, u32)> = (0..h.div_ceil(TILE))
         .flat_map(|ty| (0..w.div_ceil(TILE)).map(move |tx| (tx * TILE, ty * TILE, ((tx + 1) * TILE).min(w), ((ty + 1) * TILE).min(h))))
@@ -167,7 +196,8 @@ pub(super) fn render_chunked<E: SplatEstimator>(
         // each chunk's splats land in pass-local dense buffers, in chunk and tile order.
         let tiles_per_chunk = ((chunk_samples / (n as u64 * (TILE * TILE) as u64)).max(1)).min(tiles.len().max(1) as u64) as usize;
         let mut pass_tiles: Vec<FilmTile> = Vec::with_capacity(tiles.len());
-        let mut pass_splats: Vec<Vec<Rgb>> = vec![Vec::new(); 1 + channels];
+        // The beauty's splats, the extra channels, then the AOV layers'.
+        let mut pass_splats: Vec<Vec<Rgb>> = vec![Vec::new(); 1 + channels + n_layers];
         let mut cancelled = false;
         for chunk in tiles.chunks(tiles_per_chunk) {
             let results: Vec<Option<(FilmTile, Vec<Splat>)>> = pool.install(|| {
@@ -199,7 +229,8 @@ pub(super) fn render_chunked<E: SplatEstimator>(
                     if !(x >= 0.0 && y >= 0.0 && (x as u32) < w && (y as u32) < h) {
                         continue;
                     }
-                    if let Some(buf) = pass_splats.get_mut(sp.channel as usize) {
+                    let slot = if sp.channel >= LAYER_CHANNEL { 1 + channels + (sp.channel - LAYER_CHANNEL) as usize } else { sp.channel as usize };
+                    if let Some(buf) = pass_splats.get_mut(slot) {
                         if buf.is_empty() {
                             *buf = vec![Rgb::BLACK; (w * h) as usize];
                         }
@@ -219,6 +250,8 @@ pub(super) fn render_chunked<E: SplatEstimator>(
                 let (x, y) = ((i as u32 % w) as f32 + 0.5, (i as u32 / w) as f32 + 0.5);
                 if c == 0 {
                     film.splat(Vec2::new(x, y), *v);
+                } else if c > channels {
+                    film.splat_layer(c - 1 - channels, Vec2::new(x, y), *v);
                 } else {
                     extra[c - 1][i] += *v;
                 }

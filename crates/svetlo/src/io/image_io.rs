@@ -60,6 +60,37 @@ pub fn write_exr(path: &Path, img: &Image) -> Result<()> {
     write_atomic(path, &bytes)
 }
 
+/// One EXR file with the beauty as channels R, G, B and each layer `NAME` as `NAME.R`,
+/// `NAME.G`, `NAME.B` (OpenEXR's layer naming), 32-bit float, all the beauty's size.
+pub fn write_exr_layers(path: &Path, beauty: &Image, layers: &[(String, Image)]) -> Result<()> {
+    use exr::prelude::{AnyChannel, AnyChannels, Encoding, FlatSamples, Layer, LayerAttributes, WritableImage};
+    let (w, h) = (beauty.width, beauty.height);
+    if layers.iter().any(|(_, l)| l.width != w || l.height != h) {
+        return Err(crate::error::Error::Image { file: path.to_path_buf(), msg: "AOV layers must have the beauty's size".into() });
+    }
+    let mut channels = Vec::new();
+    let mut add = |prefix: &str, img: &Image| {
+        for (c, name) in ["R", "G", "B"].iter().enumerate() {
+            let data: Vec<f32> = img.data.iter().map(|p| [p.r, p.g, p.b][c]).collect();
+            channels.push(AnyChannel::new(format!("{prefix}{name}").as_str(), FlatSamples::F32(data)));
+        }
+    };
+    add("", beauty);
+    for (n, img) in layers {
+        add(&format!("{n}."), img);
+    }
+    let layer = Layer::new((w, h), LayerAttributes::default(), Encoding::FAST_LOSSLESS, AnyChannels::sort(channels.into()));
+    exr::prelude::Image::from_layer(layer).write().to_file(path).map_err(|e| img_err(path, e))
+}
+
+/// Every channel of an EXR file's first layer by name (e.g. `caustic.R`), as f32.
+pub fn read_exr_channels(path: &Path) -> Result<Vec<(String, Vec<f32>)>> {
+    use exr::prelude::{read, ReadChannels, ReadLayers};
+    let img =
+        read().no_deep_data().largest_resolution_level().all_channels().first_valid_layer().all_attributes().from_file(path).map_err(|e| img_err(path, e))?;
+    Ok(img.layer_data.channel_data.list.iter().map(|c| (c.name.to_string(), c.sample_data.values_as_f32().collect())).collect())
+}
+
 /// sRGB-encoded 8-bit PNG, values clamped to [0, 1] (NaN becomes 0).
 pub fn write_png(path: &Path, img: &Image) -> Result<()> {
     let mut buf = Vec::with_capacity(img.width * img.height * 3);

@@ -151,27 +151,109 @@ fn check_ply_header(bytes: &[u8], path: &Path) -> Result<()> {
     if min_len > data {
         return Err(mesh_err(path, format!("invalid PLY: the header announces at least {min_len} bytes of elements, the file holds {data}")));
     }
-    // The PLY reader keeps every element as a map of named properties (~64 bytes each).
+    // Bounded by ~64 bytes per property of every element (vertices and faces are read into
+    // fixed structs, face lists into vectors: less than that).
     let parsed: u64 = elements.iter().map(|&(n, p)| n.saturating_mul(64 * p + 64)).fold(0, u64::saturating_add);
     crate::limits::check(format!("{}: a PLY of {} elements", path.display(), elements.iter().map(|e| e.0).sum::<u64>()), parsed)
 }
 
+/// Vertex properties a PLY mesh may give, in the order of [`PlyVertex::values`].
+const PLY_VERTEX_KEYS: [&str; 12] = ["x", "y", "z", "nx", "ny", "nz", "u", "v", "texture_u", "texture_v", "s", "t"];
+
+/// One PLY vertex as the parser fills it: a fixed slot per known property (no map per
+/// vertex), with a bit per slot set when the file gave it as a scalar.
+struct PlyVertex {
+    values: [f32; 12],
+    set: u16,
+}
+
+impl ply_rs_bw::ply::PropertyAccess for PlyVertex {
+    fn new() -> Self {
+        PlyVertex { values: [0.0; 12], set: 0 }
+    }
+    fn set_property(&mut self, key: &str, property: ply_rs_bw::ply::Property) -> ply_rs_bw::ply::PropertyAccessResult {
+        use ply_rs_bw::ply::PropertyAccessResult;
+        match (PLY_VERTEX_KEYS.iter().position(|k| *k == key), property.to_f32_lossy()) {
+            (Some(i), Some(x)) => {
+                self.values[i] = x;
+                self.set |= 1 << i;
+                PropertyAccessResult::Set
+            }
+            _ => PropertyAccessResult::Ignored,
+        }
+    }
+}
+
+/// One PLY face: its index list (`vertex_indices`, else `vertex_index`).
+struct PlyFace {
+    indices: Option<ply_rs_bw::ply::Property>,
+    index: Option<ply_rs_bw::ply::Property>,
+}
+
+impl ply_rs_bw::ply::PropertyAccess for PlyFace {
+    fn new() -> Self {
+        PlyFace { indices: None, index: None }
+    }
+    fn set_property(&mut self, key: &str, property: ply_rs_bw::ply::Property) -> ply_rs_bw::ply::PropertyAccessResult {
+        match key {
+            "vertex_indices" => self.indices = Some(property),
+            "vertex_index" => self.index = Some(property),
+            _ => return ply_rs_bw::ply::PropertyAccessResult::Ignored,
+        }
+        ply_rs_bw::ply::PropertyAccessResult::Set
+    }
+}
+
+/// Elements other than vertices and faces: read past, kept nowhere.
+struct PlySkipped;
+
+impl ply_rs_bw::ply::PropertyAccess for PlySkipped {
+    fn new() -> Self {
+        PlySkipped
+    }
+}
+
 /// [`load_ply`] for a file held in memory; `path` names it in errors.
 pub fn load_ply_bytes(bytes: &[u8], path: &Path, flip_tex_coords: bool) -> Result<LoadedMesh> {
-    use ply_rs_bw::ply::{DefaultElement, Property};
+    use ply_rs_bw::parser::{Parser, Reader};
+    use ply_rs_bw::ply::Property;
     check_ply_header(bytes, path)?;
-    let mut reader = std::io::Cursor::new(bytes);
-    let parser = ply_rs_bw::parser::Parser::<DefaultElement>::new();
-    let ply = parser.read_ply(&mut reader).map_err(|e| mesh_err(path, format!("invalid PLY: {e}")))?;
-    let scalar = |e: &DefaultElement, k: &str| e.get(k).and_then(|p| p.to_f32_lossy());
-    let verts = ply.payload.get("vertex").ok_or_else(|| mesh_err(path, "no 'vertex' element"))?;
-    let faces = ply.payload.get("face").ok_or_else(|| mesh_err(path, "no 'face' element"))?;
+    let mut reader = Reader::new(std::io::Cursor::new(bytes));
+    let invalid = |e: ply_rs_bw::parser::ParseError| mesh_err(path, format!("invalid PLY: {e}"));
+    let header = Parser::<PlySkipped>::new().read_header(&mut reader).map_err(invalid)?;
+    let (mut verts, mut faces): (Option<Vec<PlyVertex>>, Option<Vec<PlyFace>>) = (None, None);
+    let mut vertex_names: Vec<&str> = Vec::new();
+    // Elements come in the header's order; each is read whole before the next.
+    for def in header.elements.values() {
+        match def.name.as_str() {
+            "vertex" if verts.is_none() => {
+                vertex_names = def.properties.keys().map(|k| k.as_str()).collect();
+                verts = Some(Parser::<PlyVertex>::new().read_payload_for_element(&mut reader, def, &header).map_err(invalid)?);
+            }
+            "face" if faces.is_none() => faces = Some(Parser::<PlyFace>::new().read_payload_for_element(&mut reader, def, &header).map_err(invalid)?),
+            _ => {
+                Parser::<PlySkipped>::new().read_payload_for_element(&mut reader, def, &header).map_err(invalid)?;
+            }
+        }
+    }
+    let verts = verts.ok_or_else(|| mesh_err(path, "no 'vertex' element"))?;
+    let faces = faces.ok_or_else(|| mesh_err(path, "no 'face' element"))?;
     let mut mesh = TriangleMesh::default();
+    let slot = |k: &str| PLY_VERTEX_KEYS.iter().position(|x| *x == k).unwrap_or(0);
+    let declared = |k: &str| vertex_names.contains(&k);
     let uv_keys = [("u", "v"), ("texture_u", "texture_v"), ("s", "t")];
-    let uv_key = verts.first().and_then(|v| uv_keys.iter().find(|(a, b)| v.contains_key(*a) && v.contains_key(*b)));
-    let has_n = verts.first().is_some_and(|v| v.contains_key("nx") && v.contains_key("ny") && v.contains_key("nz"));
+    let uv_key = uv_keys.iter().find(|(a, b)| declared(a) && declared(b));
+    let has_n = declared("nx") && declared("ny") && declared("nz");
+    mesh.positions.reserve(verts.len());
     for (i, v) in verts.iter().enumerate() {
-        let get = |k: &str| scalar(v, k).ok_or_else(|| mesh_err(path, format!("vertex {i}: missing or non-scalar property '{k}'")));
+        let get = |k: &str| {
+            let s = slot(k);
+            if v.set & (1 << s) != 0 {
+                Ok(v.values[s])
+            } else {
+                Err(mesh_err(path, format!("vertex {i}: missing or non-scalar property '{k}'")))
+            }
+        };
         mesh.positions.push(Vec3::new(get("x")?, get("y")?, get("z")?));
         if has_n {
             mesh.normals.push(Vec3::new(get("nx")?, get("ny")?, get("nz")?));
@@ -182,8 +264,9 @@ pub fn load_ply_bytes(bytes: &[u8], path: &Path, flip_tex_coords: bool) -> Resul
         }
     }
     let nv = mesh.positions.len() as i64;
+    mesh.indices.reserve(faces.len());
     for (fi, f) in faces.iter().enumerate() {
-        let list = f.get("vertex_indices").or_else(|| f.get("vertex_index")).ok_or_else(|| mesh_err(path, format!("face {fi}: no vertex_indices")))?;
+        let list = f.indices.as_ref().or(f.index.as_ref()).ok_or_else(|| mesh_err(path, format!("face {fi}: no vertex_indices")))?;
         let idx: Vec<i64> = match list {
             Property::ListChar(l) => l.iter().map(|&x| x as i64).collect(),
             Property::ListUChar(l) => l.iter().map(|&x| x as i64).collect(),

@@ -74,6 +74,21 @@ impl AovSet {
         Ok(AovSet { names, lpes, beauty_filter, labels, shape_labels: Vec::new() })
     }
 
+    /// Compile `name = expression` pairs and the beauty's optional restriction; an error
+    /// names the AOV whose expression is wrong.
+    pub fn compile(aovs: &[(String, String)], beauty: Option<&str>) -> Result<AovSet, LpeError> {
+        let mut list = Vec::new();
+        for (n, e) in aovs {
+            let l = Lpe::new(e).map_err(|mut err| {
+                err.msg = format!("AOV '{n}': {}", err.msg);
+                err
+            })?;
+            list.push((n.clone(), l));
+        }
+        let b = beauty.map(Lpe::new).transpose()?;
+        AovSet::new(list, b)
+    }
+
     /// Resolve labels against the scene's shape ids; returns a warning per label that names
     /// nothing and per expression that can match no path.
     pub fn bind(&mut self, scene: &Scene) -> Vec<String> {
@@ -118,6 +133,56 @@ impl AovSet {
     #[inline]
     pub fn light_event(&self, shape: Option<u32>) -> Event {
         Event { labels: shape.map_or(0, |s| self.shape_labels(s)), ..Event::LIGHT }
+    }
+
+    /// The event of reaching emitter `light` (by sampling it or by hitting it): B for the
+    /// environment (what escaped rays see), L with its shape's labels otherwise.
+    #[inline]
+    pub fn emitter_event(&self, light: &crate::light::Light) -> Event {
+        use crate::light::Light;
+        match light {
+            Light::Area(a) => self.light_event(Some(a.shape)),
+            Light::Constant { .. } | Light::EnvMap(_) => Event::BACKGROUND,
+            _ => Event::LIGHT,
+        }
+    }
+
+    /// The event of scattering at a surface of shape `shape` with BSDF lobes `flags`:
+    /// `lobe` the lobe sampled (None: an evaluated direction, next-event estimation or a
+    /// connection), `transmission` whether the directions lie on opposite sides.
+    #[inline]
+    pub fn scatter_event(&self, shape: u32, flags: crate::bsdf::LobeFlags, lobe: Option<crate::bsdf::LobeFlags>, transmission: bool) -> Event {
+        let singular = lobe.is_some_and(|l| l.contains(crate::bsdf::LobeFlags::SPECULAR));
+        Event::scatter(flags, singular, transmission, self.shape_labels(shape))
+    }
+
+    /// The event of a path endpoint on an emitter: a light subpath's first vertex, or a
+    /// camera subpath that ended on an emitter or escaped (no light: the environment).
+    #[inline]
+    pub fn endpoint_event(&self, scene: &Scene, v: &crate::path::Vertex) -> Event {
+        match v.light {
+            Some(li) => self.emitter_event(&scene.lights[li as usize]),
+            None => Event::BACKGROUND,
+        }
+    }
+
+    /// The event of scattering at subpath vertex `v` as its walk sampled it; None for a
+    /// null interaction (a mask let the path through: not a vertex of the expression).
+    #[inline]
+    pub fn sampled_event(&self, v: &crate::path::Vertex) -> Option<Event> {
+        if v.event.kind == crate::path::EventKind::Null {
+            return None;
+        }
+        let flags = v.bsdf.as_ref().map_or(crate::bsdf::LobeFlags::NONE, |b| b.flags());
+        Some(Event::scatter(flags, v.delta, v.event.transmission, self.shape_labels(v.shape)))
+    }
+
+    /// The event of scattering at subpath vertex `v` toward point `q` (a connection).
+    #[inline]
+    pub fn connected_event(&self, v: &crate::path::Vertex, q: glam::Vec3) -> Event {
+        let flags = v.bsdf.as_ref().map_or(crate::bsdf::LobeFlags::NONE, |b| b.flags());
+        let through = (v.wo.dot(v.ng) > 0.0) != ((q - v.p).dot(v.ng) > 0.0);
+        Event::scatter(flags, false, through, self.shape_labels(v.shape))
     }
 
     #[inline]
@@ -191,6 +256,18 @@ pub struct LightTracker<'a> {
 }
 
 impl<'a> LightTracker<'a> {
+    /// A subpath whose events so far are `path`'s first `n` vertices as sampled (vertex 0 the
+    /// light endpoint).
+    pub fn along(set: &'a AovSet, scene: &Scene, path: &[crate::path::Vertex], n: usize) -> Self {
+        let mut t = LightTracker::light(set, set.endpoint_event(scene, &path[0]));
+        for v in &path[1..n] {
+            if let Some(e) = set.sampled_event(v) {
+                t.push(e);
+            }
+        }
+        t
+    }
+
     /// A subpath that starts at a light with event `e` (L or B).
     #[inline]
     pub fn light(set: &'a AovSet, e: Event) -> Self {

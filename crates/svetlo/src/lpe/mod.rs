@@ -17,6 +17,19 @@ pub use aov::{AovSet, LayerMask, LightTracker, Tracker, MAX_LAYERS};
 
 use automaton::{Dfa, BASE_COUNT};
 
+/// `--aov-preset lecture`: one AOV per method class of the lecture, camera first (the
+/// lecture's S, any directional lobe, is `[GS]`; its S_M, the ideal mirror, is `S`). The
+/// classes nest (local ⊂ Whitted ⊂ Cook; radiosity beside them); `rest` is every path in
+/// none of them, so that `cook`, `radiosity` and `rest` less their overlap `C D? [LB]`
+/// cover everything.
+pub const LECTURE_PRESET: &[(&str, &str)] = &[
+    ("local", "C [DG]? [LB]"),
+    ("whitted", "C S* [DG]? [LB]"),
+    ("cook", "C [GS]* D? [LB]"),
+    ("radiosity", "C D* [LB]"),
+    ("rest", "C .* D .* [GS] .* [LB] | C .* [GS] .* D .* D .* [LB]"),
+];
+
 /// A malformed expression: the message, and the expression with a caret under the column.
 #[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
 #[error("{msg} (column {})\n  {expr}\n  {caret}^", col + 1, caret = " ".repeat(*col))]

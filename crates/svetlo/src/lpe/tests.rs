@@ -192,3 +192,28 @@ fn an_expression_that_matches_nothing_is_reported() {
     assert!(Lpe::new("C D L").unwrap().can_match());
     assert_eq!(Lpe::new("C D L").unwrap().useful_symbols(), vec!["C", "L", "D", "TD"]);
 }
+
+/// The preset's `rest` is exactly the paths in none of the lecture's classes: every path of
+/// up to six scattering events (D, G, S, reflection or transmission), to a light or the sky.
+#[test]
+fn lecture_rest_is_the_complement_of_the_classes() {
+    let l: Vec<Lpe> = LECTURE_PRESET.iter().map(|(_, e)| Lpe::new(e).unwrap()).collect();
+    let (classes, rest) = l.split_at(4);
+    let scatter = ["D", "G", "S", "TD", "TG", "TS"];
+    for n in 0..=5u32 {
+        for code in 0..6usize.pow(n) {
+            let mut p = vec![Event::CAMERA];
+            let mut c = code;
+            for _ in 0..n {
+                p.push(Event::parse_token(scatter[c % 6]).unwrap());
+                c /= 6;
+            }
+            for end in [Event::LIGHT, Event::BACKGROUND] {
+                let mut q = p.clone();
+                q.push(end);
+                let any = classes.iter().any(|x| x.matches(&q));
+                assert_eq!(rest[0].matches(&q), !any, "{:?}", q.iter().map(|e| e.symbol()).collect::<Vec<_>>());
+            }
+        }
+    }
+}

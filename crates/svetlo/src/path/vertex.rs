@@ -102,6 +102,8 @@ pub struct Vertex {
     pub pdf_rev: f32,
     pub delta: bool,
     pub event: Event,
+    /// Surfaces: the scene shape (for light path expressions' labels).
+    pub shape: u32,
     /// Camera vertices: where on the film.
     pub raster: Vec2,
     /// The path's time in the shutter interval (the camera ray's): connections test
@@ -152,6 +154,7 @@ impl Vertex {
             pdf_rev: 0.0,
             delta: false,
             event: if kind == VertexKind::Camera { Event::CAMERA } else { Event::LIGHT },
+            shape: 0,
             raster: Vec2::ZERO,
             time: 0.0,
         }
@@ -187,6 +190,7 @@ impl Vertex {
             light,
             beta,
             time: si.time,
+            shape: si.shape,
             ..Self::blank(VertexKind::Surface)
         }
     }
@@ -298,6 +302,7 @@ impl Vertex {
                 }
             }
             l @ Light::Spot { .. } => l.spot_intensity(w),
+            Light::Projector(pr) => pr.intensity(w),
             Light::Point { .. } => self.le,
             _ => Rgb::BLACK,
         }

@@ -9,9 +9,6 @@ use crate::error::Result;
 use crate::limits::{MAX_PLUGIN_DEPTH, MAX_PLUGIN_INSTANCES};
 use std::collections::HashMap;
 
-/// A node of the depth-first walk: its id, its edges, and the next edge to follow.
-type Walk<'a> = (&'a str, Vec<(&'a str, &'a Node)>, usize);
-
 /// The newest scene format this loader reads.
 const MAX_VERSION_MAJOR: u32 = 3;
 
@@ -31,6 +28,9 @@ fn edges<'a>(n: &'a Node, out: &mut Vec<(&'a str, &'a Node)>) {
     }
 }
 
+/// One id on the search stack: the id, the ids it uses (with where), the next one to follow.
+type Frame<'a> = (&'a str, Vec<(&'a str, &'a Node)>, usize);
+
 /// Fail on a cycle of references (a `twosided` whose nested BSDF refers back to it, a
 /// shapegroup that instances itself), naming the chain.
 pub(super) fn check_cycles(ids: &HashMap<&str, &Node>) -> Result<()> {
@@ -48,7 +48,7 @@ pub(super) fn check_cycles(ids: &HashMap<&str, &Node>) -> Result<()> {
             continue;
         }
         // (id, its edges, the next edge to follow)
-        let mut stack: Vec<Walk> = Vec::new();
+        let mut stack: Vec<Frame> = Vec::new();
         let mut out = Vec::new();
         edges(ids[root], &mut out);
         mark.insert(root, Mark::Open);

@@ -133,7 +133,7 @@ impl<'a> Loader<'a> {
     }
 
     /// The horizontal fov from `fov` + `fov_axis` or a 35 mm `focal_length` (Mitsuba's default 50mm).
-    fn fov_x(&self, node: &'a Node, aspect: f32) -> Result<f32> {
+    pub(super) fn fov_x(&self, node: &'a Node, aspect: f32) -> Result<f32> {
         let (fov, axis) = match self.opt_float(node, "fov")? {
             Some(f) => (f, self.string(node, "fov_axis")?.unwrap_or("x").to_string()),
             None => {

@@ -10,7 +10,6 @@ use crate::io::spectra::SpectrumKind;
 use crate::math::Frame;
 use crate::spectrum::Rgb;
 use glam::{Mat3, Mat4, Vec3};
-use std::path::{Path, PathBuf};
 
 /// Is the linear part of `m` a uniform scale (any rotation allowed)? Returns the scale.
 fn uniform_scale(m: &Mat4) -> Option<f32> {
@@ -97,7 +96,11 @@ impl<'a> Loader<'a> {
                 let loaded = match ty {
                     "obj" => mesh_files::load_obj(&path, self.boolean(node, "flip_tex_coords", true)?)?,
                     "ply" => mesh_files::load_ply(&path, self.boolean(node, "flip_tex_coords", false)?)?,
-                    _ => self.serialized_twin(node, &path)?,
+                    _ => {
+                        let index = self.int(node, "shape_index", 0)?;
+                        let index = u32::try_from(index).map_err(|_| node.loc.err(format!("shape_index must be non-negative, got {index}")))?;
+                        crate::io::serialized::load_serialized(&path, index)?
+                    }
                 };
                 let LoadedMesh { mut mesh, warnings } = loaded;
                 for w in warnings {
@@ -220,30 +223,6 @@ impl<'a> Loader<'a> {
                 m.transform(&object);
                 Ok(Geometry::Mesh(finish(m, flip)))
             }
-        }
-    }
-
-    /// Mitsuba's `.serialized` format is not read; a twin OBJ/PLY of the same name is used.
-    fn serialized_twin(&mut self, node: &'a Node, path: &Path) -> Result<LoadedMesh> {
-        let stem = path.file_stem().and_then(|s| s.to_str()).unwrap_or("");
-        let dir = path.parent().unwrap_or(Path::new("."));
-        let mut candidates: Vec<PathBuf> = Vec::new();
-        for ext in ["obj", "ply"] {
-            candidates.push(dir.join(format!("{stem}.{ext}")));
-            if let Some(up) = dir.parent() {
-                candidates.push(up.join(ext).join(format!("{stem}.{ext}")));
-            }
-        }
-        let twin = candidates
-            .into_iter()
-            .find(|c| c.exists())
-            .ok_or_else(|| node.loc.err(format!("'.serialized' meshes are not supported and no .obj/.ply twin of '{}' was found", path.display())))?;
-        self.warn(format!("{}: .serialized is not supported; loaded its twin {}", path.display(), twin.display()));
-        // Serialized meshes store uvs as they are: no flip for either twin.
-        if twin.extension().is_some_and(|e| e == "obj") {
-            mesh_files::load_obj(&twin, false)
-        } else {
-            mesh_files::load_ply(&twin, false)
         }
     }
 }
