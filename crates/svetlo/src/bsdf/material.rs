@@ -12,9 +12,10 @@ use super::phong::Phong;
 use super::plastic::{self, RoughPlastic, SmoothPlastic};
 use super::ward::{Ward, WardVariant};
 use super::{diffuse::Diffuse, Bsdf, BsdfModel};
+use crate::math::Frame;
 use crate::spectrum::Rgb;
-use crate::texture::Texture;
-use glam::Vec2;
+use crate::texture::{TexPoint, Texture};
+use glam::Vec3;
 
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Default)]
 pub enum MicrofacetKind {
@@ -59,6 +60,22 @@ pub enum Material {
     Mask { opacity: Texture, inner: Box<Material> },
     /// Nothing scatters (e.g. a pure emitter); rays pass through unchanged.
     Null,
+    /// Mitsuba `normalmap`: `inner` in the shading frame the tangent-space normal texture gives.
+    NormalMap { normals: Texture, inner: Box<Material> },
+    /// Mitsuba `bumpmap`: `inner` in the shading frame of the surface displaced by
+    /// `scale` times the height texture.
+    BumpMap { height: Texture, scale: f32, inner: Box<Material> },
+    /// Mitsuba `blendbsdf`: (1 - weight) a + weight b.
+    Blend { weight: Texture, a: Box<Material>, b: Box<Material> },
+}
+
+/// The differential geometry at a hit that surface detail (normal and bump maps) needs.
+#[derive(Clone, Copy, Debug)]
+pub struct ShadingGeometry {
+    pub shading: Frame,
+    pub ng: Vec3,
+    pub dpdu: Vec3,
+    pub dpdv: Vec3,
 }
 
 impl Default for Material {
@@ -69,7 +86,7 @@ impl Default for Material {
 
 impl Roughness {
     /// The microfacet distribution at `uv` (alphas read from the first channel).
-    pub fn at(&self, uv: Vec2) -> Microfacet {
+    pub fn at(&self, uv: TexPoint) -> Microfacet {
         Microfacet::new(self.kind, self.alpha_u.eval_f32(uv), self.alpha_v.eval_f32(uv))
     }
 }
@@ -77,7 +94,7 @@ impl Roughness {
 /// Mean of a texture for sampling heuristics. Bitmaps would need a pass over every texel
 /// per hit, so they use the local value: that changes only how samples are spread
 /// between lobes (the estimate stays unbiased), not the BSDF.
-fn sampling_mean(t: &Texture, uv: Vec2) -> f32 {
+fn sampling_mean(t: &Texture, uv: TexPoint) -> f32 {
     match t {
         Texture::Bitmap { .. } => t.eval(uv).mean(),
         _ => t.mean().mean(),
@@ -102,6 +119,9 @@ impl Material {
             Material::TwoSided { front, .. } => format!("twosided({})", front.kind_name()),
             Material::Mask { inner, .. } => format!("mask({})", inner.kind_name()),
             Material::Null => "null".into(),
+            Material::NormalMap { inner, .. } => format!("normalmap({})", inner.kind_name()),
+            Material::BumpMap { inner, .. } => format!("bumpmap({})", inner.kind_name()),
+            Material::Blend { a, b, .. } => format!("blendbsdf({}, {})", a.kind_name(), b.kind_name()),
         }
     }
 
@@ -128,11 +148,13 @@ impl Material {
             Material::TwoSided { front, back } => front.is_uniform() && back.is_uniform(),
             Material::Mask { opacity, inner } => c(opacity) && inner.is_uniform(),
             Material::Null => true,
+            Material::NormalMap { .. } | Material::BumpMap { .. } => false,
+            Material::Blend { weight, a, b } => c(weight) && a.is_uniform() && b.is_uniform(),
         }
     }
 
     /// The model one side of this material describes, with textures evaluated at `uv`.
-    fn model(&self, uv: Vec2) -> Option<BsdfModel> {
+    fn model(&self, uv: TexPoint) -> Option<BsdfModel> {
         match self {
             Material::Diffuse { reflectance } => Some(BsdfModel::Diffuse(Diffuse { reflectance: reflectance.eval(uv).clamp(0.0, 1.0) })),
             Material::Conductor { eta, k, specular_reflectance, roughness } => {
@@ -215,16 +237,24 @@ impl Material {
             Material::TwoSided { front, .. } => front.model(uv),
             Material::Mask { inner, .. } => inner.model(uv),
             Material::Null => None,
+            // Without the geometry there is no perturbed frame (see `bsdf_with_detail`).
+            Material::NormalMap { inner, .. } | Material::BumpMap { inner, .. } => inner.model(uv),
+            Material::Blend { weight, a, b } => {
+                Some(BsdfModel::Blend(Box::new(super::blend::Blend { a: a.bsdf(uv), b: b.bsdf(uv), weight: weight.eval_f32(uv).clamp(0.0, 1.0) })))
+            }
         }
     }
 
-    /// The BSDF at a surface point with texture coordinates `uv`. A null material gives a
-    /// BSDF that lets every ray pass (opacity 0).
-    pub fn bsdf(&self, uv: Vec2) -> Bsdf {
+    /// The BSDF at a surface point (its uv, or the full [`TexPoint`] for mesh attributes),
+    /// without surface detail: normal and bump maps need the geometry of
+    /// [`Self::bsdf_with_detail`]. A null material gives a BSDF that lets every ray pass
+    /// (opacity 0).
+    pub fn bsdf(&self, uv: impl Into<TexPoint>) -> Bsdf {
+        let uv = uv.into();
         match self {
             // The common case built in place, without the Option of `model`.
             Material::Diffuse { reflectance } => Bsdf::new(BsdfModel::Diffuse(Diffuse { reflectance: reflectance.eval(uv).clamp(0.0, 1.0) })),
-            Material::Null => Bsdf { front: BsdfModel::Diffuse(Diffuse { reflectance: Rgb::BLACK }), back: None, opacity: 0.0 },
+            Material::Null => Bsdf { front: BsdfModel::Diffuse(Diffuse { reflectance: Rgb::BLACK }), back: None, opacity: 0.0, detail: None },
             Material::TwoSided { front, back } => {
                 let mut b = front.bsdf(uv);
                 b.back = back.model(uv);
@@ -235,7 +265,107 @@ impl Material {
                 b.opacity *= opacity.eval_f32(uv).clamp(0.0, 1.0);
                 b
             }
+            Material::NormalMap { inner, .. } | Material::BumpMap { inner, .. } => inner.bsdf(uv),
             _ => Bsdf::new(self.model(uv).unwrap_or(BsdfModel::Diffuse(Diffuse { reflectance: Rgb::BLACK }))),
         }
+    }
+
+    /// Does the material perturb the shading frame (a normal or bump map, outermost or
+    /// under `twosided` / `mask`)? Then its BSDF needs [`Self::bsdf_with_detail`].
+    pub fn has_detail(&self) -> bool {
+        match self {
+            Material::NormalMap { .. } | Material::BumpMap { .. } => true,
+            Material::TwoSided { front, .. } => front.has_detail(),
+            Material::Mask { inner, .. } => inner.has_detail(),
+            _ => false,
+        }
+    }
+
+    /// The BSDF at a point with its surface detail: a normal or bump map sets the BSDF's
+    /// perturbed frame (a map nested inside another map's BSDF is not applied).
+    pub fn bsdf_with_detail(&self, p: TexPoint, g: &ShadingGeometry) -> Bsdf {
+        use super::detail::{bump_map_normal, normal_map_normal, Detail};
+        let with = |inner: &Material, n: Vec3| {
+            let mut b = inner.bsdf(p);
+            b.detail = Some(Detail::new(n, true));
+            b
+        };
+        match self {
+            Material::NormalMap { normals, inner } => with(inner, normal_map_normal(normals.eval(p))),
+            Material::BumpMap { height, scale, inner } => with(inner, bump_map_normal(height.eval_f32_grad(p) * *scale, &g.shading, g.ng, g.dpdu, g.dpdv)),
+            Material::TwoSided { front, back } => {
+                let mut b = front.bsdf_with_detail(p, g);
+                b.back = back.model(p);
+                b
+            }
+            Material::Mask { opacity, inner } => {
+                let mut b = inner.bsdf_with_detail(p, g);
+                b.opacity *= opacity.eval_f32(p).clamp(0.0, 1.0);
+                b
+            }
+            _ => self.bsdf(p),
+        }
+    }
+
+    /// Every texture of the material, nested materials' included.
+    pub fn textures_mut(&mut self) -> Vec<&mut Texture> {
+        let mut out: Vec<&mut Texture> = Vec::new();
+        fn rough<'m>(r: &'m mut Option<Roughness>, out: &mut Vec<&'m mut Texture>) {
+            if let Some(Roughness { alpha_u, alpha_v, .. }) = r {
+                out.push(alpha_u);
+                out.push(alpha_v);
+            }
+        }
+        match self {
+            Material::Diffuse { reflectance } => out.push(reflectance),
+            Material::Conductor { specular_reflectance, roughness, .. } => {
+                out.push(specular_reflectance);
+                rough(roughness, &mut out);
+            }
+            Material::Dielectric { specular_reflectance, specular_transmittance, roughness, .. } => {
+                out.push(specular_reflectance);
+                out.push(specular_transmittance);
+                rough(roughness, &mut out);
+            }
+            Material::ThinDielectric { specular_reflectance, specular_transmittance, .. } => {
+                out.push(specular_reflectance);
+                out.push(specular_transmittance);
+            }
+            Material::Plastic { diffuse_reflectance, specular_reflectance, roughness, .. } => {
+                out.push(diffuse_reflectance);
+                out.push(specular_reflectance);
+                rough(roughness, &mut out);
+            }
+            Material::Phong { diffuse_reflectance, specular_reflectance, exponent }
+            | Material::BlinnPhong { diffuse_reflectance, specular_reflectance, exponent } => out.extend([diffuse_reflectance, specular_reflectance, exponent]),
+            Material::CookTorrance { diffuse_reflectance, specular_reflectance, alpha, .. } => out.extend([diffuse_reflectance, specular_reflectance, alpha]),
+            Material::OrenNayar { reflectance, alpha } => out.extend([reflectance, alpha]),
+            Material::Ward { diffuse_reflectance, specular_reflectance, alpha_u, alpha_v, .. } => {
+                out.extend([diffuse_reflectance, specular_reflectance, alpha_u, alpha_v])
+            }
+            Material::TwoSided { front, back } => {
+                out.extend(front.textures_mut());
+                out.extend(back.textures_mut());
+            }
+            Material::Mask { opacity, inner } => {
+                out.push(opacity);
+                out.extend(inner.textures_mut());
+            }
+            Material::Null => {}
+            Material::NormalMap { normals, inner } => {
+                out.push(normals);
+                out.extend(inner.textures_mut());
+            }
+            Material::BumpMap { height, inner, .. } => {
+                out.push(height);
+                out.extend(inner.textures_mut());
+            }
+            Material::Blend { weight, a, b } => {
+                out.push(weight);
+                out.extend(a.textures_mut());
+                out.extend(b.textures_mut());
+            }
+        }
+        out
     }
 }

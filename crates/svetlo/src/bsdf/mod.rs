@@ -2,9 +2,11 @@
 //! pointing away from the surface. `f` never includes the cosine; an estimator weights a
 //! sample by `f * |cos(wi)| / pdf`. Delta lobes report `pdf = 1` and `f = weight / |cos(wi)|`.
 
+pub mod blend;
 pub mod blinn;
 pub mod conductor;
 pub mod cook_torrance;
+pub mod detail;
 pub mod dielectric;
 pub mod diffuse;
 pub mod fresnel;
@@ -117,6 +119,8 @@ pub enum BsdfModel {
     CookTorrance(cook_torrance::CookTorrance),
     OrenNayar(oren_nayar::OrenNayar),
     Ward(ward::Ward),
+    /// Mitsuba `blendbsdf` of two whole BSDFs (each with its own sides and mask).
+    Blend(Box<blend::Blend>),
 }
 
 /// Forward a call to the model inside, whatever it is.
@@ -136,6 +140,7 @@ macro_rules! dispatch {
             BsdfModel::CookTorrance($m) => $e,
             BsdfModel::OrenNayar($m) => $e,
             BsdfModel::Ward($m) => $e,
+            BsdfModel::Blend($m) => $e,
         }
     };
 }
@@ -151,6 +156,10 @@ pub struct Bsdf {
     pub back: Option<BsdfModel>,
     /// Mitsuba `mask`: probability that the surface is there at all.
     pub opacity: f32,
+    /// Mitsuba `normalmap` / `bumpmap`: the perturbed normal in the coordinates of the
+    /// surface's own shading frame; everything above is evaluated in the frame it gives
+    /// (see `detail`). None: no surface detail.
+    pub detail: Option<detail::Detail>,
 }
 
 impl BsdfModel {
@@ -180,12 +189,14 @@ impl BsdfModel {
             BsdfModel::CookTorrance(m) => m.diffuse_reflectance,
             BsdfModel::Ward(m) => m.diffuse_reflectance,
             BsdfModel::OrenNayar(m) => m.reflectance,
+            BsdfModel::Blend(m) => m.diffuse_albedo(),
             _ => Rgb::BLACK,
         }
     }
-    /// Whether the model scatters light arriving on its back side by itself (dielectrics).
+    /// Whether the model scatters light arriving on its back side by itself (dielectrics;
+    /// a blend, whose parts decide their sides themselves).
     pub fn handles_back_side(&self) -> bool {
-        self.flags().intersects(LobeFlags::TRANSMISSION)
+        matches!(self, BsdfModel::Blend(_)) || self.flags().intersects(LobeFlags::TRANSMISSION)
     }
 }
 
@@ -202,7 +213,7 @@ fn flip(w: Vec3) -> Vec3 {
 
 impl Bsdf {
     pub fn new(front: BsdfModel) -> Self {
-        Bsdf { front, back: None, opacity: 1.0 }
+        Bsdf { front, back: None, opacity: 1.0, detail: None }
     }
 
     pub fn flags(&self) -> LobeFlags {
@@ -226,7 +237,50 @@ impl Bsdf {
         }
     }
 
+    /// For surface detail: the factor that makes the nested BSDF's value in the perturbed
+    /// frame `p` one relative to the original frame, or None where it is zero. As in
+    /// Mitsuba, the direction on the side the light arrives from (wi for radiance, wo for
+    /// importance) must lie on the same side of the original and the perturbed normal, and
+    /// the shadowing term is taken for it; the estimator's |cos| in the original frame
+    /// replaces the perturbed frame's, in which the nested BSDF's cosine belongs.
+    #[inline]
+    fn detail_factor(d: &detail::Detail, mode: TransportMode, (wo, wi): (Vec3, Vec3), (pwo, pwi): (Vec3, Vec3)) -> Option<f32> {
+        let (w, pw) = if mode == TransportMode::Radiance { (wi, pwi) } else { (wo, pwo) };
+        (w.z * pw.z > 0.0).then(|| pw.z.abs() / w.z.abs() * d.shadowing(w))
+    }
+
     pub fn eval(&self, wo: Vec3, wi: Vec3, mode: TransportMode) -> Rgb {
+        let Some(d) = &self.detail else { return self.eval_local(wo, wi, mode) };
+        let f = d.frame(wo);
+        let (pwo, pwi) = (f.to_local(wo), f.to_local(wi));
+        match Self::detail_factor(d, mode, (wo, wi), (pwo, pwi)) {
+            Some(k) => self.eval_local(pwo, pwi, mode) * k,
+            None => Rgb::BLACK,
+        }
+    }
+
+    pub fn pdf(&self, wo: Vec3, wi: Vec3, mode: TransportMode) -> f32 {
+        let Some(d) = &self.detail else { return self.pdf_local(wo, wi, mode) };
+        let f = d.frame(wo);
+        let (pwo, pwi) = (f.to_local(wo), f.to_local(wi));
+        match Self::detail_factor(d, mode, (wo, wi), (pwo, pwi)) {
+            Some(_) => self.pdf_local(pwo, pwi, mode),
+            None => 0.0,
+        }
+    }
+
+    pub fn sample(&self, wo: Vec3, uc: f32, u: Vec2, mode: TransportMode) -> Option<BsdfSample> {
+        let Some(d) = &self.detail else { return self.sample_local(wo, uc, u, mode) };
+        let f = d.frame(wo);
+        let pwo = f.to_local(wo);
+        let mut s = self.sample_local(pwo, uc, u, mode)?;
+        let pwi = s.wi;
+        s.wi = f.to_world(pwi);
+        s.f *= Self::detail_factor(d, mode, (wo, s.wi), (pwo, pwi))?;
+        Some(s)
+    }
+
+    fn eval_local(&self, wo: Vec3, wi: Vec3, mode: TransportMode) -> Rgb {
         match self.side(wo) {
             Some((m, false)) => m.eval(wo, wi, mode) * self.opacity,
             Some((m, true)) => m.eval(flip(wo), flip(wi), mode) * self.opacity,
@@ -234,7 +288,7 @@ impl Bsdf {
         }
     }
 
-    pub fn pdf(&self, wo: Vec3, wi: Vec3, mode: TransportMode) -> f32 {
+    fn pdf_local(&self, wo: Vec3, wi: Vec3, mode: TransportMode) -> f32 {
         match self.side(wo) {
             Some((m, false)) => m.pdf(wo, wi, mode) * self.opacity,
             Some((m, true)) => m.pdf(flip(wo), flip(wi), mode) * self.opacity,
@@ -242,7 +296,7 @@ impl Bsdf {
         }
     }
 
-    pub fn sample(&self, wo: Vec3, uc: f32, u: Vec2, mode: TransportMode) -> Option<BsdfSample> {
+    fn sample_local(&self, wo: Vec3, uc: f32, u: Vec2, mode: TransportMode) -> Option<BsdfSample> {
         let mut uc = uc;
         if self.opacity < 1.0 {
             // Mask: pass through with probability 1 - opacity (delta, weight 1).
@@ -278,6 +332,7 @@ impl Bsdf {
         if lobe == LobeFlags::NULL_TRANSMISSION {
             return 1.0 - self.opacity;
         }
+        let wo = self.detail.map_or(wo, |d| d.frame(wo).to_local(wo));
         let Some((m, flipped)) = self.side(wo) else { return 0.0 };
         let wo = if flipped { flip(wo) } else { wo };
         let p = match m {
@@ -303,6 +358,7 @@ impl Bsdf {
             }
             BsdfModel::SmoothConductor(_) => f32::from(lobe == LobeFlags::SPECULAR_REFLECTION && wo.z > 0.0),
             BsdfModel::SmoothPlastic(p) if lobe == LobeFlags::SPECULAR_REFLECTION && wo.z > 0.0 => p.prob_specular(fresnel::dielectric(wo.z, p.eta).0),
+            BsdfModel::Blend(b) => b.delta_probability(wo, lobe),
             _ => 0.0,
         };
         p * self.opacity

@@ -16,6 +16,9 @@ pub struct SurfaceInteraction {
     pub shape: u32,
     /// Index of the primitive inside the shape (triangle index; 0 for a sphere).
     pub prim: u32,
+    /// Barycentrics (b1, b2) of the point in its triangle (zero on other shapes): per-vertex
+    /// mesh attributes are interpolated with them.
+    pub bary: Vec2,
     /// Direction toward the ray origin (-ray.d), world space.
     pub wo: Vec3,
     /// The time of the ray that found the point (motion blur): rays leaving it keep it.
@@ -23,6 +26,11 @@ pub struct SurfaceInteraction {
 }
 
 impl SurfaceInteraction {
+    /// Where textures are looked up at this point.
+    #[inline]
+    pub fn tex_point(&self) -> crate::texture::TexPoint {
+        crate::texture::TexPoint { uv: self.uv, prim: self.prim, bary: self.bary }
+    }
     #[inline]
     pub fn to_local(&self, w: Vec3) -> Vec3 {
         self.shading.to_local(w)

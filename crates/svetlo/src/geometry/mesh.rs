@@ -64,6 +64,22 @@ impl TriangleMesh {
         }
     }
 
+    /// (dp/du, dp/dv) of a triangle (constant over it), as Mitsuba derives them from the
+    /// uvs; without uvs (uv = the barycentrics) the two edges from the first vertex.
+    pub fn dp_duv(&self, tri: usize) -> (Vec3, Vec3) {
+        let [i0, i1, i2] = self.indices[tri].map(|i| i as usize);
+        let (e1, e2) = (self.positions[i1] - self.positions[i0], self.positions[i2] - self.positions[i0]);
+        if self.uvs.is_empty() {
+            return (e1, e2);
+        }
+        let (d1, d2) = (self.uvs[i1] - self.uvs[i0], self.uvs[i2] - self.uvs[i0]);
+        let det = d1.x * d2.y - d1.y * d2.x;
+        if det.abs() <= 1e-12 {
+            return (e1, e2);
+        }
+        ((e1 * d2.y - e2 * d1.y) / det, (e2 * d1.x - e1 * d2.x) / det)
+    }
+
     /// Texture coordinates at barycentrics (b1, b2); the barycentrics themselves without uvs.
     #[inline]
     pub fn uv(&self, tri: usize, b1: f32, b2: f32) -> Vec2 {

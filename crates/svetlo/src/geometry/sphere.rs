@@ -52,6 +52,20 @@ impl Sphere {
         }
     }
     /// (geometric normal, uv, dp/du) at a point on the sphere. uv follows Mitsuba's convention.
+    /// (dp/du, dp/dv) at a point of the sphere for the uvs of [`Self::surface`]
+    /// (u = phi / 2 pi, v = theta / pi).
+    pub fn dp_duv(&self, p: Vec3) -> (Vec3, Vec3) {
+        let n = ((p - self.center) / self.radius).normalize_or_zero();
+        let sin_theta = (n.x * n.x + n.y * n.y).sqrt();
+        let dpdu = Vec3::new(-n.y, n.x, 0.0) * (2.0 * PI * self.radius);
+        let dpdv = if sin_theta > 1e-6 {
+            Vec3::new(n.z * n.x / sin_theta, n.z * n.y / sin_theta, -sin_theta) * (PI * self.radius)
+        } else {
+            Vec3::new(n.z, 0.0, 0.0) * (PI * self.radius)
+        };
+        (dpdu, dpdv)
+    }
+
     pub fn surface(&self, p: Vec3) -> (Vec3, Vec2, Vec3) {
         let local = (p - self.center) / self.radius;
         let n = local.normalize_or_zero();

@@ -46,7 +46,7 @@ impl PixelEstimator for DirectIntegrator {
                 l += area.l(si.ng, si.uv, si.wo);
             }
         }
-        let bsdf = scene.material(&si).bsdf(si.uv);
+        let bsdf = scene.bsdf(&si);
         let wo = si.to_local(si.wo);
         let (ne, nb) = (self.emitter_samples as f32, self.bsdf_samples as f32);
         if bsdf.flags().has_non_specular() {

@@ -190,7 +190,7 @@ pub(crate) fn camera_walk<R: WalkRules + ?Sized>(
         if last || !settings.depth_allows(depth + 1) {
             break;
         }
-        let bsdf = scene.material(&si).bsdf(si.uv);
+        let bsdf = scene.bsdf(&si);
         let wo = si.to_local(si.wo);
         let flags = bsdf.flags();
         let u_light = sampler.next_1d();

@@ -125,7 +125,7 @@ impl WhittedEstimator {
         if depth + 1 > max {
             return l;
         }
-        let bsdf = scene.material(&si).bsdf(si.uv);
+        let bsdf = scene.bsdf(&si);
         let wo = si.to_local(si.wo);
         if bsdf.flags().has_non_specular() {
             l += self.lights.shade(scene, si.p, si.ng, &si.shading, wo, &bsdf, true, si.time);

@@ -694,8 +694,8 @@ mod tests {
         let d = |r: f32, g: f32, b: f32| BsdfModel::Diffuse(Diffuse { reflectance: Rgb::new(r, g, b) });
         let bsdfs = [
             Bsdf::new(d(0.7, 0.5, 0.3)),
-            Bsdf { front: d(0.7, 0.5, 0.3), back: Some(d(0.1, 0.9, 0.4)), opacity: 1.0 },
-            Bsdf { front: d(0.7, 0.5, 0.3), back: Some(d(0.2, 0.2, 0.2)), opacity: 0.37 },
+            Bsdf { front: d(0.7, 0.5, 0.3), back: Some(d(0.1, 0.9, 0.4)), opacity: 1.0, detail: None },
+            Bsdf { front: d(0.7, 0.5, 0.3), back: Some(d(0.2, 0.2, 0.2)), opacity: 0.37, detail: None },
         ];
         let dirs = directions();
         for b in &bsdfs {
@@ -716,9 +716,9 @@ mod tests {
             exponent: 20.0,
             specular_sampling_weight: 0.5,
         });
-        assert!(Lambert::of(&Bsdf { front: d(0.5, 0.5, 0.5), back: Some(blinn.clone()), opacity: 1.0 }).is_none());
+        assert!(Lambert::of(&Bsdf { front: d(0.5, 0.5, 0.5), back: Some(blinn.clone()), opacity: 1.0, detail: None }).is_none());
         // Blinn-Phong in world space equals the BSDF in the shading frame to rounding.
-        let bsdf = Bsdf { front: blinn, back: None, opacity: 0.8 };
+        let bsdf = Bsdf { front: blinn, back: None, opacity: 0.8, detail: None };
         let local = Lambert::of(&bsdf).and_then(|l| l.blinn).expect("one-sided Blinn-Phong");
         let ns = Vec3::new(0.2, -0.5, 0.8).normalize();
         let frame = crate::math::Frame::from_normal_tangent(ns, Vec3::X);

@@ -16,6 +16,62 @@ fn mesh_err(path: &Path, msg: impl std::fmt::Display) -> Error {
 pub struct LoadedMesh {
     pub mesh: TriangleMesh,
     pub warnings: Vec<String>,
+    /// Further per-vertex and per-face values (PLY), for `mesh_attribute` textures.
+    pub attributes: Vec<Attribute>,
+}
+
+/// Values a PLY file gives per vertex or per face beyond the geometry, named as Mitsuba
+/// names them: `vertex_NAME` / `face_NAME`, where properties `NAME_0`, `NAME_1`, .. are the
+/// channels of one attribute and `r g b` (or `red green blue`) those of `color`.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Attribute {
+    pub name: String,
+    pub per_face: bool,
+    /// One to three channels (one is grey).
+    pub channels: usize,
+    /// Per vertex, or per triangle (a polygon's value repeated on each of its triangles).
+    pub values: Vec<crate::spectrum::Rgb>,
+}
+
+/// Group a PLY element's extra scalar properties into attributes: (name, the properties'
+/// positions among the extras per channel, scale). 8-bit colours are scaled by 1/255.
+fn group_attributes(names: &[(String, bool)]) -> Vec<(String, Vec<usize>, f32)> {
+    // (name, (channel, position) per property, scale)
+    type Group = (String, Vec<(usize, usize)>, f32);
+    let mut groups: Vec<Group> = Vec::new();
+    for (i, (n, uchar)) in names.iter().enumerate() {
+        let (base, channel) = match n.as_str() {
+            "r" | "red" => ("color".to_string(), 0),
+            "g" | "green" => ("color".to_string(), 1),
+            "b" | "blue" => ("color".to_string(), 2),
+            "a" | "alpha" => continue,
+            _ => match n.rsplit_once('_') {
+                Some((b, d)) if !b.is_empty() && d.len() == 1 && d.as_bytes()[0].is_ascii_digit() => (b.to_string(), (d.as_bytes()[0] - b'0') as usize),
+                _ => (n.clone(), 0),
+            },
+        };
+        let scale = if *uchar && base == "color" { 1.0 / 255.0 } else { 1.0 };
+        match groups.iter_mut().find(|g| g.0 == base) {
+            Some(g) => g.1.push((channel, i)),
+            None => groups.push((base, vec![(channel, i)], scale)),
+        }
+    }
+    groups
+        .into_iter()
+        .map(|(n, mut ch, scale)| {
+            ch.sort();
+            (n, ch.into_iter().map(|c| c.1).take(3).collect(), scale)
+        })
+        .collect()
+}
+
+fn attribute_values(extra: &[f32], channels: &[usize], scale: f32) -> crate::spectrum::Rgb {
+    let c = |k: usize| channels.get(k).and_then(|&i| extra.get(i)).copied().unwrap_or(0.0) * scale;
+    if channels.len() == 1 {
+        crate::spectrum::Rgb::splat(c(0))
+    } else {
+        crate::spectrum::Rgb::new(c(0), c(1), c(2))
+    }
 }
 
 /// Read an OBJ file. Materials (`mtllib`) are ignored: the scene file gives the BSDF.
@@ -112,7 +168,7 @@ pub fn load_obj_bytes(bytes: &[u8], path: &Path, flip_tex_coords: bool) -> Resul
     if mesh.indices.is_empty() {
         return Err(mesh_err(path, "the OBJ file has no faces"));
     }
-    Ok(LoadedMesh { mesh, warnings })
+    Ok(LoadedMesh { mesh, warnings, attributes: Vec::new() })
 }
 
 /// Read a PLY file (ASCII or binary). Vertex properties x, y, z; optional nx, ny, nz; uvs as
@@ -165,11 +221,13 @@ const PLY_VERTEX_KEYS: [&str; 12] = ["x", "y", "z", "nx", "ny", "nz", "u", "v", 
 struct PlyVertex {
     values: [f32; 12],
     set: u16,
+    /// Other scalar properties, in the header's order (attributes).
+    extra: Vec<f32>,
 }
 
 impl ply_rs_bw::ply::PropertyAccess for PlyVertex {
     fn new() -> Self {
-        PlyVertex { values: [0.0; 12], set: 0 }
+        PlyVertex { values: [0.0; 12], set: 0, extra: Vec::new() }
     }
     fn set_property(&mut self, key: &str, property: ply_rs_bw::ply::Property) -> ply_rs_bw::ply::PropertyAccessResult {
         use ply_rs_bw::ply::PropertyAccessResult;
@@ -177,6 +235,10 @@ impl ply_rs_bw::ply::PropertyAccess for PlyVertex {
             (Some(i), Some(x)) => {
                 self.values[i] = x;
                 self.set |= 1 << i;
+                PropertyAccessResult::Set
+            }
+            (None, Some(x)) => {
+                self.extra.push(x);
                 PropertyAccessResult::Set
             }
             _ => PropertyAccessResult::Ignored,
@@ -188,17 +250,22 @@ impl ply_rs_bw::ply::PropertyAccess for PlyVertex {
 struct PlyFace {
     indices: Option<ply_rs_bw::ply::Property>,
     index: Option<ply_rs_bw::ply::Property>,
+    /// Scalar properties, in the header's order (attributes).
+    extra: Vec<f32>,
 }
 
 impl ply_rs_bw::ply::PropertyAccess for PlyFace {
     fn new() -> Self {
-        PlyFace { indices: None, index: None }
+        PlyFace { indices: None, index: None, extra: Vec::new() }
     }
     fn set_property(&mut self, key: &str, property: ply_rs_bw::ply::Property) -> ply_rs_bw::ply::PropertyAccessResult {
         match key {
             "vertex_indices" => self.indices = Some(property),
             "vertex_index" => self.index = Some(property),
-            _ => return ply_rs_bw::ply::PropertyAccessResult::Ignored,
+            _ => match property.to_f32_lossy() {
+                Some(x) => self.extra.push(x),
+                None => return ply_rs_bw::ply::PropertyAccessResult::Ignored,
+            },
         }
         ply_rs_bw::ply::PropertyAccessResult::Set
     }
@@ -223,14 +290,31 @@ pub fn load_ply_bytes(bytes: &[u8], path: &Path, flip_tex_coords: bool) -> Resul
     let header = Parser::<PlySkipped>::new().read_header(&mut reader).map_err(invalid)?;
     let (mut verts, mut faces): (Option<Vec<PlyVertex>>, Option<Vec<PlyFace>>) = (None, None);
     let mut vertex_names: Vec<&str> = Vec::new();
+    // The extra scalar properties of vertices and faces: (name, 8-bit).
+    let extras = |def: &ply_rs_bw::ply::ElementDef, skip: &[&str]| -> Vec<(String, bool)> {
+        use ply_rs_bw::ply::{PropertyType, ScalarType};
+        def.properties
+            .values()
+            .filter(|p| !skip.contains(&p.name.as_str()))
+            .filter_map(|p| match &p.data_type {
+                PropertyType::Scalar(t) => Some((p.name.clone(), *t == ScalarType::UChar)),
+                PropertyType::List(..) => None,
+            })
+            .collect()
+    };
+    let (mut vertex_extra, mut face_extra) = (Vec::new(), Vec::new());
     // Elements come in the header's order; each is read whole before the next.
     for def in header.elements.values() {
         match def.name.as_str() {
             "vertex" if verts.is_none() => {
                 vertex_names = def.properties.keys().map(|k| k.as_str()).collect();
+                vertex_extra = extras(def, &PLY_VERTEX_KEYS);
                 verts = Some(Parser::<PlyVertex>::new().read_payload_for_element(&mut reader, def, &header).map_err(invalid)?);
             }
-            "face" if faces.is_none() => faces = Some(Parser::<PlyFace>::new().read_payload_for_element(&mut reader, def, &header).map_err(invalid)?),
+            "face" if faces.is_none() => {
+                face_extra = extras(def, &["vertex_indices", "vertex_index"]);
+                faces = Some(Parser::<PlyFace>::new().read_payload_for_element(&mut reader, def, &header).map_err(invalid)?)
+            }
             _ => {
                 Parser::<PlySkipped>::new().read_payload_for_element(&mut reader, def, &header).map_err(invalid)?;
             }
@@ -263,6 +347,23 @@ pub fn load_ply_bytes(bytes: &[u8], path: &Path, flip_tex_coords: bool) -> Resul
             mesh.uvs.push(Vec2::new(get(ku)?, if flip_tex_coords { 1.0 - vv } else { vv }));
         }
     }
+    let vertex_groups = group_attributes(&vertex_extra);
+    let face_groups = group_attributes(&face_extra);
+    let mut attributes: Vec<Attribute> = vertex_groups
+        .iter()
+        .map(|(n, ch, _)| Attribute { name: format!("vertex_{n}"), per_face: false, channels: ch.len(), values: Vec::with_capacity(verts.len()) })
+        .chain(face_groups.iter().map(|(n, ch, _)| Attribute { name: format!("face_{n}"), per_face: true, channels: ch.len(), values: Vec::new() }))
+        .collect();
+    if !vertex_groups.is_empty() {
+        for (i, v) in verts.iter().enumerate() {
+            if v.extra.len() != vertex_extra.len() {
+                return Err(mesh_err(path, format!("vertex {i}: {} attribute values, the header declares {}", v.extra.len(), vertex_extra.len())));
+            }
+            for (a, (_, ch, scale)) in attributes.iter_mut().zip(&vertex_groups) {
+                a.values.push(attribute_values(&v.extra, ch, *scale));
+            }
+        }
+    }
     let nv = mesh.positions.len() as i64;
     mesh.indices.reserve(faces.len());
     for (fi, f) in faces.iter().enumerate() {
@@ -283,12 +384,22 @@ pub fn load_ply_bytes(bytes: &[u8], path: &Path, flip_tex_coords: bool) -> Resul
         for k in 2..idx.len() {
             mesh.indices.push([idx[0] as u32, idx[k - 1] as u32, idx[k] as u32]);
         }
+        if !face_groups.is_empty() {
+            if f.extra.len() != face_extra.len() {
+                return Err(mesh_err(path, format!("face {fi}: {} attribute values, the header declares {}", f.extra.len(), face_extra.len())));
+            }
+            let first = vertex_groups.len();
+            for (a, (_, ch, scale)) in attributes[first..].iter_mut().zip(&face_groups) {
+                let v = attribute_values(&f.extra, ch, *scale);
+                a.values.extend(std::iter::repeat_n(v, idx.len().saturating_sub(2)));
+            }
+        }
     }
     check_finite(path, &mesh)?;
     if mesh.indices.is_empty() {
         return Err(mesh_err(path, "the PLY file has no faces"));
     }
-    Ok(LoadedMesh { mesh, warnings: Vec::new() })
+    Ok(LoadedMesh { mesh, warnings: Vec::new(), attributes })
 }
 
 fn check_finite(path: &Path, m: &TriangleMesh) -> Result<()> {

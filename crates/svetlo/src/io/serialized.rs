@@ -155,7 +155,7 @@ pub fn load_serialized(path: &Path, shape_index: u32) -> Result<LoadedMesh> {
     if mesh.positions.iter().any(|p| !p.is_finite()) {
         return Err(bad(path, "a vertex position is not finite"));
     }
-    Ok(LoadedMesh { mesh, warnings })
+    Ok(LoadedMesh { mesh, warnings, attributes: Vec::new() })
 }
 
 #[cfg(test)]

@@ -178,7 +178,7 @@ impl Vertex {
 
     /// A surface hit with its BSDF; `pdf_fwd` is set by the walk.
     pub fn surface(scene: &Scene, si: &SurfaceInteraction, beta: Rgb) -> Self {
-        let bsdf = scene.material(si).bsdf(si.uv);
+        let bsdf = scene.bsdf(si);
         let light = scene.area_light(si).map(|(i, _)| i);
         Vertex {
             p: si.p,

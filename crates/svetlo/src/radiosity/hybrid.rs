@@ -66,7 +66,7 @@ impl<'a> HybridView<'a> {
                 return beta * l;
             }
             let Some(si) = scene.intersect(&ray) else { return Rgb::BLACK };
-            let bsdf = scene.material(&si).bsdf(si.uv);
+            let bsdf = scene.bsdf(&si);
             let Some(bs) = bsdf.sample(si.to_local(si.wo), sampler.next_1d(), sampler.next_2d(), TransportMode::Radiance) else { return Rgb::BLACK };
             if bs.pdf <= 0.0 {
                 return Rgb::BLACK;
@@ -91,7 +91,7 @@ impl PixelEstimator for HybridView<'_> {
                     l += beta * area.l(si.ng, si.uv, si.wo);
                 }
             }
-            let bsdf = scene.material(&si).bsdf(si.uv);
+            let bsdf = scene.bsdf(&si);
             let wo = si.to_local(si.wo);
             if !self.specular[hit.shape as usize] {
                 if self.gather == 0 {

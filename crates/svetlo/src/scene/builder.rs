@@ -51,6 +51,11 @@ impl SceneBuilder {
         (self.materials.len() - 1) as u32
     }
 
+    /// A material added before.
+    pub fn material(&self, i: u32) -> Option<&Material> {
+        self.materials.get(i as usize)
+    }
+
     /// Add a shape with material `material`, emitting `emission` radiance if given.
     /// Meshes are checked: NaN or infinite positions and out-of-range indices are errors,
     /// zero-area triangles are dropped with a warning. `name` identifies it in messages.
@@ -153,7 +158,9 @@ impl SceneBuilder {
                 lights.push(Light::Area(AreaLight::new(i as u32, g.clone(), e)));
                 (lights.len() - 1) as u32
             });
-            shapes.push(Shape::new(g, material, light, name, animation.map(|a| Arc::new(Motion::new(a)))));
+            let mut shape = Shape::new(g, material, light, name, animation.map(|a| Arc::new(Motion::new(a))));
+            shape.detail = self.materials.get(material as usize).is_some_and(|m| m.has_detail());
+            shapes.push(shape);
         }
         let static_ids: Vec<u32> = (0..shapes.len() as u32).filter(|&i| shapes[i as usize].motion.is_none()).collect();
         let geoms: Vec<&Geometry> = static_ids.iter().map(|&i| &*shapes[i as usize].geometry).collect();

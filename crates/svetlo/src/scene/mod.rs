@@ -13,7 +13,7 @@ use crate::geometry::{Geometry, Motion, Ray, SurfaceInteraction};
 use crate::light::{Light, SceneBounds};
 use crate::math::Frame;
 use crate::sampling::{Distribution1D, SamplerKind};
-use glam::{Mat3, Mat4, Vec3};
+use glam::{Mat3, Mat4, Vec2, Vec3};
 use std::sync::Arc;
 
 #[derive(Clone, Debug)]
@@ -29,6 +29,9 @@ pub struct Shape {
     /// Per triangle of a mesh, its shading when constant over it (`TriangleMesh::flat_shading`),
     /// computed once so that a hit costs no normalisation; empty for other shapes.
     pub flat: Vec<Option<(Vec3, Frame)>>,
+    /// Whether the material has surface detail (normal or bump map): its BSDF then needs
+    /// the partial derivatives (see [`Scene::bsdf`]).
+    pub detail: bool,
 }
 
 impl Shape {
@@ -37,7 +40,7 @@ impl Shape {
             Geometry::Mesh(m) => (0..m.triangle_count()).map(|t| m.flat_shading(t)).collect(),
             Geometry::Sphere(_) => Vec::new(),
         };
-        Shape { geometry, material, light, name, motion, flat }
+        Shape { geometry, material, light, name, motion, flat, detail: false }
     }
 }
 
@@ -196,7 +199,19 @@ impl Scene {
                 let p = p0 * (1.0 - hit.b1 - hit.b2) + p1 * hit.b1 + p2 * hit.b2;
                 if let Some(Some((ng, shading))) = shape.flat.get(hit.prim as usize) {
                     let uv = m.uv(hit.prim as usize, hit.b1, hit.b2);
-                    return SurfaceInteraction { p, t: hit.t, ng: *ng, shading: *shading, uv, shape: hit.shape, prim: hit.prim, wo: -ray.d, time: ray.time };
+                    let bary = Vec2::new(hit.b1, hit.b2);
+                    return SurfaceInteraction {
+                        p,
+                        t: hit.t,
+                        ng: *ng,
+                        shading: *shading,
+                        uv,
+                        shape: hit.shape,
+                        prim: hit.prim,
+                        bary,
+                        wo: -ray.d,
+                        time: ray.time,
+                    };
                 }
                 let (ng, ns, uv, dpdu) = m.surface(hit.prim as usize, hit.b1, hit.b2);
                 (p, ng, ns, uv, dpdu)
@@ -209,7 +224,19 @@ impl Scene {
                 (p, n, n, uv, dpdu)
             }
         };
-        SurfaceInteraction { p, t: hit.t, ng, shading: Frame::from_normal_tangent(ns, dpdu), uv, shape: hit.shape, prim: hit.prim, wo: -ray.d, time: ray.time }
+        let bary = if matches!(&*shape.geometry, Geometry::Mesh(_)) { Vec2::new(hit.b1, hit.b2) } else { Vec2::ZERO };
+        SurfaceInteraction {
+            p,
+            t: hit.t,
+            ng,
+            shading: Frame::from_normal_tangent(ns, dpdu),
+            uv,
+            shape: hit.shape,
+            prim: hit.prim,
+            bary,
+            wo: -ray.d,
+            time: ray.time,
+        }
     }
 
     /// Is anything in the way along `ray` (static or, at the ray's time, moving)?
@@ -253,6 +280,26 @@ impl Scene {
         let mut ray = Ray::new(o, w);
         ray.time = time;
         self.blocked(&ray)
+    }
+
+    /// The BSDF at a hit: its material's, textures looked up at the point, with the
+    /// perturbed frame of a normal or bump map.
+    #[inline]
+    pub fn bsdf(&self, si: &SurfaceInteraction) -> crate::bsdf::Bsdf {
+        let m = self.material(si);
+        if !self.shapes[si.shape as usize].detail {
+            return m.bsdf(si.tex_point());
+        }
+        let (dpdu, dpdv) = self.dp_duv(si);
+        m.bsdf_with_detail(si.tex_point(), &crate::bsdf::material::ShadingGeometry { shading: si.shading, ng: si.ng, dpdu, dpdv })
+    }
+
+    /// (dp/du, dp/dv) at a hit, world space (a moving shape's in its reference pose).
+    fn dp_duv(&self, si: &SurfaceInteraction) -> (Vec3, Vec3) {
+        match &*self.shapes[si.shape as usize].geometry {
+            Geometry::Mesh(m) => m.dp_duv(si.prim as usize),
+            Geometry::Sphere(s) => s.dp_duv(si.p),
+        }
     }
 
     /// The area light of the shape hit, if it emits.

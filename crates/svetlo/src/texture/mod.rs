@@ -1,5 +1,6 @@
-//! Textures: RGB-valued functions of the surface's uv. Scalar parameters (roughness,
-//! opacity) use the same textures and read the first channel.
+//! Textures: RGB-valued functions of a surface point (its uv, or for Mitsuba's
+//! `mesh_attribute` its triangle and barycentrics). Scalar parameters (roughness, opacity,
+//! weights) use the same textures, read as Mitsuba's `eval_1` reads them.
 
 use crate::spectrum::Rgb;
 use glam::{Affine2, Vec2};
@@ -43,11 +44,65 @@ impl Bitmap {
     }
 }
 
+/// Where a texture is looked up: the uv, and the triangle with the barycentrics (b1, b2) of
+/// the point inside it, which per-vertex and per-face mesh attributes need.
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct TexPoint {
+    pub uv: Vec2,
+    pub prim: u32,
+    pub bary: Vec2,
+}
+
+impl From<Vec2> for TexPoint {
+    fn from(uv: Vec2) -> Self {
+        TexPoint { uv, prim: 0, bary: Vec2::ZERO }
+    }
+}
+
+/// Values a mesh stores per vertex or per triangle (Mitsuba's `vertex_NAME` / `face_NAME`
+/// PLY properties), one to three channels widened to RGB (one channel is grey).
+#[derive(Clone, Debug, PartialEq)]
+pub struct MeshAttribute {
+    pub name: String,
+    pub per_face: bool,
+    /// Per vertex or per triangle.
+    pub values: Vec<Rgb>,
+    /// The mesh's triangles (vertex indices), for per-vertex interpolation.
+    pub indices: Arc<Vec<[u32; 3]>>,
+}
+
+impl MeshAttribute {
+    fn eval(&self, p: TexPoint) -> Rgb {
+        let Some(tri) = self.indices.get(p.prim as usize) else { return Rgb::BLACK };
+        if self.per_face {
+            return self.values.get(p.prim as usize).copied().unwrap_or(Rgb::BLACK);
+        }
+        let v = |k: usize| self.values.get(tri[k] as usize).copied().unwrap_or(Rgb::BLACK);
+        v(0) * (1.0 - p.bary.x - p.bary.y) + v(1) * p.bary.x + v(2) * p.bary.y
+    }
+    fn mean(&self) -> Rgb {
+        self.values.iter().copied().sum::<Rgb>() / self.values.len().max(1) as f32
+    }
+}
+
 #[derive(Clone, Debug)]
 pub enum Texture {
     Constant(Rgb),
-    Bitmap { image: Arc<Bitmap>, filter: FilterMode, wrap: WrapMode, to_uv: Affine2 },
-    Checkerboard { color0: Rgb, color1: Rgb, to_uv: Affine2 },
+    Bitmap {
+        image: Arc<Bitmap>,
+        filter: FilterMode,
+        wrap: WrapMode,
+        to_uv: Affine2,
+    },
+    Checkerboard {
+        color0: Rgb,
+        color1: Rgb,
+        to_uv: Affine2,
+    },
+    /// Mitsuba `mesh_attribute`, bound to the mesh of the shape that uses it.
+    MeshAttribute(Arc<MeshAttribute>),
+    /// A `mesh_attribute` not yet bound to a mesh (the loader binds it per shape).
+    UnboundAttribute(String),
 }
 
 impl Default for Texture {
@@ -81,19 +136,22 @@ fn wrap(i: i64, n: usize, mode: WrapMode) -> usize {
 }
 
 impl Texture {
-    /// Value at `uv`; constants (the common case) inline at the call site.
+    /// Value at a point (a uv converts); constants (the common case) inline at the call site.
     #[inline]
-    pub fn eval(&self, uv: Vec2) -> Rgb {
+    pub fn eval(&self, p: impl Into<TexPoint>) -> Rgb {
         match self {
             Texture::Constant(c) => *c,
-            _ => self.eval_varying(uv),
+            _ => self.eval_varying(p.into()),
         }
     }
 
     #[inline(never)]
-    fn eval_varying(&self, uv: Vec2) -> Rgb {
+    fn eval_varying(&self, p: TexPoint) -> Rgb {
+        let uv = p.uv;
         match self {
             Texture::Constant(c) => *c,
+            Texture::MeshAttribute(a) => a.eval(p),
+            Texture::UnboundAttribute(_) => Rgb::BLACK,
             Texture::Checkerboard { color0, color1, to_uv } => {
                 let p = to_uv.transform_point2(uv);
                 let (fx, fy) = (p.x - p.x.floor(), p.y - p.y.floor());
@@ -128,22 +186,45 @@ impl Texture {
     /// colours the other way round from its colour lookup (Mitsuba's float checkerboard puts
     /// `color1` where the colour one puts `color0`; its test scenes are rendered that way).
     #[inline]
-    pub fn eval_f32(&self, uv: Vec2) -> f32 {
+    pub fn eval_f32(&self, p: impl Into<TexPoint>) -> f32 {
         match self {
             Texture::Constant(c) => c.r,
-            _ => self.eval_f32_varying(uv),
+            _ => self.eval_f32_varying(p.into()),
         }
     }
 
     #[inline(never)]
-    fn eval_f32_varying(&self, uv: Vec2) -> f32 {
+    fn eval_f32_varying(&self, p: TexPoint) -> f32 {
         match self {
             Texture::Checkerboard { color0, color1, to_uv } => {
                 let swapped = Texture::Checkerboard { color0: *color1, color1: *color0, to_uv: *to_uv };
-                swapped.eval_varying(uv).luminance()
+                swapped.eval_varying(p).luminance()
             }
-            _ => self.eval(uv).luminance(),
+            _ => self.eval(p).luminance(),
         }
+    }
+
+    /// Gradient of the scalar value (`eval_f32`) with respect to (u, v), as Mitsuba's
+    /// `eval_1_grad`: exact for a bilinear bitmap (the derivative of its interpolant inside
+    /// the texel cell), zero for constants, checkerboards and mesh attributes (piecewise
+    /// constant, or not functions of uv).
+    pub fn eval_f32_grad(&self, p: impl Into<TexPoint>) -> Vec2 {
+        let p = p.into();
+        let Texture::Bitmap { image, filter, wrap: wm, to_uv } = self else { return Vec2::ZERO };
+        if *filter == FilterMode::Nearest {
+            return Vec2::ZERO;
+        }
+        let q = to_uv.transform_point2(p.uv);
+        let (w, h) = (image.width as f32, image.height as f32);
+        let (x, y) = (q.x * w - 0.5, q.y * h - 0.5);
+        let (x0, y0) = (x.floor(), y.floor());
+        let (fx, fy) = (x - x0, y - y0);
+        let (x0, y0) = (x0 as i64, y0 as i64);
+        let t = |dx: i64, dy: i64| image.texel(wrap(x0 + dx, image.width, *wm), wrap(y0 + dy, image.height, *wm)).luminance();
+        let (f00, f10, f01, f11) = (t(0, 0), t(1, 0), t(0, 1), t(1, 1));
+        // d/dq of the interpolant, then the chain rule through to_uv (q = A uv + b).
+        let dq = Vec2::new(((f10 - f00) * (1.0 - fy) + (f11 - f01) * fy) * w, ((f01 - f00) * (1.0 - fx) + (f11 - f10) * fx) * h);
+        to_uv.matrix2.transpose() * dq
     }
     /// Mean value over the texture (for light power and radiosity albedo).
     pub fn mean(&self) -> Rgb {
@@ -151,6 +232,8 @@ impl Texture {
             Texture::Constant(c) => *c,
             Texture::Checkerboard { color0, color1, .. } => (*color0 + *color1) * 0.5,
             Texture::Bitmap { image, .. } => image.mean(),
+            Texture::MeshAttribute(a) => a.mean(),
+            Texture::UnboundAttribute(_) => Rgb::BLACK,
         }
     }
     pub fn is_constant(&self) -> bool {

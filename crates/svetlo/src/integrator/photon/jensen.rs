@@ -225,7 +225,7 @@ impl Estimator {
         // A photon there needs one segment at least.
         while settings.depth_allows(depth + 1) {
             let Some(si) = scene.intersect(&ray) else { break };
-            let bsdf = scene.material(&si).bsdf(si.uv);
+            let bsdf = scene.bsdf(&si);
             let flags = bsdf.flags();
             let wo = si.to_local(si.wo);
             if flags.has_non_specular() {

@@ -48,6 +48,22 @@ impl<'a> Loader<'a> {
         Ok(out)
     }
 
+    /// The texture nested in a BSDF whatever its name (bumpmap's height), inline or by reference.
+    fn nested_texture(&self, node: &'a Node) -> Result<Option<&'a Node>> {
+        for c in &node.children {
+            let t = match c.tag.as_str() {
+                "texture" => c,
+                "ref" => self.lookup(c)?,
+                _ => continue,
+            };
+            if t.tag == "texture" {
+                self.queried.borrow_mut().note(node, Some(c));
+                return Ok(Some(t));
+            }
+        }
+        Ok(None)
+    }
+
     fn one_child(&self, node: &'a Node) -> Result<&'a Node> {
         let kids = self.child_bsdfs(node)?;
         match kids.as_slice() {
@@ -181,14 +197,50 @@ impl<'a> Loader<'a> {
                 Material::Mask { opacity, inner: Box::new(self.bsdf(inner)?) }
             }
             "null" => Material::Null,
-            // Surface-detail wrappers: render the surface without the detail.
-            "bumpmap" | "normalmap" => {
+            "normalmap" => {
                 let inner = self.one_child(node)?;
-                self.warn(format!("{}:{}: {ty} is not supported; the nested bsdf is used without it", node.loc.file.display(), node.loc.line));
-                self.bsdf(inner)?
+                let tex = self.prop(node, "normalmap")?.ok_or_else(|| node.loc.err("normalmap needs a texture named 'normalmap'"))?;
+                if tex.tag != "texture" {
+                    return Err(tex.loc.err("normalmap: 'normalmap' must be a texture (a bitmap of tangent-space normals)"));
+                }
+                let normals = self.texture(tex, SpectrumKind::Unbounded)?;
+                if let crate::texture::Texture::Bitmap { image, .. } = &normals {
+                    // Stored as 0.5 (n + 1): a texel outside [0, 1] or one that is no direction
+                    // (all channels 0.5) is not a normal map (an sRGB-decoded one, or a height map).
+                    if let Some(i) = image.data.iter().position(|c| c.min_component() < -1e-4 || c.max_component() > 1.0001) {
+                        return Err(tex.loc.err(format!("normalmap: texel {i} is {:?}, outside [0, 1]: not a normal map (give it raw=true)", image.data[i])));
+                    }
+                    if image.data.iter().all(|c| (c.r - 0.5).abs() < 1e-3 && (c.g - 0.5).abs() < 1e-3 && (c.b - 0.5).abs() < 1e-3) {
+                        return Err(tex.loc.err("normalmap: every texel is (0.5, 0.5, 0.5), no direction: not a normal map"));
+                    }
+                }
+                Material::NormalMap { normals, inner: Box::new(self.bsdf(inner)?) }
             }
-            "principled" | "principledthin" | "blendbsdf" | "hair" | "measured" | "pplastic" | "polarizer" | "retarder" | "circular" | "roughcoating"
-            | "coating" | "difftrans" => {
+            "bumpmap" => {
+                let inner = self.one_child(node)?;
+                let tex = self.nested_texture(node)?.ok_or_else(|| node.loc.err("bumpmap needs a nested height texture"))?;
+                let height = self.texture(tex, SpectrumKind::Unbounded)?;
+                let scale = self.float(node, "scale", 1.0)?;
+                if !scale.is_finite() {
+                    return Err(node.loc.err(format!("bumpmap: scale must be finite, got {scale}")));
+                }
+                Material::BumpMap { height, scale, inner: Box::new(self.bsdf(inner)?) }
+            }
+            "blendbsdf" => {
+                let kids = self.child_bsdfs(node)?;
+                let [a, b] = kids.as_slice() else {
+                    return Err(node.loc.err(format!("blendbsdf needs exactly two nested bsdfs, found {}", kids.len())));
+                };
+                let weight = self.float_texture(node, "weight", 0.5)?;
+                if let crate::texture::Texture::Constant(c) = &weight {
+                    if !(0.0..=1.0).contains(&c.r) {
+                        return Err(node.loc.err(format!("blendbsdf: weight must lie in [0, 1], got {}", c.r)));
+                    }
+                }
+                Material::Blend { weight, a: Box::new(self.bsdf(a)?), b: Box::new(self.bsdf(b)?) }
+            }
+            "principled" | "principledthin" | "hair" | "measured" | "pplastic" | "polarizer" | "retarder" | "circular" | "roughcoating" | "coating"
+            | "difftrans" => {
                 return Err(node.loc.err(format!("bsdf type '{ty}' is not supported")));
             }
             other => return Err(node.loc.err(format!("unknown bsdf type '{other}'"))),

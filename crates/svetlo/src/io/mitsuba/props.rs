@@ -40,7 +40,7 @@ pub struct Queried {
 const PROPERTY_TAGS: &[&str] = &["float", "integer", "boolean", "string", "rgb", "srgb", "spectrum", "point", "vector", "transform", "texture"];
 
 impl Queried {
-    fn note(&mut self, plugin: &Node, prop: Option<&Node>) {
+    pub(super) fn note(&mut self, plugin: &Node, prop: Option<&Node>) {
         self.plugins.insert(plugin as *const Node as usize);
         if let Some(p) = prop {
             self.props.insert(p as *const Node as usize);

@@ -79,6 +79,7 @@ impl<'a> Loader<'a> {
             }
         }
         let flip = self.boolean(node, "flip_normals", false)?;
+        let mut attributes = Vec::new();
         let geometry = match ty {
             "sphere" => self.sphere(node, to_world, flip, emission.is_some(), &name)?,
             "rectangle" | "cube" | "disk" | "cylinder" => {
@@ -102,7 +103,8 @@ impl<'a> Loader<'a> {
                         crate::io::serialized::load_serialized(&path, index)?
                     }
                 };
-                let LoadedMesh { mut mesh, warnings } = loaded;
+                let LoadedMesh { mut mesh, warnings, attributes: a } = loaded;
+                attributes = a;
                 for w in warnings {
                     self.warn(w);
                 }
@@ -125,6 +127,7 @@ impl<'a> Loader<'a> {
             Some(m) => m,
             None => self.default_material(),
         };
+        let material = self.bind_attributes(node, material, &geometry, attributes, &name)?;
         match animation {
             Some(a) => {
                 if emission.is_some() && !a.is_static() {
@@ -134,6 +137,47 @@ impl<'a> Loader<'a> {
             }
             None => self.b.add_shape(geometry, material, emission, &name),
         }
+    }
+
+    /// A material whose `mesh_attribute` textures read this shape's attributes: a copy of
+    /// `material` bound to them, or `material` itself when it has none.
+    fn bind_attributes(&mut self, node: &'a Node, material: u32, geometry: &Geometry, attributes: Vec<mesh_files::Attribute>, name: &str) -> Result<u32> {
+        use crate::texture::{MeshAttribute, Texture};
+        let Some(m) = self.b.material(material) else { return Ok(material) };
+        let mut m = m.clone();
+        let mut unbound = m.textures_mut().into_iter().filter(|t| matches!(t, Texture::UnboundAttribute(_))).peekable();
+        if unbound.peek().is_none() {
+            return Ok(material);
+        }
+        let Geometry::Mesh(mesh) = geometry else {
+            return Err(node.loc.err(format!("shape '{name}': mesh_attribute textures need a mesh (a PLY file with the attributes)")));
+        };
+        let indices = std::sync::Arc::new(mesh.indices.clone());
+        for t in unbound {
+            let Texture::UnboundAttribute(want) = &*t else { continue };
+            let Some(a) = attributes.iter().find(|a| &a.name == want) else {
+                let have: Vec<&str> = attributes.iter().map(|a| a.name.as_str()).collect();
+                return Err(node.loc.err(format!(
+                    "shape '{name}': no mesh attribute '{want}' (the mesh has {})",
+                    if have.is_empty() { "none".to_string() } else { have.join(", ") }
+                )));
+            };
+            let expected = if a.per_face { mesh.indices.len() } else { mesh.positions.len() };
+            if a.values.len() != expected {
+                return Err(node.loc.err(format!(
+                    "shape '{name}': attribute '{want}' has {} values for {expected} {}",
+                    a.values.len(),
+                    if a.per_face { "triangles" } else { "vertices" }
+                )));
+            }
+            *t = Texture::MeshAttribute(std::sync::Arc::new(MeshAttribute {
+                name: a.name.clone(),
+                per_face: a.per_face,
+                values: a.values.clone(),
+                indices: indices.clone(),
+            }));
+        }
+        Ok(self.b.add_material(m))
     }
 
     /// The svetlo extension for motion blur (Mitsuba 0.6's syntax):

@@ -75,7 +75,29 @@ impl<'a> Loader<'a> {
                 let color1 = self.constant_color(node, "color1", Rgb::splat(0.2), kind)?;
                 Ok(Texture::Checkerboard { color0, color1, to_uv })
             }
-            other => Err(node.loc.err(format!("texture type '{other}' is not supported (bitmap, checkerboard)"))),
+            // A constant given as is, not as a colour (Mitsuba's `rawconstant`: normal maps).
+            "rawconstant" => {
+                let v = self.prop(node, "value")?.ok_or_else(|| node.loc.err("rawconstant needs a 'value'"))?;
+                let c = match v.tag.as_str() {
+                    "vector" | "point" => {
+                        let p = self.vec3(node, "value")?.unwrap_or_default();
+                        Rgb::new(p.x, p.y, p.z)
+                    }
+                    _ => super::props::color_of(v, "value", SpectrumKind::Unbounded)?,
+                };
+                if !c.is_finite() {
+                    return Err(v.loc.err(format!("rawconstant: {c:?} is not finite")));
+                }
+                Ok(Texture::Constant(c))
+            }
+            "mesh_attribute" => {
+                let name = self.string(node, "name")?.ok_or_else(|| node.loc.err("mesh_attribute needs a 'name' (vertex_NAME or face_NAME)"))?;
+                if !(name.starts_with("vertex_") || name.starts_with("face_")) {
+                    return Err(node.loc.err(format!("mesh_attribute name '{name}' must start with vertex_ or face_")));
+                }
+                Ok(Texture::UnboundAttribute(name.to_string()))
+            }
+            other => Err(node.loc.err(format!("texture type '{other}' is not supported (bitmap, checkerboard, mesh_attribute)"))),
         }
     }
 }

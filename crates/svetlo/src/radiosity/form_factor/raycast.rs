@@ -54,7 +54,7 @@ pub fn row(scene: &Scene, mesh: &RadiosityMesh, i: usize, rays: u32, seed: u64) 
                 break;
             }
             let Some(si) = scene.intersect(&ray) else { break };
-            let bsdf = scene.material(&si).bsdf(si.uv);
+            let bsdf = scene.bsdf(&si);
             let Some(bs) = bsdf.sample(si.to_local(si.wo), rng.next_f32(), Vec2::new(rng.next_f32(), rng.next_f32()), TransportMode::Radiance) else { break };
             if bs.pdf <= 0.0 {
                 break;
