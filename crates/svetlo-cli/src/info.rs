@@ -130,12 +130,36 @@ pub fn run(a: &InfoArgs) -> Result<ExitCode> {
         let _ = write!(std::io::stdout(), "{}", p.summary());
         return Ok(ExitCode::SUCCESS);
     }
+    // Mitsuba scenes: every unsupported plugin first, whether or not the scene then loads.
+    if matches!(ext.as_deref(), Some("xml")) {
+        if let Ok(list) = svetlo::io::mitsuba::unsupported_plugins(&a.scene, &a.define) {
+            let _ = write!(std::io::stdout(), "{}", describe_unsupported(&list));
+        }
+    }
     let scene = crate::load_scene(&a.scene, &a.define)?;
     let _ = write!(std::io::stdout(), "{}", describe(&scene));
+    if svetlo::methods::by_name(&scene.settings.integrator).is_err() {
+        let _ =
+            writeln!(std::io::stdout(), "note        integrator '{}' is not one of svetlo's methods: give --integrator to render", scene.settings.integrator);
+    }
     if let Some(e) = &a.lpe {
         let _ = write!(std::io::stdout(), "{}", describe_lpe(&scene, e).map_err(|e| crate::Usage(format!("light path expression: {e}")))?);
     }
     Ok(ExitCode::SUCCESS)
+}
+
+/// The `unsupported` section of `svetlo info`: one line per plugin, file:line first.
+pub fn describe_unsupported(list: &[svetlo::io::mitsuba::Unsupported]) -> String {
+    let mut o = String::new();
+    if list.is_empty() {
+        let _ = writeln!(o, "unsupported none");
+    } else {
+        let _ = writeln!(o, "unsupported {}", list.len());
+        for u in list {
+            let _ = writeln!(o, "  {u}");
+        }
+    }
+    o
 }
 
 /// The event symbols a scene can produce: C, L or B by its lights, and per material the

@@ -1,4 +1,5 @@
-//! Bad input to the Mitsuba plugins of issue #20 (projector, ...): typed errors that name
+//! Bad input to the Mitsuba plugins of issue #20 (projector, normal and bump maps, blends,
+//! mesh attributes): typed errors that name
 //! the file and the line of the offending element, never a panic.
 
 use std::path::Path;
@@ -37,4 +38,89 @@ fn projector_loads() {
     let text = format!("<scene version=\"3.0.0\">\n{SENSOR}\n<emitter type=\"projector\"><float name=\"fov\" value=\"60\"/><rgb name=\"irradiance\" value=\"0.5\"/></emitter>\n</scene>");
     let s = load_scene_from_str(&text, Path::new("/nowhere/ok.xml"), &[]).expect("loads");
     assert!(matches!(s.lights.as_slice(), [svetlo::light::Light::Projector(_)]));
+}
+
+const DIFFUSE: &str = r#"<bsdf type="diffuse"/>"#;
+
+#[test]
+fn surface_detail_bad_input() {
+    assert_names_line(&format!(r#"<bsdf type="normalmap" id="a">{DIFFUSE}</bsdf>"#), "needs a texture named 'normalmap'");
+    assert_names_line(&format!(r#"<bsdf type="normalmap" id="a"><rgb name="normalmap" value="0.5"/>{DIFFUSE}</bsdf>"#), "must be a texture");
+    // Not a normal map: no direction at all, or values a normal map cannot hold.
+    let flat = r#"<texture type="rawconstant" name="normalmap"><vector name="value" value="0.5, 0.5, 0.5"/></texture>"#;
+    let e = error_of(&format!("<bsdf type=\"normalmap\" id=\"a\">\n{flat}{DIFFUSE}</bsdf>"));
+    assert!(e.contains("bad.xml:4") && e.contains("not a normal map"), "{e}");
+    let big = r#"<texture type="rawconstant" name="normalmap"><vector name="value" value="0.5, 2, 1"/></texture>"#;
+    assert!(error_of(&format!("<bsdf type=\"normalmap\" id=\"a\">\n{big}{DIFFUSE}</bsdf>")).contains("not a normal map"));
+    assert_names_line(r#"<bsdf type="normalmap" id="a"/>"#, "exactly one nested bsdf");
+    assert_names_line(&format!(r#"<bsdf type="bumpmap" id="a">{DIFFUSE}</bsdf>"#), "nested height texture");
+    let height = r#"<texture type="checkerboard"/>"#;
+    assert_names_line(&format!(r#"<bsdf type="bumpmap" id="a"><float name="scale" value="inf"/>{height}{DIFFUSE}</bsdf>"#), "scale");
+}
+
+#[test]
+fn blend_bad_input() {
+    assert_names_line(&format!(r#"<bsdf type="blendbsdf" id="a">{DIFFUSE}</bsdf>"#), "exactly two nested bsdfs");
+    assert_names_line(&format!(r#"<bsdf type="blendbsdf" id="a"><float name="weight" value="1.5"/>{DIFFUSE}{DIFFUSE}</bsdf>"#), "weight");
+}
+
+/// A two-triangle PLY with a per-vertex colour and a per-face weight.
+fn attribute_ply(dir: &Path) -> std::path::PathBuf {
+    let p = dir.join("attr.ply");
+    let text = "ply\nformat ascii 1.0\nelement vertex 4\nproperty float x\nproperty float y\nproperty float z\nproperty float color_0\nproperty float color_1\nproperty float color_2\n\
+                element face 1\nproperty list uchar int vertex_indices\nproperty float weight_0\nend_header\n\
+                0 0 0 1 0 0\n1 0 0 0 1 0\n1 1 0 0 0 1\n0 1 0 1 1 1\n4 0 1 2 3 0.25\n";
+    std::fs::write(&p, text).unwrap();
+    p
+}
+
+#[test]
+fn mesh_attribute_bad_input_and_values() {
+    assert_names_line(
+        r#"<texture type="mesh_attribute" id="t"/><bsdf type="diffuse" id="b"><ref name="reflectance" id="t"/></bsdf><shape type="sphere"><ref id="b"/></shape>"#,
+        "needs a 'name'",
+    );
+    assert_names_line(
+        r#"<texture type="mesh_attribute" id="t"><string name="name" value="color"/></texture><bsdf type="diffuse" id="b"><ref name="reflectance" id="t"/></bsdf><shape type="sphere"><ref id="b"/></shape>"#,
+        "vertex_ or face_",
+    );
+    let e = error_of(
+        r#"<bsdf type="diffuse"><texture type="mesh_attribute" name="reflectance"><string name="name" value="vertex_color"/></texture></bsdf><shape type="sphere"><bsdf type="diffuse"><texture type="mesh_attribute" name="reflectance"><string name="name" value="vertex_color"/></texture></bsdf></shape>"#,
+    );
+    assert!(e.contains("need a mesh"), "{e}");
+    let dir = std::env::temp_dir().join(format!("svetlo-attr-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    let ply = attribute_ply(&dir);
+    let shape = |name: &str| {
+        format!(
+            "<scene version=\"3.0.0\">\n{SENSOR}\n<shape type=\"ply\"><string name=\"filename\" value=\"{}\"/><bsdf type=\"diffuse\"><texture type=\"mesh_attribute\" name=\"reflectance\"><string name=\"name\" value=\"{name}\"/></texture></bsdf></shape>\n</scene>",
+            ply.display()
+        )
+    };
+    // An attribute the mesh does not have: the error lists those it has.
+    let e = load_scene_from_str(&shape("face_color"), &dir.join("s.xml"), &[]).err().expect("missing attribute").to_string();
+    assert!(e.contains("s.xml:3") && e.contains("face_color") && e.contains("vertex_color, face_weight"), "{e}");
+    // The values as the file gives them: per vertex (interpolated), per face (on both triangles of the quad).
+    for (name, want) in [("vertex_color", None), ("face_weight", Some(0.25f32))] {
+        let s = load_scene_from_str(&shape(name), &dir.join("s.xml"), &[]).expect("loads");
+        let m = &s.materials[s.shapes[0].material as usize];
+        for prim in 0..2u32 {
+            for bary in [glam::Vec2::ZERO, glam::Vec2::new(1.0, 0.0), glam::Vec2::new(0.25, 0.5)] {
+                let p = svetlo::texture::TexPoint { uv: glam::Vec2::ZERO, prim, bary };
+                let svetlo::bsdf::Material::Diffuse { reflectance } = m else { panic!("{m:?}") };
+                let got = reflectance.eval(p);
+                match want {
+                    Some(w) => assert_eq!(got, svetlo::Rgb::splat(w)),
+                    None => {
+                        // Fan (0, 1, 2), (0, 2, 3) with colours red, green, blue, white.
+                        let cols = [svetlo::Rgb::new(1.0, 0.0, 0.0), svetlo::Rgb::new(0.0, 1.0, 0.0), svetlo::Rgb::new(0.0, 0.0, 1.0), svetlo::Rgb::WHITE];
+                        let tri = if prim == 0 { [0, 1, 2] } else { [0, 2, 3] };
+                        let w = cols[tri[0]] * (1.0 - bary.x - bary.y) + cols[tri[1]] * bary.x + cols[tri[2]] * bary.y;
+                        assert!((got - w).max_component().abs() < 1e-6, "{prim} {bary}: {got:?} vs {w:?}");
+                    }
+                }
+            }
+        }
+    }
+    let _ = std::fs::remove_dir_all(&dir);
 }

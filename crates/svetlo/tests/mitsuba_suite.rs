@@ -70,6 +70,7 @@ fn integrator_of(rel: &str) -> &str {
 struct Outcome {
     spp: u32,
     fraction: f64,
+    relmse: f64,
     pass: bool,
 }
 
@@ -89,7 +90,7 @@ fn run(root: &Path, rel: &str, stem: &str, samples: f64) -> Result<Outcome, Stri
     let method = svetlo::methods::by_name(&scene.settings.integrator).map_err(|e| e.to_string())?;
     let film = method.render(&scene, &settings, &Progress::new()).map_err(|e| e.to_string())?;
     let z = z_test(&film.image(), &reference, &variance, film.spp_done).map_err(|e| e.to_string())?;
-    Ok(Outcome { spp: film.spp_done, fraction: z.fraction_passing, pass: z.pass })
+    Ok(Outcome { spp: film.spp_done, fraction: z.fraction_passing, relmse: z.relmse, pass: z.pass })
 }
 
 /// Render the whole list and print the pass table; returns the scenes that failed and
@@ -98,14 +99,14 @@ fn suite(samples: f64) -> Vec<String> {
     let Some(root) = shared() else { return Vec::new() };
     let mut unexpected = Vec::new();
     let mut passed = 0;
-    println!("| scene | spp | pass fraction | result |\n|---|---|---|---|");
+    println!("| scene | spp | pass fraction | relMSE | result |\n|---|---|---|---|---|");
     // SVETLO_SUITE=substring renders only the matching scenes (for work on one plugin).
     let only = std::env::var("SVETLO_SUITE").unwrap_or_default();
     for &(rel, stem) in SCENES.iter().filter(|(rel, _)| rel.contains(only.as_str())) {
         let known = KNOWN_FAILING.iter().find(|(s, _)| *s == rel).map(|(_, why)| *why);
         let (row, pass) = match run(&root, rel, stem, samples) {
-            Ok(o) => (format!("| {rel} | {} | {:.4} | {} |", o.spp, o.fraction, if o.pass { "PASS" } else { "FAIL" }), o.pass),
-            Err(e) => (format!("| {rel} | - | - | ERROR: {} |", e.lines().next().unwrap_or("")), false),
+            Ok(o) => (format!("| {rel} | {} | {:.4} | {:.2e} | {} |", o.spp, o.fraction, o.relmse, if o.pass { "PASS" } else { "FAIL" }), o.pass),
+            Err(e) => (format!("| {rel} | - | - | - | ERROR: {} |", e.lines().next().unwrap_or("")), false),
         };
         println!("{row}{}", known.map(|w| format!(" (known: {w})")).unwrap_or_default());
         passed += pass as usize;

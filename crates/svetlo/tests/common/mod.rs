@@ -6,9 +6,42 @@
 pub mod scenes;
 
 use glam::{Vec2, Vec3};
-use svetlo::bsdf::{BsdfModel, TransportMode};
+use svetlo::bsdf::{Bsdf, BsdfModel, BsdfSample, TransportMode};
 use svetlo::sampling::stats::chi2_sf;
 use svetlo::sampling::Pcg32;
+use svetlo::Rgb;
+
+/// What the chi-square test needs of a scattering function: a model, or a whole `Bsdf` with
+/// its wrappers (sides, mask, surface detail).
+pub trait Scatter {
+    fn sample(&self, wo: Vec3, uc: f32, u: Vec2, mode: TransportMode) -> Option<BsdfSample>;
+    fn pdf(&self, wo: Vec3, wi: Vec3, mode: TransportMode) -> f32;
+    fn eval(&self, wo: Vec3, wi: Vec3, mode: TransportMode) -> Rgb;
+}
+
+impl Scatter for BsdfModel {
+    fn sample(&self, wo: Vec3, uc: f32, u: Vec2, mode: TransportMode) -> Option<BsdfSample> {
+        BsdfModel::sample(self, wo, uc, u, mode)
+    }
+    fn pdf(&self, wo: Vec3, wi: Vec3, mode: TransportMode) -> f32 {
+        BsdfModel::pdf(self, wo, wi, mode)
+    }
+    fn eval(&self, wo: Vec3, wi: Vec3, mode: TransportMode) -> Rgb {
+        BsdfModel::eval(self, wo, wi, mode)
+    }
+}
+
+impl Scatter for Bsdf {
+    fn sample(&self, wo: Vec3, uc: f32, u: Vec2, mode: TransportMode) -> Option<BsdfSample> {
+        Bsdf::sample(self, wo, uc, u, mode)
+    }
+    fn pdf(&self, wo: Vec3, wi: Vec3, mode: TransportMode) -> f32 {
+        Bsdf::pdf(self, wo, wi, mode)
+    }
+    fn eval(&self, wo: Vec3, wi: Vec3, mode: TransportMode) -> Rgb {
+        Bsdf::eval(self, wo, wi, mode)
+    }
+}
 
 pub const TWO_PI: f64 = 2.0 * std::f64::consts::PI;
 
@@ -118,7 +151,7 @@ pub struct Chi2Outcome {
 /// `n * ∫_bin pdf`. Delta-lobe samples and failed samples go to one extra cell whose
 /// expected count is `n * (1 - ∫ pdf)`: the mass the pdf does not account for. Cells
 /// expecting fewer than 5 samples are pooled (smallest first) before the statistic is formed.
-pub fn chi2_test(model: &BsdfModel, wo: Vec3, mode: TransportMode, bins: SphereBins, n: usize, seed: u64) -> Chi2Outcome {
+pub fn chi2_test(model: &impl Scatter, wo: Vec3, mode: TransportMode, bins: SphereBins, n: usize, seed: u64) -> Chi2Outcome {
     let mut rng = Pcg32::new(seed, 0x5eed);
     let nb = bins.count();
     let mut observed = vec![0f64; nb + 1];

@@ -204,15 +204,18 @@ impl<'a> Loader<'a> {
                     return Err(tex.loc.err("normalmap: 'normalmap' must be a texture (a bitmap of tangent-space normals)"));
                 }
                 let normals = self.texture(tex, SpectrumKind::Unbounded)?;
-                if let crate::texture::Texture::Bitmap { image, .. } = &normals {
-                    // Stored as 0.5 (n + 1): a texel outside [0, 1] or one that is no direction
-                    // (all channels 0.5) is not a normal map (an sRGB-decoded one, or a height map).
-                    if let Some(i) = image.data.iter().position(|c| c.min_component() < -1e-4 || c.max_component() > 1.0001) {
-                        return Err(tex.loc.err(format!("normalmap: texel {i} is {:?}, outside [0, 1]: not a normal map (give it raw=true)", image.data[i])));
-                    }
-                    if image.data.iter().all(|c| (c.r - 0.5).abs() < 1e-3 && (c.g - 0.5).abs() < 1e-3 && (c.b - 0.5).abs() < 1e-3) {
-                        return Err(tex.loc.err("normalmap: every texel is (0.5, 0.5, 0.5), no direction: not a normal map"));
-                    }
+                // Stored as 0.5 (n + 1): a texel outside [0, 1] or one that is no direction
+                // (all channels 0.5) is not a normal map (an sRGB-decoded one, or a height map).
+                let texels: &[Rgb] = match &normals {
+                    crate::texture::Texture::Bitmap { image, .. } => &image.data,
+                    crate::texture::Texture::Constant(c) => std::slice::from_ref(c),
+                    _ => &[],
+                };
+                if let Some(i) = texels.iter().position(|c| c.min_component() < -1e-4 || c.max_component() > 1.0001) {
+                    return Err(tex.loc.err(format!("normalmap: texel {i} is {:?}, outside [0, 1]: not a normal map", texels[i])));
+                }
+                if !texels.is_empty() && texels.iter().all(|c| (c.r - 0.5).abs() < 1e-3 && (c.g - 0.5).abs() < 1e-3 && (c.b - 0.5).abs() < 1e-3) {
+                    return Err(tex.loc.err("normalmap: every texel is (0.5, 0.5, 0.5), no direction: not a normal map"));
                 }
                 Material::NormalMap { normals, inner: Box::new(self.bsdf(inner)?) }
             }

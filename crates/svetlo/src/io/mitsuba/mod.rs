@@ -15,11 +15,13 @@ mod props;
 mod refs;
 mod sensor;
 mod shape;
+mod support;
 mod texture;
 mod xml;
 
 pub use props::{look_at, parse_transform};
 pub use sensor::fov_x_from_axis;
+pub use support::{unsupported_plugins, Consequence, Unsupported};
 
 use crate::error::{Error, Result};
 use crate::scene::{Scene, SceneBuilder};
