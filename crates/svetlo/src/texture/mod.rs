@@ -53,9 +53,15 @@ pub struct TexPoint {
     pub bary: Vec2,
 }
 
+impl TexPoint {
+    /// `prim` of a point known only by its uv (the rasteriser, radiosity's albedos): mesh
+    /// attributes give their mean there.
+    pub const NO_PRIM: u32 = u32::MAX;
+}
+
 impl From<Vec2> for TexPoint {
     fn from(uv: Vec2) -> Self {
-        TexPoint { uv, prim: 0, bary: Vec2::ZERO }
+        TexPoint { uv, prim: TexPoint::NO_PRIM, bary: Vec2::ZERO }
     }
 }
 
@@ -73,7 +79,7 @@ pub struct MeshAttribute {
 
 impl MeshAttribute {
     fn eval(&self, p: TexPoint) -> Rgb {
-        let Some(tri) = self.indices.get(p.prim as usize) else { return Rgb::BLACK };
+        let Some(tri) = self.indices.get(p.prim as usize) else { return self.mean() };
         if self.per_face {
             return self.values.get(p.prim as usize).copied().unwrap_or(Rgb::BLACK);
         }
