@@ -41,27 +41,29 @@ fn projector_loads() {
 }
 
 const DIFFUSE: &str = r#"<bsdf type="diffuse"/>"#;
+/// A shape that uses the BSDF `a` (unused BSDFs are not built).
+const USE: &str = r#"<shape type="sphere"><ref id="a"/></shape>"#;
 
 #[test]
 fn surface_detail_bad_input() {
-    assert_names_line(&format!(r#"<bsdf type="normalmap" id="a">{DIFFUSE}</bsdf>"#), "needs a texture named 'normalmap'");
-    assert_names_line(&format!(r#"<bsdf type="normalmap" id="a"><rgb name="normalmap" value="0.5"/>{DIFFUSE}</bsdf>"#), "must be a texture");
+    assert_names_line(&format!(r#"<bsdf type="normalmap" id="a">{DIFFUSE}</bsdf>{USE}"#), "needs a texture named 'normalmap'");
+    assert_names_line(&format!(r#"<bsdf type="normalmap" id="a"><rgb name="normalmap" value="0.5"/>{DIFFUSE}</bsdf>{USE}"#), "must be a texture");
     // Not a normal map: no direction at all, or values a normal map cannot hold.
     let flat = r#"<texture type="rawconstant" name="normalmap"><vector name="value" value="0.5, 0.5, 0.5"/></texture>"#;
-    let e = error_of(&format!("<bsdf type=\"normalmap\" id=\"a\">\n{flat}{DIFFUSE}</bsdf>"));
+    let e = error_of(&format!("<bsdf type=\"normalmap\" id=\"a\">\n{flat}{DIFFUSE}</bsdf>{USE}"));
     assert!(e.contains("bad.xml:4") && e.contains("not a normal map"), "{e}");
     let big = r#"<texture type="rawconstant" name="normalmap"><vector name="value" value="0.5, 2, 1"/></texture>"#;
-    assert!(error_of(&format!("<bsdf type=\"normalmap\" id=\"a\">\n{big}{DIFFUSE}</bsdf>")).contains("not a normal map"));
-    assert_names_line(r#"<bsdf type="normalmap" id="a"/>"#, "exactly one nested bsdf");
-    assert_names_line(&format!(r#"<bsdf type="bumpmap" id="a">{DIFFUSE}</bsdf>"#), "nested height texture");
+    assert!(error_of(&format!("<bsdf type=\"normalmap\" id=\"a\">\n{big}{DIFFUSE}</bsdf>{USE}")).contains("not a normal map"));
+    assert_names_line(&format!(r#"<bsdf type="normalmap" id="a"/>{USE}"#), "exactly one nested bsdf");
+    assert_names_line(&format!(r#"<bsdf type="bumpmap" id="a">{DIFFUSE}</bsdf>{USE}"#), "nested height texture");
     let height = r#"<texture type="checkerboard"/>"#;
-    assert_names_line(&format!(r#"<bsdf type="bumpmap" id="a"><float name="scale" value="inf"/>{height}{DIFFUSE}</bsdf>"#), "scale");
+    assert_names_line(&format!(r#"<bsdf type="bumpmap" id="a"><float name="scale" value="inf"/>{height}{DIFFUSE}</bsdf>{USE}"#), "scale");
 }
 
 #[test]
 fn blend_bad_input() {
-    assert_names_line(&format!(r#"<bsdf type="blendbsdf" id="a">{DIFFUSE}</bsdf>"#), "exactly two nested bsdfs");
-    assert_names_line(&format!(r#"<bsdf type="blendbsdf" id="a"><float name="weight" value="1.5"/>{DIFFUSE}{DIFFUSE}</bsdf>"#), "weight");
+    assert_names_line(&format!(r#"<bsdf type="blendbsdf" id="a">{DIFFUSE}</bsdf>{USE}"#), "exactly two nested bsdfs");
+    assert_names_line(&format!(r#"<bsdf type="blendbsdf" id="a"><float name="weight" value="1.5"/>{DIFFUSE}{DIFFUSE}</bsdf>{USE}"#), "weight");
 }
 
 /// A two-triangle PLY with a per-vertex colour and a per-face weight.
