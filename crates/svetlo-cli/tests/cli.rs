@@ -340,3 +340,19 @@ fn light_tracing_warns_about_environment_emitters() {
     let (_, _, err) = run(&["render", s(&scene), "-o", s(&d.join("p.exr")), "--integrator", "path", "-D", "res=8", "--spp", "1"]);
     assert!(!err.contains("environment emitters"), "{err}");
 }
+
+/// `svetlo info` lists every unsupported plugin by file and line before it tries to load,
+/// and still reports the loading error.
+#[test]
+fn info_lists_unsupported_plugins() {
+    let d = tmp("unsupported");
+    let scene = d.join("u.xml");
+    let text = "<scene version=\"3.0.0\">\n<sensor type=\"perspective\"/>\n<shape type=\"sdfgrid\"/>\n<shape type=\"sphere\">\n<bsdf type=\"principled\"/>\n</shape>\n</scene>\n";
+    std::fs::write(&scene, text).unwrap();
+    let (code, stdout, err) = run(&["info", s(&scene)]);
+    assert_eq!(code, 3, "{stdout}{err}");
+    assert!(stdout.contains("unsupported 2"), "{stdout}");
+    assert!(stdout.contains("u.xml:3: <shape type=\"sdfgrid\"> not supported: skipped"), "{stdout}");
+    assert!(stdout.contains("u.xml:5: <bsdf type=\"principled\"> not supported: the scene does not load"), "{stdout}");
+    assert!(err.contains("principled"), "{err}");
+}
