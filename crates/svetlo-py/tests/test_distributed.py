@@ -164,3 +164,28 @@ def test_cancel_keeps_the_chunks_done_and_partial_images(client):
     if r.spp < 256:
         assert r.interrupted
     assert np.isfinite(r.image).all()
+
+
+# Two-sided 0.001 quantile of Student's t with 7 degrees of freedom (8 independent renders).
+T7_0001 = 5.408
+
+
+@pytest.mark.parametrize("integrator", ["pssmlt", "mlt"])
+def test_independent_chains_agree_with_a_long_local_render(client, integrator):
+    """The rule for the methods that are not pass-separable: independent renders (own
+    bootstrap, own chains) averaged. The average is deterministic (the local renders of the
+    same seeds, averaged, bit for bit) and agrees with a long path-traced reference: a t-test
+    on the image mean per channel, the renders' spread plus the reference's standard error."""
+    box = dict(width=16, height=16, filter="box")
+    kw = dict(integrator=integrator, options={"bootstrap": 5000, "chains": 16}, spp=16, **box)
+    n = 8
+    mean, images = sd.render_independent(CBOX, client=client, renders=n, seed=100, **kw)
+    scene = svetlo.load_file(CBOX)
+    for i in (0, n - 1):
+        assert np.array_equal(bits(images[i]), bits(svetlo.render(scene, seed=100 + i, progress=False, **kw)))
+    assert np.array_equal(bits(mean), bits((np.sum(np.array(images, dtype=np.float64), axis=0) / n).astype(np.float32)))
+    ref = svetlo.render_result(scene, integrator="path", spp=1024, seed=7, progress=False, **box)
+    per_render = np.array([im.mean(axis=(0, 1)) for im in images], dtype=np.float64)
+    se = np.sqrt(per_render.var(axis=0, ddof=1) / n + ref.variance.mean(axis=(0, 1)) / (1024 * 256))
+    t = (per_render.mean(axis=0) - ref.image.mean(axis=(0, 1))) / se
+    assert np.all(np.abs(t) < T7_0001), f"{integrator}: t = {t} against the path-traced reference"
