@@ -53,7 +53,17 @@ fn merged_ranges_are_the_local_render_bit_for_bit() {
     let cbox = scene("cornell-box.xml", 20, 16);
     // 37 spp on 320 pixels: passes 1, 2, 4, 8, 16, 6 (six passes, a ragged tree).
     let s = RenderSettings { spp: 37, max_depth: 5, seed: 7, threads: 2, ..RenderSettings::from_scene(&cbox) };
-    for spec in ["path", "path:simd=false", "light", "bdpt", "direct", "whitted", "distributed", "photon:photons=2000,caustic-photons=500,gather=4", "radiosity:element-size=1"] {
+    for spec in [
+        "path",
+        "path:simd=false",
+        "light",
+        "bdpt",
+        "direct",
+        "whitted",
+        "distributed",
+        "photon:photons=2000,caustic-photons=500,gather=4",
+        "radiosity:element-size=1",
+    ] {
         let local = svetlo::methods::by_name(spec).unwrap().render(&cbox, &s, &Progress::new()).unwrap();
         assert!(local.image().mean().max_component() > 0.0, "{spec}: black image");
         for (chunks, threads) in [(1, 1), (3, 1), (4, 2), (100, 2)] {

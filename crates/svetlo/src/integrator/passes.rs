@@ -83,13 +83,15 @@ pub fn is_node(range: &Range<u32>, passes: u32) -> bool {
 /// passes are left), so the tasks carry about equal work.
 pub fn chunk_nodes(plan: &[(u32, u32)], chunks: usize) -> Vec<Range<u32>> {
     let samples = |r: &Range<u32>| -> u64 { plan[r.start as usize..r.end as usize].iter().map(|p| p.1 as u64).sum() };
-    let mut nodes = vec![0..plan.len() as u32];
     if plan.is_empty() {
         return Vec::new();
     }
+    let mut nodes: Vec<Range<u32>> = Vec::with_capacity(chunks.max(1));
+    nodes.push(0..plan.len() as u32);
     while nodes.len() < chunks.max(1) {
         // The largest splittable node; the first of equals, for a deterministic plan.
-        let Some((i, _)) = nodes.iter().enumerate().filter(|(_, r)| r.end - r.start >= 2).max_by(|x, y| samples(x.1).cmp(&samples(y.1)).then(y.0.cmp(&x.0))) else {
+        let Some((i, _)) = nodes.iter().enumerate().filter(|(_, r)| r.end - r.start >= 2).max_by(|x, y| samples(x.1).cmp(&samples(y.1)).then(y.0.cmp(&x.0)))
+        else {
             break;
         };
         let r = nodes[i].clone();
@@ -244,6 +246,6 @@ mod tests {
         let nodes = chunk_nodes(&plan, 8);
         let spp: Vec<u32> = nodes.iter().map(|r| plan[r.start as usize..r.end as usize].iter().map(|p| p.1).sum()).collect();
         assert_eq!(spp.iter().sum::<u32>(), 4096);
-        assert!(spp.iter().all(|&s| s >= 256 && s <= 1024), "{spp:?}");
+        assert!(spp.iter().all(|&s| (256..=1024).contains(&s)), "{spp:?}");
     }
 }

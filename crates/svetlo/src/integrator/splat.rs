@@ -284,7 +284,9 @@ pub(super) fn render_chunked<E: SplatEstimator>(
         }
         pass_spp = next_pass_spp(pass_spp, w as u64 * h as u64, settings.time_limit.map(|t| (t.as_secs_f64(), start.elapsed().as_secs_f64(), spp_done)));
     }
-    let (mut film, mut extra) = sum.finish(add).unwrap_or_else(|| (Film::with_layers(w, h, settings.filter, settings.aovs().names()), vec![vec![Rgb::BLACK; (w * h) as usize]; channels]));
+    let (mut film, mut extra) = sum
+        .finish(add)
+        .unwrap_or_else(|| (Film::with_layers(w, h, settings.filter, settings.aovs().names()), vec![vec![Rgb::BLACK; (w * h) as usize]; channels]));
     film.spp_done = spp_done;
     // Each pixel sample traced one light path: N = W H spp paths, and the camera's
     // importance is normalised so that splats scale by W H / N = 1 / spp.
