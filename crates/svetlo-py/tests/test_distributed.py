@@ -57,6 +57,8 @@ def test_any_chunk_count_gives_the_same_bits(client):
     for chunks in (1, 2, 5, 64):
         img = sd.render(CBOX, client=client, chunks=chunks, progress=False, **kw)
         assert np.array_equal(bits(img), bits(ref)), f"{chunks} chunks"
+    # Workers that share the client's file system read the path itself.
+    assert np.array_equal(bits(sd.render(CBOX, client=client, chunks=3, ship=False, progress=False, **kw)), bits(ref))
     # Photon mapping splits too: every task traces the same photon maps from the seed.
     kw = dict(integrator="photon", options={"photons": 2000, "caustic_photons": 500, "gather": 4}, spp=7, seed=1, width=16, height=12)
     assert np.array_equal(bits(sd.render(CBOX, client=client, chunks=3, progress=False, **kw)), bits(local(CBOX, **kw).image))
@@ -89,7 +91,7 @@ def test_assets_ship_to_workers_that_cannot_read_the_clients_files(client, tmp_p
     shutil.rmtree(tmp_path / "scene")
     img = sd.render(src, client=client, chunks=3, progress=False, **kw)
     assert np.array_equal(bits(img), bits(ref))
-    # Without shipping, the workers look for the path and fail as a local load would.
+    # Without shipping the path itself must be readable: gone, it fails as a local load does.
     with pytest.raises(svetlo.SvetloError):
         sd.render(p, client=client, ship=False, progress=False, **kw)
 
