@@ -24,7 +24,7 @@ cargo test --release
 # --- Python package (issue #13): build the wheel with maturin, install it, run its pytest suite.
 # The bit-for-bit tests compare against this checkout's CLI binary.
 cargo build --release -p svetlo-cli
-python3 -m pip install --quiet --disable-pip-version-check maturin numpy pytest mitsuba==3.9.1 matplotlib
+python3 -m pip install --quiet --disable-pip-version-check maturin numpy pytest mitsuba==3.9.1 matplotlib "dask[distributed]"
 python3 -m pip install --quiet --disable-pip-version-check --force-reinstall --no-deps ./crates/svetlo-py
 # pytest exits 5 when it collected no test: that must fail, as any other non-zero code does.
 py_rc=0

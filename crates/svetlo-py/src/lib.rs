@@ -4,6 +4,7 @@
 //! registry (`svetlo::methods`).
 
 mod dict;
+mod distributed;
 mod errors;
 mod images;
 mod radiosity;
@@ -30,6 +31,9 @@ fn _svetlo(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_function(wrap_pyfunction!(images::relmse, m)?)?;
     m.add_function(wrap_pyfunction!(images::ztest, m)?)?;
     m.add_function(wrap_pyfunction!(radiosity::radiosity, m)?)?;
+    m.add_function(wrap_pyfunction!(distributed::plan_chunks, m)?)?;
+    m.add_function(wrap_pyfunction!(distributed::render_passes, m)?)?;
+    m.add_function(wrap_pyfunction!(distributed::merge_films, m)?)?;
     m.add("__version__", env!("CARGO_PKG_VERSION"))?;
     Ok(())
 }

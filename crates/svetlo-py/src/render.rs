@@ -21,22 +21,22 @@ const TIME_ONLY_SPP: u32 = 1 << 24;
 const POLL: Duration = Duration::from_millis(20);
 
 /// The settings a render call asks for, over the scene file's.
-struct Overrides {
-    spp: Option<u32>,
-    time: Option<f64>,
-    seed: Option<u64>,
-    max_depth: Option<i32>,
-    width: Option<u32>,
-    height: Option<u32>,
-    filter: Option<String>,
-    threads: usize,
-    sampler: Option<String>,
-    rr_depth: Option<i32>,
-    hide_emitters: Option<bool>,
+pub(crate) struct Overrides {
+    pub(crate) spp: Option<u32>,
+    pub(crate) time: Option<f64>,
+    pub(crate) seed: Option<u64>,
+    pub(crate) max_depth: Option<i32>,
+    pub(crate) width: Option<u32>,
+    pub(crate) height: Option<u32>,
+    pub(crate) filter: Option<String>,
+    pub(crate) threads: usize,
+    pub(crate) sampler: Option<String>,
+    pub(crate) rr_depth: Option<i32>,
+    pub(crate) hide_emitters: Option<bool>,
 }
 
 /// The CLI's `configure`, step for step: settings from the scene, then each override.
-fn settings(scene: &svetlo::scene::Scene, o: &Overrides) -> PyResult<RenderSettings> {
+pub(crate) fn settings(scene: &svetlo::scene::Scene, o: &Overrides) -> PyResult<RenderSettings> {
     let mut s = RenderSettings::from_scene(scene);
     if let Some(spp) = o.spp {
         if spp == 0 {
@@ -85,7 +85,7 @@ fn settings(scene: &svetlo::scene::Scene, o: &Overrides) -> PyResult<RenderSetti
 }
 
 /// The scene at the requested resolution (a copy only when it changes), as the CLI sizes it.
-fn resized(scene: &Arc<svetlo::scene::Scene>, width: Option<u32>, height: Option<u32>) -> PyResult<Arc<svetlo::scene::Scene>> {
+pub(crate) fn resized(scene: &Arc<svetlo::scene::Scene>, width: Option<u32>, height: Option<u32>) -> PyResult<Arc<svetlo::scene::Scene>> {
     for (v, what) in [(width, "width"), (height, "height")] {
         if let Some(v) = v {
             if !(1..=65536).contains(&v) {
@@ -252,7 +252,7 @@ pub fn render<'py>(
 /// A rendered film kept for what is developed on demand (the per-sample variance).
 #[pyclass(frozen, name = "Film", module = "svetlo")]
 pub struct PyFilm {
-    film: Film,
+    pub(crate) film: Film,
 }
 
 #[pymethods]

@@ -64,6 +64,51 @@ pub fn by_name(spec: &str) -> Result<Box<dyn Integrator>> {
     })
 }
 
+/// The methods whose image is a sum over the camera-side pass driver, so that a range of its
+/// passes can be rendered anywhere ([`render_passes`]). `photon` and `radiosity` qualify
+/// because their precomputation (the photon maps, the radiosity solve) is a deterministic
+/// function of the scene and seed: every range recomputes it, identically.
+pub const PASS_SEPARABLE: &[&str] = &["path", "light", "ptracer", "bdpt", "direct", "whitted", "distributed", "photon", "radiosity"];
+
+/// Whether `spec` (a name with options) names a method of [`PASS_SEPARABLE`].
+pub fn pass_separable(spec: &str) -> bool {
+    PASS_SEPARABLE.contains(&spec.split_once(':').map_or(spec, |(n, _)| n))
+}
+
+/// Render passes `range` (a node of the pass tree of `settings.spp`) of `scene` with the method
+/// `spec`: the raw sums that [`PartialFilm::merge`](crate::film::raw::PartialFilm::merge)
+/// combines with the other nodes' into the local render's film, bit for bit.
+pub fn render_passes(
+    spec: &str,
+    scene: &crate::scene::Scene,
+    settings: &integrator::RenderSettings,
+    range: std::ops::Range<u32>,
+    progress: &integrator::Progress,
+) -> Result<crate::film::raw::PartialFilm> {
+    if !pass_separable(spec) {
+        return Err(Error::Settings(format!(
+            "integrator '{spec}' is not a sum of independent pixel samples: a range of its passes cannot be rendered apart (methods that can: {})",
+            PASS_SEPARABLE.join(", ")
+        )));
+    }
+    if settings.time_limit.is_some() {
+        return Err(Error::Settings("a range of passes needs a render without a time limit".into()));
+    }
+    let method = by_name(spec)?;
+    let plan = integrator::passes::pass_plan(settings.spp, scene.camera.width as u64 * scene.camera.height as u64);
+    let want: u32 = plan.get(range.start as usize..range.end as usize).map_or(0, |p| p.iter().map(|p| p.1).sum());
+    let s = integrator::RenderSettings { pass_range: Some(range.clone()), ..settings.clone() };
+    let film = method.render(scene, &s, progress)?;
+    if progress.cancelled() {
+        return Err(Error::Invalid(format!("the render of passes {}..{} was cancelled", range.start, range.end)));
+    }
+    // A method that ignored the range would hand back the whole render.
+    if film.spp_done != want {
+        return Err(Error::Invalid(format!("'{spec}' rendered {} samples per pixel for passes {}..{}, not {want}", film.spp_done, range.start, range.end)));
+    }
+    Ok(crate::film::raw::PartialFilm { passes: range, passes_total: plan.len() as u32, film })
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

@@ -11,6 +11,8 @@ and the methods are svetlo's (``svetlo.methods()``): path, light, bdpt, direct, 
 distributed, zbuffer, radiosity, photon, sppm, pssmlt, mlt. A render releases the GIL, shows
 a tqdm bar when tqdm is installed (or calls ``progress``), and stops on Ctrl-C with
 :class:`RenderInterrupted` (a ``KeyboardInterrupt``) whose ``.image`` is the partial image.
+``svetlo.distributed`` (``import svetlo.distributed``) renders on a Dask cluster, bit for bit
+the local image.
 """
 
 from __future__ import annotations

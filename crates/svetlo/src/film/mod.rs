@@ -6,6 +6,7 @@
 pub mod compare;
 pub mod filter;
 pub mod image;
+pub mod raw;
 
 pub use self::image::Image;
 pub use filter::Filter;
@@ -249,6 +250,30 @@ impl Film {
         self.full.add_sample(p, l);
     }
 
+    /// Add another film's raw sums to this one's (same size, filter and layers): the step of
+    /// the pass tree that makes a render's image from its passes. `spp_done` adds up; the
+    /// splat scale is left to the caller (it is the whole render's spp).
+    pub fn add(&mut self, o: &Film) {
+        debug_assert_eq!((self.width, self.height, self.layer_names.len()), (o.width, o.height, o.layer_names.len()));
+        for (d, s) in self.full.pixels.iter_mut().zip(&o.full.pixels) {
+            d.sum += s.sum;
+            d.weight += s.weight;
+            d.s1 += s.s1;
+            d.s2 += s.s2;
+            d.n += s.n;
+        }
+        for (dl, sl) in self.full.layers.iter_mut().zip(&o.full.layers) {
+            for (d, s) in dl.iter_mut().zip(sl) {
+                *d += *s;
+            }
+        }
+        add_buffer(&mut self.splats, &o.splats);
+        for (d, s) in self.layer_splats.iter_mut().zip(&o.layer_splats) {
+            add_buffer(d, s);
+        }
+        self.spp_done += o.spp_done;
+    }
+
     /// Add an unfiltered contribution at raster position `p` (box reconstruction).
     pub fn splat(&mut self, p: Vec2, l: Rgb) {
         if !l.is_finite() || p.x < 0.0 || p.y < 0.0 {
@@ -292,6 +317,19 @@ impl Film {
             })
             .collect();
         Image::new(self.width as usize, self.height as usize, data)
+    }
+}
+
+/// `dst += src` for lazily allocated buffers (empty: all zero).
+fn add_buffer(dst: &mut Vec<Rgb>, src: &[Rgb]) {
+    if src.is_empty() {
+        return;
+    }
+    if dst.is_empty() {
+        *dst = vec![Rgb::BLACK; src.len()];
+    }
+    for (d, s) in dst.iter_mut().zip(src) {
+        *d += *s;
     }
 }
 

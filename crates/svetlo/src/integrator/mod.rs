@@ -10,6 +10,7 @@ pub mod light;
 pub mod local;
 pub mod metropolis;
 pub mod mlt;
+pub mod passes;
 pub mod path;
 pub mod path_simd;
 pub mod photon;
@@ -47,6 +48,11 @@ pub struct RenderSettings {
     pub hide_emitters: bool,
     /// AOVs by light path expression and the beauty's restriction (None: neither).
     pub lpe: Option<std::sync::Arc<crate::lpe::AovSet>>,
+    /// Render only these passes of the untimed pass plan, a node of its tree (see
+    /// [`passes`]): the film then holds that node's raw sums, to be combined with the other
+    /// nodes' by [`crate::film::raw::PartialFilm::merge`]. Only the camera-side pass driver
+    /// honours it; [`crate::methods::render_passes`] refuses the other methods.
+    pub pass_range: Option<std::ops::Range<u32>>,
 }
 
 impl Default for RenderSettings {
@@ -62,6 +68,7 @@ impl Default for RenderSettings {
             filter: Filter::default(),
             hide_emitters: false,
             lpe: None,
+            pass_range: None,
         }
     }
 }

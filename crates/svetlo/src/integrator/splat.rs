@@ -7,6 +7,7 @@
 //! threads or on scheduling. Besides the film, an estimator may feed extra images
 //! ("channels", box reconstruction, divided by the spp at the end), e.g. one per strategy.
 
+use super::passes::{self, next_pass_spp, pass_plan};
 use super::{Progress, RenderSettings};
 use crate::error::{Error, Result};
 use crate::film::{Film, FilmTile};
@@ -127,28 +128,6 @@ pub struct TileJob<'a> {
     pub n: u32,
 }
 
-/// Pixel samples of one pass at most (without a time limit): bounds the work a cancel drops.
-const PASS_PIXEL_SAMPLES: u64 = 1 << 22;
-
-/// Samples per pixel of the next pass after one of `last`. Passes are summed into the film
-/// one after another, so their sizes fix the float summation order: without a time limit
-/// they double (1, 2, 4, ... up to 64 and about `PASS_PIXEL_SAMPLES`) whatever the timing,
-/// which keeps the image independent of the machine's speed and the thread count. With one
-/// (`(limit, elapsed, spp_done)` in seconds) they aim at half-second passes that end at the limit.
-fn next_pass_spp(last: u32, pixels: u64, timed: Option<(f64, f64, u32)>) -> u32 {
-    match timed {
-        None => (last.saturating_mul(2)).min((PASS_PIXEL_SAMPLES / pixels.max(1)).clamp(1, 64) as u32),
-        Some((limit, elapsed, done)) => {
-            let per_spp = elapsed / done.max(1) as f64;
-            if per_spp > 0.0 {
-                ((0.5 / per_spp) as u32).clamp(1, 64).min((((limit - elapsed) / per_spp) as u32).max(1))
-            } else {
-                64
-            }
-        }
-    }
-}
-
 /// The film (splats scaled by the spp done) and the extra channels (already divided by it).
 pub struct SplatRender {
     pub film: Film,
@@ -174,8 +153,6 @@ pub(super) fn render_chunked<E: SplatEstimator>(
     let cam = &scene.camera;
     let (w, h) = (cam.width, cam.height);
     let n_layers = settings.aovs().aov_count();
-    let mut film = Film::with_layers(w, h, settings.filter, settings.aovs().names());
-    let mut extra: Vec<Vec<Rgb>> = vec![vec![Rgb::BLACK; (w * h) as usize]; channels];
     let tiles: Vec<(u32, u32, u32, u32)> = (0..h.div_ceil(TILE))
         .flat_map(|ty| (0..w.div_ceil(TILE)).map(move |tx| (tx * TILE, ty * TILE, ((tx + 1) * TILE).min(w), ((ty + 1) * TILE).min(h))))
         .collect();
@@ -183,14 +160,51 @@ pub(super) fn render_chunked<E: SplatEstimator>(
     let pool = rayon::ThreadPoolBuilder::new().num_threads(settings.threads).build().map_err(|e| Error::Settings(format!("thread pool: {e}")))?;
     let start = Instant::now();
     let proto = make_sampler(settings.sampler, settings.spp, settings.seed);
+    // Untimed renders follow the fixed pass plan, and may be asked for one node of its tree.
+    let plan = settings.time_limit.is_none().then(|| pass_plan(settings.spp, w as u64 * h as u64));
+    let range = match (&settings.pass_range, &plan) {
+        (Some(r), Some(plan)) => {
+            if !passes::is_node(r, plan.len() as u32) {
+                return Err(Error::Settings(format!(
+                    "passes {}..{} are not a node of the pass tree of this render ({} passes for {} spp)",
+                    r.start,
+                    r.end,
+                    plan.len(),
+                    settings.spp
+                )));
+            }
+            progress.total.store(plan[r.start as usize..r.end as usize].iter().map(|p| p.1 as u64).sum::<u64>() * w as u64 * h as u64, Ordering::Relaxed);
+            r.clone()
+        }
+        (Some(_), None) => return Err(Error::Settings("a range of passes needs a render without a time limit".into())),
+        (None, Some(plan)) => 0..plan.len() as u32,
+        (None, None) => 0..u32::MAX,
+    };
+    // A pass's film and extra channels; passes add up by the pass tree.
+    type PassSum = (Film, Vec<Vec<Rgb>>);
+    let add = |a: &mut PassSum, b: PassSum| {
+        a.0.add(&b.0);
+        for (d, s) in a.1.iter_mut().zip(&b.1) {
+            for (x, y) in d.iter_mut().zip(s) {
+                *x += *y;
+            }
+        }
+    };
+    let mut sum: passes::TreeSum<PassSum> = passes::TreeSum::default();
     let mut spp_done = 0u32;
     let mut pass_spp = 1u32;
-    while spp_done < settings.spp {
+    let mut pass = range.start;
+    while pass < range.end {
+        let (s0, n) = match &plan {
+            Some(plan) => plan[pass as usize],
+            None if spp_done < settings.spp => (spp_done, pass_spp.min(settings.spp - spp_done)),
+            None => break,
+        };
         if progress.cancelled() || settings.time_limit.is_some_and(|t| start.elapsed() >= t) {
             break;
         }
-        let n = pass_spp.min(settings.spp - spp_done);
-        let s0 = spp_done;
+        let mut film = Film::with_layers(w, h, settings.filter, settings.aovs().names());
+        let mut extra: Vec<Vec<Rgb>> = vec![vec![Rgb::BLACK; (w * h) as usize]; channels];
         let film_ref = &film;
         // Tiles go in chunks so that the splat lists in memory stay bounded on large films;
         // each chunk's splats land in pass-local dense buffers, in chunk and tile order.
@@ -258,12 +272,22 @@ pub(super) fn render_chunked<E: SplatEstimator>(
             }
         }
         spp_done += n;
-        film.spp_done = spp_done;
-        // The splats' scale so far, so that an observer sees a developed image.
-        film.splat_scale = spp_done as f32;
-        progress.pass_done(&film);
+        film.spp_done = n;
+        sum.push((film, extra), add);
+        pass += 1;
+        if progress.is_observed() {
+            // The splats' scale so far, so that an observer sees a developed image.
+            if let Some((mut f, _)) = sum.peek(add) {
+                f.splat_scale = spp_done as f32;
+                progress.pass_done(&f);
+            }
+        }
         pass_spp = next_pass_spp(pass_spp, w as u64 * h as u64, settings.time_limit.map(|t| (t.as_secs_f64(), start.elapsed().as_secs_f64(), spp_done)));
     }
+    let (mut film, mut extra) = sum
+        .finish(add)
+        .unwrap_or_else(|| (Film::with_layers(w, h, settings.filter, settings.aovs().names()), vec![vec![Rgb::BLACK; (w * h) as usize]; channels]));
+    film.spp_done = spp_done;
     // Each pixel sample traced one light path: N = W H spp paths, and the camera's
     // importance is normalised so that splats scale by W H / N = 1 / spp.
     film.splat_scale = spp_done.max(1) as f32;

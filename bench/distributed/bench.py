@@ -1,0 +1,91 @@
+"""Distributed rendering on Dask (issue #17): speed-up with 1 and 2 worker processes, the
+scheduler's overhead per task, and bytes sent back per task against the film's size.
+
+    python3 bench/distributed/bench.py [--size 512] [--spp 4] [--integrator bdpt] [--repeats 2]
+
+Wall times on a shared machine are noisy: runs alternate (local, 1 worker, 2 workers, ...)
+and the medians are reported, with the machine's load average beside them. Every distributed
+image is checked against the local one, bit for bit.
+"""
+
+import argparse
+import os
+import statistics
+import sys
+import time
+import zlib
+
+import numpy as np
+
+import svetlo
+import svetlo.distributed as sd
+from svetlo import _svetlo
+
+ROOT = os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
+CBOX = os.path.join(ROOT, "scenes", "cornell-box.xml")
+
+
+def cluster(n):
+    from distributed import Client, LocalCluster
+
+    c = LocalCluster(n_workers=n, threads_per_worker=1, processes=True, dashboard_address=None)
+    return c, Client(c)
+
+
+def main():
+    ap = argparse.ArgumentParser()
+    ap.add_argument("--size", type=int, default=512)
+    ap.add_argument("--spp", type=int, default=4)
+    ap.add_argument("--integrator", default="bdpt")
+    ap.add_argument("--repeats", type=int, default=2)
+    ap.add_argument("--chunks", type=int, default=8)
+    a = ap.parse_args()
+    kw = dict(integrator=a.integrator, spp=a.spp, seed=1, width=a.size, height=a.size)
+    scene = svetlo.load_file(CBOX)
+    clusters = {n: cluster(n) for n in (1, 2)}
+    times = {"local, 1 thread": [], "local, 2 threads": [], "dask, 1 worker": [], "dask, 2 workers": []}
+    ref = None
+    for _ in range(a.repeats):
+        for th in (1, 2):
+            t = time.perf_counter()
+            img = svetlo.render(scene, threads=th, progress=False, **kw)
+            times[f"local, {th} thread{'s' if th > 1 else ''}"].append(time.perf_counter() - t)
+            ref = img if ref is None else ref
+        for n, (_, client) in clusters.items():
+            t = time.perf_counter()
+            img = sd.render(CBOX, client=client, chunks=a.chunks, threads=1, progress=False, **kw)
+            times[f"dask, {n} worker{'s' if n > 1 else ''}"].append(time.perf_counter() - t)
+            assert np.array_equal(img.view(np.uint32), ref.view(np.uint32)), "distributed image differs from the local one"
+    base = statistics.median(times["local, 1 thread"])
+    print(f"{a.integrator} {a.size}x{a.size}, {a.spp} spp, {a.chunks} chunks; load average {os.getloadavg()[0]:.1f} on {os.cpu_count()} cores")
+    for k, v in times.items():
+        m = statistics.median(v)
+        print(f"  {k:18s} median {m:7.2f} s   speed-up over local 1 thread {base / m:4.2f}")
+
+    # Overhead per task: many tiny tasks (an 8x8 film, 64-sample passes), wall time less the
+    # tasks' own render time, per task.
+    _, client = clusters[2]
+    small = dict(integrator="direct", spp=64 * 40, seed=1, width=8, height=8)
+    for chunks in (8, 32):
+        job = sd.submit(CBOX, client=client, chunks=chunks, threads=1, **small)
+        t = time.perf_counter()
+        r = job.result()
+        wall = time.perf_counter() - t
+        n = len(job.nodes)
+        busy = sum(job.task_seconds.values())
+        print(f"  overhead: {n} tasks in {wall:.3f} s wall, {busy:.3f} s rendering: {(wall - busy / 2) / n * 1e3:.1f} ms per task (2 workers)")
+
+    # Bytes per task: one node's raw sums, plain and zlib level 1, by film size.
+    print("  bytes per task (one node of the pass tree, independent of its spp):")
+    for size in (64, 256, 512, 1024):
+        for integ in ("path", "bdpt"):
+            raw = _svetlo.render_passes(scene, 0, 1, integrator=integ, spp=1, width=size, height=size, max_depth=3)
+            z = zlib.compress(raw, 1)
+            print(f"    {integ:5s} {size:5d}^2: {len(raw) / 1e6:8.2f} MB raw ({len(raw) / size ** 2:.0f} B/pixel), zlib-1 {len(z) / 1e6:8.2f} MB ({len(z) / len(raw):.0%})")
+    for c, client in clusters.values():
+        client.close()
+        c.close()
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,521 @@
+"""Renders spread over a Dask cluster, bit for bit the image of a local render.
+
+::
+
+    from dask.distributed import Client, LocalCluster
+    import svetlo.distributed
+    client = Client(LocalCluster(n_workers=4, threads_per_worker=1))
+    img = svetlo.distributed.render("scene.xml", client=client, integrator="bdpt", spp=4096, seed=1)
+
+How: an untimed render's samples are split into passes, and the passes' film sums are added by
+a fixed pairwise tree (the library's ``integrator::passes``), the same for a local render. The
+client cuts that tree into ``chunks`` nodes of about equal work; each task renders one node on
+a worker and returns the node's raw film sums (weighted radiance, weights, variance sums, splats,
+AOV layers) as bytes; the client adds the nodes by the tree. Float sums are associated exactly as
+in a local render, so the image is the local one to the bit, whatever the number of workers,
+the chunks, the order in which tasks finish, or tasks rerun after a worker died.
+
+Scenes reach the workers shipped (the default): the client reads the scene file and the files
+it references (includes, meshes, textures, spectra) and sends them once to every worker, which
+writes them to a folder of its own and loads the scene once, keeping it for later tasks keyed by
+the content of all those files. With ``ship=False`` the workers load the client's path (a
+shared file system). Workers must run the same svetlo build on the same kind of CPU: the path
+tracer's eight-wide kernel depends on AVX2 (``integrator="path:simd=false"`` does not).
+
+The methods that are sums of independent pixel samples can be split: path, light, bdpt,
+direct, whitted, distributed, and photon and radiosity (each task recomputes their photon maps
+or radiosity solution, a deterministic function of the scene and seed). sppm, pssmlt and mlt
+are not: :func:`render_independent` runs independent renders with distinct seeds on the
+workers and averages them (an unbiased method stays unbiased; sppm's bias is that of one
+render of the chains' length, its variance divided by their number).
+"""
+
+from __future__ import annotations
+
+import collections
+import dataclasses
+import hashlib
+import os
+import re
+import sys
+import tempfile
+import threading
+import time
+import uuid
+import zlib
+from typing import Any, Callable, Dict, List, Mapping, Optional, Tuple, Union
+
+import numpy as np
+
+import svetlo
+from svetlo import OptionError, RenderInterrupted, RenderResult, Scene, SvetloError, _svetlo
+
+PathLike = Union[str, "os.PathLike[str]"]
+
+__all__ = ["render", "submit", "render_independent", "DistributedRender", "SceneSource", "scene_source"]
+
+# Attribute values that may name a file (Mitsuba: filename="..." on includes, meshes,
+# textures, spectra, IES files; <string name="filename" value="..."/>).
+_FILE_ATTR = re.compile(r'(?:filename|value)\s*=\s*"([^"]+)"')
+# A scene and its files above this size are refused for shipping: use a shared path.
+MAX_SHIP_BYTES = 2 << 30
+
+
+@dataclasses.dataclass(frozen=True)
+class SceneSource:
+    """A scene file and, when shipped, the bytes of every file it needs.
+
+    ``key`` hashes the content of all of them and the ``<default>`` parameters: workers keep
+    the loaded scene under it. ``files`` maps paths relative to ``root`` to their bytes (None:
+    not shipped, the workers read ``path``).
+    """
+
+    key: str
+    path: str
+    root: str
+    name: str
+    params: Tuple[Tuple[str, str], ...]
+    files: Optional[Dict[str, bytes]]
+
+    @property
+    def nbytes(self) -> int:
+        return sum(len(b) for b in (self.files or {}).values())
+
+
+def _referenced(path: str, seen: Dict[str, bytes]) -> None:
+    """Add `path` and, for XML, the existing files its attributes name (includes recursively)."""
+    real = os.path.realpath(path)
+    if real in seen:
+        return
+    with open(real, "rb") as f:
+        data = f.read()
+    seen[real] = data
+    if not real.lower().endswith(".xml"):
+        return
+    text = data.decode("utf-8", errors="replace")
+    folder = os.path.dirname(real)
+    for name in set(_FILE_ATTR.findall(text)):
+        if "$" in name:
+            continue
+        cand = name if os.path.isabs(name) else os.path.join(folder, name)
+        if os.path.isfile(cand):
+            _referenced(cand, seen)
+
+
+def scene_source(path: PathLike, params: Optional[Mapping[str, Any]] = None, ship: bool = True) -> SceneSource:
+    """Read the scene file at `path` (and with `ship` the files it needs) into a :class:`SceneSource`."""
+    path = os.fspath(path)
+    if not os.path.isfile(path):
+        # The local loader's own error, with its message and attributes.
+        svetlo.load_file(path, **(params or {}))
+        raise OptionError(f"{path}: not a scene file")
+    files: Dict[str, bytes] = {}
+    _referenced(path, files)
+    real = os.path.realpath(path)
+    root = os.path.commonpath([os.path.dirname(p) for p in files])
+    h = hashlib.sha256()
+    ps = tuple(svetlo._params(params or {}))
+    h.update(repr(ps).encode())
+    total = 0
+    for p in sorted(files):
+        rel = os.path.relpath(p, root)
+        h.update(rel.encode() + b"\0" + len(files[p]).to_bytes(8, "little"))
+        h.update(files[p])
+        total += len(files[p])
+    if ship and total > MAX_SHIP_BYTES:
+        raise OptionError(f"{path}: the scene and its files take {total} bytes, over {MAX_SHIP_BYTES} to ship: put them on a shared path and pass ship=False")
+    shipped = {os.path.relpath(p, root): b for p, b in files.items()} if ship else None
+    if not ship:
+        h.update(os.path.abspath(path).encode())
+    return SceneSource(key=h.hexdigest(), path=os.path.abspath(path), root=root, name=os.path.relpath(real, root), params=ps, files=shipped)
+
+
+# --- Worker side: scenes loaded once per process, by content.
+
+_CACHE: "collections.OrderedDict[str, Scene]" = collections.OrderedDict()
+_CACHE_SIZE = 4
+_LOCK = threading.Lock()
+_STATS = {"loads": 0, "hits": 0}
+
+
+def cache_stats() -> Dict[str, int]:
+    """This process's scene cache: loads, hits, scenes held (for tests and monitoring)."""
+    with _LOCK:
+        return dict(_STATS, held=len(_CACHE))
+
+
+def _unpack(src: SceneSource) -> str:
+    """Write a shipped scene's files under this machine's temporary folder; its path there."""
+    base = os.path.join(tempfile.gettempdir(), f"svetlo-dask-{src.key[:24]}")
+    if not os.path.isdir(base):
+        tmp = f"{base}.{os.getpid()}.{uuid.uuid4().hex[:8]}"
+        for rel, data in (src.files or {}).items():
+            dst = os.path.normpath(os.path.join(tmp, rel))
+            if not dst.startswith(os.path.normpath(tmp) + os.sep):
+                raise OptionError(f"shipped scene file {rel!r} leaves its folder")
+            os.makedirs(os.path.dirname(dst), exist_ok=True)
+            with open(dst, "wb") as f:
+                f.write(data)
+        try:
+            os.rename(tmp, base)
+        except OSError:
+            # Another process unpacked the same content first: same bytes, use theirs.
+            import shutil
+
+            shutil.rmtree(tmp, ignore_errors=True)
+    return os.path.join(base, src.name)
+
+
+def _as_client_error(e: SvetloError, local_root: str, client_root: str) -> SvetloError:
+    """The error the client would have had loading its own copy: the same type, message and
+    attributes, with the worker's folder replaced by the client's."""
+    msg = str(e).replace(local_root, client_root)
+    out = type(e)(msg)
+    for k, v in vars(e).items():
+        setattr(out, k, v.replace(local_root, client_root) if isinstance(v, str) else v)
+    return out
+
+
+def _scene(src: SceneSource) -> Scene:
+    with _LOCK:
+        s = _CACHE.get(src.key)
+        if s is not None:
+            _CACHE.move_to_end(src.key)
+            _STATS["hits"] += 1
+            return s
+    params = dict(src.params)
+    if src.files is None:
+        s = svetlo.load_file(src.path, **params)
+    else:
+        path = _unpack(src)
+        try:
+            s = svetlo.load_file(path, **params)
+        except SvetloError as e:
+            raise _as_client_error(e, path[: -len(src.name)].rstrip(os.sep), src.root) from None
+    with _LOCK:
+        _CACHE[src.key] = s
+        _STATS["loads"] += 1
+        while len(_CACHE) > _CACHE_SIZE:
+            _CACHE.popitem(last=False)
+    return s
+
+
+def _worker_threads() -> int:
+    """Threads per task: the worker's cores shared among its task slots."""
+    try:
+        from distributed import get_worker
+
+        slots = max(1, get_worker().state.nthreads)
+    except Exception:
+        slots = 1
+    return max(1, (os.cpu_count() or 1) // slots)
+
+
+def _plan_task(src: SceneSource, chunks: int, opts: Dict[str, Any]) -> Dict[str, Any]:
+    return _svetlo.plan_chunks(_scene(src), chunks, **opts)
+
+
+def _render_task(src: SceneSource, start: int, end: int, opts: Dict[str, Any], threads: Optional[int], compress: int) -> Tuple[float, bytes]:
+    t0 = time.perf_counter()
+    raw = _svetlo.render_passes(_scene(src), start, end, threads=_worker_threads() if threads is None else threads, **opts)
+    data = zlib.compress(raw, compress) if compress else raw
+    return time.perf_counter() - t0, data
+
+
+def _independent_task(src: SceneSource, opts: Dict[str, Any], threads: Optional[int]) -> Tuple[np.ndarray, int]:
+    r = svetlo.render_result(_scene(src), threads=_worker_threads() if threads is None else threads, progress=False, **opts)
+    return r.image, r.spp
+
+
+# --- Client side.
+
+
+def _source(scene: Union[PathLike, Scene, SceneSource], params: Optional[Mapping[str, Any]], ship: bool) -> SceneSource:
+    if isinstance(scene, SceneSource):
+        return scene
+    if isinstance(scene, Scene):
+        if not os.path.isfile(scene.origin):
+            raise OptionError(f"a distributed render needs the scene's file; this scene came from {scene.origin!r} (load_string or load_dict): write it to a file and pass its path")
+        return scene_source(scene.origin, params, ship)
+    if isinstance(scene, (str, os.PathLike)):
+        return scene_source(scene, params, ship)
+    raise TypeError(f"scene must be a path, a svetlo.Scene loaded from a file or a SceneSource, got {type(scene).__name__}")
+
+
+def _default_client(client):
+    if client is not None:
+        return client
+    from distributed import get_client
+
+    return get_client()
+
+
+_OPTS = ("spp", "seed", "max_depth", "width", "height", "filter", "sampler", "rr_depth", "hide_emitters")
+
+
+class DistributedRender:
+    """A render in flight on a cluster (from :func:`submit`).
+
+    ``progress()`` says how far it is, ``partial()`` gives the image of the chunks done so far
+    (their sums in pass order: close to, but not the bits of, the final image), ``cancel()``
+    stops the chunks not yet done, ``result()`` waits and merges.
+    """
+
+    def __init__(self, client, src: SceneSource, plan: Dict[str, Any], opts: Dict[str, Any], threads: Optional[int], compress: int, shipped):
+        self.client, self.source, self.plan, self.opts = client, src, plan, opts
+        self._shipped = shipped
+        self.start_time = time.perf_counter()
+        self.nodes: List[Tuple[int, int, int, int]] = [tuple(n) for n in plan["nodes"]]
+        token = uuid.uuid4().hex[:12]
+        ref = shipped if shipped is not None else src
+        self.futures = [
+            client.submit(_render_task, ref, a, b, opts, threads, compress, key=f"svetlo-passes-{token}-{a}-{b}", pure=False, retries=0)
+            for a, b, _, _ in self.nodes
+        ]
+        self._parts: Dict[int, bytes] = {}
+        self.task_seconds: Dict[int, float] = {}
+        self.bytes_received = 0
+        self._compressed = compress > 0
+        self._lock = threading.Lock()
+        self.cancelled = False
+
+    @property
+    def spp_planned(self) -> int:
+        return self.plan["spp"]
+
+    def _collect(self, i: int, fut) -> None:
+        secs, data = fut.result()
+        with self._lock:
+            self.bytes_received += len(data)
+            self._parts[i] = zlib.decompress(data) if self._compressed else data
+            self.task_seconds[i] = secs
+
+    def _poll(self) -> None:
+        for i, f in enumerate(self.futures):
+            if i not in self._parts and f.status == "finished":
+                self._collect(i, f)
+            elif f.status == "error":
+                f.result()  # raises the task's exception
+
+    def progress(self) -> Tuple[int, int]:
+        """(samples per pixel done, planned)."""
+        self._poll()
+        with self._lock:
+            done = sum(self.nodes[i][3] - self.nodes[i][2] for i in self._parts)
+        return done, self.spp_planned
+
+    def partial(self) -> Optional[np.ndarray]:
+        """The image of the chunks done so far (None before the first)."""
+        self._poll()
+        with self._lock:
+            parts = list(self._parts.values())
+        if not parts:
+            return None
+        return _svetlo.merge_films(parts, exact=False)["image"]
+
+    def cancel(self) -> None:
+        """Cancel the chunks not yet done; those done stay."""
+        self.cancelled = True
+        self.client.cancel([f for i, f in enumerate(self.futures) if i not in self._parts])
+
+    def _result(self, interrupted: bool) -> RenderResult:
+        with self._lock:
+            parts = [self._parts[i] for i in sorted(self._parts)]
+        complete = len(parts) == len(self.nodes)
+        t0 = time.perf_counter()
+        m = _svetlo.merge_films(parts, exact=complete)
+        merge = time.perf_counter() - t0
+        secs = time.perf_counter() - self.start_time
+        return RenderResult(
+            image=m["image"],
+            film=m["film"],
+            spp=m["spp"],
+            spp_planned=self.spp_planned,
+            seconds=secs,
+            render_seconds=sum(self.task_seconds.values()),
+            develop_seconds=merge,
+            interrupted=interrupted,
+            integrator=self.plan["integrator"],
+            report=None,
+            aovs=dict(m["aovs"]),
+        )
+
+    def result(self, callback: Optional[Callable[[int, int, float], Any]] = None) -> RenderResult:
+        """Wait for every chunk and merge them: the local render's result, bit for bit.
+
+        ``callback(spp_done, spp_planned, seconds)`` is called as chunks complete. On Ctrl-C
+        the chunks left are cancelled and :class:`svetlo.RenderInterrupted` carries the
+        image of those done (``e.result``, ``e.image``). A task's exception is raised as is
+        (the same exception a local render or load would raise), the other tasks cancelled.
+        """
+        from distributed import as_completed
+
+        index = {f.key: i for i, f in enumerate(self.futures)}
+        try:
+            for f in as_completed([f for i, f in enumerate(self.futures) if i not in self._parts]):
+                if f.status == "cancelled":
+                    continue
+                try:
+                    self._collect(index[f.key], f)
+                except BaseException:
+                    self.cancel()
+                    raise
+                if callback is not None:
+                    done, total = self.progress()
+                    callback(done, total, time.perf_counter() - self.start_time)
+        except KeyboardInterrupt:
+            self.cancel()
+            r = self._result(True)
+            e = RenderInterrupted(f"distributed render interrupted after {r.spp} of {r.spp_planned} spp; the partial image is e.image (e.result holds the rest)")
+            e.result, e.image = r, r.image
+            raise e from None
+        if self.cancelled and len(self._parts) < len(self.nodes):
+            return self._result(True)
+        return self._result(False)
+
+
+def submit(
+    scene: Union[PathLike, Scene, SceneSource],
+    *,
+    client=None,
+    integrator: Optional[str] = None,
+    options: Optional[Mapping[str, Any]] = None,
+    chunks: Optional[int] = None,
+    params: Optional[Mapping[str, Any]] = None,
+    ship: bool = True,
+    threads: Optional[int] = None,
+    compress: int = 0,
+    **settings: Any,
+) -> DistributedRender:
+    """Start a distributed render and return its :class:`DistributedRender` at once.
+
+    Arguments are those of :func:`render`.
+    """
+    client = _default_client(client)
+    bad = set(settings) - set(_OPTS)
+    if bad:
+        raise TypeError(f"unknown render settings: {', '.join(sorted(bad))} (distributed renders take {', '.join(_OPTS)})")
+    if "time" in settings:
+        raise OptionError("a distributed render is planned by spp: time limits are not deterministic")
+    if options and integrator is None:
+        raise OptionError("options need the integrator named")
+    spec = svetlo._method_spec(integrator, options, None) if options else integrator
+    opts = {k: v for k, v in settings.items() if v is not None}
+    opts["integrator"] = spec
+    if chunks is None:
+        workers = len(client.scheduler_info().get("workers", {})) or 1
+        chunks = 4 * workers
+    if isinstance(chunks, bool) or not isinstance(chunks, int) or chunks < 1:
+        raise OptionError(f"chunks must be a positive integer, got {chunks!r}")
+    if not (0 <= compress <= 9):
+        raise OptionError(f"compress is a zlib level 0..9 (0: none), got {compress}")
+    src = _source(scene, params, ship)
+    # Shipped files go to every worker once; tasks refer to them by future.
+    shipped = client.scatter(src, broadcast=True, hash=False) if src.files is not None else None
+    ref = shipped if shipped is not None else src
+    plan = client.submit(_plan_task, ref, chunks, opts, pure=False).result()
+    return DistributedRender(client, src, plan, opts, threads, compress, shipped)
+
+
+def render(
+    scene: Union[PathLike, Scene, SceneSource],
+    *,
+    client=None,
+    integrator: Optional[str] = None,
+    options: Optional[Mapping[str, Any]] = None,
+    spp: Optional[int] = None,
+    seed: Optional[int] = None,
+    chunks: Optional[int] = None,
+    params: Optional[Mapping[str, Any]] = None,
+    ship: bool = True,
+    threads: Optional[int] = None,
+    compress: int = 0,
+    progress: Union[bool, None, Callable[[int, int, float], Any]] = None,
+    result: bool = False,
+    **settings: Any,
+) -> Union[np.ndarray, RenderResult]:
+    """Render on a Dask cluster; the image a local ``svetlo.render`` makes, bit for bit.
+
+    Args:
+        scene: the scene file's path (or a :class:`svetlo.Scene` loaded from a file, or a
+            :class:`SceneSource`); ``params`` fill its ``<default>`` parameters.
+        client: a ``dask.distributed.Client`` (default: the current one).
+        integrator, options, spp, seed and the other settings (max_depth, width, height,
+            filter, sampler, rr_depth, hide_emitters): as :func:`svetlo.render`.
+        chunks: how many tasks (nodes of the pass tree; fewer if the render has fewer
+            passes). Default: 4 per worker.
+        ship: send the scene's files to the workers (default) or let them read the path.
+        threads: threads per task (default: the worker's cores over its task slots).
+        compress: zlib level for the film sums sent back (0: none).
+        progress: None shows a tqdm bar when tqdm is installed, False nothing, a callable
+            is called as ``progress(spp_done, spp_planned, seconds)`` as chunks complete.
+        result: return the :class:`svetlo.RenderResult` instead of the image.
+
+    Raises the exceptions a local render raises (a scene error on a worker is the same
+    :class:`svetlo.SceneError`); :class:`svetlo.RenderInterrupted` on Ctrl-C, with the image
+    of the chunks done.
+    """
+    job = submit(scene, client=client, integrator=integrator, options=options, chunks=chunks, params=params, ship=ship, threads=threads, compress=compress, spp=spp, seed=seed, **settings)
+    bar = None
+    if progress is None or progress is True:
+        b = svetlo._Bar(None)
+        bar = b if b.bar is not None else None
+        cb = (lambda d, t, s: b(d, t, s)) if bar is not None else None
+    elif progress is False:
+        cb = None
+    elif callable(progress):
+        cb = progress
+    else:
+        raise TypeError("progress must be None, False, True or a callable(spp_done, spp_planned, seconds)")
+    try:
+        r = job.result(cb)
+    finally:
+        if bar is not None:
+            bar.close()
+    return r if result else r.image
+
+
+def render_independent(
+    scene: Union[PathLike, Scene, SceneSource],
+    *,
+    client=None,
+    renders: int,
+    seed: int = 0,
+    integrator: Optional[str] = None,
+    options: Optional[Mapping[str, Any]] = None,
+    params: Optional[Mapping[str, Any]] = None,
+    ship: bool = True,
+    threads: Optional[int] = None,
+    **settings: Any,
+) -> Tuple[np.ndarray, List[np.ndarray]]:
+    """The rule for the methods that are not sums of independent pixel samples (sppm,
+    pssmlt, mlt; any method works): `renders` independent renders, seeds ``seed``,
+    ``seed + 1``, ..., each on a worker, averaged in seed order (deterministic for given
+    seeds). Returns (mean image, the renders' images).
+
+    What it does to each method: pssmlt and mlt run independent bootstraps and chains, so the
+    average is as unbiased as one render (each render's normalisation is its own bootstrap's)
+    with variance over `renders`; sppm's bias shrinks with its iterations, not with
+    `renders`, so N renders of k iterations have the bias of k iterations and the variance of
+    N k: prefer more iterations per render where bias dominates. photon: independent maps.
+    """
+    client = _default_client(client)
+    if isinstance(renders, bool) or not isinstance(renders, int) or renders < 1:
+        raise OptionError(f"renders must be a positive integer, got {renders!r}")
+    if "time" in settings:
+        raise OptionError("independent renders are planned by spp or iterations, not time")
+    src = _source(scene, params, ship)
+    shipped = client.scatter(src, broadcast=True, hash=False) if src.files is not None else None
+    ref = shipped if shipped is not None else src
+    base = dict(integrator=integrator, options=options, **{k: v for k, v in settings.items() if v is not None})
+    futs = [client.submit(_independent_task, ref, dict(base, seed=seed + i), threads, pure=False) for i in range(renders)]
+    try:
+        out = client.gather(futs)
+    except BaseException:
+        client.cancel(futs)
+        raise
+    images = [img for img, _ in out]
+    mean = np.zeros_like(images[0], dtype=np.float64)
+    for img in images:
+        mean += img
+    return (mean / renders).astype(np.float32), images

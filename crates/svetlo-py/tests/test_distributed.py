@@ -1,0 +1,193 @@
+"""svetlo.distributed on a LocalCluster of 2 worker processes: the merged image is the local
+render's bit for bit (every pass-separable method, chunk counts that do not divide the spp,
+a worker killed mid-render), scenes shipped to workers that cannot read the client's files,
+the scene cache, errors raised as the local ones, cancellation and partial images."""
+
+import os
+import pathlib
+import shutil
+import signal
+import time
+
+import numpy as np
+import pytest
+
+import svetlo
+
+distributed = pytest.importorskip("distributed", reason="svetlo.distributed needs dask[distributed] (pip install 'dask[distributed]')")
+import svetlo.distributed as sd  # noqa: E402
+
+from conftest import SCENES  # noqa: E402
+
+CBOX = SCENES / "cornell-box.xml"
+
+
+@pytest.fixture(scope="module")
+def client():
+    cluster = distributed.LocalCluster(n_workers=2, threads_per_worker=1, processes=True, dashboard_address=None)
+    c = distributed.Client(cluster)
+    yield c
+    c.close()
+    cluster.close()
+
+
+def bits(a: np.ndarray) -> np.ndarray:
+    return np.ascontiguousarray(a, dtype=np.float32).view(np.uint32)
+
+
+def local(path, **kw):
+    return svetlo.render_result(svetlo.load_file(path), progress=False, **kw)
+
+
+@pytest.mark.parametrize("integrator", ["path", "direct", "light", "bdpt", "whitted", "distributed"])
+def test_bitwise_equal_to_the_local_render(client, integrator):
+    # 13 spp on 32x24: passes of 1, 2, 4 and 6 samples; 3 chunks do not divide either.
+    kw = dict(integrator=integrator, spp=13, seed=5, width=32, height=24, max_depth=5)
+    r = sd.render(CBOX, client=client, chunks=3, progress=False, result=True, **kw)
+    ref = local(CBOX, **kw)
+    assert r.spp == ref.spp == 13 and not r.interrupted
+    assert ref.image.max() > 0
+    assert np.array_equal(bits(r.image), bits(ref.image)), f"{integrator}: the merged image is not the local one"
+    assert np.array_equal(bits(r.variance), bits(ref.variance)), f"{integrator}: variance"
+
+
+def test_any_chunk_count_gives_the_same_bits(client):
+    kw = dict(integrator="path", spp=40, seed=2, width=20, height=16, filter="tent")
+    ref = local(CBOX, **kw).image
+    for chunks in (1, 2, 5, 64):
+        img = sd.render(CBOX, client=client, chunks=chunks, progress=False, **kw)
+        assert np.array_equal(bits(img), bits(ref)), f"{chunks} chunks"
+    # Workers that share the client's file system read the path itself.
+    assert np.array_equal(bits(sd.render(CBOX, client=client, chunks=3, ship=False, progress=False, **kw)), bits(ref))
+    # Photon mapping splits too: every task traces the same photon maps from the seed.
+    kw = dict(integrator="photon", options={"photons": 2000, "caustic_photons": 500, "gather": 4}, spp=7, seed=1, width=16, height=12)
+    assert np.array_equal(bits(sd.render(CBOX, client=client, chunks=3, progress=False, **kw)), bits(local(CBOX, **kw).image))
+
+
+def write_asset_scene(d: pathlib.Path, colour: str = "0.2, 0.3, 0.8") -> pathlib.Path:
+    """The Cornell box with a cube from an OBJ file, pulled in through an include in a subfolder."""
+    (d / "parts").mkdir(parents=True)
+    v = [(x, y, z) for x in (-0.3, 0.3) for y in (0.0, 0.6) for z in (-0.3, 0.3)]
+    faces = [(1, 2, 4, 3), (5, 7, 8, 6), (1, 5, 6, 2), (3, 4, 8, 7), (1, 3, 7, 5), (2, 6, 8, 4)]
+    obj = "".join(f"v {x} {y} {z}\n" for x, y, z in v) + "".join(f"f {a} {b} {c}\nf {a} {c} {e}\n" for a, b, c, e in faces)
+    (d / "parts" / "cube.obj").write_text(obj)
+    (d / "parts" / "cube.xml").write_text(
+        '<scene version="3.0.0"><shape type="obj"><string name="filename" value="cube.obj"/>'
+        f'<bsdf type="diffuse"><rgb name="reflectance" value="{colour}"/></bsdf></shape></scene>'
+    )
+    text = CBOX.read_text().replace("</scene>", '<include filename="parts/cube.xml"/>\n</scene>')
+    p = d / "scene.xml"
+    p.write_text(text)
+    return p
+
+
+def test_assets_ship_to_workers_that_cannot_read_the_clients_files(client, tmp_path):
+    p = write_asset_scene(tmp_path / "scene")
+    kw = dict(integrator="bdpt", spp=6, seed=9, width=24, height=24)
+    ref = local(p, **kw).image
+    src = sd.scene_source(p)
+    assert sorted(src.files) == ["parts/cube.obj", "parts/cube.xml", "scene.xml"]
+    # The client's copy is gone before any worker looks: they render from what was shipped.
+    shutil.rmtree(tmp_path / "scene")
+    img = sd.render(src, client=client, chunks=3, progress=False, **kw)
+    assert np.array_equal(bits(img), bits(ref))
+    # Without shipping the path itself must be readable: gone, it fails as a local load does.
+    with pytest.raises(svetlo.SvetloError):
+        sd.render(p, client=client, ship=False, progress=False, **kw)
+
+
+def test_workers_load_a_scene_once_and_key_it_by_content(client, tmp_path):
+    # A scene no other test renders (the cache is keyed by content).
+    p = write_asset_scene(tmp_path / "s", colour="0.7, 0.3, 0.1")
+    before = client.run(sd.cache_stats)
+    kw = dict(integrator="direct", spp=8, width=12, height=12)
+    sd.render(p, client=client, chunks=6, progress=False, **kw)
+    sd.render(p, client=client, chunks=6, progress=False, **kw)
+    after = client.run(sd.cache_stats)
+    loads = sum(after[w]["loads"] - before.get(w, {"loads": 0})["loads"] for w in after)
+    assert 1 <= loads <= 2, f"each worker loads the scene at most once for 14 tasks, got {loads} loads"
+    # New content under the same name is a new scene.
+    key = sd.scene_source(p).key
+    (tmp_path / "s" / "parts" / "cube.obj").write_text((tmp_path / "s" / "parts" / "cube.obj").read_text().replace("0.6", "0.9"))
+    assert sd.scene_source(p).key != key
+    moved = local(p, **kw).image
+    assert np.array_equal(bits(sd.render(p, client=client, chunks=2, progress=False, **kw)), bits(moved))
+
+
+def test_a_killed_worker_loses_nothing(client):
+    kw = dict(integrator="path", options={"simd": False}, spp=96, seed=4, width=48, height=48)
+    ref = local(CBOX, **kw).image
+    job = sd.submit(CBOX, client=client, chunks=12, **kw)
+    # Kill the process of a worker while it runs one of the render's tasks.
+    killed = None
+    deadline = time.time() + 60
+    while killed is None and time.time() < deadline:
+        for w, keys in client.processing().items():
+            if any(str(k).startswith("svetlo-passes-") for k in keys):
+                pid = client.run(os.getpid, workers=[w])[w]
+                os.kill(pid, signal.SIGKILL)
+                killed = w
+                break
+        time.sleep(0.02)
+    assert killed is not None, "no task of the render was seen running"
+    r = job.result()
+    assert not r.interrupted and r.spp == 96
+    assert np.array_equal(bits(r.image), bits(ref)), "the image after a worker died is not the local one"
+    client.wait_for_workers(2, timeout=60)
+
+
+def test_scene_errors_come_back_as_the_local_exception(client, tmp_path):
+    p = tmp_path / "broken.xml"
+    p.write_text(CBOX.read_text().replace('<bsdf type="diffuse" id="black">', '<bsdf type="diffuse" id="black"', 1))
+    with pytest.raises(svetlo.SceneError) as here:
+        svetlo.load_file(p)
+    with pytest.raises(svetlo.SceneError) as there:
+        sd.render(p, client=client, spp=2, progress=False)
+    assert str(there.value) == str(here.value)
+    assert (there.value.file, there.value.line, there.value.column) == (here.value.file, here.value.line, here.value.column)
+    with pytest.raises(svetlo.OptionError, match="not a sum of independent"):
+        sd.render(CBOX, client=client, integrator="sppm", spp=2, progress=False)
+    with pytest.raises(svetlo.OptionError):
+        sd.render(CBOX, client=client, spp=0, progress=False)
+
+
+def test_cancel_keeps_the_chunks_done_and_partial_images(client):
+    kw = dict(integrator="path", options={"simd": False}, spp=256, seed=1, width=32, height=32)
+    job = sd.submit(CBOX, client=client, chunks=16, **kw)
+    deadline = time.time() + 60
+    while job.progress()[0] == 0 and time.time() < deadline:
+        time.sleep(0.02)
+    part = job.partial()
+    assert part is not None and part.shape == (32, 32, 3) and np.isfinite(part).all() and part.max() > 0
+    job.cancel()
+    r = job.result()
+    done, planned = job.progress()
+    assert planned == 256 and 0 < r.spp == done
+    if r.spp < 256:
+        assert r.interrupted
+    assert np.isfinite(r.image).all()
+
+
+# Two-sided 0.001 quantile of Student's t with 7 degrees of freedom (8 independent renders).
+T7_0001 = 5.408
+
+
+@pytest.mark.parametrize("integrator", ["pssmlt", "mlt"])
+def test_independent_chains_agree_with_a_long_local_render(client, integrator):
+    """The rule for the methods that are not pass-separable: independent renders (own
+    bootstrap, own chains) averaged. The average is deterministic (the local renders of the
+    same seeds, averaged, bit for bit) and agrees with a long path-traced reference: a t-test
+    on the image mean per channel, the renders' spread plus the reference's standard error."""
+    box = dict(width=16, height=16, filter="box")
+    kw = dict(integrator=integrator, options={"bootstrap": 5000, "chains": 16}, spp=16, **box)
+    n = 8
+    mean, images = sd.render_independent(CBOX, client=client, renders=n, seed=100, **kw)
+    scene = svetlo.load_file(CBOX)
+    for i in (0, n - 1):
+        assert np.array_equal(bits(images[i]), bits(svetlo.render(scene, seed=100 + i, progress=False, **kw)))
+    assert np.array_equal(bits(mean), bits((np.sum(np.array(images, dtype=np.float64), axis=0) / n).astype(np.float32)))
+    ref = svetlo.render_result(scene, integrator="path", spp=1024, seed=7, progress=False, **box)
+    per_render = np.array([im.mean(axis=(0, 1)) for im in images], dtype=np.float64)
+    se = np.sqrt(per_render.var(axis=0, ddof=1) / n + ref.variance.mean(axis=(0, 1)) / (1024 * 256))
+    t = (per_render.mean(axis=0) - ref.image.mean(axis=(0, 1))) / se
+    assert np.all(np.abs(t) < T7_0001), f"{integrator}: t = {t} against the path-traced reference"

@@ -1,0 +1,202 @@
+//! A film's raw sums as bytes, for a render split over processes or machines: the sums of a
+//! node of the pass tree ([`crate::integrator::passes`]), not a normalised image, so that the
+//! nodes combine into the local render's film bit for bit. Little-endian, versioned by its
+//! magic; a malformed buffer is an error, never a panic, and nothing is allocated before its
+//! length has been checked against what the header announces.
+
+use super::{Film, Filter, Pixel};
+use crate::error::{Error, Result};
+use crate::spectrum::Rgb;
+use std::ops::Range;
+
+const MAGIC: &[u8; 8] = b"SVLFILM1";
+/// Bytes per pixel of the beauty: sum (3 f32), weight (f64), s1, s2 (3 f32 each), n (u32).
+const PIXEL_BYTES: usize = 12 + 8 + 12 + 12 + 4;
+
+/// The sums of passes `passes` of a render planned in `passes_total` passes.
+#[derive(Clone, Debug)]
+pub struct PartialFilm {
+    pub passes: Range<u32>,
+    pub passes_total: u32,
+    pub film: Film,
+}
+
+fn bad(msg: impl std::fmt::Display) -> Error {
+    Error::Invalid(format!("partial film: {msg}"))
+}
+
+struct Reader<'a> {
+    b: &'a [u8],
+    at: usize,
+}
+
+impl<'a> Reader<'a> {
+    fn take(&mut self, n: usize) -> Result<&'a [u8]> {
+        let end = self.at.checked_add(n).filter(|&e| e <= self.b.len()).ok_or_else(|| bad(format!("truncated at byte {}", self.at)))?;
+        let s = &self.b[self.at..end];
+        self.at = end;
+        Ok(s)
+    }
+    fn u8(&mut self) -> Result<u8> {
+        Ok(self.take(1)?[0])
+    }
+    fn u32(&mut self) -> Result<u32> {
+        Ok(u32::from_le_bytes(self.take(4)?.try_into().expect("4 bytes")))
+    }
+    fn f32(&mut self) -> Result<f32> {
+        Ok(f32::from_le_bytes(self.take(4)?.try_into().expect("4 bytes")))
+    }
+    fn f64(&mut self) -> Result<f64> {
+        Ok(f64::from_le_bytes(self.take(8)?.try_into().expect("8 bytes")))
+    }
+    fn rgb(&mut self) -> Result<Rgb> {
+        Ok(Rgb { r: self.f32()?, g: self.f32()?, b: self.f32()? })
+    }
+    fn rgbs(&mut self, n: usize) -> Result<Vec<Rgb>> {
+        (0..n).map(|_| self.rgb()).collect()
+    }
+}
+
+fn put_rgb(out: &mut Vec<u8>, c: Rgb) {
+    for v in [c.r, c.g, c.b] {
+        out.extend_from_slice(&v.to_le_bytes());
+    }
+}
+
+impl PartialFilm {
+    /// The bytes of these sums.
+    pub fn to_bytes(&self) -> Vec<u8> {
+        let f = &self.film;
+        let px = f.full.pixels.len();
+        let mut out = Vec::with_capacity(64 + px * (PIXEL_BYTES + 12 * (1 + 2 * f.layer_names.len())));
+        out.extend_from_slice(MAGIC);
+        for v in [self.passes.start, self.passes.end, self.passes_total, f.width, f.height] {
+            out.extend_from_slice(&v.to_le_bytes());
+        }
+        let (kind, param) = match f.filter {
+            Filter::Box => (0u8, 0.0f32),
+            Filter::Tent { radius } => (1, radius),
+            Filter::Gaussian { stddev } => (2, stddev),
+        };
+        out.push(kind);
+        out.extend_from_slice(&param.to_le_bytes());
+        out.extend_from_slice(&f.spp_done.to_le_bytes());
+        out.extend_from_slice(&(f.layer_names.len() as u32).to_le_bytes());
+        for n in &f.layer_names {
+            out.extend_from_slice(&(n.len() as u32).to_le_bytes());
+            out.extend_from_slice(n.as_bytes());
+        }
+        out.push(!f.splats.is_empty() as u8);
+        for s in &f.layer_splats {
+            out.push(!s.is_empty() as u8);
+        }
+        for p in &f.full.pixels {
+            put_rgb(&mut out, p.sum);
+            out.extend_from_slice(&p.weight.to_le_bytes());
+            put_rgb(&mut out, p.s1);
+            put_rgb(&mut out, p.s2);
+            out.extend_from_slice(&p.n.to_le_bytes());
+        }
+        for l in &f.full.layers {
+            l.iter().for_each(|c| put_rgb(&mut out, *c));
+        }
+        f.splats.iter().for_each(|c| put_rgb(&mut out, *c));
+        for s in &f.layer_splats {
+            s.iter().for_each(|c| put_rgb(&mut out, *c));
+        }
+        out
+    }
+
+    /// Read sums written by [`Self::to_bytes`].
+    pub fn from_bytes(b: &[u8]) -> Result<PartialFilm> {
+        let mut r = Reader { b, at: 0 };
+        if r.take(MAGIC.len()).ok() != Some(&MAGIC[..]) {
+            return Err(bad("not svetlo film sums (bad magic)"));
+        }
+        let (start, end, total, width, height) = (r.u32()?, r.u32()?, r.u32()?, r.u32()?, r.u32()?);
+        if start >= end || end > total {
+            return Err(bad(format!("passes {start}..{end} of {total}")));
+        }
+        let filter = match (r.u8()?, r.f32()?) {
+            (0, _) => Filter::Box,
+            (1, radius) if radius > 0.0 && radius.is_finite() => Filter::Tent { radius },
+            (2, stddev) if stddev > 0.0 && stddev.is_finite() => Filter::Gaussian { stddev },
+            (k, p) => return Err(bad(format!("unknown filter {k} ({p})"))),
+        };
+        let spp_done = r.u32()?;
+        let n_layers = r.u32()? as usize;
+        // Each layer name takes at least its 4-byte length: bounds the count by the input.
+        if n_layers > b.len() / 4 {
+            return Err(bad(format!("{n_layers} layers in {} bytes", b.len())));
+        }
+        let mut names = Vec::with_capacity(n_layers);
+        for _ in 0..n_layers {
+            let len = r.u32()? as usize;
+            let s = std::str::from_utf8(r.take(len)?).map_err(|_| bad("a layer name is not UTF-8"))?;
+            names.push(s.to_string());
+        }
+        let has_splats = r.u8()? != 0;
+        let layer_has: Vec<bool> = (0..n_layers).map(|_| r.u8().map(|v| v != 0)).collect::<Result<_>>()?;
+        let px = (width as u64) * (height as u64);
+        let buffers = n_layers as u64 + has_splats as u64 + layer_has.iter().filter(|&&h| h).count() as u64;
+        let want = px.checked_mul(PIXEL_BYTES as u64 + 12 * buffers).ok_or_else(|| bad("size overflows"))?;
+        if want != (b.len() - r.at) as u64 {
+            return Err(bad(format!("{width}x{height} with {buffers} buffers needs {want} bytes of sums, got {}", b.len() - r.at)));
+        }
+        let px = px as usize;
+        let mut film = Film::with_layers(width, height, filter, &names);
+        for p in film.full.pixels.iter_mut() {
+            *p = Pixel { sum: r.rgb()?, weight: r.f64()?, s1: r.rgb()?, s2: r.rgb()?, n: r.u32()? };
+        }
+        for l in film.full.layers.iter_mut() {
+            *l = r.rgbs(px)?;
+        }
+        if has_splats {
+            film.splats = r.rgbs(px)?;
+        }
+        for (i, has) in layer_has.iter().enumerate() {
+            if *has {
+                film.layer_splats[i] = r.rgbs(px)?;
+            }
+        }
+        film.spp_done = spp_done;
+        film.splat_scale = spp_done.max(1) as f32;
+        Ok(PartialFilm { passes: start..end, passes_total: total, film })
+    }
+
+    /// Combine partial films that partition one render's passes, in the pass tree's order:
+    /// the film a local render of the same scene, seed and spp makes, bit for bit.
+    pub fn merge(parts: Vec<PartialFilm>) -> Result<Film> {
+        let first = parts.first().ok_or_else(|| bad("nothing to merge"))?;
+        let (total, w, h, filter, names) = (first.passes_total, first.film.width, first.film.height, first.film.filter, first.film.layer_names.clone());
+        for p in &parts {
+            if (p.passes_total, p.film.width, p.film.height, p.film.filter) != (total, w, h, filter) || p.film.layer_names != names {
+                return Err(bad(format!(
+                    "parts of different renders: {}x{} {:?} of {} passes beside {w}x{h} {filter:?} of {total}",
+                    p.film.width, p.film.height, p.film.filter, p.passes_total
+                )));
+            }
+        }
+        let nodes = parts.into_iter().map(|p| (p.passes, p.film)).collect();
+        let mut film = crate::integrator::passes::combine(nodes, total, &|a: &mut Film, b: Film| a.add(&b))?;
+        film.splat_scale = film.spp_done.max(1) as f32;
+        Ok(film)
+    }
+
+    /// The sum of any parts of one render, for a look at a render in progress: pass order,
+    /// not the tree's, so close to the final image but not its bits.
+    pub fn preview(parts: &[PartialFilm]) -> Result<Film> {
+        let mut sorted: Vec<&PartialFilm> = parts.iter().collect();
+        sorted.sort_by_key(|p| p.passes.start);
+        let first = sorted.first().ok_or_else(|| bad("nothing to merge"))?;
+        let mut film = first.film.clone();
+        for p in &sorted[1..] {
+            if (p.film.width, p.film.height, p.film.filter, p.film.layer_names.len()) != (film.width, film.height, film.filter, film.layer_names.len()) {
+                return Err(bad("parts of different renders"));
+            }
+            film.add(&p.film);
+        }
+        film.splat_scale = film.spp_done.max(1) as f32;
+        Ok(film)
+    }
+}

@@ -1,0 +1,134 @@
+//! Renders split into ranges of passes (nodes of the pass tree), each rendered apart, sent as
+//! bytes and merged: the local render's film bit for bit (beauty, variance, AOV layers), for
+//! every pass-separable method, any number of chunks and any thread count. Scenes are the
+//! repository's own (`scenes/`).
+
+use std::path::Path;
+use std::sync::Arc;
+use svetlo::film::raw::PartialFilm;
+use svetlo::film::{Film, Image};
+use svetlo::integrator::passes::{chunk_nodes, pass_plan};
+use svetlo::integrator::{Progress, RenderSettings};
+use svetlo::scene::Scene;
+
+fn scene(name: &str, w: u32, h: u32) -> Scene {
+    let p = Path::new(env!("CARGO_MANIFEST_DIR")).join("../../scenes").join(name);
+    let mut s = svetlo::io::load_scene(&p, &[]).expect("bundled scene");
+    s.camera.width = w;
+    s.camera.height = h;
+    s
+}
+
+fn bits(img: &Image) -> Vec<u32> {
+    img.data.iter().flat_map(|c| [c.r.to_bits(), c.g.to_bits(), c.b.to_bits()]).collect()
+}
+
+/// The film of `spec` merged from `chunks` nodes, each rendered with `threads` threads and
+/// passed through bytes (in reverse order, to show that arrival order does not matter).
+fn distributed(spec: &str, scene: &Scene, s: &RenderSettings, chunks: usize, threads: usize) -> Film {
+    let plan = pass_plan(s.spp, scene.camera.width as u64 * scene.camera.height as u64);
+    let nodes = chunk_nodes(&plan, chunks);
+    let mut parts = Vec::new();
+    for r in nodes.into_iter().rev() {
+        let st = RenderSettings { threads, ..s.clone() };
+        let part = svetlo::methods::render_passes(spec, scene, &st, r, &Progress::new()).unwrap_or_else(|e| panic!("{spec}: {e}"));
+        parts.push(PartialFilm::from_bytes(&part.to_bytes()).expect("round trip"));
+    }
+    PartialFilm::merge(parts).expect("merge")
+}
+
+fn assert_same(a: &Film, b: &Film, what: &str) {
+    assert_eq!(a.spp_done, b.spp_done, "{what}: spp");
+    assert!(bits(&a.image()) == bits(&b.image()), "{what}: images differ");
+    assert!(bits(&a.variance_image()) == bits(&b.variance_image()), "{what}: variance images differ");
+    let (la, lb) = (a.layer_images(), b.layer_images());
+    assert_eq!(la.len(), lb.len());
+    for ((na, ia), (_, ib)) in la.iter().zip(&lb) {
+        assert!(bits(ia) == bits(ib), "{what}: layer {na} differs");
+    }
+}
+
+#[test]
+fn merged_ranges_are_the_local_render_bit_for_bit() {
+    let cbox = scene("cornell-box.xml", 20, 16);
+    // 37 spp on 320 pixels: passes 1, 2, 4, 8, 16, 6 (six passes, a ragged tree).
+    let s = RenderSettings { spp: 37, max_depth: 5, seed: 7, threads: 2, ..RenderSettings::from_scene(&cbox) };
+    for spec in [
+        "path",
+        "path:simd=false",
+        "light",
+        "bdpt",
+        "direct",
+        "whitted",
+        "distributed",
+        "photon:photons=2000,caustic-photons=500,gather=4",
+        "radiosity:element-size=1",
+    ] {
+        let local = svetlo::methods::by_name(spec).unwrap().render(&cbox, &s, &Progress::new()).unwrap();
+        assert!(local.image().mean().max_component() > 0.0, "{spec}: black image");
+        for (chunks, threads) in [(1, 1), (3, 1), (4, 2), (100, 2)] {
+            assert_same(&local, &distributed(spec, &cbox, &s, chunks, threads), &format!("{spec}, {chunks} chunks, {threads} threads"));
+        }
+    }
+}
+
+#[test]
+fn aov_layers_and_filters_merge_bit_for_bit() {
+    let p = Path::new(env!("CARGO_MANIFEST_DIR")).join("../../scenes/caustic.xml");
+    let sc = svetlo::io::load_scene(&p, &[("res".into(), "24".into())]).expect("scenes/caustic.xml");
+    let list = vec![("caustic".to_string(), "C D S+ L".to_string()), ("d1".to_string(), "C D [LB]".to_string())];
+    let mut set = svetlo::lpe::AovSet::compile(&list, None).expect("expressions");
+    assert!(set.bind(&sc).is_empty());
+    for filter in [svetlo::film::Filter::Box, svetlo::film::Filter::Gaussian { stddev: 0.5 }] {
+        let s = RenderSettings { spp: 21, max_depth: 6, seed: 3, threads: 2, filter, lpe: Some(Arc::new(set.clone())), ..Default::default() };
+        for spec in ["path", "bdpt"] {
+            let local = svetlo::methods::by_name(spec).unwrap().render(&sc, &s, &Progress::new()).unwrap();
+            assert_eq!(local.layer_names().len(), 2);
+            assert_same(&local, &distributed(spec, &sc, &s, 3, 2), &format!("{spec} with AOVs, {filter:?}"));
+        }
+    }
+}
+
+#[test]
+fn ranges_that_are_not_tree_nodes_and_unseparable_methods_are_refused() {
+    let cbox = scene("cornell-box.xml", 8, 8);
+    let s = RenderSettings { spp: 10, ..RenderSettings::from_scene(&cbox) };
+    // 10 spp: passes 1, 2, 4, 3; 1..3 straddles the tree's first split (0..2 | 2..4).
+    let e = svetlo::methods::render_passes("path", &cbox, &s, 1..3, &Progress::new()).unwrap_err();
+    assert!(e.to_string().contains("not a node"), "{e}");
+    for spec in ["sppm", "pssmlt", "mlt", "zbuffer"] {
+        let e = svetlo::methods::render_passes(spec, &cbox, &s, 0..4, &Progress::new()).unwrap_err();
+        assert!(e.to_string().contains("not a sum of independent"), "{spec}: {e}");
+    }
+    let timed = RenderSettings { time_limit: Some(std::time::Duration::from_secs(1)), ..s.clone() };
+    assert!(svetlo::methods::render_passes("path", &cbox, &timed, 0..4, &Progress::new()).is_err());
+    // Parts that leave a pass out, or come from different renders, do not merge.
+    let a = svetlo::methods::render_passes("path", &cbox, &s, 0..2, &Progress::new()).unwrap();
+    let b = svetlo::methods::render_passes("path", &cbox, &s, 2..3, &Progress::new()).unwrap();
+    assert!(PartialFilm::merge(vec![a.clone(), b]).is_err(), "pass 3 missing");
+    let other = scene("cornell-box.xml", 9, 8);
+    let c = svetlo::methods::render_passes("path", &other, &s, 2..4, &Progress::new()).unwrap();
+    assert!(PartialFilm::merge(vec![a, c]).is_err(), "different film sizes");
+}
+
+#[test]
+fn malformed_bytes_are_errors() {
+    let cbox = scene("cornell-box.xml", 6, 5);
+    let s = RenderSettings { spp: 3, ..RenderSettings::from_scene(&cbox) };
+    let part = svetlo::methods::render_passes("bdpt", &cbox, &s, 0..2, &Progress::new()).unwrap();
+    let bytes = part.to_bytes();
+    for cut in [0, 7, 8, 20, bytes.len() / 2, bytes.len() - 1] {
+        assert!(PartialFilm::from_bytes(&bytes[..cut]).is_err(), "cut at {cut}");
+    }
+    let mut longer = bytes.clone();
+    longer.push(0);
+    assert!(PartialFilm::from_bytes(&longer).is_err());
+    // A header announcing a huge film is refused before anything is allocated.
+    let mut huge = bytes.clone();
+    huge[20..24].copy_from_slice(&u32::MAX.to_le_bytes());
+    huge[24..28].copy_from_slice(&u32::MAX.to_le_bytes());
+    assert!(PartialFilm::from_bytes(&huge).is_err());
+    let back = PartialFilm::from_bytes(&bytes).unwrap();
+    assert_eq!(back.passes, 0..2);
+    assert!(bits(&back.film.image()) == bits(&part.film.image()));
+}
