@@ -16,11 +16,14 @@ use svetlo::scene::Scene;
 
 #[derive(Args, Debug)]
 pub struct InfoArgs {
-    /// Scene file (Mitsuba XML).
+    /// Scene file (Mitsuba XML, or pbrt-v4 `.pbrt` / `.pbrt.gz`).
     pub scene: PathBuf,
     /// Scene parameter for <default> / $name substitution (repeatable).
     #[arg(short = 'D', value_name = "NAME=VALUE", value_parser = parse_define)]
     pub define: Vec<(String, String)>,
+    /// Scene format (default: from the extension, `.pbrt` and `.pbrt.gz` are pbrt-v4).
+    #[arg(long, value_enum)]
+    pub format: Option<crate::FormatArg>,
 }
 
 /// Shapes listed one by one up to this many; beyond, only the totals.
@@ -41,6 +44,10 @@ pub fn material_kind(m: &Material) -> String {
         Material::Ward { .. } => "ward".into(),
         Material::TwoSided { front, .. } => format!("twosided({})", material_kind(front)),
         Material::Mask { inner, .. } => format!("mask({})", material_kind(inner)),
+        Material::Coated(c) => match c.base {
+            svetlo::bsdf::material::CoatedBase::Diffuse(_) => "coateddiffuse".into(),
+            svetlo::bsdf::material::CoatedBase::Conductor { .. } => "coatedconductor".into(),
+        },
         Material::Null => "null".into(),
     }
 }
@@ -139,7 +146,7 @@ pub fn describe(scene: &Scene) -> String {
 }
 
 pub fn run(a: &InfoArgs) -> Result<ExitCode> {
-    let scene = svetlo::io::load_scene(&a.scene, &a.define).context("cannot load the scene")?;
+    let scene = svetlo::io::load_scene_as(&a.scene, crate::FormatArg::format(a.format), &a.define).context("cannot load the scene")?;
     print!("{}", describe(&scene));
     Ok(ExitCode::SUCCESS)
 }

@@ -42,6 +42,22 @@ impl std::fmt::Display for Usage {
 
 impl std::error::Error for Usage {}
 
+/// `--format`: the scene file's format when its extension does not say it.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, clap::ValueEnum)]
+pub enum FormatArg {
+    Mitsuba,
+    Pbrt,
+}
+
+impl FormatArg {
+    pub fn format(f: Option<FormatArg>) -> Option<svetlo::io::SceneFormat> {
+        f.map(|f| match f {
+            FormatArg::Mitsuba => svetlo::io::SceneFormat::Mitsuba,
+            FormatArg::Pbrt => svetlo::io::SceneFormat::Pbrt,
+        })
+    }
+}
+
 pub const EXIT_FAIL: u8 = 1;
 pub const EXIT_USAGE: u8 = 2;
 pub const EXIT_INTERRUPTED: u8 = 130;

@@ -57,8 +57,63 @@ pub enum Material {
     TwoSided { front: Box<Material>, back: Box<Material> },
     /// Mitsuba `mask`: the surface is present with probability `opacity`.
     Mask { opacity: Texture, inner: Box<Material> },
+    /// pbrt-v4 `coateddiffuse` / `coatedconductor`: the layered BSDF of `bsdf/coated.rs`.
+    Coated(Box<CoatedMaterial>),
     /// Nothing scatters (e.g. a pure emitter); rays pass through unchanged.
     Null,
+}
+
+/// The base of a coated material (IORs relative to the outside; divided by the coating's
+/// IOR when the BSDF is built, as pbrt does).
+#[derive(Clone, Debug)]
+pub enum CoatedBase {
+    Diffuse(Texture),
+    Conductor { eta: Rgb, k: Rgb, roughness: Option<Roughness> },
+}
+
+/// pbrt-v4's layered material parameters.
+#[derive(Clone, Debug)]
+pub struct CoatedMaterial {
+    pub base: CoatedBase,
+    /// The coating's IOR and roughness (None: smooth).
+    pub eta: f32,
+    pub roughness: Option<Roughness>,
+    pub thickness: f32,
+    pub albedo: Rgb,
+    pub g: f32,
+    pub max_depth: u32,
+    pub n_samples: u32,
+}
+
+impl CoatedMaterial {
+    fn model(&self, uv: Vec2) -> BsdfModel {
+        let w = Rgb::WHITE;
+        let top = match &self.roughness {
+            None => BsdfModel::SmoothDielectric(SmoothDielectric { eta: self.eta, specular_reflectance: w, specular_transmittance: w }),
+            Some(r) => {
+                BsdfModel::RoughDielectric(RoughDielectric { distribution: r.at(uv), eta: self.eta, specular_reflectance: w, specular_transmittance: w })
+            }
+        };
+        let bottom = match &self.base {
+            CoatedBase::Diffuse(t) => BsdfModel::Diffuse(Diffuse { reflectance: t.eval(uv).clamp(0.0, 1.0) }),
+            CoatedBase::Conductor { eta, k, roughness } => {
+                let (eta, k) = (*eta / self.eta, *k / self.eta);
+                match roughness {
+                    None => BsdfModel::SmoothConductor(SmoothConductor { eta, k, specular_reflectance: w }),
+                    Some(r) => BsdfModel::RoughConductor(RoughConductor { distribution: r.at(uv), eta, k, specular_reflectance: w }),
+                }
+            }
+        };
+        BsdfModel::Coated(Box::new(super::coated::Coated {
+            top,
+            bottom,
+            thickness: self.thickness,
+            albedo: self.albedo,
+            g: self.g,
+            max_depth: self.max_depth,
+            n_samples: self.n_samples,
+        }))
+    }
 }
 
 impl Default for Material {
@@ -107,6 +162,13 @@ impl Material {
             }
             Material::TwoSided { front, back } => front.is_uniform() && back.is_uniform(),
             Material::Mask { opacity, inner } => c(opacity) && inner.is_uniform(),
+            Material::Coated(m) => {
+                r(&m.roughness)
+                    && match &m.base {
+                        CoatedBase::Diffuse(t) => c(t),
+                        CoatedBase::Conductor { roughness, .. } => r(roughness),
+                    }
+            }
             Material::Null => true,
         }
     }
@@ -194,6 +256,7 @@ impl Material {
             }
             Material::TwoSided { front, .. } => front.model(uv),
             Material::Mask { inner, .. } => inner.model(uv),
+            Material::Coated(m) => Some(m.model(uv)),
             Material::Null => None,
         }
     }

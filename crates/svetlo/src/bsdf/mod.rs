@@ -3,6 +3,7 @@
 //! sample by `f * |cos(wi)| / pdf`. Delta lobes report `pdf = 1` and `f = weight / |cos(wi)|`.
 
 pub mod blinn;
+pub mod coated;
 pub mod conductor;
 pub mod cook_torrance;
 pub mod dielectric;
@@ -117,6 +118,8 @@ pub enum BsdfModel {
     CookTorrance(cook_torrance::CookTorrance),
     OrenNayar(oren_nayar::OrenNayar),
     Ward(ward::Ward),
+    /// pbrt-v4's layered coated BSDF (boxed: it holds two models).
+    Coated(Box<coated::Coated>),
 }
 
 /// Forward a call to the model inside, whatever it is.
@@ -136,6 +139,7 @@ macro_rules! dispatch {
             BsdfModel::CookTorrance($m) => $e,
             BsdfModel::OrenNayar($m) => $e,
             BsdfModel::Ward($m) => $e,
+            BsdfModel::Coated($m) => $e,
         }
     };
 }

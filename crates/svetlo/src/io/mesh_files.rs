@@ -73,9 +73,14 @@ pub fn load_obj(path: &Path, flip_tex_coords: bool) -> Result<LoadedMesh> {
 /// Read a PLY file (ASCII or binary). Vertex properties x, y, z; optional nx, ny, nz; uvs as
 /// u, v or texture_u, texture_v or s, t. Faces from `vertex_indices` or `vertex_index`.
 pub fn load_ply(path: &Path, flip_tex_coords: bool) -> Result<LoadedMesh> {
-    use ply_rs_bw::ply::{DefaultElement, Property};
     let file = std::fs::File::open(path).map_err(|e| Error::Io { file: path.to_path_buf(), source: e })?;
-    let mut reader = std::io::BufReader::new(file);
+    load_ply_from_reader(&mut std::io::BufReader::new(file), path, flip_tex_coords)
+}
+
+/// [`load_ply`] from any reader (decompressed `.ply.gz` data, say); `path` names it in errors.
+pub fn load_ply_from_reader(reader: &mut impl std::io::BufRead, path: &Path, flip_tex_coords: bool) -> Result<LoadedMesh> {
+    use ply_rs_bw::ply::{DefaultElement, Property};
+    let mut reader = reader;
     let parser = ply_rs_bw::parser::Parser::<DefaultElement>::new();
     let ply = parser.read_ply(&mut reader).map_err(|e| mesh_err(path, format!("invalid PLY: {e}")))?;
     let scalar = |e: &DefaultElement, k: &str| e.get(k).and_then(|p| p.to_f32_lossy());
