@@ -194,7 +194,7 @@ mod tests {
         assert_eq!(v[2], (Tok::Str("float radius".into()), 2, 3));
         assert_eq!(v[3], (Tok::Open, 2, 18));
         assert_eq!(v[4], (Tok::Num(-25.0), 2, 20));
-        assert_eq!(v[5], (Tok::Close, 2, 26));
+        assert_eq!(v[5], (Tok::Close, 2, 27));
         assert_eq!(v.len(), 6);
     }
 
