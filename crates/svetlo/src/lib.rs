@@ -10,13 +10,18 @@ pub mod bsdf;
 pub mod camera;
 pub mod error;
 pub mod film;
+#[doc(hidden)]
+pub mod fuzzing;
 pub mod geometry;
 pub mod integrator;
 pub mod io;
 pub mod light;
+pub mod limits;
+pub mod lpe;
 pub mod math;
 pub mod methods;
 pub mod path;
+pub mod photometry;
 pub mod radiosity;
 pub mod raster;
 pub mod sampling;

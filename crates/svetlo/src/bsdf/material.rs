@@ -59,6 +59,11 @@ pub enum Material {
     Mask { opacity: Texture, inner: Box<Material> },
     /// pbrt-v4 `coateddiffuse` / `coatedconductor`: the layered BSDF of `bsdf/coated.rs`.
     Coated(Box<CoatedMaterial>),
+    /// pbrt-v4 `mix`, Mitsuba `blendbsdf`: (1 - amount) a + amount b (`bsdf/mix.rs`). Both
+    /// must scatter (no null or mask inside); a two-sided blend wraps the mix, not its parts.
+    Mix { amount: Texture, a: Box<Material>, b: Box<Material> },
+    /// pbrt-v4 `diffusetransmission` (`bsdf/diffuse_transmission.rs`), the same from both sides.
+    DiffuseTransmission { reflectance: Texture, transmittance: Texture },
     /// Nothing scatters (e.g. a pure emitter); rays pass through unchanged.
     Null,
 }
@@ -140,6 +145,32 @@ fn sampling_mean(t: &Texture, uv: Vec2) -> f32 {
 }
 
 impl Material {
+    /// The Mitsuba plugin name this material stands for (`svetlo info`, Python's `scene.info()`).
+    pub fn kind_name(&self) -> String {
+        let rough = |r: bool, smooth: &str, rough: &str| if r { rough.to_string() } else { smooth.to_string() };
+        match self {
+            Material::Diffuse { .. } => "diffuse".into(),
+            Material::Conductor { roughness, .. } => rough(roughness.is_some(), "conductor", "roughconductor"),
+            Material::Dielectric { roughness, .. } => rough(roughness.is_some(), "dielectric", "roughdielectric"),
+            Material::ThinDielectric { .. } => "thindielectric".into(),
+            Material::Plastic { roughness, .. } => rough(roughness.is_some(), "plastic", "roughplastic"),
+            Material::Phong { .. } => "phong".into(),
+            Material::BlinnPhong { .. } => "blinnphong".into(),
+            Material::CookTorrance { .. } => "cooktorrance".into(),
+            Material::OrenNayar { .. } => "roughdiffuse".into(),
+            Material::Ward { .. } => "ward".into(),
+            Material::TwoSided { front, .. } => format!("twosided({})", front.kind_name()),
+            Material::Mask { inner, .. } => format!("mask({})", inner.kind_name()),
+            Material::Coated(c) => match c.base {
+                CoatedBase::Diffuse(_) => "coateddiffuse".into(),
+                CoatedBase::Conductor { .. } => "coatedconductor".into(),
+            },
+            Material::Mix { a, b, .. } => format!("mix({}, {})", a.kind_name(), b.kind_name()),
+            Material::DiffuseTransmission { .. } => "diffusetransmission".into(),
+            Material::Null => "null".into(),
+        }
+    }
+
     /// Does the BSDF not depend on the surface point (no texture but constants)? Then one
     /// `bsdf()` serves every point, which the rasteriser's shading pass exploits.
     pub fn is_uniform(&self) -> bool {
@@ -169,6 +200,8 @@ impl Material {
                         CoatedBase::Conductor { roughness, .. } => r(roughness),
                     }
             }
+            Material::Mix { amount, a, b } => c(amount) && a.is_uniform() && b.is_uniform(),
+            Material::DiffuseTransmission { reflectance, transmittance } => c(reflectance) && c(transmittance),
             Material::Null => true,
         }
     }
@@ -257,6 +290,23 @@ impl Material {
             Material::TwoSided { front, .. } => front.model(uv),
             Material::Mask { inner, .. } => inner.model(uv),
             Material::Coated(m) => Some(m.model(uv)),
+            Material::DiffuseTransmission { reflectance, transmittance } => {
+                Some(BsdfModel::DiffuseTransmission(super::diffuse_transmission::DiffuseTransmission {
+                    reflectance: reflectance.eval(uv).clamp(0.0, 1.0),
+                    transmittance: transmittance.eval(uv).clamp(0.0, 1.0),
+                }))
+            }
+            Material::Mix { amount, a, b } => {
+                let amount = amount.eval_f32(uv).clamp(0.0, 1.0);
+                let (a, b) = (a.model(uv)?, b.model(uv)?);
+                Some(if amount <= 0.0 {
+                    a
+                } else if amount >= 1.0 {
+                    b
+                } else {
+                    BsdfModel::Mix(Box::new(super::mix::Mix { a, b, amount }))
+                })
+            }
             Material::Null => None,
         }
     }

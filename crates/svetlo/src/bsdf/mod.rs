@@ -8,10 +8,12 @@ pub mod conductor;
 pub mod cook_torrance;
 pub mod dielectric;
 pub mod diffuse;
+pub mod diffuse_transmission;
 pub mod fresnel;
 pub mod lobes;
 pub mod material;
 pub mod microfacet;
+pub mod mix;
 pub mod oren_nayar;
 pub mod phong;
 pub mod plastic;
@@ -120,6 +122,10 @@ pub enum BsdfModel {
     Ward(ward::Ward),
     /// pbrt-v4's layered coated BSDF (boxed: it holds two models).
     Coated(Box<coated::Coated>),
+    /// A blend of two models (pbrt-v4 `mix`, Mitsuba `blendbsdf`).
+    Mix(Box<mix::Mix>),
+    /// pbrt-v4's Lambertian reflection and transmission.
+    DiffuseTransmission(diffuse_transmission::DiffuseTransmission),
 }
 
 /// Forward a call to the model inside, whatever it is.
@@ -140,6 +146,8 @@ macro_rules! dispatch {
             BsdfModel::OrenNayar($m) => $e,
             BsdfModel::Ward($m) => $e,
             BsdfModel::Coated($m) => $e,
+            BsdfModel::Mix($m) => $e,
+            BsdfModel::DiffuseTransmission($m) => $e,
         }
     };
 }
@@ -284,32 +292,7 @@ impl Bsdf {
         }
         let Some((m, flipped)) = self.side(wo) else { return 0.0 };
         let wo = if flipped { flip(wo) } else { wo };
-        let p = match m {
-            BsdfModel::SmoothDielectric(d) => {
-                let f = fresnel::dielectric(wo.z, d.eta).0;
-                if lobe == LobeFlags::SPECULAR_REFLECTION {
-                    f
-                } else if lobe == LobeFlags::SPECULAR_TRANSMISSION {
-                    1.0 - f
-                } else {
-                    0.0
-                }
-            }
-            BsdfModel::ThinDielectric(d) => {
-                let r = d.reflectance(wo.z);
-                if lobe == LobeFlags::SPECULAR_REFLECTION {
-                    r
-                } else if lobe == LobeFlags::SPECULAR_TRANSMISSION {
-                    1.0 - r
-                } else {
-                    0.0
-                }
-            }
-            BsdfModel::SmoothConductor(_) => f32::from(lobe == LobeFlags::SPECULAR_REFLECTION && wo.z > 0.0),
-            BsdfModel::SmoothPlastic(p) if lobe == LobeFlags::SPECULAR_REFLECTION && wo.z > 0.0 => p.prob_specular(fresnel::dielectric(wo.z, p.eta).0),
-            _ => 0.0,
-        };
-        p * self.opacity
+        model_delta_probability(m, wo, lobe) * self.opacity
     }
 
     /// The delta lobe `lobe` seen from `wo`, without its random choice: its direction, the
@@ -335,6 +318,36 @@ impl Bsdf {
             }
         }
         None
+    }
+}
+
+/// [`Bsdf::delta_probability`] for one model, `wo` on its front side.
+fn model_delta_probability(m: &BsdfModel, wo: Vec3, lobe: LobeFlags) -> f32 {
+    match m {
+        BsdfModel::SmoothDielectric(d) => {
+            let f = fresnel::dielectric(wo.z, d.eta).0;
+            if lobe == LobeFlags::SPECULAR_REFLECTION {
+                f
+            } else if lobe == LobeFlags::SPECULAR_TRANSMISSION {
+                1.0 - f
+            } else {
+                0.0
+            }
+        }
+        BsdfModel::ThinDielectric(d) => {
+            let r = d.reflectance(wo.z);
+            if lobe == LobeFlags::SPECULAR_REFLECTION {
+                r
+            } else if lobe == LobeFlags::SPECULAR_TRANSMISSION {
+                1.0 - r
+            } else {
+                0.0
+            }
+        }
+        BsdfModel::SmoothConductor(_) => f32::from(lobe == LobeFlags::SPECULAR_REFLECTION && wo.z > 0.0),
+        BsdfModel::SmoothPlastic(p) if lobe == LobeFlags::SPECULAR_REFLECTION && wo.z > 0.0 => p.prob_specular(fresnel::dielectric(wo.z, p.eta).0),
+        BsdfModel::Mix(x) => model_delta_probability(&x.a, wo, lobe) * (1.0 - x.amount) + model_delta_probability(&x.b, wo, lobe) * x.amount,
+        _ => 0.0,
     }
 }
 

@@ -54,6 +54,11 @@ impl SceneBuilder {
     /// Add a shape with material `material`, emitting `emission` radiance if given.
     /// Meshes are checked: NaN or infinite positions and out-of-range indices are errors,
     /// zero-area triangles are dropped with a warning. `name` identifies it in messages.
+    /// The material of index `i`, if there is one.
+    pub fn material(&self, i: u32) -> Option<&Material> {
+        self.materials.get(i as usize)
+    }
+
     pub fn add_shape(&mut self, geometry: Geometry, material: u32, emission: Option<Texture>, name: &str) -> Result<()> {
         let geometry = match geometry {
             Geometry::Mesh(m) => Geometry::Mesh(self.validate_mesh(m, name)?),

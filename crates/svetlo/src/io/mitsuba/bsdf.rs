@@ -35,7 +35,8 @@ impl<'a> Loader<'a> {
         for c in &node.children {
             match c.tag.as_str() {
                 "bsdf" => out.push(c),
-                "ref" if c.name().is_none() => {
+                // Named or not (`<ref name="bsdf_0" id=..>`): the target's kind decides.
+                "ref" => {
                     let t = self.lookup(c)?;
                     if t.tag == "bsdf" {
                         out.push(t);
@@ -102,7 +103,12 @@ impl<'a> Loader<'a> {
         Ok(Roughness { kind, alpha_u, alpha_v })
     }
 
+    /// A `<bsdf>` element as a material, nested BSDFs included.
     pub(super) fn bsdf(&mut self, node: &'a Node) -> Result<Material> {
+        self.nested(node, |l| l.bsdf_plugin(node))
+    }
+
+    fn bsdf_plugin(&mut self, node: &'a Node) -> Result<Material> {
         let ty = node.type_()?;
         let white = Rgb::WHITE;
         let refl = SpectrumKind::Reflectance;
@@ -174,6 +180,18 @@ impl<'a> Loader<'a> {
                 let inner = self.one_child(node)?;
                 Material::Mask { opacity, inner: Box::new(self.bsdf(inner)?) }
             }
+            "blendbsdf" => {
+                let amount = self.float_texture(node, "weight", 0.5)?;
+                let kids = self.child_bsdfs(node)?;
+                let [a, b] = kids.as_slice() else {
+                    return Err(node.loc.err(format!("blendbsdf needs two nested bsdfs, found {}", kids.len())));
+                };
+                let (a, b) = (self.bsdf(a)?, self.bsdf(b)?);
+                if [&a, &b].iter().any(|m| matches!(m, Material::Null | Material::Mask { .. })) {
+                    return Err(node.loc.err("blendbsdf: a null or mask bsdf inside a blend is not supported"));
+                }
+                Material::Mix { amount, a: Box::new(a), b: Box::new(b) }
+            }
             "null" => Material::Null,
             // Surface-detail wrappers: render the surface without the detail.
             "bumpmap" | "normalmap" => {
@@ -181,8 +199,8 @@ impl<'a> Loader<'a> {
                 self.warn(format!("{}:{}: {ty} is not supported; the nested bsdf is used without it", node.loc.file.display(), node.loc.line));
                 self.bsdf(inner)?
             }
-            "principled" | "principledthin" | "blendbsdf" | "hair" | "measured" | "pplastic" | "polarizer" | "retarder" | "circular" | "roughcoating"
-            | "coating" | "difftrans" => {
+            "principled" | "principledthin" | "hair" | "measured" | "pplastic" | "polarizer" | "retarder" | "circular" | "roughcoating" | "coating"
+            | "difftrans" => {
                 return Err(node.loc.err(format!("bsdf type '{ty}' is not supported")));
             }
             other => return Err(node.loc.err(format!("unknown bsdf type '{other}'"))),

@@ -125,7 +125,7 @@ impl Loader {
     }
 
     /// A scalar parameter: a float or a named float texture.
-    fn float_param(&self, p: &ParamList, name: &str, default: f32) -> Result<Texture> {
+    pub(super) fn float_param(&self, p: &ParamList, name: &str, default: f32) -> Result<Texture> {
         if let Some((t, loc)) = p.texture_ref(name) {
             return self.float_textures.get(t).cloned().ok_or_else(|| loc.err(format!("no float texture named '{t}'")));
         }
@@ -233,22 +233,47 @@ impl Loader {
                 }))
             }
             "interface" | "none" | "" => Material::Null,
+            "diffusetransmission" => {
+                let scale = p.float("scale", 1.0)?;
+                let scaled = |t: Texture| match t {
+                    Texture::Constant(c) => Ok(Texture::Constant(c * scale)),
+                    t if scale == 1.0 => Ok(t),
+                    _ => Err(loc.err("diffusetransmission: 'scale' with textured reflectance or transmittance is not supported")),
+                };
+                Material::DiffuseTransmission {
+                    reflectance: scaled(self.color_param(p, "reflectance", Rgb::splat(0.25), refl)?)?,
+                    transmittance: scaled(self.color_param(p, "transmittance", Rgb::splat(0.25), refl)?)?,
+                }
+            }
             "mix" => {
                 let names = p.strings("materials")?.ok_or_else(|| loc.err("mix needs \"string materials\" [ a b ]"))?;
                 if names.len() != 2 {
                     return Err(loc.err(format!("mix needs two material names, got {}", names.len())));
                 }
                 let amount = self.float_param(p, "amount", 0.5)?;
-                let pick = match amount {
-                    Texture::Constant(c) if c.r <= 0.0 => &names[0],
-                    Texture::Constant(c) if c.r >= 1.0 => &names[1],
-                    _ => return Err(loc.err("mix with an amount strictly between 0 and 1 is not supported yet")),
-                };
-                let i = *self.named_materials.get(pick).ok_or_else(|| loc.err(format!("mix: no material named '{pick}'")))?;
+                let index = |l: &Self, n: &str| l.named_materials.get(n).copied().ok_or_else(|| loc.err(format!("mix: no material named '{n}'")));
+                let (ia, ib) = (index(self, &names[0])?, index(self, &names[1])?);
                 self.warn_unused(&format!("Material \"{ty}\""), p);
-                return Ok(i);
+                match amount {
+                    Texture::Constant(c) if c.r <= 0.0 => return Ok(ia),
+                    Texture::Constant(c) if c.r >= 1.0 => return Ok(ib),
+                    _ => {}
+                }
+                // The parts as pbrt defines them (one-sided wrappers off), blended, then
+                // wrapped once like any other reflecting material.
+                let part = |l: &Self, i: u32| -> Result<Material> {
+                    match l.b.material(i) {
+                        Some(Material::TwoSided { front, .. }) => Ok((**front).clone()),
+                        Some(Material::Null | Material::Mask { .. }) | None => {
+                            Err(loc.err("mix: 'interface' materials and alpha inside a mix are not supported"))
+                        }
+                        Some(m) => Ok(m.clone()),
+                    }
+                };
+                let (a, b) = (part(self, ia)?, part(self, ib)?);
+                Material::Mix { amount, a: Box::new(a), b: Box::new(b) }
             }
-            "measured" | "hair" | "subsurface" | "diffusetransmission" => {
+            "measured" | "hair" | "subsurface" => {
                 return Err(loc.err(format!("material '{ty}' is not supported yet")));
             }
             other => return Err(loc.err(format!("unknown material '{other}'"))),
@@ -257,7 +282,7 @@ impl Loader {
         // pbrt's reflecting BSDFs act alike on both sides of a surface; svetlo's (Mitsuba's)
         // are one-sided unless wrapped.
         let m = match m {
-            Material::Dielectric { .. } | Material::ThinDielectric { .. } | Material::Null => m,
+            Material::Dielectric { .. } | Material::ThinDielectric { .. } | Material::DiffuseTransmission { .. } | Material::Null => m,
             other => Material::TwoSided { front: Box::new(other.clone()), back: Box::new(other) },
         };
         Ok(self.b.add_material(m))

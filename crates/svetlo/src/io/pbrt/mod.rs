@@ -13,7 +13,7 @@
 //! bounces and becomes svetlo's `max_depth` (segments) + 1; pbrt's `fov` spans the shorter
 //! image axis. What is approximated or ignored is listed in `Scene::warnings` with file and line.
 
-mod camera;
+pub(crate) mod camera;
 mod lexer;
 mod lights;
 mod materials;
@@ -54,21 +54,32 @@ pub fn load_pbrt_from_str(text: &str, origin: &Path) -> Result<Scene> {
 
 /// A file's text; `.gz` files (or any starting with gzip's magic) are decompressed.
 fn read_text(path: &Path, at: Option<&Loc>) -> Result<String> {
-    let bytes = std::fs::read(path).map_err(|e| match at {
-        Some(l) => l.err(format!("cannot read '{}': {e}", path.display())),
-        None => Error::Io { file: path.to_path_buf(), source: e },
-    })?;
-    let bytes = gunzip_if_needed(bytes, path)?;
+    let bytes = read_bytes(path, at)?;
     String::from_utf8(bytes).map_err(|_| Error::Scene { file: path.to_path_buf(), msg: "the file is not UTF-8 text".into() })
 }
 
-/// Decompress gzip data (recognised by its magic number); other bytes pass through.
-pub(crate) fn gunzip_if_needed(bytes: Vec<u8>, path: &Path) -> Result<Vec<u8>> {
+/// A file's bytes through the memory budget, decompressed if gzip. A failure to read names
+/// the directive that asked for the file (`at`) when there is one.
+pub(crate) fn read_bytes(path: &Path, at: Option<&Loc>) -> Result<Vec<u8>> {
+    let bytes = crate::limits::read_file(path).map_err(|e| match (at, e) {
+        (Some(l), Error::Io { source, .. }) => l.err(format!("cannot read '{}': {source}", path.display())),
+        (Some(l), Error::Scene { msg, .. }) => l.err(format!("'{}' {msg}", path.display())),
+        (_, e) => e,
+    })?;
+    gunzip_if_needed(bytes, path)
+}
+
+/// Decompress gzip data (recognised by its magic number); other bytes pass through. The
+/// output is bounded by the memory budget (a small bomb cannot expand without limit).
+fn gunzip_if_needed(bytes: Vec<u8>, path: &Path) -> Result<Vec<u8>> {
     if bytes.len() >= 2 && bytes[0] == 0x1f && bytes[1] == 0x8b {
+        let limit = crate::limits::max_memory();
         let mut out = Vec::new();
         flate2::read::MultiGzDecoder::new(&bytes[..])
+            .take(limit.saturating_add(1))
             .read_to_end(&mut out)
             .map_err(|e| Error::Scene { file: path.to_path_buf(), msg: format!("invalid gzip data: {e}") })?;
+        crate::limits::check(format!("decompressing {}", path.display()), out.len() as u64)?;
         Ok(out)
     } else {
         Ok(bytes)
@@ -525,13 +536,18 @@ impl Loader {
     }
 
     /// A shape for the scene or, inside ObjectBegin/End, for the object.
-    fn emit_shape(&mut self, geometry: Geometry, loc: &Loc, kind: &str) -> Result<()> {
+    /// `alpha`: the shape's cut-out texture (its material is then wrapped in a mask).
+    fn emit_shape(&mut self, geometry: Geometry, loc: &Loc, kind: &str, alpha: Option<Texture>) -> Result<()> {
         self.shape_count += 1;
         let name = format!("{kind}#{} ({})", self.shape_count, loc.at());
-        let material = match self.gs.material {
+        let mut material = match self.gs.material {
             Some(m) => m,
             None => self.default_material(),
         };
+        if let Some(opacity) = alpha {
+            let inner = self.b.material(material).cloned().unwrap_or_default();
+            material = self.b.add_material(crate::bsdf::Material::Mask { opacity, inner: Box::new(inner) });
+        }
         if let Some((_, shapes, _)) = &mut self.current_object {
             if self.gs.area_light.is_some() {
                 self.b

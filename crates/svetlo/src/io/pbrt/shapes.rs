@@ -15,6 +15,7 @@ use crate::error::Result;
 use crate::geometry::{Geometry, Sphere, TriangleMesh};
 use crate::io::mesh_files;
 use crate::math::PI;
+use crate::texture::Texture;
 use glam::{Mat3, Mat4, Vec2, Vec3};
 use std::collections::HashMap;
 
@@ -28,13 +29,15 @@ impl Loader {
         let m = self.gs.ctm[0];
         let reverse = self.gs.reverse_orientation;
         let mirrored = m.determinant() < 0.0;
-        if let Some(alpha) = p.get("alpha") {
-            let constant = alpha.ty == super::params::ParamType::Float;
-            if constant && p.float("alpha", 1.0)? <= 0.0 {
-                return Ok(()); // fully transparent: pbrt drops the shape
-            }
-            if !constant {
-                self.warn(loc, "alpha textures are not supported yet: the shape is rendered opaque");
+        // pbrt's alpha cuts the surface out stochastically: Mitsuba's mask, the surface
+        // present with probability alpha.
+        let mut alpha = None;
+        if p.get("alpha").is_some() {
+            let a = self.float_param(p, "alpha", 1.0)?;
+            match a {
+                Texture::Constant(c) if c.r <= 0.0 => return Ok(()), // fully transparent: pbrt drops the shape
+                Texture::Constant(c) if c.r >= 1.0 => {}
+                t => alpha = Some(t),
             }
         }
         for k in ["emission", "displacement", "edgelength"] {
@@ -50,9 +53,8 @@ impl Loader {
             "plymesh" => {
                 let name = p.string("filename")?.ok_or_else(|| loc.err("plymesh needs a \"string filename\""))?;
                 let path = self.resolve(name, loc);
-                let bytes = std::fs::read(&path).map_err(|e| loc.err(format!("cannot read PLY file '{}': {e}", path.display())))?;
-                let bytes = super::gunzip_if_needed(bytes, &path)?;
-                let loaded = mesh_files::load_ply_from_reader(&mut std::io::Cursor::new(bytes), &path, false)?;
+                let bytes = super::read_bytes(&path, Some(loc))?;
+                let loaded = mesh_files::load_ply_bytes(&bytes, &path, false)?;
                 for w in loaded.warnings {
                     self.warn(loc, w);
                 }
@@ -68,6 +70,9 @@ impl Loader {
                     return Err(loc.err(format!("loopsubdiv: levels must be between 0 and 8, got {levels}")));
                 }
                 let mut mesh = triangle_mesh(p, loc)?;
+                // Each level quadruples the triangles: refuse before building what cannot fit.
+                let tris = mesh.indices.len() as u64;
+                crate::limits::check_items(format!("{}: loopsubdiv of {tris} triangles to level {levels}", loc.at()), tris << (2 * levels), 64)?;
                 for _ in 0..levels {
                     mesh = loop_subdivide(&mesh);
                 }
@@ -128,7 +133,7 @@ impl Loader {
             other => return Err(loc.err(format!("unknown shape '{other}'"))),
         };
         self.warn_unused(&format!("Shape \"{ty}\""), p);
-        self.emit_shape(geometry, loc, ty)
+        self.emit_shape(geometry, loc, ty, alpha)
     }
 }
 
