@@ -58,7 +58,7 @@ impl DiffuseTransmission {
             wi.z = -wi.z;
         }
         let pdf = self.pdf(wo, wi, mode);
-        if !(pdf > 0.0) {
+        if pdf <= 0.0 || pdf.is_nan() {
             return None;
         }
         let lobe = if reflect { LobeFlags::DIFFUSE_REFLECTION } else { LobeFlags::DIFFUSE_TRANSMISSION };
