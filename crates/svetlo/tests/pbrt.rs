@@ -377,15 +377,18 @@ fn coffee_by_class(w: u32, h: u32, spp: u32) -> Option<Vec<(CoffeeClass, ClassDi
 }
 
 /// Coffee maker at 40×50 (Tungsten's 200×250 box average block-averaged 5×5), 32 spp: the
-/// metal and glass regions agree with Tungsten within what the render's own noise and the
-/// reference's allow (see [`assert_coffee_agrees`]); the plastics are reported.
+/// metal and glass regions agree with Tungsten within what the render's own noise allows
+/// plus 2 % (see [`assert_coffee_agrees`]); the plastics are reported. At this noise level it
+/// catches gross errors only: the full-resolution test below shows (and fails on) systematic
+/// differences of 5-12 % in both regions that are not resolved yet.
 #[test]
 fn coffee_metal_and_glass_match_tungsten() {
     let Some(diffs) = coffee_by_class(40, 50, 32) else { return };
     assert_coffee_agrees(&diffs, 32);
 }
 
-/// The same at Tungsten's 200×250 and 256 spp.
+/// The same at Tungsten's 200×250 and 256 spp. Fails at present (metal -5/-5/-10 %, glass
+/// +11/+12/+10 %, far beyond the noise): an open discrepancy, kept as the test to pass.
 #[test]
 #[ignore = "heavy (minutes on 2 cores): cargo test --release --test pbrt -- --ignored"]
 fn coffee_full_resolution_matches_tungsten() {
