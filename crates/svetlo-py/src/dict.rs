@@ -6,6 +6,7 @@
 //! Written in Rust because walking the dict in Python cost 3x the XML load itself.
 
 use crate::errors::SceneError;
+use numpy::PyArrayMethods;
 use pyo3::prelude::*;
 use pyo3::types::{PyBool, PyDict, PyFloat, PyInt, PyList, PyMapping, PyString, PyTuple};
 use std::collections::HashMap;
@@ -32,7 +33,8 @@ const TAGS: &[(&str, &str)] = &[
 ];
 
 fn tag_of(t: &str) -> Option<&'static str> {
-    TAGS.iter().find(|(_, types)| types.split(' ').any(|x| x == t)).map(|(tag, _)| *tag)
+    static BY_TYPE: std::sync::OnceLock<HashMap<&'static str, &'static str>> = std::sync::OnceLock::new();
+    BY_TYPE.get_or_init(|| TAGS.iter().flat_map(|(tag, types)| types.split(' ').map(move |t| (t, *tag))).collect()).get(t).copied()
 }
 
 fn err(msg: String) -> PyErr {
@@ -93,7 +95,6 @@ struct Writer<'py> {
     xml: String,
     keys: Vec<String>,
     ids: HashMap<String, &'static str>,
-    np_asarray: Bound<'py, PyAny>,
 }
 
 impl<'py> Writer<'py> {
@@ -116,7 +117,12 @@ impl<'py> Writer<'py> {
             if !(v.is_instance_of::<PyList>() || v.is_instance_of::<PyTuple>()) {
                 return None;
             }
-            if let Ok(x) = v.extract::<Vec<f64>>() {
+            // Rows when the first item is a sequence: a failed extract (an exception) costs more
+            // than the check.
+            let first = v.get_item(0).ok();
+            let rows_first = first.as_ref().is_some_and(|f| f.is_instance_of::<PyList>() || f.is_instance_of::<PyTuple>());
+            if !rows_first {
+                let x = v.extract::<Vec<f64>>().ok()?;
                 let n = x.len();
                 return Some((x, vec![n]));
             }
@@ -128,6 +134,13 @@ impl<'py> Writer<'py> {
             let r = rows.len();
             Some((rows.into_iter().flatten().collect(), vec![r, c]))
         }
+        // numpy float64 arrays (ScalarTransform4f's matrix) read directly: through `tolist`
+        // they cost several times the rest of a dict's walk.
+        if let Ok(a) = v.downcast::<numpy::PyArrayDyn<f64>>() {
+            let ro = a.try_readonly().ok()?;
+            let view = ro.as_array();
+            return Some((view.iter().copied().collect(), view.shape().to_vec()));
+        }
         if let Some(x) = nested(v) {
             return Some(x);
         }
@@ -138,7 +151,8 @@ impl<'py> Writer<'py> {
         }
         let kw = PyDict::new(self.py);
         kw.set_item("dtype", "float64").ok()?;
-        let a = self.np_asarray.call((v,), Some(&kw)).ok()?;
+        // Imported only for values that need it (an import costs microseconds per call).
+        let a = self.py.import("numpy").ok()?.getattr("asarray").ok()?.call((v,), Some(&kw)).ok()?;
         let shape: Vec<usize> = a.getattr("shape").ok()?.extract().ok()?;
         let flat: Vec<f64> = a.call_method0("ravel").ok()?.call_method0("tolist").ok()?.extract().ok()?;
         Some((flat, shape))
@@ -157,7 +171,7 @@ impl<'py> Writer<'py> {
             self.emit(depth, &format!("<float name={n} value=\"{}\"/>", num(x, where_)?), where_);
         } else if let Ok(s) = v.downcast::<PyString>() {
             self.emit(depth, &format!("<string name={n} value={}/>", quote(&s.to_cow()?)), where_);
-        } else if v.is_instance_of::<PyDict>() || v.downcast::<PyMapping>().is_ok() {
+        } else if v.is_instance_of::<PyDict>() || (!v.is_instance_of::<PyList>() && !v.is_instance_of::<PyTuple>() && v.downcast::<PyMapping>().is_ok()) {
             self.object(depth, Some(name), v, where_, None)?;
         } else if !(v.is_instance_of::<PyList>() || v.is_instance_of::<PyTuple>()) && v.hasattr("__fspath__")? {
             let p: String = self.py.import("os")?.call_method1("fspath", (v,))?.extract()?;
@@ -280,6 +294,16 @@ fn collect_ids(d: &Bound<'_, PyMapping>, key: Option<String>, ids: &mut HashMap<
         ids.entry(id).or_insert(tag);
     }
     for v in d.values()?.iter() {
+        // Only dicts (and other mappings) hold objects; the common values are ruled out first,
+        // as the Mapping ABC's isinstance check is slow.
+        let plain = v.is_instance_of::<PyString>()
+            || v.is_instance_of::<PyFloat>()
+            || v.is_instance_of::<PyInt>()
+            || v.is_instance_of::<PyList>()
+            || v.is_instance_of::<PyTuple>();
+        if plain {
+            continue;
+        }
         if let Ok(m) = v.downcast::<PyMapping>() {
             collect_ids(m, None, ids)?;
         }
@@ -305,7 +329,7 @@ pub fn dict_to_xml(py: Python<'_>, scene: &Bound<'_, PyAny>) -> PyResult<(String
             collect_ids(m, Some(k), &mut ids)?;
         }
     }
-    let mut w = Writer { py, xml: String::new(), keys: Vec::new(), ids, np_asarray: py.import("numpy")?.getattr("asarray")? };
+    let mut w = Writer { py, xml: String::with_capacity(4096), keys: Vec::new(), ids };
     w.emit(0, "<scene version=\"3.0.0\">", "scene");
     for item in root.items()?.iter() {
         let (k, v): (Bound<'_, PyAny>, Bound<'_, PyAny>) = item.extract()?;
