@@ -16,11 +16,15 @@ use svetlo::scene::Scene;
 
 #[derive(Args, Debug)]
 pub struct InfoArgs {
-    /// Scene file (Mitsuba XML), or a luminaire file (.ies, .ldt) for its photometric summary.
+    /// Scene file (Mitsuba XML, or pbrt-v4 `.pbrt` / `.pbrt.gz`), or a luminaire file (.ies,
+    /// .ldt) for its photometric summary.
     pub scene: PathBuf,
     /// Scene parameter for <default> / $name substitution (repeatable).
     #[arg(short = 'D', value_name = "NAME=VALUE", value_parser = parse_define)]
     pub define: Vec<(String, String)>,
+    /// Scene format (default: from the extension, `.pbrt` and `.pbrt.gz` are pbrt-v4).
+    #[arg(long, value_enum)]
+    pub format: Option<crate::FormatArg>,
     /// Also compile a light path expression: its automaton's size and the event symbols it
     /// uses against those the scene can produce.
     #[arg(long, value_name = "EXPR")]
@@ -131,12 +135,12 @@ pub fn run(a: &InfoArgs) -> Result<ExitCode> {
         return Ok(ExitCode::SUCCESS);
     }
     // Mitsuba scenes: every unsupported plugin first, whether or not the scene then loads.
-    if matches!(ext.as_deref(), Some("xml")) {
+    if matches!(ext.as_deref(), Some("xml")) && !matches!(a.format, Some(crate::FormatArg::Pbrt)) {
         if let Ok(list) = svetlo::io::mitsuba::unsupported_plugins(&a.scene, &a.define) {
             let _ = write!(std::io::stdout(), "{}", describe_unsupported(&list));
         }
     }
-    let scene = crate::load_scene(&a.scene, &a.define)?;
+    let scene = crate::load_scene(&a.scene, a.format, &a.define)?;
     let _ = write!(std::io::stdout(), "{}", describe(&scene));
     if svetlo::methods::by_name(&scene.settings.integrator).is_err() {
         let _ =

@@ -1,4 +1,4 @@
-//! `svetlo`: render a scene, compare two images, describe a scene.
+//! `svetlo`: render a scene, compare two images, describe or convert a scene.
 //!
 //! Exit codes (README, "Exit codes and limits"): 0 success (or a passing comparison),
 //! 1 runtime failure (render or write error, failing Z-test), 2 bad command line or options
@@ -22,6 +22,7 @@ macro_rules! tell {
 }
 
 mod compare;
+mod convert;
 mod info;
 mod preview;
 mod radiosity;
@@ -52,6 +53,8 @@ pub enum Command {
     Render(render::RenderArgs),
     /// Compare an image with a reference: relMSE, and the Z-test given the reference's variance.
     Compare(compare::CompareArgs),
+    /// Convert a scene between pbrt-v4 and Mitsuba XML (meshes as PLY, images as EXR).
+    Convert(convert::ConvertArgs),
     /// Describe a scene: shapes, materials, lights, camera, settings and loader warnings.
     Info(info::InfoArgs),
     /// Solve a scene by radiosity: convergence report, solved mesh (PLY), progressive snapshots.
@@ -72,6 +75,22 @@ impl std::fmt::Display for Usage {
 
 impl std::error::Error for Usage {}
 
+/// `--format`: the scene file's format when its extension does not say it.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, clap::ValueEnum)]
+pub enum FormatArg {
+    Mitsuba,
+    Pbrt,
+}
+
+impl FormatArg {
+    pub fn format(f: Option<FormatArg>) -> Option<svetlo::io::SceneFormat> {
+        f.map(|f| match f {
+            FormatArg::Mitsuba => svetlo::io::SceneFormat::Mitsuba,
+            FormatArg::Pbrt => svetlo::io::SceneFormat::Pbrt,
+        })
+    }
+}
+
 /// A scene that cannot be loaded (exit code 3).
 #[derive(Debug)]
 pub struct SceneError(pub svetlo::Error);
@@ -90,8 +109,9 @@ pub const EXIT_SCENE: u8 = 3;
 pub const EXIT_INTERRUPTED: u8 = 130;
 
 /// Load a scene for a subcommand; its errors exit with [`EXIT_SCENE`].
-pub fn load_scene(path: &std::path::Path, define: &[(String, String)]) -> anyhow::Result<svetlo::scene::Scene> {
-    svetlo::io::load_scene(path, define).map_err(|e| anyhow::Error::new(SceneError(e)).context("cannot load the scene"))
+/// The one loading path of the CLI: the format from `--format`, else from the extension.
+pub fn load_scene(path: &std::path::Path, format: Option<FormatArg>, define: &[(String, String)]) -> anyhow::Result<svetlo::scene::Scene> {
+    svetlo::io::load_scene_as(path, FormatArg::format(format), define).map_err(|e| anyhow::Error::new(SceneError(e)).context("cannot load the scene"))
 }
 
 /// The exit code of an error: what kind of mistake it is, wherever in the chain it sits.
@@ -122,6 +142,7 @@ fn main() -> ExitCode {
     let result = match cli.command {
         Command::Render(a) => render::run(&a),
         Command::Compare(a) => compare::run(&a),
+        Command::Convert(a) => convert::run(&a),
         Command::Info(a) => info::run(&a),
         Command::Radiosity(a) => radiosity::run(&a),
         Command::Serve(a) => preview::serve(&a),

@@ -61,6 +61,9 @@ pub struct RadiosityArgs {
     /// Scene parameter for <default> / $name substitution (repeatable).
     #[arg(short = 'D', value_name = "NAME=VALUE", value_parser = parse_define)]
     pub define: Vec<(String, String)>,
+    /// Scene format (default: from the extension, `.pbrt` and `.pbrt.gz` are pbrt-v4).
+    #[arg(long, value_enum)]
+    pub format: Option<crate::FormatArg>,
 }
 
 fn options(a: &RadiosityArgs) -> Result<RadiosityOptions> {
@@ -124,7 +127,7 @@ fn write_ply(path: &PathBuf, solved: &svetlo::radiosity::Solved) -> Result<()> {
 
 pub fn run(a: &RadiosityArgs) -> Result<ExitCode> {
     let opts = options(a)?;
-    let scene = crate::load_scene(&a.scene, &a.define)?;
+    let scene = crate::load_scene(&a.scene, a.format, &a.define)?;
     if let Some(dir) = &a.snapshots {
         std::fs::create_dir_all(dir).with_context(|| format!("cannot create {}", dir.display()))?;
     }

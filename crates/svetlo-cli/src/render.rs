@@ -34,7 +34,7 @@ pub enum SamplerArg {
 
 #[derive(Args, Debug)]
 pub struct RenderArgs {
-    /// Scene file (Mitsuba XML).
+    /// Scene file (Mitsuba XML, or pbrt-v4 `.pbrt` / `.pbrt.gz`).
     pub scene: PathBuf,
     /// Output image; OUT.png is written beside it. Default: <scene name>.exr in the current directory.
     #[arg(short, long, value_name = "OUT.exr")]
@@ -75,6 +75,9 @@ pub struct RenderArgs {
     /// Also write the per-sample variance image OUT_var.exr.
     #[arg(long)]
     pub variance: bool,
+    /// Scene format (default: from the extension, `.pbrt` and `.pbrt.gz` are pbrt-v4).
+    #[arg(long, value_enum)]
+    pub format: Option<crate::FormatArg>,
     /// BDPT only: also write one image per (s, t) strategy into DIR, MIS-weighted
     /// (s<S>_t<T>_weighted.exr, they sum to the image) and unweighted (s<S>_t<T>_unweighted.exr).
     #[arg(long, value_name = "DIR")]
@@ -434,7 +437,7 @@ pub fn run(a: &RenderArgs) -> Result<ExitCode> {
     }
     let out = OutputPaths::new(&a.scene, a.output.as_deref())?;
     limit_global_threads(a.threads as usize);
-    let scene = crate::load_scene(&a.scene, &a.define)?;
+    let scene = crate::load_scene(&a.scene, a.format, &a.define)?;
     for w in &scene.warnings {
         tell!("warning: {w}");
     }

@@ -356,3 +356,33 @@ fn info_lists_unsupported_plugins() {
     assert!(stdout.contains("u.xml:5: <bsdf type=\"principled\"> not supported: the scene does not load"), "{stdout}");
     assert!(err.contains("principled"), "{err}");
 }
+
+/// pbrt-v4 scenes through the CLI: `convert` both ways (meshes beside the output), `render`
+/// of a pbrt file under another name with `--format pbrt`, and a bad pbrt file exits 3
+/// naming its file and line.
+#[test]
+fn pbrt_convert_render_and_errors() {
+    let d = tmp("pbrt");
+    let src = Path::new(env!("CARGO_MANIFEST_DIR")).join("../../scenes/pbrt/shapes.pbrt");
+    let xml = d.join("shapes.xml");
+    let (code, stdout, err) = run(&["convert", s(&src), "-o", s(&xml)]);
+    assert_eq!(code, 0, "{stdout}{err}");
+    assert!(stdout.contains("wrote") && d.join("shapes_files").is_dir(), "{stdout}");
+    let (code, stdout, err) = run(&["info", s(&xml)]);
+    assert_eq!(code, 0, "{stdout}{err}");
+    let back = d.join("again.pbrt");
+    let (code, _, err) = run(&["convert", s(&xml), "-o", s(&back)]);
+    assert_eq!(code, 0, "{err}");
+    let renamed = d.join("scene.txt");
+    std::fs::copy(&back, &renamed).unwrap();
+    let out = d.join("r.exr");
+    let (code, stdout, err) = run(&["render", s(&renamed), "--format", "pbrt", "-o", s(&out), "--spp", "1", "--width", "16", "--height", "12"]);
+    assert_eq!(code, 0, "{stdout}{err}");
+    assert!(out.is_file());
+    let bad = d.join("bad.pbrt");
+    std::fs::write(&bad, "Camera \"perspective\"\nWorldBegin\nShape \"sphere\" \"float radius\" [ 1\n").unwrap();
+    let (code, _, err) = run(&["convert", s(&bad), "-o", s(&d.join("x.xml"))]);
+    assert_eq!(code, 3, "{err}");
+    assert!(err.contains("bad.pbrt:3"), "{err}");
+    let _ = std::fs::remove_dir_all(&d);
+}

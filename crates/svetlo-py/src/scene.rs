@@ -45,7 +45,7 @@ fn defines(params: Option<Vec<(String, String)>>) -> PyResult<Vec<(String, Strin
 #[pyo3(signature = (path, params=None))]
 pub fn load_file(py: Python<'_>, path: PathBuf, params: Option<Vec<(String, String)>>) -> PyResult<PyScene> {
     let d = defines(params)?;
-    let scene = py.allow_threads(|| svetlo::io::load_scene(&path, &d)).map_err(to_py)?;
+    let scene = py.allow_threads(|| svetlo::io::load_scene_as(&path, None, &d)).map_err(to_py)?;
     Ok(PyScene { scene: Arc::new(scene), origin: path.display().to_string() })
 }
 

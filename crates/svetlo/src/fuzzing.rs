@@ -22,6 +22,15 @@ pub fn mitsuba_xml(data: &[u8]) {
     }
 }
 
+/// A pbrt-v4 scene held in memory, resolved like [`mitsuba_xml`] against a folder that does
+/// not exist.
+pub fn pbrt(data: &[u8]) {
+    crate::limits::set_max_memory(FUZZ_MEMORY);
+    if let Some(t) = text(data) {
+        let _ = crate::io::load_pbrt_from_str(t, Path::new("/nonexistent-svetlo-fuzz/scene.pbrt"));
+    }
+}
+
 /// An OBJ file's bytes, with and without the texture-coordinate flip.
 pub fn obj(data: &[u8]) {
     crate::limits::set_max_memory(FUZZ_MEMORY);
@@ -84,6 +93,7 @@ pub type Entry = fn(&[u8]);
 /// The targets by name, as `fuzz/corpus/<name>` and the reproducers' folders are named.
 pub const TARGETS: &[(&str, Entry)] = &[
     ("mitsuba_xml", mitsuba_xml),
+    ("pbrt", pbrt),
     ("obj", obj),
     ("ply", ply),
     ("image", image),

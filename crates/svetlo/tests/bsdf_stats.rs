@@ -10,7 +10,9 @@ use glam::{Vec2, Vec3};
 use svetlo::bsdf::conductor::{RoughConductor, SmoothConductor};
 use svetlo::bsdf::dielectric::{RoughDielectric, SmoothDielectric, ThinDielectric};
 use svetlo::bsdf::diffuse::Diffuse;
+use svetlo::bsdf::diffuse_transmission::DiffuseTransmission;
 use svetlo::bsdf::microfacet::Microfacet;
+use svetlo::bsdf::mix::Mix;
 use svetlo::bsdf::plastic::{RoughPlastic, SmoothPlastic};
 use svetlo::bsdf::{fresnel, BsdfModel, LobeFlags, MicrofacetKind, TransportMode};
 use svetlo::sampling::stats::{normal_isf, sidak_alpha};
@@ -64,6 +66,13 @@ fn smooth_plastic(diffuse: f32, eta: f32, nonlinear: bool) -> BsdfModel {
 }
 fn rough_plastic(kind: MicrofacetKind, alpha: f32, diffuse: f32, eta: f32, nonlinear: bool) -> BsdfModel {
     BsdfModel::RoughPlastic(RoughPlastic::new(kind, alpha, Rgb::splat(diffuse), Rgb::WHITE, eta, nonlinear, 1.0 / (1.0 + diffuse)))
+}
+
+fn diffuse_transmission(r: f32, t: f32) -> BsdfModel {
+    BsdfModel::DiffuseTransmission(DiffuseTransmission { reflectance: Rgb::splat(r), transmittance: Rgb::splat(t) })
+}
+fn mix(a: BsdfModel, b: BsdfModel, amount: f32) -> BsdfModel {
+    BsdfModel::Mix(Box::new(Mix { a, b, amount }))
 }
 
 fn chi2_family(label: &str, cases: &[Case], n: usize, bins: SphereBins) {
@@ -173,6 +182,11 @@ fn all_models_white() -> Vec<(String, BsdfModel)> {
         ("thindielectric".into(), BsdfModel::ThinDielectric(ThinDielectric { eta: 1.5, specular_reflectance: Rgb::WHITE, specular_transmittance: Rgb::WHITE })),
         ("plastic linear".into(), smooth_plastic(1.0, 1.5, false)),
         ("plastic nonlinear eta 1.9".into(), smooth_plastic(1.0, 1.9, true)),
+        ("diffusetransmission".into(), diffuse_transmission(0.5, 0.5)),
+        (
+            "mix diffuse / roughconductor".into(),
+            mix(BsdfModel::Diffuse(Diffuse { reflectance: Rgb::WHITE }), rough_conductor(MicrofacetKind::Ggx, (0.3, 0.3)), 0.3),
+        ),
     ];
     for kind in KINDS {
         for a in [(0.05, 0.05), (0.5, 0.5), (0.2, 0.6)] {
@@ -401,5 +415,48 @@ fn black_plastic_is_its_coating() {
         let (mean, se) = albedo(&m, wo, TransportMode::Radiance, 1000, 1);
         let f = fresnel_ref(wo.z as f64, 1.0, 1.5);
         assert!((mean[1] - f).abs() < 1e-5 && se[1] < 1e-6, "{} vs {f}", mean[1]);
+    }
+}
+
+/// pbrt-v4's diffusetransmission from both sides, and blends (pbrt's mix) of a diffuse and a
+/// glossy model, of a plastic with a delta lobe and a rough dielectric.
+#[test]
+fn chi2_diffuse_transmission_and_mix() {
+    let cases = vec![
+        Case { name: "diffusetransmission".into(), model: diffuse_transmission(0.6, 0.3), wos: both_sides_dirs() },
+        Case {
+            name: "mix diffuse / roughconductor".into(),
+            model: mix(BsdfModel::Diffuse(Diffuse { reflectance: Rgb::splat(0.7) }), rough_conductor(MicrofacetKind::Ggx, (0.3, 0.3)), 0.4),
+            wos: top_dirs(),
+        },
+        Case {
+            name: "mix plastic / roughdielectric".into(),
+            model: mix(smooth_plastic(0.5, 1.5, false), rough_dielectric(MicrofacetKind::Ggx, (0.3, 0.3), 1.5), 0.6),
+            wos: both_sides_dirs(),
+        },
+    ];
+    chi2_family("diffusetransmission and mix", &cases, N_CHI2, BINS);
+}
+
+/// Closed forms: diffusetransmission's albedo is R + T from either side; a blend's albedo is
+/// the blend of its parts' albedos (each measured by its own sampler), within 4.5 standard
+/// errors of the Monte Carlo estimates.
+#[test]
+fn diffuse_transmission_and_mix_albedos() {
+    let n = 200_000;
+    for wo in [dir_deg(20.0, 30.0), dir_deg(160.0, 200.0)] {
+        let (m, se) = albedo(&diffuse_transmission(0.6, 0.3), wo, TransportMode::Radiance, n, 1);
+        assert!((m[0] - 0.9).abs() <= 4.5 * se[0] + 1e-6, "diffusetransmission from {wo:?}: {} ± {}", m[0], se[0]);
+    }
+    let (a, b) = (smooth_plastic(0.5, 1.5, false), rough_conductor(MicrofacetKind::Ggx, (0.2, 0.5)));
+    let t = 0.35;
+    let wo = dir_deg(50.0, 10.0);
+    let (ma, sa) = albedo(&a, wo, TransportMode::Radiance, n, 2);
+    let (mb, sb) = albedo(&b, wo, TransportMode::Radiance, n, 3);
+    let (mm, sm) = albedo(&mix(a, b, t), wo, TransportMode::Radiance, n, 4);
+    for c in 0..3 {
+        let expect = (1.0 - t as f64) * ma[c] + t as f64 * mb[c];
+        let se = (sm[c].powi(2) + ((1.0 - t as f64) * sa[c]).powi(2) + (t as f64 * sb[c]).powi(2)).sqrt();
+        assert!((mm[c] - expect).abs() <= 4.5 * se, "mix albedo channel {c}: {} vs blend {expect} (se {se})", mm[c]);
     }
 }

@@ -155,7 +155,7 @@ pub fn serve(a: &ServeArgs) -> Result<ExitCode> {
         None => None,
     };
     render::limit_global_threads(r.threads as usize);
-    let scene = crate::load_scene(&r.scene, &r.define)?;
+    let scene = crate::load_scene(&r.scene, r.format, &r.define)?;
     for w in &scene.warnings {
         eprintln!("warning: {w}");
     }

@@ -58,6 +58,13 @@ pub enum Material {
     TwoSided { front: Box<Material>, back: Box<Material> },
     /// Mitsuba `mask`: the surface is present with probability `opacity`.
     Mask { opacity: Texture, inner: Box<Material> },
+    /// pbrt-v4 `coateddiffuse` / `coatedconductor`: the layered BSDF of `bsdf/coated.rs`.
+    Coated(Box<CoatedMaterial>),
+    /// pbrt-v4 `mix`, Mitsuba `blendbsdf`: (1 - amount) a + amount b (`bsdf/mix.rs`). Both
+    /// must scatter (no null or mask inside); a two-sided blend wraps the mix, not its parts.
+    Mix { amount: Texture, a: Box<Material>, b: Box<Material> },
+    /// pbrt-v4 `diffusetransmission` (`bsdf/diffuse_transmission.rs`), the same from both sides.
+    DiffuseTransmission { reflectance: Texture, transmittance: Texture },
     /// Nothing scatters (e.g. a pure emitter); rays pass through unchanged.
     Null,
     /// Mitsuba `normalmap`: `inner` in the shading frame the tangent-space normal texture gives.
@@ -76,6 +83,59 @@ pub struct ShadingGeometry {
     pub ng: Vec3,
     pub dpdu: Vec3,
     pub dpdv: Vec3,
+}
+
+/// The base of a coated material (IORs relative to the outside; divided by the coating's
+/// IOR when the BSDF is built, as pbrt does).
+#[derive(Clone, Debug)]
+pub enum CoatedBase {
+    Diffuse(Texture),
+    Conductor { eta: Rgb, k: Rgb, roughness: Option<Roughness> },
+}
+
+/// pbrt-v4's layered material parameters.
+#[derive(Clone, Debug)]
+pub struct CoatedMaterial {
+    pub base: CoatedBase,
+    /// The coating's IOR and roughness (None: smooth).
+    pub eta: f32,
+    pub roughness: Option<Roughness>,
+    pub thickness: f32,
+    pub albedo: Rgb,
+    pub g: f32,
+    pub max_depth: u32,
+    pub n_samples: u32,
+}
+
+impl CoatedMaterial {
+    fn model(&self, uv: TexPoint) -> BsdfModel {
+        let w = Rgb::WHITE;
+        let top = match &self.roughness {
+            None => BsdfModel::SmoothDielectric(SmoothDielectric { eta: self.eta, specular_reflectance: w, specular_transmittance: w }),
+            Some(r) => {
+                BsdfModel::RoughDielectric(RoughDielectric { distribution: r.at(uv), eta: self.eta, specular_reflectance: w, specular_transmittance: w })
+            }
+        };
+        let bottom = match &self.base {
+            CoatedBase::Diffuse(t) => BsdfModel::Diffuse(Diffuse { reflectance: t.eval(uv).clamp(0.0, 1.0) }),
+            CoatedBase::Conductor { eta, k, roughness } => {
+                let (eta, k) = (*eta / self.eta, *k / self.eta);
+                match roughness {
+                    None => BsdfModel::SmoothConductor(SmoothConductor { eta, k, specular_reflectance: w }),
+                    Some(r) => BsdfModel::RoughConductor(RoughConductor { distribution: r.at(uv), eta, k, specular_reflectance: w }),
+                }
+            }
+        };
+        BsdfModel::Coated(Box::new(super::coated::Coated {
+            top,
+            bottom,
+            thickness: self.thickness,
+            albedo: self.albedo,
+            g: self.g,
+            max_depth: self.max_depth,
+            n_samples: self.n_samples,
+        }))
+    }
 }
 
 impl Default for Material {
@@ -118,6 +178,12 @@ impl Material {
             Material::Ward { .. } => "ward".into(),
             Material::TwoSided { front, .. } => format!("twosided({})", front.kind_name()),
             Material::Mask { inner, .. } => format!("mask({})", inner.kind_name()),
+            Material::Coated(c) => match c.base {
+                CoatedBase::Diffuse(_) => "coateddiffuse".into(),
+                CoatedBase::Conductor { .. } => "coatedconductor".into(),
+            },
+            Material::Mix { a, b, .. } => format!("mix({}, {})", a.kind_name(), b.kind_name()),
+            Material::DiffuseTransmission { .. } => "diffusetransmission".into(),
             Material::Null => "null".into(),
             Material::NormalMap { inner, .. } => format!("normalmap({})", inner.kind_name()),
             Material::BumpMap { inner, .. } => format!("bumpmap({})", inner.kind_name()),
@@ -147,6 +213,15 @@ impl Material {
             }
             Material::TwoSided { front, back } => front.is_uniform() && back.is_uniform(),
             Material::Mask { opacity, inner } => c(opacity) && inner.is_uniform(),
+            Material::Coated(m) => {
+                r(&m.roughness)
+                    && match &m.base {
+                        CoatedBase::Diffuse(t) => c(t),
+                        CoatedBase::Conductor { roughness, .. } => r(roughness),
+                    }
+            }
+            Material::Mix { amount, a, b } => c(amount) && a.is_uniform() && b.is_uniform(),
+            Material::DiffuseTransmission { reflectance, transmittance } => c(reflectance) && c(transmittance),
             Material::Null => true,
             Material::NormalMap { .. } | Material::BumpMap { .. } => false,
             Material::Blend { weight, a, b } => c(weight) && a.is_uniform() && b.is_uniform(),
@@ -236,6 +311,24 @@ impl Material {
             }
             Material::TwoSided { front, .. } => front.model(uv),
             Material::Mask { inner, .. } => inner.model(uv),
+            Material::Coated(m) => Some(m.model(uv)),
+            Material::DiffuseTransmission { reflectance, transmittance } => {
+                Some(BsdfModel::DiffuseTransmission(super::diffuse_transmission::DiffuseTransmission {
+                    reflectance: reflectance.eval(uv).clamp(0.0, 1.0),
+                    transmittance: transmittance.eval(uv).clamp(0.0, 1.0),
+                }))
+            }
+            Material::Mix { amount, a, b } => {
+                let amount = amount.eval_f32(uv).clamp(0.0, 1.0);
+                let (a, b) = (a.model(uv)?, b.model(uv)?);
+                Some(if amount <= 0.0 {
+                    a
+                } else if amount >= 1.0 {
+                    b
+                } else {
+                    BsdfModel::Mix(Box::new(super::mix::Mix { a, b, amount }))
+                })
+            }
             Material::Null => None,
             // Without the geometry there is no perturbed frame (see `bsdf_with_detail`).
             Material::NormalMap { inner, .. } | Material::BumpMap { inner, .. } => inner.model(uv),
@@ -364,6 +457,20 @@ impl Material {
                 out.push(weight);
                 out.extend(a.textures_mut());
                 out.extend(b.textures_mut());
+            }
+            Material::Mix { amount, a, b } => {
+                out.push(amount);
+                out.extend(a.textures_mut());
+                out.extend(b.textures_mut());
+            }
+            Material::DiffuseTransmission { reflectance, transmittance } => out.extend([reflectance, transmittance]),
+            Material::Coated(c) => {
+                let c = &mut **c;
+                match &mut c.base {
+                    CoatedBase::Diffuse(t) => out.push(t),
+                    CoatedBase::Conductor { roughness, .. } => rough(roughness, &mut out),
+                }
+                rough(&mut c.roughness, &mut out);
             }
         }
         out

@@ -4,15 +4,18 @@
 
 pub mod blend;
 pub mod blinn;
+pub mod coated;
 pub mod conductor;
 pub mod cook_torrance;
 pub mod detail;
 pub mod dielectric;
 pub mod diffuse;
+pub mod diffuse_transmission;
 pub mod fresnel;
 pub mod lobes;
 pub mod material;
 pub mod microfacet;
+pub mod mix;
 pub mod oren_nayar;
 pub mod phong;
 pub mod plastic;
@@ -121,6 +124,12 @@ pub enum BsdfModel {
     Ward(ward::Ward),
     /// Mitsuba `blendbsdf` of two whole BSDFs (each with its own sides and mask).
     Blend(Box<blend::Blend>),
+    /// pbrt-v4's layered coated BSDF (boxed: it holds two models).
+    Coated(Box<coated::Coated>),
+    /// A blend of two models (pbrt-v4 `mix`; Mitsuba's `blendbsdf` of whole BSDFs is `Blend`).
+    Mix(Box<mix::Mix>),
+    /// pbrt-v4's Lambertian reflection and transmission.
+    DiffuseTransmission(diffuse_transmission::DiffuseTransmission),
 }
 
 /// Forward a call to the model inside, whatever it is.
@@ -141,6 +150,9 @@ macro_rules! dispatch {
             BsdfModel::OrenNayar($m) => $e,
             BsdfModel::Ward($m) => $e,
             BsdfModel::Blend($m) => $e,
+            BsdfModel::Coated($m) => $e,
+            BsdfModel::Mix($m) => $e,
+            BsdfModel::DiffuseTransmission($m) => $e,
         }
     };
 }
@@ -335,33 +347,7 @@ impl Bsdf {
         let wo = self.detail.map_or(wo, |d| d.frame(wo).to_local(wo));
         let Some((m, flipped)) = self.side(wo) else { return 0.0 };
         let wo = if flipped { flip(wo) } else { wo };
-        let p = match m {
-            BsdfModel::SmoothDielectric(d) => {
-                let f = fresnel::dielectric(wo.z, d.eta).0;
-                if lobe == LobeFlags::SPECULAR_REFLECTION {
-                    f
-                } else if lobe == LobeFlags::SPECULAR_TRANSMISSION {
-                    1.0 - f
-                } else {
-                    0.0
-                }
-            }
-            BsdfModel::ThinDielectric(d) => {
-                let r = d.reflectance(wo.z);
-                if lobe == LobeFlags::SPECULAR_REFLECTION {
-                    r
-                } else if lobe == LobeFlags::SPECULAR_TRANSMISSION {
-                    1.0 - r
-                } else {
-                    0.0
-                }
-            }
-            BsdfModel::SmoothConductor(_) => f32::from(lobe == LobeFlags::SPECULAR_REFLECTION && wo.z > 0.0),
-            BsdfModel::SmoothPlastic(p) if lobe == LobeFlags::SPECULAR_REFLECTION && wo.z > 0.0 => p.prob_specular(fresnel::dielectric(wo.z, p.eta).0),
-            BsdfModel::Blend(b) => b.delta_probability(wo, lobe),
-            _ => 0.0,
-        };
-        p * self.opacity
+        model_delta_probability(m, wo, lobe) * self.opacity
     }
 
     /// The delta lobe `lobe` seen from `wo`, without its random choice: its direction, the
@@ -387,6 +373,37 @@ impl Bsdf {
             }
         }
         None
+    }
+}
+
+/// [`Bsdf::delta_probability`] for one model, `wo` on its front side.
+fn model_delta_probability(m: &BsdfModel, wo: Vec3, lobe: LobeFlags) -> f32 {
+    match m {
+        BsdfModel::SmoothDielectric(d) => {
+            let f = fresnel::dielectric(wo.z, d.eta).0;
+            if lobe == LobeFlags::SPECULAR_REFLECTION {
+                f
+            } else if lobe == LobeFlags::SPECULAR_TRANSMISSION {
+                1.0 - f
+            } else {
+                0.0
+            }
+        }
+        BsdfModel::ThinDielectric(d) => {
+            let r = d.reflectance(wo.z);
+            if lobe == LobeFlags::SPECULAR_REFLECTION {
+                r
+            } else if lobe == LobeFlags::SPECULAR_TRANSMISSION {
+                1.0 - r
+            } else {
+                0.0
+            }
+        }
+        BsdfModel::SmoothConductor(_) => f32::from(lobe == LobeFlags::SPECULAR_REFLECTION && wo.z > 0.0),
+        BsdfModel::SmoothPlastic(p) if lobe == LobeFlags::SPECULAR_REFLECTION && wo.z > 0.0 => p.prob_specular(fresnel::dielectric(wo.z, p.eta).0),
+        BsdfModel::Mix(x) => model_delta_probability(&x.a, wo, lobe) * (1.0 - x.amount) + model_delta_probability(&x.b, wo, lobe) * x.amount,
+        BsdfModel::Blend(b) => b.delta_probability(wo, lobe),
+        _ => 0.0,
     }
 }
 
