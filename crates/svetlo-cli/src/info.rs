@@ -53,6 +53,7 @@ pub fn light_kind(l: &Light) -> &'static str {
         Light::Directional { .. } => "directional",
         Light::Constant { .. } => "constant",
         Light::EnvMap(_) => "envmap",
+        Light::Luminaire(_) => "luminaire",
     }
 }
 

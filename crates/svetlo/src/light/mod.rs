@@ -17,10 +17,12 @@
 pub mod area;
 mod directional;
 pub mod envmap;
+pub mod luminaire;
 mod point;
 
 pub use area::AreaLight;
 pub use envmap::EnvMap;
+pub use luminaire::Luminaire;
 
 use crate::geometry::{Aabb, Ray, SurfaceInteraction};
 use crate::math::{warp, Frame, PI};
@@ -93,6 +95,9 @@ pub enum Light {
     },
     /// Latitude-longitude environment map (Mitsuba `envmap`).
     EnvMap(Box<EnvMap>),
+    /// A luminaire from an IES or EULUMDAT file (`luminaire.rs`): a delta position (or a
+    /// point of its opening per sample) with a tabulated intensity.
+    Luminaire(Box<Luminaire>),
 }
 
 /// Context for light sampling: the scene's bounding sphere (infinite lights need it).
@@ -111,7 +116,7 @@ impl SceneBounds {
 
 impl Light {
     pub fn is_delta(&self) -> bool {
-        matches!(self, Light::Point { .. } | Light::Spot { .. } | Light::Directional { .. })
+        matches!(self, Light::Point { .. } | Light::Spot { .. } | Light::Directional { .. } | Light::Luminaire(_))
     }
 
     pub fn is_infinite(&self) -> bool {
@@ -163,6 +168,7 @@ impl Light {
                 let (wi, pdf) = env.sample(u)?;
                 Some(LightSample { wi, li: env.eval(wi), pdf, p: point_at_infinity(bounds, p_ref, wi), n: Vec3::ZERO, infinite: true })
             }
+            Light::Luminaire(l) => l.sample_li(p_ref, u),
         }
     }
 
@@ -204,6 +210,7 @@ impl Light {
             Light::Directional { irradiance, .. } => disk * irradiance.luminance(),
             Light::Constant { radiance } => 4.0 * PI * disk * radiance.luminance(),
             Light::EnvMap(env) => disk * env.luminance_integral(),
+            Light::Luminaire(l) => l.power(),
         }
         .max(0.0)
     }
@@ -236,6 +243,7 @@ impl Light {
                 let (ray, pdf_pos) = ray_from_infinity(bounds, d, u_pos, time);
                 Some(EmissionSample { ray, le: ls.li, pdf_pos, pdf_dir: ls.pdf, n: d })
             }
+            Light::Luminaire(l) => l.sample_le(u_pos, u_dir, time),
         }
     }
 
@@ -248,6 +256,7 @@ impl Light {
             Light::Spot { frame, cos_cutoff, .. } => (0.0, warp::square_to_uniform_cone_pdf(frame.to_local(ray.d), *cos_cutoff)),
             Light::Directional { .. } => (disk_pdf(bounds), 0.0),
             Light::Constant { .. } | Light::EnvMap(_) => (disk_pdf(bounds), self.pdf_li_escaped(-ray.d)),
+            Light::Luminaire(l) => (0.0, l.pdf_dir(ray.d)),
         }
     }
 }

@@ -76,6 +76,7 @@ impl<'a> Loader<'a> {
                 let image = self.bitmap(&path, false)?;
                 Light::EnvMap(Box::new(EnvMap::new(image, to_world.unwrap_or(Mat4::IDENTITY), scale)))
             }
+            "ies" => self.luminaire(node, to_world)?,
             "projector" => {
                 self.warn(format!("{}:{}: projector emitters are not supported; skipped", node.loc.file.display(), node.loc.line));
                 return Ok(());
