@@ -4,6 +4,7 @@
 //! 2 bad command line or bad input, 130 render interrupted by Ctrl-C (images still written).
 
 mod compare;
+mod illuminance;
 mod info;
 mod radiosity;
 mod render;
@@ -28,6 +29,8 @@ pub enum Command {
     Info(info::InfoArgs),
     /// Solve a scene by radiosity: convergence report, solved mesh (PLY), progressive snapshots.
     Radiosity(radiosity::RadiosityArgs),
+    /// Illuminance (lux) on a work plane: grid CSV and JSON with Emin, Eavg, Emax, U0.
+    Illuminance(illuminance::IlluminanceArgs),
 }
 
 /// A mistake in what the user asked for (exit code 2), as opposed to a failure while doing it.
@@ -62,6 +65,7 @@ fn main() -> ExitCode {
         Command::Compare(a) => compare::run(&a),
         Command::Info(a) => info::run(&a),
         Command::Radiosity(a) => radiosity::run(&a),
+        Command::Illuminance(a) => illuminance::run(&a),
     };
     match result {
         Ok(code) => code,

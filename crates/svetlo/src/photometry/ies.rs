@@ -173,15 +173,15 @@ pub fn parse_with_tilt(bytes: &[u8], file: &Path, tilt_deg: f64) -> Result<Photo
     }
     let type_line = n.line();
     let kind = match n.next("photometric type")? {
-        t if t == 1.0 => PhotometricType::C,
-        t if t == 2.0 => PhotometricType::B,
-        t if t == 3.0 => PhotometricType::A,
+        1.0 => PhotometricType::C,
+        2.0 => PhotometricType::B,
+        3.0 => PhotometricType::A,
         t => return Err(err(file, type_line, format!("photometric type must be 1 (C), 2 (B) or 3 (A), got {t}"))),
     };
     let units_line = n.line();
     let to_m = match n.next("units type")? {
-        u if u == 1.0 => 0.3048,
-        u if u == 2.0 => 1.0,
+        1.0 => 0.3048,
+        2.0 => 1.0,
         u => return Err(err(file, units_line, format!("units type must be 1 (feet) or 2 (metres), got {u}"))),
     };
     let width = n.next("width")? * to_m;

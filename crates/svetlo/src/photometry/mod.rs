@@ -15,6 +15,7 @@
 
 pub mod eulumdat;
 pub mod ies;
+pub mod illuminance;
 pub mod table;
 
 pub use table::{IntensityTable, PhotometricType};
