@@ -38,15 +38,15 @@ pub fn run(a: &CompareArgs) -> Result<ExitCode> {
     let img = load(&a.image)?;
     let reference = load(&a.reference)?;
     let relmse = rel_mse(&img, &reference).map_err(|e| Usage(e.to_string()))?;
-    println!("image       {} {}x{} mean {}", a.image.display(), img.width, img.height, fmt_rgb(img.mean()));
-    println!("reference   {} {}x{} mean {}", a.reference.display(), reference.width, reference.height, fmt_rgb(reference.mean()));
-    println!("relMSE      {relmse:.6e}");
+    say!("image       {} {}x{} mean {}", a.image.display(), img.width, img.height, fmt_rgb(img.mean()));
+    say!("reference   {} {}x{} mean {}", a.reference.display(), reference.width, reference.height, fmt_rgb(reference.mean()));
+    say!("relMSE      {relmse:.6e}");
     let (Some(var_path), Some(spp)) = (&a.ref_var, a.spp) else {
         return Ok(ExitCode::SUCCESS);
     };
     let var = load(var_path)?;
     let t = z_test(&img, &reference, &var, spp).map_err(|e| Usage(e.to_string()))?;
-    println!(
+    say!(
         "Z-test      {}: {:.4} % of {} pixel channels pass (need {:.2} %), {} fail; alpha {:.3e}, min p {:.3e}, {} spp",
         if t.pass { "PASS" } else { "FAIL" },
         100.0 * t.fraction_passing,

@@ -1,7 +1,7 @@
 //! `svetlo info SCENE.xml`: what the loader made of a scene, and what it warned about.
 
 use crate::parse_define;
-use anyhow::{Context, Result};
+use anyhow::Result;
 use clap::Args;
 use glam::Vec3;
 use std::collections::BTreeMap;
@@ -21,40 +21,21 @@ pub struct InfoArgs {
     /// Scene parameter for <default> / $name substitution (repeatable).
     #[arg(short = 'D', value_name = "NAME=VALUE", value_parser = parse_define)]
     pub define: Vec<(String, String)>,
+    /// Also compile a light path expression: its automaton's size and the event symbols it
+    /// uses against those the scene can produce.
+    #[arg(long, value_name = "EXPR")]
+    pub lpe: Option<String>,
 }
 
 /// Shapes listed one by one up to this many; beyond, only the totals.
 const MAX_LISTED_SHAPES: usize = 40;
 
 pub fn material_kind(m: &Material) -> String {
-    let rough = |r: &Option<_>, smooth: &str, rough: &str| if r.is_some() { rough.to_string() } else { smooth.to_string() };
-    match m {
-        Material::Diffuse { .. } => "diffuse".into(),
-        Material::Conductor { roughness, .. } => rough(roughness, "conductor", "roughconductor"),
-        Material::Dielectric { roughness, .. } => rough(roughness, "dielectric", "roughdielectric"),
-        Material::ThinDielectric { .. } => "thindielectric".into(),
-        Material::Plastic { roughness, .. } => rough(roughness, "plastic", "roughplastic"),
-        Material::Phong { .. } => "phong".into(),
-        Material::BlinnPhong { .. } => "blinnphong".into(),
-        Material::CookTorrance { .. } => "cooktorrance".into(),
-        Material::OrenNayar { .. } => "roughdiffuse".into(),
-        Material::Ward { .. } => "ward".into(),
-        Material::TwoSided { front, .. } => format!("twosided({})", material_kind(front)),
-        Material::Mask { inner, .. } => format!("mask({})", material_kind(inner)),
-        Material::Null => "null".into(),
-    }
+    m.kind_name()
 }
 
 pub fn light_kind(l: &Light) -> &'static str {
-    match l {
-        Light::Area(_) => "area",
-        Light::Point { .. } => "point",
-        Light::Spot { .. } => "spot",
-        Light::Directional { .. } => "directional",
-        Light::Constant { .. } => "constant",
-        Light::EnvMap(_) => "envmap",
-        Light::Luminaire(_) => "luminaire",
-    }
+    l.kind_name()
 }
 
 fn counts<I: IntoIterator<Item = String>>(items: I) -> String {
@@ -140,16 +121,80 @@ pub fn describe(scene: &Scene) -> String {
 }
 
 pub fn run(a: &InfoArgs) -> Result<ExitCode> {
+    // A closed stdout (`svetlo info s.xml | head -1`) is not an error.
+    use std::io::Write as _;
     // Luminaire files (IES LM-63, EULUMDAT) get their photometric summary.
     let ext = a.scene.extension().and_then(|e| e.to_str()).map(|e| e.to_ascii_lowercase());
     if matches!(ext.as_deref(), Some("ies" | "ldt")) {
-        let p = svetlo::photometry::load(&a.scene).context("cannot read the luminaire file")?;
-        print!("{}", p.summary());
+        let p = svetlo::photometry::load(&a.scene).map_err(|e| anyhow::Error::new(crate::SceneError(e)).context("cannot read the luminaire file"))?;
+        let _ = write!(std::io::stdout(), "{}", p.summary());
         return Ok(ExitCode::SUCCESS);
     }
-    let scene = svetlo::io::load_scene(&a.scene, &a.define).context("cannot load the scene")?;
-    print!("{}", describe(&scene));
+    let scene = crate::load_scene(&a.scene, &a.define)?;
+    let _ = write!(std::io::stdout(), "{}", describe(&scene));
+    if let Some(e) = &a.lpe {
+        let _ = write!(std::io::stdout(), "{}", describe_lpe(&scene, e).map_err(|e| crate::Usage(format!("light path expression: {e}")))?);
+    }
     Ok(ExitCode::SUCCESS)
+}
+
+/// The event symbols a scene can produce: C, L or B by its lights, and per material the
+/// scattering events its lobes make (as path vertices label them).
+pub fn scene_symbols(scene: &Scene) -> Vec<&'static str> {
+    use svetlo::bsdf::LobeFlags;
+    use svetlo::lpe::Event;
+    let mut out = vec!["C"];
+    if scene.lights.iter().any(|l| !matches!(l, Light::Constant { .. } | Light::EnvMap(_))) {
+        out.push("L");
+    }
+    if !scene.environment_lights.is_empty() {
+        out.push("B");
+    }
+    for m in &scene.materials {
+        let f = m.bsdf(glam::Vec2::ZERO).flags();
+        for t in [false, true] {
+            let side = if t { LobeFlags::TRANSMISSION } else { LobeFlags::REFLECTION };
+            if !f.intersects(side) {
+                continue;
+            }
+            let mut evs = Vec::new();
+            if f.intersects(LobeFlags::SPECULAR) {
+                evs.push(Event::scatter(f, true, t, 0));
+            }
+            if f.has_non_specular() {
+                evs.push(Event::scatter(f, false, t, 0));
+            }
+            for e in evs {
+                if !out.contains(&e.symbol()) {
+                    out.push(e.symbol());
+                }
+            }
+        }
+    }
+    out
+}
+
+fn describe_lpe(scene: &Scene, expr: &str) -> std::result::Result<String, svetlo::lpe::LpeError> {
+    let mut set = svetlo::lpe::AovSet::compile(&[("lpe".into(), expr.into())], None)?;
+    let warnings = set.bind(scene);
+    let l = &set.expressions()[0];
+    let (states, rev, classes) = l.size();
+    let have = scene_symbols(scene);
+    let used = l.useful_symbols();
+    let mut s = String::new();
+    let order = if l.light_first { "light first, reversed" } else { "camera first" };
+    let _ = writeln!(s, "lpe         '{expr}' ({order})");
+    let _ = writeln!(s, "automaton   {states} states (minimised), reverse {rev} states, {classes} event classes");
+    let _ = writeln!(s, "expression  uses {}", used.join(" "));
+    let _ = writeln!(s, "scene       produces {}", have.join(" "));
+    let missing: Vec<&str> = used.iter().copied().filter(|u| !have.contains(u)).collect();
+    if !missing.is_empty() {
+        let _ = writeln!(s, "note        the scene produces no {} events", missing.join(" "));
+    }
+    for w in warnings {
+        let _ = writeln!(s, "warning     {w}");
+    }
+    Ok(s)
 }
 
 #[cfg(test)]

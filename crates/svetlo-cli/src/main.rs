@@ -1,13 +1,33 @@
 //! `svetlo`: render a scene, compare two images, describe a scene.
 //!
-//! Exit codes: 0 success (or a passing comparison), 1 failure (render error, failing Z-test),
-//! 2 bad command line or bad input, 130 render interrupted by Ctrl-C (images still written).
+//! Exit codes (README, "Exit codes and limits"): 0 success (or a passing comparison),
+//! 1 runtime failure (render or write error, failing Z-test), 2 bad command line or options
+//! (including `--integrator name:key=value` options and compare's input images), 3 the scene
+//! cannot be loaded, 130 interrupted by SIGINT or SIGTERM (images still written).
+
+/// `println!` that tolerates a closed stdout (`svetlo info scene.xml | head -1`).
+macro_rules! say {
+    ($($t:tt)*) => {{
+        use std::io::Write as _;
+        let _ = writeln!(std::io::stdout(), $($t)*);
+    }};
+}
+
+/// `eprintln!` that tolerates a closed stderr.
+macro_rules! tell {
+    ($($t:tt)*) => {{
+        use std::io::Write as _;
+        let _ = writeln!(std::io::stderr(), $($t)*);
+    }};
+}
 
 mod compare;
 mod illuminance;
 mod info;
+mod preview;
 mod radiosity;
 mod render;
+mod signals;
 
 use clap::{Parser, Subcommand};
 use std::process::ExitCode;
@@ -17,6 +37,14 @@ use std::process::ExitCode;
 pub struct Cli {
     #[command(subcommand)]
     pub command: Command,
+    /// Memory budget (e.g. 8G, 512M): films, textures and meshes whose headers announce more
+    /// are refused before anything is allocated. Default: half the machine's memory.
+    #[arg(long, global = true, value_name = "SIZE", value_parser = parse_memory)]
+    pub max_memory: Option<u64>,
+}
+
+fn parse_memory(s: &str) -> Result<u64, String> {
+    svetlo::limits::parse_size(s).ok_or_else(|| format!("'{s}' is not a size (a number of bytes, or with K, M, G or T)"))
 }
 
 #[derive(Subcommand, Debug)]
@@ -31,6 +59,8 @@ pub enum Command {
     Radiosity(radiosity::RadiosityArgs),
     /// Illuminance (lux) on a work plane: grid CSV and JSON with Emin, Eavg, Emax, U0.
     Illuminance(illuminance::IlluminanceArgs),
+    /// Render with a live browser view: compare methods, restart from the page (Ctrl-C ends).
+    Serve(preview::ServeArgs),
 }
 
 /// A mistake in what the user asked for (exit code 2), as opposed to a failure while doing it.
@@ -45,9 +75,38 @@ impl std::fmt::Display for Usage {
 
 impl std::error::Error for Usage {}
 
+/// A scene that cannot be loaded (exit code 3).
+#[derive(Debug)]
+pub struct SceneError(pub svetlo::Error);
+
+impl std::fmt::Display for SceneError {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        self.0.fmt(f)
+    }
+}
+
+impl std::error::Error for SceneError {}
+
 pub const EXIT_FAIL: u8 = 1;
 pub const EXIT_USAGE: u8 = 2;
+pub const EXIT_SCENE: u8 = 3;
 pub const EXIT_INTERRUPTED: u8 = 130;
+
+/// Load a scene for a subcommand; its errors exit with [`EXIT_SCENE`].
+pub fn load_scene(path: &std::path::Path, define: &[(String, String)]) -> anyhow::Result<svetlo::scene::Scene> {
+    svetlo::io::load_scene(path, define).map_err(|e| anyhow::Error::new(SceneError(e)).context("cannot load the scene"))
+}
+
+/// The exit code of an error: what kind of mistake it is, wherever in the chain it sits.
+pub fn exit_code(e: &anyhow::Error) -> u8 {
+    if e.chain().any(|c| c.is::<SceneError>()) {
+        EXIT_SCENE
+    } else if e.chain().any(|c| c.is::<Usage>() || matches!(c.downcast_ref::<svetlo::Error>(), Some(svetlo::Error::Settings(_)))) {
+        EXIT_USAGE
+    } else {
+        EXIT_FAIL
+    }
+}
 
 /// `-D name=value`: a scene parameter for `<default>` / `$name` substitution.
 pub fn parse_define(s: &str) -> Result<(String, String), String> {
@@ -60,22 +119,22 @@ pub fn parse_define(s: &str) -> Result<(String, String), String> {
 
 fn main() -> ExitCode {
     let cli = Cli::parse();
+    if let Some(m) = cli.max_memory {
+        svetlo::limits::set_max_memory(m);
+    }
     let result = match cli.command {
         Command::Render(a) => render::run(&a),
         Command::Compare(a) => compare::run(&a),
         Command::Info(a) => info::run(&a),
         Command::Radiosity(a) => radiosity::run(&a),
         Command::Illuminance(a) => illuminance::run(&a),
+        Command::Serve(a) => preview::serve(&a),
     };
     match result {
         Ok(code) => code,
         Err(e) => {
-            eprintln!("error: {e:#}");
-            if e.downcast_ref::<Usage>().is_some() {
-                ExitCode::from(EXIT_USAGE)
-            } else {
-                ExitCode::from(EXIT_FAIL)
-            }
+            tell!("error: {e:#}");
+            ExitCode::from(exit_code(&e))
         }
     }
 }

@@ -124,7 +124,7 @@ fn write_ply(path: &PathBuf, solved: &svetlo::radiosity::Solved) -> Result<()> {
 
 pub fn run(a: &RadiosityArgs) -> Result<ExitCode> {
     let opts = options(a)?;
-    let scene = svetlo::io::load_scene(&a.scene, &a.define).context("cannot load the scene")?;
+    let scene = crate::load_scene(&a.scene, &a.define)?;
     if let Some(dir) = &a.snapshots {
         std::fs::create_dir_all(dir).with_context(|| format!("cannot create {}", dir.display()))?;
     }
@@ -147,10 +147,10 @@ pub fn run(a: &RadiosityArgs) -> Result<ExitCode> {
         return Err(e.context("cannot write a snapshot"));
     }
     for w in &solved.mesh.warnings {
-        eprintln!("warning: {w}");
+        tell!("warning: {w}");
     }
-    println!("scene        {}", a.scene.display());
-    println!(
+    say!("scene        {}", a.scene.display());
+    say!(
         "{}     {} in {} patches, {} display vertices, area {:.4}",
         if solved.hierarchy.is_some() { "display " } else { "elements" },
         solved.mesh.elements.len(),
@@ -159,7 +159,7 @@ pub fn run(a: &RadiosityArgs) -> Result<ExitCode> {
         solved.mesh.total_area()
     );
     if solved.hierarchy.is_none() {
-        println!(
+        say!(
             "form factors {:?}: {} rows computed, {} stored ({:.1} MiB)",
             opts.form_factors,
             solved.rows_computed,
@@ -168,7 +168,7 @@ pub fn run(a: &RadiosityArgs) -> Result<ExitCode> {
         );
     }
     if let Some(h) = &solved.hierarchy {
-        println!(
+        say!(
             "hierarchy    {} links, {} nodes, {} leaves (elements), {} link form factors computed, {} refine passes, {:.1} MiB",
             h.links,
             h.nodes,
@@ -178,17 +178,17 @@ pub fn run(a: &RadiosityArgs) -> Result<ExitCode> {
             h.memory as f64 / (1 << 20) as f64
         );
     }
-    println!("solver       {:?}, tolerance {:.1e}: {}", solved.solver, opts.solve.tolerance, if solved.converged { "converged" } else { "NOT converged" });
-    println!("time         mesh {:.3} s, form factors {:.3} s, solve {:.3} s", solved.mesh_seconds, solved.form_factor_seconds, solved.solve_seconds);
+    say!("solver       {:?}, tolerance {:.1e}: {}", solved.solver, opts.solve.tolerance, if solved.converged { "converged" } else { "NOT converged" });
+    say!("time         mesh {:.3} s, form factors {:.3} s, solve {:.3} s", solved.mesh_seconds, solved.form_factor_seconds, solved.solve_seconds);
     if a.report {
-        println!("{:>10} {:>12} {:>10} {:>12}", "step", "residual", "seconds", "rows");
+        say!("{:>10} {:>12} {:>10} {:>12}", "step", "residual", "seconds", "rows");
         for s in &solved.history {
-            println!("{:>10} {:>12.4e} {:>10.4} {:>12}", s.step, s.residual, s.seconds, s.rows);
+            say!("{:>10} {:>12.4e} {:>10.4} {:>12}", s.step, s.residual, s.seconds, s.rows);
         }
     }
     if let Some(p) = &a.ply {
         write_ply(p, &solved)?;
-        println!("wrote        {}", p.display());
+        say!("wrote        {}", p.display());
     }
     Ok(ExitCode::SUCCESS)
 }

@@ -7,7 +7,7 @@ use clap::{value_parser, Args, ValueEnum};
 use indicatif::{ProgressBar, ProgressStyle};
 use std::path::{Path, PathBuf};
 use std::process::ExitCode;
-use std::sync::atomic::{AtomicBool, AtomicU32, Ordering};
+use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::Arc;
 use std::time::{Duration, Instant};
 use svetlo::film::{Film, Filter};
@@ -63,9 +63,9 @@ pub struct RenderArgs {
     /// Pixel reconstruction filter (tent radius 1, Gaussian sigma 0.5).
     #[arg(long, value_enum)]
     pub filter: Option<FilterArg>,
-    /// Worker threads (0: all cores).
-    #[arg(long, value_name = "N", default_value_t = 0)]
-    pub threads: usize,
+    /// Worker threads (0: all cores; at most 1024).
+    #[arg(long, value_name = "N", default_value_t = 0, allow_negative_numbers = true, value_parser = value_parser!(u16).range(0..=1024))]
+    pub threads: u16,
     /// Sample generator.
     #[arg(long, value_enum)]
     pub sampler: Option<SamplerArg>,
@@ -79,9 +79,30 @@ pub struct RenderArgs {
     /// (s<S>_t<T>_weighted.exr, they sum to the image) and unweighted (s<S>_t<T>_unweighted.exr).
     #[arg(long, value_name = "DIR")]
     pub strategies: Option<PathBuf>,
+    /// An AOV: the paths a light path expression matches, as its own layer NAME.R/G/B of
+    /// the EXR and OUT_NAME.png (repeatable; e.g. --aov caustic='C D S+ L').
+    #[arg(long, value_name = "NAME=EXPR", value_parser = parse_aov)]
+    pub aov: Vec<(String, String)>,
+    /// Restrict the beauty to the paths a light path expression matches (e.g. 'L D* E').
+    #[arg(long, value_name = "EXPR")]
+    pub lpe: Option<String>,
+    /// Add a preset of AOVs: `lecture` writes one per method class of the lecture (local,
+    /// whitted, cook, radiosity, rest).
+    #[arg(long, value_name = "NAME", value_parser = ["lecture"])]
+    pub aov_preset: Option<String>,
     /// With --strategies: the longest paths (in segments) that get their own images.
     #[arg(long, value_name = "N", default_value_t = 5, value_parser = value_parser!(u32).range(1..=32))]
     pub strategy_depth: u32,
+    /// Live preview in a browser, and tev streaming.
+    #[command(flatten)]
+    pub live: crate::preview::PreviewArgs,
+}
+
+fn parse_aov(s: &str) -> std::result::Result<(String, String), String> {
+    match s.split_once('=') {
+        Some((n, e)) if !n.trim().is_empty() => Ok((n.trim().to_string(), e.to_string())),
+        _ => Err(format!("'{s}' is not NAME=EXPRESSION")),
+    }
 }
 
 fn parse_seconds(s: &str) -> std::result::Result<f64, String> {
@@ -114,6 +135,9 @@ impl OutputPaths {
             None => {
                 let stem = scene.file_stem().ok_or_else(|| Usage(format!("scene path '{}' has no file name", scene.display())))?;
                 (PathBuf::from(stem), false)
+            }
+            Some(o) if o.is_dir() => {
+                return Err(Usage(format!("output '{}' is a folder; name a file in it (e.g. {}/image.exr)", o.display(), o.display())).into());
             }
             Some(o) => {
                 let ext = o.extension().map(|e| e.to_string_lossy().to_ascii_lowercase());
@@ -158,7 +182,7 @@ pub fn configure(mut scene: Scene, a: &RenderArgs) -> Result<Job> {
         if a.integrator.is_some() {
             anyhow::Error::new(Usage(e.to_string()))
         } else {
-            anyhow::Error::new(e).context(format!("the scene asks for integrator '{integrator_name}'; choose another with --integrator"))
+            anyhow::Error::new(crate::SceneError(e)).context(format!("the scene asks for integrator '{integrator_name}'; choose another with --integrator"))
         }
     })?;
     if a.strategies.is_some() && integrator_name != "bdpt" {
@@ -177,7 +201,7 @@ pub fn configure(mut scene: Scene, a: &RenderArgs) -> Result<Job> {
     if let Some(d) = a.max_depth {
         s.max_depth = d;
     }
-    s.threads = a.threads;
+    s.threads = a.threads as usize;
     if let Some(f) = a.filter {
         s.filter = match f {
             FilterArg::Box => Filter::Box,
@@ -200,6 +224,25 @@ pub fn configure(mut scene: Scene, a: &RenderArgs) -> Result<Job> {
         (None, None) => {}
     }
     s.validate().context("render settings")?;
+    svetlo::limits::check_film(cam.width, cam.height).map_err(|e| Usage(e.to_string()))?;
+    if scene.lights.is_empty() {
+        tell!("warning: the scene has no emitter: the image is black");
+    } else if matches!(integrator_name.as_str(), "light" | "ptracer") && !scene.environment_lights.is_empty() {
+        tell!(
+            "warning: light tracing does not see environment emitters (envmap, constant) from the camera; they are missing from the image (use path or bdpt)"
+        );
+    }
+    let mut aovs = a.aov.clone();
+    if a.aov_preset.as_deref() == Some("lecture") {
+        aovs.extend(svetlo::lpe::LECTURE_PRESET.iter().map(|(n, e)| (n.to_string(), e.to_string())));
+    }
+    if !aovs.is_empty() || a.lpe.is_some() {
+        let mut set = svetlo::lpe::AovSet::compile(&aovs, a.lpe.as_deref()).map_err(|e| Usage(format!("light path expression: {e}")))?;
+        for w in set.bind(&scene) {
+            tell!("warning: {w}");
+        }
+        s.lpe = Some(Arc::new(set));
+    }
     Ok(Job { scene, settings: s, integrator_name, integrator })
 }
 
@@ -263,6 +306,26 @@ fn drive_bar(progress: &Progress, finished: &AtomicBool, start: Instant, time_li
     bar.finish_and_clear();
 }
 
+/// CPU time (user + system, all threads) this process has used, where the OS tells it.
+fn process_cpu_seconds() -> Option<f64> {
+    #[cfg(unix)]
+    {
+        let mut u = std::mem::MaybeUninit::<libc::rusage>::zeroed();
+        // SAFETY: getrusage fills the struct it is given and touches nothing else.
+        if unsafe { libc::getrusage(libc::RUSAGE_SELF, u.as_mut_ptr()) } != 0 {
+            return None;
+        }
+        // SAFETY: initialised by the successful call above (and zeroed before).
+        let u = unsafe { u.assume_init() };
+        let tv = |t: libc::timeval| t.tv_sec as f64 + t.tv_usec as f64 * 1e-6;
+        Some(tv(u.ru_utime) + tv(u.ru_stime))
+    }
+    #[cfg(not(unix))]
+    {
+        None
+    }
+}
+
 /// A number with an SI prefix: 1234567 -> "1.23 M".
 pub fn si(x: f64) -> String {
     let (v, p) = if x >= 1e9 {
@@ -277,28 +340,23 @@ pub fn si(x: f64) -> String {
     format!("{v:.2} {p}")
 }
 
-/// First Ctrl-C: cancel the render (it returns the passes done). Second: exit at once.
-fn install_ctrlc(progress: Arc<Progress>) {
-    let presses = AtomicU32::new(0);
-    let r = ctrlc::try_set_handler(move || {
-        if presses.fetch_add(1, Ordering::SeqCst) == 0 {
-            progress.cancel.store(true, Ordering::SeqCst);
-            eprintln!("\ninterrupt: finishing the current pass and writing the image (Ctrl-C again to quit now)");
-        } else {
-            std::process::exit(EXIT_INTERRUPTED as i32);
-        }
-    });
-    if let Err(e) = r {
-        eprintln!("warning: Ctrl-C will not stop the render cleanly: {e}");
-    }
-}
-
 /// Write the images; returns the paths written.
 pub fn write_outputs(film: &Film, out: &OutputPaths, variance: bool) -> Result<Vec<PathBuf>> {
     let img = film.image();
-    write_exr(&out.exr, &img)?;
+    let layers = film.layer_images();
+    if layers.is_empty() {
+        write_exr(&out.exr, &img)?;
+    } else {
+        svetlo::io::image_io::write_exr_layers(&out.exr, &img, &layers)?;
+    }
     write_png(&out.png, &img)?;
     let mut written = vec![out.exr.clone(), out.png.clone()];
+    // One PNG per AOV beside the beauty's: OUT_NAME.png.
+    for (name, layer) in &layers {
+        let p = with_suffix(&out.exr.with_extension(""), &format!("_{name}.png"));
+        write_png(&p, layer)?;
+        written.push(p);
+    }
     if let Some(p) = &out.pfm {
         write_pfm(p, &img)?;
         written.push(p.clone());
@@ -314,12 +372,10 @@ pub fn write_outputs(film: &Film, out: &OutputPaths, variance: bool) -> Result<V
 pub fn render_loaded(scene: Scene, a: &RenderArgs, out: &OutputPaths, progress: &Progress) -> Result<ExitCode> {
     let job = configure(scene, a)?;
     if a.variance && matches!(job.integrator_name.as_str(), "light" | "ptracer" | "bdpt") {
-        eprintln!(
-            "warning: --variance counts only what each pixel's own samples add; the {} integrator's splats (light paths) are not in it",
-            job.integrator_name
-        );
+        tell!("warning: --variance counts only what each pixel's own samples add; the {} integrator's splats (light paths) are not in it", job.integrator_name);
     }
     let (w, h) = (job.scene.camera.width, job.scene.camera.height);
+    let cpu0 = process_cpu_seconds();
     let (film, elapsed, strategy_files) = match &a.strategies {
         Some(dir) => execute_strategies(&job, progress, dir, a.strategy_depth)?,
         None => {
@@ -327,32 +383,49 @@ pub fn render_loaded(scene: Scene, a: &RenderArgs, out: &OutputPaths, progress: 
             (film, elapsed, Vec::new())
         }
     };
+    let cpu = process_cpu_seconds().zip(cpu0).map(|(b, a)| b - a);
     let written = write_outputs(&film, out, a.variance)?;
     let secs = elapsed.as_secs_f64();
     let samples = film.spp_done as f64 * w as f64 * h as f64;
-    println!("integrator  {}", job.integrator_name);
-    println!("resolution  {w}x{h}");
+    say!("integrator  {}", job.integrator_name);
+    say!("resolution  {w}x{h}");
     let planned = if a.spp.is_none() && a.time.is_some() { "time-limited".to_string() } else { format!("of {}", job.settings.spp) };
-    println!("spp         {} ({planned})", film.spp_done);
-    println!("time        {secs:.2} s");
-    println!("samples/s   {}", si(samples / secs.max(1e-9)));
+    say!("spp         {} ({planned})", film.spp_done);
+    say!("time        {secs:.2} s");
+    if let Some(c) = cpu {
+        // All threads' CPU time in the render call: what benchmarks on a busy machine compare.
+        say!("cpu         {c:.2} s");
+    }
+    say!("samples/s   {}", si(samples / secs.max(1e-9)));
     for p in &written {
-        println!("wrote       {}", p.display());
+        say!("wrote       {}", p.display());
     }
     if let (Some(dir), false) = (&a.strategies, strategy_files.is_empty()) {
-        println!("strategies  {} images in {}", strategy_files.len(), dir.display());
+        say!("strategies  {} images in {}", strategy_files.len(), dir.display());
     }
     if let Some(r) = job.integrator.report() {
-        eprint!("{r}");
+        {
+            use std::io::Write as _;
+            let _ = write!(std::io::stderr(), "{r}");
+        }
     }
     if progress.cancelled() {
-        eprintln!("interrupted after {} spp", film.spp_done);
+        tell!("interrupted after {} spp", film.spp_done);
         return Ok(ExitCode::from(EXIT_INTERRUPTED));
     }
     if film.spp_done == 0 {
         anyhow::bail!("no sample pass finished within the time limit; the image is empty");
     }
     Ok(ExitCode::SUCCESS)
+}
+
+/// `--threads N` holds for the whole process: loading, the BVH build and tables built on
+/// first use run on rayon's global pool, which gets N threads (the render makes its own pool
+/// of N). Only the first call in a process can size it; later ones keep that size.
+pub fn limit_global_threads(threads: usize) {
+    if threads > 0 {
+        let _ = rayon::ThreadPoolBuilder::new().num_threads(threads).build_global();
+    }
 }
 
 pub fn run(a: &RenderArgs) -> Result<ExitCode> {
@@ -364,13 +437,21 @@ pub fn run(a: &RenderArgs) -> Result<ExitCode> {
         }
     }
     let out = OutputPaths::new(&a.scene, a.output.as_deref())?;
-    let scene = svetlo::io::load_scene(&a.scene, &a.define).context("cannot load the scene")?;
+    limit_global_threads(a.threads as usize);
+    let scene = crate::load_scene(&a.scene, &a.define)?;
     for w in &scene.warnings {
-        eprintln!("warning: {w}");
+        tell!("warning: {w}");
     }
-    let progress = Arc::new(Progress::new());
-    install_ctrlc(progress.clone());
-    render_loaded(scene, a, &out, &progress)
+    let live = crate::preview::Live::start(a, &scene)?;
+    let progress = live.as_ref().map_or_else(|| Arc::new(Progress::new()), |l| l.progress());
+    for sig in crate::signals::install(progress.clone()) {
+        tell!("warning: {sig} is ignored (as the parent process set it): it will not stop the render");
+    }
+    let outcome = render_loaded(scene, a, &out, &progress);
+    if let Some(l) = live {
+        l.finish(&outcome, &out);
+    }
+    outcome
 }
 
 #[cfg(test)]

@@ -82,7 +82,7 @@ fn unloadable_scene_fails_naming_the_file() {
             args.extend(["-o", s(&out)]);
         }
         let (code, _, err) = run(&args);
-        assert_eq!(code, 1, "{cmd}: {err}");
+        assert_eq!(code, 3, "{cmd}: {err}");
         assert!(err.contains("missing-scene.xml"), "{cmd}: {err}");
     }
     assert!(!out.exists());
@@ -204,24 +204,143 @@ fn render_end_to_end() {
     assert!(stdout.contains("1 spheres") && stdout.contains("1 point"), "{stdout}");
 }
 
-#[test]
-fn ctrl_c_writes_the_image_and_exits_130() {
-    let d = tmp("ctrlc");
+/// Start a render that would take a minute, with `sig` reset to its default disposition in
+/// the child: the test must not depend on what its own parent ignores (CI may start it with
+/// SIGINT ignored, which the child would inherit and, by convention, keep).
+fn start_long_render(d: &Path, sig: libc::c_int) -> std::process::Child {
+    use std::os::unix::process::CommandExt;
     let scene = d.join("tiny.xml");
     std::fs::write(&scene, TINY_XML).unwrap();
-    let out = d.join("c.exr");
-    let child = Command::new(env!("CARGO_BIN_EXE_svetlo"))
-        .args(["render", s(&scene), "-o", s(&out), "--time", "60", "-D", "res=64"])
+    let mut cmd = Command::new(env!("CARGO_BIN_EXE_svetlo"));
+    cmd.args(["render", s(&scene), "-o", s(&d.join("c.exr")), "--time", "60", "-D", "res=64"])
         .stdout(std::process::Stdio::piped())
-        .stderr(std::process::Stdio::piped())
-        .spawn()
-        .unwrap();
-    std::thread::sleep(std::time::Duration::from_millis(1500));
-    let k = Command::new("kill").args(["-INT", &child.id().to_string()]).status().unwrap();
-    assert!(k.success());
-    let o = child.wait_with_output().unwrap();
+        .stderr(std::process::Stdio::piped());
+    // SAFETY: only async-signal-safe calls between fork and exec.
+    unsafe {
+        cmd.pre_exec(move || {
+            libc::signal(sig, libc::SIG_DFL);
+            Ok(())
+        });
+    }
+    cmd.spawn().unwrap()
+}
+
+#[test]
+fn ctrl_c_and_sigterm_write_the_image_and_exit_130() {
+    for (sig, name) in [(libc::SIGINT, "INT"), (libc::SIGTERM, "TERM")] {
+        let d = tmp(&format!("signal-{name}"));
+        let child = start_long_render(&d, sig);
+        std::thread::sleep(std::time::Duration::from_millis(1500));
+        let k = Command::new("kill").args([&format!("-{name}"), &child.id().to_string()]).status().unwrap();
+        assert!(k.success());
+        let o = child.wait_with_output().unwrap();
+        let err = String::from_utf8_lossy(&o.stderr);
+        assert_eq!(o.status.code(), Some(130), "SIG{name}: {err}");
+        assert!(err.contains("interrupted after"), "{err}");
+        assert!(d.join("c.exr").is_file() && d.join("c.png").is_file(), "SIG{name}");
+    }
+}
+
+#[test]
+fn exit_codes_follow_the_documented_classes() {
+    let d = tmp("exitcodes");
+    let scene = d.join("tiny.xml");
+    std::fs::write(&scene, TINY_XML).unwrap();
+    let bad = d.join("bad.xml");
+    std::fs::write(&bad, TINY_XML.replace("<bsdf type=\"diffuse\"/>", "<bsdf type=\"nope\"/>")).unwrap();
+    let o = s(&d.join("o.exr")).to_string();
+    let cases: Vec<(Vec<&str>, i32, &str)> = vec![
+        // Options of a method (checked when the render starts) are usage errors, like the rest.
+        (vec!["render", s(&scene), "-o", &o, "--integrator", "radiosity:element-size=0"], 2, "element"),
+        (vec!["render", s(&scene), "-o", &o, "--integrator", "pssmlt:large-step=2"], 2, "large"),
+        (vec!["render", s(&scene), "-o", &o, "--threads", "100000"], 2, "--threads"),
+        (vec!["render", s(&scene), "-o", &o, "--threads", "-1"], 2, "--threads"),
+        (vec!["render", s(&scene), "-o", s(&d), "--spp", "1"], 2, "is a folder"),
+        (vec!["render", s(&scene), "-o", &o, "--width", "65536", "--height", "65536"], 2, "budget"),
+        (vec!["render", s(&scene), "-o", &o, "--max-memory", "lots"], 2, "--max-memory"),
+        (vec!["render", s(&scene), "-o", &o, "--max-memory", "1M", "-D", "res=1000"], 3, "budget"),
+        // The scene cannot be loaded.
+        (vec!["render", s(&bad), "-o", &o], 3, "bad.xml"),
+        (vec!["info", s(&bad)], 3, "nope"),
+        (vec!["render", "/dev/zero", "-o", &o], 3, "not a regular file"),
+    ];
+    for (args, want, needle) in cases {
+        let t = std::time::Instant::now();
+        let (code, out, err) = run(&args);
+        assert_eq!(code, want, "{args:?}: {out}{err}");
+        assert!(err.contains(needle), "{args:?}: {err}");
+        assert!(t.elapsed().as_secs() < 20, "{args:?} took {:?}", t.elapsed());
+    }
+}
+
+#[test]
+fn a_closed_stdout_is_not_a_panic() {
+    let d = tmp("stdout");
+    let scene = d.join("tiny.xml");
+    std::fs::write(&scene, TINY_XML).unwrap();
+    for args in [vec!["render", s(&scene), "-o", s(&d.join("p.exr")), "--spp", "1"], vec!["info", s(&scene)]] {
+        let mut child =
+            Command::new(env!("CARGO_BIN_EXE_svetlo")).args(&args).stdout(std::process::Stdio::piped()).stderr(std::process::Stdio::piped()).spawn().unwrap();
+        // Close the reading end before the child prints: its writes fail with EPIPE.
+        drop(child.stdout.take());
+        let o = child.wait_with_output().unwrap();
+        let err = String::from_utf8_lossy(&o.stderr);
+        assert!(!err.contains("panicked"), "{args:?}: {err}");
+        assert_eq!(o.status.code(), Some(0), "{args:?}: {err}");
+    }
+}
+
+#[test]
+fn a_full_disk_leaves_no_partial_image() {
+    // The file size limit stands in for a full disk: writes past 64 KiB fail (EFBIG; SIGXFSZ
+    // is ignored so that the process sees the error). A 256x256 EXR does not fit; every file
+    // left behind must be whole (readable) and no temporary file may remain.
+    let d = tmp("diskfull");
+    let scene = d.join("tiny.xml");
+    std::fs::write(&scene, TINY_XML).unwrap();
+    let out = d.join("full.exr");
+    let cmd = "trap '' XFSZ; ulimit -f 128; exec \"$0\" render \"$1\" -o \"$2\" --spp 1 -D res=256".to_string();
+    let o = Command::new("sh").args(["-c", &cmd, env!("CARGO_BIN_EXE_svetlo"), s(&scene), s(&out)]).output().unwrap();
     let err = String::from_utf8_lossy(&o.stderr);
-    assert_eq!(o.status.code(), Some(130), "{err}");
-    assert!(err.contains("interrupted after"), "{err}");
-    assert!(out.is_file() && d.join("c.png").is_file());
+    assert!(!err.contains("panicked"), "{err}");
+    assert_eq!(o.status.code(), Some(1), "{err}");
+    assert!(!out.exists(), "a partial EXR was left behind");
+    for f in std::fs::read_dir(&d).unwrap() {
+        let p = f.unwrap().path();
+        let name = p.file_name().unwrap().to_string_lossy().into_owned();
+        assert!(!name.contains(".tmp"), "temporary file left: {name}");
+        if name != "tiny.xml" {
+            svetlo::io::read_image(&p).unwrap_or_else(|e| panic!("{name} is not whole: {e}"));
+        }
+    }
+}
+
+#[test]
+fn render_without_emitters_is_black_with_a_warning() {
+    let d = tmp("noemitter");
+    let scene = d.join("dark.xml");
+    let text = TINY_XML.lines().filter(|l| !l.contains("<emitter")).collect::<Vec<_>>().join("\n");
+    std::fs::write(&scene, text).unwrap();
+    for m in ["mlt", "pssmlt", "path"] {
+        let out = d.join(format!("{m}.exr"));
+        let t = std::time::Instant::now();
+        let (code, _, err) = run(&["render", s(&scene), "-o", s(&out), "--integrator", m, "-D", "res=8", "--spp", "4"]);
+        assert_eq!(code, 0, "{m}: {err}");
+        assert!(err.contains("no emitter"), "{m}: {err}");
+        assert!(t.elapsed().as_secs() < 20, "{m}");
+        let img = svetlo::io::read_image(&out).unwrap();
+        assert!(img.data.iter().all(|c| *c == Rgb::BLACK), "{m}");
+    }
+}
+
+#[test]
+fn light_tracing_warns_about_environment_emitters() {
+    let d = tmp("envlight");
+    let scene = d.join("env.xml");
+    std::fs::write(&scene, TINY_XML.replace("<emitter type=\"point\">", "<emitter type=\"constant\"/><emitter type=\"point\">")).unwrap();
+    let (code, _, err) = run(&["render", s(&scene), "-o", s(&d.join("e.exr")), "--integrator", "light", "-D", "res=8", "--spp", "1"]);
+    assert_eq!(code, 0, "{err}");
+    assert!(err.contains("light tracing does not see environment emitters"), "{err}");
+    let (_, _, err) = run(&["render", s(&scene), "-o", s(&d.join("p.exr")), "--integrator", "path", "-D", "res=8", "--spp", "1"]);
+    assert!(!err.contains("environment emitters"), "{err}");
 }

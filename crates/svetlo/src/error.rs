@@ -21,6 +21,11 @@ pub enum Error {
     Settings(String),
     #[error("invalid scene: {0}")]
     Invalid(String),
+    /// Something would need more memory than the budget allows (`limits::max_memory`).
+    #[error("{what} would need {} of memory, over the budget of {} (raise it with --max-memory)", crate::limits::human(*bytes), crate::limits::human(*limit))]
+    TooLarge { what: String, bytes: u64, limit: u64 },
+    #[error("light path expression: {0}")]
+    Lpe(#[from] crate::lpe::LpeError),
 }
 
 pub type Result<T> = std::result::Result<T, Error>;

@@ -10,10 +10,14 @@ pub mod bsdf;
 pub mod camera;
 pub mod error;
 pub mod film;
+#[doc(hidden)]
+pub mod fuzzing;
 pub mod geometry;
 pub mod integrator;
 pub mod io;
 pub mod light;
+pub mod limits;
+pub mod lpe;
 pub mod math;
 pub mod methods;
 pub mod path;

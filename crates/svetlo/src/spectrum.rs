@@ -2,7 +2,9 @@
 
 use std::ops::{Add, AddAssign, Div, DivAssign, Index, Mul, MulAssign, Neg, Sub, SubAssign};
 
+/// `repr(C)`: an image's `[Rgb]` is a packed `[f32; 3]` array, handed to Python without a copy.
 #[derive(Clone, Copy, Debug, Default, PartialEq)]
+#[repr(C)]
 pub struct Rgb {
     pub r: f32,
     pub g: f32,

@@ -380,8 +380,11 @@ const DOMINANT_SPECULAR: [(&str, [f64; 4]); 4] =
 #[test]
 fn mlt_each_mutation_keeps_f_stationary() {
     let scene = tiny_box();
+    // 2048 mutations per pixel: at 512 the dark cells of the box (a few chain visits per
+    // render, in runs) have skewed per-render estimates, and the t-test fails there on some
+    // seeds for every mutation (seen on 2 of 7 seeds); at 2048 all 7 seeds tried pass.
     for (name, w) in &DOMINANT[..3] {
-        let (sum, max, cells) = mlt_stationary(&scene, *w, [1.0; 4], 16, 512);
+        let (sum, max, cells) = mlt_stationary(&scene, *w, [1.0; 4], 16, 2048);
         print!("{name}: ");
         assert!(t_sum_ok(sum, max, cells, 16), "{name}: the chain's image departs from the path tracer's");
     }

@@ -13,6 +13,7 @@ use crate::geometry::triangle::WatertightRay;
 use crate::geometry::{Aabb, Geometry, Ray, Sphere};
 use glam::Vec3;
 
+#[derive(Clone)]
 pub struct Accel {
     tri_nodes: Vec<Node>,
     tris: Vec<Tri8>,

@@ -85,6 +85,26 @@ fn sampling_mean(t: &Texture, uv: Vec2) -> f32 {
 }
 
 impl Material {
+    /// The Mitsuba plugin name this material stands for (`svetlo info`, Python's `scene.info()`).
+    pub fn kind_name(&self) -> String {
+        let rough = |r: bool, smooth: &str, rough: &str| if r { rough.to_string() } else { smooth.to_string() };
+        match self {
+            Material::Diffuse { .. } => "diffuse".into(),
+            Material::Conductor { roughness, .. } => rough(roughness.is_some(), "conductor", "roughconductor"),
+            Material::Dielectric { roughness, .. } => rough(roughness.is_some(), "dielectric", "roughdielectric"),
+            Material::ThinDielectric { .. } => "thindielectric".into(),
+            Material::Plastic { roughness, .. } => rough(roughness.is_some(), "plastic", "roughplastic"),
+            Material::Phong { .. } => "phong".into(),
+            Material::BlinnPhong { .. } => "blinnphong".into(),
+            Material::CookTorrance { .. } => "cooktorrance".into(),
+            Material::OrenNayar { .. } => "roughdiffuse".into(),
+            Material::Ward { .. } => "ward".into(),
+            Material::TwoSided { front, .. } => format!("twosided({})", front.kind_name()),
+            Material::Mask { inner, .. } => format!("mask({})", inner.kind_name()),
+            Material::Null => "null".into(),
+        }
+    }
+
     /// Does the BSDF not depend on the surface point (no texture but constants)? Then one
     /// `bsdf()` serves every point, which the rasteriser's shading pass exploits.
     pub fn is_uniform(&self) -> bool {

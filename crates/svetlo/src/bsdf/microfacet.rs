@@ -97,44 +97,89 @@ impl Microfacet {
     /// Draw a microfacet normal visible from `v` (upper hemisphere), proportional to
     /// D(m) G1(v, m) max(0, v.m).
     pub fn sample_visible(&self, v: Vec3, u: Vec2) -> Vec3 {
-        match self.kind {
-            MicrofacetKind::Ggx => self.sample_ggx(v, u),
-            MicrofacetKind::Beckmann => self.sample_beckmann(v, u),
+        let s = VisibleSampler::new(self, v);
+        s.combine(s.part_x(u.x), s.part_y(u.y))
+    }
+}
+
+/// Visible-normal sampling for one direction `v`, split into what depends on `v` alone, on
+/// `u.x` alone and on `u.y` alone, so that a quadrature over a grid of `u` (the coating
+/// tables) evaluates the costly one-dimensional parts once per grid line.
+/// [`Microfacet::sample_visible`] is these same pieces, so both agree bit for bit.
+#[derive(Clone, Copy, Debug)]
+pub(crate) enum VisibleSampler {
+    /// Heitz 2018: in the stretched configuration the visible normals of GGX are the
+    /// projection of a uniform disk onto a hemisphere, with the disk's far half squashed.
+    /// `vh` is the stretched view, `t1`, `t2` the disk's axes.
+    Ggx { alpha: (f32, f32), vh: Vec3, t1: Vec3, t2: Vec3, s: f32 },
+    /// Heitz and d'Eon 2014: stretch to alpha = 1, sample the visible slopes there, rotate
+    /// back to the azimuth of `v` and unstretch.
+    Beckmann { alpha: (f32, f32), cos_t: f64, cos_phi: f32, sin_phi: f32 },
+}
+
+impl VisibleSampler {
+    pub(crate) fn new(md: &Microfacet, v: Vec3) -> Self {
+        let alpha = (md.alpha_u, md.alpha_v);
+        match md.kind {
+            MicrofacetKind::Ggx => {
+                let vh = Vec3::new(md.alpha_u * v.x, md.alpha_v * v.y, v.z).normalize();
+                let len2 = vh.x * vh.x + vh.y * vh.y;
+                let t1 = if len2 > 0.0 { Vec3::new(-vh.y, vh.x, 0.0) / len2.sqrt() } else { Vec3::X };
+                VisibleSampler::Ggx { alpha, vh, t1, t2: vh.cross(t1), s: 0.5 * (1.0 + vh.z) }
+            }
+            MicrofacetKind::Beckmann => {
+                let vs = Vec3::new(md.alpha_u * v.x, md.alpha_v * v.y, v.z).normalize();
+                let r = (vs.x * vs.x + vs.y * vs.y).sqrt();
+                let (cos_phi, sin_phi) = if r > 0.0 { (vs.x / r, vs.y / r) } else { (1.0, 0.0) };
+                VisibleSampler::Beckmann { alpha, cos_t: vs.z as f64, cos_phi, sin_phi }
+            }
         }
     }
 
-    /// Heitz 2018: in the stretched configuration the visible normals of GGX are the
-    /// projection of a uniform disk onto a hemisphere, with the disk's far half squashed.
-    fn sample_ggx(&self, v: Vec3, u: Vec2) -> Vec3 {
-        let vh = Vec3::new(self.alpha_u * v.x, self.alpha_v * v.y, v.z).normalize();
-        let len2 = vh.x * vh.x + vh.y * vh.y;
-        let t1 = if len2 > 0.0 { Vec3::new(-vh.y, vh.x, 0.0) / len2.sqrt() } else { Vec3::X };
-        let t2 = vh.cross(t1);
-        let r = u.x.sqrt();
-        let phi = 2.0 * PI * u.y;
-        let p1 = r * phi.cos();
-        let mut p2 = r * phi.sin();
-        let s = 0.5 * (1.0 + vh.z);
-        p2 = (1.0 - s) * (1.0 - p1 * p1).max(0.0).sqrt() + s * p2;
-        let nh = p1 * t1 + p2 * t2 + (1.0 - p1 * p1 - p2 * p2).max(0.0).sqrt() * vh;
-        Vec3::new(self.alpha_u * nh.x, self.alpha_v * nh.y, nh.z.max(1e-7)).normalize()
+    /// What depends on `u.x` only: the disk radius (GGX) or the x slope (Beckmann).
+    #[inline]
+    pub(crate) fn part_x(&self, ux: f32) -> f32 {
+        match *self {
+            VisibleSampler::Ggx { .. } => ux.sqrt(),
+            VisibleSampler::Beckmann { cos_t, .. } => beckmann_slope_x_11(cos_t, ux as f64) as f32,
+        }
     }
 
-    /// Heitz and d'Eon 2014: stretch to alpha = 1, sample the visible slopes there, rotate
-    /// back to the azimuth of `v` and unstretch.
-    fn sample_beckmann(&self, v: Vec3, u: Vec2) -> Vec3 {
-        let vs = Vec3::new(self.alpha_u * v.x, self.alpha_v * v.y, v.z).normalize();
-        let r = (vs.x * vs.x + vs.y * vs.y).sqrt();
-        let (cos_phi, sin_phi) = if r > 0.0 { (vs.x / r, vs.y / r) } else { (1.0, 0.0) };
-        let (sx, sy) = beckmann_slopes_11(vs.z as f64, u.x as f64, u.y as f64);
-        let (sx, sy) = (sx as f32, sy as f32);
-        let px = (cos_phi * sx - sin_phi * sy) * self.alpha_u;
-        let py = (sin_phi * sx + cos_phi * sy) * self.alpha_v;
-        let m = Vec3::new(-px, -py, 1.0).normalize();
-        if m.is_finite() {
-            m
-        } else {
-            Vec3::Z
+    /// What depends on `u.y` only (and not on `v`): the disk angle's cosine and sine (GGX)
+    /// or the y slope (Beckmann, second value unused).
+    #[inline]
+    pub(crate) fn part_y(&self, uy: f32) -> (f32, f32) {
+        match *self {
+            VisibleSampler::Ggx { .. } => {
+                let phi = 2.0 * PI * uy;
+                (phi.cos(), phi.sin())
+            }
+            VisibleSampler::Beckmann { .. } => (erfinv_approx(2.0 * uy as f64 - 1.0) as f32, 0.0),
+        }
+    }
+
+    /// The microfacet normal from the two parts.
+    #[inline]
+    pub(crate) fn combine(&self, x: f32, y: (f32, f32)) -> Vec3 {
+        match *self {
+            VisibleSampler::Ggx { alpha, vh, t1, t2, s } => {
+                let p1 = x * y.0;
+                let mut p2 = x * y.1;
+                p2 = (1.0 - s) * (1.0 - p1 * p1).max(0.0).sqrt() + s * p2;
+                let nh = p1 * t1 + p2 * t2 + (1.0 - p1 * p1 - p2 * p2).max(0.0).sqrt() * vh;
+                Vec3::new(alpha.0 * nh.x, alpha.1 * nh.y, nh.z.max(1e-7)).normalize()
+            }
+            VisibleSampler::Beckmann { alpha, cos_phi, sin_phi, .. } => {
+                let (sx, sy) = (x, y.0);
+                let px = (cos_phi * sx - sin_phi * sy) * alpha.0;
+                let py = (sin_phi * sx + cos_phi * sy) * alpha.1;
+                let m = Vec3::new(-px, -py, 1.0).normalize();
+                if m.is_finite() {
+                    m
+                } else {
+                    Vec3::Z
+                }
+            }
         }
     }
 }
@@ -178,11 +223,12 @@ fn erfinv_approx(x: f64) -> f64 {
     p * x
 }
 
-/// Visible slopes of the alpha = 1 Beckmann distribution seen at incidence cosine
-/// `cos_t` (azimuth 0). The x slope has density ∝ exp(-x²) (1 - x tanθ) on x < cot θ,
-/// whose CDF is C(x) = erfc(-x)/2 + tanθ exp(-x²) / (2√π); the y slope is Gaussian with
-/// density exp(-y²)/√π (the same CDF with tanθ = 0).
-fn beckmann_slopes_11(cos_t: f64, u1: f64, u2: f64) -> (f64, f64) {
+/// The x slope of the alpha = 1 Beckmann distribution's visible normals seen at incidence
+/// cosine `cos_t` (azimuth 0). It has density ∝ exp(-x²) (1 - x tanθ) on x < cot θ, whose
+/// CDF is C(x) = erfc(-x)/2 + tanθ exp(-x²) / (2√π). The y slope is Gaussian with density
+/// exp(-y²)/√π (the same CDF with tanθ = 0), whose inverse CDF is erfinv itself (Giles' fit
+/// is accurate to f32 precision).
+fn beckmann_slope_x_11(cos_t: f64, u1: f64) -> f64 {
     let cos_t = cos_t.clamp(1e-8, 1.0);
     let tan_t = (1.0 - cos_t * cos_t).max(0.0).sqrt() / cos_t;
     let x_max = if tan_t > 1e-8 { (1.0 / tan_t).min(8.0) } else { 8.0 };
@@ -191,13 +237,10 @@ fn beckmann_slopes_11(cos_t: f64, u1: f64, u2: f64) -> (f64, f64) {
     let u1c = u1.clamp(1e-12, 1.0 - 1e-12);
     let max_erf = 1.0 - erfc(x_max);
     let g = max_erf - (max_erf + 1.0) * (1.0 - erfc((-u1c.ln()).sqrt()));
-    let x = invert_slope_cdf(tan_t, u1, x_max, erfinv_approx(g));
-    // The y slope's inverse CDF is erfinv itself; Giles' fit is accurate to f32 precision.
-    let y = erfinv_approx(2.0 * u2 - 1.0);
-    (x, y)
+    invert_slope_cdf(tan_t, u1, x_max, erfinv_approx(g))
 }
 
-/// Solve C(x) = u C(x_max) for x in [-8, x_max], with C as in [`beckmann_slopes_11`]:
+/// Solve C(x) = u C(x_max) for x in [-8, x_max], with C as in [`beckmann_slope_x_11`]:
 /// Newton steps from `guess`, kept inside a shrinking bracket (bisection when Newton
 /// leaves it), so that it always converges.
 fn invert_slope_cdf(tan_t: f64, u: f64, x_max: f64, guess: f64) -> f64 {

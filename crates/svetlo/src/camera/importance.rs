@@ -67,14 +67,74 @@ impl Camera {
         matches!(self.perspective_params(), Some((r, _)) if r == 0.0)
     }
 
-    fn to_camera(&self) -> Mat4 {
-        self.to_world.inverse()
+    /// The camera's constants for connections, computed once (a matrix inverse and a
+    /// tangent): None for the orthographic camera. Methods that connect many times keep it
+    /// (`PathConfig::lens`); it goes stale if the camera is changed afterwards.
+    pub fn lens_connector(&self) -> Option<LensConnector> {
+        let (radius, focus) = self.perspective_params()?;
+        Some(LensConnector {
+            to_world: self.to_world,
+            to_camera: self.to_world.inverse(),
+            radius,
+            focus,
+            half: self.film_half_extent(),
+            film_area: self.film_area(),
+            lens_area: self.lens_area(),
+            size: Vec2::new(self.width as f32, self.height as f32),
+            near_clip: self.near_clip,
+            far_clip: self.far_clip,
+            n_lens: self.to_world.transform_vector3(Vec3::Z).normalize_or_zero(),
+        })
     }
 
+    /// Importance carried by a world-space ray leaving the camera, and where it lands on
+    /// the film; None outside the film or the lens. For a thin lens the ray's origin is
+    /// moved along it to the lens plane.
+    pub fn we(&self, ray: &Ray) -> Option<(f32, Vec2)> {
+        self.lens_connector()?.we(ray)
+    }
+
+    /// Densities (pdf_pos per unit lens area, pdf_dir per unit solid angle) with which
+    /// `generate_ray` produces `ray` from uniform film and lens samples; zeros outside.
+    pub fn pdf_we(&self, ray: &Ray) -> (f32, f32) {
+        self.lens_connector().map_or((0.0, 0.0), |c| c.pdf_we(ray))
+    }
+
+    /// Choose a point on the lens (uniform by area; the center for a pinhole) and connect
+    /// `p_ref` to it. None if `p_ref` is outside the near/far range or the connection
+    /// misses the film.
+    pub fn sample_wi(&self, p_ref: Vec3, u: Vec2) -> Option<CameraSample> {
+        self.lens_connector()?.sample_wi(p_ref, u)
+    }
+}
+
+/// A perspective camera's importance, densities and lens connections with its constants
+/// (inverse transform, film extent, areas) computed once: [`Camera::lens_connector`].
+/// The same arithmetic as the camera's own methods, which are made of it.
+#[derive(Clone, Copy, Debug)]
+pub struct LensConnector {
+    to_world: Mat4,
+    to_camera: Mat4,
+    radius: f32,
+    focus: f32,
+    /// Half extent of the film on the plane z = 1.
+    half: Vec2,
+    film_area: f32,
+    lens_area: f32,
+    /// Film width and height in pixels.
+    size: Vec2,
+    near_clip: f32,
+    far_clip: f32,
+    /// The camera's forward axis (world space).
+    n_lens: Vec3,
+}
+
+impl LensConnector {
     /// Importance and raster position of a ray leaving the lens at camera-space point
     /// `o` (z = 0; ignored for a pinhole) in unit camera-space direction `d`.
+    #[inline]
     fn we_local(&self, o: Vec3, d: Vec3) -> Option<(f32, Vec2)> {
-        let (radius, focus) = self.perspective_params()?;
+        let (radius, focus) = (self.radius, self.focus);
         let cos_t = d.z;
         if cos_t <= 0.0 {
             return None;
@@ -87,20 +147,20 @@ impl Camera {
         } else {
             Vec2::new(d.x, d.y) / cos_t
         };
-        let raster = self.camera_to_raster(q);
-        if !(raster.x >= 0.0 && raster.y >= 0.0 && raster.x < self.width as f32 && raster.y < self.height as f32) {
+        // Camera space to raster (+x of camera space is the image's left, +y its top).
+        let ndc = 0.5 * (Vec2::ONE - q / self.half);
+        let raster = Vec2::new(ndc.x * self.size.x, ndc.y * self.size.y);
+        if !(raster.x >= 0.0 && raster.y >= 0.0 && raster.x < self.size.x && raster.y < self.size.y) {
             return None;
         }
         let cos2 = cos_t * cos_t;
-        Some((1.0 / (self.film_area() * self.lens_area() * cos2 * cos2), raster))
+        Some((1.0 / (self.film_area * self.lens_area * cos2 * cos2), raster))
     }
 
-    /// Importance carried by a world-space ray leaving the camera, and where it lands on
-    /// the film; None outside the film or the lens. For a thin lens the ray's origin is
-    /// moved along it to the lens plane.
+    /// [`Camera::we`].
     pub fn we(&self, ray: &Ray) -> Option<(f32, Vec2)> {
-        let (radius, _) = self.perspective_params()?;
-        let m = self.to_camera();
+        let radius = self.radius;
+        let m = self.to_camera;
         let d = m.transform_vector3(ray.d).normalize_or_zero();
         let mut o = m.transform_point3(ray.o);
         if radius > 0.0 {
@@ -115,24 +175,25 @@ impl Camera {
         self.we_local(o, d)
     }
 
-    /// Densities (pdf_pos per unit lens area, pdf_dir per unit solid angle) with which
-    /// `generate_ray` produces `ray` from uniform film and lens samples; zeros outside.
+    /// [`Camera::pdf_we`].
     pub fn pdf_we(&self, ray: &Ray) -> (f32, f32) {
         if self.we(ray).is_none() {
             return (0.0, 0.0);
         }
-        let d = self.to_camera().transform_vector3(ray.d).normalize_or_zero();
-        let pdf_pos = if self.is_pinhole() { 0.0 } else { 1.0 / self.lens_area() };
-        (pdf_pos, 1.0 / (self.film_area() * d.z * d.z * d.z))
+        let d = self.to_camera.transform_vector3(ray.d).normalize_or_zero();
+        let pdf_pos = if self.radius == 0.0 { 0.0 } else { 1.0 / self.lens_area };
+        (pdf_pos, 1.0 / (self.film_area * d.z * d.z * d.z))
     }
 
-    /// Choose a point on the lens (uniform by area; the center for a pinhole) and connect
-    /// `p_ref` to it. None if `p_ref` is outside the near/far range or the connection
-    /// misses the film.
+    /// The world-to-camera transform.
+    pub fn to_camera(&self) -> Mat4 {
+        self.to_camera
+    }
+
+    /// [`Camera::sample_wi`].
     pub fn sample_wi(&self, p_ref: Vec3, u: Vec2) -> Option<CameraSample> {
-        let (radius, _) = self.perspective_params()?;
-        let m = self.to_camera();
-        let p = m.transform_point3(p_ref);
+        let radius = self.radius;
+        let p = self.to_camera.transform_point3(p_ref);
         if p.z < self.near_clip || p.z > self.far_clip {
             return None;
         }
@@ -145,11 +206,10 @@ impl Camera {
         }
         let d = to_ref / dist2.sqrt();
         let (we, raster) = self.we_local(o, d)?;
-        let pdf = dist2 / (d.z * self.lens_area());
+        let pdf = dist2 / (d.z * self.lens_area);
         let p_lens = self.to_world.transform_point3(o);
         let wi = (p_lens - p_ref).normalize_or_zero();
-        let n_lens = self.to_world.transform_vector3(Vec3::Z).normalize_or_zero();
-        Some(CameraSample { we, wi, pdf, raster, p_lens, n_lens })
+        Some(CameraSample { we, wi, pdf, raster, p_lens, n_lens: self.n_lens })
     }
 }
 

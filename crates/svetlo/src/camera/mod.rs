@@ -10,7 +10,7 @@
 
 mod importance;
 
-pub use importance::CameraSample;
+pub use importance::{CameraSample, LensConnector};
 
 use crate::geometry::Ray;
 use crate::math::warp;
@@ -76,12 +76,6 @@ impl Camera {
         let ndc = Vec2::new(raster.x / self.width as f32, raster.y / self.height as f32);
         // +x of camera space is the image's left, +y its top.
         (Vec2::ONE - 2.0 * ndc) * half
-    }
-
-    /// Inverse of `raster_to_camera`.
-    fn camera_to_raster(&self, c: Vec2) -> Vec2 {
-        let ndc = 0.5 * (Vec2::ONE - c / self.film_half_extent());
-        Vec2::new(ndc.x * self.width as f32, ndc.y * self.height as f32)
     }
 
     /// The ray through raster position `raster`, lens sample `lens` in [0,1)^2 and time

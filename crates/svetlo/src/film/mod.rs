@@ -35,11 +35,46 @@ pub struct FilmTile {
     pub y1: u32,
     filter: Filter,
     pixels: Vec<Pixel>,
+    /// Per AOV layer: filter-weighted sums, sharing the beauty's weights.
+    layers: Vec<Vec<Rgb>>,
 }
 
 impl FilmTile {
     pub fn new(x0: u32, y0: u32, x1: u32, y1: u32, filter: Filter) -> Self {
-        FilmTile { x0, y0, x1, y1, filter, pixels: vec![Pixel::default(); ((x1 - x0) * (y1 - y0)) as usize] }
+        FilmTile { x0, y0, x1, y1, filter, pixels: vec![Pixel::default(); ((x1 - x0) * (y1 - y0)) as usize], layers: Vec::new() }
+    }
+
+    /// Add a sample to the beauty and, with the same filter weights, `aov[i]` to layer i.
+    pub fn add_sample_layers(&mut self, p: Vec2, l: Rgb, aov: &[Rgb]) {
+        self.add_sample(p, l);
+        let r = self.filter.radius();
+        let w = self.x1 - self.x0;
+        let xmin = (-floor_i(-(p.x - 0.5 - r))).max(self.x0 as i64);
+        let xmax = floor_i(p.x - 0.5 + r).min(self.x1 as i64 - 1);
+        let ymin = (-floor_i(-(p.y - 0.5 - r))).max(self.y0 as i64);
+        let ymax = floor_i(p.y - 0.5 + r).min(self.y1 as i64 - 1);
+        for (layer, &v) in self.layers.iter_mut().zip(aov) {
+            let v = if v.is_finite() { v } else { Rgb::BLACK };
+            if v.is_black() {
+                continue;
+            }
+            if self.filter == Filter::Box {
+                let (ox, oy) = (floor_i(p.x), floor_i(p.y));
+                if ox >= self.x0 as i64 && oy >= self.y0 as i64 && ox < self.x1 as i64 && oy < self.y1 as i64 {
+                    layer[((oy as u32 - self.y0) * w + (ox as u32 - self.x0)) as usize] += v;
+                }
+                continue;
+            }
+            for y in ymin..=ymax {
+                let fy = self.filter.eval(y as f32 + 0.5 - p.y);
+                for x in xmin..=xmax {
+                    let wgt = fy * self.filter.eval(x as f32 + 0.5 - p.x);
+                    if wgt != 0.0 {
+                        layer[((y as u32 - self.y0) * w + (x as u32 - self.x0)) as usize] += v * wgt;
+                    }
+                }
+            }
+        }
     }
 
     /// Add a sample taken at raster position `p` (pixels, origin top-left). The filter spreads it
@@ -107,18 +142,85 @@ pub struct Film {
     pub splat_scale: f32,
     /// Samples per pixel actually taken (the render may have been cancelled).
     pub spp_done: u32,
+    /// Names of the AOV layers (light path expressions), in order.
+    layer_names: Vec<String>,
+    /// Per layer: splats, scaled like the beauty's.
+    layer_splats: Vec<Vec<Rgb>>,
 }
 
 impl Film {
     pub fn new(width: u32, height: u32, filter: Filter) -> Self {
-        Film { width, height, filter, full: FilmTile::new(0, 0, width, height, filter), splats: Vec::new(), splat_scale: 1.0, spp_done: 0 }
+        Film {
+            width,
+            height,
+            filter,
+            full: FilmTile::new(0, 0, width, height, filter),
+            splats: Vec::new(),
+            splat_scale: 1.0,
+            spp_done: 0,
+            layer_names: Vec::new(),
+            layer_splats: Vec::new(),
+        }
+    }
+
+    /// A film with AOV layers of these names beside the beauty.
+    pub fn with_layers(width: u32, height: u32, filter: Filter, names: &[String]) -> Self {
+        let mut f = Film::new(width, height, filter);
+        f.layer_names = names.to_vec();
+        f.full.layers = vec![vec![Rgb::BLACK; (width * height) as usize]; names.len()];
+        f.layer_splats = vec![Vec::new(); names.len()];
+        f
+    }
+
+    /// The AOV layers' names, in order.
+    pub fn layer_names(&self) -> &[String] {
+        &self.layer_names
+    }
+
+    /// Add an unfiltered contribution to layer `i` (see [`Film::splat`]).
+    pub fn splat_layer(&mut self, i: usize, p: Vec2, l: Rgb) {
+        if !l.is_finite() || p.x < 0.0 || p.y < 0.0 || i >= self.layer_splats.len() {
+            return;
+        }
+        let (x, y) = (p.x as u32, p.y as u32);
+        if x >= self.width || y >= self.height {
+            return;
+        }
+        let buf = &mut self.layer_splats[i];
+        if buf.is_empty() {
+            *buf = vec![Rgb::BLACK; (self.width * self.height) as usize];
+        }
+        buf[(y * self.width + x) as usize] += l;
+    }
+
+    /// Layer `i` developed like the beauty: its filtered sums over the beauty's weights plus
+    /// its scaled splats.
+    pub fn layer_image(&self, i: usize) -> Image {
+        let sums = &self.full.layers[i];
+        let mut data: Vec<Rgb> = self.full.pixels.iter().zip(sums).map(|(p, s)| if p.weight > 0.0 { *s / p.weight as f32 } else { Rgb::BLACK }).collect();
+        for (d, s) in data.iter_mut().zip(&self.layer_splats[i]) {
+            *d += *s / self.splat_scale;
+        }
+        Image::new(self.width as usize, self.height as usize, data)
+    }
+
+    /// Every layer by name, developed.
+    pub fn layer_images(&self) -> Vec<(String, Image)> {
+        self.layer_names.iter().enumerate().map(|(i, n)| (n.clone(), self.layer_image(i))).collect()
+    }
+
+    /// The developed layer called `name`.
+    pub fn layer(&self, name: &str) -> Option<Image> {
+        self.layer_names.iter().position(|n| n == name).map(|i| self.layer_image(i))
     }
 
     /// A tile covering `[x0,x1) x [y0,y1)` of this film, to be filled and merged back.
     pub fn tile(&self, x0: u32, y0: u32, x1: u32, y1: u32) -> FilmTile {
         // Extend by the filter radius so samples near the border reach neighbours.
         let r = self.filter.radius().ceil() as u32;
-        FilmTile::new(x0.saturating_sub(r), y0.saturating_sub(r), (x1 + r).min(self.width), (y1 + r).min(self.height), self.filter)
+        let mut t = FilmTile::new(x0.saturating_sub(r), y0.saturating_sub(r), (x1 + r).min(self.width), (y1 + r).min(self.height), self.filter);
+        t.layers = vec![vec![Rgb::BLACK; t.pixels.len()]; self.layer_names.len()];
+        t
     }
 
     pub fn merge_tile(&mut self, t: &FilmTile) {
@@ -132,6 +234,13 @@ impl Film {
                 d.s1 += s.s1;
                 d.s2 += s.s2;
                 d.n += s.n;
+            }
+        }
+        for (dl, sl) in self.full.layers.iter_mut().zip(&t.layers) {
+            for y in t.y0..t.y1 {
+                for x in t.x0..t.x1 {
+                    dl[(y * self.width + x) as usize] += sl[((y - t.y0) * tw + (x - t.x0)) as usize];
+                }
             }
         }
     }

@@ -19,23 +19,33 @@ pub fn rectangle() -> TriangleMesh {
 }
 
 /// Mitsuba `cube`: [-1,1]³ with outward normals; each face has its own four vertices
-/// (flat normals) and uvs spanning [0,1]² across the face.
+/// (flat normals). Corners, their order and uvs follow Mitsuba 3's cube mesh (read from its
+/// `vertex_positions_buffer` / `vertex_texcoords_buffer`), so textures land as there: the
+/// corners (c0, c1, c2, c3) get uvs (0,1), (1,1), (1,0), (0,0), triangles (0,1,2), (3,0,2).
 pub fn cube() -> TriangleMesh {
+    // Each face: its outward normal and corner c0, with c1 = c0 + 2 a, c2 = c1 + 2 b, c3 = c0 + 2 b.
+    let faces: [([f32; 3], [f32; 3], [f32; 3]); 6] = [
+        ([0.0, -1.0, 0.0], [1.0, -1.0, -1.0], [0.0, 0.0, 1.0]),
+        ([0.0, 1.0, 0.0], [1.0, 1.0, -1.0], [-1.0, 0.0, 0.0]),
+        ([1.0, 0.0, 0.0], [1.0, -1.0, -1.0], [0.0, 1.0, 0.0]),
+        ([0.0, 0.0, 1.0], [1.0, -1.0, 1.0], [0.0, 1.0, 0.0]),
+        ([-1.0, 0.0, 0.0], [-1.0, -1.0, 1.0], [0.0, 1.0, 0.0]),
+        ([0.0, 0.0, -1.0], [1.0, 1.0, -1.0], [0.0, -1.0, 0.0]),
+    ];
     let mut m = TriangleMesh::default();
-    // For each face: the outward normal and two in-plane axes with s × t = n.
-    let faces = [(Vec3::X, Vec3::Y, Vec3::Z), (Vec3::Y, Vec3::Z, Vec3::X), (Vec3::Z, Vec3::X, Vec3::Y)];
-    for (n, s, t) in faces {
-        for sign in [1.0f32, -1.0] {
-            let (n, s) = (n * sign, s * sign);
-            let base = m.positions.len() as u32;
-            for (a, b) in [(-1.0, -1.0), (1.0, -1.0), (1.0, 1.0), (-1.0, 1.0)] {
-                m.positions.push(n + s * a + t * b);
-                m.normals.push(n);
-                m.uvs.push(Vec2::new(0.5 * (a + 1.0), 0.5 * (b + 1.0)));
-            }
-            m.indices.push([base, base + 1, base + 2]);
-            m.indices.push([base, base + 2, base + 3]);
+    for (n, c0, a) in faces {
+        let (n, c0, a) = (Vec3::from(n), Vec3::from(c0), Vec3::from(a));
+        // The second edge runs so that (c1 - c0) x (c2 - c1) points along n.
+        let b = n.cross(a);
+        let base = m.positions.len() as u32;
+        let corners = [c0, c0 + 2.0 * a, c0 + 2.0 * a + 2.0 * b, c0 + 2.0 * b];
+        for (p, uv) in corners.into_iter().zip([Vec2::new(0.0, 1.0), Vec2::new(1.0, 1.0), Vec2::new(1.0, 0.0), Vec2::ZERO]) {
+            m.positions.push(p);
+            m.normals.push(n);
+            m.uvs.push(uv);
         }
+        m.indices.push([base, base + 1, base + 2]);
+        m.indices.push([base + 3, base, base + 2]);
     }
     m
 }
@@ -161,6 +171,38 @@ mod tests {
         for t in 0..12 {
             let (ng, ns, _, _) = m.surface(t, 0.3, 0.3);
             assert!(ng.dot(ns) > 0.999);
+        }
+    }
+
+    /// uvs at points of each face as Mitsuba 3.9.1's cube gives them (ray hits).
+    #[test]
+    fn cube_uvs_match_mitsuba() {
+        let m = cube();
+        let cases = [
+            ([1.0, 0.5, 0.2], [0.75, 0.4]),
+            ([-1.0, 0.5, 0.2], [0.75, 0.6]),
+            ([0.3, 1.0, -0.6], [0.35, 0.8]),
+            ([0.3, -1.0, -0.6], [0.2, 0.65]),
+            ([0.3, -0.4, 1.0], [0.3, 0.65]),
+            ([0.3, -0.4, -1.0], [0.7, 0.65]),
+        ];
+        for (p, want) in cases {
+            let p = Vec3::from(p);
+            // The triangle containing p: barycentrics from the plane's 2-D solve.
+            let hit = (0..m.triangle_count()).find_map(|t| {
+                let [a, b, c] = m.vertices(t);
+                let n = (b - a).cross(c - a);
+                if n.dot(p - a).abs() > 1e-5 {
+                    return None;
+                }
+                let (v0, v1, v2) = (b - a, c - a, p - a);
+                let (d00, d01, d11, d20, d21) = (v0.dot(v0), v0.dot(v1), v1.dot(v1), v2.dot(v0), v2.dot(v1));
+                let den = d00 * d11 - d01 * d01;
+                let (b1, b2) = ((d11 * d20 - d01 * d21) / den, (d00 * d21 - d01 * d20) / den);
+                (b1 >= -1e-6 && b2 >= -1e-6 && b1 + b2 <= 1.0 + 1e-6).then(|| m.uv(t, b1, b2))
+            });
+            let uv = hit.expect("a face contains the point");
+            assert!((uv - Vec2::from(want)).abs().max_element() < 1e-5, "{p}: {uv} vs Mitsuba {want:?}");
         }
     }
 

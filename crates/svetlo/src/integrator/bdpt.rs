@@ -15,6 +15,7 @@ use super::{Integrator, Progress, RenderSettings};
 use crate::error::Result;
 use crate::film::{Film, Image};
 use crate::geometry::Ray;
+use crate::lpe::{AovSet, Event, LayerMask, LightTracker, Tracker};
 use crate::path::{camera_subpath, connect, light_subpath, Connection, PathConfig, Vertex};
 use crate::sampling::Sampler;
 use crate::scene::Scene;
@@ -58,17 +59,21 @@ impl SplatEstimator for Estimator {
     fn scratch(&self) -> Scratch {
         Scratch { camera: Vec::with_capacity(16), light: Vec::with_capacity(16) }
     }
+    fn supports_lpe(&self) -> bool {
+        // The per-strategy images are beauty only.
+        self.index.is_empty()
+    }
     fn sample(
         &self,
         scene: &Scene,
-        _settings: &RenderSettings,
+        settings: &RenderSettings,
         ray: &Ray,
         raster: Vec2,
         sampler: &mut dyn Sampler,
         sc: &mut Scratch,
         out: &mut SampleOut,
     ) -> Rgb {
-        sample_bdpt(scene, &self.cfg, ray, raster, sampler, sc, out, |_, _, s, t, c, v, out| {
+        sample_bdpt(scene, settings, &self.cfg, ray, raster, sampler, sc, out, |_, _, s, t, c, v, out| {
             if let Some(k) = self.strategy(s, t) {
                 let at = c.raster.unwrap_or(raster);
                 out.push(1 + 2 * k, at, v);
@@ -87,6 +92,7 @@ impl SplatEstimator for Estimator {
 #[allow(clippy::too_many_arguments)]
 pub(crate) fn sample_bdpt(
     scene: &Scene,
+    settings: &RenderSettings,
     cfg: &PathConfig,
     ray: &Ray,
     raster: Vec2,
@@ -97,8 +103,17 @@ pub(crate) fn sample_bdpt(
 ) -> Rgb {
     camera_subpath(scene, cfg, ray, raster, sampler, &mut sc.camera);
     light_subpath(scene, cfg, ray.time, sampler, &mut sc.light);
+    let aovs = settings.aovs();
     let mut l = Rgb::BLACK;
+    // With AOVs: the camera prefix's automata over camera[0..t-1] (the vertices before the
+    // connected one), advanced as t grows.
+    let mut cam_events = Tracker::camera(aovs);
     for t in 1..=sc.camera.len() {
+        if t >= 3 {
+            if let Some(e) = aovs.sampled_event(&sc.camera[t - 2]) {
+                cam_events.push(e);
+            }
+        }
         for s in 0..=sc.light.len() {
             if s + t < 2 || !cfg.allows(s + t) {
                 continue;
@@ -108,13 +123,47 @@ pub(crate) fn sample_bdpt(
             if !visit(&sc.light, &sc.camera, s, t, &c, v, out) {
                 continue;
             }
+            let mask = if aovs.is_empty() { crate::lpe::aov::BEAUTY } else { connection_layers(scene, aovs, &sc.light, &sc.camera, s, t, &c, &cam_events) };
             match c.raster {
-                Some(r) => out.splat(r, v),
-                None => l += v,
+                Some(r) => out.splat_layers(mask, r, v),
+                None => {
+                    l += v;
+                    out.layers.add(mask, v);
+                }
             }
         }
     }
     l
+}
+
+/// The layers that take strategy (s, t)'s path: the camera prefix forward (`cam`: its
+/// events before vertex t - 1), the light subpath backward, and the two connected vertices'
+/// events toward each other.
+#[allow(clippy::too_many_arguments)]
+fn connection_layers(scene: &Scene, aovs: &AovSet, light: &[Vertex], camera: &[Vertex], s: usize, t: usize, c: &Connection, cam: &Tracker) -> LayerMask {
+    let mut cam = *cam;
+    if s == 0 {
+        // The camera subpath found an emitter (or escaped) at vertex t - 1.
+        return cam.ends(aovs.endpoint_event(scene, &camera[t - 1]));
+    }
+    let mut lt = if s == 1 && t >= 2 {
+        let sampled = c.sampled_light.map_or(Event::BACKGROUND, |li| aovs.emitter_event(&scene.lights[li as usize]));
+        LightTracker::light(aovs, sampled)
+    } else {
+        LightTracker::along(aovs, scene, light, (s - 1).max(1))
+    };
+    if t == 1 {
+        if s >= 2 {
+            lt.push(aovs.connected_event(&light[s - 1], c.sampled_p));
+        }
+        return lt.meets_camera();
+    }
+    let toward = if s == 1 { c.sampled_p } else { light[s - 1].p };
+    cam.push(aovs.connected_event(&camera[t - 1], toward));
+    if s >= 2 {
+        lt.push(aovs.connected_event(&light[s - 1], camera[t - 1].p));
+    }
+    lt.meets(&cam)
 }
 
 impl Bdpt {

@@ -41,7 +41,7 @@ impl Integrator for Distributed {
 
 impl PixelEstimator for Distributed {
     fn li(&self, scene: &Scene, camera_ray: &Ray, sampler: &mut dyn Sampler, settings: &RenderSettings) -> Rgb {
-        camera_walk(scene, camera_ray, sampler, settings, &mut CookRules)
+        camera_walk(scene, camera_ray, sampler, settings, &mut CookRules, &mut Default::default())
     }
 }
 

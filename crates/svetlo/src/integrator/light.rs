@@ -12,6 +12,7 @@ use super::{Integrator, Progress, RenderSettings};
 use crate::error::{Error, Result};
 use crate::film::Film;
 use crate::geometry::Ray;
+use crate::lpe::LightTracker;
 use crate::path::{connect, light_subpath, PathConfig, Vertex};
 use crate::sampling::Sampler;
 use crate::scene::Scene;
@@ -33,7 +34,7 @@ impl SplatEstimator for Estimator {
     fn sample(
         &self,
         scene: &Scene,
-        _settings: &RenderSettings,
+        settings: &RenderSettings,
         ray: &Ray,
         _raster: Vec2,
         sampler: &mut dyn Sampler,
@@ -41,14 +42,33 @@ impl SplatEstimator for Estimator {
         out: &mut SampleOut,
     ) -> Rgb {
         light_subpath(scene, &self.cfg, ray.time, sampler, path);
+        // With AOVs: the reverse automata's states over the vertices before the connected one.
+        let aovs = settings.aovs();
+        let mut events = (!aovs.is_empty() && !path.is_empty()).then(|| LightTracker::light(aovs, aovs.endpoint_event(scene, &path[0])));
         for s in 1..=path.len() {
             if let Some(c) = connect(scene, &self.cfg, path, &[], s, 1, sampler, false) {
                 if let Some(r) = c.raster {
-                    out.splat(r, c.l);
+                    match events {
+                        None => out.splat(r, c.l),
+                        Some(mut e) => {
+                            if s >= 2 {
+                                e.push(aovs.connected_event(&path[s - 1], c.sampled_p));
+                            }
+                            out.splat_layers(e.meets_camera(), r, c.l);
+                        }
+                    }
+                }
+            }
+            if let (Some(e), true) = (events.as_mut(), s >= 2) {
+                if let Some(ev) = aovs.sampled_event(&path[s - 1]) {
+                    e.push(ev);
                 }
             }
         }
         Rgb::BLACK
+    }
+    fn supports_lpe(&self) -> bool {
+        true
     }
 }
 

@@ -45,6 +45,8 @@ pub struct RenderSettings {
     pub filter: Filter,
     /// Do not show emitters seen directly by the camera.
     pub hide_emitters: bool,
+    /// AOVs by light path expression and the beauty's restriction (None: neither).
+    pub lpe: Option<std::sync::Arc<crate::lpe::AovSet>>,
 }
 
 impl Default for RenderSettings {
@@ -59,6 +61,7 @@ impl Default for RenderSettings {
             sampler: SamplerKind::Independent,
             filter: Filter::default(),
             hide_emitters: false,
+            lpe: None,
         }
     }
 }
@@ -92,6 +95,21 @@ impl RenderSettings {
         Ok(())
     }
 
+    /// The render's AOVs (the empty set when there are none).
+    #[inline]
+    pub fn aovs(&self) -> &crate::lpe::AovSet {
+        self.lpe.as_deref().unwrap_or(crate::lpe::AovSet::empty())
+    }
+
+    /// An error when AOVs or a beauty restriction are asked of a method that cannot route
+    /// its contributions by path.
+    pub fn check_lpe_support(&self, method: &str, supported: bool) -> Result<()> {
+        if !supported && !self.aovs().is_empty() {
+            return Err(Error::Settings(format!("{method} does not support light path expressions (AOVs or --lpe)")));
+        }
+        Ok(())
+    }
+
     /// Whether a path may have `segments` segments.
     #[inline]
     pub fn depth_allows(&self, segments: i32) -> bool {
@@ -99,19 +117,51 @@ impl RenderSettings {
     }
 }
 
+/// Called with the film as it stands after each complete pass (camera methods), round of
+/// mutations (Metropolis) or iteration (SPPM), on the render's own thread: it should copy what
+/// it needs and return quickly (the preview develops the image and hands it to its server).
+pub type PassObserver = dyn Fn(&Film) + Send + Sync;
+
 /// Progress of a render, shared with whoever shows it; setting `cancel` stops the render
 /// after the current pass, keeping the samples done.
-#[derive(Debug, Default)]
+#[derive(Default)]
 pub struct Progress {
     /// Work units done and planned (samples x pixels, or the method's own unit).
     pub done: AtomicU64,
     pub total: AtomicU64,
     pub cancel: AtomicBool,
+    /// Who watches the film form; `None` costs one branch per pass.
+    observer: Option<Box<PassObserver>>,
+}
+
+impl std::fmt::Debug for Progress {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("Progress")
+            .field("done", &self.done)
+            .field("total", &self.total)
+            .field("cancel", &self.cancel)
+            .field("observed", &self.observer.is_some())
+            .finish()
+    }
 }
 
 impl Progress {
     pub fn new() -> Self {
         Self::default()
+    }
+    /// Progress whose film is shown to `observer` after every pass.
+    pub fn observed(observer: impl Fn(&Film) + Send + Sync + 'static) -> Self {
+        Progress { observer: Some(Box::new(observer)), ..Self::default() }
+    }
+    /// Whether anyone watches (methods whose intermediate film costs work to develop ask).
+    pub fn is_observed(&self) -> bool {
+        self.observer.is_some()
+    }
+    /// A pass is complete: show the film to the observer, if any.
+    pub fn pass_done(&self, film: &Film) {
+        if let Some(o) = &self.observer {
+            o(film);
+        }
     }
     pub fn cancelled(&self) -> bool {
         self.cancel.load(Ordering::Relaxed)
@@ -138,6 +188,21 @@ pub trait Integrator: Sync {
 /// Radiance along one camera ray: the core of every camera-side method.
 pub trait PixelEstimator: Sync {
     fn li(&self, scene: &Scene, ray: &crate::geometry::Ray, sampler: &mut dyn Sampler, settings: &RenderSettings) -> Rgb;
+    /// [`Self::li`] that also reports each contribution with the layers its path matches
+    /// (`settings.aovs()`); estimators that do say so in [`Self::supports_lpe`].
+    fn li_layers(
+        &self,
+        scene: &Scene,
+        ray: &crate::geometry::Ray,
+        sampler: &mut dyn Sampler,
+        settings: &RenderSettings,
+        _layers: &mut crate::lpe::aov::LayerSample,
+    ) -> Rgb {
+        self.li(scene, ray, sampler, settings)
+    }
+    fn supports_lpe(&self) -> bool {
+        false
+    }
 }
 
 /// Run a pixel estimator over the film: passes of a few samples per pixel over all tiles in
@@ -182,6 +247,9 @@ impl splat::SplatEstimator for TileKernel<'_, '_> {
     fn render_tile(&self, t: splat::TileJob, _: &mut dyn Sampler, _: &mut (), _: &mut Vec<splat::Splat>) {
         (self.0)(t.tile, t.rect, t.s0, t.n)
     }
+    fn supports_lpe(&self) -> bool {
+        false
+    }
 }
 
 /// A pixel estimator seen as a splatting one that never splats.
@@ -198,8 +266,15 @@ impl splat::SplatEstimator for NoSplats<'_> {
         _raster: Vec2,
         sampler: &mut dyn Sampler,
         _scratch: &mut (),
-        _out: &mut splat::SampleOut,
+        out: &mut splat::SampleOut,
     ) -> Rgb {
-        self.0.li(scene, ray, sampler, settings)
+        if settings.aovs().is_empty() {
+            self.0.li(scene, ray, sampler, settings)
+        } else {
+            self.0.li_layers(scene, ray, sampler, settings, &mut out.layers)
+        }
+    }
+    fn supports_lpe(&self) -> bool {
+        self.0.supports_lpe()
     }
 }

@@ -9,6 +9,8 @@ use crate::bsdf::{Bsdf, LobeFlags, TransportMode};
 use crate::error::Result;
 use crate::film::Film;
 use crate::geometry::{Ray, SurfaceInteraction};
+use crate::lpe::aov::LayerSample;
+use crate::lpe::{Event, Tracker};
 use crate::sampling::{power_heuristic, Sampler};
 use crate::scene::Scene;
 use crate::spectrum::Rgb;
@@ -39,35 +41,60 @@ pub(crate) fn sample_light_mis(
     counts: (f32, f32),
     time: f32,
 ) -> Rgb {
+    sample_light_mis_to(scene, p, ng, frame, wo, bsdf, u_light, u, counts, time).0
+}
+
+/// [`sample_light_mis`] that also says which light it reached and whether the light lies
+/// on the other side of the surface (a transmission), for the path's events.
+#[allow(clippy::too_many_arguments)]
+pub(crate) fn sample_light_mis_to(
+    scene: &Scene,
+    p: Vec3,
+    ng: Vec3,
+    frame: &crate::math::Frame,
+    wo: Vec3,
+    bsdf: &crate::bsdf::Bsdf,
+    u_light: f32,
+    u: glam::Vec2,
+    counts: (f32, f32),
+    time: f32,
+) -> (Rgb, u32, bool) {
+    const NONE: (Rgb, u32, bool) = (Rgb::BLACK, 0, false);
     if scene.lights.is_empty() {
-        return Rgb::BLACK;
+        return NONE;
     }
     let (li, pmf, _) = scene.light_distribution.sample_discrete(u_light);
     if pmf <= 0.0 {
-        return Rgb::BLACK;
+        return NONE;
     }
     let light = &scene.lights[li];
-    let Some(ls) = light.sample_li(p, u, &scene.bounds) else { return Rgb::BLACK };
+    let Some(ls) = light.sample_li(p, u, &scene.bounds) else { return NONE };
     if ls.pdf <= 0.0 || ls.li.is_black() {
-        return Rgb::BLACK;
+        return NONE;
     }
     let wi = frame.to_local(ls.wi);
     let f = bsdf.eval(wo, wi, TransportMode::Radiance);
     if f.is_black() {
-        return Rgb::BLACK;
+        return NONE;
     }
     let blocked = if ls.infinite { scene.occluded_dir_at(p, ng, ls.wi, time) } else { scene.occluded_at(p, ng, ls.p, time) };
     if blocked {
-        return Rgb::BLACK;
+        return NONE;
     }
     let pdf_light = pmf * ls.pdf;
     let w = if light.is_delta() { 1.0 } else { power_heuristic(counts.0, pdf_light, counts.1, bsdf.pdf(wo, wi, TransportMode::Radiance)) };
-    f * ls.li * (wi.z.abs() * w / pdf_light)
+    (f * ls.li * (wi.z.abs() * w / pdf_light), li as u32, wi.z * wo.z < 0.0)
 }
 
 impl PixelEstimator for PathTracer {
     fn li(&self, scene: &Scene, camera_ray: &Ray, sampler: &mut dyn Sampler, settings: &RenderSettings) -> Rgb {
-        camera_walk(scene, camera_ray, sampler, settings, &mut PathRules)
+        camera_walk(scene, camera_ray, sampler, settings, &mut PathRules, &mut LayerSample::default())
+    }
+    fn li_layers(&self, scene: &Scene, camera_ray: &Ray, sampler: &mut dyn Sampler, settings: &RenderSettings, layers: &mut LayerSample) -> Rgb {
+        camera_walk(scene, camera_ray, sampler, settings, &mut PathRules, layers)
+    }
+    fn supports_lpe(&self) -> bool {
+        true
     }
 }
 
@@ -108,8 +135,19 @@ impl WalkRules for PathRules {}
 
 /// Radiance along `camera_ray` by path tracing under `rules`. Sample dimensions per vertex, in
 /// order: light choice, light point (2), whatever `rules.at_vertex` draws, BSDF lobe, BSDF
-/// direction (2), Russian roulette.
-pub(crate) fn camera_walk<R: WalkRules + ?Sized>(scene: &Scene, camera_ray: &Ray, sampler: &mut dyn Sampler, settings: &RenderSettings, rules: &mut R) -> Rgb {
+/// direction (2), Russian roulette. Each contribution also goes to `layers` with the AOVs
+/// its path's events match (the rules' own estimates do not: methods that add some do not
+/// support AOVs).
+pub(crate) fn camera_walk<R: WalkRules + ?Sized>(
+    scene: &Scene,
+    camera_ray: &Ray,
+    sampler: &mut dyn Sampler,
+    settings: &RenderSettings,
+    rules: &mut R,
+    layers: &mut LayerSample,
+) -> Rgb {
+    let aovs = settings.aovs();
+    let mut events = Tracker::camera(aovs);
     let mut l = Rgb::BLACK;
     let mut beta = Rgb::WHITE;
     let mut ray = *camera_ray;
@@ -135,6 +173,7 @@ pub(crate) fn camera_walk<R: WalkRules + ?Sized>(scene: &Scene, camera_ray: &Ray
                     }
                     let w = if prev_specular { 1.0 } else { power_heuristic(1.0, prev_pdf, 1.0, scene.light_pmf(ei) * light.pdf_li_escaped(ray.d)) };
                     l += beta * le * w;
+                    layers.add(events.ends(Event::BACKGROUND), beta * le * w);
                 }
             }
             break;
@@ -144,6 +183,7 @@ pub(crate) fn camera_walk<R: WalkRules + ?Sized>(scene: &Scene, camera_ray: &Ray
             if !le.is_black() && !hide {
                 let w = if prev_specular { 1.0 } else { power_heuristic(1.0, prev_pdf, 1.0, scene.light_pmf(li) * area.pdf_li(prev_p, si.p, si.ng)) };
                 l += beta * le * w;
+                layers.add(events.ends(aovs.light_event(Some(si.shape))), beta * le * w);
             }
         }
         // Another segment must fit in max_depth for anything more to count.
@@ -156,7 +196,12 @@ pub(crate) fn camera_walk<R: WalkRules + ?Sized>(scene: &Scene, camera_ray: &Ray
         let u_light = sampler.next_1d();
         let u_l2 = sampler.next_2d();
         if flags.has_non_specular() {
-            l += beta * sample_light_mis(scene, si.p, si.ng, &si.shading, wo, &bsdf, u_light, u_l2, (1.0, 1.0), si.time);
+            let (c, li, through) = sample_light_mis_to(scene, si.p, si.ng, &si.shading, wo, &bsdf, u_light, u_l2, (1.0, 1.0), si.time);
+            l += beta * c;
+            if !aovs.is_empty() && !c.is_black() {
+                let here = aovs.scatter_event(si.shape, flags, None, through);
+                layers.add(events.ends2(here, aovs.emitter_event(&scene.lights[li as usize])), beta * c);
+            }
         }
         l += beta * rules.at_vertex(&WalkVertex { si: &si, bsdf: &bsdf, flags, wo, beta, depth }, sampler);
         let uc = sampler.next_1d();
@@ -166,6 +211,9 @@ pub(crate) fn camera_walk<R: WalkRules + ?Sized>(scene: &Scene, camera_ray: &Ray
             break;
         }
         beta *= bs.weight();
+        if !bs.lobe.is_null() {
+            events.push(aovs.scatter_event(si.shape, flags, Some(bs.lobe), bs.lobe.contains(LobeFlags::TRANSMISSION)));
+        }
         if bs.lobe.contains(LobeFlags::TRANSMISSION) {
             eta_scale *= bs.eta * bs.eta;
         }

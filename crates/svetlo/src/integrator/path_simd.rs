@@ -64,7 +64,11 @@ impl SimdPathTracer {
 
 impl Integrator for SimdPathTracer {
     fn render(&self, scene: &Scene, settings: &RenderSettings, progress: &Progress) -> Result<Film> {
-        if self.simd && crate::accel::packet::avx2() {
+        // The lanes do not track path events: AOVs and --lpe take the scalar tracer.
+        if !settings.aovs().is_empty() && self.simd {
+            eprintln!("note: light path expressions use the scalar path tracer (the eight-wide kernel does not track path events)");
+        }
+        if self.simd && crate::accel::packet::avx2() && settings.aovs().is_empty() {
             if let Some(k) = SimdKernel::new(scene, settings) {
                 return k.render(scene, settings, progress);
             }

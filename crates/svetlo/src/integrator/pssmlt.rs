@@ -117,6 +117,9 @@ impl Pssmlt {
     /// Render and return the chain statistics as well.
     pub fn render_with_stats(&self, scene: &Scene, settings: &RenderSettings, progress: &Progress) -> Result<(Film, ChainStats)> {
         self.options.validate()?;
+        if scene.lights.is_empty() {
+            return metropolis::black(scene.camera.width, scene.camera.height, settings);
+        }
         match self.options.target {
             PssTargetKind::Bdpt => {
                 require_connectible_camera(scene, "pssmlt")?;

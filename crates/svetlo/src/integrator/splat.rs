@@ -32,12 +32,29 @@ pub struct Splat {
     pub value: Rgb,
 }
 
+/// Splat channels from here on are AOV layers (layer = channel - LAYER_CHANNEL).
+pub const LAYER_CHANNEL: u32 = 1 << 16;
+
 /// What one pixel sample produced.
 pub struct SampleOut<'a> {
     pub splats: &'a mut Vec<Splat>,
+    /// The sample's own-pixel contributions per AOV layer (and to a restricted beauty).
+    pub layers: crate::lpe::aov::LayerSample,
 }
 
 impl SampleOut<'_> {
+    /// Splat `value` to the beauty and the AOV layers of `mask`.
+    #[inline]
+    pub fn splat_layers(&mut self, mask: crate::lpe::LayerMask, raster: Vec2, value: Rgb) {
+        if mask & crate::lpe::aov::BEAUTY != 0 {
+            self.push(0, raster, value);
+        }
+        let mut m = mask & !crate::lpe::aov::BEAUTY;
+        while m != 0 {
+            self.push(LAYER_CHANNEL + m.trailing_zeros(), raster, value);
+            m &= m - 1;
+        }
+    }
     #[inline]
     pub fn splat(&mut self, raster: Vec2, value: Rgb) {
         self.push(0, raster, value);
@@ -55,6 +72,10 @@ pub trait SplatEstimator: Sync {
     /// Per-thread scratch space (subpath buffers), reused across samples.
     type Scratch: Send;
     fn scratch(&self) -> Self::Scratch;
+    /// Whether the estimator reports its contributions by path (AOVs, `--lpe`).
+    fn supports_lpe(&self) -> bool {
+        false
+    }
     /// Radiance to add at `raster` through the pixel filter; light-side results go to `out`.
     #[allow(clippy::too_many_arguments)]
     fn sample(
@@ -75,13 +96,19 @@ pub trait SplatEstimator: Sync {
     fn render_tile(&self, t: TileJob, sampler: &mut dyn Sampler, scratch: &mut Self::Scratch, splats: &mut Vec<Splat>) {
         let [x0, y0, x1, y1] = t.rect;
         let cam = t.scene.camera.ray_generator();
+        let aovs = t.settings.aovs();
         for y in y0..y1 {
             for x in x0..x1 {
                 for s in t.s0..t.s0 + t.n {
                     let (raster, ray) = super::camera_sample(&cam, sampler, x, y, s);
-                    let mut out = SampleOut { splats };
+                    let mut out = SampleOut { splats, layers: Default::default() };
                     let l = self.sample(t.scene, t.settings, &ray, raster, sampler, scratch, &mut out);
-                    t.tile.add_sample(raster, l);
+                    if aovs.is_empty() {
+                        t.tile.add_sample(raster, l);
+                    } else {
+                        let beauty = if aovs.restricts_beauty() { out.layers.beauty } else { l };
+                        t.tile.add_sample_layers(raster, beauty, &out.layers.aov[..aovs.aov_count()]);
+                    }
                 }
             }
         }
@@ -98,6 +125,28 @@ pub struct TileJob<'a> {
     pub tile: &'a mut FilmTile,
     pub s0: u32,
     pub n: u32,
+}
+
+/// Pixel samples of one pass at most (without a time limit): bounds the work a cancel drops.
+const PASS_PIXEL_SAMPLES: u64 = 1 << 22;
+
+/// Samples per pixel of the next pass after one of `last`. Passes are summed into the film
+/// one after another, so their sizes fix the float summation order: without a time limit
+/// they double (1, 2, 4, ... up to 64 and about `PASS_PIXEL_SAMPLES`) whatever the timing,
+/// which keeps the image independent of the machine's speed and the thread count. With one
+/// (`(limit, elapsed, spp_done)` in seconds) they aim at half-second passes that end at the limit.
+fn next_pass_spp(last: u32, pixels: u64, timed: Option<(f64, f64, u32)>) -> u32 {
+    match timed {
+        None => (last.saturating_mul(2)).min((PASS_PIXEL_SAMPLES / pixels.max(1)).clamp(1, 64) as u32),
+        Some((limit, elapsed, done)) => {
+            let per_spp = elapsed / done.max(1) as f64;
+            if per_spp > 0.0 {
+                ((0.5 / per_spp) as u32).clamp(1, 64).min((((limit - elapsed) / per_spp) as u32).max(1))
+            } else {
+                64
+            }
+        }
+    }
 }
 
 /// The film (splats scaled by the spp done) and the extra channels (already divided by it).
@@ -121,9 +170,11 @@ pub(super) fn render_chunked<E: SplatEstimator>(
     chunk_samples: u64,
 ) -> Result<SplatRender> {
     settings.validate()?;
+    settings.check_lpe_support("this method", est.supports_lpe())?;
     let cam = &scene.camera;
     let (w, h) = (cam.width, cam.height);
-    let mut film = Film::new(w, h, settings.filter);
+    let n_layers = settings.aovs().aov_count();
+    let mut film = Film::with_layers(w, h, settings.filter, settings.aovs().names());
     let mut extra: Vec<Vec<Rgb>> = vec![vec![Rgb::BLACK; (w * h) as usize]; channels];
     let tiles: Vec<(u32, u32, u32, u32)> = (0..h.div_ceil(TILE))
         .flat_map(|ty| (0..w.div_ceil(TILE)).map(move |tx| (tx * TILE, ty * TILE, ((tx + 1) * TILE).min(w), ((ty + 1) * TILE).min(h))))
@@ -145,7 +196,8 @@ pub(super) fn render_chunked<E: SplatEstimator>(
         // each chunk's splats land in pass-local dense buffers, in chunk and tile order.
         let tiles_per_chunk = ((chunk_samples / (n as u64 * (TILE * TILE) as u64)).max(1)).min(tiles.len().max(1) as u64) as usize;
         let mut pass_tiles: Vec<FilmTile> = Vec::with_capacity(tiles.len());
-        let mut pass_splats: Vec<Vec<Rgb>> = vec![Vec::new(); 1 + channels];
+        // The beauty's splats, the extra channels, then the AOV layers'.
+        let mut pass_splats: Vec<Vec<Rgb>> = vec![Vec::new(); 1 + channels + n_layers];
         let mut cancelled = false;
         for chunk in tiles.chunks(tiles_per_chunk) {
             let results: Vec<Option<(FilmTile, Vec<Splat>)>> = pool.install(|| {
@@ -177,7 +229,8 @@ pub(super) fn render_chunked<E: SplatEstimator>(
                     if !(x >= 0.0 && y >= 0.0 && (x as u32) < w && (y as u32) < h) {
                         continue;
                     }
-                    if let Some(buf) = pass_splats.get_mut(sp.channel as usize) {
+                    let slot = if sp.channel >= LAYER_CHANNEL { 1 + channels + (sp.channel - LAYER_CHANNEL) as usize } else { sp.channel as usize };
+                    if let Some(buf) = pass_splats.get_mut(slot) {
                         if buf.is_empty() {
                             *buf = vec![Rgb::BLACK; (w * h) as usize];
                         }
@@ -197,6 +250,8 @@ pub(super) fn render_chunked<E: SplatEstimator>(
                 let (x, y) = ((i as u32 % w) as f32 + 0.5, (i as u32 / w) as f32 + 0.5);
                 if c == 0 {
                     film.splat(Vec2::new(x, y), *v);
+                } else if c > channels {
+                    film.splat_layer(c - 1 - channels, Vec2::new(x, y), *v);
                 } else {
                     extra[c - 1][i] += *v;
                 }
@@ -204,15 +259,10 @@ pub(super) fn render_chunked<E: SplatEstimator>(
         }
         spp_done += n;
         film.spp_done = spp_done;
-        let elapsed = start.elapsed().as_secs_f64();
-        let per_spp = elapsed / spp_done as f64;
-        pass_spp = if per_spp > 0.0 { ((0.5 / per_spp) as u32).clamp(1, 64) } else { 64 };
-        if let Some(t) = settings.time_limit {
-            let left = t.as_secs_f64() - elapsed;
-            if per_spp > 0.0 {
-                pass_spp = pass_spp.min(((left / per_spp) as u32).max(1));
-            }
-        }
+        // The splats' scale so far, so that an observer sees a developed image.
+        film.splat_scale = spp_done as f32;
+        progress.pass_done(&film);
+        pass_spp = next_pass_spp(pass_spp, w as u64 * h as u64, settings.time_limit.map(|t| (t.as_secs_f64(), start.elapsed().as_secs_f64(), spp_done)));
     }
     // Each pixel sample traced one light path: N = W H spp paths, and the camera's
     // importance is normalised so that splats scale by W H / N = 1 / spp.
@@ -239,6 +289,21 @@ mod tests {
 
     /// Splitting the tiles into chunks changes neither the image nor the channels.
     #[test]
+    fn pass_sizes_without_time_limit_depend_on_nothing_but_the_film() {
+        // The image is the sum of its passes in order: their sizes must not follow timing.
+        let mut seq = vec![1u32];
+        while seq.len() < 9 {
+            seq.push(next_pass_spp(*seq.last().unwrap_or(&1), 256 * 256, None));
+        }
+        assert_eq!(seq, [1, 2, 4, 8, 16, 32, 64, 64, 64]);
+        assert_eq!(next_pass_spp(8, 1920 * 1080, None), 2, "large films take small passes");
+        assert_eq!(next_pass_spp(8, 8000 * 8000, None), 1);
+        // With a time limit the passes end near it.
+        assert_eq!(next_pass_spp(1, 100, Some((10.0, 9.9, 100))), 1);
+        assert_eq!(next_pass_spp(1, 100, Some((10.0, 1.0, 100))), 50);
+    }
+
+    #[test]
     fn chunking_does_not_change_the_image() {
         let mut b = SceneBuilder::new();
         let m = b.add_material(Material::Diffuse { reflectance: Texture::Constant(Rgb::splat(0.6)) });
@@ -262,6 +327,43 @@ mod tests {
         assert!(big.film.image().mean().max_component() > 0.0);
         assert_eq!(big.film.image().data, small.film.image().data);
         assert_eq!(big.channels, small.channels);
+    }
+
+    /// An observer sees every pass, in order, with developed splats; the last film it sees is
+    /// the render's result; watching changes nothing in the image.
+    #[test]
+    fn observer_sees_each_pass_and_changes_nothing() {
+        use std::sync::{Arc, Mutex};
+        let mut b = SceneBuilder::new();
+        let m = b.add_material(Material::Diffuse { reflectance: Texture::Constant(Rgb::splat(0.6)) });
+        b.add_shape(Geometry::Sphere(Sphere { center: Vec3::new(0.0, 0.0, 4.0), radius: 1.5, flip_normals: false }), m, None, "ball").unwrap();
+        b.add_light(Light::Point { position: Vec3::new(1.0, 2.0, 0.0), intensity: Rgb::splat(10.0) });
+        b.set_camera(Camera {
+            to_world: Mat4::IDENTITY,
+            projection: Projection::Perspective { fov_x_deg: 50.0, aperture_radius: 0.0, focus_distance: 1.0 },
+            width: 24,
+            height: 20,
+            near_clip: 0.01,
+            far_clip: 100.0,
+            shutter_open: 0.0,
+            shutter_close: 0.0,
+        });
+        let scene = b.build().unwrap();
+        let settings = RenderSettings { spp: 6, max_depth: 3, ..Default::default() };
+        let est = crate::integrator::bdpt::test_estimator(&scene, &settings);
+        type Passes = Mutex<Vec<(u32, Vec<Rgb>)>>;
+        let seen: Arc<Passes> = Arc::default();
+        let log = seen.clone();
+        let progress = Progress::observed(move |f: &Film| log.lock().unwrap().push((f.spp_done, f.image().data)));
+        let watched = render_chunked(&scene, &settings, &progress, &est, 0, u64::MAX).unwrap();
+        let plain = render_chunked(&scene, &settings, &Progress::new(), &est, 0, u64::MAX).unwrap();
+        assert_eq!(watched.film.image().data, plain.film.image().data);
+        let seen = seen.lock().unwrap();
+        assert!(!seen.is_empty());
+        assert!(seen.windows(2).all(|w| w[0].0 < w[1].0), "passes in order");
+        let (spp, last) = seen.last().unwrap();
+        assert_eq!(*spp, 6);
+        assert_eq!(*last, plain.film.image().data, "the last pass shown is the result, splats scaled");
     }
 
     /// Counts the pixel samples it is asked for, per pixel.

@@ -186,6 +186,7 @@ impl ZBuffer {
                     Light::Directional { direction, .. } => Some(ShadowMap::directional(*direction, scene.bounds.center, scene.bounds.radius, res, &occluders)),
                     Light::Point { position, .. } | Light::Spot { position, .. } => Some(ShadowMap::point(*position, res, &occluders, near)),
                     Light::Luminaire(lum) => Some(ShadowMap::point(lum.position, res, &occluders, near)),
+                    Light::Projector(pr) => Some(ShadowMap::point(pr.position, res, &occluders, near)),
                     Light::Area(_) => {
                         // The proxy's position seen from the scene's centre (fixed for meshes).
                         let s = lights.sample(scene, i, scene.bounds.center)?;
@@ -664,6 +665,7 @@ impl Integrator for ZBuffer {
             }
         }
         film.spp_done = ss * ss;
+        progress.pass_done(&film);
         Ok(film)
     }
 }

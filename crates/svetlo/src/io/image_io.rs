@@ -15,13 +15,80 @@ fn io_err(path: &Path, source: std::io::Error) -> Error {
     Error::Io { file: path.to_path_buf(), source }
 }
 
-/// Linear RGB as 32-bit float channels R, G, B.
-pub fn write_exr(path: &Path, img: &Image) -> Result<()> {
-    exr::prelude::write_rgb_file(path, img.width, img.height, |x, y| {
+/// Write `bytes` to `path` whole or not at all: into a temporary file beside it, flushed to
+/// disk, then renamed over `path`. A full disk or an interrupted write leaves `path` as it
+/// was (absent, or the previous image) and no temporary file behind.
+pub fn write_atomic(path: &Path, bytes: &[u8]) -> Result<()> {
+    use std::io::Write;
+    static COUNTER: std::sync::atomic::AtomicU64 = std::sync::atomic::AtomicU64::new(0);
+    let name = path.file_name().ok_or_else(|| img_err(path, "names no file"))?;
+    let n = COUNTER.fetch_add(1, std::sync::atomic::Ordering::Relaxed);
+    let mut tmp_name = std::ffi::OsString::from(".");
+    tmp_name.push(name);
+    tmp_name.push(format!(".{}-{n}.tmp", std::process::id()));
+    let tmp = path.with_file_name(tmp_name);
+    let written = (|| {
+        let mut f = std::fs::OpenOptions::new().write(true).create_new(true).open(&tmp)?;
+        f.write_all(bytes)?;
+        f.sync_all()?;
+        std::fs::rename(&tmp, path)
+    })();
+    written.map_err(|e| {
+        let _ = std::fs::remove_file(&tmp);
+        io_err(path, e)
+    })
+}
+
+/// The bytes of an EXR file: linear RGB as 32-bit float channels R, G, B.
+pub fn encode_exr(img: &Image) -> Result<Vec<u8>> {
+    use exr::prelude::{SpecificChannels, Vec2, WritableImage};
+    let channels = SpecificChannels::rgb(|Vec2(x, y): Vec2<usize>| {
         let c = img.get(x, y);
         (c.r, c.g, c.b)
-    })
-    .map_err(|e| img_err(path, e))
+    });
+    let mut out = Vec::new();
+    exr::prelude::Image::from_channels((img.width, img.height), channels)
+        .write()
+        .to_buffered(Cursor::new(&mut out))
+        .map_err(|e| Error::Image { file: "(EXR in memory)".into(), msg: e.to_string() })?;
+    Ok(out)
+}
+
+/// Linear RGB as 32-bit float channels R, G, B.
+pub fn write_exr(path: &Path, img: &Image) -> Result<()> {
+    let bytes = encode_exr(img).map_err(|e| img_err(path, e))?;
+    write_atomic(path, &bytes)
+}
+
+/// One EXR file with the beauty as channels R, G, B and each layer `NAME` as `NAME.R`,
+/// `NAME.G`, `NAME.B` (OpenEXR's layer naming), 32-bit float, all the beauty's size.
+pub fn write_exr_layers(path: &Path, beauty: &Image, layers: &[(String, Image)]) -> Result<()> {
+    use exr::prelude::{AnyChannel, AnyChannels, Encoding, FlatSamples, Layer, LayerAttributes, WritableImage};
+    let (w, h) = (beauty.width, beauty.height);
+    if layers.iter().any(|(_, l)| l.width != w || l.height != h) {
+        return Err(crate::error::Error::Image { file: path.to_path_buf(), msg: "AOV layers must have the beauty's size".into() });
+    }
+    let mut channels = Vec::new();
+    let mut add = |prefix: &str, img: &Image| {
+        for (c, name) in ["R", "G", "B"].iter().enumerate() {
+            let data: Vec<f32> = img.data.iter().map(|p| [p.r, p.g, p.b][c]).collect();
+            channels.push(AnyChannel::new(format!("{prefix}{name}").as_str(), FlatSamples::F32(data)));
+        }
+    };
+    add("", beauty);
+    for (n, img) in layers {
+        add(&format!("{n}."), img);
+    }
+    let layer = Layer::new((w, h), LayerAttributes::default(), Encoding::FAST_LOSSLESS, AnyChannels::sort(channels.into()));
+    exr::prelude::Image::from_layer(layer).write().to_file(path).map_err(|e| img_err(path, e))
+}
+
+/// Every channel of an EXR file's first layer by name (e.g. `caustic.R`), as f32.
+pub fn read_exr_channels(path: &Path) -> Result<Vec<(String, Vec<f32>)>> {
+    use exr::prelude::{read, ReadChannels, ReadLayers};
+    let img =
+        read().no_deep_data().largest_resolution_level().all_channels().first_valid_layer().all_attributes().from_file(path).map_err(|e| img_err(path, e))?;
+    Ok(img.layer_data.channel_data.list.iter().map(|c| (c.name.to_string(), c.sample_data.values_as_f32().collect())).collect())
 }
 
 /// sRGB-encoded 8-bit PNG, values clamped to [0, 1] (NaN becomes 0).
@@ -32,7 +99,10 @@ pub fn write_png(path: &Path, img: &Image) -> Result<()> {
             buf.push((Rgb::linear_to_srgb(v).clamp(0.0, 1.0) * 255.0 + 0.5) as u8);
         }
     }
-    image::save_buffer(path, &buf, img.width as u32, img.height as u32, image::ColorType::Rgb8).map_err(|e| img_err(path, e))
+    let mut out = Vec::new();
+    image::write_buffer_with_format(&mut Cursor::new(&mut out), &buf, img.width as u32, img.height as u32, image::ColorType::Rgb8, image::ImageFormat::Png)
+        .map_err(|e| img_err(path, e))?;
+    write_atomic(path, &out)
 }
 
 /// PFM flavours: three channels (`PF`) or one (`Pf`, written as the pixel's luminance).
@@ -67,7 +137,7 @@ pub fn encode_pfm(img: &Image, channels: PfmChannels, big_endian: bool) -> Vec<u
 
 /// Little-endian RGB PFM.
 pub fn write_pfm(path: &Path, img: &Image) -> Result<()> {
-    std::fs::write(path, encode_pfm(img, PfmChannels::Rgb, false)).map_err(|e| io_err(path, e))
+    write_atomic(path, &encode_pfm(img, PfmChannels::Rgb, false))
 }
 
 /// Parse a PFM file's bytes; `path` is only used in messages. A grey file gives r = g = b.
@@ -115,6 +185,7 @@ pub fn decode_pfm(bytes: &[u8], path: &Path) -> Result<Image> {
     }
     pos += 1;
     let need = w.checked_mul(h).and_then(|p| p.checked_mul(nc * 4)).ok_or_else(|| img_err(path, format!("PFM size {w}x{h} is too large")))?;
+    crate::limits::check_items(format!("{}: a {w}x{h} PFM image", path.display()), (w * h) as u64, 12)?;
     let data = &bytes[pos..];
     if data.len() < need {
         return Err(img_err(path, format!("PFM {w}x{h} needs {need} bytes of pixel data, the file has {}", data.len())));
@@ -140,7 +211,7 @@ pub fn decode_pfm(bytes: &[u8], path: &Path) -> Result<Image> {
 }
 
 pub fn read_pfm(path: &Path) -> Result<Image> {
-    let bytes = std::fs::read(path).map_err(|e| io_err(path, e))?;
+    let bytes = crate::limits::read_file(path)?;
     decode_pfm(&bytes, path)
 }
 
@@ -152,6 +223,19 @@ pub fn write_image(path: &Path, img: &Image) -> Result<()> {
         "pfm" => write_pfm(path, img),
         other => Err(img_err(path, format!("unsupported output format '{other}' (exr, png, pfm)"))),
     }
+}
+
+/// PNG, JPEG or BMP through the `image` crate, its size checked against the budget first
+/// (the decoded image, its float copy and ours: 40 bytes per pixel).
+pub fn decode_8bit(bytes: &[u8], path: &Path) -> Result<image::DynamicImage> {
+    let reader = || image::ImageReader::new(Cursor::new(bytes)).with_guessed_format().map_err(|e| img_err(path, e));
+    let (w, h) = reader()?.into_dimensions().map_err(|e| img_err(path, e))?;
+    crate::limits::check_items(format!("{}: a {w}x{h} image", path.display()), w as u64 * h as u64, 40)?;
+    let mut r = reader()?;
+    let mut limits = image::Limits::default();
+    limits.max_alloc = Some(crate::limits::max_memory());
+    r.limits(limits);
+    r.decode().map_err(|e| img_err(path, e))
 }
 
 fn ext(path: &Path) -> String {
@@ -169,6 +253,14 @@ fn channel_base(name: &str) -> &str {
 /// Alpha and other channels are ignored.
 pub fn decode_exr(bytes: &[u8], path: &Path) -> Result<Image> {
     use exr::prelude::{read, ReadChannels, ReadLayers, Vec2};
+    // The header announces the size: check it against the budget before the decoder
+    // allocates (a 2 KB file may claim 100 000 x 100 000 pixels).
+    let meta = exr::meta::MetaData::read_from_buffered(Cursor::new(bytes), false).map_err(|e| img_err(path, e))?;
+    for h in &meta.headers {
+        let (w, hh) = (h.layer_size.width() as u64, h.layer_size.height() as u64);
+        let per_pixel = h.channels.list.len() as u64 * 4 + 12;
+        crate::limits::check_items(format!("{}: a {w}x{hh} EXR layer", path.display()), w.saturating_mul(hh), per_pixel)?;
+    }
     let img = read()
         .no_deep_data()
         .largest_resolution_level()
@@ -213,26 +305,30 @@ pub fn decode_exr(bytes: &[u8], path: &Path) -> Result<Image> {
 }
 
 pub fn read_exr(path: &Path) -> Result<Image> {
-    let bytes = std::fs::read(path).map_err(|e| io_err(path, e))?;
+    let bytes = crate::limits::read_file(path)?;
     decode_exr(&bytes, path)
 }
 
 /// Read an image, recognising EXR and PFM by their magic bytes; other formats go to the
 /// `image` crate, and 8-bit formats are decoded from sRGB to linear.
 pub fn read_image(path: &Path) -> Result<Image> {
-    let bytes = std::fs::read(path).map_err(|e| io_err(path, e))?;
+    decode_image(&crate::limits::read_file(path)?, path)
+}
+
+/// [`read_image`] for bytes held in memory; `path` names them in errors and, for formats
+/// without a magic number, gives the extension.
+pub fn decode_image(bytes: &[u8], path: &Path) -> Result<Image> {
     if bytes.starts_with(&[0x76, 0x2f, 0x31, 0x01]) {
-        return decode_exr(&bytes, path);
+        return decode_exr(bytes, path);
     }
     if bytes.starts_with(b"PF") || bytes.starts_with(b"Pf") {
-        return decode_pfm(&bytes, path);
+        return decode_pfm(bytes, path);
     }
     match ext(path).as_str() {
         "exr" => Err(img_err(path, "not an OpenEXR file (bad magic number)")),
         "pfm" => Err(img_err(path, "not a PFM file (bad magic number)")),
         _ => {
-            let dynimg = image::load_from_memory(&bytes).map_err(|e| img_err(path, e))?;
-            let rgb = dynimg.to_rgb32f();
+            let rgb = decode_8bit(bytes, path)?.to_rgb32f();
             let (w, h) = (rgb.width() as usize, rgb.height() as usize);
             let data = rgb.pixels().map(|p| Rgb::new(Rgb::srgb_to_linear(p[0]), Rgb::srgb_to_linear(p[1]), Rgb::srgb_to_linear(p[2]))).collect();
             Ok(Image::new(w, h, data))

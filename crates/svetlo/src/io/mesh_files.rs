@@ -20,8 +20,53 @@ pub struct LoadedMesh {
 
 /// Read an OBJ file. Materials (`mtllib`) are ignored: the scene file gives the BSDF.
 pub fn load_obj(path: &Path, flip_tex_coords: bool) -> Result<LoadedMesh> {
-    let file = std::fs::File::open(path).map_err(|e| Error::Io { file: path.to_path_buf(), source: e })?;
-    let mut reader = std::io::BufReader::new(file);
+    load_obj_bytes(&crate::limits::read_file(path)?, path, flip_tex_coords)
+}
+
+/// Check an OBJ's face indices before the OBJ reader sees them (a relative index past the
+/// first vertex overflows inside it), and its size against the memory budget.
+fn check_obj(bytes: &[u8], path: &Path) -> Result<()> {
+    // Vertices, texture coordinates and normals defined so far, and face corners in all.
+    let (mut counts, mut corners) = ([0i64; 3], 0u64);
+    for (ln, line) in bytes.split(|&b| b == b'\n').enumerate() {
+        let line = String::from_utf8_lossy(line);
+        let mut tok = line.split_whitespace();
+        match tok.next() {
+            Some("v") => counts[0] += 1,
+            Some("vt") => counts[1] += 1,
+            Some("vn") => counts[2] += 1,
+            Some("f") | Some("l") | Some("p") => {
+                for corner in tok {
+                    corners += 1;
+                    for (k, idx) in corner.split('/').enumerate().take(3) {
+                        if idx.is_empty() && k > 0 {
+                            continue;
+                        }
+                        let n = counts[k];
+                        let ok = match idx.parse::<i64>() {
+                            Ok(i) if i > 0 => i <= n,
+                            Ok(i) if i < 0 => -i <= n,
+                            _ => false,
+                        };
+                        if !ok {
+                            let what = ["vertex", "texture coordinate", "normal"][k];
+                            return Err(mesh_err(path, format!("line {}: {what} index '{idx}' is out of range ({n} defined so far)", ln + 1)));
+                        }
+                    }
+                }
+            }
+            _ => {}
+        }
+    }
+    // Unindexed, every corner may become its own vertex (position, normal, uv, index).
+    let bytes_needed = corners.saturating_mul(4 + 32).saturating_add((counts[0] as u64 + counts[2] as u64) * 12 + counts[1] as u64 * 8);
+    crate::limits::check(format!("{}: a mesh of {corners} face corners", path.display()), bytes_needed)
+}
+
+/// [`load_obj`] for a file held in memory; `path` names it in errors.
+pub fn load_obj_bytes(bytes: &[u8], path: &Path, flip_tex_coords: bool) -> Result<LoadedMesh> {
+    check_obj(bytes, path)?;
+    let mut reader = std::io::Cursor::new(bytes);
     let opts = tobj::LoadOptions { single_index: true, triangulate: true, ignore_points: true, ignore_lines: true };
     let (models, _) =
         tobj::load_obj_buf(&mut reader, &opts, |_| Ok((Vec::new(), Default::default()))).map_err(|e| mesh_err(path, format!("invalid OBJ: {e}")))?;
@@ -73,20 +118,142 @@ pub fn load_obj(path: &Path, flip_tex_coords: bool) -> Result<LoadedMesh> {
 /// Read a PLY file (ASCII or binary). Vertex properties x, y, z; optional nx, ny, nz; uvs as
 /// u, v or texture_u, texture_v or s, t. Faces from `vertex_indices` or `vertex_index`.
 pub fn load_ply(path: &Path, flip_tex_coords: bool) -> Result<LoadedMesh> {
-    use ply_rs_bw::ply::{DefaultElement, Property};
-    let file = std::fs::File::open(path).map_err(|e| Error::Io { file: path.to_path_buf(), source: e })?;
-    let mut reader = std::io::BufReader::new(file);
-    let parser = ply_rs_bw::parser::Parser::<DefaultElement>::new();
-    let ply = parser.read_ply(&mut reader).map_err(|e| mesh_err(path, format!("invalid PLY: {e}")))?;
-    let scalar = |e: &DefaultElement, k: &str| e.get(k).and_then(|p| p.to_f32_lossy());
-    let verts = ply.payload.get("vertex").ok_or_else(|| mesh_err(path, "no 'vertex' element"))?;
-    let faces = ply.payload.get("face").ok_or_else(|| mesh_err(path, "no 'face' element"))?;
+    load_ply_bytes(&crate::limits::read_file(path)?, path, flip_tex_coords)
+}
+
+/// The element counts a PLY header announces, checked before the PLY reader allocates for
+/// them: a binary file must hold at least one byte per property of every element, a text
+/// file two (a digit and a separator), and the parsed elements must fit the budget.
+fn check_ply_header(bytes: &[u8], path: &Path) -> Result<()> {
+    let end = bytes.windows(10).position(|w| w == b"end_header").ok_or_else(|| mesh_err(path, "invalid PLY: no end_header"))?;
+    let header = String::from_utf8_lossy(&bytes[..end]);
+    let ascii = header.lines().any(|l| l.trim().starts_with("format ascii"));
+    // (count, properties) per element
+    let mut elements: Vec<(u64, u64)> = Vec::new();
+    for line in header.lines() {
+        let t: Vec<&str> = line.split_whitespace().collect();
+        match t.as_slice() {
+            ["element", _, n] => {
+                let n: u64 = n.parse().map_err(|_| mesh_err(path, format!("invalid PLY: element count '{n}'")))?;
+                elements.push((n, 0));
+            }
+            ["property", ..] => {
+                if let Some(e) = elements.last_mut() {
+                    e.1 += 1;
+                }
+            }
+            _ => {}
+        }
+    }
+    let per_prop = if ascii { 2 } else { 1 };
+    let min_len: u64 = elements.iter().map(|&(n, p)| n.saturating_mul(p * per_prop)).fold(0, u64::saturating_add);
+    let data = (bytes.len() - end) as u64;
+    if min_len > data {
+        return Err(mesh_err(path, format!("invalid PLY: the header announces at least {min_len} bytes of elements, the file holds {data}")));
+    }
+    // Bounded by ~64 bytes per property of every element (vertices and faces are read into
+    // fixed structs, face lists into vectors: less than that).
+    let parsed: u64 = elements.iter().map(|&(n, p)| n.saturating_mul(64 * p + 64)).fold(0, u64::saturating_add);
+    crate::limits::check(format!("{}: a PLY of {} elements", path.display(), elements.iter().map(|e| e.0).sum::<u64>()), parsed)
+}
+
+/// Vertex properties a PLY mesh may give, in the order of [`PlyVertex::values`].
+const PLY_VERTEX_KEYS: [&str; 12] = ["x", "y", "z", "nx", "ny", "nz", "u", "v", "texture_u", "texture_v", "s", "t"];
+
+/// One PLY vertex as the parser fills it: a fixed slot per known property (no map per
+/// vertex), with a bit per slot set when the file gave it as a scalar.
+struct PlyVertex {
+    values: [f32; 12],
+    set: u16,
+}
+
+impl ply_rs_bw::ply::PropertyAccess for PlyVertex {
+    fn new() -> Self {
+        PlyVertex { values: [0.0; 12], set: 0 }
+    }
+    fn set_property(&mut self, key: &str, property: ply_rs_bw::ply::Property) -> ply_rs_bw::ply::PropertyAccessResult {
+        use ply_rs_bw::ply::PropertyAccessResult;
+        match (PLY_VERTEX_KEYS.iter().position(|k| *k == key), property.to_f32_lossy()) {
+            (Some(i), Some(x)) => {
+                self.values[i] = x;
+                self.set |= 1 << i;
+                PropertyAccessResult::Set
+            }
+            _ => PropertyAccessResult::Ignored,
+        }
+    }
+}
+
+/// One PLY face: its index list (`vertex_indices`, else `vertex_index`).
+struct PlyFace {
+    indices: Option<ply_rs_bw::ply::Property>,
+    index: Option<ply_rs_bw::ply::Property>,
+}
+
+impl ply_rs_bw::ply::PropertyAccess for PlyFace {
+    fn new() -> Self {
+        PlyFace { indices: None, index: None }
+    }
+    fn set_property(&mut self, key: &str, property: ply_rs_bw::ply::Property) -> ply_rs_bw::ply::PropertyAccessResult {
+        match key {
+            "vertex_indices" => self.indices = Some(property),
+            "vertex_index" => self.index = Some(property),
+            _ => return ply_rs_bw::ply::PropertyAccessResult::Ignored,
+        }
+        ply_rs_bw::ply::PropertyAccessResult::Set
+    }
+}
+
+/// Elements other than vertices and faces: read past, kept nowhere.
+struct PlySkipped;
+
+impl ply_rs_bw::ply::PropertyAccess for PlySkipped {
+    fn new() -> Self {
+        PlySkipped
+    }
+}
+
+/// [`load_ply`] for a file held in memory; `path` names it in errors.
+pub fn load_ply_bytes(bytes: &[u8], path: &Path, flip_tex_coords: bool) -> Result<LoadedMesh> {
+    use ply_rs_bw::parser::{Parser, Reader};
+    use ply_rs_bw::ply::Property;
+    check_ply_header(bytes, path)?;
+    let mut reader = Reader::new(std::io::Cursor::new(bytes));
+    let invalid = |e: ply_rs_bw::parser::ParseError| mesh_err(path, format!("invalid PLY: {e}"));
+    let header = Parser::<PlySkipped>::new().read_header(&mut reader).map_err(invalid)?;
+    let (mut verts, mut faces): (Option<Vec<PlyVertex>>, Option<Vec<PlyFace>>) = (None, None);
+    let mut vertex_names: Vec<&str> = Vec::new();
+    // Elements come in the header's order; each is read whole before the next.
+    for def in header.elements.values() {
+        match def.name.as_str() {
+            "vertex" if verts.is_none() => {
+                vertex_names = def.properties.keys().map(|k| k.as_str()).collect();
+                verts = Some(Parser::<PlyVertex>::new().read_payload_for_element(&mut reader, def, &header).map_err(invalid)?);
+            }
+            "face" if faces.is_none() => faces = Some(Parser::<PlyFace>::new().read_payload_for_element(&mut reader, def, &header).map_err(invalid)?),
+            _ => {
+                Parser::<PlySkipped>::new().read_payload_for_element(&mut reader, def, &header).map_err(invalid)?;
+            }
+        }
+    }
+    let verts = verts.ok_or_else(|| mesh_err(path, "no 'vertex' element"))?;
+    let faces = faces.ok_or_else(|| mesh_err(path, "no 'face' element"))?;
     let mut mesh = TriangleMesh::default();
+    let slot = |k: &str| PLY_VERTEX_KEYS.iter().position(|x| *x == k).unwrap_or(0);
+    let declared = |k: &str| vertex_names.contains(&k);
     let uv_keys = [("u", "v"), ("texture_u", "texture_v"), ("s", "t")];
-    let uv_key = verts.first().and_then(|v| uv_keys.iter().find(|(a, b)| v.contains_key(*a) && v.contains_key(*b)));
-    let has_n = verts.first().is_some_and(|v| v.contains_key("nx") && v.contains_key("ny") && v.contains_key("nz"));
+    let uv_key = uv_keys.iter().find(|(a, b)| declared(a) && declared(b));
+    let has_n = declared("nx") && declared("ny") && declared("nz");
+    mesh.positions.reserve(verts.len());
     for (i, v) in verts.iter().enumerate() {
-        let get = |k: &str| scalar(v, k).ok_or_else(|| mesh_err(path, format!("vertex {i}: missing or non-scalar property '{k}'")));
+        let get = |k: &str| {
+            let s = slot(k);
+            if v.set & (1 << s) != 0 {
+                Ok(v.values[s])
+            } else {
+                Err(mesh_err(path, format!("vertex {i}: missing or non-scalar property '{k}'")))
+            }
+        };
         mesh.positions.push(Vec3::new(get("x")?, get("y")?, get("z")?));
         if has_n {
             mesh.normals.push(Vec3::new(get("nx")?, get("ny")?, get("nz")?));
@@ -97,8 +264,9 @@ pub fn load_ply(path: &Path, flip_tex_coords: bool) -> Result<LoadedMesh> {
         }
     }
     let nv = mesh.positions.len() as i64;
+    mesh.indices.reserve(faces.len());
     for (fi, f) in faces.iter().enumerate() {
-        let list = f.get("vertex_indices").or_else(|| f.get("vertex_index")).ok_or_else(|| mesh_err(path, format!("face {fi}: no vertex_indices")))?;
+        let list = f.indices.as_ref().or(f.index.as_ref()).ok_or_else(|| mesh_err(path, format!("face {fi}: no vertex_indices")))?;
         let idx: Vec<i64> = match list {
             Property::ListChar(l) => l.iter().map(|&x| x as i64).collect(),
             Property::ListUChar(l) => l.iter().map(|&x| x as i64).collect(),

@@ -1,7 +1,7 @@
 //! Emitters, with Mitsuba 3's semantics. Area lights are shapes with an emitting material
 //! (`area.rs`); the others are standalone: point and spot (`point.rs`), directional and the
 //! geometry of rays from infinity (`directional.rs`), constant, and the lat-long
-//! environment map (`envmap.rs`).
+//! environment map (`envmap.rs`), the projector (`projector.rs`).
 //!
 //! Two families of sampling, with the measures they use:
 //! * From a reference point (next-event estimation): `sample_li` returns a direction toward
@@ -19,10 +19,12 @@ mod directional;
 pub mod envmap;
 pub mod luminaire;
 mod point;
+pub mod projector;
 
 pub use area::AreaLight;
 pub use envmap::EnvMap;
 pub use luminaire::Luminaire;
+pub use projector::Projector;
 
 use crate::geometry::{Aabb, Ray, SurfaceInteraction};
 use crate::math::{warp, Frame, PI};
@@ -98,6 +100,8 @@ pub enum Light {
     /// A luminaire from an IES or EULUMDAT file (`luminaire.rs`): a delta position (or a
     /// point of its opening per sample) with a tabulated intensity.
     Luminaire(Box<Luminaire>),
+    /// A pinhole projecting an image (Mitsuba `projector`, see `projector.rs`).
+    Projector(Box<Projector>),
 }
 
 /// Context for light sampling: the scene's bounding sphere (infinite lights need it).
@@ -115,8 +119,22 @@ impl SceneBounds {
 }
 
 impl Light {
+    /// The Mitsuba plugin name of this emitter.
+    pub fn kind_name(&self) -> &'static str {
+        match self {
+            Light::Area(_) => "area",
+            Light::Point { .. } => "point",
+            Light::Spot { .. } => "spot",
+            Light::Projector(_) => "projector",
+            Light::Directional { .. } => "directional",
+            Light::Constant { .. } => "constant",
+            Light::EnvMap(_) => "envmap",
+            Light::Luminaire(_) => "ies",
+        }
+    }
+
     pub fn is_delta(&self) -> bool {
-        matches!(self, Light::Point { .. } | Light::Spot { .. } | Light::Directional { .. } | Light::Luminaire(_))
+        matches!(self, Light::Point { .. } | Light::Spot { .. } | Light::Directional { .. } | Light::Luminaire(_) | Light::Projector(_))
     }
 
     pub fn is_infinite(&self) -> bool {
@@ -148,6 +166,19 @@ impl Light {
                     return None;
                 }
                 Some(LightSample { wi, li: i / dist2, pdf: 1.0, p: *position, n: Vec3::ZERO, infinite: false })
+            }
+            Light::Projector(pr) => {
+                let d = pr.position - p_ref;
+                let dist2 = d.length_squared();
+                if dist2 == 0.0 {
+                    return None;
+                }
+                let wi = d / dist2.sqrt();
+                let i = pr.intensity(-wi);
+                if i.is_black() {
+                    return None;
+                }
+                Some(LightSample { wi, li: i / dist2, pdf: 1.0, p: pr.position, n: Vec3::ZERO, infinite: false })
             }
             Light::Directional { direction, irradiance } => {
                 let wi = -*direction;
@@ -207,6 +238,7 @@ impl Light {
                 let tex = texture.as_ref().map_or(Rgb::WHITE, |t| t.mean());
                 point::spot_solid_angle(*cutoff_angle, *beam_width) * (*intensity * tex).luminance()
             }
+            Light::Projector(pr) => pr.power(),
             Light::Directional { irradiance, .. } => disk * irradiance.luminance(),
             Light::Constant { radiance } => 4.0 * PI * disk * radiance.luminance(),
             Light::EnvMap(env) => disk * env.luminance_integral(),
@@ -233,6 +265,12 @@ impl Light {
                 ray.time = time;
                 Some(EmissionSample { ray, le: self.spot_intensity(d), pdf_pos: 1.0, pdf_dir, n: d })
             }
+            Light::Projector(pr) => {
+                let (d, pdf_dir) = pr.sample_direction(u_dir);
+                let mut ray = Ray::new(pr.position, d);
+                ray.time = time;
+                Some(EmissionSample { ray, le: pr.intensity(d), pdf_pos: 1.0, pdf_dir, n: d })
+            }
             Light::Directional { direction, irradiance } => {
                 let (ray, pdf_pos) = ray_from_infinity(bounds, *direction, u_pos, time);
                 Some(EmissionSample { ray, le: *irradiance, pdf_pos, pdf_dir: 1.0, n: *direction })
@@ -254,6 +292,7 @@ impl Light {
             Light::Area(a) => a.pdf_le(ray, n),
             Light::Point { .. } => (0.0, point::POINT_PDF_DIR),
             Light::Spot { frame, cos_cutoff, .. } => (0.0, warp::square_to_uniform_cone_pdf(frame.to_local(ray.d), *cos_cutoff)),
+            Light::Projector(pr) => (0.0, pr.pdf_direction(ray.d)),
             Light::Directional { .. } => (disk_pdf(bounds), 0.0),
             Light::Constant { .. } | Light::EnvMap(_) => (disk_pdf(bounds), self.pdf_li_escaped(-ray.d)),
             Light::Luminaire(l) => (0.0, l.pdf_dir(ray.d)),

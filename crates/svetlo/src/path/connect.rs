@@ -27,6 +27,10 @@ pub struct Connection {
     pub weight: f32,
     /// Film position for t = 1 (a splat); None: the camera subpath's own pixel.
     pub raster: Option<Vec2>,
+    /// The vertex the strategy sampled (t = 1: the lens point; s = 1: the light point) and,
+    /// for s = 1, its light: what light path expressions need of it.
+    pub sampled_p: glam::Vec3,
+    pub sampled_light: Option<u32>,
 }
 
 /// Strategy (s, t) on the subpaths `light` and `camera`; None when it contributes nothing.
@@ -67,7 +71,7 @@ pub fn connect(
         if !cfg.camera_connectible || !qs.connectible(scene) || (s == 1 && !qs.is_area_light(scene)) {
             return None;
         }
-        let cs = scene.camera.sample_wi(qs.p, u)?;
+        let cs = cfg.lens.as_ref()?.sample_wi(qs.p, u)?;
         if cs.pdf <= 0.0 || cs.we <= 0.0 {
             return None;
         }
@@ -133,5 +137,5 @@ pub fn connect(
         return None;
     }
     let weight = if weighted { mis_weight(scene, cfg, light, camera, sampled.as_ref(), s, t) } else { 1.0 };
-    Some(Connection { l, weight, raster })
+    Some(Connection { l, weight, raster, sampled_p: sampled.as_ref().map_or(glam::Vec3::ZERO, |v| v.p), sampled_light: sampled.as_ref().and_then(|v| v.light) })
 }

@@ -48,16 +48,16 @@ pub fn mis_weight(scene: &Scene, cfg: &PathConfig, light: &[Vertex], camera: &[V
 
     // Reverse densities at the connection, for this strategy.
     let pt_rev = match qs {
-        Some(q) => q.pdf(scene, qs_minus, pt, TransportMode::Importance),
+        Some(q) => q.pdf_with_lens(scene, cfg.lens.as_ref(), qs_minus, pt, TransportMode::Importance),
         None => pt_minus.map_or(0.0, |pm| pt.pdf_light_origin(scene, pm)),
     };
     let pt_minus_rev = pt_minus.map(|pm| match qs {
-        Some(q) => pt.pdf(scene, Some(q), pm, TransportMode::Importance),
+        Some(q) => pt.pdf_with_lens(scene, cfg.lens.as_ref(), Some(q), pm, TransportMode::Importance),
         None => pt.pdf_light(scene, pm),
     });
-    let qs_rev = qs.map(|q| pt.pdf(scene, pt_minus, q, TransportMode::Radiance));
+    let qs_rev = qs.map(|q| pt.pdf_with_lens(scene, cfg.lens.as_ref(), pt_minus, q, TransportMode::Radiance));
     let qs_minus_rev = match (qs, qs_minus) {
-        (Some(q), Some(qm)) => Some(q.pdf(scene, Some(pt), qm, TransportMode::Radiance)),
+        (Some(q), Some(qm)) => Some(q.pdf_with_lens(scene, cfg.lens.as_ref(), Some(pt), qm, TransportMode::Radiance)),
         _ => None,
     };
 

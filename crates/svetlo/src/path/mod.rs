@@ -59,6 +59,8 @@ pub struct PathConfig {
     pub hide_emitters: bool,
     /// Whether the camera can be connected to (perspective and thin lens; not orthographic).
     pub camera_connectible: bool,
+    /// The camera's connection constants (None: orthographic), computed once per render.
+    pub lens: Option<crate::camera::LensConnector>,
 }
 
 impl PathConfig {
@@ -71,6 +73,7 @@ impl PathConfig {
             rr_depth,
             hide_emitters,
             camera_connectible: !matches!(scene.camera.projection, crate::camera::Projection::Orthographic),
+            lens: scene.camera.lens_connector(),
         }
     }
 

@@ -1,6 +1,7 @@
 //! One vertex of a path, and the densities and throughputs between two vertices.
 
 use crate::bsdf::{Bsdf, LobeFlags, TransportMode};
+use crate::camera::LensConnector;
 use crate::geometry::SurfaceInteraction;
 use crate::light::Light;
 use crate::math::{Frame, PI};
@@ -101,6 +102,8 @@ pub struct Vertex {
     pub pdf_rev: f32,
     pub delta: bool,
     pub event: Event,
+    /// Surfaces: the scene shape (for light path expressions' labels).
+    pub shape: u32,
     /// Camera vertices: where on the film.
     pub raster: Vec2,
     /// The path's time in the shutter interval (the camera ray's): connections test
@@ -151,6 +154,7 @@ impl Vertex {
             pdf_rev: 0.0,
             delta: false,
             event: if kind == VertexKind::Camera { Event::CAMERA } else { Event::LIGHT },
+            shape: 0,
             raster: Vec2::ZERO,
             time: 0.0,
         }
@@ -186,6 +190,7 @@ impl Vertex {
             light,
             beta,
             time: si.time,
+            shape: si.shape,
             ..Self::blank(VertexKind::Surface)
         }
     }
@@ -297,6 +302,7 @@ impl Vertex {
                 }
             }
             l @ (Light::Spot { .. } | Light::Luminaire(_)) => l.spot_intensity(w),
+            Light::Projector(pr) => pr.intensity(w),
             Light::Point { .. } => self.le,
             _ => Rgb::BLACK,
         }
@@ -305,6 +311,15 @@ impl Vertex {
     /// Area density at `next` of a walk at this vertex that arrived from `prev` and samples
     /// `next` (`mode`: the direction of that walk). Light endpoints sample by emission.
     pub fn pdf(&self, scene: &Scene, prev: Option<&Vertex>, next: &Vertex, mode: TransportMode) -> f32 {
+        if self.kind == VertexKind::Camera {
+            return self.pdf_with_lens(scene, scene.camera.lens_connector().as_ref(), prev, next, mode);
+        }
+        self.pdf_with_lens(scene, None, prev, next, mode)
+    }
+
+    /// [`Self::pdf`] with the camera's constants computed beforehand (`PathConfig::lens`;
+    /// only camera vertices read it), for the connections that ask per sample.
+    pub fn pdf_with_lens(&self, scene: &Scene, lens: Option<&LensConnector>, prev: Option<&Vertex>, next: &Vertex, mode: TransportMode) -> f32 {
         if self.kind == VertexKind::Light {
             return self.pdf_light(scene, next);
         }
@@ -313,7 +328,7 @@ impl Vertex {
             return 0.0;
         }
         let pdf = match self.kind {
-            VertexKind::Camera => scene.camera.pdf_we(&crate::geometry::Ray::new(self.p, wn)).1,
+            VertexKind::Camera => lens.map_or(0.0, |l| l.pdf_we(&crate::geometry::Ray::new(self.p, wn)).1),
             _ => {
                 let (Some(bsdf), Some(prev)) = (&self.bsdf, prev) else { return 0.0 };
                 let (wp, dp2) = self.direction_to(prev);

@@ -14,8 +14,8 @@ use crate::spectrum::Rgb;
 use glam::{Vec2, Vec3};
 
 /// The lens point a camera ray leaves from (its origin is on the near plane).
-fn lens_point(scene: &Scene, ray: &Ray) -> Vec3 {
-    let m = scene.camera.to_world.inverse();
+fn lens_point(scene: &Scene, cfg: &PathConfig, ray: &Ray) -> Vec3 {
+    let m = cfg.lens.map_or_else(|| scene.camera.to_world.inverse(), |l| l.to_camera());
     let o = m.transform_point3(ray.o);
     let d = m.transform_vector3(ray.d);
     let o_lens = if d.z != 0.0 { o - d * (o.z / d.z) } else { o };
@@ -30,10 +30,10 @@ pub fn camera_subpath(scene: &Scene, cfg: &PathConfig, ray: &Ray, raster: Vec2, 
     if cfg.max_camera_vertices == 0 {
         return;
     }
-    let mut cam = Vertex::camera(lens_point(scene, ray), raster, Rgb::WHITE);
+    let mut cam = Vertex::camera(lens_point(scene, cfg, ray), raster, Rgb::WHITE);
     cam.time = ray.time;
     path.push(cam);
-    let (_, pdf_dir) = scene.camera.pdf_we(ray);
+    let (_, pdf_dir) = cfg.lens.map_or((0.0, 0.0), |l| l.pdf_we(ray));
     random_walk(scene, *ray, sampler, Rgb::WHITE, pdf_dir, cfg.max_camera_vertices, cfg.rr_depth, TransportMode::Radiance, path);
 }
 

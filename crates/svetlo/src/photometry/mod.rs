@@ -114,7 +114,7 @@ impl Photometry {
 /// Read a luminaire file, choosing the parser by extension (`.ies`, `.ldt`) and falling back
 /// to content (an IES file starts with `IESNA` or has a `TILT=` line).
 pub fn load(path: &Path) -> Result<Photometry> {
-    let bytes = std::fs::read(path).map_err(|source| Error::Io { file: path.to_path_buf(), source })?;
+    let bytes = crate::limits::read_file(path)?;
     let ext = path.extension().and_then(|e| e.to_str()).map(|e| e.to_ascii_lowercase());
     match ext.as_deref() {
         Some("ldt") => eulumdat::parse(&bytes, path),

@@ -250,7 +250,8 @@ impl View {
 fn floor_i(v: f32) -> i32 {
     let i = v as i32;
     if (i as f32) > v {
-        i - 1
+        // Saturating: below i32::MIN the cast gave MIN already (a light at y = -2^32).
+        i.saturating_sub(1)
     } else {
         i
     }
@@ -260,7 +261,7 @@ fn floor_i(v: f32) -> i32 {
 fn ceil_i(v: f32) -> i32 {
     let i = v as i32;
     if (i as f32) < v {
-        i + 1
+        i.saturating_add(1)
     } else {
         i
     }
@@ -294,6 +295,21 @@ impl DepthBuffer {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn floor_and_ceil_saturate_far_outside_the_image() {
+        // Projected coordinates of a light at y = 2^32 and beyond: no overflow (a wrapped
+        // value would turn an off-screen bound into an on-screen one).
+        for v in [-3e9f32, -2.2e9, -1e30, f32::NEG_INFINITY] {
+            assert_eq!(floor_i(v), i32::MIN, "{v}");
+            assert_eq!(ceil_i(v), i32::MIN, "{v}");
+        }
+        for v in [3e9f32, 2.2e9, 1e30, f32::INFINITY] {
+            assert_eq!(ceil_i(v), i32::MAX, "{v}");
+            assert_eq!(floor_i(v), i32::MAX, "{v}");
+        }
+        assert_eq!((floor_i(-1.5), ceil_i(-1.5), floor_i(2.0), ceil_i(2.0)), (-2, -1, 2, 2));
+    }
 
     fn view() -> View {
         View { world_to_camera: Mat4::IDENTITY, projection: ViewProjection::Perspective { half: Vec2::splat(1.0) }, width: 64, height: 64, near: 0.1 }

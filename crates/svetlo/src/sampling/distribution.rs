@@ -68,6 +68,9 @@ impl Distribution1D {
     #[inline(always)]
     pub fn sample_discrete(&self, u: f32) -> (usize, f32, f32) {
         let i = match self.func.len() {
+            // No entry (a scene without lights): probability 0, which every caller checks
+            // before using the index.
+            0 => return (0, 0.0, 0.0),
             // One entry (a scene's only light): nothing to search.
             1 => return (0, 1.0, u),
             // Two (a quad light's triangles): one comparison. Neither interval can be empty

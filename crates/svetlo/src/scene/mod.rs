@@ -43,6 +43,7 @@ impl Shape {
 
 /// A shape that moves during the shutter: its own accelerator over its reference pose, into
 /// which rays are carried at their time.
+#[derive(Clone)]
 pub struct MovingShape {
     pub shape: u32,
     pub accel: Accel,
@@ -94,6 +95,8 @@ impl Default for SceneSettings {
     }
 }
 
+/// Clone: a render at another resolution (Python's `render(width=...)`) takes a copy.
+#[derive(Clone)]
 pub struct Scene {
     pub shapes: Vec<Shape>,
     pub materials: Vec<Material>,

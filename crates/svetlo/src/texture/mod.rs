@@ -123,10 +123,27 @@ impl Texture {
             }
         }
     }
-    /// Scalar parameter: the first channel.
+    /// Scalar parameter (roughness, opacity, weights), read as Mitsuba 3's `eval_1` reads it:
+    /// a constant's first channel, a bitmap's luminance, and a checkerboard with its two
+    /// colours the other way round from its colour lookup (Mitsuba's float checkerboard puts
+    /// `color1` where the colour one puts `color0`; its test scenes are rendered that way).
     #[inline]
     pub fn eval_f32(&self, uv: Vec2) -> f32 {
-        self.eval(uv).r
+        match self {
+            Texture::Constant(c) => c.r,
+            _ => self.eval_f32_varying(uv),
+        }
+    }
+
+    #[inline(never)]
+    fn eval_f32_varying(&self, uv: Vec2) -> f32 {
+        match self {
+            Texture::Checkerboard { color0, color1, to_uv } => {
+                let swapped = Texture::Checkerboard { color0: *color1, color1: *color0, to_uv: *to_uv };
+                swapped.eval_varying(uv).luminance()
+            }
+            _ => self.eval(uv).luminance(),
+        }
     }
     /// Mean value over the texture (for light power and radiosity albedo).
     pub fn mean(&self) -> Rgb {
@@ -138,5 +155,31 @@ impl Texture {
     }
     pub fn is_constant(&self) -> bool {
         matches!(self, Texture::Constant(_))
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// Mitsuba 3.9.1's checkerboard (to_uv scale 25, color0 0.05, color1 0.3) gives `eval`
+    /// 0.05 and `eval_1` 0.3 at uv (0.001, 0.001) and (0.03, 0.03), the reverse at (0.03, 0.001).
+    #[test]
+    fn checkerboard_scalar_lookup_is_mitsubas() {
+        let t = Texture::Checkerboard { color0: Rgb::splat(0.05), color1: Rgb::splat(0.3), to_uv: Affine2::from_scale(Vec2::splat(25.0)) };
+        for (uv, colour, scalar) in [((0.001, 0.001), 0.05, 0.3), ((0.03, 0.03), 0.05, 0.3), ((0.03, 0.001), 0.3, 0.05), ((0.001, 0.03), 0.3, 0.05)] {
+            let uv = Vec2::new(uv.0, uv.1);
+            assert_eq!(t.eval(uv), Rgb::splat(colour), "{uv}");
+            assert!((t.eval_f32(uv) - scalar).abs() < 1e-6, "{uv}: {}", t.eval_f32(uv));
+        }
+    }
+
+    /// A bitmap read as a scalar gives its luminance (Mitsuba's `eval_1` of an RGB bitmap).
+    #[test]
+    fn bitmap_scalar_lookup_is_luminance() {
+        let c = Rgb::new(0.8, 0.2, 0.1);
+        let t = Texture::Bitmap { image: Arc::new(Bitmap::new(1, 1, vec![c])), filter: FilterMode::Nearest, wrap: WrapMode::Repeat, to_uv: Affine2::IDENTITY };
+        assert!((t.eval_f32(Vec2::new(0.3, 0.6)) - c.luminance()).abs() < 1e-6);
+        assert_eq!(Texture::from(c).eval_f32(Vec2::ZERO), c.r);
     }
 }

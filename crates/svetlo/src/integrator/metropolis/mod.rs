@@ -246,6 +246,15 @@ struct Chain<S> {
 
 /// Render `target` on a `width` x `height` film by Metropolis sampling: `settings.spp`
 /// mutations per pixel (or until the time limit), `cfg.chains` chains.
+/// The render of a scene without emitters: black, exactly (the bootstrap would have nothing
+/// to find), with all samples counted as done.
+pub fn black(width: u32, height: u32, settings: &RenderSettings) -> Result<(Film, ChainStats)> {
+    settings.validate()?;
+    let mut film = Film::new(width, height, settings.filter);
+    film.spp_done = settings.spp;
+    Ok((film, ChainStats::default()))
+}
+
 pub fn run<T: MetropolisTarget>(
     target: &T,
     width: u32,
@@ -411,6 +420,11 @@ pub fn run<T: MetropolisTarget>(
             done += st.mutations;
         }
         progress.done.store(done, Ordering::Relaxed);
+        if progress.is_observed() && done > 0 {
+            film.splat_scale = (done as f64 / npix as f64) as f32;
+            film.spp_done = ((done as f64 / npix as f64).round() as u32).max(1);
+            progress.pass_done(&film);
+        }
         if let Some(t) = settings.time_limit {
             let el = start.elapsed().as_secs_f64();
             let per = el / done.max(1) as f64;

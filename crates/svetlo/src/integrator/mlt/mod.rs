@@ -106,6 +106,9 @@ impl Mlt {
     /// The render and the chains' statistics.
     pub fn render_with_stats(&self, scene: &Scene, settings: &RenderSettings, progress: &Progress) -> Result<(Film, ChainStats)> {
         self.options.validate()?;
+        if scene.lights.is_empty() {
+            return metropolis::black(scene.camera.width, scene.camera.height, settings);
+        }
         let t = Target::new(scene, settings, self.options.weights)?;
         metropolis::run(&t, scene.camera.width, scene.camera.height, settings, &self.options.chain, progress)
     }

@@ -43,7 +43,7 @@ pub(crate) fn camera_walk(
     settings: &RenderSettings,
     at_diffuse: &mut dyn FnMut(&DiffuseVertex, &mut dyn Sampler) -> Rgb,
 ) -> Rgb {
-    path::camera_walk(scene, camera_ray, sampler, settings, &mut PhotonRules { at_diffuse, index: 0 })
+    path::camera_walk(scene, camera_ray, sampler, settings, &mut PhotonRules { at_diffuse, index: 0 }, &mut Default::default())
 }
 
 /// The photon methods' split of path space (module comment) as rules of the camera walk.

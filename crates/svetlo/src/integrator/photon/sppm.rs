@@ -221,26 +221,34 @@ impl Integrator for Sppm {
             iterations += 1;
             per_iteration_s = start.elapsed().as_secs_f64() / iterations as f64;
             progress.done.fetch_add((w * h) as u64, Ordering::Relaxed);
-        }
-        // Develop: each pixel is its own measurement (box reconstruction).
-        let mut film = Film::new(scene.camera.width, scene.camera.height, Filter::Box);
-        if iterations > 0 {
-            let emitted = per_iter as f64 * iterations as f64;
-            for y in 0..h {
-                for x in 0..w {
-                    let mut l = direct[y * w + x] / iterations as f32;
-                    for st in &stats[(y * w + x) * slots..(y * w + x + 1) * slots] {
-                        if st.n > 0.0 {
-                            l += st.tau / ((PI as f64 * st.r as f64 * st.r as f64 * emitted) as f32);
-                        }
-                    }
-                    film.add_sample(Vec2::new(x as f32 + 0.5, y as f32 + 0.5), l);
-                }
+            if progress.is_observed() {
+                progress.pass_done(&develop(scene, &direct, &stats, slots, per_iter, iterations));
             }
         }
-        film.spp_done = iterations;
-        Ok(film)
+        Ok(develop(scene, &direct, &stats, slots, per_iter, iterations))
     }
+}
+
+/// The image after `iterations`: each pixel is its own measurement (box reconstruction).
+fn develop(scene: &Scene, direct: &[Rgb], stats: &[Stats], slots: usize, per_iter: u64, iterations: u32) -> Film {
+    let (w, h) = (scene.camera.width as usize, scene.camera.height as usize);
+    let mut film = Film::new(scene.camera.width, scene.camera.height, Filter::Box);
+    if iterations > 0 {
+        let emitted = per_iter as f64 * iterations as f64;
+        for y in 0..h {
+            for x in 0..w {
+                let mut l = direct[y * w + x] / iterations as f32;
+                for st in &stats[(y * w + x) * slots..(y * w + x + 1) * slots] {
+                    if st.n > 0.0 {
+                        l += st.tau / ((PI as f64 * st.r as f64 * st.r as f64 * emitted) as f32);
+                    }
+                }
+                film.add_sample(Vec2::new(x as f32 + 0.5, y as f32 + 0.5), l);
+            }
+        }
+    }
+    film.spp_done = iterations;
+    film
 }
 
 #[cfg(test)]

@@ -35,7 +35,8 @@ impl<'a> Loader<'a> {
         for c in &node.children {
             match c.tag.as_str() {
                 "bsdf" => out.push(c),
-                "ref" if c.name().is_none() => {
+                // Named or not (`<ref name="bsdf_0" id=..>`): the target's kind decides.
+                "ref" => {
                     let t = self.lookup(c)?;
                     if t.tag == "bsdf" {
                         out.push(t);
@@ -102,7 +103,12 @@ impl<'a> Loader<'a> {
         Ok(Roughness { kind, alpha_u, alpha_v })
     }
 
+    /// A `<bsdf>` element as a material, nested BSDFs included.
     pub(super) fn bsdf(&mut self, node: &'a Node) -> Result<Material> {
+        self.nested(node, |l| l.bsdf_plugin(node))
+    }
+
+    fn bsdf_plugin(&mut self, node: &'a Node) -> Result<Material> {
         let ty = node.type_()?;
         let white = Rgb::WHITE;
         let refl = SpectrumKind::Reflectance;

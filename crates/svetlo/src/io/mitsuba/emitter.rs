@@ -78,8 +78,21 @@ impl<'a> Loader<'a> {
             }
             "ies" => self.luminaire(node, to_world)?,
             "projector" => {
-                self.warn(format!("{}:{}: projector emitters are not supported; skipped", node.loc.file.display(), node.loc.line));
-                return Ok(());
+                let m = to_world.unwrap_or(Mat4::IDENTITY);
+                let irradiance = self.spectrum(node, "irradiance", Rgb::WHITE, il)?;
+                // The image's aspect ratio shapes the frustum; a constant is square.
+                let aspect = match &irradiance {
+                    crate::texture::Texture::Bitmap { image, .. } => image.width as f32 / image.height as f32,
+                    _ => 1.0,
+                };
+                let scale = self.float(node, "scale", 1.0)?;
+                if !(scale >= 0.0 && scale.is_finite()) {
+                    return Err(node.loc.err(format!("projector scale must be non-negative, got {scale}")));
+                }
+                // fov / fov_axis / focal_length as a sensor reads them (0 < fov < 180).
+                let fov_x = self.fov_x(node, aspect)?;
+                let p = crate::light::Projector::new(&m, fov_x, aspect, irradiance, scale).ok_or_else(|| node.loc.err("projector: degenerate to_world"))?;
+                Light::Projector(Box::new(p))
             }
             "area" => return Err(node.loc.err("an area emitter must be attached to a shape")),
             other => return Err(node.loc.err(format!("unknown emitter type '{other}'"))),

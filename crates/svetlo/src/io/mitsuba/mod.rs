@@ -13,6 +13,7 @@ mod classic;
 mod emitter;
 mod luminaire;
 mod props;
+mod refs;
 mod sensor;
 mod shape;
 mod texture;
@@ -45,6 +46,7 @@ pub fn load_scene_from_str(text: &str, origin: &Path, defaults: &[(String, Strin
 fn load_parsed(parsed: xml::Parsed, path: &Path) -> Result<Scene> {
     let mut ids = HashMap::new();
     collect_ids(&parsed.root, &mut ids)?;
+    refs::check_cycles(&ids)?;
     let mut loader = Loader {
         ids,
         search_paths: parsed.search_paths.clone(),
@@ -54,11 +56,17 @@ fn load_parsed(parsed: xml::Parsed, path: &Path) -> Result<Scene> {
         bitmaps: HashMap::new(),
         shape_count: 0,
         has_sensor: false,
+        plugin_depth: 0,
+        plugin_instances: 0,
+        queried: Default::default(),
     };
     for p in &parsed.unused_params {
         loader.warn(format!("parameter '{p}' given on the command line is not used by the scene"));
     }
     loader.scene(&parsed.root)?;
+    let mut unused = Vec::new();
+    loader.queried.borrow().unused(&parsed.root, &mut unused);
+    loader.b.warnings.extend(unused);
     if !loader.has_sensor {
         return Err(Error::Scene { file: path.to_path_buf(), msg: "the scene has no <sensor>".into() });
     }
@@ -88,6 +96,11 @@ pub(crate) struct Loader<'a> {
     bitmaps: HashMap<(PathBuf, bool), Arc<Bitmap>>,
     shape_count: usize,
     has_sensor: bool,
+    /// Plugins being built (nested and referenced) and built so far: see [`Loader::nested`].
+    plugin_depth: usize,
+    plugin_instances: usize,
+    /// Properties asked for, to report the ones nobody read.
+    queried: std::cell::RefCell<props::Queried>,
 }
 
 impl<'a> Loader<'a> {
@@ -112,6 +125,7 @@ impl<'a> Loader<'a> {
     }
 
     fn scene(&mut self, root: &'a Node) -> Result<()> {
+        self.check_version(root)?;
         for c in &root.children {
             match c.tag.as_str() {
                 "integrator" => self.integrator(c)?,

@@ -15,6 +15,10 @@ pub fn parse_f32(s: &str, loc: &Loc, what: &str) -> Result<f32> {
     if v.is_nan() {
         return Err(loc.err(format!("{what}: value is NaN")));
     }
+    // "inf", or 1e39 (beyond f32): no quantity of a scene means anything at infinity.
+    if v.is_infinite() {
+        return Err(loc.err(format!("{what}: '{}' is not a finite number", s.trim())));
+    }
     Ok(v)
 }
 
@@ -23,10 +27,56 @@ pub fn parse_list(s: &str, loc: &Loc, what: &str) -> Result<Vec<f32>> {
     s.split(|c: char| c == ',' || c.is_whitespace()).filter(|t| !t.is_empty()).map(|t| parse_f32(t, loc, what)).collect()
 }
 
+/// Which plugins asked for properties, and which properties were asked for: what a plugin
+/// that was read holds but nobody asked for is reported (Mitsuba rejects such "unreferenced
+/// properties"; svetlo warns, since it reads a subset of Mitsuba's plugins).
+#[derive(Default)]
+pub struct Queried {
+    plugins: std::collections::HashSet<usize>,
+    props: std::collections::HashSet<usize>,
+}
+
+/// The property elements that are checked for use.
+const PROPERTY_TAGS: &[&str] = &["float", "integer", "boolean", "string", "rgb", "srgb", "spectrum", "point", "vector", "transform", "texture"];
+
+impl Queried {
+    fn note(&mut self, plugin: &Node, prop: Option<&Node>) {
+        self.plugins.insert(plugin as *const Node as usize);
+        if let Some(p) = prop {
+            self.props.insert(p as *const Node as usize);
+        }
+    }
+
+    /// Warnings for the unused properties of every plugin that was read, in file order.
+    pub fn unused(&self, n: &Node, out: &mut Vec<String>) {
+        if self.plugins.contains(&(n as *const Node as usize)) {
+            for c in &n.children {
+                if PROPERTY_TAGS.contains(&c.tag.as_str()) && !self.props.contains(&(c as *const Node as usize)) {
+                    if let Some(name) = c.name() {
+                        out.push(format!(
+                            "{}:{}: <{} name=\"{name}\"> of <{} type=\"{}\"> is not used (svetlo does not read it)",
+                            c.loc.file.display(),
+                            c.loc.line,
+                            c.tag,
+                            n.tag,
+                            n.attr("type").unwrap_or("?")
+                        ));
+                    }
+                }
+            }
+        }
+        for c in &n.children {
+            self.unused(c, out);
+        }
+    }
+}
+
 impl<'a> Loader<'a> {
     /// The child property `name` of a plugin; a `<ref name=.. id=..>` resolves to its target.
     pub fn prop(&self, node: &'a Node, name: &str) -> Result<Option<&'a Node>> {
-        match node.children.iter().find(|c| c.name() == Some(name)) {
+        let found = node.children.iter().find(|c| c.name() == Some(name));
+        self.queried.borrow_mut().note(node, found);
+        match found {
             Some(c) if c.tag == "ref" => Ok(Some(self.lookup(c)?)),
             other => Ok(other),
         }
@@ -146,8 +196,21 @@ impl<'a> Loader<'a> {
     }
 }
 
-/// The RGB value of an `rgb`, `srgb`, `spectrum`, `float` or `integer` element.
+/// The RGB value of an `rgb`, `srgb`, `spectrum`, `float` or `integer` element. Radiance,
+/// intensity and reflectance must be finite and non-negative (a negative one gives negative
+/// pixels, or black from the Metropolis methods).
 pub fn color_of(p: &Node, name: &str, kind: SpectrumKind) -> Result<Rgb> {
+    let c = color_value(p, name, kind)?;
+    if !c.is_finite() {
+        return Err(p.loc.err(format!("{name}: {c:?} is not finite")));
+    }
+    if kind != SpectrumKind::Unbounded && c.min_component() < 0.0 {
+        return Err(p.loc.err(format!("{name}: {c:?} is negative (radiance, intensity and reflectance are at least 0)")));
+    }
+    Ok(c)
+}
+
+fn color_value(p: &Node, name: &str, kind: SpectrumKind) -> Result<Rgb> {
     let value = p.req("value")?;
     match p.tag.as_str() {
         "float" | "integer" => Ok(Rgb::splat(parse_f32(value, &p.loc, name)?)),
@@ -246,7 +309,11 @@ pub fn parse_transform(t: &Node) -> Result<Mat4> {
             "matrix" => {
                 let v = parse_list(op.req("value")?, &op.loc, "matrix")?;
                 match v.len() {
-                    // Row-major in the file; glam is column-major.
+                    // Row-major in the file; glam is column-major. Shapes, lights and cameras
+                    // are placed by affine maps: a projective last row has no meaning here.
+                    16 if v[12..] != [0.0, 0.0, 0.0, 1.0] => {
+                        return Err(op.loc.err(format!("<matrix>: the last row must be 0 0 0 1 (an affine transform), got {:?}", &v[12..])));
+                    }
                     16 => Mat4::from_cols_array(&v.try_into().expect("16 values")).transpose(),
                     9 => Mat4::from_cols(Vec4::new(v[0], v[3], v[6], 0.0), Vec4::new(v[1], v[4], v[7], 0.0), Vec4::new(v[2], v[5], v[8], 0.0), Vec4::W),
                     n => return Err(op.loc.err(format!("<matrix> needs 16 (or 9) values, got {n}"))),

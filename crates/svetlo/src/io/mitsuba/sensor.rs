@@ -43,6 +43,9 @@ impl<'a> Loader<'a> {
     pub(super) fn sensor(&mut self, node: &'a Node) -> Result<()> {
         let ty = node.type_()?;
         let to_world = self.transform(node, "to_world")?.unwrap_or(Mat4::IDENTITY);
+        if singular(&to_world) {
+            return Err(node.loc.err("the sensor's to_world is singular (a zero scale, or axes that coincide): the camera would see nothing"));
+        }
         let film = node.children.iter().find(|c| c.tag == "film");
         let (mut width, mut height) = (768, 576);
         if let Some(f) = film {
@@ -74,6 +77,7 @@ impl<'a> Loader<'a> {
             return Err(fl.loc.err(format!("film size {width}x{height} is not between 1 and 65536")));
         }
         let (width, height) = (width as u32, height as u32);
+        crate::limits::check_film(width, height).map_err(|e| fl.loc.err(e.to_string()))?;
         if let Some(s) = node.children.iter().find(|c| c.tag == "sampler") {
             let spp = self.int(s, "sample_count", 4)?;
             if !(1..=u32::MAX as i64).contains(&spp) {
@@ -129,7 +133,7 @@ impl<'a> Loader<'a> {
     }
 
     /// The horizontal fov from `fov` + `fov_axis` or a 35 mm `focal_length` (Mitsuba's default 50mm).
-    fn fov_x(&self, node: &'a Node, aspect: f32) -> Result<f32> {
+    pub(super) fn fov_x(&self, node: &'a Node, aspect: f32) -> Result<f32> {
         let (fov, axis) = match self.opt_float(node, "fov")? {
             Some(f) => (f, self.string(node, "fov_axis")?.unwrap_or("x").to_string()),
             None => {
@@ -176,6 +180,13 @@ impl<'a> Loader<'a> {
         self.b.settings.hide_emitters = self.boolean(node, "hide_emitters", false)?;
         Ok(())
     }
+}
+
+/// Is the linear part of `m` singular, up to its scale?
+fn singular(m: &Mat4) -> bool {
+    let l = glam::Mat3::from_mat4(*m);
+    let scale = l.x_axis.length() * l.y_axis.length() * l.z_axis.length();
+    !(scale > 0.0 && (l.determinant() / scale).abs() > 1e-6)
 }
 
 fn positive(node: &Node, name: &str, v: f32) -> Result<f32> {

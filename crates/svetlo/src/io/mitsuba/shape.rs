@@ -10,7 +10,6 @@ use crate::io::spectra::SpectrumKind;
 use crate::math::Frame;
 use crate::spectrum::Rgb;
 use glam::{Mat3, Mat4, Vec3};
-use std::path::{Path, PathBuf};
 
 /// Is the linear part of `m` a uniform scale (any rotation allowed)? Returns the scale.
 fn uniform_scale(m: &Mat4) -> Option<f32> {
@@ -27,6 +26,10 @@ fn uniform_scale(m: &Mat4) -> Option<f32> {
 impl<'a> Loader<'a> {
     /// Add the geometry of a `<shape>` (placed by `parent`, for instances) to the scene.
     pub(super) fn shape(&mut self, node: &'a Node, parent: Mat4) -> Result<()> {
+        self.nested(node, |l| l.shape_plugin(node, parent))
+    }
+
+    fn shape_plugin(&mut self, node: &'a Node, parent: Mat4) -> Result<()> {
         let ty = node.type_()?;
         let animation = self.animation(node, parent)?;
         let to_world = match &animation {
@@ -47,13 +50,11 @@ impl<'a> Loader<'a> {
         let (mut material, mut emission) = (None, None);
         for c in &node.children {
             let target = match c.tag.as_str() {
-                "ref" if c.name().is_none() => self.lookup(c)?,
-                "ref" => {
-                    if matches!(c.name(), Some("interior") | Some("exterior")) {
-                        return Err(c.loc.err("participating media (interior/exterior) are not supported"));
-                    }
-                    continue;
+                "ref" if matches!(c.name(), Some("interior") | Some("exterior")) => {
+                    return Err(c.loc.err("participating media (interior/exterior) are not supported"));
                 }
+                // Named or not (Mitsuba's writer emits `<ref name="bsdf" id=..>`): the target's kind decides.
+                "ref" => self.lookup(c)?,
                 "bsdf" | "emitter" | "medium" => c,
                 _ => continue,
             };
@@ -95,7 +96,11 @@ impl<'a> Loader<'a> {
                 let loaded = match ty {
                     "obj" => mesh_files::load_obj(&path, self.boolean(node, "flip_tex_coords", true)?)?,
                     "ply" => mesh_files::load_ply(&path, self.boolean(node, "flip_tex_coords", false)?)?,
-                    _ => self.serialized_twin(node, &path)?,
+                    _ => {
+                        let index = self.int(node, "shape_index", 0)?;
+                        let index = u32::try_from(index).map_err(|_| node.loc.err(format!("shape_index must be non-negative, got {index}")))?;
+                        crate::io::serialized::load_serialized(&path, index)?
+                    }
                 };
                 let LoadedMesh { mut mesh, warnings } = loaded;
                 for w in warnings {
@@ -218,30 +223,6 @@ impl<'a> Loader<'a> {
                 m.transform(&object);
                 Ok(Geometry::Mesh(finish(m, flip)))
             }
-        }
-    }
-
-    /// Mitsuba's `.serialized` format is not read; a twin OBJ/PLY of the same name is used.
-    fn serialized_twin(&mut self, node: &'a Node, path: &Path) -> Result<LoadedMesh> {
-        let stem = path.file_stem().and_then(|s| s.to_str()).unwrap_or("");
-        let dir = path.parent().unwrap_or(Path::new("."));
-        let mut candidates: Vec<PathBuf> = Vec::new();
-        for ext in ["obj", "ply"] {
-            candidates.push(dir.join(format!("{stem}.{ext}")));
-            if let Some(up) = dir.parent() {
-                candidates.push(up.join(ext).join(format!("{stem}.{ext}")));
-            }
-        }
-        let twin = candidates
-            .into_iter()
-            .find(|c| c.exists())
-            .ok_or_else(|| node.loc.err(format!("'.serialized' meshes are not supported and no .obj/.ply twin of '{}' was found", path.display())))?;
-        self.warn(format!("{}: .serialized is not supported; loaded its twin {}", path.display(), twin.display()));
-        // Serialized meshes store uvs as they are: no flip for either twin.
-        if twin.extension().is_some_and(|e| e == "obj") {
-            mesh_files::load_obj(&twin, false)
-        } else {
-            mesh_files::load_ply(&twin, false)
         }
     }
 }

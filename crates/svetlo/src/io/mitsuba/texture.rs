@@ -17,10 +17,14 @@ fn to_uv(m: Mat4) -> Affine2 {
 
 /// Read an image without decoding sRGB (Mitsuba's `raw`): 8-bit values map to [0, 1] as stored.
 fn read_raw(path: &Path) -> Result<crate::film::Image> {
-    if path.extension().and_then(|e| e.to_str()).is_some_and(|e| e.eq_ignore_ascii_case("exr")) {
-        return crate::io::image_io::read_exr(path);
+    let bytes = crate::limits::read_file(path)?;
+    if bytes.starts_with(&[0x76, 0x2f, 0x31, 0x01]) {
+        return crate::io::image_io::decode_exr(&bytes, path);
     }
-    let img = image::open(path).map_err(|e| crate::Error::Image { file: path.to_path_buf(), msg: e.to_string() })?.to_rgb32f();
+    if bytes.starts_with(b"PF") || bytes.starts_with(b"Pf") {
+        return crate::io::image_io::decode_pfm(&bytes, path);
+    }
+    let img = crate::io::image_io::decode_8bit(&bytes, path)?.to_rgb32f();
     let data = img.pixels().map(|p| Rgb::new(p[0], p[1], p[2])).collect();
     Ok(crate::film::Image::new(img.width() as usize, img.height() as usize, data))
 }

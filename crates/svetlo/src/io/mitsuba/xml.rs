@@ -4,6 +4,8 @@
 //! file, line and column it came from, so later errors can point at it.
 
 use crate::error::{Error, Result};
+use crate::limits::{MAX_ELEMENT_DEPTH, MAX_INCLUDES, MAX_SCENE_TEXT};
+use std::cell::Cell;
 use std::collections::HashMap;
 use std::path::{Path, PathBuf};
 use std::rc::Rc;
@@ -66,12 +68,29 @@ struct Ctx {
     used: std::collections::HashSet<String>,
     search_paths: Vec<PathBuf>,
     stack: Vec<PathBuf>,
+    /// Includes expanded and bytes of text parsed so far: includes that fan out (each file
+    /// including the next twice) would otherwise take exponential time without a cycle.
+    includes: usize,
+    text_bytes: u64,
+}
+
+impl Ctx {
+    fn charge(&mut self, path: &Path, bytes: usize) -> Result<()> {
+        self.text_bytes += bytes as u64;
+        if self.text_bytes > MAX_SCENE_TEXT {
+            return Err(Error::Scene {
+                file: path.to_path_buf(),
+                msg: format!("the scene and its includes exceed {} of text", crate::limits::human(MAX_SCENE_TEXT)),
+            });
+        }
+        Ok(())
+    }
 }
 
 /// Parse `path` and everything it includes. `defaults` override `<default>` values.
 pub fn parse(path: &Path, defaults: &[(String, String)]) -> Result<Parsed> {
     let canon = std::fs::canonicalize(path).map_err(|e| Error::Io { file: path.to_path_buf(), source: e })?;
-    let text = std::fs::read_to_string(path).map_err(|e| Error::Io { file: path.to_path_buf(), source: e })?;
+    let text = crate::limits::read_text(path)?;
     parse_text(&text, path, Some(canon), defaults)
 }
 
@@ -87,7 +106,10 @@ fn parse_text(text: &str, path: &Path, canon: Option<PathBuf>, defaults: &[(Stri
         used: Default::default(),
         search_paths: vec![path.parent().map(Path::to_path_buf).unwrap_or_default()],
         stack: Vec::new(),
+        includes: 0,
+        text_bytes: 0,
     };
+    ctx.charge(path, text.len())?;
     let root = parse_document(text, path, canon, &mut ctx)?;
     let unused_params = defaults.iter().map(|(k, _)| k.clone()).filter(|k| !ctx.used.contains(k)).collect();
     Ok(Parsed { root, search_paths: ctx.search_paths, unused_params })
@@ -99,7 +121,8 @@ fn parse_file(path: &Path, ctx: &mut Ctx) -> Result<Node> {
         let chain: Vec<String> = ctx.stack.iter().chain(std::iter::once(&canon)).map(|p| p.display().to_string()).collect();
         return Err(Error::Scene { file: path.to_path_buf(), msg: format!("include cycle: {}", chain.join(" -> ")) });
     }
-    let text = std::fs::read_to_string(path).map_err(|e| Error::Io { file: path.to_path_buf(), source: e })?;
+    let text = crate::limits::read_text(path)?;
+    ctx.charge(path, text.len())?;
     parse_document(&text, path, Some(canon), ctx)
 }
 
@@ -111,15 +134,18 @@ fn parse_document(text: &str, path: &Path, canon: Option<PathBuf>, ctx: &mut Ctx
         let p = e.pos();
         Error::SceneAt { file: path.to_path_buf(), line: p.row, col: p.col, msg: format!("malformed XML: {e}") }
     })?;
-    let file = Rc::new(path.to_path_buf());
+    let d = Doc { lines: LineIndex::new(text), file: Rc::new(path.to_path_buf()) };
     let root = doc.root_element();
-    let loc = loc_of(&doc, root, &file);
+    let loc = d.loc(root);
     if root.tag_name().name() != "scene" {
         return Err(loc.err(format!("not a Mitsuba scene: the root element is <{}>, not <scene>", root.tag_name().name())));
     }
+    if ctx.stack.len() >= MAX_ELEMENT_DEPTH {
+        return Err(loc.err(format!("includes nest more than {MAX_ELEMENT_DEPTH} deep")));
+    }
     let pushed = canon.is_some();
     ctx.stack.extend(canon);
-    let children = expand_children(&doc, root, &file, ctx);
+    let children = expand_children(&d, root, 1, ctx);
     if pushed {
         ctx.stack.pop();
     }
@@ -127,15 +153,62 @@ fn parse_document(text: &str, path: &Path, canon: Option<PathBuf>, ctx: &mut Ctx
     Ok(Node { tag: "scene".into(), attrs, children: children?, loc })
 }
 
-fn loc_of(doc: &roxmltree::Document, n: roxmltree::Node, file: &Rc<PathBuf>) -> Loc {
-    let p = doc.text_pos_at(n.range().start);
-    Loc { file: file.clone(), line: p.row, col: p.col }
+/// Line and column (1-based, in characters) of byte offsets, asked in increasing order as the
+/// tree is walked: a cursor moves forward through the text, so a file's positions cost one
+/// pass over it in all (roxmltree's `text_pos_at` scans from the start each time, quadratic
+/// in the number of elements).
+struct LineIndex<'t> {
+    text: &'t str,
+    /// Byte offset, line and column of the cursor.
+    cursor: Cell<(usize, u32, u32)>,
 }
 
-fn expand_children(doc: &roxmltree::Document, parent: roxmltree::Node, file: &Rc<PathBuf>, ctx: &mut Ctx) -> Result<Vec<Node>> {
+impl<'t> LineIndex<'t> {
+    fn new(text: &'t str) -> Self {
+        LineIndex { text, cursor: Cell::new((0, 1, 1)) }
+    }
+
+    fn pos(&self, byte: usize) -> (u32, u32) {
+        let byte = byte.min(self.text.len());
+        let (mut at, mut line, mut col) = self.cursor.get();
+        if byte < at {
+            (at, line, col) = (0, 1, 1);
+        }
+        for c in self.text[at..byte].chars() {
+            if c == '\n' {
+                line += 1;
+                col = 1;
+            } else {
+                col += 1;
+            }
+        }
+        at = byte;
+        self.cursor.set((at, line, col));
+        (line, col)
+    }
+}
+
+/// One parsed document: where its elements are, and the file they came from.
+struct Doc<'t> {
+    lines: LineIndex<'t>,
+    file: Rc<PathBuf>,
+}
+
+impl Doc<'_> {
+    fn loc(&self, n: roxmltree::Node) -> Loc {
+        let (line, col) = self.lines.pos(n.range().start);
+        Loc { file: self.file.clone(), line, col }
+    }
+}
+
+fn expand_children(d: &Doc, parent: roxmltree::Node, depth: usize, ctx: &mut Ctx) -> Result<Vec<Node>> {
     let mut out = Vec::new();
     for n in parent.children().filter(|n| n.is_element()) {
-        let loc = loc_of(doc, n, file);
+        let loc = d.loc(n);
+        // The loader walks the tree recursively: bound its depth here, once for every pass.
+        if depth >= MAX_ELEMENT_DEPTH {
+            return Err(loc.err(format!("elements nest more than {MAX_ELEMENT_DEPTH} deep")));
+        }
         let tag = normalise_tag(n.tag_name().name());
         let mut attrs = Vec::new();
         for a in n.attributes() {
@@ -161,13 +234,17 @@ fn expand_children(doc: &roxmltree::Document, parent: roxmltree::Node, file: &Rc
             }
             "include" => {
                 let fname = node.req("filename")?;
+                ctx.includes += 1;
+                if ctx.includes > MAX_INCLUDES {
+                    return Err(node.loc.err(format!("more than {MAX_INCLUDES} includes in one scene (do the includes fan out?)")));
+                }
                 let target = resolve_in(fname, &node.loc.dir(), &ctx.search_paths).ok_or_else(|| node.loc.err(format!("included file '{fname}' not found")))?;
                 let inc = parse_file(&target, ctx)?;
                 out.extend(inc.children);
             }
             _ => {
                 let mut node = node;
-                node.children = expand_children(doc, n, file, ctx)?;
+                node.children = expand_children(d, n, depth + 1, ctx)?;
                 out.push(node);
             }
         }

@@ -1,0 +1,20 @@
+#!/usr/bin/env bash
+# Overhead of 8 AOVs against none at equal spp, one thread, alternating runs; prints the
+# median ratio of CPU time (user+sys) per method. Usage: bench/lpe/run.sh [scene.xml] [spp] [res]
+set -euo pipefail
+cd "$(dirname "$0")/../.."
+BIN=target/release/svetlo
+SCENE=${1:-scenes/caustic.xml}; SPP=${2:-16}; RES=${3:-64}; RUNS=${RUNS:-3}
+AOVS=(--aov a='C [LB]' --aov b='C D [LB]' --aov c='C D [^LB]+ [LB]' --aov d='C [GS] .* [LB]'
+      --aov e='C D S+ L' --aov f='C <R.> L' --aov g='C . .+ L' --aov h='L D* E')
+tmp=$(mktemp -d); trap 'rm -rf "$tmp"' EXIT
+cpu() { /usr/bin/time -f "%U %S" -o "$tmp/t" "$@" >/dev/null 2>&1; awk '{print $1+$2}' "$tmp/t"; }
+for m in "path:simd=false" bdpt; do
+  ratios=()
+  for i in $(seq "$RUNS"); do
+    base=$(cpu $BIN render "$SCENE" -Dres=$RES --spp $SPP --threads 1 --integrator "$m" -o "$tmp/n.exr")
+    with=$(cpu $BIN render "$SCENE" -Dres=$RES --spp $SPP --threads 1 --integrator "$m" "${AOVS[@]}" -o "$tmp/a.exr")
+    ratios+=("$(awk -v a="$with" -v b="$base" 'BEGIN{printf "%.3f", a/b}')")
+  done
+  echo "$m: 8 AOVs / none CPU-time ratios ${ratios[*]} (median $(printf '%s\n' "${ratios[@]}" | sort -n | sed -n "$(( (RUNS+1)/2 ))p"))"
+done

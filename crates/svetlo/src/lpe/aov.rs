@@ -1,0 +1,330 @@
+//! AOVs: a set of named expressions (and an optional restriction of the beauty), bound to a
+//! scene's labels, and the per-path trackers every integrator advances one step per vertex.
+//!
+//! A contribution is reported with a [`LayerMask`]: bit i for AOV i, [`BEAUTY`] for the
+//! beauty (always set when the beauty is not restricted). Trackers are `Copy` arrays: a walk
+//! keeps one and copies it at branches, with no allocation.
+
+use super::{Event, Lpe, LpeError};
+use crate::scene::Scene;
+use crate::spectrum::Rgb;
+
+/// Most AOVs of one render (the beauty's restriction, if any, comes on top).
+pub const MAX_LAYERS: usize = 15;
+/// Bit i: AOV i takes the contribution; `BEAUTY`: the beauty does.
+pub type LayerMask = u32;
+pub const BEAUTY: LayerMask = 1 << 31;
+
+/// The AOVs of a render and the beauty's restriction. The empty set (no AOVs, the beauty
+/// unrestricted) costs a loop of zero steps per vertex.
+#[derive(Clone, Debug, Default)]
+pub struct AovSet {
+    names: Vec<String>,
+    /// The AOVs' expressions, then the beauty's restriction when there is one.
+    lpes: Vec<Lpe>,
+    beauty_filter: bool,
+    labels: Vec<String>,
+    /// Per scene shape: the bits of the labels that name it.
+    shape_labels: Vec<u32>,
+}
+
+static EMPTY: AovSet = AovSet { names: Vec::new(), lpes: Vec::new(), beauty_filter: false, labels: Vec::new(), shape_labels: Vec::new() };
+
+impl AovSet {
+    /// The set with nothing in it.
+    pub fn empty() -> &'static AovSet {
+        &EMPTY
+    }
+
+    /// Named AOVs and an optional restriction of the beauty. Names must be distinct and
+    /// usable as EXR layer names (no '.').
+    pub fn new(aovs: Vec<(String, Lpe)>, beauty: Option<Lpe>) -> Result<AovSet, LpeError> {
+        if aovs.len() > MAX_LAYERS {
+            return Err(LpeError::at("", 0, format!("at most {MAX_LAYERS} AOVs per render, got {}", aovs.len())));
+        }
+        let mut names: Vec<String> = Vec::new();
+        let mut lpes = Vec::new();
+        for (n, l) in aovs {
+            if n.is_empty() || n.contains('.') || n.chars().any(|c| c.is_whitespace() || c == '/') || names.contains(&n) || n == "beauty" {
+                return Err(LpeError::at(&l.source, 0, format!("AOV name '{n}' must be unique, not 'beauty', and without '.', '/' or spaces")));
+            }
+            names.push(n);
+            lpes.push(l);
+        }
+        let beauty_filter = beauty.is_some();
+        lpes.extend(beauty);
+        // One label list for the set; each expression's labels map to its bits.
+        let mut labels: Vec<String> = Vec::new();
+        for l in &mut lpes {
+            let bits = l
+                .labels()
+                .iter()
+                .map(|x| {
+                    if !labels.contains(x) {
+                        labels.push(x.clone());
+                    }
+                    labels.iter().position(|y| y == x).expect("just added") as u8
+                })
+                .collect();
+            l.bind_labels(bits);
+        }
+        if labels.len() > 32 {
+            return Err(LpeError::at("", 0, "more than 32 distinct labels over all AOVs".into()));
+        }
+        Ok(AovSet { names, lpes, beauty_filter, labels, shape_labels: Vec::new() })
+    }
+
+    /// Compile `name = expression` pairs and the beauty's optional restriction; an error
+    /// names the AOV whose expression is wrong.
+    pub fn compile(aovs: &[(String, String)], beauty: Option<&str>) -> Result<AovSet, LpeError> {
+        let mut list = Vec::new();
+        for (n, e) in aovs {
+            let l = Lpe::new(e).map_err(|mut err| {
+                err.msg = format!("AOV '{n}': {}", err.msg);
+                err
+            })?;
+            list.push((n.clone(), l));
+        }
+        let b = beauty.map(Lpe::new).transpose()?;
+        AovSet::new(list, b)
+    }
+
+    /// Resolve labels against the scene's shape ids; returns a warning per label that names
+    /// nothing and per expression that can match no path.
+    pub fn bind(&mut self, scene: &Scene) -> Vec<String> {
+        self.shape_labels =
+            scene.shapes.iter().map(|s| self.labels.iter().enumerate().filter(|(_, l)| **l == s.name).fold(0u32, |m, (i, _)| m | 1 << i)).collect();
+        let mut warn: Vec<String> = self
+            .labels
+            .iter()
+            .filter(|l| !scene.shapes.iter().any(|s| &s.name == *l))
+            .map(|l| format!("light path expression label '{l}' names no shape of the scene"))
+            .collect();
+        for l in &self.lpes {
+            if !l.can_match() {
+                warn.push(format!("light path expression '{}' can match no path", l.source));
+            }
+        }
+        warn
+    }
+
+    pub fn is_empty(&self) -> bool {
+        self.lpes.is_empty()
+    }
+    pub fn names(&self) -> &[String] {
+        &self.names
+    }
+    pub fn aov_count(&self) -> usize {
+        self.names.len()
+    }
+    pub fn expressions(&self) -> &[Lpe] {
+        &self.lpes
+    }
+    /// Whether the beauty holds only the paths of an expression.
+    pub fn restricts_beauty(&self) -> bool {
+        self.beauty_filter
+    }
+    /// The label bits of scene shape `shape`.
+    #[inline]
+    pub fn shape_labels(&self, shape: u32) -> u32 {
+        self.shape_labels.get(shape as usize).copied().unwrap_or(0)
+    }
+    /// The event of a light vertex on scene shape `shape` (None: not a shape).
+    #[inline]
+    pub fn light_event(&self, shape: Option<u32>) -> Event {
+        Event { labels: shape.map_or(0, |s| self.shape_labels(s)), ..Event::LIGHT }
+    }
+
+    /// The event of reaching emitter `light` (by sampling it or by hitting it): B for the
+    /// environment (what escaped rays see), L with its shape's labels otherwise.
+    #[inline]
+    pub fn emitter_event(&self, light: &crate::light::Light) -> Event {
+        use crate::light::Light;
+        match light {
+            Light::Area(a) => self.light_event(Some(a.shape)),
+            Light::Constant { .. } | Light::EnvMap(_) => Event::BACKGROUND,
+            _ => Event::LIGHT,
+        }
+    }
+
+    /// The event of scattering at a surface of shape `shape` with BSDF lobes `flags`:
+    /// `lobe` the lobe sampled (None: an evaluated direction, next-event estimation or a
+    /// connection), `transmission` whether the directions lie on opposite sides.
+    #[inline]
+    pub fn scatter_event(&self, shape: u32, flags: crate::bsdf::LobeFlags, lobe: Option<crate::bsdf::LobeFlags>, transmission: bool) -> Event {
+        let singular = lobe.is_some_and(|l| l.contains(crate::bsdf::LobeFlags::SPECULAR));
+        Event::scatter(flags, singular, transmission, self.shape_labels(shape))
+    }
+
+    /// The event of a path endpoint on an emitter: a light subpath's first vertex, or a
+    /// camera subpath that ended on an emitter or escaped (no light: the environment).
+    #[inline]
+    pub fn endpoint_event(&self, scene: &Scene, v: &crate::path::Vertex) -> Event {
+        match v.light {
+            Some(li) => self.emitter_event(&scene.lights[li as usize]),
+            None => Event::BACKGROUND,
+        }
+    }
+
+    /// The event of scattering at subpath vertex `v` as its walk sampled it; None for a
+    /// null interaction (a mask let the path through: not a vertex of the expression).
+    #[inline]
+    pub fn sampled_event(&self, v: &crate::path::Vertex) -> Option<Event> {
+        if v.event.kind == crate::path::EventKind::Null {
+            return None;
+        }
+        let flags = v.bsdf.as_ref().map_or(crate::bsdf::LobeFlags::NONE, |b| b.flags());
+        Some(Event::scatter(flags, v.delta, v.event.transmission, self.shape_labels(v.shape)))
+    }
+
+    /// The event of scattering at subpath vertex `v` toward point `q` (a connection).
+    #[inline]
+    pub fn connected_event(&self, v: &crate::path::Vertex, q: glam::Vec3) -> Event {
+        let flags = v.bsdf.as_ref().map_or(crate::bsdf::LobeFlags::NONE, |b| b.flags());
+        let through = (v.wo.dot(v.ng) > 0.0) != ((q - v.p).dot(v.ng) > 0.0);
+        Event::scatter(flags, false, through, self.shape_labels(v.shape))
+    }
+
+    #[inline]
+    fn bit(&self, i: usize) -> LayerMask {
+        if i < self.names.len() {
+            1 << i
+        } else {
+            BEAUTY
+        }
+    }
+    #[inline]
+    fn base_mask(&self) -> LayerMask {
+        if self.beauty_filter {
+            0
+        } else {
+            BEAUTY
+        }
+    }
+}
+
+/// The automata's states along a camera subpath (forward automata, camera first).
+#[derive(Clone, Copy, Debug)]
+pub struct Tracker<'a> {
+    set: &'a AovSet,
+    st: [u32; MAX_LAYERS + 1],
+}
+
+impl<'a> Tracker<'a> {
+    /// A path that has left the camera (its first event, `C`, read).
+    #[inline]
+    pub fn camera(set: &'a AovSet) -> Self {
+        let mut t = Tracker { set, st: [Lpe::START; MAX_LAYERS + 1] };
+        t.push(Event::CAMERA);
+        t
+    }
+    #[inline]
+    pub fn push(&mut self, e: Event) {
+        for (s, l) in self.st.iter_mut().zip(&self.set.lpes) {
+            *s = l.step(*s, e);
+        }
+    }
+    /// The layers that take a path ending here with event `e`.
+    #[inline]
+    pub fn ends(&self, e: Event) -> LayerMask {
+        let mut m = self.set.base_mask();
+        for (i, (s, l)) in self.st.iter().zip(&self.set.lpes).enumerate() {
+            if l.accepts(l.step(*s, e)) {
+                m |= self.set.bit(i);
+            }
+        }
+        m
+    }
+    /// The layers that take a path ending with events `a` then `b` (next-event estimation:
+    /// the scattering vertex, then the light).
+    #[inline]
+    pub fn ends2(&self, a: Event, b: Event) -> LayerMask {
+        let mut t = *self;
+        t.push(a);
+        t.ends(b)
+    }
+    pub fn set(&self) -> &'a AovSet {
+        self.set
+    }
+}
+
+/// The reverse automata's states along a light subpath (light first).
+#[derive(Clone, Copy, Debug)]
+pub struct LightTracker<'a> {
+    set: &'a AovSet,
+    st: [u32; MAX_LAYERS + 1],
+}
+
+impl<'a> LightTracker<'a> {
+    /// A subpath whose events so far are `path`'s first `n` vertices as sampled (vertex 0 the
+    /// light endpoint).
+    pub fn along(set: &'a AovSet, scene: &Scene, path: &[crate::path::Vertex], n: usize) -> Self {
+        let mut t = LightTracker::light(set, set.endpoint_event(scene, &path[0]));
+        for v in &path[1..n] {
+            if let Some(e) = set.sampled_event(v) {
+                t.push(e);
+            }
+        }
+        t
+    }
+
+    /// A subpath that starts at a light with event `e` (L or B).
+    #[inline]
+    pub fn light(set: &'a AovSet, e: Event) -> Self {
+        let mut t = LightTracker { set, st: [Lpe::START; MAX_LAYERS + 1] };
+        t.push(e);
+        t
+    }
+    #[inline]
+    pub fn push(&mut self, e: Event) {
+        for (s, l) in self.st.iter_mut().zip(&self.set.lpes) {
+            *s = l.rev_step(*s, e);
+        }
+    }
+    /// The layers that take the camera prefix `cam` joined to this subpath.
+    #[inline]
+    pub fn meets(&self, cam: &Tracker) -> LayerMask {
+        let mut m = self.set.base_mask();
+        for (i, ((r, q), l)) in self.st.iter().zip(&cam.st).zip(&self.set.lpes).enumerate() {
+            if l.meets(*q, *r) {
+                m |= self.set.bit(i);
+            }
+        }
+        m
+    }
+    /// The layers that take this subpath ending at the camera (light tracing, t = 1).
+    #[inline]
+    pub fn meets_camera(&self) -> LayerMask {
+        self.meets(&Tracker::camera(self.set))
+    }
+}
+
+/// What one camera sample adds to each AOV and to the (restricted) beauty.
+#[derive(Clone, Copy, Debug)]
+pub struct LayerSample {
+    pub aov: [Rgb; MAX_LAYERS],
+    /// The sum of contributions the beauty takes.
+    pub beauty: Rgb,
+}
+
+impl Default for LayerSample {
+    fn default() -> Self {
+        LayerSample { aov: [Rgb::BLACK; MAX_LAYERS], beauty: Rgb::BLACK }
+    }
+}
+
+impl LayerSample {
+    /// Route `value` to the layers of `mask`.
+    #[inline]
+    pub fn add(&mut self, mask: LayerMask, value: Rgb) {
+        if mask & BEAUTY != 0 {
+            self.beauty += value;
+        }
+        let mut m = mask & !BEAUTY;
+        while m != 0 {
+            let i = m.trailing_zeros() as usize;
+            self.aov[i] += value;
+            m &= m - 1;
+        }
+    }
+}
