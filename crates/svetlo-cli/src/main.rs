@@ -22,11 +22,13 @@ macro_rules! tell {
 }
 
 mod compare;
+mod glare;
 mod illuminance;
 mod info;
 mod preview;
 mod radiosity;
 mod render;
+mod report;
 mod signals;
 
 use clap::{Parser, Subcommand};
@@ -57,8 +59,12 @@ pub enum Command {
     Info(info::InfoArgs),
     /// Solve a scene by radiosity: convergence report, solved mesh (PLY), progressive snapshots.
     Radiosity(radiosity::RadiosityArgs),
-    /// Illuminance (lux) on a work plane: grid CSV and JSON with Emin, Eavg, Emax, U0.
+    /// Illuminance (lux) or daylight factor on a work plane: CSV, JSON and a false-colour plan.
     Illuminance(illuminance::IlluminanceArgs),
+    /// Discomfort glare (CIE UGR) for an observer position and view direction.
+    Glare(glare::GlareArgs),
+    /// A lighting report: one self-contained HTML page with plans, tables, UGR and luminaires.
+    Report(report::ReportArgs),
     /// Render with a live browser view: compare methods, restart from the page (Ctrl-C ends).
     Serve(preview::ServeArgs),
 }
@@ -128,6 +134,8 @@ fn main() -> ExitCode {
         Command::Info(a) => info::run(&a),
         Command::Radiosity(a) => radiosity::run(&a),
         Command::Illuminance(a) => illuminance::run(&a),
+        Command::Glare(a) => glare::run(&a),
+        Command::Report(a) => report::run(&a),
         Command::Serve(a) => preview::serve(&a),
     };
     match result {

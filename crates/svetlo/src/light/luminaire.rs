@@ -28,6 +28,12 @@ pub struct Luminaire {
     pub per_cd: Rgb,
     /// The opening emission is spread over (None: a point).
     pub spread: Option<Opening>,
+    /// The file's luminous opening (whether or not emission is spread over it): the
+    /// luminous area that glare ratings divide the intensity by.
+    pub opening: Opening,
+    /// For reports: the file's name and label, and its input power (W) where it states one.
+    pub name: String,
+    pub input_watts: Option<f64>,
 }
 
 impl Luminaire {
@@ -42,11 +48,13 @@ impl Luminaire {
         let lum = color.luminance();
         let color = if lum > 0.0 { color / lum } else { Rgb::WHITE };
         let per_cd = color * (scale / LM_PER_W as f32);
+        let opening = spread.unwrap_or(Opening::Point);
         let spread = spread.filter(|o| o.area() > 0.0);
-        Luminaire { position, axes: [x, y, z], table, per_cd, spread }
+        Luminaire { position, axes: [x, y, z], table, per_cd, spread, opening, name: String::new(), input_watts: None }
     }
 
-    fn to_local(&self, w: Vec3) -> Vec3 {
+    /// World direction `w` in the luminaire's frame (x = C0, y = C90, z = up, γ = 0 at −z).
+    pub fn to_local(&self, w: Vec3) -> Vec3 {
         Vec3::new(w.dot(self.axes[0]), w.dot(self.axes[1]), w.dot(self.axes[2]))
     }
 

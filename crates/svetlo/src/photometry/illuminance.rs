@@ -7,7 +7,11 @@
 //!   sampling in importance mode; every segment that crosses the plane's rectangle from the
 //!   side its normal faces deposits its flux on the cell it crosses. The plane is virtual
 //!   (it blocks nothing). An estimate of the cell's mean illuminance, with the standard
-//!   error from independent batches.
+//!   error from independent batches;
+//! * radiosity: E = the delta lights' direct irradiance (shadow rays) + Σ_j B_j F(x → j) V(x, j)
+//!   over the solved elements j (B the exitance, F Lambert's point-to-polygon form factor,
+//!   V the unblocked fraction of shadow rays to points of j); its error bound is the change
+//!   from a solve at twice the element size (constant elements converge in O(h)).
 //!
 //! Luminous quantities from radiometric RGB by 683 lm/W and the Rec.709 weights.
 
@@ -16,9 +20,11 @@ use crate::bsdf::TransportMode;
 use crate::geometry::Ray;
 use crate::integrator::path::PathTracer;
 use crate::integrator::{PixelEstimator, RenderSettings};
+use crate::light::Light;
+use crate::radiosity::RadiosityOptions;
 use crate::sampling::{IndependentSampler, Sampler};
 use crate::scene::Scene;
-use glam::Vec3;
+use glam::{Vec2, Vec3};
 use rayon::prelude::*;
 
 /// A rectangle `origin + s u + t v` (s, t in [0, 1]) sampled at cell centres `spacing`
@@ -89,6 +95,8 @@ pub struct IlluminanceGrid {
     pub lux: Vec<f64>,
     pub std_err: Vec<f64>,
     pub method: &'static str,
+    /// "lx", or "%" for a daylight-factor grid.
+    pub unit: &'static str,
 }
 
 impl IlluminanceGrid {
@@ -106,9 +114,18 @@ impl IlluminanceGrid {
         self.min() / self.mean()
     }
 
+    /// The daylight factor DF = 100 E / E_out (%), E_out the unobstructed horizontal
+    /// illuminance outdoors under the same sky ([`super::sky::unobstructed_illuminance`]).
+    pub fn daylight_factor(mut self, e_out: f64) -> IlluminanceGrid {
+        let k = if e_out > 0.0 { 100.0 / e_out } else { 0.0 };
+        self.lux.iter_mut().chain(self.std_err.iter_mut()).for_each(|x| *x *= k);
+        self.unit = "%";
+        self
+    }
+
     pub fn to_csv(&self) -> String {
         let (nu, nv) = self.plane.dims();
-        let mut s = String::from("i,j,x,y,z,lux,std_err\n");
+        let mut s = format!("i,j,x,y,z,{},std_err\n", if self.unit == "%" { "daylight_factor_percent" } else { "lux" });
         for i in 0..nu {
             for j in 0..nv {
                 let p = self.plane.point(i, j);
@@ -123,8 +140,9 @@ impl IlluminanceGrid {
         let (nu, nv) = self.plane.dims();
         let list = |v: &[f64]| v.iter().map(|x| format!("{x:.4}")).collect::<Vec<_>>().join(",");
         format!(
-            "{{\"method\":\"{}\",\"nu\":{nu},\"nv\":{nv},\"spacing\":{},\"e_min\":{:.4},\"e_avg\":{:.4},\"e_max\":{:.4},\"u0\":{:.5},\"e_min_over_e_max\":{:.5},\"lux\":[{}],\"std_err\":[{}]}}\n",
+            "{{\"method\":\"{}\",\"unit\":\"{}\",\"nu\":{nu},\"nv\":{nv},\"spacing\":{},\"e_min\":{:.4},\"e_avg\":{:.4},\"e_max\":{:.4},\"u0\":{:.5},\"e_min_over_e_max\":{:.5},\"lux\":[{}],\"std_err\":[{}]}}\n",
             self.method,
+            self.unit,
             self.plane.spacing,
             self.min(),
             self.mean(),
@@ -153,16 +171,7 @@ pub fn gather(scene: &Scene, plane: &WorkPlane, spp: u32, settings: &RenderSetti
                 sampler.start_pixel_sample(i as u32, j as u32, si);
                 let mut e = 0.0f64;
                 for light in scene.lights.iter().filter(|l| l.is_delta()) {
-                    let u = sampler.next_2d();
-                    let Some(ls) = light.sample_li(p, u, &scene.bounds) else { continue };
-                    let cos = n.dot(ls.wi);
-                    if cos <= 0.0 {
-                        continue;
-                    }
-                    let blocked = if ls.infinite { scene.occluded_dir(p, n, ls.wi) } else { scene.occluded(p, n, ls.p) };
-                    if !blocked {
-                        e += (ls.li.luminance() * cos / ls.pdf) as f64;
-                    }
+                    e += delta_irradiance(scene, light, p, n, sampler.next_2d());
                 }
                 let w = frame.to_world(crate::math::warp::square_to_cosine_hemisphere(sampler.next_2d()));
                 let ray = Ray::new(crate::geometry::ray::offset_ray_origin(p, n, w), w);
@@ -175,7 +184,89 @@ pub fn gather(scene: &Scene, plane: &WorkPlane, spp: u32, settings: &RenderSetti
             (m, ((s2 / spp as f64 - m * m).max(0.0) / spp as f64).sqrt())
         })
         .collect();
-    IlluminanceGrid { plane: *plane, lux: res.iter().map(|r| r.0).collect(), std_err: res.iter().map(|r| r.1).collect(), method: "gathering" }
+    IlluminanceGrid { plane: *plane, lux: res.iter().map(|r| r.0).collect(), std_err: res.iter().map(|r| r.1).collect(), method: "gathering", unit: "lx" }
+}
+
+/// Illuminance (lx) at `p` facing `n` from everything but the delta lights (area lights,
+/// skies, interreflection), by `spp` cosine-distributed rays through the path tracer: the
+/// mean and its standard error. Glare ratings take the background luminance from it.
+pub fn indirect_illuminance(scene: &Scene, p: Vec3, n: Vec3, spp: u32, settings: &RenderSettings) -> (f64, f64) {
+    let frame = crate::math::Frame::from_normal(n);
+    let mut sampler = IndependentSampler::new(spp, settings.seed ^ 0x91a2e);
+    let (mut s, mut s2) = (0.0f64, 0.0f64);
+    for si in 0..spp {
+        sampler.start_pixel_sample(0, 0, si);
+        let w = frame.to_world(crate::math::warp::square_to_cosine_hemisphere(sampler.next_2d()));
+        let ray = Ray::new(crate::geometry::ray::offset_ray_origin(p, n, w), w);
+        let e = std::f64::consts::PI * PathTracer.li(scene, &ray, &mut sampler, settings).luminance() as f64 * LM_PER_W;
+        s += e;
+        s2 += e * e;
+    }
+    let m = s / spp.max(1) as f64;
+    (m, ((s2 / spp.max(1) as f64 - m * m).max(0.0) / spp.max(1) as f64).sqrt())
+}
+
+/// Irradiance (W/m², luminance) at `p` (normal `n`) from one delta light, shadow-tested;
+/// `u` picks the point of a spread luminaire's opening.
+fn delta_irradiance(scene: &Scene, light: &Light, p: Vec3, n: Vec3, u: Vec2) -> f64 {
+    let Some(ls) = light.sample_li(p, u, &scene.bounds) else { return 0.0 };
+    let cos = n.dot(ls.wi);
+    if cos <= 0.0 || ls.pdf <= 0.0 {
+        return 0.0;
+    }
+    let blocked = if ls.infinite { scene.occluded_dir(p, n, ls.wi) } else { scene.occluded(p, n, ls.p) };
+    if blocked {
+        0.0
+    } else {
+        (ls.li.luminance() * cos / ls.pdf) as f64
+    }
+}
+
+/// Radiosity estimator: solve with `opts` and again at twice the element size; lux at each
+/// grid point from the finer solution, `std_err` holding the discretisation bound
+/// |E_h − E_2h| (the plane is virtual: it blocks nothing and is not meshed).
+pub fn radiosity(scene: &Scene, plane: &WorkPlane, opts: &RadiosityOptions, settings: &RenderSettings) -> crate::error::Result<IlluminanceGrid> {
+    let fine = crate::radiosity::solve(scene, opts, settings.max_depth)?;
+    let h = opts.mesh.max_edge.unwrap_or(scene.bounds.radius.max(1e-6) / 5.0);
+    let mut coarse_opts = opts.clone();
+    coarse_opts.mesh.max_edge = Some(2.0 * h);
+    let coarse = crate::radiosity::solve(scene, &coarse_opts, settings.max_depth)?;
+    let (nu, nv) = plane.dims();
+    let n = plane.normal();
+    let delta: Vec<&Light> = scene.lights.iter().filter(|l| l.is_delta()).collect();
+    let res: Vec<(f64, f64)> = (0..nu * nv)
+        .into_par_iter()
+        .map(|k| {
+            let p = plane.point(k / nv, k % nv);
+            // A 2 × 2 stratification of a spread opening (one point for the others).
+            let us = [Vec2::new(0.25, 0.25), Vec2::new(0.75, 0.25), Vec2::new(0.25, 0.75), Vec2::new(0.75, 0.75)];
+            let direct: f64 = delta.iter().map(|l| us.iter().map(|u| delta_irradiance(scene, l, p, n, *u)).sum::<f64>() / 4.0).sum();
+            let ef = direct + gathered_from_elements(scene, &fine, p, n);
+            let ec = direct + gathered_from_elements(scene, &coarse, p, n);
+            (ef * LM_PER_W, (ef - ec).abs() * LM_PER_W)
+        })
+        .collect();
+    Ok(IlluminanceGrid { plane: *plane, lux: res.iter().map(|r| r.0).collect(), std_err: res.iter().map(|r| r.1).collect(), method: "radiosity", unit: "lx" })
+}
+
+/// Σ_j B_j F(p → j) V(p, j) (luminance, W/m²) over the elements whose front faces `p`.
+fn gathered_from_elements(scene: &Scene, solved: &crate::radiosity::Solved, p: Vec3, n: Vec3) -> f64 {
+    use crate::radiosity::form_factor::analytic::{point_to_polygon, triangle_points};
+    let mut e = 0.0;
+    for (el, b) in solved.mesh.elements.iter().zip(&solved.b) {
+        let b = b.luminance() as f64;
+        if b <= 0.0 || el.normal.dot(p - el.centroid) <= 0.0 {
+            continue;
+        }
+        let f = point_to_polygon(p, n, &el.p);
+        if f <= 0.0 {
+            continue;
+        }
+        let targets = triangle_points(&el.p, 2);
+        let seen = targets.iter().filter(|y| !scene.occluded(p, n, **y)).count();
+        e += b * f * seen as f64 / targets.len() as f64;
+    }
+    e
 }
 
 /// Light-tracing estimator: `photons` paths in `BATCHES` independent batches.
@@ -206,7 +297,7 @@ pub fn light_trace(scene: &Scene, plane: &WorkPlane, photons: u64, settings: &Re
         lux[k] = m;
         se[k] = (var / BATCHES as f64).sqrt();
     }
-    IlluminanceGrid { plane: *plane, lux, std_err: se, method: "light tracing" }
+    IlluminanceGrid { plane: *plane, lux, std_err: se, method: "light tracing", unit: "lx" }
 }
 
 /// Where segment o + t d (0 < t < t_max) crosses the plane from its front: the cell.
@@ -245,14 +336,14 @@ fn trace_photon(scene: &Scene, plane: &WorkPlane, n: Vec3, sampler: &mut Indepen
     if denom <= 0.0 {
         return;
     }
-    let mut beta = (es.le * es.n.dot(es.ray.d).abs() / denom).luminance() as f64;
+    let mut beta = es.le * (es.n.dot(es.ray.d).abs() / denom);
     let mut ray = es.ray;
     let max_bounces = if settings.max_depth < 0 { 64 } else { settings.max_depth.max(1) as usize };
     for _ in 0..max_bounces {
         let hit = scene.intersect(&ray);
         let t_max = hit.as_ref().map_or(f32::INFINITY, |h| (h.p - ray.o).length());
         if let Some(c) = crossing(plane, n, ray.o, ray.d, t_max) {
-            grid[c] += beta;
+            grid[c] += beta.luminance() as f64;
         }
         let Some(si) = hit else { return };
         let bsdf = scene.material(&si).bsdf(si.uv);
@@ -261,10 +352,10 @@ fn trace_photon(scene: &Scene, plane: &WorkPlane, n: Vec3, sampler: &mut Indepen
         if bs.pdf <= 0.0 {
             return;
         }
-        // The throughput is carried as luminance: exact for grey materials (a coloured
-        // interreflection would need the RGB of Φ, which a lux grid discards anyway).
-        beta *= bs.weight().luminance() as f64;
-        if beta <= 0.0 {
+        // The throughput stays RGB (the luminance of a product is not the product of the
+        // luminances on coloured walls); only the deposit is luminance.
+        beta *= bs.weight();
+        if beta.is_black() {
             return;
         }
         ray = si.spawn_ray(si.to_world(bs.wi));

@@ -31,6 +31,11 @@ impl<'a> Loader<'a> {
             photometry::ies::parse_with_tilt(&bytes, &path, tilt as f64)?
         };
         let opening = spread.then_some(p.opening);
-        Ok(Light::Luminaire(Box::new(Luminaire::new(Arc::new(p.table), &to_world.unwrap_or(Mat4::IDENTITY), scale, color, opening))))
+        let mut lum = Luminaire::new(Arc::new(p.table), &to_world.unwrap_or(Mat4::IDENTITY), scale, color, opening);
+        lum.opening = p.opening;
+        let file = path.file_name().map(|f| f.to_string_lossy().into_owned()).unwrap_or_default();
+        lum.name = if p.label.trim().is_empty() { file } else { format!("{file} ({})", p.label.trim()) };
+        lum.input_watts = p.input_watts.map(|w| w * scale as f64);
+        Ok(Light::Luminaire(Box::new(lum)))
     }
 }
