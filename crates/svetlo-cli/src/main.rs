@@ -23,10 +23,13 @@ macro_rules! tell {
 
 mod compare;
 mod convert;
+mod glare;
+mod illuminance;
 mod info;
 mod preview;
 mod radiosity;
 mod render;
+mod report;
 mod signals;
 
 use clap::{Parser, Subcommand};
@@ -59,6 +62,12 @@ pub enum Command {
     Info(info::InfoArgs),
     /// Solve a scene by radiosity: convergence report, solved mesh (PLY), progressive snapshots.
     Radiosity(radiosity::RadiosityArgs),
+    /// Illuminance (lux) or daylight factor on a work plane: CSV, JSON and a false-colour plan.
+    Illuminance(illuminance::IlluminanceArgs),
+    /// Discomfort glare (CIE UGR) for an observer position and view direction.
+    Glare(glare::GlareArgs),
+    /// A lighting report: one self-contained HTML page with plans, tables, UGR and luminaires.
+    Report(report::ReportArgs),
     /// Render with a live browser view: compare methods, restart from the page (Ctrl-C ends).
     Serve(preview::ServeArgs),
 }
@@ -145,6 +154,9 @@ fn main() -> ExitCode {
         Command::Convert(a) => convert::run(&a),
         Command::Info(a) => info::run(&a),
         Command::Radiosity(a) => radiosity::run(&a),
+        Command::Illuminance(a) => illuminance::run(&a),
+        Command::Glare(a) => glare::run(&a),
+        Command::Report(a) => report::run(&a),
         Command::Serve(a) => preview::serve(&a),
     };
     match result {

@@ -99,6 +99,16 @@ pub struct RenderArgs {
     /// Live preview in a browser, and tev streaming.
     #[command(flatten)]
     pub live: crate::preview::PreviewArgs,
+    /// Also write OUT_falsecolour.png: the image's luminance in cd/m² (683 lm/W) in false
+    /// colour with a legend, as Radiance's falsecolor.
+    #[arg(long, value_name = "QUANTITY", value_parser = ["luminance"])]
+    pub false_colour: Option<String>,
+    /// The false-colour scale 'lo:hi' in cd/m² (default: 0 to the image's maximum).
+    #[arg(long, value_name = "LO:HI", requires = "false_colour")]
+    pub scale: Option<String>,
+    /// Logarithmic false-colour scale.
+    #[arg(long, requires = "false_colour")]
+    pub log: bool,
 }
 
 fn parse_aov(s: &str) -> std::result::Result<(String, String), String> {
@@ -339,6 +349,19 @@ pub fn si(x: f64) -> String {
     format!("{v:.2} {p}")
 }
 
+/// OUT_falsecolour.png: luminance (cd/m²) in false colour with its legend.
+fn write_false_colour(img: &svetlo::film::Image, exr: &Path, scale: Option<&str>, log: bool) -> Result<PathBuf> {
+    use svetlo::photometry::false_colour::{picture, Scale};
+    let cd: Vec<f64> = img.data.iter().map(|c| c.luminance() as f64 * svetlo::photometry::LM_PER_W).collect();
+    let sc = match scale {
+        Some(s) => Scale::parse(s, log).map_err(|e| crate::Usage(format!("--scale: {e}")))?,
+        None => Scale::auto(&cd, log),
+    };
+    let p = with_suffix(&exr.with_extension(""), "_falsecolour.png");
+    write_png(&p, &picture(&cd, img.width, img.height, &sc, "cd/m2", false))?;
+    Ok(p)
+}
+
 /// Write the images; returns the paths written.
 pub fn write_outputs(film: &Film, out: &OutputPaths, variance: bool) -> Result<Vec<PathBuf>> {
     let img = film.image();
@@ -383,7 +406,10 @@ pub fn render_loaded(scene: Scene, a: &RenderArgs, out: &OutputPaths, progress: 
         }
     };
     let cpu = process_cpu_seconds().zip(cpu0).map(|(b, a)| b - a);
-    let written = write_outputs(&film, out, a.variance)?;
+    let mut written = write_outputs(&film, out, a.variance)?;
+    if a.false_colour.is_some() {
+        written.push(write_false_colour(&film.image(), &out.exr, a.scale.as_deref(), a.log)?);
+    }
     let secs = elapsed.as_secs_f64();
     let samples = film.spp_done as f64 * w as f64 * h as f64;
     say!("integrator  {}", job.integrator_name);

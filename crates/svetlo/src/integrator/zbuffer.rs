@@ -185,6 +185,7 @@ impl ZBuffer {
                 match l {
                     Light::Directional { direction, .. } => Some(ShadowMap::directional(*direction, scene.bounds.center, scene.bounds.radius, res, &occluders)),
                     Light::Point { position, .. } | Light::Spot { position, .. } => Some(ShadowMap::point(*position, res, &occluders, near)),
+                    Light::Luminaire(lum) => Some(ShadowMap::point(lum.position, res, &occluders, near)),
                     Light::Projector(pr) => Some(ShadowMap::point(pr.position, res, &occluders, near)),
                     Light::Area(_) => {
                         // The proxy's position seen from the scene's centre (fixed for meshes).

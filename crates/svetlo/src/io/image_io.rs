@@ -124,6 +124,12 @@ pub fn read_exr_layers(path: &Path) -> Result<(Image, Vec<(String, Image)>)> {
 
 /// sRGB-encoded 8-bit PNG, values clamped to [0, 1] (NaN becomes 0).
 pub fn write_png(path: &Path, img: &Image) -> Result<()> {
+    let out = encode_png(img).map_err(|e| img_err(path, e))?;
+    write_atomic(path, &out)
+}
+
+/// The bytes of [`write_png`]'s file (for pages that embed their images).
+pub fn encode_png(img: &Image) -> std::result::Result<Vec<u8>, image::ImageError> {
     let mut buf = Vec::with_capacity(img.width * img.height * 3);
     for c in &img.data {
         for v in c.to_array() {
@@ -131,9 +137,8 @@ pub fn write_png(path: &Path, img: &Image) -> Result<()> {
         }
     }
     let mut out = Vec::new();
-    image::write_buffer_with_format(&mut Cursor::new(&mut out), &buf, img.width as u32, img.height as u32, image::ColorType::Rgb8, image::ImageFormat::Png)
-        .map_err(|e| img_err(path, e))?;
-    write_atomic(path, &out)
+    image::write_buffer_with_format(&mut Cursor::new(&mut out), &buf, img.width as u32, img.height as u32, image::ColorType::Rgb8, image::ImageFormat::Png)?;
+    Ok(out)
 }
 
 /// PFM flavours: three channels (`PF`) or one (`Pf`, written as the pixel's luminance).

@@ -17,11 +17,13 @@
 pub mod area;
 mod directional;
 pub mod envmap;
+pub mod luminaire;
 mod point;
 pub mod projector;
 
 pub use area::AreaLight;
 pub use envmap::EnvMap;
+pub use luminaire::Luminaire;
 pub use projector::Projector;
 
 use crate::geometry::{Aabb, Ray, SurfaceInteraction};
@@ -95,6 +97,9 @@ pub enum Light {
     },
     /// Latitude-longitude environment map (Mitsuba `envmap`).
     EnvMap(Box<EnvMap>),
+    /// A luminaire from an IES or EULUMDAT file (`luminaire.rs`): a delta position (or a
+    /// point of its opening per sample) with a tabulated intensity.
+    Luminaire(Box<Luminaire>),
     /// A pinhole projecting an image (Mitsuba `projector`, see `projector.rs`).
     Projector(Box<Projector>),
 }
@@ -124,11 +129,12 @@ impl Light {
             Light::Directional { .. } => "directional",
             Light::Constant { .. } => "constant",
             Light::EnvMap(_) => "envmap",
+            Light::Luminaire(_) => "ies",
         }
     }
 
     pub fn is_delta(&self) -> bool {
-        matches!(self, Light::Point { .. } | Light::Spot { .. } | Light::Directional { .. } | Light::Projector(_))
+        matches!(self, Light::Point { .. } | Light::Spot { .. } | Light::Directional { .. } | Light::Luminaire(_) | Light::Projector(_))
     }
 
     pub fn is_infinite(&self) -> bool {
@@ -193,6 +199,7 @@ impl Light {
                 let (wi, pdf) = env.sample(u)?;
                 Some(LightSample { wi, li: env.eval(wi), pdf, p: point_at_infinity(bounds, p_ref, wi), n: Vec3::ZERO, infinite: true })
             }
+            Light::Luminaire(l) => l.sample_li(p_ref, u),
         }
     }
 
@@ -235,6 +242,7 @@ impl Light {
             Light::Directional { irradiance, .. } => disk * irradiance.luminance(),
             Light::Constant { radiance } => 4.0 * PI * disk * radiance.luminance(),
             Light::EnvMap(env) => disk * env.luminance_integral(),
+            Light::Luminaire(l) => l.power(),
         }
         .max(0.0)
     }
@@ -273,6 +281,7 @@ impl Light {
                 let (ray, pdf_pos) = ray_from_infinity(bounds, d, u_pos, time);
                 Some(EmissionSample { ray, le: ls.li, pdf_pos, pdf_dir: ls.pdf, n: d })
             }
+            Light::Luminaire(l) => l.sample_le(u_pos, u_dir, time),
         }
     }
 
@@ -286,6 +295,7 @@ impl Light {
             Light::Projector(pr) => (0.0, pr.pdf_direction(ray.d)),
             Light::Directional { .. } => (disk_pdf(bounds), 0.0),
             Light::Constant { .. } | Light::EnvMap(_) => (disk_pdf(bounds), self.pdf_li_escaped(-ray.d)),
+            Light::Luminaire(l) => (0.0, l.pdf_dir(ray.d)),
         }
     }
 }

@@ -57,7 +57,7 @@ impl Light {
         }
     }
 
-    /// Radiant intensity of a spot light toward world direction `w` (unit): the intensity times
+    /// Radiant intensity of a spot light (or a luminaire) toward world direction `w` (unit): the intensity times
     /// the falloff and, as Mitsuba 3 does, a texture projected over the cone: local direction
     /// (x, y, z) maps to uv = 1/2 + (x, y) / (2 z tan(cutoff)).
     pub fn spot_intensity(&self, w: Vec3) -> Rgb {
@@ -75,6 +75,7 @@ impl Light {
                 }
                 i
             }
+            Light::Luminaire(l) => l.intensity(w),
             _ => Rgb::BLACK,
         }
     }

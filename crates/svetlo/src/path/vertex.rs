@@ -301,7 +301,7 @@ impl Vertex {
                     Rgb::BLACK
                 }
             }
-            l @ Light::Spot { .. } => l.spot_intensity(w),
+            l @ (Light::Spot { .. } | Light::Luminaire(_)) => l.spot_intensity(w),
             Light::Projector(pr) => pr.intensity(w),
             Light::Point { .. } => self.le,
             _ => Rgb::BLACK,

@@ -98,7 +98,7 @@ pub fn parse(bytes: &[u8], file: &Path) -> Result<Photometry> {
     for _ in 0..10 {
         l.num("direct ratio")?;
     }
-    if isym != 1 && (mc == 0 || (isym >= 2 && !mc.is_multiple_of(4) && isym != 2) || (isym == 2 && !mc.is_multiple_of(2))) {
+    if isym != 1 && (mc == 0 || (isym >= 3 && !mc.is_multiple_of(4)) || (isym == 2 && !mc.is_multiple_of(2))) {
         return Err(err(file, 4, format!("number of C-planes Mc = {mc} does not suit symmetry {isym}")));
     }
     let c_line = l.pos + 1;

@@ -14,7 +14,11 @@
 //! `light::luminaire`.
 
 pub mod eulumdat;
+pub mod false_colour;
+pub mod glare;
 pub mod ies;
+pub mod illuminance;
+pub mod sky;
 pub mod table;
 
 pub use table::{IntensityTable, PhotometricType};

@@ -289,6 +289,22 @@ impl IntensityTable {
         self.eval(d.normalize())
     }
 
+    /// The grid: φ and θ nodes (radians).
+    pub fn grid(&self) -> (&[f64], &[f64]) {
+        (&self.phi, &self.theta)
+    }
+
+    /// Probability with which [`IntensityTable::sample`] picks cell (i, j) (between φ_i,
+    /// φ_i+1 and θ_j, θ_j+1).
+    pub fn cell_probability(&self, i: usize, j: usize) -> f64 {
+        self.cells.pmf(i * self.n_cells_theta() + j) as f64
+    }
+
+    /// (φ, θ) of a unit direction in the luminaire frame.
+    pub fn direction_angles(&self, d: Vec3) -> (f64, f64) {
+        self.angles(d)
+    }
+
     fn n_cells_theta(&self) -> usize {
         self.theta.len() - 1
     }

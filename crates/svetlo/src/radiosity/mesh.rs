@@ -58,9 +58,19 @@ pub struct Element {
     pub reflectance: Rgb,
     /// Emitted radiosity E = π Le (W/m²).
     pub emission: Rgb,
+    /// Radiosity ρ E_direct reflected once from the lights with a position and no surface
+    /// (luminaires, point, spot, directional), which the form factors cannot carry: the
+    /// solvers start from it as from emission, displays count it as reflected light.
+    pub lit: Rgb,
 }
 
 impl Element {
+    /// What the system starts from: emission plus the reflected light of positional lights.
+    #[inline]
+    pub fn source(&self) -> Rgb {
+        self.emission + self.lit
+    }
+
     /// Point at barycentrics (b1, b2) (weights of p[1], p[2]).
     #[inline]
     pub fn point(&self, b1: f32, b2: f32) -> Vec3 {
@@ -255,13 +265,46 @@ impl RadiosityMesh {
         if mesh.elements.is_empty() {
             return Err(Error::Invalid("radiosity: the scene has no diffuse or emitting surface to mesh".into()));
         }
-        if !mesh.elements.iter().any(|e| !e.emission.is_black()) {
+        mesh.light_by_delta_lights(scene);
+        if !mesh.elements.iter().any(|e| !e.source().is_black()) {
             mesh.warnings.push(
-                "radiosity: no surface emits light (point, directional and environment lights are not part of the radiosity solution); the image will be black"
-                    .into(),
+                "radiosity: no surface emits or receives light (environment lights are not part of the radiosity solution); the image will be black".into(),
             );
         }
         Ok(mesh)
+    }
+
+    /// Set each element's `lit`: ρ times the irradiance from every delta light, averaged over
+    /// four points of the element (its centroid and the midpoints toward its corners) with
+    /// shadow rays. A spread luminaire's opening is sampled at one point per element point.
+    fn light_by_delta_lights(&mut self, scene: &Scene) {
+        use rayon::prelude::*;
+        let lights: Vec<&Light> = scene.lights.iter().filter(|l| l.is_delta()).collect();
+        if lights.is_empty() {
+            return;
+        }
+        self.elements.par_iter_mut().for_each(|e| {
+            if e.reflectance.is_black() {
+                return;
+            }
+            let pts = [e.centroid, (e.centroid + e.p[0]) * 0.5, (e.centroid + e.p[1]) * 0.5, (e.centroid + e.p[2]) * 0.5];
+            let us = [Vec2::new(0.25, 0.25), Vec2::new(0.75, 0.25), Vec2::new(0.25, 0.75), Vec2::new(0.75, 0.75)];
+            let mut irradiance = Rgb::BLACK;
+            for l in &lights {
+                for (p, u) in pts.iter().zip(us) {
+                    let Some(ls) = l.sample_li(*p, u, &scene.bounds) else { continue };
+                    let cos = e.normal.dot(ls.wi);
+                    if cos <= 0.0 {
+                        continue;
+                    }
+                    let blocked = if ls.infinite { scene.occluded_dir(*p, e.normal, ls.wi) } else { scene.occluded(*p, e.normal, ls.p) };
+                    if !blocked {
+                        irradiance += ls.li * (cos / ls.pdf);
+                    }
+                }
+            }
+            e.lit = e.reflectance * irradiance * 0.25;
+        });
     }
 
     #[allow(clippy::too_many_arguments)]
@@ -295,6 +338,7 @@ impl RadiosityMesh {
                     area,
                     reflectance: albedo(uv).clamp(0.0, 1.0),
                     emission,
+                    lit: Rgb::BLACK,
                 });
             }
             self.patches.push(Patch { first, count: n * n, area: patch_area });

@@ -201,7 +201,7 @@ impl Solved {
 /// The system's per-element data.
 pub fn system<'a>(mesh: &RadiosityMesh, rows: solver::Rows<'a>) -> System<'a> {
     System {
-        emission: mesh.elements.iter().map(|e| e.emission).collect(),
+        emission: mesh.elements.iter().map(|e| e.source()).collect(),
         reflectance: mesh.elements.iter().map(|e| e.reflectance).collect(),
         area: mesh.elements.iter().map(|e| e.area).collect(),
         patch_of: mesh.elements.iter().map(|e| e.patch).collect(),
@@ -230,7 +230,17 @@ pub fn solve_observed(
     let t0 = Instant::now();
     let mesh = RadiosityMesh::build(scene, &opts.mesh)?;
     let mesh_seconds = t0.elapsed().as_secs_f64();
-    let kind = opts.solver_for(mesh.elements.len());
+    let mut kind = opts.solver_for(mesh.elements.len());
+    // The hierarchy's roots carry one `lit` per input triangle, too coarse for the pools of
+    // light of luminaires and point lights: those scenes solve on the regular mesh.
+    if kind == SolverKind::Hierarchical && scene.lights.iter().any(|l| l.is_delta()) {
+        if opts.solver == SolverKind::Hierarchical {
+            return Err(crate::error::Error::Settings(
+                "radiosity: the hierarchical solver does not take point lights or luminaires; use solver=gauss-seidel (or auto)".into(),
+            ));
+        }
+        kind = SolverKind::GaussSeidel;
+    }
     if kind == SolverKind::Hierarchical {
         // Chosen automatically without an element size: finer leaves than the matrix's default
         // (the hierarchy only refines where the oracle asks; bench/radiosity README).

@@ -76,6 +76,39 @@ impl<'a> Loader<'a> {
                 let image = self.bitmap(&path, false)?;
                 Light::EnvMap(Box::new(EnvMap::new(image, to_world.unwrap_or(Mat4::IDENTITY), scale)))
             }
+            "ies" => self.luminaire(node, to_world)?,
+            "cie_sky" => {
+                // A CIE standard sky (photometry::sky), Z up, azimuth from +Y toward +X; the
+                // sun's direct beam, when sun_illuminance (lx, normal to the beam) is given,
+                // as a directional light beside it.
+                let sky_type = self.int(node, "type", crate::photometry::sky::TRADITIONAL_OVERCAST as i64)?;
+                let el = self.float(node, "sun_elevation", 45.0)? as f64;
+                let az = self.float(node, "sun_azimuth", 180.0)? as f64;
+                let mut sky =
+                    crate::photometry::sky::CieSky::new(u32::try_from(sky_type).unwrap_or(0), el, az).map_err(|e| node.loc.err(format!("cie_sky: {e}")))?;
+                let lz = self.float(node, "zenith_luminance", -1.0)? as f64;
+                let eh = self.float(node, "horizontal_illuminance", -1.0)? as f64;
+                sky.zenith_luminance = match (lz, eh) {
+                    (l, e) if l >= 0.0 && e >= 0.0 => return Err(node.loc.err("cie_sky: give zenith_luminance or horizontal_illuminance, not both")),
+                    (l, _) if l >= 0.0 && l.is_finite() => l,
+                    (_, e) if e >= 0.0 && e.is_finite() => e / sky.horizontal_illuminance(),
+                    (l, e) if l == -1.0 && e == -1.0 => 10_000.0 / sky.horizontal_illuminance(),
+                    _ => return Err(node.loc.err("cie_sky: zenith_luminance and horizontal_illuminance must be non-negative")),
+                };
+                let width = self.int(node, "resolution", 512)?;
+                if !(8..=8192).contains(&width) {
+                    return Err(node.loc.err(format!("cie_sky: resolution {width} must be within 8-8192")));
+                }
+                let sun = self.float(node, "sun_illuminance", 0.0)? as f64;
+                if !(sun >= 0.0 && sun.is_finite()) {
+                    return Err(node.loc.err(format!("cie_sky: sun_illuminance must be non-negative, got {sun}")));
+                }
+                if sun > 0.0 {
+                    let e = (sun / crate::photometry::LM_PER_W) as f32;
+                    self.b.add_light(Light::Directional { direction: -crate::photometry::sky::direction(el, az), irradiance: Rgb::new(e, e, e) });
+                }
+                Light::EnvMap(Box::new(sky.env_map(width as usize)))
+            }
             "projector" => {
                 let m = to_world.unwrap_or(Mat4::IDENTITY);
                 let irradiance = self.spectrum(node, "irradiance", Rgb::WHITE, il)?;

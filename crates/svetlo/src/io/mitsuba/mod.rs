@@ -11,6 +11,7 @@
 mod bsdf;
 mod classic;
 mod emitter;
+mod luminaire;
 mod props;
 mod refs;
 mod sensor;

@@ -144,11 +144,11 @@ impl<'a> Hierarchy<'a> {
         let mut forest = Forest { nodes: Vec::with_capacity(roots.elements.len() * 4), roots: roots.elements.len() };
         for (i, e) in roots.elements.iter().enumerate() {
             let mut n = Node::new(e.p, e.normal, i as u32, 0);
-            n.b = e.emission;
+            n.b = e.source();
             forest.nodes.push(n);
         }
         let area: f64 = roots.total_area();
-        let power: f64 = roots.elements.iter().map(|e| e.area as f64 * e.emission.luminance() as f64).sum();
+        let power: f64 = roots.elements.iter().map(|e| e.area as f64 * e.source().luminance() as f64).sum();
         let b_ref = if power > 0.0 { power / area } else { 1.0 };
         let links = vec![vec![]; forest.nodes.len()];
         Ok(Hierarchy {
@@ -171,7 +171,7 @@ impl<'a> Hierarchy<'a> {
         self.roots.elements[self.forest.nodes[n as usize].root as usize].reflectance
     }
     fn emission(&self, n: u32) -> Rgb {
-        self.roots.elements[self.forest.nodes[n as usize].root as usize].emission
+        self.roots.elements[self.forest.nodes[n as usize].root as usize].source()
     }
 
     /// One Gauss-Seidel sweep: each tree gathers over its links (with the newest B) and is pushed and pulled.
@@ -258,7 +258,7 @@ impl<'a> Hierarchy<'a> {
                 stack.extend((node.children..node.children + 4).zip(tree::split_corners(down)));
             }
         }
-        let power: f64 = self.roots.elements.iter().map(|e| e.area as f64 * l1(e.emission)).sum();
+        let power: f64 = self.roots.elements.iter().map(|e| e.area as f64 * l1(e.source())).sum();
         total / if power > 0.0 { power } else { 1.0 }
     }
 
