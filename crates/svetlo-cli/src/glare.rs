@@ -69,7 +69,7 @@ pub fn describe(g: &Glare) -> String {
 
 pub fn run(a: &GlareArgs) -> Result<ExitCode> {
     check_view(a.dir, a.up)?;
-    let scene = crate::load_scene(&a.scene, &a.define)?;
+    let scene = crate::load_scene(&a.scene, None, &a.define)?;
     let settings = RenderSettings { seed: a.seed, ..RenderSettings::from_scene(&scene) };
     let g = ugr(&scene, a.eye, a.dir, a.up, a.spp, &settings);
     print!("{}", describe(&g));

@@ -106,7 +106,7 @@ pub fn compute(
 pub fn run(a: &IlluminanceArgs) -> Result<ExitCode> {
     let plane = WorkPlane::parse(&a.plane, a.spacing).map_err(|e| crate::Usage(format!("--plane: {e}")))?;
     let scale = a.scale.as_deref().map(|s| Scale::parse(s, a.log)).transpose().map_err(|e| crate::Usage(format!("--scale: {e}")))?;
-    let scene = crate::load_scene(&a.scene, &a.define)?;
+    let scene = crate::load_scene(&a.scene, None, &a.define)?;
     let settings = RenderSettings { seed: a.seed, ..RenderSettings::from_scene(&scene) };
     let mut grid = compute(&scene, &plane, &a.integrator, a.spp, &a.radiosity, &settings)?;
     if let Some(target) = a.error {

@@ -95,7 +95,7 @@ pub fn run(a: &ReportArgs) -> Result<ExitCode> {
         .map(|p| WorkPlane::parse(p, a.spacing).map_err(|e| anyhow::Error::new(crate::Usage(format!("--plane '{p}': {e}")))))
         .collect::<Result<_>>()?;
     let observers: Vec<(Vec3, Vec3)> = a.observer.iter().map(|o| parse_observer(o)).collect::<Result<_>>()?;
-    let scene = crate::load_scene(&a.scene, &a.define)?;
+    let scene = crate::load_scene(&a.scene, None, &a.define)?;
     let settings = RenderSettings { seed: a.seed, ..RenderSettings::from_scene(&scene) };
     let mut html = String::from(
         "<!DOCTYPE html>\n<html><head><meta charset=\"utf-8\"><title>svetlo lighting report</title>\n<style>body{font-family:sans-serif;margin:2em;max-width:60em}table{border-collapse:collapse;margin:1em 0}td,th{border:1px solid #999;padding:0.25em 0.6em;text-align:right}th{background:#eee}img{image-rendering:pixelated;border:1px solid #999}</style></head><body>\n",

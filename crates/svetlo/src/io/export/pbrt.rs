@@ -357,6 +357,7 @@ pub(super) fn write(scene: &Scene, files: &mut Files) -> Result<String> {
                 w.out += "AttributeEnd\n";
             }
             Light::Projector(_) => w.files.warn("a projector light is not exported yet; left out"),
+            Light::Luminaire(_) => w.files.warn("an ies luminaire is not exported yet (its photometric file is not carried over); left out"),
         }
     }
 
