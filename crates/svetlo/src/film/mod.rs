@@ -47,8 +47,21 @@ impl FilmTile {
     /// Add a sample to the beauty and, with the same filter weights, `aov[i]` to layer i.
     pub fn add_sample_layers(&mut self, p: Vec2, l: Rgb, aov: &[Rgb]) {
         self.add_sample(p, l);
-        let r = self.filter.radius();
         let w = self.x1 - self.x0;
+        if self.filter == Filter::Box {
+            // One pixel takes the whole sample: find it once for every layer.
+            let (ox, oy) = (floor_i(p.x), floor_i(p.y));
+            if ox >= self.x0 as i64 && oy >= self.y0 as i64 && ox < self.x1 as i64 && oy < self.y1 as i64 {
+                let k = ((oy as u32 - self.y0) * w + (ox as u32 - self.x0)) as usize;
+                for (layer, &v) in self.layers.iter_mut().zip(aov) {
+                    if v.is_finite() {
+                        layer[k] += v;
+                    }
+                }
+            }
+            return;
+        }
+        let r = self.filter.radius();
         let xmin = (-floor_i(-(p.x - 0.5 - r))).max(self.x0 as i64);
         let xmax = floor_i(p.x - 0.5 + r).min(self.x1 as i64 - 1);
         let ymin = (-floor_i(-(p.y - 0.5 - r))).max(self.y0 as i64);
@@ -56,13 +69,6 @@ impl FilmTile {
         for (layer, &v) in self.layers.iter_mut().zip(aov) {
             let v = if v.is_finite() { v } else { Rgb::BLACK };
             if v.is_black() {
-                continue;
-            }
-            if self.filter == Filter::Box {
-                let (ox, oy) = (floor_i(p.x), floor_i(p.y));
-                if ox >= self.x0 as i64 && oy >= self.y0 as i64 && ox < self.x1 as i64 && oy < self.y1 as i64 {
-                    layer[((oy as u32 - self.y0) * w + (ox as u32 - self.x0)) as usize] += v;
-                }
                 continue;
             }
             for y in ymin..=ymax {
