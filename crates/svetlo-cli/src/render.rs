@@ -232,13 +232,9 @@ pub fn configure(mut scene: Scene, a: &RenderArgs) -> Result<Job> {
             "warning: light tracing does not see environment emitters (envmap, constant) from the camera; they are missing from the image (use path or bdpt)"
         );
     }
-    let mut aovs = a.aov.clone();
-    if a.aov_preset.as_deref() == Some("lecture") {
-        aovs.extend(svetlo::lpe::LECTURE_PRESET.iter().map(|(n, e)| (n.to_string(), e.to_string())));
-    }
-    if !aovs.is_empty() || a.lpe.is_some() {
-        let mut set = svetlo::lpe::AovSet::compile(&aovs, a.lpe.as_deref()).map_err(|e| Usage(format!("light path expression: {e}")))?;
-        for w in set.bind(&scene) {
+    let request = svetlo::lpe::AovSet::request(&scene, &a.aov, a.aov_preset.as_deref(), a.lpe.as_deref());
+    if let Some((set, warnings)) = request.map_err(|e| Usage(format!("light path expression: {e}")))? {
+        for w in warnings {
             tell!("warning: {w}");
         }
         s.lpe = Some(Arc::new(set));

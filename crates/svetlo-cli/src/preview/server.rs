@@ -4,7 +4,7 @@
 //! state as JSON and the images as half-float frames, and takes the page's commands.
 
 use super::http::{self, Request};
-use super::state::{encode_frame, hello_json, status_json, Config, Mode, Session, SlotState, LAYERS};
+use super::state::{encode_frame, hello_json, status_json, Config, Mode, Session, SlotState};
 use super::websocket::{self, Incoming, ReadError};
 use anyhow::{Context, Result};
 use std::io::Write;
@@ -175,13 +175,13 @@ fn command(text: &str, session: &Session, conn: &Connection) {
     let mut words = text.split_whitespace();
     match words.next() {
         Some("stop") => session.stop(),
-        Some("layer") => match words.next().and_then(|l| LAYERS.iter().position(|x| *x == l)) {
+        Some("layer") => match words.next().and_then(|l| session.info.layers.iter().position(|x| x == l)) {
             Some(i) => {
                 conn.layer.store(i, Ordering::SeqCst);
                 conn.resend.store(true, Ordering::SeqCst);
                 session.poke();
             }
-            None => session.say(format!("unknown layer in '{text}' (layers: {})", LAYERS.join(", "))),
+            None => session.say(format!("unknown layer in '{text}' (layers: {})", session.info.layers.join(", "))),
         },
         Some("restart") if session.info.mode == Mode::Serve => {
             let current = session.lock().config.clone();

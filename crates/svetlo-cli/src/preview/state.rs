@@ -8,8 +8,8 @@ use std::time::{Duration, Instant};
 use svetlo::film::{compare::rel_mse, Film, Image};
 use svetlo::integrator::Progress;
 
-/// The image layers a page can choose; the film's AOV layers, once they exist, are added here
-/// and in [`Frame::develop`].
+/// The image layers every film has; a page can also choose the film's AOV layers, which follow
+/// these in [`Info::layers`] and [`Frame::layers`].
 pub const LAYERS: &[&str] = &["color", "variance"];
 
 /// Largest share of the render's time the observer may spend developing films.
@@ -23,13 +23,15 @@ pub struct Frame {
     pub width: u32,
     pub height: u32,
     pub spp: u32,
-    /// In the order of [`LAYERS`].
+    /// In the order of [`Info::layers`]: [`LAYERS`], then the AOVs.
     pub layers: Vec<Image>,
 }
 
 impl Frame {
     pub fn develop(film: &Film) -> Frame {
-        Frame { width: film.width, height: film.height, spp: film.spp_done, layers: vec![film.image(), film.variance_image()] }
+        let mut layers = vec![film.image(), film.variance_image()];
+        layers.extend(film.layer_images().into_iter().map(|(_, im)| im));
+        Frame { width: film.width, height: film.height, spp: film.spp_done, layers }
     }
     pub fn color(&self) -> &Image {
         &self.layers[0]
@@ -173,6 +175,15 @@ pub struct Info {
     pub mode: Mode,
     pub scene: String,
     pub reference: Option<Image>,
+    /// The layers a page can choose: [`LAYERS`], then the render's AOVs by name.
+    pub layers: Vec<String>,
+}
+
+impl Info {
+    pub fn new(mode: Mode, scene: String, reference: Option<Image>, aovs: &[String]) -> Info {
+        let layers = LAYERS.iter().map(|l| l.to_string()).chain(aovs.iter().cloned()).collect();
+        Info { mode, scene, reference, layers }
+    }
 }
 
 pub struct Session {
@@ -388,7 +399,7 @@ fn json_num(x: f64) -> String {
 pub fn hello_json(info: &Info) -> String {
     let methods: Vec<String> =
         svetlo::methods::METHODS.iter().map(|m| format!("{{\"name\":{},\"summary\":{}}}", json_str(m.name), json_str(m.summary))).collect();
-    let layers: Vec<String> = LAYERS.iter().map(|l| json_str(l)).collect();
+    let layers: Vec<String> = info.layers.iter().map(|l| json_str(l)).collect();
     format!(
         "{{\"type\":\"hello\",\"mode\":{},\"scene\":{},\"reference\":{},\"methods\":[{}],\"layers\":[{}]}}",
         json_str(if info.mode == Mode::Serve { "serve" } else { "render" }),
@@ -563,7 +574,7 @@ mod tests {
     /// A run as the page sees it: queued, running with an error curve, then done.
     #[test]
     fn session_states_reach_the_status() {
-        let info = Info { mode: Mode::Serve, scene: "s".into(), reference: None };
+        let info = Info::new(Mode::Serve, "s".into(), None, &[]);
         let s = Session::new(info, Config { methods: vec!["path".into(), "bdpt".into()], spp: 4, max_depth: 3 });
         let run = s.begin_run(Config { methods: vec!["path".into()], spp: 4, max_depth: 3 });
         assert!(status_json(&s.lock()).contains("\"state\":\"queued\""));

@@ -19,6 +19,7 @@ import dataclasses
 import functools
 import os
 import sys
+import warnings
 from typing import Any, Callable, Dict, List, Mapping, Optional, Tuple, Union
 
 import numpy as np
@@ -57,6 +58,8 @@ __all__ = [
     "methods",
     "write",
     "read",
+    "write_layers",
+    "read_layers",
     "relmse",
     "ztest",
 ]
@@ -157,8 +160,8 @@ class RenderResult:
         interrupted: whether Ctrl-C (or a cancel) stopped it early.
         integrator: the method that ran, with its options.
         report: the method's own report (e.g. Metropolis acceptance), or None.
-        aovs: named film layers (light path expressions), one (height, width, 3) array each;
-            empty until the renderer produces layers.
+        aovs: the AOVs asked for (``aovs=``, ``aov_preset=``), one (height, width, 3) array
+            each, by name, in the order asked.
         strategies: for ``strategies=N`` with bdpt, {(s, t): (weighted, unweighted)} images.
     """
 
@@ -224,6 +227,9 @@ def render_result(
     sampler: Optional[str] = None,
     rr_depth: Optional[int] = None,
     hide_emitters: Optional[bool] = None,
+    aovs: Optional[Mapping[str, str]] = None,
+    lpe: Optional[str] = None,
+    aov_preset: Optional[str] = None,
     strategies: Optional[int] = None,
     progress: Union[bool, None, Callable[[int, int, float], Any]] = None,
 ) -> RenderResult:
@@ -250,6 +256,12 @@ def render_result(
         if not (np.isfinite(time) and time > 0):
             raise OptionError(f"time must be a positive number of seconds, got {time}")
     spec = _method_spec(integrator, options, scene)
+    if aovs is not None:
+        if not isinstance(aovs, Mapping) or not all(isinstance(k, str) and isinstance(v, str) for k, v in aovs.items()):
+            raise TypeError("render: aovs must be a dict of name -> light path expression (str -> str)")
+    for name, v in (("lpe", lpe), ("aov_preset", aov_preset)):
+        if v is not None and not isinstance(v, str):
+            raise TypeError(f"render: {name} must be a string, got {type(v).__name__}")
     bar = None
     if progress is None or progress is True:
         bar = _Bar(time)
@@ -277,10 +289,15 @@ def render_result(
             hide_emitters=hide_emitters,
             strategies=strategies,
             callback=callback,
+            aovs=None if aovs is None else list(aovs.items()),
+            lpe=lpe,
+            aov_preset=aov_preset,
         )
     finally:
         if bar is not None:
             bar.close()
+    for w in r["warnings"]:
+        warnings.warn(w, stacklevel=3)
     result = RenderResult(
         image=r["image"],
         film=r["film"],
@@ -292,7 +309,7 @@ def render_result(
         interrupted=r["interrupted"],
         integrator=r["integrator"],
         report=r["report"],
-        aovs=dict(r.get("aovs", {})),
+        aovs=dict(r["aovs"]),
         strategies={(s, t): (w, u) for s, t, w, u in r["strategies"]},
     )
     if result.interrupted:
@@ -319,6 +336,9 @@ def render(
     sampler: Optional[str] = None,
     rr_depth: Optional[int] = None,
     hide_emitters: Optional[bool] = None,
+    aovs: Optional[Mapping[str, str]] = None,
+    lpe: Optional[str] = None,
+    aov_preset: Optional[str] = None,
     progress: Union[bool, None, Callable[[int, int, float], Any]] = None,
 ) -> np.ndarray:
     """Render ``scene``; return the image as a (height, width, 3) float32 array of linear RGB.
@@ -345,6 +365,12 @@ def render(
         sampler: "independent" or "sobol".
         rr_depth: depth at which Russian roulette starts.
         hide_emitters: do not show emitters seen directly by the camera.
+        aovs: light path expressions as ``{name: expression}`` (the CLI's ``--aov``, e.g.
+            ``{"caustic": "C D S+ L"}``); their images are ``render_result(...).aovs[name]``
+            (``render`` itself returns the beauty only).
+        lpe: restrict the beauty to the paths this expression matches (``--lpe``).
+        aov_preset: "lecture" adds one AOV per method class of the lecture (local, whitted,
+            cook, radiosity, rest).
         progress: None (default) shows a tqdm bar when tqdm is installed; False shows nothing;
             a callable is called as ``progress(done, total, seconds)`` every 20 ms from the
             calling thread (an exception in it cancels the render and is raised).
@@ -372,6 +398,9 @@ def render(
         sampler=sampler,
         rr_depth=rr_depth,
         hide_emitters=hide_emitters,
+        aovs=aovs,
+        lpe=lpe,
+        aov_preset=aov_preset,
         progress=progress,
     ).image
 
@@ -436,6 +465,18 @@ def write(path: PathLike, image: Any) -> None:
 def read(path: PathLike) -> np.ndarray:
     """Read an image (EXR, PFM, PNG, JPEG) as a (height, width, 3) float32 array of linear RGB."""
     return _svetlo.read(path)
+
+
+def write_layers(path: PathLike, image: Any, aovs: Mapping[str, Any]) -> None:
+    """Write one EXR with ``image`` as R, G, B and each AOV as ``NAME.R``, ``NAME.G``, ``NAME.B``
+    (the CLI's ``--aov`` output; OpenEXR's layer naming)."""
+    _svetlo.write_layers(path, _image_arg(image, "image"), [(str(n), _image_arg(a, str(n))) for n, a in aovs.items()])
+
+
+def read_layers(path: PathLike) -> Tuple[np.ndarray, Dict[str, np.ndarray]]:
+    """Read a multi-layer EXR (e.g. ``svetlo render --aov ...``): the beauty and ``{name: image}``."""
+    beauty, layers = _svetlo.read_layers(path)
+    return beauty, dict(layers)
 
 
 def relmse(image: Any, reference: Any) -> float:

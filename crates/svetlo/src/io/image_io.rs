@@ -91,6 +91,37 @@ pub fn read_exr_channels(path: &Path) -> Result<Vec<(String, Vec<f32>)>> {
     Ok(img.layer_data.channel_data.list.iter().map(|c| (c.name.to_string(), c.sample_data.values_as_f32().collect())).collect())
 }
 
+/// The beauty (channels R, G, B) and the layers (`NAME.R`, `NAME.G`, `NAME.B`, in the
+/// file's channel order) of an EXR written by [`write_exr_layers`]. A layer lacking one of its
+/// three channels is an error naming it.
+pub fn read_exr_layers(path: &Path) -> Result<(Image, Vec<(String, Image)>)> {
+    let beauty = read_exr(path)?;
+    let n = beauty.width * beauty.height;
+    let mut names: Vec<String> = Vec::new();
+    let mut channels = std::collections::HashMap::new();
+    for (name, data) in read_exr_channels(path)? {
+        if let Some((layer, c)) = name.rsplit_once('.') {
+            if !names.iter().any(|x| x == layer) {
+                names.push(layer.to_string());
+            }
+            channels.insert((layer.to_string(), c.to_string()), data);
+        }
+    }
+    let mut layers = Vec::with_capacity(names.len());
+    for layer in names {
+        let mut get = |c: &str| {
+            channels
+                .remove(&(layer.clone(), c.to_string()))
+                .filter(|d| d.len() == n)
+                .ok_or_else(|| Error::Image { file: path.to_path_buf(), msg: format!("layer '{layer}' has no channel {layer}.{c} of the image's size") })
+        };
+        let (r, g, b) = (get("R")?, get("G")?, get("B")?);
+        let data = (0..n).map(|i| Rgb::new(r[i], g[i], b[i])).collect();
+        layers.push((layer, Image::new(beauty.width, beauty.height, data)));
+    }
+    Ok((beauty, layers))
+}
+
 /// sRGB-encoded 8-bit PNG, values clamped to [0, 1] (NaN becomes 0).
 pub fn write_png(path: &Path, img: &Image) -> Result<()> {
     let mut buf = Vec::with_capacity(img.width * img.height * 3);

@@ -108,6 +108,30 @@ impl AovSet {
         AovSet::new(list, b)
     }
 
+    /// What a render asks for (the CLI's `--aov`, `--aov-preset`, `--lpe`; Python's `aovs`,
+    /// `aov_preset`, `lpe`), compiled and bound to `scene`: None when nothing is asked, else
+    /// the set and the warnings of [`Self::bind`]. The only preset is `lecture`.
+    pub fn request(scene: &Scene, aovs: &[(String, String)], preset: Option<&str>, beauty: Option<&str>) -> Result<Option<(AovSet, Vec<String>)>, LpeError> {
+        let all = Self::requested(aovs, preset)?;
+        if all.is_empty() && beauty.is_none() {
+            return Ok(None);
+        }
+        let mut set = AovSet::compile(&all, beauty)?;
+        let warnings = set.bind(scene);
+        Ok(Some((set, warnings)))
+    }
+
+    /// The AOVs a request names, in their layer order: `aovs`, then the preset's.
+    pub fn requested(aovs: &[(String, String)], preset: Option<&str>) -> Result<Vec<(String, String)>, LpeError> {
+        let mut all = aovs.to_vec();
+        match preset {
+            None => {}
+            Some("lecture") => all.extend(super::LECTURE_PRESET.iter().map(|(n, e)| (n.to_string(), e.to_string()))),
+            Some(other) => return Err(LpeError::at(other, 0, format!("unknown AOV preset '{other}' (lecture)"))),
+        }
+        Ok(all)
+    }
+
     /// Resolve labels against the scene's shape ids; returns a warning per label that names
     /// nothing and per expression that can match no path.
     pub fn bind(&mut self, scene: &Scene) -> Vec<String> {
