@@ -7,8 +7,8 @@
 set -eu
 secs=${1:-60}
 cd "$(dirname "$0")"
-targets="mitsuba_xml obj ply image integrator_options photometry"
-nice -n 15 cargo +nightly fuzz build --release $targets 2>&1 | tail -n 3
+targets="mitsuba_xml obj ply image integrator_options photometry lpe"
+nice -n 15 cargo +nightly fuzz build --release 2>&1 | tail -n 3
 for t in $targets; do
     mkdir -p "corpus/$t" "artifacts/$t" "work/$t"
     # New inputs go to work/ (not committed); corpus/ is the small seed set.

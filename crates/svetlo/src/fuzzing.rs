@@ -53,9 +53,34 @@ pub fn integrator_options(data: &[u8]) {
     }
 }
 
+/// A light path expression (the first line) and a path to match (each later byte one vertex:
+/// its base class and label bits). Besides not crashing, the camera-first automaton, the
+/// light-first one and every split of the path into a camera prefix and a light subpath must
+/// agree: the bidirectional methods rely on it.
+pub fn lpe(data: &[u8]) {
+    let (expr, path) = match data.iter().position(|&b| b == b'\n') {
+        Some(i) => (&data[..i], &data[i + 1..]),
+        None => (data, &data[..0]),
+    };
+    let Some(expr) = text(expr) else { return };
+    let Ok(mut l) = crate::lpe::Lpe::new(expr) else { return };
+    // Labels named in the expression bound to the first bits, as an AOV set binds them.
+    let n = l.labels().len();
+    l.bind_labels((0..n as u8).collect());
+    let events: Vec<crate::lpe::Event> =
+        path.iter().take(64).map(|&b| crate::lpe::Event { base: b % crate::lpe::automaton::BASE_COUNT as u8, labels: (b as u32 >> 4) & 0xf }).collect();
+    let forward = l.matches(&events);
+    assert_eq!(forward, l.matches_from_light(&events), "'{expr}': the reverse automaton disagrees on {events:?}");
+    for k in 0..=events.len() {
+        let q = events[..k].iter().fold(crate::lpe::Lpe::START, |s, &e| l.step(s, e));
+        let r = events[k..].iter().rev().fold(crate::lpe::Lpe::START, |s, &e| l.rev_step(s, e));
+        assert_eq!(forward, l.meets(q, r), "'{expr}': the split at {k} disagrees on {events:?}");
+    }
+}
+
 /// A target's entry point.
 pub type Entry = fn(&[u8]);
 
 /// The targets by name, as `fuzz/corpus/<name>` and the reproducers' folders are named.
 pub const TARGETS: &[(&str, Entry)] =
-    &[("mitsuba_xml", mitsuba_xml), ("obj", obj), ("ply", ply), ("image", image), ("integrator_options", integrator_options), ("photometry", photometry)];
+    &[("mitsuba_xml", mitsuba_xml), ("obj", obj), ("ply", ply), ("image", image), ("integrator_options", integrator_options), ("photometry", photometry), ("lpe", lpe)];

@@ -48,7 +48,7 @@ try {
   phase('launch');
   // ---- 1. svetlo render --preview: the image appears and changes; Stop keeps the samples ----
   const stopExr = join(OUT, 'stopped.exr');
-  const r = start(['render', SCENE, '--preview', '--spp', '1000000', '--width', '96', '--height', '96', '--max-depth', '5', '-o', stopExr]);
+  const r = start(['render', SCENE, '--preview', '--spp', '1000000', '--width', '96', '--height', '96', '--max-depth', '5', '--aov-preset', 'lecture', '-o', stopExr]);
   const page = await browser.newPage({ viewport: { width: 1280, height: 900 } });
   await page.goto(await r.url);
   await page.waitForFunction(() => window.svetlo.framesReceived >= 1 && window.svetlo.drawn >= 1, null, { timeout: T });
@@ -65,6 +65,12 @@ try {
   result.render = { spp1, spp2: await page.evaluate(() => window.svetlo.frames[0].spp), lit: stats.lit / stats.n };
   await page.screenshot({ path: join(OUT, 'render.png') });
   phase('changed');
+  // The render's AOVs (--aov-preset lecture) are in the layer menu; choosing one brings its frames.
+  const options = await page.$$eval('#layer option', (os) => os.map((o) => o.value));
+  if (!options.includes('radiosity')) fail(`no AOV in the layer menu: ${options}`);
+  await page.selectOption('#layer', 'radiosity');
+  await page.waitForFunction((i) => window.svetlo.frames[0] && window.svetlo.frames[0].layer === i, options.indexOf('radiosity'), { timeout: T });
+  phase('aov layer');
   await page.click('#stop');
   const ended = await Promise.race([r.exited, new Promise((res) => setTimeout(() => res(null), T))]);
   if (!ended) { r.p.kill(); fail('the render did not stop after the Stop button'); }
