@@ -4,7 +4,7 @@
 # (METHODS='a b' picks the methods; RUNS the alternating runs.)
 set -euo pipefail
 cd "$(dirname "$0")/../.."
-BIN=target/release/svetlo
+BIN=${BIN:-target/release/svetlo}
 SCENE=${1:-scenes/caustic.xml}; SPP=${2:-16}; RES=${3:-64}; RUNS=${RUNS:-3}
 AOVS=(--aov a='C [LB]' --aov b='C D [LB]' --aov c='C D [^LB]+ [LB]' --aov d='C [GS] .* [LB]'
       --aov e='C D S+ L' --aov f='C <R.> L' --aov g='C . .+ L' --aov h='L D* E')

@@ -82,5 +82,12 @@ pub fn lpe(data: &[u8]) {
 pub type Entry = fn(&[u8]);
 
 /// The targets by name, as `fuzz/corpus/<name>` and the reproducers' folders are named.
-pub const TARGETS: &[(&str, Entry)] =
-    &[("mitsuba_xml", mitsuba_xml), ("obj", obj), ("ply", ply), ("image", image), ("integrator_options", integrator_options), ("photometry", photometry), ("lpe", lpe)];
+pub const TARGETS: &[(&str, Entry)] = &[
+    ("mitsuba_xml", mitsuba_xml),
+    ("obj", obj),
+    ("ply", ply),
+    ("image", image),
+    ("integrator_options", integrator_options),
+    ("photometry", photometry),
+    ("lpe", lpe),
+];

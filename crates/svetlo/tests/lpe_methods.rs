@@ -260,13 +260,14 @@ fn methods_without_lpe_support_refuse_it() {
     }
 }
 
-/// The product automaton (one state per camera path, built when a set is bound to a scene)
-/// routes exactly as the automata stepped one by one (the unbound set): every event
-/// sequence up to 5 vertices over the classes the scene's shapes produce, with a custom
-/// label, ends in the same layers.
+/// The product automata (one state per camera path and one per light subpath, built when a
+/// set is bound to a scene) route exactly as the automata stepped one by one (the unbound
+/// set): every event sequence up to 4 scattering vertices over the classes the scene's
+/// shapes produce, with a custom label, ends in the same layers, and so does every split of
+/// it into a camera prefix and a light subpath that meet.
 #[test]
 fn product_automaton_routes_as_the_separate_automata() {
-    use svetlo::lpe::{Event, Tracker};
+    use svetlo::lpe::{Event, LightTracker, Tracker};
     let scene = mirror_room();
     let list: Vec<(String, String)> =
         [("a", "C [LB]"), ("b", "C D [LB]"), ("c", "C 'mirror' .* L"), ("d", "C [GS]+ D? L"), ("e", "L D* E"), ("f", "C <T.> .* L")]
@@ -292,8 +293,25 @@ fn product_automaton_routes_as_the_separate_automata() {
             u.push(e);
         }
         for &e in &ends {
-            assert_eq!(p.ends(e), u.ends(e), "{path:?} then {e:?}");
+            let want = u.ends(e);
+            assert_eq!(p.ends(e), want, "{path:?} then {e:?}");
             checked += 1;
+            // Split anywhere into a camera prefix and a light subpath read light first: the
+            // reverse products meet the prefix in the same layers.
+            for k in 0..=path.len() {
+                let (mut cp, mut cu) = (Tracker::camera(&bound), Tracker::camera(&unbound));
+                for &x in &path[..k] {
+                    cp.push(x);
+                    cu.push(x);
+                }
+                let (mut lp, mut lu) = (LightTracker::light(&bound, e), LightTracker::light(&unbound, e));
+                for &x in path[k..].iter().rev() {
+                    lp.push(x);
+                    lu.push(x);
+                }
+                assert_eq!(lu.meets(&cu), want, "{path:?} split at {k}");
+                assert_eq!(lp.meets(&cp), want, "{path:?} split at {k} (products)");
+            }
         }
         if path.len() < 4 {
             for &e in &events {

@@ -66,15 +66,31 @@ impl FilmTile {
         let xmax = floor_i(p.x - 0.5 + r).min(self.x1 as i64 - 1);
         let ymin = (-floor_i(-(p.y - 0.5 - r))).max(self.y0 as i64);
         let ymax = floor_i(p.y - 0.5 + r).min(self.y1 as i64 - 1);
+        if xmax < xmin || ymax < ymin {
+            return;
+        }
+        // The filter's separable weights, evaluated once for all layers.
+        const SPAN: usize = 16;
+        let (nx, ny) = ((xmax - xmin + 1) as usize, (ymax - ymin + 1) as usize);
+        let (mut fx, mut fy) = ([0.0f32; SPAN], [0.0f32; SPAN]);
+        let cached = nx <= SPAN && ny <= SPAN;
+        if cached {
+            for (i, f) in fx[..nx].iter_mut().enumerate() {
+                *f = self.filter.eval((xmin + i as i64) as f32 + 0.5 - p.x);
+            }
+            for (j, f) in fy[..ny].iter_mut().enumerate() {
+                *f = self.filter.eval((ymin + j as i64) as f32 + 0.5 - p.y);
+            }
+        }
         for (layer, &v) in self.layers.iter_mut().zip(aov) {
             let v = if v.is_finite() { v } else { Rgb::BLACK };
             if v.is_black() {
                 continue;
             }
             for y in ymin..=ymax {
-                let fy = self.filter.eval(y as f32 + 0.5 - p.y);
+                let wy = if cached { fy[(y - ymin) as usize] } else { self.filter.eval(y as f32 + 0.5 - p.y) };
                 for x in xmin..=xmax {
-                    let wgt = fy * self.filter.eval(x as f32 + 0.5 - p.x);
+                    let wgt = wy * if cached { fx[(x - xmin) as usize] } else { self.filter.eval(x as f32 + 0.5 - p.x) };
                     if wgt != 0.0 {
                         layer[((y as u32 - self.y0) * w + (x as u32 - self.x0)) as usize] += v * wgt;
                     }

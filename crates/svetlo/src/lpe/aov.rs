@@ -42,7 +42,21 @@ struct Product {
     accept: Vec<LayerMask>,
     /// Per product state: each automaton's own state (for meeting light subpaths).
     states: Vec<[u32; MAX_LAYERS + 1]>,
+    /// The product of the reverse automata and, per (forward, reverse) pair of product
+    /// states, the layers a joined path goes to; None when too large.
+    rev: Option<RevProduct>,
 }
+
+#[derive(Clone, Debug)]
+struct RevProduct {
+    table: Vec<u32>,
+    states: usize,
+    /// `meets[q * states + r]`.
+    meets: Vec<LayerMask>,
+}
+
+/// Most entries of the table of meeting product states.
+const MAX_MEET_ENTRIES: usize = 1 << 18;
 
 /// Most states of the product automaton; larger products fall back to one step per AOV.
 const MAX_PRODUCT_STATES: usize = 1 << 14;
@@ -196,7 +210,51 @@ impl AovSet {
             q += 1;
         }
         let accept = states.iter().map(|st| (0..n).filter(|&i| self.lpes[i].accepts(st[i])).fold(self.base_mask(), |m, i| m | self.bit(i))).collect();
-        Some(Product { masks, n_classes: nc, table, accept, states })
+        let rev = self.build_rev_product(&masks, &states);
+        Some(Product { masks, n_classes: nc, table, accept, states, rev })
+    }
+
+    /// The reverse automata's product (breadth-first from the start) and its meeting table.
+    fn build_rev_product(&self, masks: &[u32], fwd: &[[u32; MAX_LAYERS + 1]]) -> Option<RevProduct> {
+        use std::collections::HashMap;
+        let base = super::automaton::BASE_COUNT;
+        let nc = base * masks.len();
+        let n = self.lpes.len();
+        let start = [Lpe::START; MAX_LAYERS + 1];
+        let mut index: HashMap<[u32; MAX_LAYERS + 1], u32> = HashMap::from([(start, 0)]);
+        let mut states = vec![start];
+        let mut table = Vec::new();
+        let mut q = 0;
+        while q < states.len() {
+            let cur = states[q];
+            for c in 0..nc {
+                let e = Event { base: (c % base) as u8, labels: masks[c / base] };
+                let mut next = [Lpe::START; MAX_LAYERS + 1];
+                for i in 0..n {
+                    next[i] = self.lpes[i].rev_step(cur[i], e);
+                }
+                let id = match index.get(&next) {
+                    Some(&id) => id,
+                    None => {
+                        if states.len() >= MAX_PRODUCT_STATES || (states.len() + 1) * fwd.len() > MAX_MEET_ENTRIES {
+                            return None;
+                        }
+                        index.insert(next, states.len() as u32);
+                        states.push(next);
+                        states.len() as u32 - 1
+                    }
+                };
+                table.push(id);
+            }
+            q += 1;
+        }
+        let mut meets = Vec::with_capacity(fwd.len() * states.len());
+        for f in fwd {
+            for r in &states {
+                meets.push((0..n).filter(|&i| self.lpes[i].meets(f[i], r[i])).fold(self.base_mask(), |m, i| m | self.bit(i)));
+            }
+        }
+        Some(RevProduct { table, states: states.len(), meets })
     }
 
     /// States of the product automaton (0: none was built).
@@ -427,6 +485,8 @@ impl<'a> Tracker<'a> {
 #[derive(Clone, Copy, Debug)]
 pub struct LightTracker<'a> {
     set: &'a AovSet,
+    /// The reverse product state, when the set has one.
+    r: u32,
     st: [u32; MAX_LAYERS + 1],
 }
 
@@ -446,12 +506,21 @@ impl<'a> LightTracker<'a> {
     /// A subpath that starts at a light with event `e` (L or B).
     #[inline]
     pub fn light(set: &'a AovSet, e: Event) -> Self {
-        let mut t = LightTracker { set, st: [Lpe::START; MAX_LAYERS + 1] };
+        let mut t = LightTracker { set, r: 0, st: [Lpe::START; MAX_LAYERS + 1] };
         t.push(e);
         t
     }
     #[inline]
+    fn rev(&self) -> Option<(&'a Product, &'a RevProduct)> {
+        let p = self.set.product.as_ref()?;
+        Some((p, p.rev.as_ref()?))
+    }
+    #[inline]
     pub fn push(&mut self, e: Event) {
+        if let Some((p, rp)) = self.rev() {
+            self.r = rp.table[self.r as usize * p.n_classes + p.class(e)];
+            return;
+        }
         for (s, l) in self.st.iter_mut().zip(&self.set.lpes) {
             *s = l.rev_step(*s, e);
         }
@@ -459,6 +528,9 @@ impl<'a> LightTracker<'a> {
     /// The layers that take the camera prefix `cam` joined to this subpath.
     #[inline]
     pub fn meets(&self, cam: &Tracker) -> LayerMask {
+        if let Some((_, rp)) = self.rev() {
+            return rp.meets[cam.q as usize * rp.states + self.r as usize];
+        }
         let mut m = self.set.base_mask();
         for (i, ((r, q), l)) in self.st.iter().zip(cam.states()).zip(&self.set.lpes).enumerate() {
             if l.meets(*q, *r) {
