@@ -160,7 +160,7 @@ impl WhittedEstimator {
             r.time = ray.time;
             let mut next = *events;
             // The mask's pass-through branch (first) is no vertex of the path.
-            if !aovs.is_empty() && !(null_first && k == 0) {
+            if !(aovs.is_empty() || null_first && k == 0) {
                 next.push(Event::scatter(flags, true, wi.z * wo.z < 0.0, aovs.shape_labels(si.shape)));
             }
             l += w * self.trace(scene, &r, depth + 1, t, settings, &next, layers);

@@ -43,6 +43,9 @@ pub struct Contribution {
     pub splats: Vec<(Vec2, Rgb, LayerMask)>,
 }
 
+/// One deposit: raster position, radiance, layers.
+type Deposit = (Vec2, Rgb, LayerMask);
+
 /// Mask bit of a deposit that counts toward the chain's target f.
 pub const TARGET: LayerMask = 1 << 30;
 const AOV_BITS: LayerMask = (1 << crate::lpe::MAX_LAYERS) - 1;
@@ -389,7 +392,7 @@ pub fn run<T: MetropolisTarget>(
         if chains.iter().all(|c| c.as_ref().is_none_or(|c| c.left == 0)) {
             break;
         }
-        let results: Vec<(Vec<(Vec2, Rgb, LayerMask)>, ChainStats)> = pool.install(|| {
+        let results: Vec<(Vec<Deposit>, ChainStats)> = pool.install(|| {
             chains
                 .par_iter_mut()
                 .map(|slot| {
