@@ -1,15 +1,16 @@
 #!/usr/bin/env bash
 # Overhead of 8 AOVs against none at equal spp, one thread, alternating runs; prints the
 # median ratio of CPU time (user+sys) per method. Usage: bench/lpe/run.sh [scene.xml] [spp] [res]
+# (METHODS='a b' picks the methods; RUNS the alternating runs.)
 set -euo pipefail
 cd "$(dirname "$0")/../.."
-BIN=target/release/svetlo
+BIN=${BIN:-target/release/svetlo}
 SCENE=${1:-scenes/caustic.xml}; SPP=${2:-16}; RES=${3:-64}; RUNS=${RUNS:-3}
 AOVS=(--aov a='C [LB]' --aov b='C D [LB]' --aov c='C D [^LB]+ [LB]' --aov d='C [GS] .* [LB]'
       --aov e='C D S+ L' --aov f='C <R.> L' --aov g='C . .+ L' --aov h='L D* E')
 tmp=$(mktemp -d); trap 'rm -rf "$tmp"' EXIT
 cpu() { /usr/bin/time -f "%U %S" -o "$tmp/t" "$@" >/dev/null 2>&1; awk '{print $1+$2}' "$tmp/t"; }
-for m in "path:simd=false" bdpt; do
+for m in ${METHODS:-"path:simd=false" bdpt "mlt:bootstrap=20000"}; do
   ratios=()
   for i in $(seq "$RUNS"); do
     base=$(cpu $BIN render "$SCENE" -Dres=$RES --spp $SPP --threads 1 --integrator "$m" -o "$tmp/n.exr")

@@ -48,28 +48,50 @@ impl FilmTile {
     /// Add a sample to the beauty and, with the same filter weights, `aov[i]` to layer i.
     pub fn add_sample_layers(&mut self, p: Vec2, l: Rgb, aov: &[Rgb]) {
         self.add_sample(p, l);
-        let r = self.filter.radius();
         let w = self.x1 - self.x0;
+        if self.filter == Filter::Box {
+            // One pixel takes the whole sample: find it once for every layer.
+            let (ox, oy) = (floor_i(p.x), floor_i(p.y));
+            if ox >= self.x0 as i64 && oy >= self.y0 as i64 && ox < self.x1 as i64 && oy < self.y1 as i64 {
+                let k = ((oy as u32 - self.y0) * w + (ox as u32 - self.x0)) as usize;
+                for (layer, &v) in self.layers.iter_mut().zip(aov) {
+                    if v.is_finite() {
+                        layer[k] += v;
+                    }
+                }
+            }
+            return;
+        }
+        let r = self.filter.radius();
         let xmin = (-floor_i(-(p.x - 0.5 - r))).max(self.x0 as i64);
         let xmax = floor_i(p.x - 0.5 + r).min(self.x1 as i64 - 1);
         let ymin = (-floor_i(-(p.y - 0.5 - r))).max(self.y0 as i64);
         let ymax = floor_i(p.y - 0.5 + r).min(self.y1 as i64 - 1);
+        if xmax < xmin || ymax < ymin {
+            return;
+        }
+        // The filter's separable weights, evaluated once for all layers.
+        const SPAN: usize = 16;
+        let (nx, ny) = ((xmax - xmin + 1) as usize, (ymax - ymin + 1) as usize);
+        let (mut fx, mut fy) = ([0.0f32; SPAN], [0.0f32; SPAN]);
+        let cached = nx <= SPAN && ny <= SPAN;
+        if cached {
+            for (i, f) in fx[..nx].iter_mut().enumerate() {
+                *f = self.filter.eval((xmin + i as i64) as f32 + 0.5 - p.x);
+            }
+            for (j, f) in fy[..ny].iter_mut().enumerate() {
+                *f = self.filter.eval((ymin + j as i64) as f32 + 0.5 - p.y);
+            }
+        }
         for (layer, &v) in self.layers.iter_mut().zip(aov) {
             let v = if v.is_finite() { v } else { Rgb::BLACK };
             if v.is_black() {
                 continue;
             }
-            if self.filter == Filter::Box {
-                let (ox, oy) = (floor_i(p.x), floor_i(p.y));
-                if ox >= self.x0 as i64 && oy >= self.y0 as i64 && ox < self.x1 as i64 && oy < self.y1 as i64 {
-                    layer[((oy as u32 - self.y0) * w + (ox as u32 - self.x0)) as usize] += v;
-                }
-                continue;
-            }
             for y in ymin..=ymax {
-                let fy = self.filter.eval(y as f32 + 0.5 - p.y);
+                let wy = if cached { fy[(y - ymin) as usize] } else { self.filter.eval(y as f32 + 0.5 - p.y) };
                 for x in xmin..=xmax {
-                    let wgt = fy * self.filter.eval(x as f32 + 0.5 - p.x);
+                    let wgt = wy * if cached { fx[(x - xmin) as usize] } else { self.filter.eval(x as f32 + 0.5 - p.x) };
                     if wgt != 0.0 {
                         layer[((y as u32 - self.y0) * w + (x as u32 - self.x0)) as usize] += v * wgt;
                     }

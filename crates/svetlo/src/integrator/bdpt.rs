@@ -105,16 +105,11 @@ pub(crate) fn sample_bdpt(
     light_subpath(scene, cfg, ray.time, sampler, &mut sc.light);
     let aovs = settings.aovs();
     let mut l = Rgb::BLACK;
-    // With AOVs: the camera prefix's automata over camera[0..t-1] (the vertices before the
-    // connected one), advanced as t grows.
-    let mut cam_events = Tracker::camera(aovs);
+    let mut router = StrategyRouter::new(aovs);
     for t in 1..=sc.camera.len() {
-        if t >= 3 {
-            if let Some(e) = aovs.sampled_event(&sc.camera[t - 2]) {
-                cam_events.push(e);
-            }
-        }
+        router.at_t(&sc.camera, t);
         for s in 0..=sc.light.len() {
+            router.at_s(scene, &sc.light, s);
             if s + t < 2 || !cfg.allows(s + t) {
                 continue;
             }
@@ -123,7 +118,7 @@ pub(crate) fn sample_bdpt(
             if !visit(&sc.light, &sc.camera, s, t, &c, v, out) {
                 continue;
             }
-            let mask = if aovs.is_empty() { crate::lpe::aov::BEAUTY } else { connection_layers(scene, aovs, &sc.light, &sc.camera, s, t, &c, &cam_events) };
+            let mask = router.layers(scene, &sc.light, &sc.camera, s, t, &c);
             match c.raster {
                 Some(r) => out.splat_layers(mask, r, v),
                 None => {
@@ -136,34 +131,83 @@ pub(crate) fn sample_bdpt(
     l
 }
 
-/// The layers that take strategy (s, t)'s path: the camera prefix forward (`cam`: its
-/// events before vertex t - 1), the light subpath backward, and the two connected vertices'
-/// events toward each other.
-#[allow(clippy::too_many_arguments)]
-fn connection_layers(scene: &Scene, aovs: &AovSet, light: &[Vertex], camera: &[Vertex], s: usize, t: usize, c: &Connection, cam: &Tracker) -> LayerMask {
-    let mut cam = *cam;
-    if s == 0 {
-        // The camera subpath found an emitter (or escaped) at vertex t - 1.
-        return cam.ends(aovs.endpoint_event(scene, &camera[t - 1]));
+/// The automata along both subpaths of a BDPT sample as its loops advance t (outer) and s
+/// (inner), so that routing strategy (s, t) costs a few steps, not a walk of both subpaths.
+pub(crate) struct StrategyRouter<'a> {
+    aovs: &'a AovSet,
+    /// Forward automata over camera[0..t-1] (the vertices before the connected one).
+    cam: Tracker<'a>,
+    /// Reverse automata over light[0..max(s-1, 1)] as sampled.
+    light: Option<LightTracker<'a>>,
+}
+
+impl<'a> StrategyRouter<'a> {
+    pub fn new(aovs: &'a AovSet) -> Self {
+        StrategyRouter { aovs, cam: Tracker::camera(aovs), light: None }
     }
-    let mut lt = if s == 1 && t >= 2 {
-        let sampled = c.sampled_light.map_or(Event::BACKGROUND, |li| aovs.emitter_event(&scene.lights[li as usize]));
-        LightTracker::light(aovs, sampled)
-    } else {
-        LightTracker::along(aovs, scene, light, (s - 1).max(1))
-    };
-    if t == 1 {
-        if s >= 2 {
-            lt.push(aovs.connected_event(&light[s - 1], c.sampled_p));
+    #[inline]
+    pub fn at_t(&mut self, camera: &[Vertex], t: usize) {
+        if self.aovs.is_empty() {
+            return;
         }
-        return lt.meets_camera();
+        if t >= 3 {
+            if let Some(e) = self.aovs.sampled_event(&camera[t - 2]) {
+                self.cam.push(e);
+            }
+        }
+        self.light = None;
     }
-    let toward = if s == 1 { c.sampled_p } else { light[s - 1].p };
-    cam.push(aovs.connected_event(&camera[t - 1], toward));
-    if s >= 2 {
-        lt.push(aovs.connected_event(&light[s - 1], camera[t - 1].p));
+    #[inline]
+    pub fn at_s(&mut self, scene: &Scene, light: &[Vertex], s: usize) {
+        if self.aovs.is_empty() || s == 0 {
+            return;
+        }
+        match &mut self.light {
+            None => self.light = Some(LightTracker::light(self.aovs, self.aovs.endpoint_event(scene, &light[0]))),
+            Some(lt) if s >= 3 => {
+                if let Some(e) = self.aovs.sampled_event(&light[s - 2]) {
+                    lt.push(e);
+                }
+            }
+            Some(_) => {}
+        }
     }
-    lt.meets(&cam)
+
+    /// The layers that take strategy (s, t)'s path: the camera prefix forward, the light
+    /// subpath backward, and the two connected vertices' events toward each other.
+    #[inline]
+    pub fn layers(&self, scene: &Scene, light: &[Vertex], camera: &[Vertex], s: usize, t: usize, c: &Connection) -> LayerMask {
+        let aovs = self.aovs;
+        if aovs.is_empty() {
+            return crate::lpe::aov::BEAUTY;
+        }
+        let mut cam = self.cam;
+        if s == 0 {
+            // The camera subpath found an emitter (or escaped) at vertex t - 1.
+            return cam.ends(aovs.endpoint_event(scene, &camera[t - 1]));
+        }
+        let mut lt = if s == 1 && t >= 2 {
+            let sampled = c.sampled_light.map_or(Event::BACKGROUND, |li| aovs.emitter_event(&scene.lights[li as usize]));
+            LightTracker::light(aovs, sampled)
+        } else {
+            match self.light {
+                Some(lt) => lt,
+                None => LightTracker::along(aovs, scene, light, (s - 1).max(1)),
+            }
+        };
+        if t == 1 {
+            if s >= 2 {
+                lt.push(aovs.connected_event(&light[s - 1], c.sampled_p));
+            }
+            return lt.meets_camera();
+        }
+        let toward = if s == 1 { c.sampled_p } else { light[s - 1].p };
+        cam.push(aovs.connected_event(&camera[t - 1], toward));
+        if s >= 2 {
+            lt.push(aovs.connected_event(&light[s - 1], camera[t - 1].p));
+        }
+        lt.meets(&cam)
+    }
 }
 
 impl Bdpt {

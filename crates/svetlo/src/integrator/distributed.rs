@@ -22,6 +22,7 @@ use crate::bsdf::LobeFlags;
 use crate::error::Result;
 use crate::film::Film;
 use crate::geometry::Ray;
+use crate::lpe::aov::LayerSample;
 use crate::sampling::{Sampler, SamplerKind};
 use crate::scene::Scene;
 use crate::spectrum::Rgb;
@@ -42,6 +43,13 @@ impl Integrator for Distributed {
 impl PixelEstimator for Distributed {
     fn li(&self, scene: &Scene, camera_ray: &Ray, sampler: &mut dyn Sampler, settings: &RenderSettings) -> Rgb {
         camera_walk(scene, camera_ray, sampler, settings, &mut CookRules, &mut Default::default())
+    }
+    /// The walk routes every contribution by its events (Cook's rule only ends paths).
+    fn li_layers(&self, scene: &Scene, camera_ray: &Ray, sampler: &mut dyn Sampler, settings: &RenderSettings, layers: &mut LayerSample) -> Rgb {
+        camera_walk(scene, camera_ray, sampler, settings, &mut CookRules, layers)
+    }
+    fn supports_lpe(&self) -> bool {
+        true
     }
 }
 

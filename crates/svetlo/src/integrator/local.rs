@@ -173,6 +173,26 @@ impl LocalLights {
     #[allow(clippy::too_many_arguments)]
     pub fn shade(&self, scene: &Scene, p: Vec3, ng: Vec3, frame: &Frame, wo: Vec3, bsdf: &Bsdf, shadows: bool, time: f32) -> Rgb {
         let mut l = Rgb::BLACK;
+        self.shade_each(scene, p, ng, frame, wo, bsdf, shadows, time, |_, c, _| l += c);
+        l
+    }
+
+    /// [`Self::shade`] light by light: `each(light, contribution, transmission)`, where
+    /// `transmission` says the light lies behind the surface (for the path's events).
+    #[allow(clippy::too_many_arguments)]
+    #[inline]
+    pub fn shade_each(
+        &self,
+        scene: &Scene,
+        p: Vec3,
+        ng: Vec3,
+        frame: &Frame,
+        wo: Vec3,
+        bsdf: &Bsdf,
+        shadows: bool,
+        time: f32,
+        mut each: impl FnMut(usize, Rgb, bool),
+    ) {
         for i in 0..scene.lights.len() {
             let Some(s) = self.sample(scene, i, p) else { continue };
             let wi = frame.to_local(s.wi);
@@ -189,8 +209,7 @@ impl LocalLights {
                     continue;
                 }
             }
-            l += f * s.li * wi.z.abs();
+            each(i, f * s.li * wi.z.abs(), wi.z * wo.z < 0.0);
         }
-        l
     }
 }

@@ -16,17 +16,23 @@
 //! Target `path`: the path tracer (next-event estimation + MIS); coordinates 0-1 pick the
 //! raster position anywhere on the image, 2-4 the lens and time, the rest feed the path.
 //!
+//! Light path expressions: each deposit goes to the layers its path matches (the path
+//! tracer's and BDPT's own routing); the chain's target stays the whole beauty.
+//!
 //! Options (`pssmlt:key=value,...`): `large-step` (probability, default 0.3), `sigma` (small
 //! step deviation, 0.01), `chains` (256), `bootstrap` (100000 seed samples), `target`
 //! (`bdpt` or `path`).
 
+use super::bdpt::StrategyRouter;
 use super::light::require_connectible_camera;
 use super::metropolis::pss::PssSampler;
-use super::metropolis::{self, ChainSettings, ChainStats, Contribution, MetropolisTarget, Proposal};
+use super::metropolis::{self, ChainSettings, ChainStats, Contribution, MetropolisTarget, Proposal, TARGET};
 use super::path::PathTracer;
 use super::{Integrator, PixelEstimator, Progress, RenderSettings};
 use crate::error::{Error, Result};
 use crate::film::Film;
+use crate::lpe::aov::LayerSample;
+use crate::lpe::AovSet;
 use crate::path::{camera_subpath, connect, light_subpath, PathConfig, Vertex};
 use crate::sampling::{Pcg32, Sampler};
 use crate::scene::Scene;
@@ -124,7 +130,7 @@ impl Pssmlt {
             PssTargetKind::Bdpt => {
                 require_connectible_camera(scene, "pssmlt")?;
                 let cfg = PathConfig::new(scene, settings.max_depth, settings.rr_depth, settings.hide_emitters);
-                let t = BdptTarget { scene, cfg, opts: &self.options };
+                let t = BdptTarget { scene, cfg, opts: &self.options, aovs: settings.aovs() };
                 metropolis::run(&t, scene.camera.width, scene.camera.height, settings, &self.options.chain, progress)
             }
             PssTargetKind::Path => {
@@ -162,8 +168,14 @@ impl PathTarget<'_> {
         let lens = s.next_2d();
         let time = s.next_1d();
         let ray = cam.generate_ray(raster, lens, time);
-        let l = PathTracer.li(self.scene, &ray, s, self.settings);
-        out.push(raster, l);
+        let aovs = self.settings.aovs();
+        let mut layers = LayerSample::default();
+        let l = if aovs.is_empty() {
+            PathTracer.li(self.scene, &ray, s, self.settings)
+        } else {
+            PathTracer.li_layers(self.scene, &ray, s, self.settings, &mut layers)
+        };
+        out.push_layers(aovs, raster, l, &layers);
     }
 }
 
@@ -202,6 +214,7 @@ struct BdptTarget<'a> {
     scene: &'a Scene,
     cfg: PathConfig,
     opts: &'a PssmltOptions,
+    aovs: &'a AovSet,
 }
 
 pub struct BdptState {
@@ -233,20 +246,31 @@ impl BdptTarget<'_> {
         s.start_stream(1);
         light_subpath(scene, &self.cfg, ray.time, s, &mut st.light);
         s.start_stream(2);
+        let aovs = self.aovs;
         let mut here = crate::spectrum::Rgb::BLACK;
+        let mut layers = LayerSample::default();
+        // Each strategy's path routed as BDPT routes it.
+        let mut router = StrategyRouter::new(aovs);
         for t in 1..=st.camera.len() {
+            router.at_t(&st.camera, t);
             for sl in 0..=st.light.len() {
+                router.at_s(scene, &st.light, sl);
                 if sl + t < 2 || !self.cfg.allows(sl + t) {
                     continue;
                 }
                 let Some(c) = connect(scene, &self.cfg, &st.light, &st.camera, sl, t, s, true) else { continue };
+                let v = c.l * c.weight;
+                let mask = router.layers(scene, &st.light, &st.camera, sl, t, &c);
                 match c.raster {
-                    Some(r) => out.push(r, c.l * c.weight),
-                    None => here += c.l * c.weight,
+                    Some(r) => out.push_masked(r, v, mask | TARGET),
+                    None => {
+                        here += v;
+                        layers.add(mask, v);
+                    }
                 }
             }
         }
-        out.push(raster, here);
+        out.push_layers(aovs, raster, here, &layers);
     }
 }
 

@@ -17,6 +17,8 @@ use crate::bsdf::{fresnel, Bsdf, BsdfModel, TransportMode};
 use crate::error::Result;
 use crate::film::Film;
 use crate::geometry::Ray;
+use crate::lpe::aov::LayerSample;
+use crate::lpe::{Event, Tracker};
 use crate::sampling::Sampler;
 use crate::scene::Scene;
 use crate::spectrum::Rgb;
@@ -104,13 +106,20 @@ pub(crate) fn specular_branches(bsdf: &Bsdf, wo: Vec3) -> Vec<(Vec3, Rgb)> {
 }
 
 impl WhittedEstimator {
-    fn trace(&self, scene: &Scene, ray: &Ray, depth: i32, throughput: Rgb, settings: &RenderSettings) -> Rgb {
+    /// Radiance along `ray` at `depth` segments; `throughput` is the product of the branch
+    /// weights so far, with which each contribution also goes to the layers its events
+    /// (`events`: the path so far) match.
+    #[allow(clippy::too_many_arguments)]
+    fn trace(&self, scene: &Scene, ray: &Ray, depth: i32, throughput: Rgb, settings: &RenderSettings, events: &Tracker, layers: &mut LayerSample) -> Rgb {
+        let aovs = settings.aovs();
         let hide = depth == 1 && settings.hide_emitters;
         let Some(si) = scene.intersect(ray) else {
             let mut l = Rgb::BLACK;
             if !hide {
                 for &ei in &scene.environment_lights {
-                    l += scene.lights[ei as usize].le_escaped(ray.d);
+                    let le = scene.lights[ei as usize].le_escaped(ray.d);
+                    l += le;
+                    layers.add(events.ends(Event::BACKGROUND), throughput * le);
                 }
             }
             return l;
@@ -118,7 +127,9 @@ impl WhittedEstimator {
         let mut l = Rgb::BLACK;
         if let Some((_, area)) = scene.area_light(&si) {
             if !hide {
-                l += area.l(si.ng, si.uv, si.wo);
+                let le = area.l(si.ng, si.uv, si.wo);
+                l += le;
+                layers.add(events.ends(aovs.light_event(Some(si.shape))), throughput * le);
             }
         }
         let max = if settings.max_depth < 0 { UNBOUNDED_DEPTH } else { settings.max_depth };
@@ -127,17 +138,32 @@ impl WhittedEstimator {
         }
         let bsdf = scene.bsdf(&si);
         let wo = si.to_local(si.wo);
-        if bsdf.flags().has_non_specular() {
-            l += self.lights.shade(scene, si.p, si.ng, &si.shading, wo, &bsdf, true, si.time);
+        let flags = bsdf.flags();
+        if flags.has_non_specular() {
+            if aovs.is_empty() {
+                l += self.lights.shade(scene, si.p, si.ng, &si.shading, wo, &bsdf, true, si.time);
+            } else {
+                self.lights.shade_each(scene, si.p, si.ng, &si.shading, wo, &bsdf, true, si.time, |i, c, through| {
+                    l += c;
+                    let here = aovs.scatter_event(si.shape, flags, None, through);
+                    layers.add(events.ends2(here, aovs.emitter_event(&scene.lights[i])), throughput * c);
+                });
+            }
         }
-        for (wi, w) in specular_branches(&bsdf, wo) {
+        let null_first = bsdf.opacity < 1.0;
+        for (k, (wi, w)) in specular_branches(&bsdf, wo).into_iter().enumerate() {
             let t = throughput * w;
             if t.max_component() < MIN_WEIGHT {
                 continue;
             }
             let mut r = si.spawn_ray(si.to_world(wi));
             r.time = ray.time;
-            l += w * self.trace(scene, &r, depth + 1, t, settings);
+            let mut next = *events;
+            // The mask's pass-through branch (first) is no vertex of the path.
+            if !(aovs.is_empty() || null_first && k == 0) {
+                next.push(Event::scatter(flags, true, wi.z * wo.z < 0.0, aovs.shape_labels(si.shape)));
+            }
+            l += w * self.trace(scene, &r, depth + 1, t, settings, &next, layers);
         }
         l
     }
@@ -145,6 +171,12 @@ impl WhittedEstimator {
 
 impl PixelEstimator for WhittedEstimator {
     fn li(&self, scene: &Scene, ray: &Ray, _sampler: &mut dyn Sampler, settings: &RenderSettings) -> Rgb {
-        self.trace(scene, ray, 1, Rgb::WHITE, settings)
+        self.trace(scene, ray, 1, Rgb::WHITE, settings, &Tracker::camera(settings.aovs()), &mut LayerSample::default())
+    }
+    fn li_layers(&self, scene: &Scene, ray: &Ray, _sampler: &mut dyn Sampler, settings: &RenderSettings, layers: &mut LayerSample) -> Rgb {
+        self.trace(scene, ray, 1, Rgb::WHITE, settings, &Tracker::camera(settings.aovs()), layers)
+    }
+    fn supports_lpe(&self) -> bool {
+        true
     }
 }

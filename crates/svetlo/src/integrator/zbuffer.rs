@@ -20,10 +20,12 @@
 use super::local::LocalLights;
 use super::{Integrator, Progress, RenderSettings};
 use crate::bsdf::{Bsdf, BsdfModel};
-use crate::error::Result;
+use crate::error::{Error, Result};
 use crate::film::Film;
 use crate::geometry::Geometry;
 use crate::light::Light;
+use crate::lpe::aov::LayerSample;
+use crate::lpe::{AovSet, Event, LayerMask};
 use crate::math::{Frame, PI};
 use crate::raster::shadow::ShadowMap;
 use crate::raster::{View, ViewProjection};
@@ -209,6 +211,9 @@ impl ZBuffer {
                 l += a.l(s.ng, s.uv, wo_w);
             }
         }
+        if prepared.emission_only {
+            return l;
+        }
         let owned;
         let bsdf = match &prepared.bsdfs[sh.material as usize] {
             Some(b) => b,
@@ -256,6 +261,8 @@ pub struct Prepared {
     bsdfs: Vec<Option<Bsdf>>,
     /// Those of them that are Lambertian on each side, as their constant f.
     lambert: Vec<Option<Lambert>>,
+    /// Shade only the emitted light (`C L` and `C B`: the light path expressions' split).
+    emission_only: bool,
 }
 
 /// A uniform BSDF that is Lambertian on each side it reflects from (`diffuse`, `twosided`
@@ -360,6 +367,8 @@ impl Lambert {
 pub struct FrameImage {
     pub ss: u32,
     pub subsamples: Vec<Rgb>,
+    /// The triangle each subsample sees (u32::MAX: none).
+    pub triangles: Vec<u32>,
     pub image: crate::film::Image,
     /// Wall time of the visibility pass (transform, rasterise, depth test) and of the rest
     /// (shading the visible subsamples, resolve), for benchmarks.
@@ -376,7 +385,7 @@ impl ZBuffer {
         let maps = self.shadow_maps(scene, &lights, &tris);
         let bsdfs: Vec<Option<Bsdf>> = scene.materials.iter().map(|m| m.is_uniform().then(|| m.bsdf(Vec2::ZERO))).collect();
         let lambert = bsdfs.iter().map(|b| b.as_ref().and_then(Lambert::of)).collect();
-        Prepared { zbuffer: *self, lights, poses, tris, maps, bsdfs, lambert }
+        Prepared { zbuffer: *self, lights, poses, tris, maps, bsdfs, lambert, emission_only: false }
     }
 }
 
@@ -446,7 +455,7 @@ impl Prepared {
                         let d = d.normalize();
                         return if hide_emitters { Rgb::BLACK } else { scene.environment_lights.iter().map(|&e| scene.lights[e as usize].le_escaped(d)).sum() };
                     }
-                    if fast_ok {
+                    if fast_ok && !self.emission_only {
                         if fast.0 != k {
                             *fast = (k, FastTri::new(self, scene, k, eye));
                         }
@@ -517,7 +526,7 @@ impl Prepared {
                 out[x / ss as usize] += *c * norm;
             }
         }
-        Ok(FrameImage { ss, subsamples, image, visibility_time, shading_time: start.elapsed() - visibility_time })
+        Ok(FrameImage { ss, subsamples, triangles: ids, image, visibility_time, shading_time: start.elapsed() - visibility_time })
     }
 }
 
@@ -654,19 +663,88 @@ impl Integrator for ZBuffer {
         }
         let (w, h) = (cam.width * ss, cam.height * ss);
         progress.total.store((w * h) as u64, Ordering::Relaxed);
+        let aovs = settings.aovs();
+        let routes = if aovs.is_empty() { None } else { Some(self.routes(scene, aovs)?) };
+        let mut prepared = prepared;
         let frame = prepared.frame(scene, cam, ss, settings.hide_emitters, settings.threads)?;
+        // With AOVs: the emitted part apart (a second, cheap pass), the rest reflected once.
+        let emitted = match routes {
+            Some(_) => {
+                prepared.emission_only = true;
+                Some(prepared.frame(scene, cam, ss, settings.hide_emitters, settings.threads)?.subsamples)
+            }
+            None => None,
+        };
         progress.done.store((w * h) as u64, Ordering::Relaxed);
         // Through the film, so that the scene's reconstruction filter applies to the subsamples.
-        let mut film = Film::new(cam.width, cam.height, settings.filter);
+        let mut film = Film::with_layers(cam.width, cam.height, settings.filter, aovs.names());
+        let mut tile = film.tile(0, 0, cam.width, cam.height);
+        let n = aovs.aov_count();
         for y in 0..h {
             for x in 0..w {
+                let i = (y * w + x) as usize;
                 let raster = Vec2::new((x as f32 + 0.5) / ss as f32, (y as f32 + 0.5) / ss as f32);
-                film.add_sample(raster, frame.subsamples[(y * w + x) as usize]);
+                let l = frame.subsamples[i];
+                let (Some((background, masks)), Some(emitted)) = (&routes, &emitted) else {
+                    tile.add_sample(raster, l);
+                    continue;
+                };
+                let mut layers = LayerSample::default();
+                match frame.triangles[i] {
+                    u32::MAX => layers.add(*background, l),
+                    k => {
+                        let m = masks[prepared.tris[k as usize].shape as usize];
+                        layers.add(m[0], emitted[i]);
+                        layers.add(m[1], l - emitted[i]);
+                    }
+                }
+                let beauty = if aovs.restricts_beauty() { layers.beauty } else { l };
+                tile.add_sample_layers(raster, beauty, &layers.aov[..n]);
             }
         }
+        film.merge_tile(&tile);
         film.spp_done = ss * ss;
         progress.pass_done(&film);
         Ok(film)
+    }
+}
+
+impl ZBuffer {
+    /// The layers of the paths the local model computes: the background (`C B`), and per
+    /// shape its emission (`C L`) and its light reflected once (`C x L`, x the material's
+    /// type); a typed error when an expression takes only some of one class, or with an
+    /// ambient term (no light path).
+    fn routes(&self, scene: &Scene, aovs: &AovSet) -> Result<(LayerMask, Vec<[LayerMask; 2]>)> {
+        if !self.ambient.is_black() {
+            return Err(Error::Settings("zbuffer: the ambient term is no light path: light path expressions need ambient 0".into()));
+        }
+        let lights = aovs.emitter_events(scene);
+        let err = |e: String| {
+            Error::Settings(format!(
+                "zbuffer: the light path expression '{e}' takes only some of the paths of a class the local model keeps whole (per surface: C L, C x L)"
+            ))
+        };
+        let background = aovs.class_layers(&[Event::CAMERA], &[], 0, &[Event::BACKGROUND]).map_err(err)?;
+        let masks = scene
+            .shapes
+            .iter()
+            .enumerate()
+            .map(|(k, sh)| {
+                let flags = scene.materials[sh.material as usize].bsdf(Vec2::splat(0.5)).flags();
+                let emit = aovs.class_layers(&[Event::CAMERA], &[], 0, &[aovs.light_event(Some(k as u32))])?;
+                // Reflection and (for transmissive lobes) transmission toward the light.
+                let once = aovs.class_layers(&[Event::CAMERA, aovs.scatter_event(k as u32, flags, None, false)], &[], 0, &lights)?;
+                if flags.intersects(crate::bsdf::LobeFlags::TRANSMISSION) {
+                    let t = aovs.class_layers(&[Event::CAMERA, aovs.scatter_event(k as u32, flags, None, true)], &[], 0, &lights)?;
+                    if t != once {
+                        return Err(format!("(one of them, R against T at '{}')", sh.name));
+                    }
+                }
+                Ok([emit, once])
+            })
+            .collect::<std::result::Result<Vec<_>, String>>()
+            .map_err(err)?;
+        Ok((background, masks))
     }
 }
 

@@ -26,9 +26,42 @@ pub struct AovSet {
     labels: Vec<String>,
     /// Per scene shape: the bits of the labels that name it.
     shape_labels: Vec<u32>,
+    /// All forward automata as one (built by [`AovSet::bind`]): a camera path's state is
+    /// one small integer and a vertex one table step, whatever the number of AOVs.
+    product: Option<Product>,
 }
 
-static EMPTY: AovSet = AovSet { names: Vec::new(), lpes: Vec::new(), beauty_filter: false, labels: Vec::new(), shape_labels: Vec::new() };
+/// The product of a set's forward automata over the label masks the scene's shapes carry.
+#[derive(Clone, Debug)]
+struct Product {
+    /// Distinct label masks of events (0 first); an event's class is base + 9 x index.
+    masks: Vec<u32>,
+    n_classes: usize,
+    table: Vec<u32>,
+    /// Per product state: the layers whose automaton accepts there (with the base mask).
+    accept: Vec<LayerMask>,
+    /// Per product state: each automaton's own state (for meeting light subpaths).
+    states: Vec<[u32; MAX_LAYERS + 1]>,
+    /// The product of the reverse automata and, per (forward, reverse) pair of product
+    /// states, the layers a joined path goes to; None when too large.
+    rev: Option<RevProduct>,
+}
+
+#[derive(Clone, Debug)]
+struct RevProduct {
+    table: Vec<u32>,
+    states: usize,
+    /// `meets[q * states + r]`.
+    meets: Vec<LayerMask>,
+}
+
+/// Most entries of the table of meeting product states.
+const MAX_MEET_ENTRIES: usize = 1 << 18;
+
+/// Most states of the product automaton; larger products fall back to one step per AOV.
+const MAX_PRODUCT_STATES: usize = 1 << 14;
+
+static EMPTY: AovSet = AovSet { names: Vec::new(), lpes: Vec::new(), beauty_filter: false, labels: Vec::new(), shape_labels: Vec::new(), product: None };
 
 impl AovSet {
     /// The set with nothing in it.
@@ -71,7 +104,7 @@ impl AovSet {
         if labels.len() > 32 {
             return Err(LpeError::at("", 0, "more than 32 distinct labels over all AOVs".into()));
         }
-        Ok(AovSet { names, lpes, beauty_filter, labels, shape_labels: Vec::new() })
+        Ok(AovSet { names, lpes, beauty_filter, labels, shape_labels: Vec::new(), product: None })
     }
 
     /// Compile `name = expression` pairs and the beauty's optional restriction; an error
@@ -129,7 +162,104 @@ impl AovSet {
                 warn.push(format!("light path expression '{}' can match no path", l.source));
             }
         }
+        self.product = self.build_product();
         warn
+    }
+
+    /// The product automaton by breadth-first search from the start, None when it would
+    /// exceed [`MAX_PRODUCT_STATES`].
+    fn build_product(&self) -> Option<Product> {
+        use std::collections::HashMap;
+        if self.lpes.is_empty() {
+            return None;
+        }
+        let mut masks = vec![0u32];
+        for &m in &self.shape_labels {
+            if !masks.contains(&m) {
+                masks.push(m);
+            }
+        }
+        let nc = super::automaton::BASE_COUNT * masks.len();
+        let n = self.lpes.len();
+        let start = [Lpe::START; MAX_LAYERS + 1];
+        let mut index: HashMap<[u32; MAX_LAYERS + 1], u32> = HashMap::from([(start, 0)]);
+        let mut states = vec![start];
+        let mut table = Vec::new();
+        let mut q = 0;
+        while q < states.len() {
+            let cur = states[q];
+            for c in 0..nc {
+                let e = Event { base: (c % super::automaton::BASE_COUNT) as u8, labels: masks[c / super::automaton::BASE_COUNT] };
+                let mut next = [Lpe::START; MAX_LAYERS + 1];
+                for i in 0..n {
+                    next[i] = self.lpes[i].step(cur[i], e);
+                }
+                let id = match index.get(&next) {
+                    Some(&id) => id,
+                    None => {
+                        if states.len() >= MAX_PRODUCT_STATES {
+                            return None;
+                        }
+                        index.insert(next, states.len() as u32);
+                        states.push(next);
+                        states.len() as u32 - 1
+                    }
+                };
+                table.push(id);
+            }
+            q += 1;
+        }
+        let accept = states.iter().map(|st| (0..n).filter(|&i| self.lpes[i].accepts(st[i])).fold(self.base_mask(), |m, i| m | self.bit(i))).collect();
+        let rev = self.build_rev_product(&masks, &states);
+        Some(Product { masks, n_classes: nc, table, accept, states, rev })
+    }
+
+    /// The reverse automata's product (breadth-first from the start) and its meeting table.
+    fn build_rev_product(&self, masks: &[u32], fwd: &[[u32; MAX_LAYERS + 1]]) -> Option<RevProduct> {
+        use std::collections::HashMap;
+        let base = super::automaton::BASE_COUNT;
+        let nc = base * masks.len();
+        let n = self.lpes.len();
+        let start = [Lpe::START; MAX_LAYERS + 1];
+        let mut index: HashMap<[u32; MAX_LAYERS + 1], u32> = HashMap::from([(start, 0)]);
+        let mut states = vec![start];
+        let mut table = Vec::new();
+        let mut q = 0;
+        while q < states.len() {
+            let cur = states[q];
+            for c in 0..nc {
+                let e = Event { base: (c % base) as u8, labels: masks[c / base] };
+                let mut next = [Lpe::START; MAX_LAYERS + 1];
+                for i in 0..n {
+                    next[i] = self.lpes[i].rev_step(cur[i], e);
+                }
+                let id = match index.get(&next) {
+                    Some(&id) => id,
+                    None => {
+                        if states.len() >= MAX_PRODUCT_STATES || (states.len() + 1) * fwd.len() > MAX_MEET_ENTRIES {
+                            return None;
+                        }
+                        index.insert(next, states.len() as u32);
+                        states.push(next);
+                        states.len() as u32 - 1
+                    }
+                };
+                table.push(id);
+            }
+            q += 1;
+        }
+        let mut meets = Vec::with_capacity(fwd.len() * states.len());
+        for f in fwd {
+            for r in &states {
+                meets.push((0..n).filter(|&i| self.lpes[i].meets(f[i], r[i])).fold(self.base_mask(), |m, i| m | self.bit(i)));
+            }
+        }
+        Some(RevProduct { table, states: states.len(), meets })
+    }
+
+    /// States of the product automaton (0: none was built).
+    pub fn product_states(&self) -> usize {
+        self.product.as_ref().map_or(0, |p| p.states.len())
     }
 
     pub fn is_empty(&self) -> bool {
@@ -209,6 +339,55 @@ impl AovSet {
         Event::scatter(flags, false, through, self.shape_labels(v.shape))
     }
 
+    /// The event of scattering at path vertex `v` between points `a` and `b` (either order):
+    /// a delta vertex by the lobe its walk chose, a non-delta one by its BSDF's non-delta
+    /// lobes, transmission when `a` and `b` lie on opposite sides; None for a null vertex.
+    #[inline]
+    pub fn vertex_event(&self, v: &crate::path::Vertex, a: glam::Vec3, b: glam::Vec3) -> Option<Event> {
+        use crate::path::EventKind;
+        if v.event.kind == EventKind::Null {
+            return None;
+        }
+        let flags = v.bsdf.as_ref().map_or(crate::bsdf::LobeFlags::NONE, |b| b.flags());
+        let through = ((a - v.p).dot(v.ng) > 0.0) != ((b - v.p).dot(v.ng) > 0.0);
+        Some(Event::scatter(flags, v.delta, through, self.shape_labels(v.shape)))
+    }
+
+    /// The layers that take a whole path given light first (`path[0]` on an emitter, the
+    /// last vertex the camera), as path-space Metropolis builds it.
+    pub fn path_layers(&self, scene: &Scene, path: &[crate::path::Vertex]) -> LayerMask {
+        let k = path.len().saturating_sub(1);
+        if self.is_empty() || k == 0 {
+            return self.base_mask();
+        }
+        let mut t = Tracker::camera(self);
+        for i in (1..k).rev() {
+            if let Some(e) = self.vertex_event(&path[i], path[i - 1].p, path[i + 1].p) {
+                t.push(e);
+            }
+        }
+        t.ends(self.endpoint_event(scene, &path[0]))
+    }
+
+    /// The layers that take every path of a class (see [`Lpe::class_verdict`]); Err names
+    /// an expression that takes only some of them.
+    pub fn class_layers(&self, prefix: &[Event], repeat: &[Event], min_repeat: usize, ends: &[Event]) -> Result<LayerMask, String> {
+        let mut m = self.base_mask();
+        for (i, l) in self.lpes.iter().enumerate() {
+            match l.class_verdict(prefix, repeat, min_repeat, ends) {
+                Some(true) => m |= self.bit(i),
+                Some(false) => {}
+                None => return Err(l.source.clone()),
+            }
+        }
+        Ok(m)
+    }
+
+    /// The events of reaching each of the scene's emitters.
+    pub fn emitter_events(&self, scene: &Scene) -> Vec<Event> {
+        scene.lights.iter().map(|l| self.emitter_event(l)).collect()
+    }
+
     #[inline]
     fn bit(&self, i: usize) -> LayerMask {
         if i < self.names.len() {
@@ -227,30 +406,52 @@ impl AovSet {
     }
 }
 
-/// The automata's states along a camera subpath (forward automata, camera first).
+/// The automata's states along a camera subpath (forward automata, camera first): one
+/// product state when the set has its product automaton, else one state per automaton.
 #[derive(Clone, Copy, Debug)]
 pub struct Tracker<'a> {
     set: &'a AovSet,
+    q: u32,
     st: [u32; MAX_LAYERS + 1],
+}
+
+impl Product {
+    #[inline]
+    fn class(&self, e: Event) -> usize {
+        let k = if e.labels == 0 { 0 } else { self.masks.iter().position(|&m| m == e.labels).unwrap_or(0) };
+        e.base as usize + super::automaton::BASE_COUNT * k
+    }
+    #[inline]
+    fn step(&self, q: u32, e: Event) -> u32 {
+        self.table[q as usize * self.n_classes + self.class(e)]
+    }
 }
 
 impl<'a> Tracker<'a> {
     /// A path that has left the camera (its first event, `C`, read).
     #[inline]
     pub fn camera(set: &'a AovSet) -> Self {
-        let mut t = Tracker { set, st: [Lpe::START; MAX_LAYERS + 1] };
+        let mut t = Tracker { set, q: 0, st: [Lpe::START; MAX_LAYERS + 1] };
         t.push(Event::CAMERA);
         t
     }
     #[inline]
     pub fn push(&mut self, e: Event) {
-        for (s, l) in self.st.iter_mut().zip(&self.set.lpes) {
-            *s = l.step(*s, e);
+        match &self.set.product {
+            Some(p) => self.q = p.step(self.q, e),
+            None => {
+                for (s, l) in self.st.iter_mut().zip(&self.set.lpes) {
+                    *s = l.step(*s, e);
+                }
+            }
         }
     }
     /// The layers that take a path ending here with event `e`.
     #[inline]
     pub fn ends(&self, e: Event) -> LayerMask {
+        if let Some(p) = &self.set.product {
+            return p.accept[p.step(self.q, e) as usize];
+        }
         let mut m = self.set.base_mask();
         for (i, (s, l)) in self.st.iter().zip(&self.set.lpes).enumerate() {
             if l.accepts(l.step(*s, e)) {
@@ -267,6 +468,14 @@ impl<'a> Tracker<'a> {
         t.push(a);
         t.ends(b)
     }
+    /// Each automaton's own state.
+    #[inline]
+    fn states(&self) -> &[u32; MAX_LAYERS + 1] {
+        match &self.set.product {
+            Some(p) => &p.states[self.q as usize],
+            None => &self.st,
+        }
+    }
     pub fn set(&self) -> &'a AovSet {
         self.set
     }
@@ -276,6 +485,8 @@ impl<'a> Tracker<'a> {
 #[derive(Clone, Copy, Debug)]
 pub struct LightTracker<'a> {
     set: &'a AovSet,
+    /// The reverse product state, when the set has one.
+    r: u32,
     st: [u32; MAX_LAYERS + 1],
 }
 
@@ -295,12 +506,21 @@ impl<'a> LightTracker<'a> {
     /// A subpath that starts at a light with event `e` (L or B).
     #[inline]
     pub fn light(set: &'a AovSet, e: Event) -> Self {
-        let mut t = LightTracker { set, st: [Lpe::START; MAX_LAYERS + 1] };
+        let mut t = LightTracker { set, r: 0, st: [Lpe::START; MAX_LAYERS + 1] };
         t.push(e);
         t
     }
     #[inline]
+    fn rev(&self) -> Option<(&'a Product, &'a RevProduct)> {
+        let p = self.set.product.as_ref()?;
+        Some((p, p.rev.as_ref()?))
+    }
+    #[inline]
     pub fn push(&mut self, e: Event) {
+        if let Some((p, rp)) = self.rev() {
+            self.r = rp.table[self.r as usize * p.n_classes + p.class(e)];
+            return;
+        }
         for (s, l) in self.st.iter_mut().zip(&self.set.lpes) {
             *s = l.rev_step(*s, e);
         }
@@ -308,8 +528,11 @@ impl<'a> LightTracker<'a> {
     /// The layers that take the camera prefix `cam` joined to this subpath.
     #[inline]
     pub fn meets(&self, cam: &Tracker) -> LayerMask {
+        if let Some((_, rp)) = self.rev() {
+            return rp.meets[cam.q as usize * rp.states + self.r as usize];
+        }
         let mut m = self.set.base_mask();
-        for (i, ((r, q), l)) in self.st.iter().zip(&cam.st).zip(&self.set.lpes).enumerate() {
+        for (i, ((r, q), l)) in self.st.iter().zip(cam.states()).zip(&self.set.lpes).enumerate() {
             if l.meets(*q, *r) {
                 m |= self.set.bit(i);
             }
@@ -338,6 +561,15 @@ impl Default for LayerSample {
 }
 
 impl LayerSample {
+    /// Add `other` times `k` (a throughput), for the first `n` AOVs.
+    #[inline]
+    pub fn add_scaled(&mut self, other: &LayerSample, k: Rgb, n: usize) {
+        self.beauty += other.beauty * k;
+        for (a, b) in self.aov[..n].iter_mut().zip(&other.aov[..n]) {
+            *a += *b * k;
+        }
+    }
+
     /// Route `value` to the layers of `mask`.
     #[inline]
     pub fn add(&mut self, mask: LayerMask, value: Rgb) {

@@ -184,6 +184,55 @@ impl Lpe {
         let r = path.iter().rev().fold(Self::START, |s, &e| self.rev_step(s, e));
         self.meets(Self::START, r)
     }
+    /// Whether the expression takes all (`Some(true)`), none (`Some(false)`) or only some
+    /// (`None`) of the paths `prefix · r^n · end` with `n >= min_repeat`, each `r` any of
+    /// `repeat` and `end` any of `ends`, camera first: how methods that solve for a whole
+    /// class of paths at once (radiosity, the local model) learn which layers take it.
+    pub fn class_verdict(&self, prefix: &[Event], repeat: &[Event], min_repeat: usize, ends: &[Event]) -> Option<bool> {
+        let n = self.dfa.states();
+        let q0 = prefix.iter().fold(Self::START, |q, &e| self.step(q, e));
+        let mut set = vec![false; n];
+        set[q0 as usize] = true;
+        let step_all = |set: &[bool]| {
+            let mut out = vec![false; n];
+            for q in (0..n).filter(|&q| set[q]) {
+                for &e in repeat {
+                    out[self.step(q as u32, e) as usize] = true;
+                }
+            }
+            out
+        };
+        for _ in 0..min_repeat {
+            set = step_all(&set);
+        }
+        if min_repeat > 0 || !repeat.is_empty() {
+            // Any number of further repeats: the closure.
+            loop {
+                let next = step_all(&set);
+                let grown: Vec<bool> = set.iter().zip(&next).map(|(a, b)| *a || *b).collect();
+                if grown == set {
+                    break;
+                }
+                set = grown;
+            }
+        }
+        let (mut any, mut all) = (false, true);
+        for q in (0..n).filter(|&q| set[q]) {
+            for &e in ends {
+                let a = self.accepts(self.step(q as u32, e));
+                any |= a;
+                all &= a;
+            }
+        }
+        if all && any {
+            Some(true)
+        } else if !any {
+            Some(false)
+        } else {
+            None
+        }
+    }
+
     /// The base classes (as symbols) that can occur in some matching path.
     pub fn useful_symbols(&self) -> Vec<&'static str> {
         let live = live_states(&self.dfa);

@@ -5,7 +5,11 @@
 
 use super::mesh::RadiosityMesh;
 use super::Shading;
+use crate::bsdf::LobeFlags;
+use crate::error::{Error, Result};
 use crate::integrator::{render_pixels, PixelEstimator, RenderSettings};
+use crate::lpe::aov::LayerSample;
+use crate::lpe::{AovSet, Event, LayerMask};
 use crate::math::INV_PI;
 use crate::sampling::Sampler;
 use crate::scene::Scene;
@@ -31,17 +35,79 @@ pub struct RadiosityView<'a> {
     pub b: &'a [Rgb],
     pub vertex_b: Vec<Rgb>,
     pub shading: Shading,
+    /// The one-bounce part of `b` (see [`super::Solved::b_one`]), for light path expressions.
+    pub b_one: Option<&'a [Rgb]>,
+    /// With AOVs: per scene shape, the layers of its three classes of paths (emission `C L`,
+    /// one bounce `C D L`, more `C D D+ L`), and the parts' values at the display vertices.
+    routes: Option<Routes>,
+}
+
+struct Routes {
+    masks: Vec<[LayerMask; 3]>,
+    e: Vec<Rgb>,
+    one: Vec<Rgb>,
+    vertex_e: Vec<Rgb>,
+    vertex_one: Vec<Rgb>,
 }
 
 impl<'a> RadiosityView<'a> {
     pub fn new(mesh: &'a RadiosityMesh, b: &'a [Rgb], shading: Shading) -> Self {
         let vertex_b = if shading == Shading::Gouraud { vertex_radiosity(mesh, b) } else { vec![] };
-        RadiosityView { mesh, b, vertex_b, shading }
+        RadiosityView { mesh, b, vertex_b, shading, b_one: None, routes: None }
     }
 
     /// Gouraud display with given vertex values (one per display vertex).
     pub fn with_vertex_values(mesh: &'a RadiosityMesh, b: &'a [Rgb], vertex_b: Vec<Rgb>) -> Self {
-        RadiosityView { mesh, b, vertex_b, shading: Shading::Gouraud }
+        RadiosityView { mesh, b, vertex_b, shading: Shading::Gouraud, b_one: None, routes: None }
+    }
+
+    /// Prepare the routing of the solution's parts to `aovs` (`hidden`: the emitters' own
+    /// light was taken out of `b`): a typed error when an expression takes only some paths
+    /// of one part (radiosity keeps the emitted light, one bounce and the rest apart, not
+    /// every bounce), or when the solver kept no one-bounce part.
+    pub fn route(&mut self, scene: &Scene, aovs: &AovSet, hidden: bool) -> Result<()> {
+        if aovs.is_empty() {
+            return Ok(());
+        }
+        let Some(one) = self.b_one else {
+            return Err(Error::Settings("radiosity: light path expressions need a solver with form factors per element (not hierarchical)".into()));
+        };
+        let d = |shape: usize| Event::scatter(LobeFlags::DIFFUSE, false, false, aovs.shape_labels(shape as u32));
+        let mut any_d: Vec<Event> = (0..scene.shapes.len()).map(d).collect();
+        any_d.sort_by_key(|e| e.labels);
+        any_d.dedup();
+        let ends = aovs.emitter_events(scene);
+        let masks = (0..scene.shapes.len())
+            .map(|s| {
+                let emit = aovs.class_layers(&[Event::CAMERA], &[], 0, &[aovs.light_event(Some(s as u32))])?;
+                let once = aovs.class_layers(&[Event::CAMERA, d(s)], &[], 0, &ends)?;
+                let more = aovs.class_layers(&[Event::CAMERA, d(s)], &any_d, 1, &ends)?;
+                Ok([emit, once, more])
+            })
+            .collect::<std::result::Result<Vec<_>, String>>()
+            .map_err(|e| {
+                Error::Settings(format!(
+                    "radiosity: the light path expression '{e}' takes only some of the paths of a part that radiosity keeps whole \
+                     (per surface: C L, C D L, C D D+ L)"
+                ))
+            })?;
+        let e: Vec<Rgb> = self.mesh.elements.iter().map(|e| if hidden { Rgb::BLACK } else { e.emission }).collect();
+        let (vertex_e, vertex_one) =
+            if self.shading == Shading::Gouraud { (vertex_radiosity(self.mesh, &e), vertex_radiosity(self.mesh, one)) } else { (Vec::new(), Vec::new()) };
+        self.routes = Some(Routes { masks, e, one: one.to_vec(), vertex_e, vertex_one });
+        Ok(())
+    }
+
+    /// A per-element quantity shown at `p` on element `i` as the view shows radiosity.
+    fn shown(&self, hit: &crate::accel::PrimHit, p: glam::Vec3, i: u32, elem: &[Rgb], vertex: &[Rgb]) -> Rgb {
+        match self.shading {
+            Shading::Flat => elem[i as usize],
+            Shading::Gouraud => {
+                let e = &self.mesh.elements[i as usize];
+                let w = self.mesh.corner_weights(hit, p, e);
+                vertex[e.vertex[0] as usize] * w[0] + vertex[e.vertex[1] as usize] * w[1] + vertex[e.vertex[2] as usize] * w[2]
+            }
+        }
     }
 
     /// Radiosity leaving the surface the ray hits (None: the ray escapes).
@@ -73,6 +139,25 @@ impl PixelEstimator for RadiosityView<'_> {
         let _ = settings;
         self.radiosity(scene, ray).map(|b| b * INV_PI).unwrap_or(Rgb::BLACK)
     }
+    /// The shown radiosity split into emitted light, one bounce and the rest (their
+    /// difference, so that the parts sum to the image), each to its layers.
+    fn li_layers(&self, scene: &Scene, ray: &crate::geometry::Ray, _sampler: &mut dyn Sampler, _settings: &RenderSettings, layers: &mut LayerSample) -> Rgb {
+        let Some(hit) = scene.intersect_prim(ray) else { return Rgb::BLACK };
+        let p = ray.at(hit.t);
+        let Some((i, b)) = self.element_radiosity(&hit, p, ray.d) else { return Rgb::BLACK };
+        if let Some(r) = &self.routes {
+            let e = self.shown(&hit, p, i, &r.e, &r.vertex_e);
+            let one = self.shown(&hit, p, i, &r.one, &r.vertex_one);
+            let m = r.masks[hit.shape as usize];
+            layers.add(m[0], e * INV_PI);
+            layers.add(m[1], one * INV_PI);
+            layers.add(m[2], (b - e - one) * INV_PI);
+        }
+        b * INV_PI
+    }
+    fn supports_lpe(&self) -> bool {
+        true
+    }
 }
 
 /// The `radiosity` integrator: solve, then ray-cast the solution through the camera with the
@@ -82,7 +167,7 @@ pub struct RadiosityIntegrator {
 }
 
 impl crate::integrator::Integrator for RadiosityIntegrator {
-    fn render(&self, scene: &Scene, settings: &RenderSettings, progress: &crate::integrator::Progress) -> crate::error::Result<crate::film::Film> {
+    fn render(&self, scene: &Scene, settings: &RenderSettings, progress: &crate::integrator::Progress) -> Result<crate::film::Film> {
         settings.validate()?;
         let mut solved = super::solve(scene, &self.options, settings.max_depth)?;
         if settings.hide_emitters {
@@ -97,11 +182,13 @@ impl crate::integrator::Integrator for RadiosityIntegrator {
                 }
             }
         }
-        let view = solved.view(self.options.shading);
+        let mut view = solved.view(self.options.shading);
         if self.options.hybrid {
+            settings.check_lpe_support("radiosity's hybrid display", false)?;
             let hybrid = super::hybrid::HybridView::new(scene, view, self.options.gather);
             return render_pixels(scene, settings, progress, &hybrid);
         }
+        view.route(scene, settings.aovs(), settings.hide_emitters)?;
         render_pixels(scene, settings, progress, &view)
     }
 }

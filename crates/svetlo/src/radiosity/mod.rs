@@ -181,11 +181,20 @@ pub struct Solved {
     /// Gouraud values at the display vertices when the solver provides its own (hierarchical:
     /// interpolated over its leaves); None: area-weighted means of the elements around each vertex.
     pub vertex_b: Option<Vec<Rgb>>,
+    /// The light of exactly one diffuse bounce, ρ F E (paths `L D E`), for light path
+    /// expressions; None where the solver keeps no form-factor matrix to compute it from.
+    pub b_one: Option<Vec<Rgb>>,
 }
 
 impl Solved {
     /// The solution shown through a camera.
     pub fn view(&self, shading: Shading) -> display::RadiosityView<'_> {
+        let mut v = self.plain_view(shading);
+        v.b_one = self.b_one.as_deref();
+        v
+    }
+
+    fn plain_view(&self, shading: Shading) -> display::RadiosityView<'_> {
         match &self.vertex_b {
             Some(v) if shading == Shading::Gouraud => display::RadiosityView::with_vertex_values(&self.mesh, &self.b, v.clone()),
             _ => display::RadiosityView::new(&self.mesh, &self.b, shading),
@@ -277,6 +286,23 @@ pub fn solve_observed(
         None => kind.solve(&sys, &opts.solve)?,
     };
     let solve_seconds = t2.elapsed().as_secs_f64();
+    let b_one = match (&matrix, bounces) {
+        (_, Some(0)) => Some(vec![Rgb::BLACK; sys.n()]),
+        (Some(m), _) => Some((0..sys.n()).map(|i| sys.gather(m, &sys.emission, i)).collect()),
+        // Rows on demand: only the emitters' rows, by reciprocity F_ij A_i = F_ji A_j.
+        (None, _) => {
+            let mut one = vec![Rgb::BLACK; sys.n()];
+            for j in (0..sys.n()).filter(|&j| !sys.emission[j].is_black()) {
+                for (i, f) in sys.rows.row(j) {
+                    let i = i as usize;
+                    if sys.area[i] > 0.0 {
+                        one[i] += sys.reflectance[i] * sys.emission[j] * (f * sys.area[j] / sys.area[i]);
+                    }
+                }
+            }
+            Some(one)
+        }
+    };
     let rows_computed = source.rows_computed.load(std::sync::atomic::Ordering::Relaxed);
     let (nnz, matrix_bytes) = matrix.as_ref().map(|m| (m.nnz(), m.memory())).unwrap_or((0, 0));
     drop(sys);
@@ -294,6 +320,7 @@ pub fn solve_observed(
         solve_seconds,
         hierarchy: None,
         vertex_b: None,
+        b_one,
     })
 }
 
@@ -320,5 +347,6 @@ fn solve_hierarchical(scene: &Scene, opts: &RadiosityOptions, max_depth: i32) ->
         solve_seconds: total - o.stats.refine_seconds,
         hierarchy: Some(o.stats),
         vertex_b: Some(o.vertex_b),
+        b_one: None,
     })
 }

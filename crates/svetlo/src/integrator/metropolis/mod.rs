@@ -23,6 +23,8 @@ pub mod pss;
 use super::{Progress, RenderSettings};
 use crate::error::{Error, Result};
 use crate::film::Film;
+use crate::lpe::aov::{LayerSample, BEAUTY};
+use crate::lpe::{AovSet, LayerMask};
 use crate::sampling::rng::hash_seed;
 use crate::sampling::Pcg32;
 use crate::spectrum::Rgb;
@@ -32,24 +34,54 @@ use std::fmt::Write as _;
 use std::sync::atomic::Ordering;
 use std::time::Instant;
 
-/// What one state deposits on the film: radiance estimates at raster positions.
+/// What one state deposits on the film: radiance estimates at raster positions, each with
+/// the layers it goes to ([`LayerMask`]: the beauty, AOVs) and whether it counts toward
+/// the target f ([`TARGET`]). The target is the whole (unrestricted) beauty whatever the
+/// AOVs and `--lpe`: the chains sample all paths, the layers only sort their deposits.
 #[derive(Clone, Debug, Default)]
 pub struct Contribution {
-    pub splats: Vec<(Vec2, Rgb)>,
+    pub splats: Vec<(Vec2, Rgb, LayerMask)>,
 }
+
+/// One deposit: raster position, radiance, layers.
+type Deposit = (Vec2, Rgb, LayerMask);
+
+/// Mask bit of a deposit that counts toward the chain's target f.
+pub const TARGET: LayerMask = 1 << 30;
+const AOV_BITS: LayerMask = (1 << crate::lpe::MAX_LAYERS) - 1;
 
 impl Contribution {
     pub fn clear(&mut self) {
         self.splats.clear();
     }
+    /// Radiance for the beauty that also counts toward f.
     pub fn push(&mut self, raster: Vec2, l: Rgb) {
-        if l.is_finite() && !l.is_black() {
-            self.splats.push((raster, l));
+        self.push_masked(raster, l, BEAUTY | TARGET);
+    }
+    pub fn push_masked(&mut self, raster: Vec2, l: Rgb, mask: LayerMask) {
+        if l.is_finite() && !l.is_black() && mask != 0 {
+            self.splats.push((raster, l, mask));
+        }
+    }
+    /// A camera sample's value `l` (all of it counts toward f) whose parts per layer are in
+    /// `layers`.
+    pub fn push_layers(&mut self, aovs: &AovSet, raster: Vec2, l: Rgb, layers: &LayerSample) {
+        if aovs.is_empty() {
+            return self.push(raster, l);
+        }
+        if aovs.restricts_beauty() {
+            self.push_masked(raster, l, TARGET);
+            self.push_masked(raster, layers.beauty, BEAUTY);
+        } else {
+            self.push(raster, l);
+        }
+        for (i, v) in layers.aov[..aovs.aov_count()].iter().enumerate() {
+            self.push_masked(raster, *v, 1 << i);
         }
     }
     /// The scalar the chain is distributed by: total luminance (non-negative, finite).
     pub fn f(&self) -> f32 {
-        let f: f32 = self.splats.iter().map(|(_, l)| l.luminance().max(0.0)).sum();
+        let f: f32 = self.splats.iter().filter(|s| s.2 & TARGET != 0).map(|(_, l, _)| l.luminance().max(0.0)).sum();
         if f.is_finite() {
             f
         } else {
@@ -250,7 +282,7 @@ struct Chain<S> {
 /// to find), with all samples counted as done.
 pub fn black(width: u32, height: u32, settings: &RenderSettings) -> Result<(Film, ChainStats)> {
     settings.validate()?;
-    let mut film = Film::new(width, height, settings.filter);
+    let mut film = Film::with_layers(width, height, settings.filter, settings.aovs().names());
     film.spp_done = settings.spp;
     Ok((film, ChainStats::default()))
 }
@@ -268,7 +300,7 @@ pub fn run<T: MetropolisTarget>(
     let start = Instant::now();
     let (w, h) = (width, height);
     let npix = w as u64 * h as u64;
-    let mut film = Film::new(w, h, settings.filter);
+    let mut film = Film::with_layers(w, h, settings.filter, settings.aovs().names());
     let mut stats = ChainStats::new(target.mutation_names());
     stats.bootstrap = cfg.bootstrap;
     stats.chains = cfg.chains;
@@ -360,7 +392,7 @@ pub fn run<T: MetropolisTarget>(
         if chains.iter().all(|c| c.as_ref().is_none_or(|c| c.left == 0)) {
             break;
         }
-        let results: Vec<(Vec<(Vec2, Rgb)>, ChainStats)> = pool.install(|| {
+        let results: Vec<(Vec<Deposit>, ChainStats)> = pool.install(|| {
             chains
                 .par_iter_mut()
                 .map(|slot| {
@@ -379,13 +411,14 @@ pub fn run<T: MetropolisTarget>(
                             ((fy as f64 * p.t_ratio) / ch.f as f64).min(1.0) as f32
                         };
                         // Expected values: both states contribute, weighted by 1 - a and a.
+                        // (Deposits that only count toward f go nowhere on the film.)
                         if a < 1.0 {
                             let wx = (1.0 - a) * b / ch.f;
-                            splats.extend(ch.current.splats.iter().map(|&(r, l)| (r, l * wx)));
+                            splats.extend(ch.current.splats.iter().filter(|s| s.2 & !TARGET != 0).map(|&(r, l, m)| (r, l * wx, m)));
                         }
                         if a > 0.0 {
                             let wy = a * b / fy;
-                            splats.extend(proposal.splats.iter().map(|&(r, l)| (r, l * wy)));
+                            splats.extend(proposal.splats.iter().filter(|s| s.2 & !TARGET != 0).map(|&(r, l, m)| (r, l * wy, m)));
                         }
                         st.proposed[p.kind] += 1;
                         st.acceptance_sum[p.kind] += a as f64;
@@ -406,10 +439,17 @@ pub fn run<T: MetropolisTarget>(
         });
         for (c, (splats, st)) in results.iter().enumerate() {
             let mut cs = [0.0f64; 3];
-            for &(r, l) in splats {
-                film.splat(r, l);
-                for (k, v) in cs.iter_mut().enumerate() {
-                    *v += l[k] as f64;
+            for &(r, l, m) in splats {
+                if m & BEAUTY != 0 {
+                    film.splat(r, l);
+                    for (k, v) in cs.iter_mut().enumerate() {
+                        *v += l[k] as f64;
+                    }
+                }
+                let mut aov = m & AOV_BITS;
+                while aov != 0 {
+                    film.splat_layer(aov.trailing_zeros() as usize, r, l);
+                    aov &= aov - 1;
                 }
             }
             for (k, v) in cs.iter().enumerate() {

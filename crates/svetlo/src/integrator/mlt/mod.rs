@@ -134,6 +134,8 @@ pub struct Target<'a> {
     /// upside down) to check that a wrong acceptance ratio is detected.
     #[doc(hidden)]
     pub ratio_power: [f64; 4],
+    /// The render's AOVs: each path's deposit goes to the layers its events match.
+    lpe: Option<std::sync::Arc<crate::lpe::AovSet>>,
 }
 
 impl<'a> Target<'a> {
@@ -149,6 +151,7 @@ impl<'a> Target<'a> {
             cfg: PathConfig::new(scene, settings.max_depth, settings.rr_depth, settings.hide_emitters),
             probs: weights.map(|w| w / total),
             ratio_power: [1.0; 4],
+            lpe: settings.lpe.clone(),
         })
     }
 }
@@ -162,7 +165,9 @@ pub struct State {
 impl Target<'_> {
     /// The contribution of `x` as film splats.
     pub fn contribution(&self, x: &MPath, out: &mut Contribution) {
-        out.push(x.raster(), self.space.contribution(x));
+        let aovs = self.lpe.as_deref().unwrap_or(crate::lpe::AovSet::empty());
+        let mask = if aovs.is_empty() { crate::lpe::aov::BEAUTY } else { aovs.path_layers(self.space.scene, &x.v) };
+        out.push_masked(x.raster(), self.space.contribution(x), mask | metropolis::TARGET);
     }
 
     /// Propose by mutation `kind`: the proposal and T(y→x)/T(x→y), or None (stay).

@@ -163,6 +163,7 @@ impl PhotonMapper {
 impl Integrator for PhotonMapper {
     fn render(&self, scene: &Scene, settings: &RenderSettings, progress: &Progress) -> Result<Film> {
         settings.validate()?;
+        settings.check_lpe_support("photon", false)?;
         let start = Instant::now();
         let pool = rayon::ThreadPoolBuilder::new().num_threads(settings.threads).build().map_err(|e| Error::Settings(format!("thread pool: {e}")))?;
         let maps = pool.install(|| self.build_maps(scene, settings));

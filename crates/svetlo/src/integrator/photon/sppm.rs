@@ -119,6 +119,7 @@ impl Sppm {
 impl Integrator for Sppm {
     fn render(&self, scene: &Scene, settings: &RenderSettings, progress: &Progress) -> Result<Film> {
         settings.validate()?;
+        settings.check_lpe_support("sppm", false)?;
         let o = &self.options;
         let start = Instant::now();
         let cam = &scene.camera.ray_generator();

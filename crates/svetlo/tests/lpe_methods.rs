@@ -1,0 +1,345 @@
+//! Light path expressions on the methods beyond path, light and BDPT: direct, whitted,
+//! zbuffer, distributed, pssmlt, mlt and radiosity.
+//!
+//! - Partition: AOVs that partition path space sum to the beauty per pixel (float rounding).
+//! - Each method's own class (the lecture's claims, the method's side): the AOV of the class
+//!   the method computes holds its whole image.
+//! - Cross-method agreement: `whitted` and `distributed` against the path tracer restricted
+//!   (`--lpe`) to their classes, by per-pixel two-sample Z-tests (Šidák, family level 1 %)
+//!   on scenes where the unrestricted images differ; the Metropolis methods' AOVs against the
+//!   path tracer's same AOV (image means over batches); radiosity's `C D L` and `C D D+ L`
+//!   AOVs against the path tracer's within its discretisation error.
+
+mod classic_scenes;
+
+use classic_scenes::*;
+use glam::Vec3;
+use std::path::Path;
+use std::sync::Arc;
+use svetlo::film::{Film, Filter, Image};
+use svetlo::integrator::{Progress, RenderSettings};
+use svetlo::light::Light;
+use svetlo::lpe::AovSet;
+use svetlo::scene::{Scene, SceneBuilder};
+use svetlo::Rgb;
+
+fn repo_scene(name: &str, res: u32) -> Scene {
+    let p = Path::new(env!("CARGO_MANIFEST_DIR")).join("../../scenes").join(name);
+    svetlo::io::load_scene(&p, &[("res".into(), res.to_string())]).expect("scene")
+}
+
+fn aovs(scene: &Scene, list: &[(&str, &str)], beauty: Option<&str>) -> Arc<AovSet> {
+    let l: Vec<(String, String)> = list.iter().map(|(a, b)| (a.to_string(), b.to_string())).collect();
+    let mut set = AovSet::compile(&l, beauty).expect("expressions");
+    assert!(set.bind(scene).is_empty());
+    Arc::new(set)
+}
+
+fn render(scene: &Scene, method: &str, spp: u32, max_depth: i32, seed: u64, set: Option<Arc<AovSet>>) -> Film {
+    let s = RenderSettings { spp, max_depth, seed, threads: 2, filter: Filter::Box, lpe: set, ..Default::default() };
+    svetlo::methods::by_name(method).expect("method").render(scene, &s, &Progress::new()).expect("render")
+}
+
+/// Per pixel channel, equal up to float rounding (relative 1e-4 of the larger, or 1e-6).
+fn assert_close(a: &Image, b: &Image, what: &str) {
+    let mut worst = 0.0f32;
+    for (x, y) in a.data.iter().zip(&b.data) {
+        for (u, v) in [(x.r, y.r), (x.g, y.g), (x.b, y.b)] {
+            let tol = 1e-4 * u.abs().max(v.abs()) + 1e-6;
+            worst = worst.max((u - v).abs() / tol);
+        }
+    }
+    assert!(worst <= 1.0, "{what}: differs by {worst} tolerances");
+}
+
+fn sum(imgs: &[Image]) -> Image {
+    let mut out = imgs[0].clone();
+    for i in &imgs[1..] {
+        for (a, b) in out.data.iter_mut().zip(&i.data) {
+            *a += *b;
+        }
+    }
+    out
+}
+
+/// By the first scattering event: none, diffuse then the emitter, diffuse and more, glossy
+/// or singular and anything.
+const PARTITION: &[(&str, &str)] = &[("emit", "C [LB]"), ("d1", "C D [LB]"), ("dmore", "C D [^LB]+ [LB]"), ("spec", "C [GS] .* [LB]")];
+
+const METHODS: &[&str] = &[
+    "direct",
+    "whitted",
+    "zbuffer",
+    "distributed",
+    "pssmlt:chains=16,bootstrap=4000",
+    "pssmlt:target=path,chains=16,bootstrap=4000",
+    "mlt:chains=16,bootstrap=4000",
+];
+
+/// Every method on the caustic scene (diffuse floor and wall, glass sphere, small light):
+/// the partition's layers sum to the beauty, and the diffuse ones are not empty.
+#[test]
+fn partition_sums_to_the_beauty_for_every_method() {
+    let scene = repo_scene("caustic.xml", 16);
+    let set = aovs(&scene, PARTITION, None);
+    for &method in METHODS {
+        let film = render(&scene, method, 4, 6, 3, Some(set.clone()));
+        let layers: Vec<Image> = film.layer_images().into_iter().map(|(_, i)| i).collect();
+        assert_eq!(layers.len(), PARTITION.len(), "{method}");
+        assert!(film.image().mean().max_component() > 0.0, "{method}: black");
+        assert!(layers[1].mean().max_component() > 0.0, "{method}: C D L is empty");
+        // Only the methods of the full solution see C D .+ L (not Cook's or Whitted's).
+        if method.contains("mlt") {
+            assert!(layers[2].mean().max_component() > 0.0, "{method}: C D .+ L is empty");
+        }
+        assert_close(&sum(&layers), &film.image(), method);
+    }
+}
+
+/// With AOVs the beauty is the one rendered without them (AOVs only observe).
+#[test]
+fn aovs_do_not_change_the_beauty() {
+    let scene = repo_scene("caustic.xml", 12);
+    let set = aovs(&scene, PARTITION, None);
+    for &method in METHODS {
+        let with = render(&scene, method, 2, 5, 7, Some(set.clone())).image();
+        let without = render(&scene, method, 2, 5, 7, None).image();
+        assert_close(&with, &without, method);
+    }
+}
+
+/// `--lpe` restricts the beauty to the same paths as the AOV of the same expression.
+#[test]
+fn restricted_beauty_equals_its_aov() {
+    let scene = repo_scene("caustic.xml", 12);
+    let set = aovs(&scene, &[("direct", "L D E")], Some("C D L"));
+    for &method in METHODS {
+        let film = render(&scene, method, 2, 5, 2, Some(set.clone()));
+        assert!(film.image().mean().max_component() > 0.0, "{method}");
+        assert_close(&film.image(), &film.layer("direct").expect("layer"), method);
+    }
+}
+
+/// The lecture's classes, camera first, as each method computes them: its AOV holds the
+/// method's whole image (a path routed outside the class would leave it).
+#[test]
+fn each_method_computes_its_class() {
+    let scene = repo_scene("caustic.xml", 12);
+    for (method, class) in [
+        ("direct", "C .? [LB]"),
+        ("whitted", "C S* [DG]? [LB]"),
+        ("zbuffer", "C [DG]? [LB]"),
+        ("distributed", "C [GS]* D? [LB]"),
+        ("mlt:chains=8,bootstrap=2000", "C .* [LB]"),
+    ] {
+        let set = aovs(&scene, &[("class", class), ("not", "C D D .* [LB]")], None);
+        let film = render(&scene, method, 4, 8, 11, Some(set));
+        assert_close(&film.layer("class").expect("layer"), &film.image(), method);
+        if method != "mlt:chains=8,bootstrap=2000" {
+            assert!(film.layer("not").expect("layer").data.iter().all(|c| c.is_black()), "{method}: paths with two diffuse bounces");
+        }
+    }
+}
+
+/// A diffuse floor and wall, a mirror sphere, a glass sphere and a point light: the path
+/// tracer at depth 6 also finds C D S D L and the like, which Whitted's method lacks.
+fn mirror_room() -> Scene {
+    let mut b = SceneBuilder::new();
+    add(&mut b, quad(Vec3::new(-3.0, 0.0, -3.0), Vec3::new(0.0, 0.0, 6.0), Vec3::new(6.0, 0.0, 0.0)), diffuse(Rgb::new(0.7, 0.5, 0.3)), None, "floor");
+    add(&mut b, quad(Vec3::new(-3.0, 0.0, -1.5), Vec3::new(6.0, 0.0, 0.0), Vec3::new(0.0, 3.0, 0.0)), diffuse(Rgb::splat(0.6)), None, "wall");
+    add(&mut b, sphere(Vec3::new(-0.7, 0.8, 0.0), 0.8), mirror(), None, "mirror");
+    add(&mut b, sphere(Vec3::new(1.0, 0.6, 0.6), 0.6), glass(), None, "glass");
+    b.add_light(Light::Point { position: Vec3::new(0.5, 2.5, 1.5), intensity: Rgb::splat(8.0) });
+    b.set_camera(camera(look_at(Vec3::new(0.0, 2.0, 5.0), Vec3::new(0.0, 0.6, 0.0), Vec3::Y), 45.0, 24, 18));
+    b.build().expect("scene")
+}
+
+fn check(label: &str, a: &Film, b: &Film) {
+    let c = compare(a, b, 0.01, 1e-4);
+    eprintln!("{label}: {c:?}");
+    assert!(c.mean_a > 1e-3, "{label}: the image is black");
+    assert_eq!(c.failed, 0, "{label}: {} of {} pixel channels differ ({c:?})", c.failed, c.tested);
+    assert!(c.mean_z.abs() < 4.0, "{label}: image means differ by {:.2} standard errors", c.mean_z);
+}
+
+/// Whitted's image equals the path tracer restricted to Whitted's class, where the
+/// unrestricted path tracer sees more (interreflection between floor, wall and mirror).
+#[test]
+fn whitted_equals_path_restricted_to_its_class() {
+    let scene = mirror_room();
+    let w = render(&scene, "whitted", 64, 6, 1, None);
+    let class = aovs(&scene, &[], Some("C S* [DG]? [LB]"));
+    let p = render(&scene, "path", 512, 6, 2, Some(class));
+    check("whitted vs path --lpe 'C S* [DG]? [LB]'", &w, &p);
+    // The unrestricted path tracer differs: the test can tell the classes apart.
+    let full = render(&scene, "path", 512, 6, 2, None);
+    assert!(full.image().mean().mean() > 1.05 * p.image().mean().mean(), "the scene has no interreflection to leave out");
+}
+
+/// Distributed ray tracing equals the path tracer restricted to Cook's class on the
+/// caustic scene (the path tracer alone adds diffuse interreflection).
+#[test]
+fn distributed_equals_path_restricted_to_its_class() {
+    let scene = repo_scene("caustic.xml", 16);
+    let d = render(&scene, "distributed", 256, 8, 3, None);
+    let class = aovs(&scene, &[], Some("C [GS]* D? [LB]"));
+    let p = render(&scene, "path", 256, 8, 4, Some(class));
+    check("distributed vs path --lpe 'C [GS]* D? [LB]'", &d, &p);
+    let full = render(&scene, "path", 256, 8, 4, None);
+    assert!(full.image().mean().mean() > 1.05 * p.image().mean().mean(), "no interreflection to leave out");
+}
+
+/// Image means over batches: (mean, standard error).
+fn mean_se(vals: &[f64]) -> (f64, f64) {
+    let k = vals.len() as f64;
+    let m = vals.iter().sum::<f64>() / k;
+    let v = vals.iter().map(|x| (x - m).powi(2)).sum::<f64>() / (k - 1.0);
+    (m, (v / k).sqrt())
+}
+
+/// The Metropolis methods sort their deposits into the same AOVs as BDPT (the reference
+/// that finds the caustic's paths reliably; the path tracer's rare caustic samples make its
+/// standard error unreliable): the image means of `C D [LB]` (direct light on the diffuse
+/// surfaces) and of `C D .+ [LB]` agree within 5 standard errors over 6 independent batches.
+#[test]
+fn metropolis_aovs_agree_with_the_path_tracer() {
+    let scene = repo_scene("caustic.xml", 12);
+    let set = aovs(&scene, &[("d1", "C D [LB]"), ("dmore", "C D .+ [LB]")], None);
+    let means = |method: &str, spp: u32| -> Vec<(f64, f64)> {
+        let films: Vec<Film> = (0..6u64).map(|b| render(&scene, method, spp, 6, 60 + b, Some(set.clone()))).collect();
+        ["d1", "dmore"].iter().map(|n| mean_se(&films.iter().map(|f| f.layer(n).expect("layer").mean().mean() as f64).collect::<Vec<_>>())).collect()
+    };
+    let path = means("bdpt", 16);
+    for method in ["pssmlt:chains=32,bootstrap=4000", "mlt:chains=32,bootstrap=4000"] {
+        for (k, ((mp, sp), (mm, sm))) in path.iter().zip(means(method, 32)).enumerate() {
+            let z = (mp - mm) / (sp * sp + sm * sm).sqrt();
+            eprintln!("{method} AOV {k}: bdpt {mp} +- {sp}, {mm} +- {sm}, z {z:.2}");
+            assert!(mm > 0.0);
+            assert!(z.abs() < 5.0, "{method} AOV {k}: bdpt {mp} +- {sp} vs {mm} +- {sm} (z = {z})");
+        }
+    }
+}
+
+/// Radiosity on the repository's Cornell box (diffuse only): the partition sums to the
+/// beauty; its `C D* [LB]` AOV is its image; its one-bounce and multi-bounce AOVs equal
+/// the path tracer's within the discretisation error of 0.5-unit elements (the image means
+/// within 5 %: radiosity's whole image is within a relMSE of 1.5e-2 at this size, tests/radiosity.rs).
+#[test]
+fn radiosity_routes_its_parts() {
+    let scene = repo_scene("cornell-box.xml", 24);
+    let method = "radiosity:solver=gauss-seidel,element-size=0.5";
+    let set = aovs(&scene, &[("emit", "C [LB]"), ("d1", "C D [LB]"), ("dmore", "C D D+ [LB]"), ("all", "L D* E"), ("spec", "C .* [GS] .* [LB]")], None);
+    let r = render(&scene, method, 4, -1, 1, Some(set.clone()));
+    let layer = |f: &Film, n: &str| f.layer(n).expect("layer");
+    assert_close(&sum(&[layer(&r, "emit"), layer(&r, "d1"), layer(&r, "dmore")]), &r.image(), "radiosity partition");
+    assert_close(&layer(&r, "all"), &r.image(), "radiosity C D* L");
+    assert!(layer(&r, "spec").data.iter().all(|c| c.is_black()));
+    let p = render(&scene, "path", 64, -1, 2, Some(set));
+    for n in ["d1", "dmore"] {
+        let (a, b) = (layer(&r, n).mean().mean(), layer(&p, n).mean().mean());
+        eprintln!("radiosity {n}: {a} vs path {b}");
+        assert!(a > 0.0 && (a / b - 1.0).abs() < 0.05, "{n}: radiosity {a} vs path {b}");
+    }
+    // An expression that splits a part radiosity keeps whole is refused with a clear error.
+    let bad = aovs(&scene, &[("two", "C D D [LB]")], None);
+    let e = svetlo::methods::by_name(method).unwrap().render(&scene, &RenderSettings { spp: 1, lpe: Some(bad), ..Default::default() }, &Progress::new());
+    assert!(e.is_err_and(|e| e.to_string().contains("'C D D [LB]'")));
+}
+
+#[test]
+fn methods_without_lpe_support_refuse_it() {
+    let scene = repo_scene("caustic.xml", 8);
+    let set = aovs(&scene, PARTITION, None);
+    for method in ["photon", "sppm"] {
+        let e = svetlo::methods::by_name(method).unwrap().render(
+            &scene,
+            &RenderSettings { spp: 1, lpe: Some(set.clone()), ..Default::default() },
+            &Progress::new(),
+        );
+        assert!(e.is_err_and(|e| e.to_string().contains("light path expressions")), "{method}");
+    }
+}
+
+/// The product automata (one state per camera path and one per light subpath, built when a
+/// set is bound to a scene) route exactly as the automata stepped one by one (the unbound
+/// set): every event sequence up to 4 scattering vertices over the classes the scene's
+/// shapes produce, with a custom label, ends in the same layers, and so does every split of
+/// it into a camera prefix and a light subpath that meet.
+#[test]
+fn product_automaton_routes_as_the_separate_automata() {
+    use svetlo::lpe::{Event, LightTracker, Tracker};
+    let scene = mirror_room();
+    let list: Vec<(String, String)> =
+        [("a", "C [LB]"), ("b", "C D [LB]"), ("c", "C 'mirror' .* L"), ("d", "C [GS]+ D? L"), ("e", "L D* E"), ("f", "C <T.> .* L")]
+            .iter()
+            .map(|(a, b)| (a.to_string(), b.to_string()))
+            .collect();
+    let mut bound = AovSet::compile(&list, Some("C .{1,3} L")).unwrap();
+    let unbound = bound.clone();
+    assert!(bound.bind(&scene).is_empty());
+    assert!(bound.product_states() > 1, "no product automaton");
+    assert_eq!(unbound.product_states(), 0);
+    let mirror = (0..scene.shapes.len() as u32).find(|&s| scene.shapes[s as usize].name == "mirror").unwrap();
+    let label = bound.shape_labels(mirror);
+    assert_ne!(label, 0);
+    let events: Vec<Event> = (3u8..9).flat_map(|b| [Event { base: b, labels: 0 }, Event { base: b, labels: label }]).collect();
+    let ends = [Event::LIGHT, Event::BACKGROUND];
+    let mut checked = 0;
+    let mut stack: Vec<Vec<Event>> = vec![vec![]];
+    while let Some(path) = stack.pop() {
+        let (mut p, mut u) = (Tracker::camera(&bound), Tracker::camera(&unbound));
+        for &e in &path {
+            p.push(e);
+            u.push(e);
+        }
+        for &e in &ends {
+            let want = u.ends(e);
+            assert_eq!(p.ends(e), want, "{path:?} then {e:?}");
+            checked += 1;
+            // Split anywhere into a camera prefix and a light subpath read light first: the
+            // reverse products meet the prefix in the same layers.
+            for k in 0..=path.len() {
+                let (mut cp, mut cu) = (Tracker::camera(&bound), Tracker::camera(&unbound));
+                for &x in &path[..k] {
+                    cp.push(x);
+                    cu.push(x);
+                }
+                let (mut lp, mut lu) = (LightTracker::light(&bound, e), LightTracker::light(&unbound, e));
+                for &x in path[k..].iter().rev() {
+                    lp.push(x);
+                    lu.push(x);
+                }
+                assert_eq!(lu.meets(&cu), want, "{path:?} split at {k}");
+                assert_eq!(lp.meets(&cp), want, "{path:?} split at {k} (products)");
+            }
+        }
+        if path.len() < 4 {
+            for &e in &events {
+                let mut q = path.clone();
+                q.push(e);
+                stack.push(q);
+            }
+        }
+    }
+    assert!(checked > 10_000);
+}
+
+/// Which layers take a whole class of paths: all, none, or some (an error for methods that
+/// keep the class whole).
+#[test]
+fn class_verdicts() {
+    use svetlo::lpe::{Event, Lpe};
+    let d = Event { base: 3, labels: 0 };
+    let s = Event { base: 5, labels: 0 };
+    let c = |e: &str| Lpe::new(e).unwrap();
+    // Paths C D D^n L, n >= 1.
+    let more = |e: &str| c(e).class_verdict(&[Event::CAMERA, d], &[d], 1, &[Event::LIGHT]);
+    assert_eq!(more("C D* L"), Some(true));
+    assert_eq!(more("L D D+ E"), Some(true));
+    assert_eq!(more("C D L"), Some(false));
+    assert_eq!(more("C D D L"), None);
+    assert_eq!(more("C .{2,} [LB]"), Some(true));
+    assert_eq!(more("C S .* L"), Some(false));
+    assert_eq!(c("C [DS]+ L").class_verdict(&[Event::CAMERA], &[d, s], 1, &[Event::LIGHT, Event::BACKGROUND]), None);
+    assert_eq!(c("C .+ [LB]").class_verdict(&[Event::CAMERA], &[d, s], 1, &[Event::LIGHT, Event::BACKGROUND]), Some(true));
+}
