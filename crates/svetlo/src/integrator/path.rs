@@ -27,25 +27,9 @@ impl Integrator for PathTracer {
 
 /// Next-event estimation from a surface point: one light chosen by power, one point on it,
 /// weighted against BSDF sampling (`counts`: samples of each strategy); the shadow ray
-/// sees the scene at `time`. Returns the contribution without the path throughput.
-#[allow(clippy::too_many_arguments)]
-pub(crate) fn sample_light_mis(
-    scene: &Scene,
-    p: Vec3,
-    ng: Vec3,
-    frame: &crate::math::Frame,
-    wo: Vec3,
-    bsdf: &crate::bsdf::Bsdf,
-    u_light: f32,
-    u: glam::Vec2,
-    counts: (f32, f32),
-    time: f32,
-) -> Rgb {
-    sample_light_mis_to(scene, p, ng, frame, wo, bsdf, u_light, u, counts, time).0
-}
-
-/// [`sample_light_mis`] that also says which light it reached and whether the light lies
-/// on the other side of the surface (a transmission), for the path's events.
+/// sees the scene at `time`. Returns the contribution without the path throughput,
+/// which light it reached and whether the light lies on the other side of the surface (a
+/// transmission), for the path's events.
 #[allow(clippy::too_many_arguments)]
 pub(crate) fn sample_light_mis_to(
     scene: &Scene,

@@ -61,6 +61,48 @@ const MAX_MEET_ENTRIES: usize = 1 << 18;
 /// Most states of the product automaton; larger products fall back to one step per AOV.
 const MAX_PRODUCT_STATES: usize = 1 << 14;
 
+/// A product state: each automaton's state (the AOVs', then the beauty's restriction).
+type ProductState = [u32; MAX_LAYERS + 1];
+
+/// Breadth-first search of the product of `n` automata (`step(i, state, event)` for automaton
+/// i) over the base events times the label masks `masks`: the states in discovery order and the
+/// transition table (state × class). None when it would exceed [`MAX_PRODUCT_STATES`] or
+/// `fits(states)` says no.
+fn product_search(masks: &[u32], n: usize, step: impl Fn(usize, u32, Event) -> u32, fits: impl Fn(usize) -> bool) -> Option<(Vec<ProductState>, Vec<u32>)> {
+    use std::collections::HashMap;
+    let base = super::automaton::BASE_COUNT;
+    let nc = base * masks.len();
+    let start = [Lpe::START; MAX_LAYERS + 1];
+    let mut index: HashMap<ProductState, u32> = HashMap::from([(start, 0)]);
+    let mut states = vec![start];
+    let mut table = Vec::new();
+    let mut q = 0;
+    while q < states.len() {
+        let cur = states[q];
+        for c in 0..nc {
+            let e = Event { base: (c % base) as u8, labels: masks[c / base] };
+            let mut next = start;
+            for i in 0..n {
+                next[i] = step(i, cur[i], e);
+            }
+            let id = match index.get(&next) {
+                Some(&id) => id,
+                None => {
+                    if states.len() >= MAX_PRODUCT_STATES || !fits(states.len() + 1) {
+                        return None;
+                    }
+                    index.insert(next, states.len() as u32);
+                    states.push(next);
+                    states.len() as u32 - 1
+                }
+            };
+            table.push(id);
+        }
+        q += 1;
+    }
+    Some((states, table))
+}
+
 static EMPTY: AovSet = AovSet { names: Vec::new(), lpes: Vec::new(), beauty_filter: false, labels: Vec::new(), shape_labels: Vec::new(), product: None };
 
 impl AovSet {
@@ -169,7 +211,6 @@ impl AovSet {
     /// The product automaton by breadth-first search from the start, None when it would
     /// exceed [`MAX_PRODUCT_STATES`].
     fn build_product(&self) -> Option<Product> {
-        use std::collections::HashMap;
         if self.lpes.is_empty() {
             return None;
         }
@@ -181,34 +222,7 @@ impl AovSet {
         }
         let nc = super::automaton::BASE_COUNT * masks.len();
         let n = self.lpes.len();
-        let start = [Lpe::START; MAX_LAYERS + 1];
-        let mut index: HashMap<[u32; MAX_LAYERS + 1], u32> = HashMap::from([(start, 0)]);
-        let mut states = vec![start];
-        let mut table = Vec::new();
-        let mut q = 0;
-        while q < states.len() {
-            let cur = states[q];
-            for c in 0..nc {
-                let e = Event { base: (c % super::automaton::BASE_COUNT) as u8, labels: masks[c / super::automaton::BASE_COUNT] };
-                let mut next = [Lpe::START; MAX_LAYERS + 1];
-                for i in 0..n {
-                    next[i] = self.lpes[i].step(cur[i], e);
-                }
-                let id = match index.get(&next) {
-                    Some(&id) => id,
-                    None => {
-                        if states.len() >= MAX_PRODUCT_STATES {
-                            return None;
-                        }
-                        index.insert(next, states.len() as u32);
-                        states.push(next);
-                        states.len() as u32 - 1
-                    }
-                };
-                table.push(id);
-            }
-            q += 1;
-        }
+        let (states, table) = product_search(&masks, n, |i, q, e| self.lpes[i].step(q, e), |_| true)?;
         let accept = states.iter().map(|st| (0..n).filter(|&i| self.lpes[i].accepts(st[i])).fold(self.base_mask(), |m, i| m | self.bit(i))).collect();
         let rev = self.build_rev_product(&masks, &states);
         Some(Product { masks, n_classes: nc, table, accept, states, rev })
@@ -216,38 +230,8 @@ impl AovSet {
 
     /// The reverse automata's product (breadth-first from the start) and its meeting table.
     fn build_rev_product(&self, masks: &[u32], fwd: &[[u32; MAX_LAYERS + 1]]) -> Option<RevProduct> {
-        use std::collections::HashMap;
-        let base = super::automaton::BASE_COUNT;
-        let nc = base * masks.len();
         let n = self.lpes.len();
-        let start = [Lpe::START; MAX_LAYERS + 1];
-        let mut index: HashMap<[u32; MAX_LAYERS + 1], u32> = HashMap::from([(start, 0)]);
-        let mut states = vec![start];
-        let mut table = Vec::new();
-        let mut q = 0;
-        while q < states.len() {
-            let cur = states[q];
-            for c in 0..nc {
-                let e = Event { base: (c % base) as u8, labels: masks[c / base] };
-                let mut next = [Lpe::START; MAX_LAYERS + 1];
-                for i in 0..n {
-                    next[i] = self.lpes[i].rev_step(cur[i], e);
-                }
-                let id = match index.get(&next) {
-                    Some(&id) => id,
-                    None => {
-                        if states.len() >= MAX_PRODUCT_STATES || (states.len() + 1) * fwd.len() > MAX_MEET_ENTRIES {
-                            return None;
-                        }
-                        index.insert(next, states.len() as u32);
-                        states.push(next);
-                        states.len() as u32 - 1
-                    }
-                };
-                table.push(id);
-            }
-            q += 1;
-        }
+        let (states, table) = product_search(masks, n, |i, q, e| self.lpes[i].rev_step(q, e), |count| count * fwd.len() <= MAX_MEET_ENTRIES)?;
         let mut meets = Vec::with_capacity(fwd.len() * states.len());
         for f in fwd {
             for r in &states {

@@ -16,7 +16,7 @@ use super::display::RadiosityView;
 use crate::bsdf::TransportMode;
 use crate::geometry::ray::offset_ray_origin;
 use crate::geometry::Ray;
-use crate::integrator::path::sample_light_mis;
+use crate::integrator::path::sample_light_mis_to;
 use crate::integrator::{PixelEstimator, RenderSettings};
 use crate::math::{warp, Frame, INV_PI};
 use crate::sampling::Sampler;
@@ -104,7 +104,7 @@ impl PixelEstimator for HybridView<'_> {
                 let n = if si.ng.dot(si.wo) < 0.0 { -si.ng } else { si.ng };
                 let frame = Frame::from_normal(n);
                 for _ in 0..self.gather {
-                    direct += sample_light_mis(scene, si.p, si.ng, &si.shading, wo, &bsdf, sampler.next_1d(), sampler.next_2d(), (1.0, 0.0), si.time);
+                    direct += sample_light_mis_to(scene, si.p, si.ng, &si.shading, wo, &bsdf, sampler.next_1d(), sampler.next_2d(), (1.0, 0.0), si.time).0;
                     let w = frame.to_world(warp::square_to_cosine_hemisphere(sampler.next_2d()));
                     indirect += self.gather_ray(scene, Ray::new(offset_ray_origin(si.p, si.ng, w), w), sampler);
                 }
