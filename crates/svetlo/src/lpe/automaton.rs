@@ -86,12 +86,23 @@ impl Nfa {
             Ast::Repeat { inner, min, max } => {
                 let entry = self.state(src)?;
                 let mut last = entry;
-                for _ in 0..*min {
+                // X{n,} is n - 1 copies and one that loops back on itself: one copy for X+, so
+                // that nested repetitions ((X+)+...) do not double the automaton at each level.
+                let copies = if max.is_none() { min.saturating_sub(1) } else { *min };
+                for _ in 0..copies {
                     let (a, b) = self.build(inner, src)?;
                     self.eps[last as usize].push(a);
                     last = b;
                 }
                 match max {
+                    None if *min >= 1 => {
+                        let (a, b) = self.build(inner, src)?;
+                        let out = self.state(src)?;
+                        self.eps[last as usize].push(a);
+                        self.eps[b as usize].push(a);
+                        self.eps[b as usize].push(out);
+                        last = out;
+                    }
                     None => {
                         // Kleene star on one more copy.
                         let (a, b) = self.build(inner, src)?;

@@ -217,3 +217,14 @@ fn lecture_rest_is_the_complement_of_the_classes() {
         }
     }
 }
+
+/// Nested repetitions (a fuzzer's find: `T.+*+++++++++++++` took over 10 s) compile to a small
+/// automaton: `X+` is one copy of X with a loop, so nesting does not double it per level.
+#[test]
+fn nested_repetitions_stay_small() {
+    let deep = format!("C D{} L", "+".repeat(40));
+    let l = Lpe::new(&deep).expect("40 nested '+' compile");
+    assert_eq!(l.size().0, Lpe::new("C D+ L").unwrap().size().0);
+    let mixed = format!("C (D{})+ L", "+*?".repeat(12));
+    assert_eq!(Lpe::new(&mixed).expect("mixed nesting compiles").size().0, Lpe::new("C D* L").unwrap().size().0);
+}
