@@ -327,8 +327,8 @@ mod tests {
         assert_eq!(next_pass_spp(1, 100, Some((10.0, 1.0, 100))), 50);
     }
 
-    #[test]
-    fn chunking_does_not_change_the_image() {
+    /// A point-lit diffuse ball seen by a `w` x `h` pinhole camera.
+    fn lit_ball(w: u32, h: u32) -> crate::scene::Scene {
         let mut b = SceneBuilder::new();
         let m = b.add_material(Material::Diffuse { reflectance: Texture::Constant(Rgb::splat(0.6)) });
         b.add_shape(Geometry::Sphere(Sphere { center: Vec3::new(0.0, 0.0, 4.0), radius: 1.5, flip_normals: false }), m, None, "ball").unwrap();
@@ -336,14 +336,19 @@ mod tests {
         b.set_camera(Camera {
             to_world: Mat4::IDENTITY,
             projection: Projection::Perspective { fov_x_deg: 50.0, aperture_radius: 0.0, focus_distance: 1.0 },
-            width: 40,
-            height: 36,
+            width: w,
+            height: h,
             near_clip: 0.01,
             far_clip: 100.0,
             shutter_open: 0.0,
             shutter_close: 0.0,
         });
-        let scene = b.build().unwrap();
+        b.build().unwrap()
+    }
+
+    #[test]
+    fn chunking_does_not_change_the_image() {
+        let scene = lit_ball(40, 36);
         let settings = RenderSettings { spp: 3, max_depth: 3, ..Default::default() };
         let est = crate::integrator::bdpt::test_estimator(&scene, &settings);
         let big = render_chunked(&scene, &settings, &Progress::new(), &est, 2, u64::MAX).unwrap();
@@ -358,21 +363,7 @@ mod tests {
     #[test]
     fn observer_sees_each_pass_and_changes_nothing() {
         use std::sync::{Arc, Mutex};
-        let mut b = SceneBuilder::new();
-        let m = b.add_material(Material::Diffuse { reflectance: Texture::Constant(Rgb::splat(0.6)) });
-        b.add_shape(Geometry::Sphere(Sphere { center: Vec3::new(0.0, 0.0, 4.0), radius: 1.5, flip_normals: false }), m, None, "ball").unwrap();
-        b.add_light(Light::Point { position: Vec3::new(1.0, 2.0, 0.0), intensity: Rgb::splat(10.0) });
-        b.set_camera(Camera {
-            to_world: Mat4::IDENTITY,
-            projection: Projection::Perspective { fov_x_deg: 50.0, aperture_radius: 0.0, focus_distance: 1.0 },
-            width: 24,
-            height: 20,
-            near_clip: 0.01,
-            far_clip: 100.0,
-            shutter_open: 0.0,
-            shutter_close: 0.0,
-        });
-        let scene = b.build().unwrap();
+        let scene = lit_ball(24, 20);
         let settings = RenderSettings { spp: 6, max_depth: 3, ..Default::default() };
         let est = crate::integrator::bdpt::test_estimator(&scene, &settings);
         type Passes = Mutex<Vec<(u32, Vec<Rgb>)>>;
