@@ -56,7 +56,7 @@ fn load_str(dir: &Path, body: &str) -> svetlo::Result<Scene> {
 fn mesh(s: &Scene, i: usize) -> &svetlo::geometry::TriangleMesh {
     match &*s.shapes[i].geometry {
         Geometry::Mesh(m) => m,
-        Geometry::Sphere(_) => panic!("shape {i} is a sphere"),
+        _ => panic!("shape {i} is not a mesh"),
     }
 }
 
