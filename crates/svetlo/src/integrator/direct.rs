@@ -17,9 +17,9 @@ use crate::error::Result;
 use crate::film::Film;
 use crate::geometry::{Ray, SurfaceInteraction};
 use crate::light::Light;
-use crate::math::{warp, INV_PI};
 use crate::lpe::aov::LayerSample;
 use crate::lpe::{Event, Tracker};
+use crate::math::{warp, INV_PI};
 use crate::sampling::{power_heuristic, Distribution1D, Sampler};
 use crate::scene::Scene;
 use crate::spectrum::Rgb;
@@ -204,7 +204,9 @@ impl DirectEstimator {
             let r = si.spawn_ray(wi);
             let (le, pdf_light, end) = match scene.intersect(&r) {
                 Some(s2) => match scene.area_light(&s2) {
-                    Some((li, area)) => (area.l(s2.ng, s2.uv, s2.wo), self.lights.pmf[li as usize] * area.pdf_li(si.p, s2.p, s2.ng), aovs.light_event(Some(s2.shape))),
+                    Some((li, area)) => {
+                        (area.l(s2.ng, s2.uv, s2.wo), self.lights.pmf[li as usize] * area.pdf_li(si.p, s2.p, s2.ng), aovs.light_event(Some(s2.shape)))
+                    }
                     None => continue,
                 },
                 None => {
@@ -246,7 +248,17 @@ impl DirectEstimator {
 /// probability `pmf`, by [`SkySampling`]: the contribution and whether it arrives through
 /// the surface.
 #[allow(clippy::too_many_arguments)]
-fn sky_mis_to(scene: &Scene, si: &SurfaceInteraction, wo: Vec3, bsdf: &crate::bsdf::Bsdf, sky: SkySampling, le: Rgb, pmf: f32, u: Vec2, counts: (f32, f32)) -> (Rgb, bool) {
+fn sky_mis_to(
+    scene: &Scene,
+    si: &SurfaceInteraction,
+    wo: Vec3,
+    bsdf: &crate::bsdf::Bsdf,
+    sky: SkySampling,
+    le: Rgb,
+    pmf: f32,
+    u: Vec2,
+    counts: (f32, f32),
+) -> (Rgb, bool) {
     const NONE: (Rgb, bool) = (Rgb::BLACK, false);
     let Some((wi, pdf)) = sky.sample(wo, u) else { return NONE };
     let f = bsdf.eval(wo, wi, TransportMode::Radiance);
