@@ -68,7 +68,7 @@ impl Accel {
                     sph.push(*s);
                     sph_r.push(si as u32);
                 }
-                Geometry::SdfGrid(g) => grids.push((g.clone(), si as u32)),
+                Geometry::SdfGrid(g) => grids.push(((**g).clone(), si as u32)),
             }
         }
 

@@ -207,7 +207,7 @@ fn sdf_grids_match_brute_force() {
     let place = glam::Mat4::from_translation(Vec3::new(0.2, 0.25, 0.3)) * glam::Mat4::from_rotation_x(0.6) * glam::Mat4::from_scale(Vec3::splat(0.5));
     let grid = SdfGrid::new([n, n, n], values, place, SdfNormals::Smooth).unwrap();
     let shapes = vec![
-        Geometry::SdfGrid(grid),
+        Geometry::SdfGrid(Box::new(grid)),
         Geometry::Mesh(bumpy_sphere(20, Vec3::new(0.75, 0.5, 0.4), 0.2)),
         Geometry::Sphere(Sphere { center: Vec3::new(0.45, 0.5, 0.55), radius: 0.1, flip_normals: false }),
     ];

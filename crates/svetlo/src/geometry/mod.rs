@@ -25,7 +25,8 @@ pub use sphere::Sphere;
 pub enum Geometry {
     Mesh(TriangleMesh),
     Sphere(Sphere),
-    SdfGrid(SdfGrid),
+    /// Boxed: it is several times larger than the other variants.
+    SdfGrid(Box<SdfGrid>),
 }
 
 impl Geometry {

@@ -85,7 +85,7 @@ impl SdfGrid {
         let m = to_world.as_dmat4();
         let lin = DMat3::from_mat4(m);
         let det = lin.determinant();
-        if !(det.is_finite() && det.abs() > 1e-30) || !m.is_finite() {
+        if !(det.is_finite() && det.abs() > 1e-30 && m.is_finite()) {
             return Err("to_world is singular or not finite".into());
         }
         let inv_lin = lin.inverse();
@@ -221,7 +221,7 @@ impl SdfGrid {
                 exit = Some((a, far_face));
             }
         }
-        if !(t0 < t1) || t0 >= t_max as f64 {
+        if t0.is_nan() || t1.is_nan() || t1 <= t0 || t0 >= t_max as f64 {
             return None;
         }
         let f = corners(&self.values, self.res, base).map(|v| v as f64);

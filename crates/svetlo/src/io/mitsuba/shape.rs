@@ -262,7 +262,7 @@ impl<'a> Loader<'a> {
         }
         // The grid (4 bytes a sample) is held once; the voxel list is at most as large again.
         let g = SdfGrid::new(grid.res, grid.values, to_world, normals).map_err(|e| Error::Scene { file: path, msg: e })?;
-        Ok(Geometry::SdfGrid(g))
+        Ok(Geometry::SdfGrid(Box::new(g)))
     }
 
     fn sphere(&mut self, node: &'a Node, to_world: Mat4, flip: bool, emits: bool, name: &str) -> Result<Geometry> {
