@@ -57,7 +57,7 @@ fn v3(v: Vec3) -> String {
 /// The description `svetlo info` prints.
 pub fn describe(scene: &Scene) -> String {
     let mut o = String::new();
-    let (mut tris, mut meshes, mut spheres) = (0usize, 0usize, 0usize);
+    let (mut tris, mut meshes, mut spheres, mut grids) = (0usize, 0usize, 0usize, 0usize);
     for s in &scene.shapes {
         match &*s.geometry {
             Geometry::Mesh(m) => {
@@ -65,13 +65,16 @@ pub fn describe(scene: &Scene) -> String {
                 tris += m.triangle_count();
             }
             Geometry::Sphere(_) => spheres += 1,
+            Geometry::SdfGrid(_) => grids += 1,
         }
     }
-    let _ = writeln!(o, "shapes      {} ({meshes} meshes with {tris} triangles, {spheres} spheres)", scene.shapes.len());
+    let grids = if grids > 0 { format!(", {grids} SDF grids") } else { String::new() };
+    let _ = writeln!(o, "shapes      {} ({meshes} meshes with {tris} triangles, {spheres} spheres{grids})", scene.shapes.len());
     for (i, s) in scene.shapes.iter().enumerate().take(MAX_LISTED_SHAPES) {
         let geo = match &*s.geometry {
             Geometry::Mesh(m) => format!("mesh, {} triangles", m.triangle_count()),
             Geometry::Sphere(sp) => format!("sphere, center {}, radius {}", v3(sp.center), sp.radius),
+            Geometry::SdfGrid(g) => format!("sdfgrid, {}x{}x{} samples, {} occupied voxels", g.res[0], g.res[1], g.res[2], g.voxel_count()),
         };
         let mat = scene.materials.get(s.material as usize).map(material_kind).unwrap_or_else(|| "?".into());
         let emits = if s.light.is_some() { ", emitter" } else { "" };

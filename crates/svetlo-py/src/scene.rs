@@ -102,6 +102,11 @@ impl PyScene {
                     d.set_item("center", v3(sp.center))?;
                     d.set_item("radius", sp.radius)?;
                 }
+                Geometry::SdfGrid(g) => {
+                    d.set_item("type", "sdfgrid")?;
+                    d.set_item("resolution", g.res)?;
+                    d.set_item("voxels", g.voxel_count())?;
+                }
             }
             d.set_item("material", s.material)?;
             d.set_item("emitter", s.light)?;

@@ -1,6 +1,6 @@
 //! The scene's accelerator: an 8-wide BVH over triangles (stored by value, eight to a
-//! SIMD block, in leaf order) and a second, small one over analytic spheres. A ray
-//! walks both; the nearer hit wins.
+//! SIMD block, in leaf order), a second, small one over analytic spheres and a third over
+//! the occupied voxels of SDF grids. A ray walks all three; the nearest hit wins.
 
 use super::build::{build_wide, LeafParams};
 use super::tri4::{intersect_half, TriRay};
@@ -10,7 +10,7 @@ use super::tri8::{Hit, Tri8, LANES, NO_TRI};
 use super::wide::{leaf_code, leaf_range, prefetch, traverse, BoxRay, Node};
 use super::PrimHit;
 use crate::geometry::triangle::WatertightRay;
-use crate::geometry::{Aabb, Geometry, Ray, Sphere};
+use crate::geometry::{Aabb, Geometry, Ray, SdfGrid, Sphere};
 use glam::Vec3;
 
 #[derive(Clone)]
@@ -26,6 +26,11 @@ pub struct Accel {
     spheres: Vec<Sphere>,
     /// Shape index of each sphere of `spheres`.
     sph_shapes: Vec<u32>,
+    sdf_nodes: Vec<Node>,
+    /// The SDF grids (their samples shared with the scene's) and the shape of each.
+    grids: Vec<(SdfGrid, u32)>,
+    /// (grid, voxel) of each voxel primitive, in leaf order.
+    voxels: Vec<(u32, u32)>,
     bounds: Aabb,
     /// The hierarchy is larger than the caches: traversal prefetches what it pushes.
     pub(super) prefetch: bool,
@@ -41,6 +46,8 @@ const TRI_LEAF: LeafParams = LeafParams { group: LANES, max_leaf: 16, traversal_
 /// prefetch instructions cost more than they save.
 const PREFETCH_MIN_BYTES: usize = 1 << 20;
 const SPHERE_LEAF: LeafParams = LeafParams { group: 1, max_leaf: 4, traversal_cost: 1.0 };
+/// A voxel test (a cubic's root) costs several box tests: small leaves.
+const VOXEL_LEAF: LeafParams = LeafParams { group: 1, max_leaf: 2, traversal_cost: 0.3 };
 
 impl Accel {
     pub fn build(shapes: &[&Geometry]) -> Accel {
@@ -48,6 +55,7 @@ impl Accel {
         let mut meshes = Vec::new();
         let mut sph = Vec::new();
         let mut sph_r = Vec::new();
+        let mut grids = Vec::new();
         for (si, g) in shapes.iter().enumerate() {
             match g {
                 Geometry::Mesh(m) => {
@@ -60,6 +68,7 @@ impl Accel {
                     sph.push(*s);
                     sph_r.push(si as u32);
                 }
+                Geometry::SdfGrid(g) => grids.push(((**g).clone(), si as u32)),
             }
         }
 
@@ -97,8 +106,23 @@ impl Accel {
             leaf_code(start, prims.len())
         });
 
+        let mut vox: Vec<(u32, u32)> = Vec::new();
+        let mut vox_bounds = Vec::new();
+        for (gi, (g, _)) in grids.iter().enumerate() {
+            for k in 0..g.voxel_count() {
+                vox.push((gi as u32, k as u32));
+                vox_bounds.push(g.voxel_bounds(k));
+            }
+        }
+        let mut voxels = Vec::with_capacity(vox.len());
+        let (sdf_nodes, _) = build_wide(&vox_bounds, VOXEL_LEAF, |prims| {
+            let start = voxels.len();
+            voxels.extend(prims.iter().map(|&i| vox[i as usize]));
+            leaf_code(start, prims.len())
+        });
+
         let mut bounds = Aabb::EMPTY;
-        for n in [&tri_nodes, &sph_nodes] {
+        for n in [&tri_nodes, &sph_nodes, &sdf_nodes] {
             if let Some(root) = n.first() {
                 bounds = bounds.union(root.bounds());
             }
@@ -106,9 +130,10 @@ impl Accel {
         let bytes = std::mem::size_of_val(&tri_nodes[..])
             + std::mem::size_of_val(&tris[..])
             + std::mem::size_of_val(&sph_nodes[..])
-            + std::mem::size_of_val(&spheres[..]);
+            + std::mem::size_of_val(&spheres[..])
+            + std::mem::size_of_val(&sdf_nodes[..]);
         let prefetch = bytes > PREFETCH_MIN_BYTES;
-        Accel { tri_nodes, tris, meshes, tri_mesh, sph_nodes, spheres, sph_shapes, bounds, prefetch, avx: has_avx() }
+        Accel { tri_nodes, tris, meshes, tri_mesh, sph_nodes, spheres, sph_shapes, sdf_nodes, grids, voxels, bounds, prefetch, avx: has_avx() }
     }
 
     pub fn bounds(&self) -> Aabb {
@@ -213,7 +238,39 @@ impl Accel {
                 },
             );
             if let Some(i) = hit {
+                if ANY {
+                    return Some(PrimHit { t: t_max, shape: 0, prim: 0, b1: 0.0, b2: 0.0 });
+                }
                 best = Some(PrimHit { t: t_max, shape: self.sph_shapes[i], prim: 0, b1: 0.0, b2: 0.0 });
+            }
+        }
+        if !self.sdf_nodes.is_empty() {
+            let mut hit = None;
+            traverse::<ANY, AVX>(
+                &self.sdf_nodes,
+                &bray,
+                &mut t_max,
+                self.prefetch,
+                |_| {},
+                |code, t_max| {
+                    let (start, count) = leaf_range(code);
+                    let mut found = false;
+                    for &(g, k) in &self.voxels[start..start + count] {
+                        if let Some(t) = self.grids[g as usize].0.intersect_voxel(k as usize, ray.o, ray.d, *t_max) {
+                            *t_max = t;
+                            hit = Some((g, k));
+                            found = true;
+                            if ANY {
+                                break;
+                            }
+                        }
+                    }
+                    found
+                },
+            );
+            if let Some((g, k)) = hit {
+                // prim: the voxel's number in its grid (`SdfGrid::normals_at`).
+                best = Some(PrimHit { t: t_max, shape: self.grids[g as usize].1, prim: k, b1: 0.0, b2: 0.0 });
             }
         }
         best

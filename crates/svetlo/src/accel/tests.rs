@@ -3,7 +3,7 @@
 
 use super::{Accel, PrimHit};
 use crate::geometry::triangle::WatertightRay;
-use crate::geometry::{Geometry, Ray, Sphere, TriangleMesh};
+use crate::geometry::{Geometry, Ray, SdfGrid, SdfNormals, Sphere, TriangleMesh};
 use crate::sampling::rng::Pcg32;
 use glam::Vec3;
 
@@ -29,6 +29,14 @@ fn brute(shapes: &[Geometry], ray: &Ray) -> Option<PrimHit> {
                     best = Some(PrimHit { t: th, shape: si as u32, prim: 0, b1: 0.0, b2: 0.0 });
                 }
             }
+            Geometry::SdfGrid(g) => {
+                for k in 0..g.voxel_count() {
+                    if let Some(th) = g.intersect_voxel(k, ray.o, ray.d, t_max) {
+                        t_max = th;
+                        best = Some(PrimHit { t: th, shape: si as u32, prim: k as u32, b1: 0.0, b2: 0.0 });
+                    }
+                }
+            }
         }
     }
     best
@@ -42,6 +50,7 @@ fn prim_t(shapes: &[Geometry], ray: &Ray, shape: u32, prim: u32) -> Option<f32> 
             WatertightRay::new(ray.o, ray.d).intersect(p0, p1, p2, ray.t_max).map(|h| h.0)
         }
         Geometry::Sphere(s) => s.intersect(ray.o, ray.d, ray.t_max),
+        Geometry::SdfGrid(g) => g.intersect_voxel(prim as usize, ray.o, ray.d, ray.t_max),
     }
 }
 
@@ -177,6 +186,34 @@ fn meshes_and_spheres_match_brute_force() {
     let rays = scene_rays(&mut rng, 4000);
     let hits = run(&shapes, &rays);
     assert!(hits > rays.len() / 20, "{hits} hits");
+}
+
+/// A torus-like SDF grid (two voxel hierarchies' worth of primitives) beside a mesh and a
+/// sphere: the voxel hierarchy finds what testing every voxel finds.
+#[test]
+fn sdf_grids_match_brute_force() {
+    let mut rng = Pcg32::new(4, 7);
+    let n = 20;
+    let mut values = Vec::new();
+    for z in 0..n {
+        for y in 0..n {
+            for x in 0..n {
+                let p = Vec3::new(x as f32, y as f32, z as f32) / (n - 1) as f32 - Vec3::splat(0.5);
+                let q = glam::Vec2::new(glam::Vec2::new(p.x, p.y).length() - 0.3, p.z);
+                values.push(q.length() - 0.12);
+            }
+        }
+    }
+    let place = glam::Mat4::from_translation(Vec3::new(0.2, 0.25, 0.3)) * glam::Mat4::from_rotation_x(0.6) * glam::Mat4::from_scale(Vec3::splat(0.5));
+    let grid = SdfGrid::new([n, n, n], values, place, SdfNormals::Smooth).unwrap();
+    let shapes = vec![
+        Geometry::SdfGrid(Box::new(grid)),
+        Geometry::Mesh(bumpy_sphere(20, Vec3::new(0.75, 0.5, 0.4), 0.2)),
+        Geometry::Sphere(Sphere { center: Vec3::new(0.45, 0.5, 0.55), radius: 0.1, flip_normals: false }),
+    ];
+    let rays = scene_rays(&mut rng, 3000);
+    let hits = run(&shapes, &rays);
+    assert!(hits > rays.len() / 30, "{hits} hits");
 }
 
 #[test]

@@ -56,6 +56,7 @@ impl LocalLights {
             .iter()
             .map(|l| match l {
                 Light::Area(a) => Some(match &*a.geometry {
+                    Geometry::SdfGrid(_) => return None,
                     Geometry::Sphere(s) => AreaProxy::Sphere { centre: s.center, radius: s.radius, radiance: a.radiance.mean() },
                     Geometry::Mesh(m) => {
                         let mut centre = Vec3::ZERO;

@@ -25,11 +25,11 @@ impl Integrator for PathTracer {
     }
 }
 
-/// Next-event estimation from a surface point: one light chosen by power, one point on it,
-/// weighted against BSDF sampling (`counts`: samples of each strategy); the shadow ray
-/// sees the scene at `time`. Returns the contribution without the path throughput,
-/// which light it reached and whether the light lies on the other side of the surface (a
-/// transmission), for the path's events.
+/// Next-event estimation from a surface point: one light chosen by the scene's light
+/// selection, one point on it, weighted against BSDF sampling (`counts`: samples of each
+/// strategy); the shadow ray sees the scene at `time`. Returns the contribution without the
+/// path throughput, which light it reached and whether the light lies on the other side of
+/// the surface (a transmission), for the path's events.
 #[allow(clippy::too_many_arguments)]
 pub(crate) fn sample_light_mis_to(
     scene: &Scene,
@@ -43,15 +43,35 @@ pub(crate) fn sample_light_mis_to(
     counts: (f32, f32),
     time: f32,
 ) -> (Rgb, u32, bool) {
-    const NONE: (Rgb, u32, bool) = (Rgb::BLACK, 0, false);
     if scene.lights.is_empty() {
-        return NONE;
+        return (Rgb::BLACK, 0, false);
     }
     let (li, pmf, _) = scene.light_distribution.sample_discrete(u_light);
+    let (c, through) = light_mis_to(scene, li as u32, pmf, p, ng, frame, wo, bsdf, u, counts, time);
+    (c, li as u32, through)
+}
+
+/// Next-event estimation toward light `li`, chosen with probability `pmf` (see
+/// [`sample_light_mis_to`]): the contribution and whether it arrives through the surface.
+#[allow(clippy::too_many_arguments)]
+pub(crate) fn light_mis_to(
+    scene: &Scene,
+    li: u32,
+    pmf: f32,
+    p: Vec3,
+    ng: Vec3,
+    frame: &crate::math::Frame,
+    wo: Vec3,
+    bsdf: &crate::bsdf::Bsdf,
+    u: glam::Vec2,
+    counts: (f32, f32),
+    time: f32,
+) -> (Rgb, bool) {
+    const NONE: (Rgb, bool) = (Rgb::BLACK, false);
     if pmf <= 0.0 {
         return NONE;
     }
-    let light = &scene.lights[li];
+    let light = &scene.lights[li as usize];
     let Some(ls) = light.sample_li(p, u, &scene.bounds) else { return NONE };
     if ls.pdf <= 0.0 || ls.li.is_black() {
         return NONE;
@@ -67,7 +87,7 @@ pub(crate) fn sample_light_mis_to(
     }
     let pdf_light = pmf * ls.pdf;
     let w = if light.is_delta() { 1.0 } else { power_heuristic(counts.0, pdf_light, counts.1, bsdf.pdf(wo, wi, TransportMode::Radiance)) };
-    (f * ls.li * (wi.z.abs() * w / pdf_light), li as u32, wi.z * wo.z < 0.0)
+    (f * ls.li * (wi.z.abs() * w / pdf_light), wi.z * wo.z < 0.0)
 }
 
 impl PixelEstimator for PathTracer {

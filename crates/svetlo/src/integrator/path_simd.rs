@@ -163,7 +163,7 @@ fn single_tracer(scene: &Scene) -> Tracer {
         first.push(n);
         n += match &*s.geometry {
             Geometry::Mesh(m) => m.triangle_count() as u32,
-            Geometry::Sphere(_) => 0,
+            Geometry::Sphere(_) | Geometry::SdfGrid(_) => 0,
         };
     }
     Tracer::Single { first }

@@ -129,6 +129,8 @@ impl ZBuffer {
                         tris.push(RasterTri { shape: si as u32, prim: k as u32, v });
                     }
                 }
+                // An implicit surface has no triangles to rasterise: not drawn.
+                Geometry::SdfGrid(_) => {}
             }
             if let Some((m, _)) = poses[si] {
                 for t in &mut tris[first..] {
@@ -154,6 +156,8 @@ impl ZBuffer {
                 let (n, uv, dpdu) = s.surface(p);
                 Surface { p, ng: n, ns: n, uv, dpdu }
             }
+            // Never rasterised (see `triangles`).
+            Geometry::SdfGrid(_) => Surface { p: q, ng: Vec3::Z, ns: Vec3::Z, uv: Vec2::ZERO, dpdu: Vec3::ZERO },
         };
         if let Some((m, inv)) = pose {
             // Normals by the inverse transpose; the mesh point is already in place.

@@ -7,6 +7,7 @@ pub mod mitsuba;
 pub mod pbrt;
 pub mod serialized;
 pub mod spectra;
+pub mod vol;
 
 pub use image_io::{read_exr, read_image, read_pfm, write_exr, write_image, write_pfm, write_png};
 pub use mitsuba::{load_scene, load_scene_from_str};

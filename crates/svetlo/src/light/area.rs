@@ -95,6 +95,8 @@ impl AreaLight {
                 (Some(Distribution1D::new(&areas)), area, normals, edges)
             }
             Geometry::Sphere(s) => (None, s.area(), Vec::new(), Vec::new()),
+            // Refused as emitters by the scene builder; no area to sample.
+            Geometry::SdfGrid(_) => (None, 0.0, Vec::new(), Vec::new()),
         };
         AreaLight { shape, geometry, radiance, tri_distribution, area, tri_normals, tri_edges }
     }

@@ -188,6 +188,11 @@ impl RadiosityMesh {
                 (b.diffuse_albedo(), back)
             };
             let (tri_mesh, sphere) = match &*shape.geometry {
+                // An implicit surface has no elements: radiosity leaves it out.
+                Geometry::SdfGrid(_) => {
+                    mesh.maps.push(ShapeMap::None);
+                    continue;
+                }
                 Geometry::Mesh(m) => (m.clone(), None),
                 Geometry::Sphere(s) => {
                     let mut m = shapes::uv_sphere(opts.sphere_segments.max(4));

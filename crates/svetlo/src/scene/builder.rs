@@ -12,7 +12,7 @@ use crate::texture::Texture;
 use std::sync::Arc;
 
 /// Probabilities of choosing each light for next-event estimation.
-fn light_selection_distribution(lights: &[Light], bounds: &SceneBounds, how: LightSelection) -> Distribution1D {
+pub(super) fn light_selection_distribution(lights: &[Light], bounds: &SceneBounds, how: LightSelection) -> Distribution1D {
     let n = lights.len().max(1) as f32;
     let powers: Vec<f32> = lights.iter().map(|l| l.power(bounds)).collect();
     let total: f32 = powers.iter().sum();
@@ -67,6 +67,12 @@ impl SceneBuilder {
                     return Err(Error::Invalid(format!("shape '{name}': sphere with radius {} at {:?}", s.radius, s.center)));
                 }
                 Geometry::Sphere(s)
+            }
+            Geometry::SdfGrid(g) => {
+                if emission.is_some() {
+                    return Err(Error::Invalid(format!("shape '{name}': an sdfgrid cannot be an area emitter (Mitsuba 3 does not support it either)")));
+                }
+                Geometry::SdfGrid(g)
             }
         };
         if material as usize >= self.materials.len() {

@@ -38,7 +38,7 @@ impl Shape {
     pub fn new(geometry: Arc<Geometry>, material: u32, light: Option<u32>, name: String, motion: Option<Arc<Motion>>) -> Shape {
         let flat = match &*geometry {
             Geometry::Mesh(m) => (0..m.triangle_count()).map(|t| m.flat_shading(t)).collect(),
-            Geometry::Sphere(_) => Vec::new(),
+            Geometry::Sphere(_) | Geometry::SdfGrid(_) => Vec::new(),
         };
         Shape { geometry, material, light, name, motion, flat, detail: false }
     }
@@ -223,6 +223,11 @@ impl Scene {
                 let (n, uv, dpdu) = s.surface(p);
                 (p, n, n, uv, dpdu)
             }
+            // As in Mitsuba: the point along the ray (not reprojected), no uvs.
+            Geometry::SdfGrid(g) => {
+                let (ng, ns) = g.normals_at(hit.prim as usize, p_ray);
+                (p_ray, ng, ns, Vec2::ZERO, Vec3::ZERO)
+            }
         };
         let bary = if matches!(&*shape.geometry, Geometry::Mesh(_)) { Vec2::new(hit.b1, hit.b2) } else { Vec2::ZERO };
         SurfaceInteraction {
@@ -299,6 +304,8 @@ impl Scene {
         match &*self.shapes[si.shape as usize].geometry {
             Geometry::Mesh(m) => m.dp_duv(si.prim as usize),
             Geometry::Sphere(s) => s.dp_duv(si.p),
+            // No uv parameterisation: the shading frame's axes stand in.
+            Geometry::SdfGrid(_) => (si.shading.s, si.shading.t),
         }
     }
 
@@ -313,6 +320,13 @@ impl Scene {
 
     pub fn material(&self, si: &SurfaceInteraction) -> &Material {
         &self.materials[self.shapes[si.shape as usize].material as usize]
+    }
+
+    /// Choose lights for next-event estimation (and light tracing's emission) by `how` from
+    /// now on.
+    pub fn set_light_selection(&mut self, how: LightSelection) {
+        self.settings.light_selection = how;
+        self.light_distribution = builder::light_selection_distribution(&self.lights, &self.bounds, how);
     }
 
     /// Probability that light selection picks light `i`.

@@ -301,6 +301,10 @@ pub(super) fn write(scene: &Scene, files: &mut Files) -> Result<String> {
     }
 
     for sh in &scene.shapes {
+        if matches!(&*sh.geometry, Geometry::SdfGrid(_)) {
+            w.files.warn(format!("shape '{}': SDF grids are not exported; shape left out", sh.name));
+            continue;
+        }
         if sh.motion.is_some() {
             w.files.warn(format!("shape '{}' moves: written at its first pose (motion is not exported)", sh.name));
         }
@@ -322,6 +326,7 @@ pub(super) fn write(scene: &Scene, files: &mut Files) -> Result<String> {
                     w.line(2, r#"<boolean name="flip_normals" value="true"/>"#);
                 }
             }
+            Geometry::SdfGrid(_) => {}
         }
         w.line(2, &format!(r#"<ref id="mat{}"/>"#, sh.material));
         if let Some(Light::Area(a)) = sh.light.and_then(|l| scene.lights.get(l as usize)) {

@@ -391,6 +391,10 @@ pub(super) fn write(scene: &Scene, files: &mut Files) -> Result<String> {
     w.out += "\n";
 
     for sh in &scene.shapes {
+        if matches!(&*sh.geometry, Geometry::SdfGrid(_)) {
+            w.files.warn(format!("shape '{}': pbrt-v4 has no SDF grid shape; shape left out", sh.name));
+            continue;
+        }
         if sh.motion.is_some() {
             w.files.warn(format!("shape '{}' moves: written at its first pose (motion is not exported)", sh.name));
         }
@@ -422,6 +426,7 @@ pub(super) fn write(scene: &Scene, files: &mut Files) -> Result<String> {
                 }
                 let _ = writeln!(w.out, r#"  Shape "sphere" "float radius" {}{alpha_param}"#, sp.radius);
             }
+            Geometry::SdfGrid(_) => {}
         }
         w.out += "AttributeEnd\n";
     }

@@ -1,10 +1,10 @@
-//! Shape plugins: parametric shapes (meshed, spheres analytic), mesh files, instances.
+//! Shape plugins: parametric shapes (meshed, spheres analytic), mesh files, SDF grids, instances.
 
 use super::props::{parse_f32, parse_transform};
 use super::xml::Node;
 use super::Loader;
 use crate::error::{Error, Result};
-use crate::geometry::{shapes, AnimatedTransform, Geometry, Sphere, TriangleMesh};
+use crate::geometry::{shapes, AnimatedTransform, Geometry, SdfGrid, SdfNormals, Sphere, TriangleMesh};
 use crate::io::mesh_files::{self, LoadedMesh};
 use crate::io::spectra::SpectrumKind;
 use crate::math::Frame;
@@ -117,7 +117,13 @@ impl<'a> Loader<'a> {
                 Geometry::Mesh(finish(mesh, flip))
             }
             "shapegroup" => return Err(node.loc.err("a shapegroup cannot be nested inside another shape")),
-            "sdfgrid" | "bsplinecurve" | "linearcurve" | "ellipsoids" | "ellipsoidsmesh" | "merge" => {
+            "sdfgrid" => {
+                if emission.is_some() {
+                    return Err(node.loc.err(format!("shape '{name}': an sdfgrid cannot be an area emitter (Mitsuba 3 does not support it either)")));
+                }
+                self.sdfgrid(node, to_world)?
+            }
+            "bsplinecurve" | "linearcurve" | "ellipsoids" | "ellipsoidsmesh" | "merge" => {
                 self.warn(format!("{}:{}: shape type '{ty}' is not supported; shape '{name}' skipped", node.loc.file.display(), node.loc.line));
                 return Ok(());
             }
@@ -240,6 +246,23 @@ impl<'a> Loader<'a> {
         let f = Frame::from_normal(d / len);
         let rot = Mat4::from_cols(f.s.extend(0.0), f.t.extend(0.0), f.n.extend(0.0), glam::Vec4::W);
         Ok(Mat4::from_translation(p0) * rot * Mat4::from_scale(Vec3::new(r, r, len)))
+    }
+
+    /// Mitsuba's `sdfgrid`: a one-channel `.vol` grid over the unit cube, placed by `to_world`.
+    fn sdfgrid(&mut self, node: &'a Node, to_world: Mat4) -> Result<Geometry> {
+        let normals = match self.string(node, "normals")?.unwrap_or("smooth") {
+            "smooth" => SdfNormals::Smooth,
+            "analytic" => SdfNormals::Analytic,
+            other => return Err(node.loc.err(format!("sdfgrid normals must be 'smooth' or 'analytic', not '{other}'"))),
+        };
+        let path = self.file_prop(node)?;
+        let grid = crate::io::vol::read_vol(&path)?;
+        if grid.channels != 1 {
+            return Err(Error::Scene { file: path, msg: format!("an SDF grid has one channel, this grid has {}", grid.channels) });
+        }
+        // The grid (4 bytes a sample) is held once; the voxel list is at most as large again.
+        let g = SdfGrid::new(grid.res, grid.values, to_world, normals).map_err(|e| Error::Scene { file: path, msg: e })?;
+        Ok(Geometry::SdfGrid(Box::new(g)))
     }
 
     fn sphere(&mut self, node: &'a Node, to_world: Mat4, flip: bool, emits: bool, name: &str) -> Result<Geometry> {

@@ -33,7 +33,7 @@ const SUPPORTED: &[(&str, &[&str])] = &[
             "ward",
         ],
     ),
-    ("shape", &["sphere", "rectangle", "cube", "disk", "cylinder", "obj", "ply", "serialized", "shapegroup", "instance"]),
+    ("shape", &["sphere", "rectangle", "cube", "disk", "cylinder", "obj", "ply", "serialized", "sdfgrid", "shapegroup", "instance"]),
     ("emitter", &["point", "spot", "directional", "constant", "envmap", "projector", "area"]),
     ("texture", &["bitmap", "checkerboard", "mesh_attribute", "rawconstant"]),
     ("sensor", &["perspective", "thinlens", "orthographic"]),
@@ -102,7 +102,7 @@ fn walk(n: &Node, out: &mut Vec<Unsupported>) {
     } else if let (Some((_, types)), Some(t)) = (SUPPORTED.iter().find(|(tag, _)| *tag == n.tag), ty) {
         if !types.contains(&t) {
             let consequence = match n.tag.as_str() {
-                "shape" if matches!(t, "sdfgrid" | "bsplinecurve" | "linearcurve" | "ellipsoids" | "ellipsoidsmesh" | "merge") => Consequence::Skipped,
+                "shape" if matches!(t, "bsplinecurve" | "linearcurve" | "ellipsoids" | "ellipsoidsmesh" | "merge") => Consequence::Skipped,
                 "film" | "rfilter" => Consequence::Replaced,
                 _ => Consequence::Error,
             };
@@ -128,14 +128,14 @@ mod tests {
     #[test]
     fn lists_every_unsupported_plugin_with_its_line() {
         let found = list(
-            "<scene version=\"3.0.0\">\n<bsdf type=\"principled\" id=\"a\"/>\n<shape type=\"sdfgrid\"/>\n<shape type=\"sphere\">\n<bsdf type=\"diffuse\"/>\n<ref name=\"interior\" id=\"m\"/>\n</shape>\n<medium type=\"homogeneous\" id=\"m\"/>\n<texture type=\"noise\" id=\"t\"/>\n</scene>",
+            "<scene version=\"3.0.0\">\n<bsdf type=\"principled\" id=\"a\"/>\n<shape type=\"bsplinecurve\"/>\n<shape type=\"sphere\">\n<bsdf type=\"diffuse\"/>\n<ref name=\"interior\" id=\"m\"/>\n</shape>\n<medium type=\"homogeneous\" id=\"m\"/>\n<texture type=\"noise\" id=\"t\"/>\n</scene>",
         );
         let got: Vec<(u32, &str, Consequence)> = found.iter().map(|u| (u.line, u.element.as_str(), u.consequence)).collect();
         assert_eq!(
             got,
             vec![
                 (2, "<bsdf type=\"principled\">", Consequence::Error),
-                (3, "<shape type=\"sdfgrid\">", Consequence::Skipped),
+                (3, "<shape type=\"bsplinecurve\">", Consequence::Skipped),
                 (6, "<ref name=\"interior\"> (a participating medium)", Consequence::Error),
                 (8, "<medium type=\"homogeneous\">", Consequence::Error),
                 (9, "<texture type=\"noise\">", Consequence::Error),

@@ -638,6 +638,7 @@ fn transform_geometry(g: Geometry, m: &Mat4, loc: &Loc) -> Result<Geometry> {
             }
             Geometry::Sphere(crate::geometry::Sphere { center: m.transform_point3(s.center), radius: s.radius * scale, ..s })
         }
+        Geometry::SdfGrid(g) => Geometry::SdfGrid(Box::new(g.transformed(m).map_err(|e| loc.err(e))?)),
     })
 }
 
