@@ -135,10 +135,6 @@ impl<'a> Loader<'a> {
 
     fn scene(&mut self, root: &'a Node) -> Result<()> {
         self.check_version(root)?;
-        // Mitsuba 3 picks every emitter alike for next-event estimation and light tracing (its
-        // `sampling_weight` defaults to 1): the same estimator, and so the same variance, as
-        // the renderer the scene was written for.
-        self.b.settings.light_selection = crate::scene::LightSelection::Uniform;
         for c in &root.children {
             match c.tag.as_str() {
                 "integrator" => self.integrator(c)?,
