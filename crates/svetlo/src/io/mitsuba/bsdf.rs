@@ -131,7 +131,7 @@ impl<'a> Loader<'a> {
         let weight = |l: &mut Self, name: &str, default: f32, max: f32| -> Result<Texture> {
             let t = l.float_texture(node, name, default)?;
             if let Texture::Constant(c) = &t {
-                if !(c.r >= 0.0 && c.r <= max) {
+                if !(0.0..=max).contains(&c.r) {
                     let at = l.prop(node, name)?.map_or(&node.loc, |p| &p.loc);
                     return Err(at.err(format!("{ty}: '{name}' must lie in [0, {max}], got {}", c.r)));
                 }
@@ -186,7 +186,7 @@ impl<'a> Loader<'a> {
                 (None, specular) => {
                     let s = specular.unwrap_or(0.5);
                     // sqrt(0.08 s) is the normal reflectance's square root: below 1.
-                    if !(s >= 0.0 && s < 12.5) {
+                    if !(0.0..12.5).contains(&s) {
                         let at = self.prop(node, "specular")?.map_or(&node.loc, |p| &p.loc);
                         return Err(at.err(format!("principled: 'specular' must lie in [0, 12.5), got {s}")));
                     }
