@@ -723,19 +723,27 @@ mod tests {
 
     #[test]
     fn gtr1_is_normalised_and_sampled_by_its_pdf() {
-        // ∫ D(m) cos θm dm = 1 (midpoint rule in cos θ), and the sampler's cos θ follows
-        // the same law: compare the CDF at a few points.
-        for alpha in [0.001f32, 0.03, 0.1] {
-            let n = 200_000;
-            let s: f64 = (0..n)
+        // ∫ D(m) cos θm dm = 1, and the sampler inverts its cos θ distribution: the
+        // probability of cos θ below that of the sample drawn with u.y is 1 - u.y (Mitsuba's
+        // mapping runs from the pole at u.y = 0; midpoint rule).
+        let mass_below = |alpha: f32, c_max: f64| -> f64 {
+            let n = 400_000;
+            (0..n)
                 .map(|k| {
-                    let c = (k as f64 + 0.5) / n as f64;
-                    2.0 * std::f64::consts::PI * gtr1_pdf(alpha, Vec3::new((1.0 - c * c).sqrt() as f32, 0.0, c as f32)) as f64 / n as f64
+                    let c = (k as f64 + 0.5) / n as f64 * c_max;
+                    2.0 * std::f64::consts::PI * gtr1_pdf(alpha, Vec3::new((1.0 - c * c).sqrt() as f32, 0.0, c as f32)) as f64 * c_max / n as f64
                 })
-                .sum();
-            assert!((s - 1.0).abs() < 2e-3, "alpha {alpha}: {s}");
-            let m = gtr1_sample(alpha, Vec2::new(0.3, 0.5));
-            assert!((m.length() - 1.0).abs() < 1e-5 && m.z > 0.0);
+                .sum()
+        };
+        for alpha in [0.05f32, 0.1, 0.3] {
+            let total = mass_below(alpha, 1.0);
+            assert!((total - 1.0).abs() < 2e-3, "alpha {alpha}: {total}");
+            for uy in [0.2f32, 0.5, 0.8] {
+                let m = gtr1_sample(alpha, Vec2::new(0.3, uy));
+                assert!((m.length() - 1.0).abs() < 1e-5 && m.z > 0.0);
+                let below = mass_below(alpha, m.z as f64);
+                assert!((below - (1.0 - uy as f64)).abs() < 2e-3, "alpha {alpha} u {uy}: {below}");
+            }
         }
     }
 
