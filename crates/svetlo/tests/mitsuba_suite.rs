@@ -54,9 +54,6 @@ const SCENES: &[(&str, &str)] = &[
 /// Scenes not expected to pass yet, each with the reason. The default test asserts every
 /// other scene passes, and prints how these fare.
 const KNOWN_FAILING: &[(&str, &str)] = &[
-    ("bsdf_spheres/test_texturedprincipled1_path.xml", "principled not supported"),
-    ("bsdf_spheres/test_texturedprincipled2_path.xml", "principled not supported"),
-    ("bsdf_spheres/test_texturedprincipledthin_path.xml", "principledthin not supported"),
 ];
 
 /// The integrator Mitsuba's suite renders a scene with: the file name's last `_` part.

@@ -74,6 +74,8 @@ pub enum Material {
     BumpMap { height: Texture, scale: f32, inner: Box<Material> },
     /// Mitsuba `blendbsdf`: (1 - weight) a + weight b.
     Blend { weight: Texture, a: Box<Material>, b: Box<Material> },
+    /// Mitsuba `principled` and `principledthin` (`bsdf/principled.rs`).
+    Principled(Box<super::principled::PrincipledMaterial>),
 }
 
 /// The differential geometry at a hit that surface detail (normal and bump maps) needs.
@@ -188,6 +190,7 @@ impl Material {
             Material::NormalMap { inner, .. } => format!("normalmap({})", inner.kind_name()),
             Material::BumpMap { inner, .. } => format!("bumpmap({})", inner.kind_name()),
             Material::Blend { a, b, .. } => format!("blendbsdf({}, {})", a.kind_name(), b.kind_name()),
+            Material::Principled(p) => if p.thin { "principledthin" } else { "principled" }.into(),
         }
     }
 
@@ -225,6 +228,7 @@ impl Material {
             Material::Null => true,
             Material::NormalMap { .. } | Material::BumpMap { .. } => false,
             Material::Blend { weight, a, b } => c(weight) && a.is_uniform() && b.is_uniform(),
+            Material::Principled(p) => p.is_uniform(),
         }
     }
 
@@ -335,6 +339,7 @@ impl Material {
             Material::Blend { weight, a, b } => {
                 Some(BsdfModel::Blend(Box::new(super::blend::Blend { a: a.bsdf(uv), b: b.bsdf(uv), weight: weight.eval_f32(uv).clamp(0.0, 1.0) })))
             }
+            Material::Principled(p) => Some(p.model(uv)),
         }
     }
 
@@ -472,6 +477,7 @@ impl Material {
                 }
                 rough(&mut c.roughness, &mut out);
             }
+            Material::Principled(p) => out.extend(p.textures_mut()),
         }
         out
     }

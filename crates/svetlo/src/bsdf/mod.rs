@@ -19,6 +19,7 @@ pub mod mix;
 pub mod oren_nayar;
 pub mod phong;
 pub mod plastic;
+pub mod principled;
 pub mod ward;
 
 pub use material::{Material, MicrofacetKind};
@@ -130,6 +131,10 @@ pub enum BsdfModel {
     Mix(Box<mix::Mix>),
     /// pbrt-v4's Lambertian reflection and transmission.
     DiffuseTransmission(diffuse_transmission::DiffuseTransmission),
+    /// Mitsuba `principled` (boxed: a dozen parameters).
+    Principled(Box<principled::Principled>),
+    /// Mitsuba `principledthin`.
+    PrincipledThin(Box<principled::PrincipledThin>),
 }
 
 /// Forward a call to the model inside, whatever it is.
@@ -153,6 +158,8 @@ macro_rules! dispatch {
             BsdfModel::Coated($m) => $e,
             BsdfModel::Mix($m) => $e,
             BsdfModel::DiffuseTransmission($m) => $e,
+            BsdfModel::Principled($m) => $e,
+            BsdfModel::PrincipledThin($m) => $e,
         }
     };
 }
@@ -202,6 +209,8 @@ impl BsdfModel {
             BsdfModel::Ward(m) => m.diffuse_reflectance,
             BsdfModel::OrenNayar(m) => m.reflectance,
             BsdfModel::Blend(m) => m.diffuse_albedo(),
+            BsdfModel::Principled(m) => m.diffuse_albedo(),
+            BsdfModel::PrincipledThin(m) => m.diffuse_albedo(),
             _ => Rgb::BLACK,
         }
     }

@@ -222,6 +222,40 @@ impl Writer<'_> {
                 self.color(d + 1, "reflectance", reflectance)?;
             }
             Material::Null => open(self, "null"),
+            Material::Principled(p) => {
+                open(self, if p.thin { "principledthin" } else { "principled" });
+                for (name, t) in p.textures() {
+                    if name == "base_color" {
+                        self.color(d + 1, name, t)?;
+                    } else {
+                        self.scalar(d + 1, name, t)?;
+                    }
+                }
+                if !p.thin {
+                    // Mitsuba's principled takes a constant IOR; `specular` was converted.
+                    self.line(d + 1, &format!(r#"<float name="eta" value="{}"/>"#, p.eta.eval_f32(glam::Vec2::ZERO)));
+                }
+                let r = &p.rates;
+                let rates: &[(&str, f32)] = if p.thin {
+                    &[
+                        ("diffuse_reflectance_sampling_rate", r.diffuse_reflection),
+                        ("specular_reflectance_sampling_rate", r.specular),
+                        ("specular_transmittance_sampling_rate", r.secondary),
+                        ("diffuse_transmittance_sampling_rate", r.diffuse_transmission),
+                    ]
+                } else {
+                    &[
+                        ("diffuse_reflectance_sampling_rate", r.diffuse_reflection),
+                        ("main_specular_sampling_rate", r.specular),
+                        ("clearcoat_sampling_rate", r.secondary),
+                    ]
+                };
+                for (name, v) in rates {
+                    if *v != 1.0 {
+                        self.line(d + 1, &format!(r#"<float name="{name}" value="{v}"/>"#));
+                    }
+                }
+            }
             other => {
                 self.files.warn(format!("material '{}' is svetlo's own (no Mitsuba 3 plugin): written as a grey diffuse", other.kind_name()));
                 open(self, "diffuse");

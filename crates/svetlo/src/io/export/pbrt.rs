@@ -230,6 +230,14 @@ impl Writer<'_> {
                 format!(r#""string type" "mix" "string materials" [ "{}" "{}" ] {}"#, names[0], names[1], self.scalar("amount", amount)?)
             }
             Material::Null => r#""string type" "interface""#.to_string(),
+            Material::Principled(p) => {
+                // pbrt-v4 has no Disney BSDF: its diffuse base is what carries over best.
+                self.files.warn(format!(
+                    "Mitsuba's {} has no pbrt-v4 equal: written as a diffuse of its base_color (specular, sheen, clearcoat and transmission are dropped)",
+                    if p.thin { "principledthin" } else { "principled" }
+                ));
+                format!(r#""string type" "diffuse" {}"#, self.color("reflectance", &p.base_color)?)
+            }
             other => {
                 self.files.warn(format!("material '{}' has no pbrt-v4 equal: written as a grey diffuse", other.kind_name()));
                 r#""string type" "diffuse""#.to_string()

@@ -3,10 +3,12 @@
 use super::xml::Node;
 use super::Loader;
 use crate::bsdf::material::{MicrofacetKind, Roughness};
+use crate::bsdf::principled::{eta_from_specular, PrincipledMaterial, SamplingRates};
 use crate::bsdf::Material;
 use crate::error::Result;
 use crate::io::spectra::{self, SpectrumKind};
 use crate::spectrum::Rgb;
+use crate::texture::Texture;
 
 impl<'a> Loader<'a> {
     /// The material index of a `<bsdf>` element; one with an id is built once and shared.
@@ -117,6 +119,90 @@ impl<'a> Loader<'a> {
             }
         }
         Ok(Roughness { kind, alpha_u, alpha_v })
+    }
+
+    /// Mitsuba's `principled` (`thin` false) or `principledthin`: every parameter a float
+    /// or a texture; constants outside their ranges are errors, textures are clamped when
+    /// evaluated.
+    fn principled(&mut self, node: &'a Node, thin: bool) -> Result<PrincipledMaterial> {
+        let mut m = PrincipledMaterial { thin, ..PrincipledMaterial::default() };
+        m.base_color = self.spectrum(node, "base_color", Rgb::splat(0.5), SpectrumKind::Reflectance)?;
+        let ty = if thin { "principledthin" } else { "principled" };
+        let weight = |l: &mut Self, name: &str, default: f32, max: f32| -> Result<Texture> {
+            let t = l.float_texture(node, name, default)?;
+            if let Texture::Constant(c) = &t {
+                if !(0.0..=max).contains(&c.r) {
+                    let at = l.prop(node, name)?.map_or(&node.loc, |p| &p.loc);
+                    return Err(at.err(format!("{ty}: '{name}' must lie in [0, {max}], got {}", c.r)));
+                }
+            }
+            Ok(t)
+        };
+        m.roughness = weight(self, "roughness", 0.5, 1.0)?;
+        m.anisotropic = weight(self, "anisotropic", 0.0, 1.0)?;
+        m.spec_trans = weight(self, "spec_trans", 0.0, 1.0)?;
+        m.spec_tint = weight(self, "spec_tint", 0.0, 1.0)?;
+        m.sheen = weight(self, "sheen", 0.0, 1.0)?;
+        m.sheen_tint = weight(self, "sheen_tint", 0.0, 1.0)?;
+        m.flatness = weight(self, "flatness", 0.0, 1.0)?;
+        let rate = |l: &Self, name: &str| -> Result<f32> {
+            let v = l.float(node, name, 1.0)?;
+            if !(v >= 0.0 && v.is_finite()) {
+                let at = l.prop(node, name)?.map_or(&node.loc, |p| &p.loc);
+                return Err(at.err(format!("{ty}: '{name}' must be a finite non-negative number, got {v}")));
+            }
+            Ok(v)
+        };
+        let bad_eta = |l: &Self, v: f32| -> Result<()> {
+            if v > 0.0 && v.is_finite() {
+                return Ok(());
+            }
+            let at = l.prop(node, "eta")?.map_or(&node.loc, |p| &p.loc);
+            Err(at.err(format!("{ty}: 'eta' (interior / exterior IOR) must be positive and finite, got {v}")))
+        };
+        if thin {
+            m.diff_trans = weight(self, "diff_trans", 0.0, 2.0)?;
+            m.eta = self.float_texture(node, "eta", 1.5)?;
+            if let Texture::Constant(c) = &m.eta {
+                bad_eta(self, c.r)?;
+            }
+            m.rates = SamplingRates {
+                diffuse_reflection: rate(self, "diffuse_reflectance_sampling_rate")?,
+                specular: rate(self, "specular_reflectance_sampling_rate")?,
+                secondary: rate(self, "specular_transmittance_sampling_rate")?,
+                diffuse_transmission: rate(self, "diffuse_transmittance_sampling_rate")?,
+            };
+        } else {
+            m.metallic = weight(self, "metallic", 0.0, 1.0)?;
+            m.clearcoat = weight(self, "clearcoat", 0.0, 1.0)?;
+            m.clearcoat_gloss = weight(self, "clearcoat_gloss", 0.0, 1.0)?;
+            let refracts = !matches!(&m.spec_trans, Texture::Constant(c) if c.r == 0.0);
+            let eta = match (self.opt_float(node, "eta")?, self.opt_float(node, "specular")?) {
+                (Some(_), Some(_)) => return Err(node.loc.err("principled: give either 'eta' or 'specular', not both")),
+                (Some(eta), None) => {
+                    bad_eta(self, eta)?;
+                    eta
+                }
+                (None, specular) => {
+                    let s = specular.unwrap_or(0.5);
+                    // sqrt(0.08 s) is the normal reflectance's square root: below 1.
+                    if !(0.0..12.5).contains(&s) {
+                        let at = self.prop(node, "specular")?.map_or(&node.loc, |p| &p.loc);
+                        return Err(at.err(format!("principled: 'specular' must lie in [0, 12.5), got {s}")));
+                    }
+                    // Mitsuba: zero specular (eta 1) cannot refract plausibly.
+                    eta_from_specular(if refracts && s == 0.0 { 1e-3 } else { s })
+                }
+            };
+            m.eta = Texture::Constant(Rgb::splat(eta));
+            m.rates = SamplingRates {
+                diffuse_reflection: rate(self, "diffuse_reflectance_sampling_rate")?,
+                specular: rate(self, "main_specular_sampling_rate")?,
+                secondary: rate(self, "clearcoat_sampling_rate")?,
+                diffuse_transmission: 1.0,
+            };
+        }
+        Ok(m)
     }
 
     /// A `<bsdf>` element as a material, nested BSDFs included.
@@ -242,8 +328,8 @@ impl<'a> Loader<'a> {
                 }
                 Material::Blend { weight, a: Box::new(self.bsdf(a)?), b: Box::new(self.bsdf(b)?) }
             }
-            "principled" | "principledthin" | "hair" | "measured" | "pplastic" | "polarizer" | "retarder" | "circular" | "roughcoating" | "coating"
-            | "difftrans" => {
+            "principled" | "principledthin" => Material::Principled(Box::new(self.principled(node, ty == "principledthin")?)),
+            "hair" | "measured" | "pplastic" | "polarizer" | "retarder" | "circular" | "roughcoating" | "coating" | "difftrans" => {
                 return Err(node.loc.err(format!("bsdf type '{ty}' is not supported")));
             }
             other => return Err(node.loc.err(format!("unknown bsdf type '{other}'"))),

@@ -26,6 +26,8 @@ const SUPPORTED: &[(&str, &[&str])] = &[
             "normalmap",
             "bumpmap",
             "blendbsdf",
+            "principled",
+            "principledthin",
             "phong",
             "blinnphong",
             "cooktorrance",
@@ -61,7 +63,7 @@ pub enum Consequence {
 pub struct Unsupported {
     pub file: PathBuf,
     pub line: u32,
-    /// `<bsdf type="principled">` and the like.
+    /// `<bsdf type="hair">` and the like.
     pub element: String,
     pub consequence: Consequence,
 }
@@ -128,20 +130,20 @@ mod tests {
     #[test]
     fn lists_every_unsupported_plugin_with_its_line() {
         let found = list(
-            "<scene version=\"3.0.0\">\n<bsdf type=\"principled\" id=\"a\"/>\n<shape type=\"bsplinecurve\"/>\n<shape type=\"sphere\">\n<bsdf type=\"diffuse\"/>\n<ref name=\"interior\" id=\"m\"/>\n</shape>\n<medium type=\"homogeneous\" id=\"m\"/>\n<texture type=\"noise\" id=\"t\"/>\n</scene>",
+            "<scene version=\"3.0.0\">\n<bsdf type=\"hair\" id=\"a\"/>\n<shape type=\"bsplinecurve\"/>\n<shape type=\"sphere\">\n<bsdf type=\"diffuse\"/>\n<ref name=\"interior\" id=\"m\"/>\n</shape>\n<medium type=\"homogeneous\" id=\"m\"/>\n<texture type=\"noise\" id=\"t\"/>\n</scene>",
         );
         let got: Vec<(u32, &str, Consequence)> = found.iter().map(|u| (u.line, u.element.as_str(), u.consequence)).collect();
         assert_eq!(
             got,
             vec![
-                (2, "<bsdf type=\"principled\">", Consequence::Error),
+                (2, "<bsdf type=\"hair\">", Consequence::Error),
                 (3, "<shape type=\"bsplinecurve\">", Consequence::Skipped),
                 (6, "<ref name=\"interior\"> (a participating medium)", Consequence::Error),
                 (8, "<medium type=\"homogeneous\">", Consequence::Error),
                 (9, "<texture type=\"noise\">", Consequence::Error),
             ]
         );
-        assert!(found[0].to_string().starts_with("scene.xml:2: <bsdf type=\"principled\"> not supported"), "{}", found[0]);
+        assert!(found[0].to_string().starts_with("scene.xml:2: <bsdf type=\"hair\"> not supported"), "{}", found[0]);
         assert!(list("<scene version=\"3.0.0\"><shape type=\"obj\"><bsdf type=\"normalmap\"><bsdf type=\"diffuse\"/></bsdf></shape></scene>").is_empty());
     }
 }
