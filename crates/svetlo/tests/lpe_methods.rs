@@ -250,7 +250,7 @@ fn radiosity_routes_its_parts() {
 fn methods_without_lpe_support_refuse_it() {
     let scene = repo_scene("caustic.xml", 8);
     let set = aovs(&scene, PARTITION, None);
-    for method in ["photon", "sppm"] {
+    for method in ["radiosity:hybrid=true,element-size=1"] {
         let e = svetlo::methods::by_name(method).unwrap().render(
             &scene,
             &RenderSettings { spp: 1, lpe: Some(set.clone()), ..Default::default() },

@@ -272,6 +272,11 @@ impl Film {
         self.full.add_sample(p, l);
     }
 
+    /// [`Self::add_sample`] with the sample's value in each AOV layer.
+    pub fn add_sample_layers(&mut self, p: Vec2, l: Rgb, aov: &[Rgb]) {
+        self.full.add_sample_layers(p, l, aov);
+    }
+
     /// Add another film's raw sums to this one's (same size, filter and layers): the step of
     /// the pass tree that makes a render's image from its passes. `spp_done` adds up; the
     /// splat scale is left to the caller (it is the whole render's spp).

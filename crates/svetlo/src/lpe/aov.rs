@@ -241,6 +241,12 @@ impl AovSet {
         Some(RevProduct { table, states: states.len(), meets })
     }
 
+    /// Whether a light subpath's automaton states fit one integer (the reverse product
+    /// state), which photons carry from the light to the lookup that completes their path.
+    pub fn light_states_fit(&self) -> bool {
+        self.is_empty() || self.product.as_ref().is_some_and(|p| p.rev.is_some())
+    }
+
     /// States of the product automaton (0: none was built).
     pub fn product_states(&self) -> usize {
         self.product.as_ref().map_or(0, |p| p.states.len())
@@ -463,6 +469,22 @@ impl<'a> Tracker<'a> {
     pub fn set(&self) -> &'a AovSet {
         self.set
     }
+    /// The same states held with a longer borrow of `set`, which must be the set the tracker
+    /// was made from (the states index its automata).
+    #[inline]
+    pub fn rebind<'s>(&self, set: &'s AovSet) -> Tracker<'s> {
+        debug_assert!(std::ptr::eq(self.set, set));
+        Tracker { set, q: self.q, st: self.st }
+    }
+    /// The layers that take this camera prefix joined to a light subpath whose reverse
+    /// product state is `r` ([`LightTracker::state`]; see [`AovSet::light_states_fit`]).
+    #[inline]
+    pub fn meets_state(&self, r: u32) -> LayerMask {
+        match self.set.product.as_ref().and_then(|p| p.rev.as_ref()) {
+            Some(rp) => rp.meets[self.q as usize * rp.states + r as usize],
+            None => self.set.base_mask(),
+        }
+    }
 }
 
 /// The reverse automata's states along a light subpath (light first).
@@ -523,6 +545,12 @@ impl<'a> LightTracker<'a> {
         }
         m
     }
+    /// The reverse product state: all a photon needs to carry of its subpath's events
+    /// (meaningful where [`AovSet::light_states_fit`]).
+    #[inline]
+    pub fn state(&self) -> u32 {
+        self.r
+    }
     /// The layers that take this subpath ending at the camera (light tracing, t = 1).
     #[inline]
     pub fn meets_camera(&self) -> LayerMask {
@@ -551,6 +579,15 @@ impl LayerSample {
         self.beauty += other.beauty * k;
         for (a, b) in self.aov[..n].iter_mut().zip(&other.aov[..n]) {
             *a += *b * k;
+        }
+    }
+
+    /// Multiply every layer and the beauty by `k`.
+    #[inline]
+    pub fn scale(&mut self, k: f32) {
+        self.beauty = self.beauty * k;
+        for a in &mut self.aov {
+            *a = *a * k;
         }
     }
 
