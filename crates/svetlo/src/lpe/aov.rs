@@ -406,12 +406,12 @@ pub struct Tracker<'a> {
 }
 
 impl Product {
-    #[inline]
+    #[inline(always)]
     fn class(&self, e: Event) -> usize {
         let k = if e.labels == 0 { 0 } else { self.masks.iter().position(|&m| m == e.labels).unwrap_or(0) };
         e.base as usize + super::automaton::BASE_COUNT * k
     }
-    #[inline]
+    #[inline(always)]
     fn step(&self, q: u32, e: Event) -> u32 {
         self.table[q as usize * self.n_classes + self.class(e)]
     }
@@ -425,7 +425,7 @@ impl<'a> Tracker<'a> {
         t.push(Event::CAMERA);
         t
     }
-    #[inline]
+    #[inline(always)]
     pub fn push(&mut self, e: Event) {
         match &self.set.product {
             Some(p) => self.q = p.step(self.q, e),
@@ -437,7 +437,7 @@ impl<'a> Tracker<'a> {
         }
     }
     /// The layers that take a path ending here with event `e`.
-    #[inline]
+    #[inline(always)]
     pub fn ends(&self, e: Event) -> LayerMask {
         if let Some(p) = &self.set.product {
             return p.accept[p.step(self.q, e) as usize];
@@ -454,6 +454,9 @@ impl<'a> Tracker<'a> {
     /// the scattering vertex, then the light).
     #[inline]
     pub fn ends2(&self, a: Event, b: Event) -> LayerMask {
+        if let Some(p) = &self.set.product {
+            return p.accept[p.step(p.step(self.q, a), b) as usize];
+        }
         let mut t = *self;
         t.push(a);
         t.ends(b)
@@ -564,11 +567,13 @@ pub struct LayerSample {
     pub aov: [Rgb; MAX_LAYERS],
     /// The sum of contributions the beauty takes.
     pub beauty: Rgb,
+    /// Bit i: AOV i may have been added to (the film skips the others).
+    pub touched: u32,
 }
 
 impl Default for LayerSample {
     fn default() -> Self {
-        LayerSample { aov: [Rgb::BLACK; MAX_LAYERS], beauty: Rgb::BLACK }
+        LayerSample { aov: [Rgb::BLACK; MAX_LAYERS], beauty: Rgb::BLACK, touched: 0 }
     }
 }
 
@@ -577,6 +582,7 @@ impl LayerSample {
     #[inline]
     pub fn add_scaled(&mut self, other: &LayerSample, k: Rgb, n: usize) {
         self.beauty += other.beauty * k;
+        self.touched |= other.touched;
         for (a, b) in self.aov[..n].iter_mut().zip(&other.aov[..n]) {
             *a += *b * k;
         }
@@ -598,6 +604,7 @@ impl LayerSample {
             self.beauty += value;
         }
         let mut m = mask & !BEAUTY;
+        self.touched |= m;
         while m != 0 {
             let i = m.trailing_zeros() as usize;
             self.aov[i] += value;
