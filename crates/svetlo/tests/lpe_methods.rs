@@ -255,20 +255,6 @@ fn radiosity_routes_its_parts() {
     }
 }
 
-#[test]
-fn methods_without_lpe_support_refuse_it() {
-    let scene = repo_scene("caustic.xml", 8);
-    let set = aovs(&scene, PARTITION, None);
-    for method in ["radiosity:hybrid=true,element-size=1"] {
-        let e = svetlo::methods::by_name(method).unwrap().render(
-            &scene,
-            &RenderSettings { spp: 1, lpe: Some(set.clone()), ..Default::default() },
-            &Progress::new(),
-        );
-        assert!(e.is_err_and(|e| e.to_string().contains("light path expressions")), "{method}");
-    }
-}
-
 /// The product automata (one state per camera path and one per light subpath, built when a
 /// set is bound to a scene) route exactly as the automata stepped one by one (the unbound
 /// set): every event sequence up to 4 scattering vertices over the classes the scene's

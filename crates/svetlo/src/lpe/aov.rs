@@ -591,9 +591,9 @@ impl LayerSample {
     /// Multiply every layer and the beauty by `k`.
     #[inline]
     pub fn scale(&mut self, k: f32) {
-        self.beauty = self.beauty * k;
+        self.beauty *= k;
         for a in &mut self.aov {
-            *a = *a * k;
+            *a *= k;
         }
     }
 
