@@ -1,15 +1,29 @@
 #!/usr/bin/env bash
-# Overhead of 8 AOVs against none at equal spp, one thread, alternating runs; prints the
+# Overhead of AOVs against none at equal spp, one thread, alternating runs; prints the
 # median ratio of CPU time (user+sys) per method. Usage: bench/lpe/run.sh [scene.xml] [spp] [res]
-# (METHODS='a b' picks the methods; RUNS the alternating runs.)
+# METHODS='a b' picks the methods; RUNS the alternating runs; PRESET=lecture renders the
+# lecture preset's five AOVs instead of the eight below; MEASURE=instructions counts
+# instructions under valgrind (callgrind) instead of CPU time: deterministic, so one run
+# each is enough on a loaded machine (use a small res and spp: valgrind is ~50x slower).
 set -euo pipefail
 cd "$(dirname "$0")/../.."
 BIN=${BIN:-target/release/svetlo}
 SCENE=${1:-scenes/caustic.xml}; SPP=${2:-16}; RES=${3:-64}; RUNS=${RUNS:-3}
-AOVS=(--aov a='C [LB]' --aov b='C D [LB]' --aov c='C D [^LB]+ [LB]' --aov d='C [GS] .* [LB]'
-      --aov e='C D S+ L' --aov f='C <R.> L' --aov g='C . .+ L' --aov h='L D* E')
+if [ "${PRESET:-}" = lecture ]; then
+  AOVS=(--aov-preset lecture)
+else
+  AOVS=(--aov a='C [LB]' --aov b='C D [LB]' --aov c='C D [^LB]+ [LB]' --aov d='C [GS] .* [LB]'
+        --aov e='C D S+ L' --aov f='C <R.> L' --aov g='C . .+ L' --aov h='L D* E')
+fi
 tmp=$(mktemp -d); trap 'rm -rf "$tmp"' EXIT
-cpu() { /usr/bin/time -f "%U %S" -o "$tmp/t" "$@" >/dev/null 2>&1; awk '{print $1+$2}' "$tmp/t"; }
+cpu() {
+  if [ "${MEASURE:-cpu}" = instructions ]; then
+    valgrind --tool=callgrind --callgrind-out-file="$tmp/cg" "$@" >/dev/null 2>"$tmp/v"
+    awk '/^summary:/{print $2}' "$tmp/cg"
+  else
+    /usr/bin/time -f "%U %S" -o "$tmp/t" "$@" >/dev/null 2>&1; awk '{print $1+$2}' "$tmp/t"
+  fi
+}
 for m in ${METHODS:-"path:simd=false" bdpt "mlt:bootstrap=20000"}; do
   ratios=()
   for i in $(seq "$RUNS"); do
@@ -17,5 +31,5 @@ for m in ${METHODS:-"path:simd=false" bdpt "mlt:bootstrap=20000"}; do
     with=$(cpu $BIN render "$SCENE" -Dres=$RES --spp $SPP --threads 1 --integrator "$m" "${AOVS[@]}" -o "$tmp/a.exr")
     ratios+=("$(awk -v a="$with" -v b="$base" 'BEGIN{printf "%.3f", a/b}')")
   done
-  echo "$m: 8 AOVs / none CPU-time ratios ${ratios[*]} (median $(printf '%s\n' "${ratios[@]}" | sort -n | sed -n "$(( (RUNS+1)/2 ))p"))"
+  echo "$m: ${PRESET:-8} AOVs / none ${MEASURE:-cpu} ratios ${ratios[*]} (median $(printf '%s\n' "${ratios[@]}" | sort -n | sed -n "$(( (RUNS+1)/2 ))p"))"
 done

@@ -47,16 +47,33 @@ impl FilmTile {
 
     /// Add a sample to the beauty and, with the same filter weights, `aov[i]` to layer i.
     pub fn add_sample_layers(&mut self, p: Vec2, l: Rgb, aov: &[Rgb]) {
+        self.add_sample_touched(p, l, aov, u32::MAX);
+    }
+
+    /// [`Self::add_sample_layers`] where only the layers of bit mask `touched` may be non-zero
+    /// (the others are skipped: most samples reach few of the layers).
+    #[inline]
+    pub fn add_sample_touched(&mut self, p: Vec2, l: Rgb, aov: &[Rgb], touched: u32) {
         self.add_sample(p, l);
+        let touched = touched & if aov.len() >= 32 { u32::MAX } else { (1u32 << aov.len()) - 1 };
+        if touched == 0 {
+            return;
+        }
         let w = self.x1 - self.x0;
         if self.filter == Filter::Box {
             // One pixel takes the whole sample: find it once for every layer.
             let (ox, oy) = (floor_i(p.x), floor_i(p.y));
             if ox >= self.x0 as i64 && oy >= self.y0 as i64 && ox < self.x1 as i64 && oy < self.y1 as i64 {
                 let k = ((oy as u32 - self.y0) * w + (ox as u32 - self.x0)) as usize;
-                for (layer, &v) in self.layers.iter_mut().zip(aov) {
+                let mut m = touched;
+                while m != 0 {
+                    let i = m.trailing_zeros() as usize;
+                    m &= m - 1;
+                    let v = aov[i];
                     if v.is_finite() {
-                        layer[k] += v;
+                        if let Some(px) = self.layers.get_mut(i).and_then(|layer| layer.get_mut(k)) {
+                            *px += v;
+                        }
                     }
                 }
             }
@@ -83,8 +100,8 @@ impl FilmTile {
                 *f = self.filter.eval((ymin + j as i64) as f32 + 0.5 - p.y);
             }
         }
-        for (layer, &v) in self.layers.iter_mut().zip(aov) {
-            let v = if v.is_finite() { v } else { Rgb::BLACK };
+        for (i, (layer, &v)) in self.layers.iter_mut().zip(aov).enumerate() {
+            let v = if v.is_finite() && touched >> i & 1 == 1 { v } else { Rgb::BLACK };
             if v.is_black() {
                 continue;
             }
@@ -270,6 +287,11 @@ impl Film {
 
     pub fn add_sample(&mut self, p: Vec2, l: Rgb) {
         self.full.add_sample(p, l);
+    }
+
+    /// [`Self::add_sample`] with the sample's value in each AOV layer.
+    pub fn add_sample_layers(&mut self, p: Vec2, l: Rgb, aov: &[Rgb]) {
+        self.full.add_sample_layers(p, l, aov);
     }
 
     /// Add another film's raw sums to this one's (same size, filter and layers): the step of

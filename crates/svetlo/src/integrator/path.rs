@@ -114,6 +114,8 @@ pub(crate) struct WalkVertex<'a> {
     pub beta: Rgb,
     /// Path segments from the camera to here.
     pub depth: i32,
+    /// The automata's states for the path's events before this vertex (from the camera).
+    pub events: Tracker<'a>,
 }
 
 /// What a camera walk adds to path tracing's own rules (emission and next-event estimation
@@ -121,8 +123,9 @@ pub(crate) struct WalkVertex<'a> {
 /// `distributed`, the photon methods' camera side) differ only here.
 pub(crate) trait WalkRules {
     /// Radiance the method estimates at a vertex by other means, without the throughput;
-    /// called after next-event estimation and before the BSDF sample.
-    fn at_vertex(&mut self, _v: &WalkVertex, _sampler: &mut dyn Sampler) -> Rgb {
+    /// called after next-event estimation and before the BSDF sample. With AOVs, `layers`
+    /// is the sample's: the rules add their estimate there by its paths, times `v.beta`.
+    fn at_vertex(&mut self, _v: &WalkVertex, _sampler: &mut dyn Sampler, _layers: Option<&mut LayerSample>) -> Rgb {
         Rgb::BLACK
     }
     /// Whether the walk ends at the next hit (which then adds only its emission, to complete
@@ -140,8 +143,7 @@ impl WalkRules for PathRules {}
 /// Radiance along `camera_ray` by path tracing under `rules`. Sample dimensions per vertex, in
 /// order: light choice, light point (2), whatever `rules.at_vertex` draws, BSDF lobe, BSDF
 /// direction (2), Russian roulette. Each contribution also goes to `layers` with the AOVs
-/// its path's events match (the rules' own estimates do not: methods that add some do not
-/// support AOVs).
+/// its path's events match (the rules route their own estimates).
 pub(crate) fn camera_walk<R: WalkRules + ?Sized>(
     scene: &Scene,
     camera_ray: &Ray,
@@ -207,7 +209,8 @@ pub(crate) fn camera_walk<R: WalkRules + ?Sized>(
                 layers.add(events.ends2(here, aovs.emitter_event(&scene.lights[li as usize])), beta * c);
             }
         }
-        l += beta * rules.at_vertex(&WalkVertex { si: &si, bsdf: &bsdf, flags, wo, beta, depth }, sampler);
+        let v = WalkVertex { si: &si, bsdf: &bsdf, flags, wo, beta, depth, events };
+        l += beta * rules.at_vertex(&v, sampler, (!aovs.is_empty()).then_some(&mut *layers));
         let uc = sampler.next_1d();
         let u = sampler.next_2d();
         let Some(bs) = bsdf.sample(wo, uc, u, TransportMode::Radiance) else { break };

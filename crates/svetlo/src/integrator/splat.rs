@@ -108,7 +108,7 @@ pub trait SplatEstimator: Sync {
                         t.tile.add_sample(raster, l);
                     } else {
                         let beauty = if aovs.restricts_beauty() { out.layers.beauty } else { l };
-                        t.tile.add_sample_layers(raster, beauty, &out.layers.aov[..aovs.aov_count()]);
+                        t.tile.add_sample_touched(raster, beauty, &out.layers.aov[..aovs.aov_count()], out.layers.touched);
                     }
                 }
             }

@@ -241,6 +241,12 @@ impl AovSet {
         Some(RevProduct { table, states: states.len(), meets })
     }
 
+    /// Whether a light subpath's automaton states fit one integer (the reverse product
+    /// state), which photons carry from the light to the lookup that completes their path.
+    pub fn light_states_fit(&self) -> bool {
+        self.is_empty() || self.product.as_ref().is_some_and(|p| p.rev.is_some())
+    }
+
     /// States of the product automaton (0: none was built).
     pub fn product_states(&self) -> usize {
         self.product.as_ref().map_or(0, |p| p.states.len())
@@ -400,12 +406,12 @@ pub struct Tracker<'a> {
 }
 
 impl Product {
-    #[inline]
+    #[inline(always)]
     fn class(&self, e: Event) -> usize {
         let k = if e.labels == 0 { 0 } else { self.masks.iter().position(|&m| m == e.labels).unwrap_or(0) };
         e.base as usize + super::automaton::BASE_COUNT * k
     }
-    #[inline]
+    #[inline(always)]
     fn step(&self, q: u32, e: Event) -> u32 {
         self.table[q as usize * self.n_classes + self.class(e)]
     }
@@ -419,7 +425,7 @@ impl<'a> Tracker<'a> {
         t.push(Event::CAMERA);
         t
     }
-    #[inline]
+    #[inline(always)]
     pub fn push(&mut self, e: Event) {
         match &self.set.product {
             Some(p) => self.q = p.step(self.q, e),
@@ -431,7 +437,7 @@ impl<'a> Tracker<'a> {
         }
     }
     /// The layers that take a path ending here with event `e`.
-    #[inline]
+    #[inline(always)]
     pub fn ends(&self, e: Event) -> LayerMask {
         if let Some(p) = &self.set.product {
             return p.accept[p.step(self.q, e) as usize];
@@ -448,6 +454,9 @@ impl<'a> Tracker<'a> {
     /// the scattering vertex, then the light).
     #[inline]
     pub fn ends2(&self, a: Event, b: Event) -> LayerMask {
+        if let Some(p) = &self.set.product {
+            return p.accept[p.step(p.step(self.q, a), b) as usize];
+        }
         let mut t = *self;
         t.push(a);
         t.ends(b)
@@ -462,6 +471,22 @@ impl<'a> Tracker<'a> {
     }
     pub fn set(&self) -> &'a AovSet {
         self.set
+    }
+    /// The same states held with a longer borrow of `set`, which must be the set the tracker
+    /// was made from (the states index its automata).
+    #[inline]
+    pub fn rebind<'s>(&self, set: &'s AovSet) -> Tracker<'s> {
+        debug_assert!(std::ptr::eq(self.set, set));
+        Tracker { set, q: self.q, st: self.st }
+    }
+    /// The layers that take this camera prefix joined to a light subpath whose reverse
+    /// product state is `r` ([`LightTracker::state`]; see [`AovSet::light_states_fit`]).
+    #[inline]
+    pub fn meets_state(&self, r: u32) -> LayerMask {
+        match self.set.product.as_ref().and_then(|p| p.rev.as_ref()) {
+            Some(rp) => rp.meets[self.q as usize * rp.states + r as usize],
+            None => self.set.base_mask(),
+        }
     }
 }
 
@@ -523,6 +548,12 @@ impl<'a> LightTracker<'a> {
         }
         m
     }
+    /// The reverse product state: all a photon needs to carry of its subpath's events
+    /// (meaningful where [`AovSet::light_states_fit`]).
+    #[inline]
+    pub fn state(&self) -> u32 {
+        self.r
+    }
     /// The layers that take this subpath ending at the camera (light tracing, t = 1).
     #[inline]
     pub fn meets_camera(&self) -> LayerMask {
@@ -536,11 +567,13 @@ pub struct LayerSample {
     pub aov: [Rgb; MAX_LAYERS],
     /// The sum of contributions the beauty takes.
     pub beauty: Rgb,
+    /// Bit i: AOV i may have been added to (the film skips the others).
+    pub touched: u32,
 }
 
 impl Default for LayerSample {
     fn default() -> Self {
-        LayerSample { aov: [Rgb::BLACK; MAX_LAYERS], beauty: Rgb::BLACK }
+        LayerSample { aov: [Rgb::BLACK; MAX_LAYERS], beauty: Rgb::BLACK, touched: 0 }
     }
 }
 
@@ -549,8 +582,18 @@ impl LayerSample {
     #[inline]
     pub fn add_scaled(&mut self, other: &LayerSample, k: Rgb, n: usize) {
         self.beauty += other.beauty * k;
+        self.touched |= other.touched;
         for (a, b) in self.aov[..n].iter_mut().zip(&other.aov[..n]) {
             *a += *b * k;
+        }
+    }
+
+    /// Multiply every layer and the beauty by `k`.
+    #[inline]
+    pub fn scale(&mut self, k: f32) {
+        self.beauty *= k;
+        for a in &mut self.aov {
+            *a *= k;
         }
     }
 
@@ -561,6 +604,7 @@ impl LayerSample {
             self.beauty += value;
         }
         let mut m = mask & !BEAUTY;
+        self.touched |= m;
         while m != 0 {
             let i = m.trailing_zeros() as usize;
             self.aov[i] += value;

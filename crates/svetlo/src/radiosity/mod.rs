@@ -347,6 +347,6 @@ fn solve_hierarchical(scene: &Scene, opts: &RadiosityOptions, max_depth: i32) ->
         solve_seconds: total - o.stats.refine_seconds,
         hierarchy: Some(o.stats),
         vertex_b: Some(o.vertex_b),
-        b_one: None,
+        b_one: Some(o.b_one),
     })
 }

@@ -15,6 +15,7 @@ use crate::bsdf::LobeFlags;
 use crate::geometry::Ray;
 use crate::integrator::path::{self, WalkRules, WalkVertex};
 use crate::integrator::RenderSettings;
+use crate::lpe::aov::LayerSample;
 use crate::sampling::Sampler;
 use crate::scene::Scene;
 use crate::spectrum::Rgb;
@@ -34,33 +35,38 @@ impl<'a> std::ops::Deref for DiffuseVertex<'a> {
     }
 }
 
-/// Radiance along `camera_ray` from emission and NEE; `at_diffuse` returns the photon part at
-/// each diffuse vertex (without the throughput, which the walk applies).
+/// The method's part at a diffuse vertex: radiance without the throughput, and with AOVs the
+/// same routed by paths into the sample's layers, times the throughput (see `WalkRules`).
+pub(crate) type AtDiffuse<'f> = dyn FnMut(&DiffuseVertex, &mut dyn Sampler, Option<&mut LayerSample>) -> Rgb + 'f;
+
+/// Radiance along `camera_ray` from emission and NEE, routed into `layers` with AOVs;
+/// `at_diffuse` returns the photon part at each diffuse vertex.
 pub(crate) fn camera_walk(
     scene: &Scene,
     camera_ray: &Ray,
     sampler: &mut dyn Sampler,
     settings: &RenderSettings,
-    at_diffuse: &mut dyn FnMut(&DiffuseVertex, &mut dyn Sampler) -> Rgb,
+    at_diffuse: &mut AtDiffuse,
+    layers: &mut LayerSample,
 ) -> Rgb {
-    path::camera_walk(scene, camera_ray, sampler, settings, &mut PhotonRules { at_diffuse, index: 0 }, &mut Default::default())
+    path::camera_walk(scene, camera_ray, sampler, settings, &mut PhotonRules { at_diffuse, index: 0 }, layers)
 }
 
 /// The photon methods' split of path space (module comment) as rules of the camera walk.
 struct PhotonRules<'f> {
-    at_diffuse: &'f mut dyn FnMut(&DiffuseVertex, &mut dyn Sampler) -> Rgb,
+    at_diffuse: &'f mut AtDiffuse<'f>,
     /// Diffuse vertices met so far.
     index: u32,
 }
 
 impl WalkRules for PhotonRules<'_> {
-    fn at_vertex(&mut self, v: &WalkVertex, sampler: &mut dyn Sampler) -> Rgb {
+    fn at_vertex(&mut self, v: &WalkVertex, sampler: &mut dyn Sampler, layers: Option<&mut LayerSample>) -> Rgb {
         if !v.flags.intersects(LobeFlags::DIFFUSE) {
             return Rgb::BLACK;
         }
         let d = DiffuseVertex { vertex: v, index: self.index };
         self.index += 1;
-        (self.at_diffuse)(&d, sampler)
+        (self.at_diffuse)(&d, sampler, layers)
     }
     /// A non-delta sample at a diffuse vertex: photons account for that light, except what
     /// comes straight from an emitter.

@@ -16,7 +16,7 @@
 //! fixed. Deterministic for a seed whatever the thread count.
 
 use super::camera::{camera_walk, DiffuseVertex};
-use super::map::{lambertian_albedo, Kernel, Lookup, Photon, PhotonMap, PrecomputedRadiance, RadianceSite};
+use super::map::{lambertian_albedo, Kernel, Lookup, Photon, PhotonMap, PrecomputedRadiance, RadianceSite, Route};
 use super::trace::trace_photons;
 use super::{parse_count, parse_pairs, parse_positive, photon_max_segments, pixel_footprint, segments_left};
 use crate::bsdf::TransportMode;
@@ -24,6 +24,8 @@ use crate::error::{Error, Result};
 use crate::film::Film;
 use crate::geometry::Ray;
 use crate::integrator::{render_pixels, Integrator, PixelEstimator, Progress, RenderSettings};
+use crate::lpe::aov::LayerSample;
+use crate::lpe::Tracker;
 use crate::path::PathConfig;
 use crate::sampling::Sampler;
 use crate::scene::Scene;
@@ -124,8 +126,10 @@ impl PhotonMapper {
         let cfg = PathConfig::new(scene, settings.max_depth, settings.rr_depth, settings.hide_emitters);
         let gscale = 1.0 / o.photons.max(1) as f32;
         // Every `precompute`-th path lends its Lambertian landings as precomputed-radiance sites.
-        let every = if o.gather > 0 { o.precompute as u64 } else { 0 };
-        let landed: Vec<(Photon, Option<RadianceSite>)> = trace_photons(scene, settings.seed, TAG_GLOBAL, o.photons, &cfg, |i, d| {
+        // (Precomputed radiance carries no paths: with AOVs every gather ray searches photons.)
+        let aovs = settings.aovs();
+        let every = if o.gather > 0 && aovs.is_empty() { o.precompute as u64 } else { 0 };
+        let landed: Vec<(Photon, Option<RadianceSite>)> = trace_photons(scene, settings.seed, TAG_GLOBAL, o.photons, &cfg, aovs, |i, d| {
             let site_path = every > 0 && i % every == 0;
             let site = if site_path {
                 d.albedo.map(|albedo| RadianceSite { p: d.p, n: if d.wi.dot(d.ng) >= 0.0 { d.ng } else { -d.ng }, ns: d.ns, albedo })
@@ -139,7 +143,7 @@ impl PhotonMapper {
         let other_paths_scale = o.photons as f32 / (o.photons - site_paths).max(1) as f32;
         let global: Vec<Photon> = landed.into_iter().map(|x| x.0).collect();
         let cscale = 1.0 / o.caustic_photons.max(1) as f32;
-        let caustic: Vec<Photon> = trace_photons(scene, settings.seed, TAG_CAUSTIC, o.caustic_photons, &cfg, |_, d| {
+        let caustic: Vec<Photon> = trace_photons(scene, settings.seed, TAG_CAUSTIC, o.caustic_photons, &cfg, aovs, |_, d| {
             let keep = (d.caustic && d.surface.intersects(crate::bsdf::LobeFlags::DIFFUSE)).then(|| Photon::from_deposit(d, cscale));
             // A path stays a caustic one only through delta bounces.
             let go_on = (d.caustic || d.segments == 1) && d.surface.is_specular();
@@ -163,7 +167,7 @@ impl PhotonMapper {
 impl Integrator for PhotonMapper {
     fn render(&self, scene: &Scene, settings: &RenderSettings, progress: &Progress) -> Result<Film> {
         settings.validate()?;
-        settings.check_lpe_support("photon", false)?;
+        check_light_states("photon", settings)?;
         let start = Instant::now();
         let pool = rayon::ThreadPoolBuilder::new().num_threads(settings.threads).build().map_err(|e| Error::Settings(format!("thread pool: {e}")))?;
         let maps = pool.install(|| self.build_maps(scene, settings));
@@ -184,6 +188,16 @@ impl Integrator for PhotonMapper {
     }
 }
 
+/// Photons carry their path's events as one reverse-automaton state: an error when the AOVs'
+/// reverse product is too large to have one.
+pub(super) fn check_light_states(method: &str, settings: &RenderSettings) -> Result<()> {
+    if settings.aovs().light_states_fit() {
+        Ok(())
+    } else {
+        Err(Error::Settings(format!("{method}: the AOVs' automata are too large for photons to carry (use fewer or simpler expressions)")))
+    }
+}
+
 struct Estimator {
     maps: Maps,
     gather: u32,
@@ -191,15 +205,25 @@ struct Estimator {
 }
 
 impl Estimator {
-    /// The photon part at a diffuse camera vertex: caustics, and the rest of the indirect light.
-    fn photons_at(&self, scene: &Scene, v: &DiffuseVertex, sampler: &mut dyn Sampler, settings: &RenderSettings) -> Rgb {
+    /// The photon part at a diffuse camera vertex: caustics, and the rest of the indirect
+    /// light; with `layers`, also routed there by the photons' paths (times the throughput).
+    fn photons_at(&self, scene: &Scene, v: &DiffuseVertex, sampler: &mut dyn Sampler, settings: &RenderSettings, mut layers: Option<&mut LayerSample>) -> Rgb {
         let left = segments_left(settings.max_depth, v.depth);
         let m = &self.maps;
-        let mut l = m.caustic.radiance(self.visibility.then_some(scene), v.si, v.bsdf, v.wo, &m.caustic_lookup, |p| (p.segments as i32) <= left);
+        let vis = self.visibility.then_some(scene);
+        // A lookup at the vertex itself, routed into `layers` when there are AOVs.
+        let at_x = |map: &PhotonMap, lookup: &Lookup, accept: &dyn Fn(&Photon) -> bool, layers: Option<&mut LayerSample>| match layers {
+            None => map.radiance(vis, v.si, v.bsdf, v.wo, lookup, accept, None),
+            Some(out) => {
+                let mut rt = Route::new(&v.events, v.si, v.flags);
+                let l = map.radiance(vis, v.si, v.bsdf, v.wo, lookup, accept, Some(&mut rt));
+                out.add_scaled(&rt.out, v.beta, crate::lpe::MAX_LAYERS);
+                l
+            }
+        };
+        let mut l = at_x(&m.caustic, &m.caustic_lookup, &|p| (p.segments as i32) <= left, layers.as_deref_mut());
         if self.gather == 0 {
-            l += m.global.radiance(self.visibility.then_some(scene), v.si, v.bsdf, v.wo, &m.global_lookup, |p| {
-                !p.caustic && p.segments >= 2 && (p.segments as i32) <= left
-            });
+            l += at_x(&m.global, &m.global_lookup, &|p| !p.caustic && p.segments >= 2 && (p.segments as i32) <= left, layers);
             return l;
         }
         let mut g = Rgb::BLACK;
@@ -211,14 +235,31 @@ impl Estimator {
                 continue;
             }
             let ray = v.si.spawn_ray(v.si.to_world(bs.wi));
-            g += bs.weight() * self.gather_ray(scene, ray, v.depth + 1, sampler, settings);
+            // The gather ray's path so far: the camera prefix and x as this sample scattered.
+            let route = layers.as_deref_mut().map(|out| {
+                let mut t = v.events;
+                let aovs = t.set();
+                t.push(aovs.scatter_event(v.si.shape, v.flags, Some(bs.lobe), bs.lobe.contains(crate::bsdf::LobeFlags::TRANSMISSION)));
+                (t, out, v.beta * bs.weight() * (1.0 / self.gather as f32))
+            });
+            g += bs.weight() * self.gather_ray(scene, ray, v.depth + 1, sampler, settings, route);
         }
         l + g / self.gather as f32
     }
 
     /// Radiance a gather ray brings back from the global map, through delta bounces; `depth`
-    /// is that of the first surface it meets.
-    fn gather_ray(&self, scene: &Scene, mut ray: Ray, mut depth: i32, sampler: &mut dyn Sampler, settings: &RenderSettings) -> Rgb {
+    /// is that of the first surface it meets. With `route` (the path's events so far, the
+    /// sample's layers and the weight of this ray there), the map's estimate also goes to the
+    /// layers by the photons' whole paths.
+    fn gather_ray(
+        &self,
+        scene: &Scene,
+        mut ray: Ray,
+        mut depth: i32,
+        sampler: &mut dyn Sampler,
+        settings: &RenderSettings,
+        mut route: Option<(Tracker, &mut LayerSample, Rgb)>,
+    ) -> Rgb {
         let m = &self.maps;
         let mut t = Rgb::WHITE;
         let mut l = Rgb::BLACK;
@@ -232,12 +273,22 @@ impl Estimator {
             if flags.has_non_specular() {
                 let left = segments_left(settings.max_depth, depth);
                 let n = if si.wo.dot(si.ng) >= 0.0 { si.ng } else { -si.ng };
-                let pre = match (&m.precomputed, lambertian_albedo(&bsdf, wo)) {
-                    (Some(pc), Some(_)) => pc.radiance(self.visibility.then_some(scene), si.p, n, left, si.time),
-                    _ => None,
-                };
-                l += t * pre
-                    .unwrap_or_else(|| m.global.radiance(self.visibility.then_some(scene), &si, &bsdf, wo, &m.global_lookup, |p| (p.segments as i32) <= left));
+                let vis = self.visibility.then_some(scene);
+                let accept = |p: &Photon| (p.segments as i32) <= left;
+                match &mut route {
+                    Some((events, out, k)) => {
+                        let mut rt = Route::new(events, &si, flags);
+                        l += t * m.global.radiance(vis, &si, &bsdf, wo, &m.global_lookup, accept, Some(&mut rt));
+                        out.add_scaled(&rt.out, *k * t, crate::lpe::MAX_LAYERS);
+                    }
+                    None => {
+                        let pre = match (&m.precomputed, lambertian_albedo(&bsdf, wo)) {
+                            (Some(pc), Some(_)) => pc.radiance(vis, si.p, n, left, si.time),
+                            _ => None,
+                        };
+                        l += t * pre.unwrap_or_else(|| m.global.radiance(vis, &si, &bsdf, wo, &m.global_lookup, accept, None));
+                    }
+                }
             }
             if !flags.is_specular() {
                 break;
@@ -247,6 +298,10 @@ impl Estimator {
             let Some(bs) = bsdf.sample(wo, uc, u, TransportMode::Radiance) else { break };
             if !bs.lobe.is_specular() || bs.pdf <= 0.0 {
                 break;
+            }
+            if let Some((events, _, _)) = &mut route {
+                let aovs = events.set();
+                events.push(aovs.scatter_event(si.shape, flags, Some(bs.lobe), bs.lobe.contains(crate::bsdf::LobeFlags::TRANSMISSION)));
             }
             t *= bs.weight();
             bounces += 1;
@@ -269,7 +324,13 @@ impl Estimator {
 
 impl PixelEstimator for Estimator {
     fn li(&self, scene: &Scene, ray: &Ray, sampler: &mut dyn Sampler, settings: &RenderSettings) -> Rgb {
-        camera_walk(scene, ray, sampler, settings, &mut |v, s| self.photons_at(scene, v, s, settings))
+        self.li_layers(scene, ray, sampler, settings, &mut LayerSample::default())
+    }
+    fn li_layers(&self, scene: &Scene, ray: &Ray, sampler: &mut dyn Sampler, settings: &RenderSettings, layers: &mut LayerSample) -> Rgb {
+        camera_walk(scene, ray, sampler, settings, &mut |v, s, out| self.photons_at(scene, v, s, settings, out), layers)
+    }
+    fn supports_lpe(&self) -> bool {
+        true
     }
 }
 

@@ -10,6 +10,8 @@ use crate::accel::{KdPoint, KdTree};
 use crate::bsdf::{Bsdf, BsdfModel, TransportMode};
 use crate::error::{Error, Result};
 use crate::geometry::SurfaceInteraction;
+use crate::lpe::aov::LayerSample;
+use crate::lpe::Tracker;
 use crate::math::PI;
 use crate::scene::Scene;
 use crate::spectrum::Rgb;
@@ -26,6 +28,8 @@ pub(crate) struct Photon {
     pub caustic: bool,
     /// Its path gave the sites of the precomputed radiance (then it takes no part in it).
     pub site_path: bool,
+    /// Its path's events, as the reverse automata's state (see `Deposit::light_state`).
+    pub light_state: u32,
 }
 
 impl Photon {
@@ -39,7 +43,39 @@ impl Photon {
             segments: d.segments.min(u16::MAX as u32) as u16,
             caustic: d.caustic,
             site_path: false,
+            light_state: d.light_state,
         }
+    }
+}
+
+/// Where a density estimate's photons go by their paths (AOVs): the camera prefix up to the
+/// lookup point, the lookup point's scattering (reflection, or transmission when the photon
+/// arrived on the other side), then the photon's light subpath. The estimate is split by
+/// photon, so each photon's share goes to the layers its whole path matches.
+pub(crate) struct Route<'a> {
+    reflect: Tracker<'a>,
+    transmit: Tracker<'a>,
+    /// The routed estimate (filled by [`PhotonMap::radiance`]).
+    pub out: LayerSample,
+}
+
+impl<'a> Route<'a> {
+    /// A lookup at `si` (BSDF lobes `flags`) reached by a camera prefix in state `prefix`.
+    pub fn new(prefix: &Tracker<'a>, si: &SurfaceInteraction, flags: crate::bsdf::LobeFlags) -> Self {
+        let set = prefix.set();
+        let at = |through| {
+            let mut t = *prefix;
+            t.push(set.scatter_event(si.shape, flags, None, through));
+            t
+        };
+        Route { reflect: at(false), transmit: at(true), out: LayerSample::default() }
+    }
+
+    /// Photon `ph` adds `value` at a point whose outgoing side is `front` (of the normal `ng`).
+    #[inline]
+    pub fn add_photon(&mut self, ph: &Photon, ng: Vec3, front: bool, value: Rgb) {
+        let t = if (ph.wi.dot(ng) > 0.0) == front { &self.reflect } else { &self.transmit };
+        self.out.add(t.meets_state(ph.light_state), value);
     }
 }
 
@@ -104,7 +140,8 @@ impl PhotonMap {
     /// `bsdf`, from the photons `accept` lets through that landed on a surface facing the same
     /// way (Jensen's filter: no photons from the other side of a thin wall or a corner's
     /// other face).
-    /// With `visibility`, only photons the point sees count (see [`visible`]).
+    /// With `visibility`, only photons the point sees count (see [`visible`]). With `route`,
+    /// the estimate is also split by the photons' paths into `route.out`.
     #[allow(clippy::too_many_arguments)]
     pub fn radiance(
         &self,
@@ -114,6 +151,7 @@ impl PhotonMap {
         wo: Vec3,
         lookup: &Lookup,
         accept: impl Fn(&Photon) -> bool,
+        mut route: Option<&mut Route>,
     ) -> Rgb {
         let n = if si.wo.dot(si.ng) >= 0.0 { si.ng } else { -si.ng };
         let accept = |ph: &Photon| ph.n.dot(n) > SAME_ORIENTATION_COS && accept(ph);
@@ -121,6 +159,7 @@ impl PhotonMap {
         // search): hidden ones do not count, and the disc stays the one the k reached.
         let seen = |ph: &Photon| visibility.is_none_or(|sc| visible(sc, si.p, n, ph.p, ph.n, si.time));
         let mut sum = Rgb::BLACK;
+        let front = si.wo.dot(si.ng) > 0.0;
         let mut add = |ph: &Photon, d2: f32, r2: f32| {
             let wi = si.to_local(ph.wi);
             let cos_g = ph.wi.dot(si.ng).abs();
@@ -129,7 +168,11 @@ impl PhotonMap {
             }
             let f = bsdf.eval(wo, wi, TransportMode::Radiance);
             if !f.is_black() {
-                sum += f * ph.power * (wi.z.abs() / cos_g * lookup.kernel.weight(d2, r2));
+                let v = f * ph.power * (wi.z.abs() / cos_g * lookup.kernel.weight(d2, r2));
+                sum += v;
+                if let Some(rt) = route.as_deref_mut() {
+                    rt.add_photon(ph, si.ng, front, v);
+                }
             }
         };
         let r2 = if lookup.k == 0 {
@@ -154,6 +197,9 @@ impl PhotonMap {
             }
             r2
         };
+        if let Some(rt) = route {
+            rt.out.scale(1.0 / (PI * r2));
+        }
         sum / (PI * r2)
     }
 }

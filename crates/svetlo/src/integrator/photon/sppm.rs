@@ -15,7 +15,7 @@
 //! of iterations; a time budget stops after a whole iteration.
 
 use super::camera::camera_walk;
-use super::map::{visible, Photon, SAME_ORIENTATION_COS};
+use super::map::{visible, Photon, Route, SAME_ORIENTATION_COS};
 use super::trace::trace_photons;
 use super::{parse_count, parse_pairs, parse_positive, pixel_footprint, segments_left};
 use crate::accel::KdTree;
@@ -24,6 +24,8 @@ use crate::error::{Error, Result};
 use crate::film::{Film, Filter};
 use crate::geometry::SurfaceInteraction;
 use crate::integrator::{Integrator, Progress, RenderSettings};
+use crate::lpe::aov::LayerSample;
+use crate::lpe::Tracker;
 use crate::math::PI;
 use crate::path::PathConfig;
 use crate::sampling::sampler::make_sampler;
@@ -88,12 +90,14 @@ pub struct Sppm {
 }
 
 /// Where one camera path met a diffuse surface this iteration.
-struct VisiblePoint {
+struct VisiblePoint<'a> {
     si: SurfaceInteraction,
     bsdf: Bsdf,
     wo: Vec3,
     beta: Rgb,
     depth: i32,
+    /// The path's events before it (AOVs).
+    events: Tracker<'a>,
 }
 
 /// Progressive statistics of one visible-point slot (pixel, n-th diffuse vertex).
@@ -108,7 +112,7 @@ impl Sppm {
     /// One iteration's photons: on diffuse surfaces, at least two segments from the light.
     fn photon_pass(&self, scene: &Scene, settings: &RenderSettings, iteration: u64, count: u64) -> KdTree<Photon> {
         let cfg = PathConfig::new(scene, settings.max_depth, settings.rr_depth, settings.hide_emitters);
-        let photons = trace_photons(scene, settings.seed, iteration, count, &cfg, |_, d| {
+        let photons = trace_photons(scene, settings.seed, iteration, count, &cfg, settings.aovs(), |_, d| {
             let keep = (d.segments >= 2 && d.surface.intersects(LobeFlags::DIFFUSE)).then(|| Photon::from_deposit(d, 1.0));
             (keep, true)
         });
@@ -119,7 +123,12 @@ impl Sppm {
 impl Integrator for Sppm {
     fn render(&self, scene: &Scene, settings: &RenderSettings, progress: &Progress) -> Result<Film> {
         settings.validate()?;
-        settings.check_lpe_support("sppm", false)?;
+        super::jensen::check_light_states("sppm", settings)?;
+        let aovs = settings.aovs();
+        // With AOVs, per visible point and pixel: each AOV's share of τ and of the direct part,
+        // then the (restricted) beauty's; the radii follow all photons, so the layers of a
+        // partition of path space sum to the beauty.
+        let nl = if aovs.is_empty() { 0 } else { aovs.aov_count() + 1 };
         let o = &self.options;
         let start = Instant::now();
         let cam = &scene.camera.ray_generator();
@@ -131,6 +140,8 @@ impl Integrator for Sppm {
         let mut stats = vec![Stats { r: r0, n: 0.0, tau: Rgb::BLACK }; w * h * slots];
         // Sum over iterations of the camera-side part (emission, NEE).
         let mut direct = vec![Rgb::BLACK; w * h];
+        let mut tau_layers = vec![Rgb::BLACK; if nl == 0 { h } else { w * h * slots * nl }];
+        let mut direct_layers = vec![Rgb::BLACK; w * h * nl];
         let proto = make_sampler(settings.sampler, settings.spp, settings.seed);
         progress.total.store(settings.spp as u64 * (w * h) as u64, Ordering::Relaxed);
         let mut iterations = 0u32;
@@ -148,7 +159,8 @@ impl Integrator for Sppm {
             }
             let it = iterations;
             // Camera pass: rows in parallel, each pixel's visible points and direct part.
-            let rows: Vec<Vec<(Rgb, Vec<Option<VisiblePoint>>)>> = pool.install(|| {
+            type Pixel<'a> = (Rgb, LayerSample, Vec<Option<VisiblePoint<'a>>>);
+            let rows: Vec<Vec<Pixel>> = pool.install(|| {
                 (0..h)
                     .into_par_iter()
                     .map(|y| {
@@ -157,13 +169,28 @@ impl Integrator for Sppm {
                             .map(|x| {
                                 let (_, ray) = crate::integrator::camera_sample(cam, sampler.as_mut(), x as u32, y as u32, it);
                                 let mut vps: Vec<Option<VisiblePoint>> = (0..slots).map(|_| None).collect();
-                                let l = camera_walk(scene, &ray, sampler.as_mut(), settings, &mut |v, _| {
-                                    if let Some(slot) = vps.get_mut(v.index as usize) {
-                                        *slot = Some(VisiblePoint { si: *v.si, bsdf: v.bsdf.clone(), wo: v.wo, beta: v.beta, depth: v.depth });
-                                    }
-                                    Rgb::BLACK
-                                });
-                                (l, vps)
+                                let mut layers = LayerSample::default();
+                                let l = camera_walk(
+                                    scene,
+                                    &ray,
+                                    sampler.as_mut(),
+                                    settings,
+                                    &mut |v, _, _| {
+                                        if let Some(slot) = vps.get_mut(v.index as usize) {
+                                            *slot = Some(VisiblePoint {
+                                                si: *v.si,
+                                                bsdf: v.bsdf.clone(),
+                                                wo: v.wo,
+                                                beta: v.beta,
+                                                depth: v.depth,
+                                                events: v.events.rebind(aovs),
+                                            });
+                                        }
+                                        Rgb::BLACK
+                                    },
+                                    &mut layers,
+                                );
+                                (l, layers, vps)
                             })
                             .collect()
                     })
@@ -177,11 +204,13 @@ impl Integrator for Sppm {
             let visibility = o.visibility;
             let max_depth = settings.max_depth;
             pool.install(|| {
-                stats.par_chunks_mut(w * slots).zip(rows.par_iter()).for_each(|(srow, vrow)| {
-                    for (x, (_, vps)) in vrow.iter().enumerate() {
+                let lrows = tau_layers.par_chunks_mut((w * slots * nl).max(1));
+                stats.par_chunks_mut(w * slots).zip(lrows).zip(rows.par_iter()).for_each(|((srow, lrow), vrow)| {
+                    for (x, (_, _, vps)) in vrow.iter().enumerate() {
                         for (s, vp) in vps.iter().enumerate() {
                             let Some(vp) = vp else { continue };
                             let st = &mut srow[x * slots + s];
+                            let mut route = (nl > 0).then(|| Route::new(&vp.events, &vp.si, vp.bsdf.flags()));
                             let left = segments_left(max_depth, vp.depth);
                             let mut phi = Rgb::BLACK;
                             let mut m = 0u32;
@@ -200,13 +229,25 @@ impl Integrator for Sppm {
                                 if f.is_black() || ph.n.dot(n) <= SAME_ORIENTATION_COS || (visibility && !visible(scene, vp.si.p, n, ph.p, ph.n, vp.si.time)) {
                                     return;
                                 }
-                                phi += f * ph.power * (wi.z.abs() / cos_g);
+                                let v = f * ph.power * (wi.z.abs() / cos_g);
+                                phi += v;
                                 m += 1;
+                                if let Some(rt) = &mut route {
+                                    rt.add_photon(ph, vp.si.ng, vp.si.wo.dot(vp.si.ng) > 0.0, v);
+                                }
                             });
                             if m > 0 {
                                 let n_new = st.n + alpha * m as f32;
                                 let ratio = n_new / (st.n + m as f32);
                                 st.tau = (st.tau + vp.beta * phi) * ratio;
+                                if let Some(rt) = &route {
+                                    let tl = &mut lrow[(x * slots + s) * nl..(x * slots + s + 1) * nl];
+                                    let (aov, beauty) = tl.split_at_mut(nl - 1);
+                                    for (t, p) in aov.iter_mut().zip(&rt.out.aov) {
+                                        *t = (*t + vp.beta * *p) * ratio;
+                                    }
+                                    beauty[0] = (beauty[0] + vp.beta * rt.out.beauty) * ratio;
+                                }
                                 st.r *= ratio.sqrt();
                                 st.n = n_new;
                             }
@@ -215,36 +256,73 @@ impl Integrator for Sppm {
                 });
             });
             for (y, row) in rows.iter().enumerate() {
-                for (x, (l, _)) in row.iter().enumerate() {
+                for (x, (l, ls, _)) in row.iter().enumerate() {
                     direct[y * w + x] += if l.is_finite() { *l } else { Rgb::BLACK };
+                    if nl > 0 {
+                        let d = &mut direct_layers[(y * w + x) * nl..(y * w + x + 1) * nl];
+                        for (t, v) in d.iter_mut().zip(ls.aov.iter().take(nl - 1).chain([&ls.beauty])) {
+                            *t += if v.is_finite() { *v } else { Rgb::BLACK };
+                        }
+                    }
                 }
             }
             iterations += 1;
             per_iteration_s = start.elapsed().as_secs_f64() / iterations as f64;
             progress.done.fetch_add((w * h) as u64, Ordering::Relaxed);
             if progress.wants_pass(iterations) {
-                progress.pass_done(&develop(scene, &direct, &stats, slots, per_iter, iterations));
+                progress.pass_done(&develop(
+                    scene,
+                    aovs,
+                    Parts { direct: &direct, stats: &stats, direct_layers: &direct_layers, tau_layers: &tau_layers },
+                    slots,
+                    per_iter,
+                    iterations,
+                ));
             }
         }
-        Ok(develop(scene, &direct, &stats, slots, per_iter, iterations))
+        Ok(develop(scene, aovs, Parts { direct: &direct, stats: &stats, direct_layers: &direct_layers, tau_layers: &tau_layers }, slots, per_iter, iterations))
     }
 }
 
+/// What the iterations have summed: per pixel the camera-side part, per visible-point slot
+/// the statistics, and with AOVs both split by layer (each AOV's, then the beauty's).
+struct Parts<'a> {
+    direct: &'a [Rgb],
+    stats: &'a [Stats],
+    direct_layers: &'a [Rgb],
+    tau_layers: &'a [Rgb],
+}
+
 /// The image after `iterations`: each pixel is its own measurement (box reconstruction).
-fn develop(scene: &Scene, direct: &[Rgb], stats: &[Stats], slots: usize, per_iter: u64, iterations: u32) -> Film {
+fn develop(scene: &Scene, aovs: &crate::lpe::AovSet, parts: Parts, slots: usize, per_iter: u64, iterations: u32) -> Film {
     let (w, h) = (scene.camera.width as usize, scene.camera.height as usize);
-    let mut film = Film::new(scene.camera.width, scene.camera.height, Filter::Box);
+    let mut film = Film::with_layers(scene.camera.width, scene.camera.height, Filter::Box, aovs.names());
+    let nl = if aovs.is_empty() { 0 } else { aovs.aov_count() + 1 };
     if iterations > 0 {
         let emitted = per_iter as f64 * iterations as f64;
+        let mut layers = vec![Rgb::BLACK; nl];
         for y in 0..h {
             for x in 0..w {
-                let mut l = direct[y * w + x] / iterations as f32;
-                for st in &stats[(y * w + x) * slots..(y * w + x + 1) * slots] {
+                let px = y * w + x;
+                let mut l = parts.direct[px] / iterations as f32;
+                for (t, d) in layers.iter_mut().zip(&parts.direct_layers[px * nl..]) {
+                    *t = *d / iterations as f32;
+                }
+                for s in 0..slots {
+                    let st = &parts.stats[px * slots + s];
                     if st.n > 0.0 {
-                        l += st.tau / ((PI as f64 * st.r as f64 * st.r as f64 * emitted) as f32);
+                        let k = 1.0 / ((PI as f64 * st.r as f64 * st.r as f64 * emitted) as f32);
+                        l += st.tau * k;
+                        for (t, v) in layers.iter_mut().zip(&parts.tau_layers[(px * slots + s) * nl..]) {
+                            *t += *v * k;
+                        }
                     }
                 }
-                film.add_sample(Vec2::new(x as f32 + 0.5, y as f32 + 0.5), l);
+                let p = Vec2::new(x as f32 + 0.5, y as f32 + 0.5);
+                match layers.split_last() {
+                    None => film.add_sample(p, l),
+                    Some((beauty, aov)) => film.add_sample_layers(p, if aovs.restricts_beauty() { *beauty } else { l }, aov),
+                }
             }
         }
     }

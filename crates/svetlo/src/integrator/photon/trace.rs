@@ -4,6 +4,7 @@
 //! the flux `Le |n·d| / (pmf pdf_pos pdf_dir)` times the adjoint scattering weights.
 
 use crate::bsdf::LobeFlags;
+use crate::lpe::{AovSet, LightTracker};
 use crate::path::{light_subpath, PathConfig, Vertex};
 use crate::sampling::{IndependentSampler, Sampler};
 use crate::scene::Scene;
@@ -30,6 +31,9 @@ pub(crate) struct Deposit {
     pub ns: Vec3,
     /// Reflectance of the side it arrived on, where that side is purely Lambertian.
     pub albedo: Option<Rgb>,
+    /// With AOVs: the reverse automata's state for the events of the photon's path before
+    /// this landing (the light and every bounce), which the lookup completes.
+    pub light_state: u32,
 }
 
 /// Position `sampler` at photon path `index` of pass `tag`: its numbers are a function of
@@ -39,11 +43,21 @@ fn start_photon(sampler: &mut IndependentSampler, tag: u64, index: u64) {
 }
 
 /// Trace one photon path (the light subpath of `cfg`), calling `visit` at every
-/// non-specular landing; `visit` returns false to stop reading the path there.
-pub(crate) fn trace_photon(scene: &Scene, cfg: &PathConfig, sampler: &mut dyn Sampler, path: &mut Vec<Vertex>, visit: &mut impl FnMut(&Deposit) -> bool) {
+/// non-specular landing; `visit` returns false to stop reading the path there. With AOVs
+/// (`aovs` not empty), landings carry their path's events as a reverse automaton state.
+pub(crate) fn trace_photon(
+    scene: &Scene,
+    cfg: &PathConfig,
+    aovs: &AovSet,
+    sampler: &mut dyn Sampler,
+    path: &mut Vec<Vertex>,
+    visit: &mut impl FnMut(&Deposit) -> bool,
+) {
     let cam = &scene.camera;
     let time = cam.shutter_open + sampler.next_1d() * (cam.shutter_close - cam.shutter_open);
     light_subpath(scene, cfg, time, sampler, path);
+    let Some(first) = path.first() else { return };
+    let mut events = (!aovs.is_empty()).then(|| LightTracker::light(aovs, aovs.endpoint_event(scene, first)));
     let mut all_specular = true;
     for (segments, v) in path.iter().enumerate().skip(1) {
         let Some(bsdf) = v.bsdf.as_ref().filter(|_| v.on_surface()) else { break };
@@ -59,12 +73,19 @@ pub(crate) fn trace_photon(scene: &Scene, cfg: &PathConfig, sampler: &mut dyn Sa
                 ng: v.ng,
                 ns: v.shading.n,
                 albedo: super::map::lambertian_albedo(bsdf, v.shading.to_local(v.wo)),
+                light_state: events.map_or(0, |t| t.state()),
             };
             if !visit(&d) {
                 break;
             }
         }
         all_specular &= v.delta;
+        // The event of scattering here, as the walk sampled it, for the landings after.
+        if let Some(t) = &mut events {
+            if let Some(e) = aovs.sampled_event(v) {
+                t.push(e);
+            }
+        }
     }
 }
 
@@ -77,6 +98,7 @@ pub(crate) fn trace_photons<T: Send>(
     tag: u64,
     count: u64,
     cfg: &PathConfig,
+    aovs: &AovSet,
     keep: impl Fn(u64, &Deposit) -> (Option<T>, bool) + Sync,
 ) -> Vec<T> {
     const CHUNK: u64 = 4096;
@@ -89,7 +111,7 @@ pub(crate) fn trace_photons<T: Send>(
             let mut path = Vec::new();
             for i in c * CHUNK..((c + 1) * CHUNK).min(count) {
                 start_photon(&mut sampler, tag, i);
-                trace_photon(scene, cfg, &mut sampler, &mut path, &mut |d| {
+                trace_photon(scene, cfg, aovs, &mut sampler, &mut path, &mut |d| {
                     let (v, go_on) = keep(i, d);
                     out.extend(v);
                     go_on

@@ -369,6 +369,14 @@ impl<'a> Hierarchy<'a> {
     /// from the node that covers it exactly (or the leaf above it), and Gouraud values at the
     /// display vertices (see [`Self::leaf_gouraud`]).
     pub fn display(&self, mesh: &MeshOptions) -> Result<(RadiosityMesh, Vec<Rgb>, Vec<Rgb>)> {
+        let (display, splits) = self.display_mesh(mesh)?;
+        let b = self.node_values(&display, &splits);
+        let vertex_b = self.leaf_gouraud(&display, &b, &splits);
+        Ok((display, b, vertex_b))
+    }
+
+    /// The display mesh (see [`Self::display`]) and its splits per shape.
+    fn display_mesh(&self, mesh: &MeshOptions) -> Result<(RadiosityMesh, Vec<u32>)> {
         let shapes = self.scene.shapes.len();
         let mut depth = vec![0u8; shapes];
         let mut tris = vec![0usize; shapes];
@@ -386,7 +394,12 @@ impl<'a> Hierarchy<'a> {
         }
         let splits: Vec<u32> = depth.iter().map(|d| 1u32 << d.min(&cap)).collect();
         let display = RadiosityMesh::build(self.scene, &MeshOptions { shape_splits: splits.clone(), max_elements: usize::MAX, ..mesh.clone() })?;
-        let b: Vec<Rgb> = display
+        Ok((display, splits))
+    }
+
+    /// The radiosity of the node each display element lies in.
+    fn node_values(&self, display: &RadiosityMesh, splits: &[u32]) -> Vec<Rgb> {
+        display
             .elements
             .iter()
             .map(|e| {
@@ -394,9 +407,7 @@ impl<'a> Hierarchy<'a> {
                 let n = self.forest.find(e.patch, e.centroid, d);
                 self.forest.nodes[n as usize].b
             })
-            .collect();
-        let vertex_b = self.leaf_gouraud(&display, &b, &splits);
-        Ok((display, b, vertex_b))
+            .collect()
     }
 
     /// Gouraud over the leaves, not the (finer) display elements: a leaf's corners take the
@@ -446,6 +457,9 @@ pub struct Outcome {
     pub b: Vec<Rgb>,
     /// Gouraud values at the display mesh's vertices.
     pub vertex_b: Vec<Rgb>,
+    /// Per display element, the light of exactly one diffuse bounce ρ F E (paths `L D E`) on
+    /// the final links, for light path expressions.
+    pub b_one: Vec<Rgb>,
     pub history: Vec<Step>,
     pub converged: bool,
     pub stats: Stats,
@@ -526,6 +540,17 @@ pub fn solve(scene: &Scene, mesh: &MeshOptions, opts: &HierarchicalOptions, tole
     }
     h.update_stats();
     h.stats.refine_seconds = refine_seconds;
-    let (display, b, vertex_b) = h.display(mesh)?;
-    Ok(Outcome { mesh: display, b, vertex_b, history, converged, stats: h.stats })
+    let (display, splits) = h.display_mesh(mesh)?;
+    let b = h.node_values(&display, &splits);
+    let vertex_b = h.leaf_gouraud(&display, &b, &splits);
+    // One Jacobi sweep from E on the same links is exactly one bounce.
+    let b_one = if bounces == Some(0) {
+        vec![Rgb::BLACK; b.len()]
+    } else {
+        h.reset_to_emission();
+        let e = h.node_values(&display, &splits);
+        h.jacobi_sweep();
+        h.node_values(&display, &splits).iter().zip(&e).map(|(b1, e)| (*b1 - *e).map(|x| x.max(0.0))).collect()
+    };
+    Ok(Outcome { mesh: display, b, vertex_b, b_one, history, converged, stats: h.stats })
 }
