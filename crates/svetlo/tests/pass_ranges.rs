@@ -31,7 +31,7 @@ fn distributed(spec: &str, scene: &Scene, s: &RenderSettings, chunks: usize, thr
     let mut parts = Vec::new();
     for r in nodes.into_iter().rev() {
         let st = RenderSettings { threads, ..s.clone() };
-        let part = svetlo::methods::render_passes(spec, scene, &st, r, &Progress::new()).unwrap_or_else(|e| panic!("{spec}: {e}"));
+        let part = svetlo::methods::render_passes(spec, scene, &st, r, None, &Progress::new()).unwrap_or_else(|e| panic!("{spec}: {e}"));
         parts.push(PartialFilm::from_bytes(&part.to_bytes()).expect("round trip"));
     }
     PartialFilm::merge(parts).expect("merge")
@@ -89,25 +89,65 @@ fn aov_layers_and_filters_merge_bit_for_bit() {
     }
 }
 
+/// A Metropolis render split by chain blocks: one bootstrap (through bytes) shared by every
+/// node, nodes rendered with `threads` threads, merged.
+fn distributed_chains(spec: &str, scene: &Scene, s: &RenderSettings, chunks: usize, threads: usize) -> Film {
+    let boot = svetlo::methods::prepare(spec, scene, s, &Progress::new()).expect("bootstrap").expect("metropolis shares its bootstrap");
+    let plan = svetlo::methods::unit_plan(spec, scene, s).expect("plan");
+    let mut parts = Vec::new();
+    for r in chunk_nodes(&plan, chunks).into_iter().rev() {
+        let st = RenderSettings { threads, ..s.clone() };
+        let part = svetlo::methods::render_passes(spec, scene, &st, r, Some(&boot), &Progress::new()).unwrap_or_else(|e| panic!("{spec}: {e}"));
+        parts.push(PartialFilm::from_bytes(&part.to_bytes()).expect("round trip"));
+    }
+    PartialFilm::merge(parts).expect("merge")
+}
+
+#[test]
+fn metropolis_chain_blocks_merge_into_the_local_render_bit_for_bit() {
+    let cbox = scene("cornell-box.xml", 12, 10);
+    let s = RenderSettings { spp: 6, max_depth: 5, seed: 3, threads: 2, ..RenderSettings::from_scene(&cbox) };
+    // 40 chains: blocks of 16, 16 and 8 chains.
+    for spec in ["pssmlt:chains=40,bootstrap=3000", "pssmlt:chains=40,bootstrap=3000,target=path", "mlt:chains=40,bootstrap=2000"] {
+        let plan = svetlo::methods::unit_plan(spec, &cbox, &s).unwrap();
+        assert_eq!(plan, [(0, 16), (16, 16), (32, 8)], "{spec}");
+        let local = svetlo::methods::by_name(spec).unwrap().render(&cbox, &s, &Progress::new()).unwrap();
+        assert!(local.image().data.iter().any(|c| c.r > 0.0), "{spec}: black");
+        for (chunks, threads) in [(1, 1), (2, 2), (3, 1), (8, 2)] {
+            assert_same(&distributed_chains(spec, &cbox, &s, chunks, threads), &local, &format!("{spec}, {chunks} chunks, {threads} threads"));
+        }
+    }
+    // The bootstrap is checked: malformed bytes, or one of another seed, are refused.
+    let spec = "pssmlt:chains=20,bootstrap=500";
+    let boot = svetlo::methods::prepare(spec, &cbox, &s, &Progress::new()).unwrap().unwrap();
+    for cut in [0, 8, 63, boot.len() - 1] {
+        assert!(svetlo::methods::render_passes(spec, &cbox, &s, 0..2, Some(&boot[..cut]), &Progress::new()).is_err(), "cut at {cut}");
+    }
+    let other = RenderSettings { seed: 4, ..s.clone() };
+    let e = svetlo::methods::render_passes(spec, &cbox, &other, 0..2, Some(&boot), &Progress::new()).unwrap_err();
+    assert!(e.to_string().contains("seed"), "{e}");
+    assert!(svetlo::methods::render_passes(spec, &cbox, &s, 1..3, Some(&boot), &Progress::new()).is_err(), "2 blocks: 1..3 is out of range");
+}
+
 #[test]
 fn ranges_that_are_not_tree_nodes_and_unseparable_methods_are_refused() {
     let cbox = scene("cornell-box.xml", 8, 8);
     let s = RenderSettings { spp: 10, ..RenderSettings::from_scene(&cbox) };
     // 10 spp: passes 1, 2, 4, 3; 1..3 straddles the tree's first split (0..2 | 2..4).
-    let e = svetlo::methods::render_passes("path", &cbox, &s, 1..3, &Progress::new()).unwrap_err();
+    let e = svetlo::methods::render_passes("path", &cbox, &s, 1..3, None, &Progress::new()).unwrap_err();
     assert!(e.to_string().contains("not a node"), "{e}");
-    for spec in ["sppm", "pssmlt", "mlt", "zbuffer"] {
-        let e = svetlo::methods::render_passes(spec, &cbox, &s, 0..4, &Progress::new()).unwrap_err();
+    for spec in ["sppm", "zbuffer"] {
+        let e = svetlo::methods::render_passes(spec, &cbox, &s, 0..4, None, &Progress::new()).unwrap_err();
         assert!(e.to_string().contains("not a sum of independent"), "{spec}: {e}");
     }
     let timed = RenderSettings { time_limit: Some(std::time::Duration::from_secs(1)), ..s.clone() };
-    assert!(svetlo::methods::render_passes("path", &cbox, &timed, 0..4, &Progress::new()).is_err());
+    assert!(svetlo::methods::render_passes("path", &cbox, &timed, 0..4, None, &Progress::new()).is_err());
     // Parts that leave a pass out, or come from different renders, do not merge.
-    let a = svetlo::methods::render_passes("path", &cbox, &s, 0..2, &Progress::new()).unwrap();
-    let b = svetlo::methods::render_passes("path", &cbox, &s, 2..3, &Progress::new()).unwrap();
+    let a = svetlo::methods::render_passes("path", &cbox, &s, 0..2, None, &Progress::new()).unwrap();
+    let b = svetlo::methods::render_passes("path", &cbox, &s, 2..3, None, &Progress::new()).unwrap();
     assert!(PartialFilm::merge(vec![a.clone(), b]).is_err(), "pass 3 missing");
     let other = scene("cornell-box.xml", 9, 8);
-    let c = svetlo::methods::render_passes("path", &other, &s, 2..4, &Progress::new()).unwrap();
+    let c = svetlo::methods::render_passes("path", &other, &s, 2..4, None, &Progress::new()).unwrap();
     assert!(PartialFilm::merge(vec![a, c]).is_err(), "different film sizes");
 }
 
@@ -115,7 +155,7 @@ fn ranges_that_are_not_tree_nodes_and_unseparable_methods_are_refused() {
 fn malformed_bytes_are_errors() {
     let cbox = scene("cornell-box.xml", 6, 5);
     let s = RenderSettings { spp: 3, ..RenderSettings::from_scene(&cbox) };
-    let part = svetlo::methods::render_passes("bdpt", &cbox, &s, 0..2, &Progress::new()).unwrap();
+    let part = svetlo::methods::render_passes("bdpt", &cbox, &s, 0..2, None, &Progress::new()).unwrap();
     let bytes = part.to_bytes();
     for cut in [0, 7, 8, 20, bytes.len() / 2, bytes.len() - 1] {
         assert!(PartialFilm::from_bytes(&bytes[..cut]).is_err(), "cut at {cut}");
