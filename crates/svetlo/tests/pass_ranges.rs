@@ -172,3 +172,45 @@ fn malformed_bytes_are_errors() {
     assert_eq!(back.passes, 0..2);
     assert!(bits(&back.film.image()) == bits(&part.film.image()));
 }
+
+#[test]
+fn sppm_in_row_blocks_from_photon_batches_is_the_local_render_bit_for_bit() {
+    use svetlo::integrator::photon::{Sppm, SppmOptions, SppmRows};
+    let cbox = scene("cornell-box.xml", 14, 11);
+    let s = RenderSettings { spp: 4, max_depth: 6, seed: 2, threads: 2, ..RenderSettings::from_scene(&cbox) };
+    let sppm = Sppm { options: SppmOptions { photons: Some(3000), ..Default::default() } };
+    let local = svetlo::integrator::Integrator::render(&sppm, &cbox, &s, &Progress::new()).unwrap();
+    assert!(local.image().data.iter().any(|c| c.r > 0.0));
+    let per = sppm.photons_per_iteration(&cbox);
+    for (blocks, batches, threads) in [(1, 1, 1), (2, 3, 2), (11, 2, 1)] {
+        let st = RenderSettings { threads, ..s.clone() };
+        let h = cbox.camera.height;
+        let mut states: Vec<SppmRows> = (0..blocks).map(|b| sppm.start_rows(&cbox, b * h / blocks..(b + 1) * h / blocks).unwrap()).collect();
+        for it in 0..s.spp {
+            let cuts: Vec<u64> = (0..=batches).map(|k| k * per / batches).collect();
+            let photons: Vec<Vec<u8>> = cuts.windows(2).map(|c| sppm.photon_batch(&cbox, &st, it, c[0]..c[1]).unwrap()).collect();
+            let refs: Vec<&[u8]> = photons.iter().map(|b| b.as_slice()).collect();
+            for state in states.iter_mut() {
+                // Through bytes, as between iterations on a cluster.
+                let mut back = SppmRows::from_bytes(&state.to_bytes()).unwrap();
+                sppm.iterate_rows(&cbox, &st, &mut back, &refs).unwrap();
+                *state = back;
+            }
+        }
+        states.reverse();
+        let film = sppm.develop_rows(&cbox, states).unwrap();
+        assert_same(&film, &local, &format!("sppm: {blocks} row blocks, {batches} photon batches, {threads} threads"));
+    }
+    // Rows that leave a gap, states of another render and malformed bytes are refused.
+    let a = sppm.start_rows(&cbox, 0..5).unwrap();
+    assert!(sppm.develop_rows(&cbox, vec![a.clone()]).is_err());
+    let bytes = a.to_bytes();
+    for cut in [0, 8, 27, bytes.len() - 1] {
+        assert!(SppmRows::from_bytes(&bytes[..cut]).is_err(), "cut at {cut}");
+    }
+    let mut done = a.clone();
+    let four = RenderSettings { spp: 0, ..s.clone() };
+    assert!(sppm.iterate_rows(&cbox, &four, &mut done, &[]).is_err(), "no iteration left");
+    assert!(sppm.iterate_rows(&cbox, &s, &mut done, &[b"SVLPHOT1\x01"]).is_err(), "malformed photons");
+    assert!(sppm.start_rows(&cbox, 5..12).is_err());
+}

@@ -125,7 +125,7 @@ impl PhotonMapper {
         let gscale = 1.0 / o.photons.max(1) as f32;
         // Every `precompute`-th path lends its Lambertian landings as precomputed-radiance sites.
         let every = if o.gather > 0 { o.precompute as u64 } else { 0 };
-        let landed: Vec<(Photon, Option<RadianceSite>)> = trace_photons(scene, settings.seed, TAG_GLOBAL, o.photons, &cfg, |i, d| {
+        let landed: Vec<(Photon, Option<RadianceSite>)> = trace_photons(scene, settings.seed, TAG_GLOBAL, 0..o.photons, &cfg, |i, d| {
             let site_path = every > 0 && i % every == 0;
             let site = if site_path {
                 d.albedo.map(|albedo| RadianceSite { p: d.p, n: if d.wi.dot(d.ng) >= 0.0 { d.ng } else { -d.ng }, ns: d.ns, albedo })
@@ -139,7 +139,7 @@ impl PhotonMapper {
         let other_paths_scale = o.photons as f32 / (o.photons - site_paths).max(1) as f32;
         let global: Vec<Photon> = landed.into_iter().map(|x| x.0).collect();
         let cscale = 1.0 / o.caustic_photons.max(1) as f32;
-        let caustic: Vec<Photon> = trace_photons(scene, settings.seed, TAG_CAUSTIC, o.caustic_photons, &cfg, |_, d| {
+        let caustic: Vec<Photon> = trace_photons(scene, settings.seed, TAG_CAUSTIC, 0..o.caustic_photons, &cfg, |_, d| {
             let keep = (d.caustic && d.surface.intersects(crate::bsdf::LobeFlags::DIFFUSE)).then(|| Photon::from_deposit(d, cscale));
             // A path stays a caustic one only through delta bounces.
             let go_on = (d.caustic || d.segments == 1) && d.surface.is_specular();
