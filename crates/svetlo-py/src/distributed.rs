@@ -97,7 +97,8 @@ fn splittable(r: &Resolved) -> PyResult<()> {
 
 /// The plan of a render: a dict with integrator, scheme ("passes", "chains" or "sppm"), spp,
 /// width, height; for passes and chains also units (samples per pixel or chains in all),
-/// passes (the number of work units) and nodes, a list of (first unit, end unit, first
+/// shared (the units of what all chunks share: 1 for a bootstrap, photon paths for photon
+/// mapping, 0 for nothing), passes (the number of work units) and nodes, a list of (first unit, end unit, first
 /// sample or chain, end sample or chain); for sppm photons (per iteration).
 #[pyfunction]
 #[pyo3(signature = (scene, chunks, opts))]
@@ -129,33 +130,34 @@ pub fn plan_chunks<'py>(py: Python<'py>, scene: &PyScene, chunks: usize, opts: &
         })
         .collect();
     d.set_item("units", plan.last().map_or(0, |p| p.0 + p.1))?;
+    d.set_item("shared", svetlo::methods::shared_units(&r.name).map_err(to_py)?)?;
     d.set_item("passes", plan.len())?;
     d.set_item("nodes", nodes)?;
     Ok(d)
 }
 
-/// What every chunk shares, computed once (bytes; None when nothing is shared): the
-/// Metropolis bootstrap.
+/// Units `start..end` of what every chunk shares (`plan_chunks`'s `shared`), as bytes: the
+/// Metropolis bootstrap (one unit), a batch of photon mapping's photon paths.
 #[pyfunction]
-#[pyo3(signature = (scene, opts, threads=0))]
-pub fn prepare<'py>(py: Python<'py>, scene: &PyScene, opts: &Bound<'py, PyDict>, threads: usize) -> PyResult<Option<Bound<'py, PyBytes>>> {
+#[pyo3(signature = (scene, start, end, opts, threads=0))]
+pub fn shared_batch<'py>(py: Python<'py>, scene: &PyScene, start: u64, end: u64, opts: &Bound<'py, PyDict>, threads: usize) -> PyResult<Bound<'py, PyBytes>> {
     let r = resolve(scene, opts, threads)?;
     splittable(&r)?;
-    let out = py.allow_threads(|| svetlo::methods::prepare(&r.name, &r.scene, &r.settings, &Progress::new())).map_err(to_py)?;
-    Ok(out.map(|b| PyBytes::new(py, &b)))
+    let out = py.allow_threads(|| svetlo::methods::shared_batch(&r.name, &r.scene, &r.settings, start..end, &Progress::new())).map_err(to_py)?;
+    Ok(PyBytes::new(py, &out))
 }
 
-/// Render units `start..end` (a node from `plan_chunks`) from what `prepare` made and return
-/// their raw film sums as bytes.
+/// Render units `start..end` (a node from `plan_chunks`) from the shared batches (in order;
+/// none: computed here) and return their raw film sums as bytes.
 #[pyfunction]
-#[pyo3(signature = (scene, start, end, opts, shared=None, threads=0))]
+#[pyo3(signature = (scene, start, end, opts, shared=Vec::new(), threads=0))]
 pub fn render_passes<'py>(
     py: Python<'py>,
     scene: &PyScene,
     start: u32,
     end: u32,
     opts: &Bound<'py, PyDict>,
-    shared: Option<Vec<u8>>,
+    shared: Vec<Vec<u8>>,
     threads: usize,
 ) -> PyResult<Bound<'py, PyBytes>> {
     let r = resolve(scene, opts, threads)?;
@@ -163,8 +165,8 @@ pub fn render_passes<'py>(
     if start >= end {
         return Err(option_err(format!("passes {start}..{end} are empty")));
     }
-    let part =
-        py.allow_threads(|| svetlo::methods::render_passes(&r.name, &r.scene, &r.settings, start..end, shared.as_deref(), &Progress::new())).map_err(to_py)?;
+    let refs: Vec<&[u8]> = shared.iter().map(|b| b.as_slice()).collect();
+    let part = py.allow_threads(|| svetlo::methods::render_passes(&r.name, &r.scene, &r.settings, start..end, &refs, &Progress::new())).map_err(to_py)?;
     let bytes = py.allow_threads(|| part.to_bytes());
     Ok(PyBytes::new(py, &bytes))
 }

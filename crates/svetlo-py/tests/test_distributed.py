@@ -59,9 +59,14 @@ def test_any_chunk_count_gives_the_same_bits(client):
         assert np.array_equal(bits(img), bits(ref)), f"{chunks} chunks"
     # Workers that share the client's file system read the path itself.
     assert np.array_equal(bits(sd.render(CBOX, client=client, chunks=3, ship=False, progress=False, **kw)), bits(ref))
-    # Photon mapping splits too: every task traces the same photon maps from the seed.
+    # Photon mapping: the photon paths traced once, by batches of path indices on the
+    # workers, every chunk building the maps from all batches.
     kw = dict(integrator="photon", options={"photons": 2000, "caustic_photons": 500, "gather": 4}, spp=7, seed=1, width=16, height=12)
-    assert np.array_equal(bits(sd.render(CBOX, client=client, chunks=3, progress=False, **kw)), bits(local(CBOX, **kw).image))
+    ref = local(CBOX, **kw).image
+    for batches in (1, 3):
+        job = sd.submit(CBOX, client=client, chunks=3, photon_batches=batches, **kw)
+        assert len(job.shared) == batches
+        assert np.array_equal(bits(job.result().image), bits(ref)), f"photon, {batches} photon batches"
 
 
 def write_asset_scene(d: pathlib.Path, colour: str = "0.2, 0.3, 0.8") -> pathlib.Path:
@@ -178,7 +183,7 @@ def test_metropolis_chains_share_one_bootstrap_and_equal_the_local_render(client
     nodes = {1: [(0, 3)], 2: [(0, 2), (2, 3)], 3: [(0, 1), (1, 2), (2, 3)]}
     for chunks in (1, 2, 3):
         job = sd.submit(CBOX, client=client, chunks=chunks, **kw)
-        assert job.shared is not None and [n[:2] for n in job.nodes] == nodes[chunks]
+        assert len(job.shared) == 1 and [n[:2] for n in job.nodes] == nodes[chunks]
         r = job.result()
         assert r.spp == ref.spp == 8 and not r.interrupted
         assert np.array_equal(bits(r.image), bits(ref.image)), f"{integrator}, {chunks} chunks"

@@ -133,20 +133,45 @@ pub fn unit_plan(spec: &str, scene: &crate::scene::Scene, settings: &integrator:
     Ok((0..integrator::metropolis::chain_blocks(chains)).map(|b| (b * per as u32, (chains - b as usize * per).min(per) as u32)).collect())
 }
 
-/// What every range of a split render shares, computed once: the bootstrap's bytes for the
-/// Metropolis methods ([`integrator::metropolis::Bootstrap`]), None for the others.
-pub fn prepare(spec: &str, scene: &crate::scene::Scene, settings: &integrator::RenderSettings, progress: &integrator::Progress) -> Result<Option<Vec<u8>>> {
-    if pass_separable(spec) {
-        return Ok(None);
+/// What every range of a split render shares, computed once and cut into batches by index:
+/// the Metropolis bootstrap (one unit), the photon paths of photon mapping (global then
+/// caustic); 0 for the others. See [`shared_batch`].
+pub fn shared_units(spec: &str) -> Result<u64> {
+    let o = spec.split_once(':').map_or("", |(_, o)| o);
+    Ok(match base_name(spec) {
+        "photon" => integrator::photon::PhotonMapper { options: integrator::photon::PhotonOptions::parse(o)? }.photon_paths(),
+        n if CHAIN_SEPARABLE.contains(&n) => 1,
+        _ => 0,
+    })
+}
+
+/// Units `range` of what the ranges of a split render share ([`shared_units`]), as bytes:
+/// batches computed apart and given in order to [`render_passes`] are exactly what a local
+/// render computes.
+pub fn shared_batch(
+    spec: &str,
+    scene: &crate::scene::Scene,
+    settings: &integrator::RenderSettings,
+    range: std::ops::Range<u64>,
+    progress: &integrator::Progress,
+) -> Result<Vec<u8>> {
+    let units = shared_units(spec)?;
+    if range.start >= range.end || range.end > units {
+        return Err(Error::Settings(format!("'{spec}' shares units 0..{units}, not {}..{}", range.start, range.end)));
+    }
+    if base_name(spec) == "photon" {
+        let o = spec.split_once(':').map_or("", |(_, o)| o);
+        return integrator::photon::PhotonMapper { options: integrator::photon::PhotonOptions::parse(o)? }.photon_batch(scene, settings, range);
     }
     match metropolis_job(spec, scene, settings, integrator::metropolis::Job::Bootstrap, progress)? {
-        integrator::metropolis::JobOutput::Bootstrap(b) => Ok(Some(b.to_bytes())),
+        integrator::metropolis::JobOutput::Bootstrap(b) => Ok(b.to_bytes()),
         integrator::metropolis::JobOutput::Film(..) => Err(Error::Invalid(format!("'{spec}': the bootstrap was asked for"))),
     }
 }
 
 /// Render work units `range` (a node of the tree over [`unit_plan`]) of `scene` with the
-/// method `spec`, from what [`prepare`] made (`shared`; None: computed here): the raw sums
+/// method `spec`, from the batches of [`shared_batch`] in order (`shared`; empty: computed
+/// here): the raw sums
 /// that [`PartialFilm::merge`](crate::film::raw::PartialFilm::merge) combines with the other
 /// nodes' into the local render's film, bit for bit.
 pub fn render_passes(
@@ -154,7 +179,7 @@ pub fn render_passes(
     scene: &crate::scene::Scene,
     settings: &integrator::RenderSettings,
     range: std::ops::Range<u32>,
-    shared: Option<&[u8]>,
+    shared: &[&[u8]],
     progress: &integrator::Progress,
 ) -> Result<crate::film::raw::PartialFilm> {
     if !splits(spec) {
@@ -170,7 +195,11 @@ pub fn render_passes(
         if !integrator::passes::is_node(&range, plan.len() as u32) {
             return Err(Error::Settings(format!("chain blocks {}..{} are not a node of the tree over {} blocks", range.start, range.end, plan.len())));
         }
-        let boot = shared.map(integrator::metropolis::Bootstrap::from_bytes).transpose()?;
+        let boot = match shared {
+            [] => None,
+            [b] => Some(integrator::metropolis::Bootstrap::from_bytes(b)?),
+            _ => return Err(Error::Settings(format!("'{spec}' shares one bootstrap, not {} batches", shared.len()))),
+        };
         let out = metropolis_job(spec, scene, &s, integrator::metropolis::Job::Blocks(boot.as_ref()), progress)?;
         let integrator::metropolis::JobOutput::Film(film, _, mutations) = out else {
             return Err(Error::Invalid(format!("'{spec}': a film was asked for")));
@@ -180,12 +209,15 @@ pub fn render_passes(
         }
         return Ok(crate::film::raw::PartialFilm { passes: range, passes_total: plan.len() as u32, film, mutations });
     }
-    if shared.is_some() {
-        return Err(Error::Settings(format!("'{spec}' shares nothing between its passes")));
-    }
-    let method = by_name(spec)?;
     let want: u32 = plan.get(range.start as usize..range.end as usize).map_or(0, |p| p.iter().map(|p| p.1).sum());
-    let film = method.render(scene, &s, progress)?;
+    let film = if shared.is_empty() {
+        by_name(spec)?.render(scene, &s, progress)?
+    } else if base_name(spec) == "photon" {
+        let o = spec.split_once(':').map_or("", |(_, o)| o);
+        integrator::photon::PhotonMapper { options: integrator::photon::PhotonOptions::parse(o)? }.render_from_batches(scene, &s, shared, progress)?
+    } else {
+        return Err(Error::Settings(format!("'{spec}' shares nothing between its passes")));
+    };
     if progress.cancelled() {
         return Err(cancelled());
     }

@@ -31,7 +31,7 @@ fn distributed(spec: &str, scene: &Scene, s: &RenderSettings, chunks: usize, thr
     let mut parts = Vec::new();
     for r in nodes.into_iter().rev() {
         let st = RenderSettings { threads, ..s.clone() };
-        let part = svetlo::methods::render_passes(spec, scene, &st, r, None, &Progress::new()).unwrap_or_else(|e| panic!("{spec}: {e}"));
+        let part = svetlo::methods::render_passes(spec, scene, &st, r, &[], &Progress::new()).unwrap_or_else(|e| panic!("{spec}: {e}"));
         parts.push(PartialFilm::from_bytes(&part.to_bytes()).expect("round trip"));
     }
     PartialFilm::merge(parts).expect("merge")
@@ -92,12 +92,13 @@ fn aov_layers_and_filters_merge_bit_for_bit() {
 /// A Metropolis render split by chain blocks: one bootstrap (through bytes) shared by every
 /// node, nodes rendered with `threads` threads, merged.
 fn distributed_chains(spec: &str, scene: &Scene, s: &RenderSettings, chunks: usize, threads: usize) -> Film {
-    let boot = svetlo::methods::prepare(spec, scene, s, &Progress::new()).expect("bootstrap").expect("metropolis shares its bootstrap");
+    assert_eq!(svetlo::methods::shared_units(spec).unwrap(), 1);
+    let boot = svetlo::methods::shared_batch(spec, scene, s, 0..1, &Progress::new()).expect("bootstrap");
     let plan = svetlo::methods::unit_plan(spec, scene, s).expect("plan");
     let mut parts = Vec::new();
     for r in chunk_nodes(&plan, chunks).into_iter().rev() {
         let st = RenderSettings { threads, ..s.clone() };
-        let part = svetlo::methods::render_passes(spec, scene, &st, r, Some(&boot), &Progress::new()).unwrap_or_else(|e| panic!("{spec}: {e}"));
+        let part = svetlo::methods::render_passes(spec, scene, &st, r, &[&boot], &Progress::new()).unwrap_or_else(|e| panic!("{spec}: {e}"));
         parts.push(PartialFilm::from_bytes(&part.to_bytes()).expect("round trip"));
     }
     PartialFilm::merge(parts).expect("merge")
@@ -119,14 +120,14 @@ fn metropolis_chain_blocks_merge_into_the_local_render_bit_for_bit() {
     }
     // The bootstrap is checked: malformed bytes, or one of another seed, are refused.
     let spec = "pssmlt:chains=20,bootstrap=500";
-    let boot = svetlo::methods::prepare(spec, &cbox, &s, &Progress::new()).unwrap().unwrap();
+    let boot = svetlo::methods::shared_batch(spec, &cbox, &s, 0..1, &Progress::new()).unwrap();
     for cut in [0, 8, 63, boot.len() - 1] {
-        assert!(svetlo::methods::render_passes(spec, &cbox, &s, 0..2, Some(&boot[..cut]), &Progress::new()).is_err(), "cut at {cut}");
+        assert!(svetlo::methods::render_passes(spec, &cbox, &s, 0..2, &[&boot[..cut]], &Progress::new()).is_err(), "cut at {cut}");
     }
     let other = RenderSettings { seed: 4, ..s.clone() };
-    let e = svetlo::methods::render_passes(spec, &cbox, &other, 0..2, Some(&boot), &Progress::new()).unwrap_err();
+    let e = svetlo::methods::render_passes(spec, &cbox, &other, 0..2, &[&boot], &Progress::new()).unwrap_err();
     assert!(e.to_string().contains("seed"), "{e}");
-    assert!(svetlo::methods::render_passes(spec, &cbox, &s, 1..3, Some(&boot), &Progress::new()).is_err(), "2 blocks: 1..3 is out of range");
+    assert!(svetlo::methods::render_passes(spec, &cbox, &s, 1..3, &[&boot], &Progress::new()).is_err(), "2 blocks: 1..3 is out of range");
 }
 
 #[test]
@@ -134,20 +135,20 @@ fn ranges_that_are_not_tree_nodes_and_unseparable_methods_are_refused() {
     let cbox = scene("cornell-box.xml", 8, 8);
     let s = RenderSettings { spp: 10, ..RenderSettings::from_scene(&cbox) };
     // 10 spp: passes 1, 2, 4, 3; 1..3 straddles the tree's first split (0..2 | 2..4).
-    let e = svetlo::methods::render_passes("path", &cbox, &s, 1..3, None, &Progress::new()).unwrap_err();
+    let e = svetlo::methods::render_passes("path", &cbox, &s, 1..3, &[], &Progress::new()).unwrap_err();
     assert!(e.to_string().contains("not a node"), "{e}");
     for spec in ["sppm", "zbuffer"] {
-        let e = svetlo::methods::render_passes(spec, &cbox, &s, 0..4, None, &Progress::new()).unwrap_err();
+        let e = svetlo::methods::render_passes(spec, &cbox, &s, 0..4, &[], &Progress::new()).unwrap_err();
         assert!(e.to_string().contains("not a sum of independent"), "{spec}: {e}");
     }
     let timed = RenderSettings { time_limit: Some(std::time::Duration::from_secs(1)), ..s.clone() };
-    assert!(svetlo::methods::render_passes("path", &cbox, &timed, 0..4, None, &Progress::new()).is_err());
+    assert!(svetlo::methods::render_passes("path", &cbox, &timed, 0..4, &[], &Progress::new()).is_err());
     // Parts that leave a pass out, or come from different renders, do not merge.
-    let a = svetlo::methods::render_passes("path", &cbox, &s, 0..2, None, &Progress::new()).unwrap();
-    let b = svetlo::methods::render_passes("path", &cbox, &s, 2..3, None, &Progress::new()).unwrap();
+    let a = svetlo::methods::render_passes("path", &cbox, &s, 0..2, &[], &Progress::new()).unwrap();
+    let b = svetlo::methods::render_passes("path", &cbox, &s, 2..3, &[], &Progress::new()).unwrap();
     assert!(PartialFilm::merge(vec![a.clone(), b]).is_err(), "pass 3 missing");
     let other = scene("cornell-box.xml", 9, 8);
-    let c = svetlo::methods::render_passes("path", &other, &s, 2..4, None, &Progress::new()).unwrap();
+    let c = svetlo::methods::render_passes("path", &other, &s, 2..4, &[], &Progress::new()).unwrap();
     assert!(PartialFilm::merge(vec![a, c]).is_err(), "different film sizes");
 }
 
@@ -155,7 +156,7 @@ fn ranges_that_are_not_tree_nodes_and_unseparable_methods_are_refused() {
 fn malformed_bytes_are_errors() {
     let cbox = scene("cornell-box.xml", 6, 5);
     let s = RenderSettings { spp: 3, ..RenderSettings::from_scene(&cbox) };
-    let part = svetlo::methods::render_passes("bdpt", &cbox, &s, 0..2, None, &Progress::new()).unwrap();
+    let part = svetlo::methods::render_passes("bdpt", &cbox, &s, 0..2, &[], &Progress::new()).unwrap();
     let bytes = part.to_bytes();
     for cut in [0, 7, 8, 20, bytes.len() / 2, bytes.len() - 1] {
         assert!(PartialFilm::from_bytes(&bytes[..cut]).is_err(), "cut at {cut}");
@@ -213,4 +214,32 @@ fn sppm_in_row_blocks_from_photon_batches_is_the_local_render_bit_for_bit() {
     assert!(sppm.iterate_rows(&cbox, &four, &mut done, &[]).is_err(), "no iteration left");
     assert!(sppm.iterate_rows(&cbox, &s, &mut done, &[b"SVLPHOT1\x01"]).is_err(), "malformed photons");
     assert!(sppm.start_rows(&cbox, 5..12).is_err());
+}
+
+#[test]
+fn photon_maps_from_batches_traced_apart_are_the_local_render_bit_for_bit() {
+    let cbox = scene("cornell-box.xml", 12, 10);
+    let s = RenderSettings { spp: 5, max_depth: 6, seed: 9, threads: 2, ..RenderSettings::from_scene(&cbox) };
+    let spec = "photon:photons=3000,caustic-photons=1000,gather=4,precompute=3";
+    let local = svetlo::methods::by_name(spec).unwrap().render(&cbox, &s, &Progress::new()).unwrap();
+    let paths = svetlo::methods::shared_units(spec).unwrap();
+    assert_eq!(paths, 4000);
+    let plan = pass_plan(s.spp, 120);
+    // Batch cuts inside the global pass, at its end and inside the caustic pass.
+    for cuts in [vec![0, 4000], vec![0, 1234, 3000, 3500, 4000], vec![0, 2999, 3001, 4000]] {
+        let batches: Vec<Vec<u8>> = cuts.windows(2).map(|c| svetlo::methods::shared_batch(spec, &cbox, &s, c[0]..c[1], &Progress::new()).unwrap()).collect();
+        let refs: Vec<&[u8]> = batches.iter().map(|b| b.as_slice()).collect();
+        let parts = chunk_nodes(&plan, 2)
+            .into_iter()
+            .map(|r| svetlo::methods::render_passes(spec, &cbox, &RenderSettings { threads: 1, ..s.clone() }, r, &refs, &Progress::new()).unwrap())
+            .collect();
+        assert_same(&PartialFilm::merge(parts).unwrap(), &local, &format!("photon batches cut at {cuts:?}"));
+    }
+    // Batches missing, out of order or cut short are refused.
+    let a = svetlo::methods::shared_batch(spec, &cbox, &s, 0..3000, &Progress::new()).unwrap();
+    let b = svetlo::methods::shared_batch(spec, &cbox, &s, 3000..4000, &Progress::new()).unwrap();
+    for bad in [vec![&a[..]], vec![&b[..], &a[..]], vec![&a[..], &b[..b.len() - 1]]] {
+        assert!(svetlo::methods::render_passes(spec, &cbox, &s, 0..plan.len() as u32, &bad, &Progress::new()).is_err());
+    }
+    assert!(svetlo::methods::shared_batch(spec, &cbox, &s, 3000..4001, &Progress::new()).is_err());
 }

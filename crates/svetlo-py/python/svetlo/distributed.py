@@ -219,13 +219,13 @@ def _plan_task(src: SceneSource, chunks: int, opts: Dict[str, Any]) -> Dict[str,
     return _svetlo.plan_chunks(_scene(src), chunks, opts)
 
 
-def _prepare_task(src: SceneSource, opts: Dict[str, Any], threads: Optional[int]) -> Optional[bytes]:
-    return _svetlo.prepare(_scene(src), opts, threads=_threads(threads))
+def _shared_task(src: SceneSource, start: int, end: int, opts: Dict[str, Any], threads: Optional[int]) -> bytes:
+    return _svetlo.shared_batch(_scene(src), start, end, opts, threads=_threads(threads))
 
 
-def _render_task(src: SceneSource, start: int, end: int, opts: Dict[str, Any], threads: Optional[int], compress: int, shared: Optional[bytes] = None) -> Tuple[float, bytes]:
+def _render_task(src: SceneSource, start: int, end: int, opts: Dict[str, Any], threads: Optional[int], compress: int, *shared: bytes) -> Tuple[float, bytes]:
     t0 = time.perf_counter()
-    raw = _svetlo.render_passes(_scene(src), start, end, opts, shared=shared, threads=_threads(threads))
+    raw = _svetlo.render_passes(_scene(src), start, end, opts, shared=list(shared), threads=_threads(threads))
     return time.perf_counter() - t0, pack(raw, compress)
 
 
@@ -306,20 +306,23 @@ class DistributedRender:
     stops the chunks not yet done, ``result()`` waits and merges.
     """
 
-    def __init__(self, client, src: SceneSource, plan: Dict[str, Any], opts: Dict[str, Any], threads: Optional[int], compress: int, shipped):
+    def __init__(self, client, src: SceneSource, plan: Dict[str, Any], opts: Dict[str, Any], threads: Optional[int], compress: int, shipped, batches: int = 1):
         self.client, self.source, self.plan, self.opts = client, src, plan, opts
         self._shipped = shipped
         self.start_time = time.perf_counter()
         self.nodes: List[Tuple[int, int, int, int]] = [tuple(n) for n in plan["nodes"]]
         token = uuid.uuid4().hex[:12]
         ref = shipped if shipped is not None else src
-        # Metropolis chains share one bootstrap: one task computes it, the chunks take its
-        # future (the bytes go from worker to worker, not through the client).
-        self.shared = None
-        if plan["scheme"] == "chains":
-            self.shared = client.submit(_prepare_task, ref, opts, threads, key=f"svetlo-bootstrap-{token}", pure=False)
+        # What every chunk shares is computed once, by index batches (the Metropolis
+        # bootstrap: one task; photon mapping's photon paths: `batches` tasks); the chunks take
+        # the batches' futures, so the bytes go from worker to worker, not through the client.
+        units = plan["shared"]
+        cuts = sorted({k * units // max(1, min(batches, units)) for k in range(min(batches, units) + 1)}) if units else []
+        self.shared = [
+            client.submit(_shared_task, ref, a, b, opts, threads, key=f"svetlo-shared-{token}-{a}-{b}", pure=False) for a, b in zip(cuts, cuts[1:])
+        ]
         self.futures = [
-            client.submit(_render_task, ref, a, b, opts, threads, compress, self.shared, key=f"svetlo-passes-{token}-{a}-{b}", pure=False, retries=0)
+            client.submit(_render_task, ref, a, b, opts, threads, compress, *self.shared, key=f"svetlo-passes-{token}-{a}-{b}", pure=False, retries=0)
             for a, b, _, _ in self.nodes
         ]
         self._parts: Dict[int, bytes] = {}
@@ -577,7 +580,7 @@ def submit(
     plan = client.submit(_plan_task, ref, chunks, opts, pure=False).result()
     if plan["scheme"] == "sppm":
         return SppmRender(client, src, plan, opts, threads, shipped, row_blocks=chunks, photon_batches=photon_batches)
-    return DistributedRender(client, src, plan, opts, threads, compress, shipped)
+    return DistributedRender(client, src, plan, opts, threads, compress, shipped, batches=photon_batches)
 
 
 def render(
@@ -609,8 +612,8 @@ def render(
         chunks: how many tasks (nodes of the tree over the render's passes, or over its
             Metropolis chain blocks; fewer if there are fewer). Default: 4 per worker. For
             sppm: the blocks of rows, each a task per iteration.
-        photon_batches: sppm only: tasks tracing each iteration's photons (default: one
-            per worker).
+        photon_batches: photon and sppm: tasks tracing the photon maps' paths (each
+            iteration's, for sppm) by index (default: one per worker).
         ship: send the scene's files to the workers (default) or let them read the path.
         threads: threads per task (default: the worker's cores over its task slots).
         compress: zlib level for the film sums sent back, after regrouping their bytes by
