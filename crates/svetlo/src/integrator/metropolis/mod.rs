@@ -614,11 +614,12 @@ pub fn run_blocks<T: MetropolisTarget>(
                 done += st.mutations;
             }
             progress.done.store(done, Ordering::Relaxed);
-            if progress.is_observed() && done > 0 {
-                let mut film = if timed { timed_film.clone() } else { tree.peek(add).unwrap_or_else(empty) };
+            let spp_so_far = ((done as f64 / npix as f64).round() as u32).max(1);
+            if done > 0 && progress.wants_pass(spp_so_far) {
+                let mut film = if timed { timed_film.clone() } else { tree.peek(|a: &mut Film, b: &Film| a.add(b)).unwrap_or_else(empty) };
                 films.iter().for_each(|f| film.add(f));
                 film.splat_scale = (done as f64 / npix as f64) as f32;
-                film.spp_done = ((done as f64 / npix as f64).round() as u32).max(1);
+                film.spp_done = spp_so_far;
                 progress.pass_done(&film);
             }
             if let Some(t) = settings.time_limit {

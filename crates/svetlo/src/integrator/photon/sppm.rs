@@ -365,7 +365,7 @@ impl Integrator for Sppm {
             pool.install(|| self.iterate(scene, settings, &mut state, &tree));
             per_iteration_s = start.elapsed().as_secs_f64() / state.iterations as f64;
             progress.done.fetch_add((w * h) as u64, Ordering::Relaxed);
-            if progress.is_observed() {
+            if progress.wants_pass(state.iterations) {
                 progress.pass_done(&develop(scene, &state, per_iter));
             }
         }
