@@ -207,7 +207,7 @@ pub fn render_passes(
         if progress.cancelled() {
             return Err(cancelled());
         }
-        return Ok(crate::film::raw::PartialFilm { passes: range, passes_total: plan.len() as u32, film, mutations });
+        return Ok(crate::film::raw::PartialFilm { passes: range, passes_total: plan.len() as u32, film: *film, mutations });
     }
     let want: u32 = plan.get(range.start as usize..range.end as usize).map_or(0, |p| p.iter().map(|p| p.1).sum());
     let film = if shared.is_empty() {

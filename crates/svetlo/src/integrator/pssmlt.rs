@@ -123,7 +123,7 @@ impl Pssmlt {
     /// Render and return the chain statistics as well.
     pub fn render_with_stats(&self, scene: &Scene, settings: &RenderSettings, progress: &Progress) -> Result<(Film, ChainStats)> {
         match self.job(scene, settings, metropolis::Job::Blocks(None), progress)? {
-            metropolis::JobOutput::Film(film, stats, _) => Ok((film, stats)),
+            metropolis::JobOutput::Film(film, stats, _) => Ok((*film, stats)),
             metropolis::JobOutput::Bootstrap(_) => Err(crate::error::Error::Invalid("pssmlt: a film was asked for".into())),
         }
     }

@@ -286,7 +286,7 @@ pub enum Job<'a> {
 /// What a [`Job`] makes: the bootstrap, or a film with its statistics and mutations done.
 pub enum JobOutput {
     Bootstrap(Bootstrap),
-    Film(Film, ChainStats, u64),
+    Film(Box<Film>, ChainStats, u64),
 }
 
 /// Do `job` for `target`.
@@ -303,7 +303,7 @@ pub fn job<T: MetropolisTarget>(
         Job::Bootstrap => JobOutput::Bootstrap(bootstrap(target, settings, cfg)?),
         Job::Blocks(boot) => {
             let (film, stats, done) = run_blocks(target, width, height, settings, cfg, boot, progress)?;
-            JobOutput::Film(film, stats, done)
+            JobOutput::Film(Box::new(film), stats, done)
         }
     })
 }
@@ -321,7 +321,7 @@ pub fn black_job(width: u32, height: u32, settings: &RenderSettings, cfg: &Chain
             if settings.pass_range.as_ref().is_some_and(|r| r.start > 0) {
                 film.spp_done = 0;
             }
-            JobOutput::Film(film, stats, 0)
+            JobOutput::Film(Box::new(film), stats, 0)
         }
     })
 }

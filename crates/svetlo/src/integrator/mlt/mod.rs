@@ -106,7 +106,7 @@ impl Mlt {
     /// The render and the chains' statistics.
     pub fn render_with_stats(&self, scene: &Scene, settings: &RenderSettings, progress: &Progress) -> Result<(Film, ChainStats)> {
         match self.job(scene, settings, metropolis::Job::Blocks(None), progress)? {
-            metropolis::JobOutput::Film(film, stats, _) => Ok((film, stats)),
+            metropolis::JobOutput::Film(film, stats, _) => Ok((*film, stats)),
             metropolis::JobOutput::Bootstrap(_) => Err(Error::Invalid("mlt: a film was asked for".into())),
         }
     }

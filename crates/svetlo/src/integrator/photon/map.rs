@@ -63,7 +63,7 @@ pub(crate) fn photons_to_bytes(photons: &[Photon]) -> Vec<u8> {
 
 /// Read [`photons_to_bytes`]'s output (appending to `out`); malformed bytes are an error.
 pub(crate) fn photons_from_bytes(b: &[u8], out: &mut Vec<Photon>) -> Result<()> {
-    if b.len() < 8 || &b[..8] != b"SVLPHOT1" || (b.len() - 8) % PHOTON_BYTES != 0 {
+    if b.len() < 8 || &b[..8] != b"SVLPHOT1" || !(b.len() - 8).is_multiple_of(PHOTON_BYTES) {
         return Err(Error::Invalid(format!("photons: not a svetlo photon list ({} bytes)", b.len())));
     }
     out.reserve((b.len() - 8) / PHOTON_BYTES);
