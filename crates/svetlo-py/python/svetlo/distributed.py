@@ -22,12 +22,13 @@ the content of all those files. With ``ship=False`` the workers load the client'
 shared file system). Workers must run the same svetlo build on the same kind of CPU: the path
 tracer's eight-wide kernel depends on AVX2 (``integrator="path:simd=false"`` does not).
 
-The methods that are sums of independent pixel samples can be split: path, light, bdpt,
-direct, whitted, distributed, and photon and radiosity (each task recomputes their photon maps
-or radiosity solution, a deterministic function of the scene and seed). sppm, pssmlt and mlt
-are not: :func:`render_independent` runs independent renders with distinct seeds on the
-workers and averages them (an unbiased method stays unbiased; sppm's bias is that of one
-render of the chains' length, its variance divided by their number).
+Every method but zbuffer splits, each into the local render's image bit for bit: the methods
+that are sums of independent pixel samples (path, light, bdpt, direct, whitted, distributed,
+radiosity) by passes; photon by passes too, its photon paths traced once by index batches
+that every chunk builds the maps from; pssmlt and mlt by blocks of 16 chains started from one
+bootstrap that a single task computes; sppm iteration by iteration, photon batches then
+blocks of rows (:class:`SppmRender`). :func:`render_independent` averages independent
+renders with distinct seeds, for any method.
 """
 
 from __future__ import annotations
