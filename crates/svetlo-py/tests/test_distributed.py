@@ -59,9 +59,14 @@ def test_any_chunk_count_gives_the_same_bits(client):
         assert np.array_equal(bits(img), bits(ref)), f"{chunks} chunks"
     # Workers that share the client's file system read the path itself.
     assert np.array_equal(bits(sd.render(CBOX, client=client, chunks=3, ship=False, progress=False, **kw)), bits(ref))
-    # Photon mapping splits too: every task traces the same photon maps from the seed.
+    # Photon mapping: the photon paths traced once, by batches of path indices on the
+    # workers, every chunk building the maps from all batches.
     kw = dict(integrator="photon", options={"photons": 2000, "caustic_photons": 500, "gather": 4}, spp=7, seed=1, width=16, height=12)
-    assert np.array_equal(bits(sd.render(CBOX, client=client, chunks=3, progress=False, **kw)), bits(local(CBOX, **kw).image))
+    ref = local(CBOX, **kw).image
+    for batches in (1, 3):
+        job = sd.submit(CBOX, client=client, chunks=3, photon_batches=batches, **kw)
+        assert len(job.shared) == batches
+        assert np.array_equal(bits(job.result().image), bits(ref)), f"photon, {batches} photon batches"
 
 
 def write_asset_scene(d: pathlib.Path, colour: str = "0.2, 0.3, 0.8") -> pathlib.Path:
@@ -146,7 +151,7 @@ def test_scene_errors_come_back_as_the_local_exception(client, tmp_path):
     assert str(there.value) == str(here.value)
     assert (there.value.file, there.value.line, there.value.column) == (here.value.file, here.value.line, here.value.column)
     with pytest.raises(svetlo.OptionError, match="not a sum of independent"):
-        sd.render(CBOX, client=client, integrator="sppm", spp=2, progress=False)
+        sd.render(CBOX, client=client, integrator="zbuffer", spp=2, progress=False)
     with pytest.raises(svetlo.OptionError):
         sd.render(CBOX, client=client, spp=0, progress=False)
 
@@ -166,6 +171,76 @@ def test_cancel_keeps_the_chunks_done_and_partial_images(client):
     if r.spp < 256:
         assert r.interrupted
     assert np.isfinite(r.image).all()
+
+
+@pytest.mark.parametrize("integrator", ["pssmlt", "mlt"])
+def test_metropolis_chains_share_one_bootstrap_and_equal_the_local_render(client, integrator):
+    """Chains split in blocks of 16 over the workers, all from one bootstrap computed by one
+    task: the local render with the same chain count, bit for bit, for any chunk count."""
+    kw = dict(integrator=integrator, options={"chains": 40, "bootstrap": 2000}, spp=8, seed=3, width=16, height=12)
+    ref = local(CBOX, **kw)
+    assert ref.image.max() > 0
+    nodes = {1: [(0, 3)], 2: [(0, 2), (2, 3)], 3: [(0, 1), (1, 2), (2, 3)]}
+    for chunks in (1, 2, 3):
+        job = sd.submit(CBOX, client=client, chunks=chunks, **kw)
+        assert len(job.shared) == 1 and [n[:2] for n in job.nodes] == nodes[chunks]
+        r = job.result()
+        assert r.spp == ref.spp == 8 and not r.interrupted
+        assert np.array_equal(bits(r.image), bits(ref.image)), f"{integrator}, {chunks} chunks"
+        assert job.progress() == (8, 8)
+
+
+def test_sppm_iterations_split_into_photon_batches_and_row_blocks(client):
+    """SPPM: each iteration's photons traced by batches of path indices, blocks of rows
+    advanced by one iteration from every batch; the local render bit for bit for any number
+    of blocks and batches."""
+    kw = dict(integrator="sppm", options={"photons": 1500}, spp=3, seed=4, width=14, height=11)
+    ref = local(CBOX, **kw)
+    assert ref.image.max() > 0
+    seen = []
+    for chunks, batches in ((1, 1), (3, 2), (11, 3)):
+        job = sd.submit(CBOX, client=client, chunks=chunks, photon_batches=batches, **kw)
+        assert isinstance(job, sd.SppmRender) and len(job.rows) == chunks
+        r = job.result(lambda d, t, s: seen.append((d, t)))
+        assert r.spp == 3 and not r.interrupted and job.progress() == (3, 3)
+        assert np.array_equal(bits(r.image), bits(ref.image)), f"{chunks} row blocks, {batches} photon batches"
+        assert np.array_equal(bits(job.partial()), bits(ref.image))
+    assert seen and all(t == 3 and 0 <= d <= 3 for d, t in seen)
+    # Fewer iterations: the image after them is the local render of that many.
+    two = sd.render(CBOX, client=client, chunks=2, progress=False, **dict(kw, spp=2))
+    assert np.array_equal(bits(two), bits(local(CBOX, **dict(kw, spp=2)).image))
+
+
+def test_the_image_does_not_depend_on_the_number_of_workers(client):
+    """One in-process worker against the two worker processes: the same bits."""
+    kw_m = dict(integrator="pssmlt", options={"chains": 20, "bootstrap": 1000}, spp=4, seed=8, width=12, height=10)
+    kw_s = dict(integrator="sppm", options={"photons": 800}, spp=2, seed=8, width=12, height=10)
+    two = [sd.render(CBOX, client=client, progress=False, **kw) for kw in (kw_m, kw_s)]
+    with distributed.LocalCluster(n_workers=1, threads_per_worker=1, processes=False, dashboard_address=None) as cluster, distributed.Client(cluster) as one:
+        ones = [sd.render(CBOX, client=one, progress=False, **kw) for kw in (kw_m, kw_s)]
+    for a, b in zip(two, ones):
+        assert np.array_equal(bits(a), bits(b))
+
+
+def test_packed_transfers_are_lossless():
+    raw = np.random.default_rng(1).random(1001, dtype=np.float64).tobytes() + b"xyz"
+    for level in (0, 1, 9):
+        assert sd.unpack(sd.pack(raw, level)) == raw
+    with pytest.raises(svetlo.SvetloError):
+        sd.unpack(b"\7junk")
+
+
+def test_compressed_film_sums_give_the_same_bits(client):
+    kw = dict(integrator="bdpt", spp=6, seed=2, width=32, height=24)
+    ref = local(CBOX, **kw).image
+    sizes = {}
+    for level in (0, 1):
+        job = sd.submit(CBOX, client=client, chunks=2, compress=level, **kw)
+        assert np.array_equal(bits(job.result().image), bits(ref))
+        sizes[level] = job.bytes_received
+    # 60 bytes a pixel (beauty sums and splats) per task, plus headers.
+    assert 2 * 60 * 32 * 24 <= sizes[0] < 2 * 60 * 32 * 24 + 1024
+    assert sizes[1] < sizes[0]
 
 
 # Two-sided 0.001 quantile of Student's t with 7 degrees of freedom (8 independent renders).

@@ -70,43 +70,162 @@ pub fn by_name(spec: &str) -> Result<Box<dyn Integrator>> {
 /// function of the scene and seed: every range recomputes it, identically.
 pub const PASS_SEPARABLE: &[&str] = &["path", "light", "ptracer", "bdpt", "direct", "whitted", "distributed", "photon", "radiosity"];
 
-/// Whether `spec` (a name with options) names a method of [`PASS_SEPARABLE`].
-pub fn pass_separable(spec: &str) -> bool {
-    PASS_SEPARABLE.contains(&spec.split_once(':').map_or(spec, |(n, _)| n))
+/// The Metropolis methods: their chains split by blocks of [`CHAINS_PER_BLOCK`] chains, all
+/// started from one bootstrap that [`prepare`] computes once and every block shares.
+///
+/// [`CHAINS_PER_BLOCK`]: integrator::metropolis::CHAINS_PER_BLOCK
+pub const CHAIN_SEPARABLE: &[&str] = &["pssmlt", "mlt"];
+
+fn base_name(spec: &str) -> &str {
+    spec.split_once(':').map_or(spec, |(n, _)| n)
 }
 
-/// Render passes `range` (a node of the pass tree of `settings.spp`) of `scene` with the method
-/// `spec`: the raw sums that [`PartialFilm::merge`](crate::film::raw::PartialFilm::merge)
-/// combines with the other nodes' into the local render's film, bit for bit.
+/// Whether `spec` (a name with options) names a method of [`PASS_SEPARABLE`].
+pub fn pass_separable(spec: &str) -> bool {
+    PASS_SEPARABLE.contains(&base_name(spec))
+}
+
+/// Whether a range of `spec`'s work units can be rendered apart ([`render_passes`]): the
+/// pass-separable methods (units: sample passes) and the Metropolis ones (chain blocks).
+pub fn splits(spec: &str) -> bool {
+    pass_separable(spec) || CHAIN_SEPARABLE.contains(&base_name(spec))
+}
+
+fn not_split(spec: &str) -> Error {
+    Error::Settings(format!(
+        "integrator '{spec}' is not a sum of independent pixel samples or of Metropolis chains: a range of its work cannot be rendered apart (methods that can: {}, {})",
+        PASS_SEPARABLE.join(", "),
+        CHAIN_SEPARABLE.join(", ")
+    ))
+}
+
+/// A Metropolis job of the method `spec` (pssmlt or mlt).
+fn metropolis_job(
+    spec: &str,
+    scene: &crate::scene::Scene,
+    settings: &integrator::RenderSettings,
+    job: integrator::metropolis::Job,
+    progress: &integrator::Progress,
+) -> Result<integrator::metropolis::JobOutput> {
+    let o = spec.split_once(':').map_or("", |(_, o)| o);
+    match base_name(spec) {
+        "pssmlt" => integrator::pssmlt::Pssmlt::new(integrator::pssmlt::PssmltOptions::parse(o)?).job(scene, settings, job, progress),
+        "mlt" => integrator::mlt::Mlt::new(integrator::mlt::MltOptions::parse(o)?).job(scene, settings, job, progress),
+        _ => Err(not_split(spec)),
+    }
+}
+
+/// The work units of a render split over processes, each (first index, count): sample passes
+/// (first sample, samples per pixel) of an untimed render, or for Metropolis methods chain
+/// blocks (first chain, chains). Ranges of units that are nodes of the pass tree over them
+/// ([`integrator::passes`]) are what [`render_passes`] renders.
+pub fn unit_plan(spec: &str, scene: &crate::scene::Scene, settings: &integrator::RenderSettings) -> Result<Vec<(u32, u32)>> {
+    if pass_separable(spec) {
+        return Ok(integrator::passes::pass_plan(settings.spp, scene.camera.width as u64 * scene.camera.height as u64));
+    }
+    let o = spec.split_once(':').map_or("", |(_, o)| o);
+    let chains = match base_name(spec) {
+        "pssmlt" => integrator::pssmlt::PssmltOptions::parse(o)?.chain.chains,
+        "mlt" => integrator::mlt::MltOptions::parse(o)?.chain.chains,
+        _ => return Err(not_split(spec)),
+    };
+    let per = integrator::metropolis::CHAINS_PER_BLOCK;
+    Ok((0..integrator::metropolis::chain_blocks(chains)).map(|b| (b * per as u32, (chains - b as usize * per).min(per) as u32)).collect())
+}
+
+/// What every range of a split render shares, computed once and cut into batches by index:
+/// the Metropolis bootstrap (one unit), the photon paths of photon mapping (global then
+/// caustic); 0 for the others. See [`shared_batch`].
+pub fn shared_units(spec: &str) -> Result<u64> {
+    let o = spec.split_once(':').map_or("", |(_, o)| o);
+    Ok(match base_name(spec) {
+        "photon" => integrator::photon::PhotonMapper { options: integrator::photon::PhotonOptions::parse(o)? }.photon_paths(),
+        n if CHAIN_SEPARABLE.contains(&n) => 1,
+        _ => 0,
+    })
+}
+
+/// Units `range` of what the ranges of a split render share ([`shared_units`]), as bytes:
+/// batches computed apart and given in order to [`render_passes`] are exactly what a local
+/// render computes.
+pub fn shared_batch(
+    spec: &str,
+    scene: &crate::scene::Scene,
+    settings: &integrator::RenderSettings,
+    range: std::ops::Range<u64>,
+    progress: &integrator::Progress,
+) -> Result<Vec<u8>> {
+    let units = shared_units(spec)?;
+    if range.start >= range.end || range.end > units {
+        return Err(Error::Settings(format!("'{spec}' shares units 0..{units}, not {}..{}", range.start, range.end)));
+    }
+    if base_name(spec) == "photon" {
+        let o = spec.split_once(':').map_or("", |(_, o)| o);
+        return integrator::photon::PhotonMapper { options: integrator::photon::PhotonOptions::parse(o)? }.photon_batch(scene, settings, range);
+    }
+    match metropolis_job(spec, scene, settings, integrator::metropolis::Job::Bootstrap, progress)? {
+        integrator::metropolis::JobOutput::Bootstrap(b) => Ok(b.to_bytes()),
+        integrator::metropolis::JobOutput::Film(..) => Err(Error::Invalid(format!("'{spec}': the bootstrap was asked for"))),
+    }
+}
+
+/// Render work units `range` (a node of the tree over [`unit_plan`]) of `scene` with the
+/// method `spec`, from the batches of [`shared_batch`] in order (`shared`; empty: computed
+/// here): the raw sums
+/// that [`PartialFilm::merge`](crate::film::raw::PartialFilm::merge) combines with the other
+/// nodes' into the local render's film, bit for bit.
 pub fn render_passes(
     spec: &str,
     scene: &crate::scene::Scene,
     settings: &integrator::RenderSettings,
     range: std::ops::Range<u32>,
+    shared: &[&[u8]],
     progress: &integrator::Progress,
 ) -> Result<crate::film::raw::PartialFilm> {
-    if !pass_separable(spec) {
-        return Err(Error::Settings(format!(
-            "integrator '{spec}' is not a sum of independent pixel samples: a range of its passes cannot be rendered apart (methods that can: {})",
-            PASS_SEPARABLE.join(", ")
-        )));
+    if !splits(spec) {
+        return Err(not_split(spec));
     }
     if settings.time_limit.is_some() {
         return Err(Error::Settings("a range of passes needs a render without a time limit".into()));
     }
-    let method = by_name(spec)?;
-    let plan = integrator::passes::pass_plan(settings.spp, scene.camera.width as u64 * scene.camera.height as u64);
-    let want: u32 = plan.get(range.start as usize..range.end as usize).map_or(0, |p| p.iter().map(|p| p.1).sum());
+    let plan = unit_plan(spec, scene, settings)?;
     let s = integrator::RenderSettings { pass_range: Some(range.clone()), ..settings.clone() };
-    let film = method.render(scene, &s, progress)?;
+    let cancelled = || Error::Invalid(format!("the render of passes {}..{} was cancelled", range.start, range.end));
+    if !pass_separable(spec) {
+        if !integrator::passes::is_node(&range, plan.len() as u32) {
+            return Err(Error::Settings(format!("chain blocks {}..{} are not a node of the tree over {} blocks", range.start, range.end, plan.len())));
+        }
+        let boot = match shared {
+            [] => None,
+            [b] => Some(integrator::metropolis::Bootstrap::from_bytes(b)?),
+            _ => return Err(Error::Settings(format!("'{spec}' shares one bootstrap, not {} batches", shared.len()))),
+        };
+        let out = metropolis_job(spec, scene, &s, integrator::metropolis::Job::Blocks(boot.as_ref()), progress)?;
+        let integrator::metropolis::JobOutput::Film(film, _, mutations) = out else {
+            return Err(Error::Invalid(format!("'{spec}': a film was asked for")));
+        };
+        if progress.cancelled() {
+            return Err(cancelled());
+        }
+        return Ok(crate::film::raw::PartialFilm { passes: range, passes_total: plan.len() as u32, film: *film, mutations });
+    }
+    let want: u32 = plan.get(range.start as usize..range.end as usize).map_or(0, |p| p.iter().map(|p| p.1).sum());
+    let film = if shared.is_empty() {
+        by_name(spec)?.render(scene, &s, progress)?
+    } else if base_name(spec) == "photon" {
+        let o = spec.split_once(':').map_or("", |(_, o)| o);
+        integrator::photon::PhotonMapper { options: integrator::photon::PhotonOptions::parse(o)? }.render_from_batches(scene, &s, shared, progress)?
+    } else {
+        return Err(Error::Settings(format!("'{spec}' shares nothing between its passes")));
+    };
     if progress.cancelled() {
-        return Err(Error::Invalid(format!("the render of passes {}..{} was cancelled", range.start, range.end)));
+        return Err(cancelled());
     }
     // A method that ignored the range would hand back the whole render.
     if film.spp_done != want {
         return Err(Error::Invalid(format!("'{spec}' rendered {} samples per pixel for passes {}..{}, not {want}", film.spp_done, range.start, range.end)));
     }
-    Ok(crate::film::raw::PartialFilm { passes: range, passes_total: plan.len() as u32, film })
+    Ok(crate::film::raw::PartialFilm { passes: range, passes_total: plan.len() as u32, film, mutations: 0 })
 }
 
 #[cfg(test)]

@@ -53,8 +53,7 @@ const SCENES: &[(&str, &str)] = &[
 
 /// Scenes not expected to pass yet, each with the reason. The default test asserts every
 /// other scene passes, and prints how these fare.
-const KNOWN_FAILING: &[(&str, &str)] = &[
-];
+const KNOWN_FAILING: &[(&str, &str)] = &[];
 
 /// The integrator Mitsuba's suite renders a scene with: the file name's last `_` part.
 fn integrator_of(rel: &str) -> &str {

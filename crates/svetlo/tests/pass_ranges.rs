@@ -31,7 +31,7 @@ fn distributed(spec: &str, scene: &Scene, s: &RenderSettings, chunks: usize, thr
     let mut parts = Vec::new();
     for r in nodes.into_iter().rev() {
         let st = RenderSettings { threads, ..s.clone() };
-        let part = svetlo::methods::render_passes(spec, scene, &st, r, &Progress::new()).unwrap_or_else(|e| panic!("{spec}: {e}"));
+        let part = svetlo::methods::render_passes(spec, scene, &st, r, &[], &Progress::new()).unwrap_or_else(|e| panic!("{spec}: {e}"));
         parts.push(PartialFilm::from_bytes(&part.to_bytes()).expect("round trip"));
     }
     PartialFilm::merge(parts).expect("merge")
@@ -89,25 +89,66 @@ fn aov_layers_and_filters_merge_bit_for_bit() {
     }
 }
 
+/// A Metropolis render split by chain blocks: one bootstrap (through bytes) shared by every
+/// node, nodes rendered with `threads` threads, merged.
+fn distributed_chains(spec: &str, scene: &Scene, s: &RenderSettings, chunks: usize, threads: usize) -> Film {
+    assert_eq!(svetlo::methods::shared_units(spec).unwrap(), 1);
+    let boot = svetlo::methods::shared_batch(spec, scene, s, 0..1, &Progress::new()).expect("bootstrap");
+    let plan = svetlo::methods::unit_plan(spec, scene, s).expect("plan");
+    let mut parts = Vec::new();
+    for r in chunk_nodes(&plan, chunks).into_iter().rev() {
+        let st = RenderSettings { threads, ..s.clone() };
+        let part = svetlo::methods::render_passes(spec, scene, &st, r, &[&boot], &Progress::new()).unwrap_or_else(|e| panic!("{spec}: {e}"));
+        parts.push(PartialFilm::from_bytes(&part.to_bytes()).expect("round trip"));
+    }
+    PartialFilm::merge(parts).expect("merge")
+}
+
+#[test]
+fn metropolis_chain_blocks_merge_into_the_local_render_bit_for_bit() {
+    let cbox = scene("cornell-box.xml", 12, 10);
+    let s = RenderSettings { spp: 6, max_depth: 5, seed: 3, threads: 2, ..RenderSettings::from_scene(&cbox) };
+    // 40 chains: blocks of 16, 16 and 8 chains.
+    for spec in ["pssmlt:chains=40,bootstrap=3000", "pssmlt:chains=40,bootstrap=3000,target=path", "mlt:chains=40,bootstrap=2000"] {
+        let plan = svetlo::methods::unit_plan(spec, &cbox, &s).unwrap();
+        assert_eq!(plan, [(0, 16), (16, 16), (32, 8)], "{spec}");
+        let local = svetlo::methods::by_name(spec).unwrap().render(&cbox, &s, &Progress::new()).unwrap();
+        assert!(local.image().data.iter().any(|c| c.r > 0.0), "{spec}: black");
+        for (chunks, threads) in [(1, 1), (2, 2), (3, 1), (8, 2)] {
+            assert_same(&distributed_chains(spec, &cbox, &s, chunks, threads), &local, &format!("{spec}, {chunks} chunks, {threads} threads"));
+        }
+    }
+    // The bootstrap is checked: malformed bytes, or one of another seed, are refused.
+    let spec = "pssmlt:chains=20,bootstrap=500";
+    let boot = svetlo::methods::shared_batch(spec, &cbox, &s, 0..1, &Progress::new()).unwrap();
+    for cut in [0, 8, 63, boot.len() - 1] {
+        assert!(svetlo::methods::render_passes(spec, &cbox, &s, 0..2, &[&boot[..cut]], &Progress::new()).is_err(), "cut at {cut}");
+    }
+    let other = RenderSettings { seed: 4, ..s.clone() };
+    let e = svetlo::methods::render_passes(spec, &cbox, &other, 0..2, &[&boot], &Progress::new()).unwrap_err();
+    assert!(e.to_string().contains("seed"), "{e}");
+    assert!(svetlo::methods::render_passes(spec, &cbox, &s, 1..3, &[&boot], &Progress::new()).is_err(), "2 blocks: 1..3 is out of range");
+}
+
 #[test]
 fn ranges_that_are_not_tree_nodes_and_unseparable_methods_are_refused() {
     let cbox = scene("cornell-box.xml", 8, 8);
     let s = RenderSettings { spp: 10, ..RenderSettings::from_scene(&cbox) };
     // 10 spp: passes 1, 2, 4, 3; 1..3 straddles the tree's first split (0..2 | 2..4).
-    let e = svetlo::methods::render_passes("path", &cbox, &s, 1..3, &Progress::new()).unwrap_err();
+    let e = svetlo::methods::render_passes("path", &cbox, &s, 1..3, &[], &Progress::new()).unwrap_err();
     assert!(e.to_string().contains("not a node"), "{e}");
-    for spec in ["sppm", "pssmlt", "mlt", "zbuffer"] {
-        let e = svetlo::methods::render_passes(spec, &cbox, &s, 0..4, &Progress::new()).unwrap_err();
+    for spec in ["sppm", "zbuffer"] {
+        let e = svetlo::methods::render_passes(spec, &cbox, &s, 0..4, &[], &Progress::new()).unwrap_err();
         assert!(e.to_string().contains("not a sum of independent"), "{spec}: {e}");
     }
     let timed = RenderSettings { time_limit: Some(std::time::Duration::from_secs(1)), ..s.clone() };
-    assert!(svetlo::methods::render_passes("path", &cbox, &timed, 0..4, &Progress::new()).is_err());
+    assert!(svetlo::methods::render_passes("path", &cbox, &timed, 0..4, &[], &Progress::new()).is_err());
     // Parts that leave a pass out, or come from different renders, do not merge.
-    let a = svetlo::methods::render_passes("path", &cbox, &s, 0..2, &Progress::new()).unwrap();
-    let b = svetlo::methods::render_passes("path", &cbox, &s, 2..3, &Progress::new()).unwrap();
+    let a = svetlo::methods::render_passes("path", &cbox, &s, 0..2, &[], &Progress::new()).unwrap();
+    let b = svetlo::methods::render_passes("path", &cbox, &s, 2..3, &[], &Progress::new()).unwrap();
     assert!(PartialFilm::merge(vec![a.clone(), b]).is_err(), "pass 3 missing");
     let other = scene("cornell-box.xml", 9, 8);
-    let c = svetlo::methods::render_passes("path", &other, &s, 2..4, &Progress::new()).unwrap();
+    let c = svetlo::methods::render_passes("path", &other, &s, 2..4, &[], &Progress::new()).unwrap();
     assert!(PartialFilm::merge(vec![a, c]).is_err(), "different film sizes");
 }
 
@@ -115,7 +156,7 @@ fn ranges_that_are_not_tree_nodes_and_unseparable_methods_are_refused() {
 fn malformed_bytes_are_errors() {
     let cbox = scene("cornell-box.xml", 6, 5);
     let s = RenderSettings { spp: 3, ..RenderSettings::from_scene(&cbox) };
-    let part = svetlo::methods::render_passes("bdpt", &cbox, &s, 0..2, &Progress::new()).unwrap();
+    let part = svetlo::methods::render_passes("bdpt", &cbox, &s, 0..2, &[], &Progress::new()).unwrap();
     let bytes = part.to_bytes();
     for cut in [0, 7, 8, 20, bytes.len() / 2, bytes.len() - 1] {
         assert!(PartialFilm::from_bytes(&bytes[..cut]).is_err(), "cut at {cut}");
@@ -131,4 +172,74 @@ fn malformed_bytes_are_errors() {
     let back = PartialFilm::from_bytes(&bytes).unwrap();
     assert_eq!(back.passes, 0..2);
     assert!(bits(&back.film.image()) == bits(&part.film.image()));
+}
+
+#[test]
+fn sppm_in_row_blocks_from_photon_batches_is_the_local_render_bit_for_bit() {
+    use svetlo::integrator::photon::{Sppm, SppmOptions, SppmRows};
+    let cbox = scene("cornell-box.xml", 14, 11);
+    let s = RenderSettings { spp: 4, max_depth: 6, seed: 2, threads: 2, ..RenderSettings::from_scene(&cbox) };
+    let sppm = Sppm { options: SppmOptions { photons: Some(3000), ..Default::default() } };
+    let local = svetlo::integrator::Integrator::render(&sppm, &cbox, &s, &Progress::new()).unwrap();
+    assert!(local.image().data.iter().any(|c| c.r > 0.0));
+    let per = sppm.photons_per_iteration(&cbox);
+    for (blocks, batches, threads) in [(1, 1, 1), (2, 3, 2), (11, 2, 1)] {
+        let st = RenderSettings { threads, ..s.clone() };
+        let h = cbox.camera.height;
+        let mut states: Vec<SppmRows> = (0..blocks).map(|b| sppm.start_rows(&cbox, b * h / blocks..(b + 1) * h / blocks).unwrap()).collect();
+        for it in 0..s.spp {
+            let cuts: Vec<u64> = (0..=batches).map(|k| k * per / batches).collect();
+            let photons: Vec<Vec<u8>> = cuts.windows(2).map(|c| sppm.photon_batch(&cbox, &st, it, c[0]..c[1]).unwrap()).collect();
+            let refs: Vec<&[u8]> = photons.iter().map(|b| b.as_slice()).collect();
+            for state in states.iter_mut() {
+                // Through bytes, as between iterations on a cluster.
+                let mut back = SppmRows::from_bytes(&state.to_bytes()).unwrap();
+                sppm.iterate_rows(&cbox, &st, &mut back, &refs).unwrap();
+                *state = back;
+            }
+        }
+        states.reverse();
+        let film = sppm.develop_rows(&cbox, states).unwrap();
+        assert_same(&film, &local, &format!("sppm: {blocks} row blocks, {batches} photon batches, {threads} threads"));
+    }
+    // Rows that leave a gap, states of another render and malformed bytes are refused.
+    let a = sppm.start_rows(&cbox, 0..5).unwrap();
+    assert!(sppm.develop_rows(&cbox, vec![a.clone()]).is_err());
+    let bytes = a.to_bytes();
+    for cut in [0, 8, 27, bytes.len() - 1] {
+        assert!(SppmRows::from_bytes(&bytes[..cut]).is_err(), "cut at {cut}");
+    }
+    let mut done = a.clone();
+    let four = RenderSettings { spp: 0, ..s.clone() };
+    assert!(sppm.iterate_rows(&cbox, &four, &mut done, &[]).is_err(), "no iteration left");
+    assert!(sppm.iterate_rows(&cbox, &s, &mut done, &[b"SVLPHOT1\x01"]).is_err(), "malformed photons");
+    assert!(sppm.start_rows(&cbox, 5..12).is_err());
+}
+
+#[test]
+fn photon_maps_from_batches_traced_apart_are_the_local_render_bit_for_bit() {
+    let cbox = scene("cornell-box.xml", 12, 10);
+    let s = RenderSettings { spp: 5, max_depth: 6, seed: 9, threads: 2, ..RenderSettings::from_scene(&cbox) };
+    let spec = "photon:photons=3000,caustic-photons=1000,gather=4,precompute=3";
+    let local = svetlo::methods::by_name(spec).unwrap().render(&cbox, &s, &Progress::new()).unwrap();
+    let paths = svetlo::methods::shared_units(spec).unwrap();
+    assert_eq!(paths, 4000);
+    let plan = pass_plan(s.spp, 120);
+    // Batch cuts inside the global pass, at its end and inside the caustic pass.
+    for cuts in [vec![0, 4000], vec![0, 1234, 3000, 3500, 4000], vec![0, 2999, 3001, 4000]] {
+        let batches: Vec<Vec<u8>> = cuts.windows(2).map(|c| svetlo::methods::shared_batch(spec, &cbox, &s, c[0]..c[1], &Progress::new()).unwrap()).collect();
+        let refs: Vec<&[u8]> = batches.iter().map(|b| b.as_slice()).collect();
+        let parts = chunk_nodes(&plan, 2)
+            .into_iter()
+            .map(|r| svetlo::methods::render_passes(spec, &cbox, &RenderSettings { threads: 1, ..s.clone() }, r, &refs, &Progress::new()).unwrap())
+            .collect();
+        assert_same(&PartialFilm::merge(parts).unwrap(), &local, &format!("photon batches cut at {cuts:?}"));
+    }
+    // Batches missing, out of order or cut short are refused.
+    let a = svetlo::methods::shared_batch(spec, &cbox, &s, 0..3000, &Progress::new()).unwrap();
+    let b = svetlo::methods::shared_batch(spec, &cbox, &s, 3000..4000, &Progress::new()).unwrap();
+    for bad in [vec![&a[..]], vec![&b[..], &a[..]], vec![&a[..], &b[..b.len() - 1]]] {
+        assert!(svetlo::methods::render_passes(spec, &cbox, &s, 0..plan.len() as u32, &bad, &Progress::new()).is_err());
+    }
+    assert!(svetlo::methods::shared_batch(spec, &cbox, &s, 3000..4001, &Progress::new()).is_err());
 }

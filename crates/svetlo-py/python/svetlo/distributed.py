@@ -22,12 +22,13 @@ the content of all those files. With ``ship=False`` the workers load the client'
 shared file system). Workers must run the same svetlo build on the same kind of CPU: the path
 tracer's eight-wide kernel depends on AVX2 (``integrator="path:simd=false"`` does not).
 
-The methods that are sums of independent pixel samples can be split: path, light, bdpt,
-direct, whitted, distributed, and photon and radiosity (each task recomputes their photon maps
-or radiosity solution, a deterministic function of the scene and seed). sppm, pssmlt and mlt
-are not: :func:`render_independent` runs independent renders with distinct seeds on the
-workers and averages them (an unbiased method stays unbiased; sppm's bias is that of one
-render of the chains' length, its variance divided by their number).
+Every method but zbuffer splits, each into the local render's image bit for bit: the methods
+that are sums of independent pixel samples (path, light, bdpt, direct, whitted, distributed,
+radiosity) by passes; photon by passes too, its photon paths traced once by index batches
+that every chunk builds the maps from; pssmlt and mlt by blocks of 16 chains started from one
+bootstrap that a single task computes; sppm iteration by iteration, photon batches then
+blocks of rows (:class:`SppmRender`). :func:`render_independent` averages independent
+renders with distinct seeds, for any method.
 """
 
 from __future__ import annotations
@@ -211,20 +212,65 @@ def _worker_threads() -> int:
     return max(1, (os.cpu_count() or 1) // slots)
 
 
+def _threads(threads: Optional[int]) -> int:
+    return _worker_threads() if threads is None else threads
+
+
 def _plan_task(src: SceneSource, chunks: int, opts: Dict[str, Any]) -> Dict[str, Any]:
-    return _svetlo.plan_chunks(_scene(src), chunks, **opts)
+    return _svetlo.plan_chunks(_scene(src), chunks, opts)
 
 
-def _render_task(src: SceneSource, start: int, end: int, opts: Dict[str, Any], threads: Optional[int], compress: int) -> Tuple[float, bytes]:
+def _shared_task(src: SceneSource, start: int, end: int, opts: Dict[str, Any], threads: Optional[int]) -> bytes:
+    return _svetlo.shared_batch(_scene(src), start, end, opts, threads=_threads(threads))
+
+
+def _render_task(src: SceneSource, start: int, end: int, opts: Dict[str, Any], threads: Optional[int], compress: int, *shared: bytes) -> Tuple[float, bytes]:
     t0 = time.perf_counter()
-    raw = _svetlo.render_passes(_scene(src), start, end, threads=_worker_threads() if threads is None else threads, **opts)
-    data = zlib.compress(raw, compress) if compress else raw
-    return time.perf_counter() - t0, data
+    raw = _svetlo.render_passes(_scene(src), start, end, opts, shared=list(shared), threads=_threads(threads))
+    return time.perf_counter() - t0, pack(raw, compress)
+
+
+def _sppm_photons_task(src: SceneSource, iteration: int, start: int, end: int, opts: Dict[str, Any], threads: Optional[int]) -> bytes:
+    return _svetlo.sppm_photons(_scene(src), iteration, start, end, opts, threads=_threads(threads))
+
+
+def _sppm_rows_task(src: SceneSource, start: int, end: int, state: Optional[bytes], opts: Dict[str, Any], threads: Optional[int], *batches: bytes) -> bytes:
+    return _svetlo.sppm_iterate(_scene(src), start, end, state, list(batches), opts, threads=_threads(threads))
+
+
+def _sppm_develop_task(src: SceneSource, opts: Dict[str, Any], *parts: bytes) -> Dict[str, Any]:
+    d = _svetlo.sppm_develop(_scene(src), list(parts), opts)
+    return {"image": d["image"], "spp": d["spp"]}
 
 
 def _independent_task(src: SceneSource, opts: Dict[str, Any], threads: Optional[int]) -> Tuple[np.ndarray, int]:
-    r = svetlo.render_result(_scene(src), threads=_worker_threads() if threads is None else threads, progress=False, **opts)
+    r = svetlo.render_result(_scene(src), threads=_threads(threads), progress=False, **opts)
     return r.image, r.spp
+
+
+# --- Transfers: film sums as bytes, optionally byte-shuffled and deflated (exact).
+
+
+def pack(raw: bytes, level: int) -> bytes:
+    """The film sums `raw` as sent back: as they are (level 0), or with the bytes of every
+    4-byte word regrouped by significance (sign and exponent bytes together, which repeat)
+    and deflated at zlib `level`. Lossless: :func:`unpack` returns `raw` exactly."""
+    if level == 0:
+        return b"\0" + raw
+    n = len(raw) // 4 * 4
+    planes = np.frombuffer(raw, dtype=np.uint8, count=n).reshape(-1, 4).T.tobytes()
+    return b"\1" + zlib.compress(planes + raw[n:], level)
+
+
+def unpack(data: bytes) -> bytes:
+    """The film sums that :func:`pack` packed."""
+    if data[:1] == b"\0":
+        return data[1:]
+    if data[:1] != b"\1":
+        raise SvetloError("a distributed task sent back bytes that are not packed film sums")
+    planes = zlib.decompress(data[1:])
+    n = len(planes) // 4 * 4
+    return np.frombuffer(planes, dtype=np.uint8, count=n).reshape(4, -1).T.tobytes() + planes[n:]
 
 
 # --- Client side.
@@ -257,25 +303,32 @@ class DistributedRender:
     """A render in flight on a cluster (from :func:`submit`).
 
     ``progress()`` says how far it is, ``partial()`` gives the image of the chunks done so far
-    (their sums in pass order: close to, but not the bits of, the final image), ``cancel()``
+    (their sums in unit order: close to, but not the bits of, the final image), ``cancel()``
     stops the chunks not yet done, ``result()`` waits and merges.
     """
 
-    def __init__(self, client, src: SceneSource, plan: Dict[str, Any], opts: Dict[str, Any], threads: Optional[int], compress: int, shipped):
+    def __init__(self, client, src: SceneSource, plan: Dict[str, Any], opts: Dict[str, Any], threads: Optional[int], compress: int, shipped, batches: int = 1):
         self.client, self.source, self.plan, self.opts = client, src, plan, opts
         self._shipped = shipped
         self.start_time = time.perf_counter()
         self.nodes: List[Tuple[int, int, int, int]] = [tuple(n) for n in plan["nodes"]]
         token = uuid.uuid4().hex[:12]
         ref = shipped if shipped is not None else src
+        # What every chunk shares is computed once, by index batches (the Metropolis
+        # bootstrap: one task; photon mapping's photon paths: `batches` tasks); the chunks take
+        # the batches' futures, so the bytes go from worker to worker, not through the client.
+        units = plan["shared"]
+        cuts = sorted({k * units // max(1, min(batches, units)) for k in range(min(batches, units) + 1)}) if units else []
+        self.shared = [
+            client.submit(_shared_task, ref, a, b, opts, threads, key=f"svetlo-shared-{token}-{a}-{b}", pure=False) for a, b in zip(cuts, cuts[1:])
+        ]
         self.futures = [
-            client.submit(_render_task, ref, a, b, opts, threads, compress, key=f"svetlo-passes-{token}-{a}-{b}", pure=False, retries=0)
+            client.submit(_render_task, ref, a, b, opts, threads, compress, *self.shared, key=f"svetlo-passes-{token}-{a}-{b}", pure=False, retries=0)
             for a, b, _, _ in self.nodes
         ]
         self._parts: Dict[int, bytes] = {}
         self.task_seconds: Dict[int, float] = {}
         self.bytes_received = 0
-        self._compressed = compress > 0
         self._lock = threading.Lock()
         self.cancelled = False
 
@@ -287,7 +340,7 @@ class DistributedRender:
         secs, data = fut.result()
         with self._lock:
             self.bytes_received += len(data)
-            self._parts[i] = zlib.decompress(data) if self._compressed else data
+            self._parts[i] = unpack(data)
             self.task_seconds[i] = secs
 
     def _poll(self) -> None:
@@ -298,11 +351,11 @@ class DistributedRender:
                 f.result()  # raises the task's exception
 
     def progress(self) -> Tuple[int, int]:
-        """(samples per pixel done, planned)."""
+        """(samples per pixel done, planned); for Metropolis chains, the chains' share of spp."""
         self._poll()
         with self._lock:
             done = sum(self.nodes[i][3] - self.nodes[i][2] for i in self._parts)
-        return done, self.spp_planned
+        return done * self.spp_planned // max(1, self.plan["units"]), self.spp_planned
 
     def partial(self) -> Optional[np.ndarray]:
         """The image of the chunks done so far (None before the first)."""
@@ -318,12 +371,17 @@ class DistributedRender:
         self.cancelled = True
         self.client.cancel([f for i, f in enumerate(self.futures) if i not in self._parts])
 
-    def _result(self, interrupted: bool) -> RenderResult:
+    def _complete(self) -> bool:
+        return len(self._parts) == len(self.nodes)
+
+    def _merged(self) -> Dict[str, Any]:
         with self._lock:
             parts = [self._parts[i] for i in sorted(self._parts)]
-        complete = len(parts) == len(self.nodes)
+        return _svetlo.merge_films(parts, exact=self._complete())
+
+    def _result(self, interrupted: bool) -> RenderResult:
         t0 = time.perf_counter()
-        m = _svetlo.merge_films(parts, exact=complete)
+        m = self._merged()
         merge = time.perf_counter() - t0
         secs = time.perf_counter() - self.start_time
         return RenderResult(
@@ -340,6 +398,12 @@ class DistributedRender:
             aovs=dict(m["aovs"]),
         )
 
+    def _pending(self) -> List[Any]:
+        return [f for i, f in enumerate(self.futures) if i not in self._parts]
+
+    def _take(self, f) -> None:
+        self._collect(self._index[f.key], f)
+
     def result(self, callback: Optional[Callable[[int, int, float], Any]] = None) -> RenderResult:
         """Wait for every chunk and merge them: the local render's result, bit for bit.
 
@@ -350,13 +414,13 @@ class DistributedRender:
         """
         from distributed import as_completed
 
-        index = {f.key: i for i, f in enumerate(self.futures)}
+        self._index = {f.key: i for i, f in enumerate(self.futures)}
         try:
-            for f in as_completed([f for i, f in enumerate(self.futures) if i not in self._parts]):
+            for f in as_completed(self._pending()):
                 if f.status == "cancelled":
                     continue
                 try:
-                    self._collect(index[f.key], f)
+                    self._take(f)
                 except BaseException:
                     self.cancel()
                     raise
@@ -369,9 +433,104 @@ class DistributedRender:
             e = RenderInterrupted(f"distributed render interrupted after {r.spp} of {r.spp_planned} spp; the partial image is e.image (e.result holds the rest)")
             e.result, e.image = r, r.image
             raise e from None
-        if self.cancelled and len(self._parts) < len(self.nodes):
-            return self._result(True)
-        return self._result(False)
+        return self._result(self.cancelled and not self._complete())
+
+
+class SppmRender(DistributedRender):
+    """An SPPM render in flight (from :func:`submit` with ``integrator="sppm"``).
+
+    SPPM's iterations are sequential: each visible point's radius shrinks by the photons it
+    gathered in the iterations before. So each iteration is a stage: ``photon_batches`` tasks
+    trace its photon paths by index (seeded by the global path index), then ``row_blocks``
+    tasks each advance a block of rows by one iteration, reading every batch (Dask moves them
+    between workers). A pixel's statistics are its own, so blocks of rows advance apart,
+    their state (20 bytes per visible-point slot, 12 per pixel) staying on the workers between
+    iterations. The image is the local render's bit for bit, for any batch and block counts.
+    ``progress()`` counts whole iterations, ``partial()`` is the image after the last one.
+    """
+
+    def __init__(self, client, src: SceneSource, plan: Dict[str, Any], opts: Dict[str, Any], threads: Optional[int], shipped, row_blocks: int, photon_batches: int):
+        self.client, self.source, self.plan, self.opts = client, src, plan, opts
+        self._shipped = shipped
+        self.start_time = time.perf_counter()
+        self.task_seconds: Dict[int, float] = {}
+        self.bytes_received = 0
+        self._lock = threading.Lock()
+        self.cancelled = False
+        self.shared = None
+        token = uuid.uuid4().hex[:12]
+        self._ref = ref = shipped if shipped is not None else src
+        h, photons, iterations = plan["height"], plan["photons"], plan["spp"]
+        blocks = max(1, min(row_blocks, h))
+        batches = max(1, min(photon_batches, photons))
+        self.rows = [(k * h // blocks, (k + 1) * h // blocks) for k in range(blocks)]
+        cuts = [k * photons // batches for k in range(batches + 1)]
+        self.stages: List[List[Any]] = []
+        states: List[Any] = [None] * blocks
+        for it in range(iterations):
+            pb = [
+                client.submit(_sppm_photons_task, ref, it, cuts[k], cuts[k + 1], opts, threads, key=f"svetlo-sppm-photons-{token}-{it}-{k}", pure=False)
+                for k in range(batches)
+                if cuts[k] < cuts[k + 1]
+            ]
+            states = [
+                client.submit(_sppm_rows_task, ref, a, b, states[k], opts, threads, *pb, key=f"svetlo-sppm-rows-{token}-{it}-{a}-{b}", pure=False)
+                for k, (a, b) in enumerate(self.rows)
+            ]
+            self.stages.append(states)
+        self.futures = [f for st in self.stages for f in st]
+        self._done_iterations = 0
+        self._final: Optional[bytes] = None
+
+    def _poll(self) -> None:
+        for f in self.futures:
+            if f.status == "error":
+                f.result()
+        while self._done_iterations < len(self.stages) and all(f.status == "finished" for f in self.stages[self._done_iterations]):
+            self._done_iterations += 1
+
+    def progress(self) -> Tuple[int, int]:
+        """(iterations done, planned)."""
+        self._poll()
+        return self._done_iterations, self.spp_planned
+
+    def _develop(self, iterations: int) -> Optional[bytes]:
+        if iterations == 0:
+            return None
+        futs = self.stages[iterations - 1]
+        return self.client.submit(_sppm_develop_bytes_task, self._ref, self.opts, *futs, pure=False).result()
+
+    def partial(self) -> Optional[np.ndarray]:
+        """The image after the last iteration every row block has finished (None before)."""
+        self._poll()
+        raw = self._develop(self._done_iterations)
+        return None if raw is None else _svetlo.merge_films([raw])["image"]
+
+    def cancel(self) -> None:
+        """Cancel the iterations not yet done; the last whole one stays."""
+        self.cancelled = True
+        self._poll()
+        self.client.cancel([f for st in self.stages[self._done_iterations :] for f in st])
+
+    def _complete(self) -> bool:
+        return self._done_iterations == len(self.stages)
+
+    def _merged(self) -> Dict[str, Any]:
+        raw = self._final if self._final is not None else self._develop(self._done_iterations)
+        if raw is None:
+            raise RenderInterrupted("the SPPM render was stopped before its first iteration")
+        self.bytes_received += len(raw)
+        return _svetlo.merge_films([raw])
+
+    def _pending(self) -> List[Any]:
+        return [f for st in self.stages[self._done_iterations :] for f in st]
+
+    def _take(self, f) -> None:
+        self._poll()
+
+
+def _sppm_develop_bytes_task(src: SceneSource, opts: Dict[str, Any], *parts: bytes) -> bytes:
+    return _svetlo.sppm_develop(_scene(src), list(parts), opts)
 
 
 def submit(
@@ -385,6 +544,7 @@ def submit(
     ship: bool = True,
     threads: Optional[int] = None,
     compress: int = 0,
+    photon_batches: Optional[int] = None,
     **settings: Any,
 ) -> DistributedRender:
     """Start a distributed render and return its :class:`DistributedRender` at once.
@@ -402,11 +562,16 @@ def submit(
     spec = svetlo._method_spec(integrator, options, None) if options else integrator
     opts = {k: v for k, v in settings.items() if v is not None}
     opts["integrator"] = spec
-    if chunks is None:
+    workers = None
+    if chunks is None or photon_batches is None:
         workers = len(client.scheduler_info().get("workers", {})) or 1
+    if chunks is None:
         chunks = 4 * workers
-    if isinstance(chunks, bool) or not isinstance(chunks, int) or chunks < 1:
-        raise OptionError(f"chunks must be a positive integer, got {chunks!r}")
+    if photon_batches is None:
+        photon_batches = workers
+    for name, v in (("chunks", chunks), ("photon_batches", photon_batches)):
+        if isinstance(v, bool) or not isinstance(v, int) or v < 1:
+            raise OptionError(f"{name} must be a positive integer, got {v!r}")
     if not (0 <= compress <= 9):
         raise OptionError(f"compress is a zlib level 0..9 (0: none), got {compress}")
     src = _source(scene, params, ship)
@@ -414,7 +579,9 @@ def submit(
     shipped = client.scatter(src, broadcast=True, hash=False) if src.files is not None else None
     ref = shipped if shipped is not None else src
     plan = client.submit(_plan_task, ref, chunks, opts, pure=False).result()
-    return DistributedRender(client, src, plan, opts, threads, compress, shipped)
+    if plan["scheme"] == "sppm":
+        return SppmRender(client, src, plan, opts, threads, shipped, row_blocks=chunks, photon_batches=photon_batches)
+    return DistributedRender(client, src, plan, opts, threads, compress, shipped, batches=photon_batches)
 
 
 def render(
@@ -430,6 +597,7 @@ def render(
     ship: bool = True,
     threads: Optional[int] = None,
     compress: int = 0,
+    photon_batches: Optional[int] = None,
     progress: Union[bool, None, Callable[[int, int, float], Any]] = None,
     result: bool = False,
     **settings: Any,
@@ -442,11 +610,15 @@ def render(
         client: a ``dask.distributed.Client`` (default: the current one).
         integrator, options, spp, seed and the other settings (max_depth, width, height,
             filter, sampler, rr_depth, hide_emitters): as :func:`svetlo.render`.
-        chunks: how many tasks (nodes of the pass tree; fewer if the render has fewer
-            passes). Default: 4 per worker.
+        chunks: how many tasks (nodes of the tree over the render's passes, or over its
+            Metropolis chain blocks; fewer if there are fewer). Default: 4 per worker. For
+            sppm: the blocks of rows, each a task per iteration.
+        photon_batches: photon and sppm: tasks tracing the photon maps' paths (each
+            iteration's, for sppm) by index (default: one per worker).
         ship: send the scene's files to the workers (default) or let them read the path.
         threads: threads per task (default: the worker's cores over its task slots).
-        compress: zlib level for the film sums sent back (0: none).
+        compress: zlib level for the film sums sent back, after regrouping their bytes by
+            significance (lossless; 0: sent as they are).
         progress: None shows a tqdm bar when tqdm is installed, False nothing, a callable
             is called as ``progress(spp_done, spp_planned, seconds)`` as chunks complete.
         result: return the :class:`svetlo.RenderResult` instead of the image.
@@ -455,7 +627,9 @@ def render(
     :class:`svetlo.SceneError`); :class:`svetlo.RenderInterrupted` on Ctrl-C, with the image
     of the chunks done.
     """
-    job = submit(scene, client=client, integrator=integrator, options=options, chunks=chunks, params=params, ship=ship, threads=threads, compress=compress, spp=spp, seed=seed, **settings)
+    job = submit(
+        scene, client=client, integrator=integrator, options=options, chunks=chunks, params=params, ship=ship, threads=threads, compress=compress, photon_batches=photon_batches, spp=spp, seed=seed, **settings
+    )
     bar = None
     if progress is None or progress is True:
         b = svetlo._Bar(None)

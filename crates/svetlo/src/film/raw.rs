@@ -9,16 +9,20 @@ use crate::error::{Error, Result};
 use crate::spectrum::Rgb;
 use std::ops::Range;
 
-const MAGIC: &[u8; 8] = b"SVLFILM1";
+const MAGIC: &[u8; 8] = b"SVLFILM2";
 /// Bytes per pixel of the beauty: sum (3 f32), weight (f64), s1, s2 (3 f32 each), n (u32).
 const PIXEL_BYTES: usize = 12 + 8 + 12 + 12 + 4;
 
-/// The sums of passes `passes` of a render planned in `passes_total` passes.
+/// The sums of passes `passes` of a render planned in `passes_total` passes (for Metropolis
+/// methods, chain blocks: see `methods::render_passes`).
 #[derive(Clone, Debug)]
 pub struct PartialFilm {
     pub passes: Range<u32>,
     pub passes_total: u32,
     pub film: Film,
+    /// Metropolis mutations done (0 for the other methods): the merged film's splats are
+    /// normalised by their total, as a local render's are.
+    pub mutations: u64,
 }
 
 fn bad(msg: impl std::fmt::Display) -> Error {
@@ -63,6 +67,16 @@ fn put_rgb(out: &mut Vec<u8>, c: Rgb) {
     }
 }
 
+/// The splat normalisation of summed parts: their samples per pixel, or for Metropolis parts
+/// the mutations per pixel exactly as `metropolis::run` sets it.
+fn normalise(film: &mut Film, mutations: u64) {
+    if mutations > 0 {
+        crate::integrator::metropolis::set_splat_norm(film, mutations, film.width as u64 * film.height as u64);
+    } else {
+        film.splat_scale = film.spp_done.max(1) as f32;
+    }
+}
+
 impl PartialFilm {
     /// The bytes of these sums.
     pub fn to_bytes(&self) -> Vec<u8> {
@@ -73,6 +87,7 @@ impl PartialFilm {
         for v in [self.passes.start, self.passes.end, self.passes_total, f.width, f.height] {
             out.extend_from_slice(&v.to_le_bytes());
         }
+        out.extend_from_slice(&self.mutations.to_le_bytes());
         let (kind, param) = match f.filter {
             Filter::Box => (0u8, 0.0f32),
             Filter::Tent { radius } => (1, radius),
@@ -114,6 +129,7 @@ impl PartialFilm {
             return Err(bad("not svetlo film sums (bad magic)"));
         }
         let (start, end, total, width, height) = (r.u32()?, r.u32()?, r.u32()?, r.u32()?, r.u32()?);
+        let mutations = u64::from_le_bytes(r.take(8)?.try_into().expect("8 bytes"));
         if start >= end || end > total {
             return Err(bad(format!("passes {start}..{end} of {total}")));
         }
@@ -161,7 +177,7 @@ impl PartialFilm {
         }
         film.spp_done = spp_done;
         film.splat_scale = spp_done.max(1) as f32;
-        Ok(PartialFilm { passes: start..end, passes_total: total, film })
+        Ok(PartialFilm { passes: start..end, passes_total: total, film, mutations })
     }
 
     /// Combine partial films that partition one render's passes, in the pass tree's order:
@@ -177,9 +193,10 @@ impl PartialFilm {
                 )));
             }
         }
+        let mutations: u64 = parts.iter().map(|p| p.mutations).sum();
         let nodes = parts.into_iter().map(|p| (p.passes, p.film)).collect();
         let mut film = crate::integrator::passes::combine(nodes, total, &|a: &mut Film, b: Film| a.add(&b))?;
-        film.splat_scale = film.spp_done.max(1) as f32;
+        normalise(&mut film, mutations);
         Ok(film)
     }
 
@@ -190,13 +207,14 @@ impl PartialFilm {
         sorted.sort_by_key(|p| p.passes.start);
         let first = sorted.first().ok_or_else(|| bad("nothing to merge"))?;
         let mut film = first.film.clone();
+        let mutations: u64 = sorted.iter().map(|p| p.mutations).sum();
         for p in &sorted[1..] {
             if (p.film.width, p.film.height, p.film.filter, p.film.layer_names.len()) != (film.width, film.height, film.filter, film.layer_names.len()) {
                 return Err(bad("parts of different renders"));
             }
             film.add(&p.film);
         }
-        film.splat_scale = film.spp_done.max(1) as f32;
+        normalise(&mut film, mutations);
         Ok(film)
     }
 }

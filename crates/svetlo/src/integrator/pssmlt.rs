@@ -122,20 +122,29 @@ impl Pssmlt {
 
     /// Render and return the chain statistics as well.
     pub fn render_with_stats(&self, scene: &Scene, settings: &RenderSettings, progress: &Progress) -> Result<(Film, ChainStats)> {
+        match self.job(scene, settings, metropolis::Job::Blocks(None), progress)? {
+            metropolis::JobOutput::Film(film, stats, _) => Ok((*film, stats)),
+            metropolis::JobOutput::Bootstrap(_) => Err(crate::error::Error::Invalid("pssmlt: a film was asked for".into())),
+        }
+    }
+
+    /// The bootstrap alone, or chain blocks (see [`metropolis::Job`]).
+    pub fn job(&self, scene: &Scene, settings: &RenderSettings, job: metropolis::Job, progress: &Progress) -> Result<metropolis::JobOutput> {
         self.options.validate()?;
+        let (w, h) = (scene.camera.width, scene.camera.height);
         if scene.lights.is_empty() {
-            return metropolis::black(scene.camera.width, scene.camera.height, settings);
+            return metropolis::black_job(w, h, settings, &self.options.chain, job);
         }
         match self.options.target {
             PssTargetKind::Bdpt => {
                 require_connectible_camera(scene, "pssmlt")?;
                 let cfg = PathConfig::new(scene, settings.max_depth, settings.rr_depth, settings.hide_emitters);
                 let t = BdptTarget { scene, cfg, opts: &self.options, aovs: settings.aovs() };
-                metropolis::run(&t, scene.camera.width, scene.camera.height, settings, &self.options.chain, progress)
+                metropolis::job(&t, w, h, settings, &self.options.chain, job, progress)
             }
             PssTargetKind::Path => {
                 let t = PathTarget { scene, settings, opts: &self.options };
-                metropolis::run(&t, scene.camera.width, scene.camera.height, settings, &self.options.chain, progress)
+                metropolis::job(&t, w, h, settings, &self.options.chain, job, progress)
             }
         }
     }

@@ -484,7 +484,9 @@ impl<'a> Tracker<'a> {
     #[inline]
     pub fn meets_state(&self, r: u32) -> LayerMask {
         match self.set.product.as_ref().and_then(|p| p.rev.as_ref()) {
-            Some(rp) => rp.meets[self.q as usize * rp.states + r as usize],
+            // A state from elsewhere (photon bytes from another machine) that no automaton
+            // of this set has meets nothing.
+            Some(rp) => rp.meets.get(self.q as usize * rp.states + r as usize).copied().filter(|_| (r as usize) < rp.states).unwrap_or(0),
             None => self.set.base_mask(),
         }
     }

@@ -105,12 +105,21 @@ impl Mlt {
 
     /// The render and the chains' statistics.
     pub fn render_with_stats(&self, scene: &Scene, settings: &RenderSettings, progress: &Progress) -> Result<(Film, ChainStats)> {
+        match self.job(scene, settings, metropolis::Job::Blocks(None), progress)? {
+            metropolis::JobOutput::Film(film, stats, _) => Ok((*film, stats)),
+            metropolis::JobOutput::Bootstrap(_) => Err(Error::Invalid("mlt: a film was asked for".into())),
+        }
+    }
+
+    /// The bootstrap alone, or chain blocks (see [`metropolis::Job`]).
+    pub fn job(&self, scene: &Scene, settings: &RenderSettings, job: metropolis::Job, progress: &Progress) -> Result<metropolis::JobOutput> {
         self.options.validate()?;
+        let (w, h) = (scene.camera.width, scene.camera.height);
         if scene.lights.is_empty() {
-            return metropolis::black(scene.camera.width, scene.camera.height, settings);
+            return metropolis::black_job(w, h, settings, &self.options.chain, job);
         }
         let t = Target::new(scene, settings, self.options.weights)?;
-        metropolis::run(&t, scene.camera.width, scene.camera.height, settings, &self.options.chain, progress)
+        metropolis::job(&t, w, h, settings, &self.options.chain, job, progress)
     }
 }
 

@@ -119,17 +119,32 @@ struct Maps {
     caustic_lookup: Lookup,
 }
 
+/// The photons of photon paths traced apart: global-map photons with their radiance sites,
+/// caustic-map photons.
+#[derive(Default)]
+struct Traced {
+    global: Vec<(Photon, Option<RadianceSite>)>,
+    caustic: Vec<Photon>,
+}
+
 impl PhotonMapper {
-    fn build_maps(&self, scene: &Scene, settings: &RenderSettings) -> Maps {
+    /// Photon paths of both passes, numbered as one index space: the global pass's paths
+    /// `0..photons`, then the caustic pass's.
+    pub fn photon_paths(&self) -> u64 {
+        self.options.photons + self.options.caustic_photons
+    }
+
+    /// Trace photon paths `range` of [`Self::photon_paths`], each from the seed and its index.
+    fn trace(&self, scene: &Scene, settings: &RenderSettings, range: std::ops::Range<u64>) -> Traced {
         let o = &self.options;
-        let max_seg = photon_max_segments(settings.max_depth);
         let cfg = PathConfig::new(scene, settings.max_depth, settings.rr_depth, settings.hide_emitters);
         let gscale = 1.0 / o.photons.max(1) as f32;
         // Every `precompute`-th path lends its Lambertian landings as precomputed-radiance sites.
         // (Precomputed radiance carries no paths: with AOVs every gather ray searches photons.)
         let aovs = settings.aovs();
         let every = if o.gather > 0 && aovs.is_empty() { o.precompute as u64 } else { 0 };
-        let landed: Vec<(Photon, Option<RadianceSite>)> = trace_photons(scene, settings.seed, TAG_GLOBAL, o.photons, &cfg, aovs, |i, d| {
+        let g = range.start.min(o.photons)..range.end.min(o.photons);
+        let global = trace_photons(scene, settings.seed, TAG_GLOBAL, g, &cfg, aovs, |i, d| {
             let site_path = every > 0 && i % every == 0;
             let site = if site_path {
                 d.albedo.map(|albedo| RadianceSite { p: d.p, n: if d.wi.dot(d.ng) >= 0.0 { d.ng } else { -d.ng }, ns: d.ns, albedo })
@@ -138,17 +153,47 @@ impl PhotonMapper {
             };
             (Some((Photon { site_path, ..Photon::from_deposit(d, gscale) }, site)), true)
         });
-        let sites: Vec<RadianceSite> = landed.iter().filter_map(|x| x.1).collect();
-        let site_paths = if every > 0 { o.photons.div_ceil(every) } else { 0 };
-        let other_paths_scale = o.photons as f32 / (o.photons - site_paths).max(1) as f32;
-        let global: Vec<Photon> = landed.into_iter().map(|x| x.0).collect();
         let cscale = 1.0 / o.caustic_photons.max(1) as f32;
-        let caustic: Vec<Photon> = trace_photons(scene, settings.seed, TAG_CAUSTIC, o.caustic_photons, &cfg, aovs, |_, d| {
+        let c = range.start.max(o.photons) - o.photons..range.end.max(o.photons) - o.photons;
+        let caustic = trace_photons(scene, settings.seed, TAG_CAUSTIC, c, &cfg, aovs, |_, d| {
             let keep = (d.caustic && d.surface.intersects(crate::bsdf::LobeFlags::DIFFUSE)).then(|| Photon::from_deposit(d, cscale));
             // A path stays a caustic one only through delta bounces.
             let go_on = (d.caustic || d.segments == 1) && d.surface.is_specular();
             (keep, go_on)
         });
+        Traced { global, caustic }
+    }
+
+    /// Photon paths `range` of [`Self::photon_paths`] as bytes: batches traced apart (on other
+    /// machines) and given in order to [`Self::render_from_batches`] are the local render's
+    /// photon maps exactly.
+    pub fn photon_batch(&self, scene: &Scene, settings: &RenderSettings, range: std::ops::Range<u64>) -> Result<Vec<u8>> {
+        if range.start >= range.end || range.end > self.photon_paths() {
+            return Err(Error::Settings(format!("photon: photon paths {}..{} of {}", range.start, range.end, self.photon_paths())));
+        }
+        let pool = rayon::ThreadPoolBuilder::new().num_threads(settings.threads).build().map_err(|e| Error::Settings(format!("thread pool: {e}")))?;
+        let t = pool.install(|| self.trace(scene, settings, range.clone()));
+        let photons: Vec<Photon> = t.global.iter().map(|x| x.0).collect();
+        let sites: Vec<Photon> = t.global.iter().filter_map(|x| x.1).map(site_as_photon).collect();
+        let mut out = Vec::new();
+        out.extend_from_slice(&range.start.to_le_bytes());
+        out.extend_from_slice(&range.end.to_le_bytes());
+        for list in [&photons, &sites, &t.caustic] {
+            let b = super::map::photons_to_bytes(list);
+            out.extend_from_slice(&(b.len() as u64).to_le_bytes());
+            out.extend_from_slice(&b);
+        }
+        Ok(out)
+    }
+
+    /// The photon maps from traced photons (all paths, in index order).
+    fn maps(&self, scene: &Scene, settings: &RenderSettings, global: Vec<Photon>, sites: Vec<RadianceSite>, caustic: Vec<Photon>) -> Maps {
+        let o = &self.options;
+        let max_seg = photon_max_segments(settings.max_depth);
+        // As in `trace`: with AOVs no path lends sites.
+        let every = if o.gather > 0 && settings.aovs().is_empty() { o.precompute as u64 } else { 0 };
+        let site_paths = if every > 0 { o.photons.div_ceil(every) } else { 0 };
+        let other_paths_scale = o.photons as f32 / (o.photons - site_paths).max(1) as f32;
         let px = pixel_footprint(scene);
         let global_lookup = Lookup { k: o.k, max_radius: o.radius.unwrap_or(24.0 * px), kernel: o.kernel };
         let global = PhotonMap::new(global);
@@ -162,6 +207,67 @@ impl PhotonMapper {
             caustic_lookup: Lookup { k: o.caustic_k, max_radius: o.caustic_radius.unwrap_or(6.0 * px), kernel: o.kernel },
         }
     }
+
+    fn build_maps(&self, scene: &Scene, settings: &RenderSettings) -> Maps {
+        let t = self.trace(scene, settings, 0..self.photon_paths());
+        let sites: Vec<RadianceSite> = t.global.iter().filter_map(|x| x.1).collect();
+        let global: Vec<Photon> = t.global.into_iter().map(|x| x.0).collect();
+        self.maps(scene, settings, global, sites, t.caustic)
+    }
+
+    /// The maps from batches of [`Self::photon_batch`] that cover the photon paths in order.
+    fn maps_from_batches(&self, scene: &Scene, settings: &RenderSettings, batches: &[&[u8]]) -> Result<Maps> {
+        let (mut global, mut site_photons, mut caustic) = (Vec::new(), Vec::new(), Vec::new());
+        let mut next = 0u64;
+        for b in batches {
+            let header = |i: usize| b.get(8 * i..8 * i + 8).map(|x| u64::from_le_bytes(x.try_into().expect("8 bytes")));
+            let (Some(start), Some(end)) = (header(0), header(1)) else {
+                return Err(Error::Invalid(format!("photon: a photon batch of {} bytes is truncated", b.len())));
+            };
+            if start != next || end <= start {
+                return Err(Error::Invalid(format!("photon: a batch of photon paths {start}..{end} does not follow paths 0..{next}")));
+            }
+            next = end;
+            let mut at = 16usize;
+            for list in [&mut global, &mut site_photons, &mut caustic] {
+                let len = b.get(at..at + 8).map(|x| u64::from_le_bytes(x.try_into().expect("8 bytes")) as usize);
+                let part = len.and_then(|n| b.get(at + 8..(at + 8).checked_add(n)?));
+                let Some(part) = part else {
+                    return Err(Error::Invalid(format!("photon: a photon batch of {} bytes is truncated", b.len())));
+                };
+                super::map::photons_from_bytes(part, list)?;
+                at += 8 + part.len();
+            }
+            if at != b.len() {
+                return Err(Error::Invalid(format!("photon: a photon batch has {} bytes too many", b.len() - at)));
+            }
+        }
+        if next != self.photon_paths() {
+            return Err(Error::Invalid(format!("photon: the batches cover photon paths 0..{next} of 0..{}", self.photon_paths())));
+        }
+        let sites = site_photons.iter().map(|p| RadianceSite { p: p.p, n: p.wi, ns: p.n, albedo: p.power }).collect();
+        Ok(self.maps(scene, settings, global, sites, caustic))
+    }
+
+    /// The render (or with `settings.pass_range` its passes' raw sums) from photon batches
+    /// traced apart, covering all photon paths in order: the local render bit for bit.
+    pub fn render_from_batches(&self, scene: &Scene, settings: &RenderSettings, batches: &[&[u8]], progress: &Progress) -> Result<Film> {
+        settings.validate()?;
+        settings.check_lpe_support("photon", false)?;
+        if settings.time_limit.is_some() {
+            return Err(Error::Settings("photon: a render from photon batches has no time limit".into()));
+        }
+        let pool = rayon::ThreadPoolBuilder::new().num_threads(settings.threads).build().map_err(|e| Error::Settings(format!("thread pool: {e}")))?;
+        let maps = pool.install(|| self.maps_from_batches(scene, settings, batches))?;
+        let est = Estimator { maps, gather: self.options.gather, visibility: self.options.visibility };
+        render_pixels(scene, settings, progress, &est)
+    }
+}
+
+/// A radiance site in a photon's fields, for the photon list's bytes (p, n as wi, ns as n,
+/// albedo as power).
+fn site_as_photon(s: RadianceSite) -> Photon {
+    Photon { p: s.p, wi: s.n, power: s.albedo, n: s.ns, segments: 0, caustic: false, site_path: false, light_state: 0 }
 }
 
 impl Integrator for PhotonMapper {

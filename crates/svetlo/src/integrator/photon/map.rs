@@ -79,6 +79,52 @@ impl<'a> Route<'a> {
     }
 }
 
+/// Bytes of one photon: p, wi, power, n (12 f32), segments (u16), caustic and site_path (u8
+/// each), light_state (u32).
+const PHOTON_BYTES: usize = 56;
+
+/// Photons as little-endian bytes, to send a photon pass traced on one machine to another.
+pub(crate) fn photons_to_bytes(photons: &[Photon]) -> Vec<u8> {
+    let mut out = Vec::with_capacity(8 + photons.len() * PHOTON_BYTES);
+    out.extend_from_slice(b"SVLPHOT1");
+    for ph in photons {
+        for v in [ph.p.x, ph.p.y, ph.p.z, ph.wi.x, ph.wi.y, ph.wi.z, ph.power.r, ph.power.g, ph.power.b, ph.n.x, ph.n.y, ph.n.z] {
+            out.extend_from_slice(&v.to_le_bytes());
+        }
+        out.extend_from_slice(&ph.segments.to_le_bytes());
+        out.push(ph.caustic as u8);
+        out.push(ph.site_path as u8);
+        out.extend_from_slice(&ph.light_state.to_le_bytes());
+    }
+    out
+}
+
+/// Read [`photons_to_bytes`]'s output (appending to `out`); malformed bytes are an error.
+pub(crate) fn photons_from_bytes(b: &[u8], out: &mut Vec<Photon>) -> Result<()> {
+    if b.len() < 8 || &b[..8] != b"SVLPHOT1" || !(b.len() - 8).is_multiple_of(PHOTON_BYTES) {
+        return Err(Error::Invalid(format!("photons: not a svetlo photon list ({} bytes)", b.len())));
+    }
+    out.reserve((b.len() - 8) / PHOTON_BYTES);
+    for c in b[8..].chunks_exact(PHOTON_BYTES) {
+        let f = |i: usize| f32::from_le_bytes(c[4 * i..4 * i + 4].try_into().expect("4 bytes"));
+        let v: [f32; 12] = std::array::from_fn(f);
+        if !v.iter().all(|x| x.is_finite()) || c[50] > 1 || c[51] > 1 {
+            return Err(Error::Invalid("photons: a photon is not finite or its flags are not 0 or 1".into()));
+        }
+        out.push(Photon {
+            p: Vec3::new(v[0], v[1], v[2]),
+            wi: Vec3::new(v[3], v[4], v[5]),
+            power: Rgb { r: v[6], g: v[7], b: v[8] },
+            n: Vec3::new(v[9], v[10], v[11]),
+            segments: u16::from_le_bytes([c[48], c[49]]),
+            caustic: c[50] == 1,
+            site_path: c[51] == 1,
+            light_state: u32::from_le_bytes([c[52], c[53], c[54], c[55]]),
+        });
+    }
+    Ok(())
+}
+
 impl KdPoint for Photon {
     #[inline]
     fn position(&self) -> Vec3 {

@@ -13,7 +13,7 @@ mod trace;
 
 pub use jensen::{PhotonMapper, PhotonOptions};
 pub use map::{Kernel, Lookup};
-pub use sppm::{Sppm, SppmOptions};
+pub use sppm::{Sppm, SppmOptions, SppmRows};
 
 use crate::error::{Error, Result};
 use crate::scene::Scene;

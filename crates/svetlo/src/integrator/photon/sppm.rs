@@ -15,7 +15,7 @@
 //! of iterations; a time budget stops after a whole iteration.
 
 use super::camera::camera_walk;
-use super::map::{visible, Photon, Route, SAME_ORIENTATION_COS};
+use super::map::{visible, Photon, SAME_ORIENTATION_COS};
 use super::trace::trace_photons;
 use super::{parse_count, parse_pairs, parse_positive, pixel_footprint, segments_left};
 use crate::accel::KdTree;
@@ -24,8 +24,6 @@ use crate::error::{Error, Result};
 use crate::film::{Film, Filter};
 use crate::geometry::SurfaceInteraction;
 use crate::integrator::{Integrator, Progress, RenderSettings};
-use crate::lpe::aov::LayerSample;
-use crate::lpe::Tracker;
 use crate::math::PI;
 use crate::path::PathConfig;
 use crate::sampling::sampler::make_sampler;
@@ -33,6 +31,7 @@ use crate::scene::Scene;
 use crate::spectrum::Rgb;
 use glam::{Vec2, Vec3};
 use rayon::prelude::*;
+use std::ops::Range;
 use std::sync::atomic::Ordering;
 use std::time::Instant;
 
@@ -90,239 +89,312 @@ pub struct Sppm {
 }
 
 /// Where one camera path met a diffuse surface this iteration.
-struct VisiblePoint<'a> {
+struct VisiblePoint {
     si: SurfaceInteraction,
     bsdf: Bsdf,
     wo: Vec3,
     beta: Rgb,
     depth: i32,
-    /// The path's events before it (AOVs).
-    events: Tracker<'a>,
 }
 
 /// Progressive statistics of one visible-point slot (pixel, n-th diffuse vertex).
-#[derive(Clone, Copy)]
+#[derive(Clone, Copy, Debug)]
 struct Stats {
     r: f32,
     n: f32,
     tau: Rgb,
 }
 
+/// The progressive state of rows `rows` of an SPPM render after `iterations` iterations: all
+/// a machine that renders those rows keeps from one iteration to the next. Pixels do not
+/// share statistics (a visible point's radius shrinks by its own photon counts), so rows
+/// advance apart once every machine has the iteration's photons.
+#[derive(Clone, Debug)]
+pub struct SppmRows {
+    pub rows: Range<u32>,
+    width: u32,
+    slots: u32,
+    pub iterations: u32,
+    stats: Vec<Stats>,
+    /// Sum over iterations of the camera-side part (emission, NEE).
+    direct: Vec<Rgb>,
+}
+
+const ROWS_MAGIC: &[u8; 8] = b"SVLSPPM1";
+
+impl SppmRows {
+    /// Little-endian bytes.
+    pub fn to_bytes(&self) -> Vec<u8> {
+        let mut out = Vec::with_capacity(32 + self.stats.len() * 20 + self.direct.len() * 12);
+        out.extend_from_slice(ROWS_MAGIC);
+        for v in [self.rows.start, self.rows.end, self.width, self.slots, self.iterations] {
+            out.extend_from_slice(&v.to_le_bytes());
+        }
+        for st in &self.stats {
+            for v in [st.r, st.n, st.tau.r, st.tau.g, st.tau.b] {
+                out.extend_from_slice(&v.to_le_bytes());
+            }
+        }
+        for d in &self.direct {
+            for v in [d.r, d.g, d.b] {
+                out.extend_from_slice(&v.to_le_bytes());
+            }
+        }
+        out
+    }
+
+    /// Read [`Self::to_bytes`]'s output; malformed bytes are an error.
+    pub fn from_bytes(b: &[u8]) -> Result<SppmRows> {
+        let bad = |m: String| Error::Invalid(format!("sppm rows: {m}"));
+        if b.len() < 28 || &b[..8] != ROWS_MAGIC {
+            return Err(bad("not svetlo SPPM rows (bad magic or short)".into()));
+        }
+        let u = |i: usize| u32::from_le_bytes(b[8 + 4 * i..12 + 4 * i].try_into().expect("4 bytes"));
+        let (r0, r1, width, slots, iterations) = (u(0), u(1), u(2), u(3), u(4));
+        let px = (r1.saturating_sub(r0) as u64) * width as u64;
+        let want = px.checked_mul(20 * slots as u64 + 12).and_then(|x| x.checked_add(28));
+        if r0 >= r1 || slots == 0 || slots > 16 || want != Some(b.len() as u64) {
+            return Err(bad(format!("rows {r0}..{r1} of width {width} with {slots} slots do not fit {} bytes", b.len())));
+        }
+        let f: Vec<f32> = b[28..].chunks_exact(4).map(|c| f32::from_le_bytes(c.try_into().expect("4 bytes"))).collect();
+        let n_stats = (px * slots as u64) as usize;
+        let stats = f[..5 * n_stats].chunks_exact(5).map(|c| Stats { r: c[0], n: c[1], tau: Rgb { r: c[2], g: c[3], b: c[4] } }).collect();
+        let direct = f[5 * n_stats..].chunks_exact(3).map(|c| Rgb { r: c[0], g: c[1], b: c[2] }).collect();
+        Ok(SppmRows { rows: r0..r1, width, slots, iterations, stats, direct })
+    }
+}
+
+fn thread_pool(settings: &RenderSettings) -> Result<rayon::ThreadPool> {
+    rayon::ThreadPoolBuilder::new().num_threads(settings.threads).build().map_err(|e| Error::Settings(format!("thread pool: {e}")))
+}
+
 impl Sppm {
-    /// One iteration's photons: on diffuse surfaces, at least two segments from the light.
-    fn photon_pass(&self, scene: &Scene, settings: &RenderSettings, iteration: u64, count: u64) -> KdTree<Photon> {
+    /// Photon paths per iteration.
+    pub fn photons_per_iteration(&self, scene: &Scene) -> u64 {
+        self.options.photons.unwrap_or(4 * scene.camera.width as u64 * scene.camera.height as u64).max(1)
+    }
+
+    /// The state of rows `rows` before the first iteration.
+    pub fn start_rows(&self, scene: &Scene, rows: Range<u32>) -> Result<SppmRows> {
+        if rows.start >= rows.end || rows.end > scene.camera.height {
+            return Err(Error::Settings(format!("sppm: rows {}..{} of a film {} high", rows.start, rows.end, scene.camera.height)));
+        }
+        let r0 = self.options.radius.unwrap_or(2.0 * pixel_footprint(scene));
+        let (w, slots) = (scene.camera.width, self.options.max_visible);
+        let px = (rows.end - rows.start) as usize * w as usize;
+        Ok(SppmRows {
+            rows,
+            width: w,
+            slots,
+            iterations: 0,
+            stats: vec![Stats { r: r0, n: 0.0, tau: Rgb::BLACK }; px * slots as usize],
+            direct: vec![Rgb::BLACK; px],
+        })
+    }
+
+    /// Iteration `iteration`'s photon paths `range`, traced from the seed and their indices:
+    /// ranges of an iteration traced apart and concatenated in order are its photons.
+    fn photons(&self, scene: &Scene, settings: &RenderSettings, iteration: u64, range: Range<u64>) -> Vec<Photon> {
         let cfg = PathConfig::new(scene, settings.max_depth, settings.rr_depth, settings.hide_emitters);
-        let photons = trace_photons(scene, settings.seed, iteration, count, &cfg, settings.aovs(), |_, d| {
+        // SPPM takes no AOVs yet (refused in `render`), so photons carry no path state.
+        trace_photons(scene, settings.seed, iteration, range, &cfg, &crate::lpe::AovSet::default(), |_, d| {
+            // Photons on diffuse surfaces, at least two segments from the light.
             let keep = (d.segments >= 2 && d.surface.intersects(LobeFlags::DIFFUSE)).then(|| Photon::from_deposit(d, 1.0));
             (keep, true)
+        })
+    }
+
+    /// [`Self::photons`] as bytes, for [`Self::iterate_rows`] on another machine.
+    pub fn photon_batch(&self, scene: &Scene, settings: &RenderSettings, iteration: u32, range: Range<u64>) -> Result<Vec<u8>> {
+        if range.start >= range.end || range.end > self.photons_per_iteration(scene) || iteration >= settings.spp {
+            return Err(Error::Settings(format!("sppm: photon paths {}..{} of iteration {iteration}", range.start, range.end)));
+        }
+        let pool = thread_pool(settings)?;
+        Ok(pool.install(|| super::map::photons_to_bytes(&self.photons(scene, settings, iteration as u64, range))))
+    }
+
+    /// Advance `state` by its next iteration, given that iteration's photons as batches from
+    /// [`Self::photon_batch`] covering its photon paths in order.
+    pub fn iterate_rows(&self, scene: &Scene, settings: &RenderSettings, state: &mut SppmRows, batches: &[&[u8]]) -> Result<()> {
+        if (state.width, state.slots) != (scene.camera.width, self.options.max_visible)
+            || state.rows.end > scene.camera.height
+            || state.iterations >= settings.spp
+        {
+            return Err(Error::Settings(format!("sppm: rows state of another render (iteration {} of {})", state.iterations, settings.spp)));
+        }
+        let mut photons = Vec::new();
+        for b in batches {
+            super::map::photons_from_bytes(b, &mut photons)?;
+        }
+        let pool = thread_pool(settings)?;
+        let tree = pool.install(|| KdTree::new(photons));
+        pool.install(|| self.iterate(scene, settings, state, &tree));
+        Ok(())
+    }
+
+    /// The film of rows that partition the image (any order).
+    pub fn develop_rows(&self, scene: &Scene, mut parts: Vec<SppmRows>) -> Result<Film> {
+        parts.sort_by_key(|p| p.rows.start);
+        let mut next = 0;
+        let iterations = parts.first().map_or(0, |p| p.iterations);
+        for p in &parts {
+            if p.rows.start != next || (p.width, p.slots, p.iterations) != (scene.camera.width, self.options.max_visible, iterations) {
+                return Err(Error::Invalid(format!(
+                    "sppm: rows {}..{} (iteration {}) do not follow rows 0..{next} of one render",
+                    p.rows.start, p.rows.end, p.iterations
+                )));
+            }
+            next = p.rows.end;
+        }
+        if next != scene.camera.height {
+            return Err(Error::Invalid(format!("sppm: rows cover 0..{next} of 0..{}", scene.camera.height)));
+        }
+        let mut all = SppmRows { rows: 0..next, width: scene.camera.width, slots: self.options.max_visible, iterations, stats: Vec::new(), direct: Vec::new() };
+        for p in parts {
+            all.stats.extend(p.stats);
+            all.direct.extend(p.direct);
+        }
+        Ok(develop(scene, &all, self.photons_per_iteration(scene)))
+    }
+
+    /// One iteration of the rows of `state` (in the current thread pool): their camera pass,
+    /// then every visible point gathers the photons of `tree` and updates its statistics.
+    fn iterate(&self, scene: &Scene, settings: &RenderSettings, state: &mut SppmRows, tree: &KdTree<Photon>) {
+        let o = &self.options;
+        let cam = &scene.camera.ray_generator();
+        let w = scene.camera.width as usize;
+        let slots = o.max_visible as usize;
+        let proto = make_sampler(settings.sampler, settings.spp, settings.seed);
+        let it = state.iterations;
+        let rows = state.rows.clone();
+        // Camera pass: rows in parallel, each pixel's visible points and direct part.
+        let vrows: Vec<Vec<(Rgb, Vec<Option<VisiblePoint>>)>> = rows
+            .into_par_iter()
+            .map(|y| {
+                let mut sampler = proto.clone_box();
+                (0..w)
+                    .map(|x| {
+                        let (_, ray) = crate::integrator::camera_sample(cam, sampler.as_mut(), x as u32, y, it);
+                        let mut vps: Vec<Option<VisiblePoint>> = (0..slots).map(|_| None).collect();
+                        let mut layers = crate::lpe::aov::LayerSample::default();
+                        let mut at_diffuse =
+                            |v: &super::camera::DiffuseVertex, _: &mut dyn crate::sampling::sampler::Sampler, _: Option<&mut crate::lpe::aov::LayerSample>| {
+                                if let Some(slot) = vps.get_mut(v.index as usize) {
+                                    *slot = Some(VisiblePoint { si: *v.si, bsdf: v.bsdf.clone(), wo: v.wo, beta: v.beta, depth: v.depth });
+                                }
+                                Rgb::BLACK
+                            };
+                        let l = camera_walk(scene, &ray, sampler.as_mut(), settings, &mut at_diffuse, &mut layers);
+                        (l, vps)
+                    })
+                    .collect()
+            })
+            .collect();
+        let alpha = o.alpha;
+        let visibility = o.visibility;
+        let max_depth = settings.max_depth;
+        state.stats.par_chunks_mut(w * slots).zip(vrows.par_iter()).for_each(|(srow, vrow)| {
+            for (x, (_, vps)) in vrow.iter().enumerate() {
+                for (s, vp) in vps.iter().enumerate() {
+                    let Some(vp) = vp else { continue };
+                    let st = &mut srow[x * slots + s];
+                    let left = segments_left(max_depth, vp.depth);
+                    let mut phi = Rgb::BLACK;
+                    let mut m = 0u32;
+                    // Lifted off the surface on the seen side, for the visibility test.
+                    let n = if vp.si.wo.dot(vp.si.ng) >= 0.0 { vp.si.ng } else { -vp.si.ng };
+                    tree.for_each_in_radius(vp.si.p, st.r, |ph, _| {
+                        if (ph.segments as i32) > left {
+                            return;
+                        }
+                        let wi = vp.si.to_local(ph.wi);
+                        let cos_g = ph.wi.dot(vp.si.ng).abs();
+                        if cos_g <= 0.0 {
+                            return;
+                        }
+                        let f = vp.bsdf.eval(vp.wo, wi, TransportMode::Radiance);
+                        if f.is_black() || ph.n.dot(n) <= SAME_ORIENTATION_COS || (visibility && !visible(scene, vp.si.p, n, ph.p, ph.n, vp.si.time)) {
+                            return;
+                        }
+                        phi += f * ph.power * (wi.z.abs() / cos_g);
+                        m += 1;
+                    });
+                    if m > 0 {
+                        let n_new = st.n + alpha * m as f32;
+                        let ratio = n_new / (st.n + m as f32);
+                        st.tau = (st.tau + vp.beta * phi) * ratio;
+                        st.r *= ratio.sqrt();
+                        st.n = n_new;
+                    }
+                }
+            }
         });
-        KdTree::new(photons)
+        for (yi, row) in vrows.iter().enumerate() {
+            for (x, (l, _)) in row.iter().enumerate() {
+                state.direct[yi * w + x] += if l.is_finite() { *l } else { Rgb::BLACK };
+            }
+        }
+        state.iterations += 1;
     }
 }
 
 impl Integrator for Sppm {
     fn render(&self, scene: &Scene, settings: &RenderSettings, progress: &Progress) -> Result<Film> {
         settings.validate()?;
-        super::jensen::check_light_states("sppm", settings)?;
-        let aovs = settings.aovs();
-        // With AOVs, per visible point and pixel: each AOV's share of τ and of the direct part,
-        // then the (restricted) beauty's; the radii follow all photons, so the layers of a
-        // partition of path space sum to the beauty.
-        let nl = if aovs.is_empty() { 0 } else { aovs.aov_count() + 1 };
-        let o = &self.options;
+        settings.check_lpe_support("sppm", false)?;
         let start = Instant::now();
-        let cam = &scene.camera.ray_generator();
         let (w, h) = (scene.camera.width as usize, scene.camera.height as usize);
-        let slots = o.max_visible as usize;
-        let per_iter = o.photons.unwrap_or(4 * (w * h) as u64).max(1);
-        let r0 = o.radius.unwrap_or(2.0 * pixel_footprint(scene));
-        let pool = rayon::ThreadPoolBuilder::new().num_threads(settings.threads).build().map_err(|e| Error::Settings(format!("thread pool: {e}")))?;
-        let mut stats = vec![Stats { r: r0, n: 0.0, tau: Rgb::BLACK }; w * h * slots];
-        // Sum over iterations of the camera-side part (emission, NEE).
-        let mut direct = vec![Rgb::BLACK; w * h];
-        let mut tau_layers = vec![Rgb::BLACK; if nl == 0 { h } else { w * h * slots * nl }];
-        let mut direct_layers = vec![Rgb::BLACK; w * h * nl];
-        let proto = make_sampler(settings.sampler, settings.spp, settings.seed);
+        let per_iter = self.photons_per_iteration(scene);
+        let pool = thread_pool(settings)?;
+        // The whole image is one block of rows, advanced by the steps a distributed render
+        // takes apart (photon_batch, iterate_rows, develop_rows).
+        let mut state = self.start_rows(scene, 0..h as u32)?;
         progress.total.store(settings.spp as u64 * (w * h) as u64, Ordering::Relaxed);
-        let mut iterations = 0u32;
         let mut per_iteration_s = 0.0f64;
-        while iterations < settings.spp {
+        while state.iterations < settings.spp {
             if progress.cancelled() {
                 break;
             }
             if let Some(t) = settings.time_limit {
                 // Start an iteration only if it should end within the budget.
                 let el = start.elapsed().as_secs_f64();
-                if el >= t.as_secs_f64() || (iterations > 0 && el + per_iteration_s > t.as_secs_f64()) {
+                if el >= t.as_secs_f64() || (state.iterations > 0 && el + per_iteration_s > t.as_secs_f64()) {
                     break;
                 }
             }
-            let it = iterations;
-            // Camera pass: rows in parallel, each pixel's visible points and direct part.
-            type Pixel<'a> = (Rgb, LayerSample, Vec<Option<VisiblePoint<'a>>>);
-            let rows: Vec<Vec<Pixel>> = pool.install(|| {
-                (0..h)
-                    .into_par_iter()
-                    .map(|y| {
-                        let mut sampler = proto.clone_box();
-                        (0..w)
-                            .map(|x| {
-                                let (_, ray) = crate::integrator::camera_sample(cam, sampler.as_mut(), x as u32, y as u32, it);
-                                let mut vps: Vec<Option<VisiblePoint>> = (0..slots).map(|_| None).collect();
-                                let mut layers = LayerSample::default();
-                                let l = camera_walk(
-                                    scene,
-                                    &ray,
-                                    sampler.as_mut(),
-                                    settings,
-                                    &mut |v, _, _| {
-                                        if let Some(slot) = vps.get_mut(v.index as usize) {
-                                            *slot = Some(VisiblePoint {
-                                                si: *v.si,
-                                                bsdf: v.bsdf.clone(),
-                                                wo: v.wo,
-                                                beta: v.beta,
-                                                depth: v.depth,
-                                                events: v.events.rebind(aovs),
-                                            });
-                                        }
-                                        Rgb::BLACK
-                                    },
-                                    &mut layers,
-                                );
-                                (l, layers, vps)
-                            })
-                            .collect()
-                    })
-                    .collect()
-            });
+            let tree = pool.install(|| KdTree::new(self.photons(scene, settings, state.iterations as u64, 0..per_iter)));
             if progress.cancelled() {
                 break;
             }
-            let tree = pool.install(|| self.photon_pass(scene, settings, it as u64, per_iter));
-            let alpha = o.alpha;
-            let visibility = o.visibility;
-            let max_depth = settings.max_depth;
-            pool.install(|| {
-                let lrows = tau_layers.par_chunks_mut((w * slots * nl).max(1));
-                stats.par_chunks_mut(w * slots).zip(lrows).zip(rows.par_iter()).for_each(|((srow, lrow), vrow)| {
-                    for (x, (_, _, vps)) in vrow.iter().enumerate() {
-                        for (s, vp) in vps.iter().enumerate() {
-                            let Some(vp) = vp else { continue };
-                            let st = &mut srow[x * slots + s];
-                            let mut route = (nl > 0).then(|| Route::new(&vp.events, &vp.si, vp.bsdf.flags()));
-                            let left = segments_left(max_depth, vp.depth);
-                            let mut phi = Rgb::BLACK;
-                            let mut m = 0u32;
-                            // Lifted off the surface on the seen side, for the visibility test.
-                            let n = if vp.si.wo.dot(vp.si.ng) >= 0.0 { vp.si.ng } else { -vp.si.ng };
-                            tree.for_each_in_radius(vp.si.p, st.r, |ph, _| {
-                                if (ph.segments as i32) > left {
-                                    return;
-                                }
-                                let wi = vp.si.to_local(ph.wi);
-                                let cos_g = ph.wi.dot(vp.si.ng).abs();
-                                if cos_g <= 0.0 {
-                                    return;
-                                }
-                                let f = vp.bsdf.eval(vp.wo, wi, TransportMode::Radiance);
-                                if f.is_black() || ph.n.dot(n) <= SAME_ORIENTATION_COS || (visibility && !visible(scene, vp.si.p, n, ph.p, ph.n, vp.si.time)) {
-                                    return;
-                                }
-                                let v = f * ph.power * (wi.z.abs() / cos_g);
-                                phi += v;
-                                m += 1;
-                                if let Some(rt) = &mut route {
-                                    rt.add_photon(ph, vp.si.ng, vp.si.wo.dot(vp.si.ng) > 0.0, v);
-                                }
-                            });
-                            if m > 0 {
-                                let n_new = st.n + alpha * m as f32;
-                                let ratio = n_new / (st.n + m as f32);
-                                st.tau = (st.tau + vp.beta * phi) * ratio;
-                                if let Some(rt) = &route {
-                                    let tl = &mut lrow[(x * slots + s) * nl..(x * slots + s + 1) * nl];
-                                    let (aov, beauty) = tl.split_at_mut(nl - 1);
-                                    for (t, p) in aov.iter_mut().zip(&rt.out.aov) {
-                                        *t = (*t + vp.beta * *p) * ratio;
-                                    }
-                                    beauty[0] = (beauty[0] + vp.beta * rt.out.beauty) * ratio;
-                                }
-                                st.r *= ratio.sqrt();
-                                st.n = n_new;
-                            }
-                        }
-                    }
-                });
-            });
-            for (y, row) in rows.iter().enumerate() {
-                for (x, (l, ls, _)) in row.iter().enumerate() {
-                    direct[y * w + x] += if l.is_finite() { *l } else { Rgb::BLACK };
-                    if nl > 0 {
-                        let d = &mut direct_layers[(y * w + x) * nl..(y * w + x + 1) * nl];
-                        for (t, v) in d.iter_mut().zip(ls.aov.iter().take(nl - 1).chain([&ls.beauty])) {
-                            *t += if v.is_finite() { *v } else { Rgb::BLACK };
-                        }
-                    }
-                }
-            }
-            iterations += 1;
-            per_iteration_s = start.elapsed().as_secs_f64() / iterations as f64;
+            pool.install(|| self.iterate(scene, settings, &mut state, &tree));
+            per_iteration_s = start.elapsed().as_secs_f64() / state.iterations as f64;
             progress.done.fetch_add((w * h) as u64, Ordering::Relaxed);
-            if progress.wants_pass(iterations) {
-                progress.pass_done(&develop(
-                    scene,
-                    aovs,
-                    Parts { direct: &direct, stats: &stats, direct_layers: &direct_layers, tau_layers: &tau_layers },
-                    slots,
-                    per_iter,
-                    iterations,
-                ));
+            if progress.wants_pass(state.iterations) {
+                progress.pass_done(&develop(scene, &state, per_iter));
             }
         }
-        Ok(develop(scene, aovs, Parts { direct: &direct, stats: &stats, direct_layers: &direct_layers, tau_layers: &tau_layers }, slots, per_iter, iterations))
+        Ok(develop(scene, &state, per_iter))
     }
 }
 
-/// What the iterations have summed: per pixel the camera-side part, per visible-point slot
-/// the statistics, and with AOVs both split by layer (each AOV's, then the beauty's).
-struct Parts<'a> {
-    direct: &'a [Rgb],
-    stats: &'a [Stats],
-    direct_layers: &'a [Rgb],
-    tau_layers: &'a [Rgb],
-}
-
-/// The image after `iterations`: each pixel is its own measurement (box reconstruction).
-fn develop(scene: &Scene, aovs: &crate::lpe::AovSet, parts: Parts, slots: usize, per_iter: u64, iterations: u32) -> Film {
+/// The image of rows covering the film after their iterations: each pixel is its own
+/// measurement (box reconstruction).
+fn develop(scene: &Scene, state: &SppmRows, per_iter: u64) -> Film {
     let (w, h) = (scene.camera.width as usize, scene.camera.height as usize);
-    let mut film = Film::with_layers(scene.camera.width, scene.camera.height, Filter::Box, aovs.names());
-    let nl = if aovs.is_empty() { 0 } else { aovs.aov_count() + 1 };
+    let (slots, iterations) = (state.slots as usize, state.iterations);
+    let (direct, stats) = (&state.direct, &state.stats);
+    let mut film = Film::new(scene.camera.width, scene.camera.height, Filter::Box);
     if iterations > 0 {
         let emitted = per_iter as f64 * iterations as f64;
-        let mut layers = vec![Rgb::BLACK; nl];
         for y in 0..h {
             for x in 0..w {
-                let px = y * w + x;
-                let mut l = parts.direct[px] / iterations as f32;
-                for (t, d) in layers.iter_mut().zip(&parts.direct_layers[px * nl..]) {
-                    *t = *d / iterations as f32;
-                }
-                for s in 0..slots {
-                    let st = &parts.stats[px * slots + s];
+                let mut l = direct[y * w + x] / iterations as f32;
+                for st in &stats[(y * w + x) * slots..(y * w + x + 1) * slots] {
                     if st.n > 0.0 {
-                        let k = 1.0 / ((PI as f64 * st.r as f64 * st.r as f64 * emitted) as f32);
-                        l += st.tau * k;
-                        for (t, v) in layers.iter_mut().zip(&parts.tau_layers[(px * slots + s) * nl..]) {
-                            *t += *v * k;
-                        }
+                        l += st.tau / ((PI as f64 * st.r as f64 * st.r as f64 * emitted) as f32);
                     }
                 }
-                let p = Vec2::new(x as f32 + 0.5, y as f32 + 0.5);
-                match layers.split_last() {
-                    None => film.add_sample(p, l),
-                    Some((beauty, aov)) => film.add_sample_layers(p, if aovs.restricts_beauty() { *beauty } else { l }, aov),
-                }
+                film.add_sample(Vec2::new(x as f32 + 0.5, y as f32 + 0.5), l);
             }
         }
     }

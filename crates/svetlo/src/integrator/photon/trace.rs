@@ -89,27 +89,28 @@ pub(crate) fn trace_photon(
     }
 }
 
-/// Trace photon paths `0..count` of pass `tag` in parallel and collect what `keep` makes of
-/// each landing (given the path's index), in path order (so the result does not depend on the
-/// thread count).
+/// Trace photon paths `range` of pass `tag` in parallel and collect what `keep` makes of
+/// each landing (given the path's index), in path order: the result depends on neither the
+/// thread count nor how a pass's paths are cut into ranges (ranges traced apart, on other
+/// machines, and concatenated in order are the whole pass's photons).
 pub(crate) fn trace_photons<T: Send>(
     scene: &Scene,
     seed: u64,
     tag: u64,
-    count: u64,
+    range: std::ops::Range<u64>,
     cfg: &PathConfig,
     aovs: &AovSet,
     keep: impl Fn(u64, &Deposit) -> (Option<T>, bool) + Sync,
 ) -> Vec<T> {
     const CHUNK: u64 = 4096;
-    let chunks = count.div_ceil(CHUNK);
+    let chunks = (range.end.saturating_sub(range.start)).div_ceil(CHUNK);
     let parts: Vec<Vec<T>> = (0..chunks)
         .into_par_iter()
         .map(|c| {
             let mut out = Vec::new();
             let mut sampler = IndependentSampler::new(1, seed);
             let mut path = Vec::new();
-            for i in c * CHUNK..((c + 1) * CHUNK).min(count) {
+            for i in range.start + c * CHUNK..(range.start + (c + 1) * CHUNK).min(range.end) {
                 start_photon(&mut sampler, tag, i);
                 trace_photon(scene, cfg, aovs, &mut sampler, &mut path, &mut |d| {
                     let (v, go_on) = keep(i, d);
