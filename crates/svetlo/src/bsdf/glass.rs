@@ -2,7 +2,7 @@
 //! passes undeflected (the pane's offset is neglected) or reflects specularly; between the
 //! two faces it bounces any number of times, which sums in closed form, separately for the
 //! s and p polarisations (averaging the Fresnel factor first, as `thindielectric` does,
-//! overstates transmission at oblique incidence by about 1.5 % at 60°). The glass absorbs:
+//! understates transmission at oblique incidence: by 1.5 % at 60°, 3.8 % at 75°). The glass absorbs:
 //! one pass along the normal keeps the fraction `transmissivity`, an oblique pass
 //! transmissivity^(1/cos θt). Lighting designers know the pane by its normal
 //! transmittance τn (the data sheet's light transmittance): [`transmissivity_from_normal`]
@@ -98,7 +98,7 @@ impl ThinGlass {
         }
         let (r, t) = self.reflectance_transmittance(wo.z);
         let (lr, lt) = (r.luminance().max(0.0), t.luminance().max(0.0));
-        if !(lr + lt > 0.0) {
+        if lr + lt <= 0.0 {
             return None;
         }
         let p = lr / (lr + lt);
