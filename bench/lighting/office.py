@@ -25,6 +25,7 @@ Usage: bench/lighting/office.py [--svetlo target/release/svetlo] [--spp 256] [--
 import argparse
 import json
 import os
+import re
 import resource
 import subprocess
 import sys
@@ -114,10 +115,18 @@ def subset(stride):
     return [i * nv + j for i in range(o, nu, stride) for j in range(o, nv, stride)]
 
 
-def run_radiance(d, ad, copies, idx):
+def run_radiance(d, ad, copies, idx, bodies):
     env = radiance_env()
     (d / "lum.ies").write_bytes(IES.read_bytes())
     subprocess.run(["ies2rad", "-dm", "-c", "1", "1", "1", "-t", "default", "-o", "lum", "lum.ies"], cwd=d, env=env, check=True)
+    if not bodies:
+        # ies2rad's luminaire is a black box of `light`: it absorbs interreflected light and
+        # hides the ceiling above it. svetlo's emitter has no body; Radiance's `illum` (a
+        # source that every other ray passes through) models the same room.
+        rad = (d / "lum.rad").read_text()
+        new = re.sub(r"^'lum_dist' light 'lum_light'$", "'lum_dist' illum 'lum_light'", rad, flags=re.M)
+        assert new != rad, "ies2rad's output changed: no light material to turn into illum"
+        (d / "lum.rad").write_text(new)
     (d / "office.rad").write_text(radiance_scene())
     with open(d / "office.oct", "wb") as f:
         subprocess.run(["oconv", "office.rad"], cwd=d, env=env, check=True, stdout=f)
@@ -167,6 +176,7 @@ def main():
     ap.add_argument("--copies", type=int, default=4)
     ap.add_argument("--stride", type=int, default=4, help="Radiance evaluates every STRIDE-th grid point each way (its -aa 0 gathering costs ~0.1 s per point per estimate here)")
     ap.add_argument("--radiosity", default="element-size=0.5")
+    ap.add_argument("--radiance-bodies", action="store_true", help="keep ies2rad's luminaires as black boxes (light) instead of illum")
     ap.add_argument("--spread", action="store_true", help="svetlo emits over the luminous opening (Radiance always does)")
     a = ap.parse_args()
     if not IES.exists():
@@ -177,7 +187,7 @@ def main():
         d = Path(t)
         (d / "office.xml").write_text(svetlo_scene(a.spread))
         idx = subset(a.stride)
-        rm, rse, rcpu = run_radiance(d, a.ad, a.copies, idx)
+        rm, rse, rcpu = run_radiance(d, a.ad, a.copies, idx, a.radiance_bodies)
         r_stats = stats(rm, rse)
         # Cost to 1 % at every point of the full grid: each point's own (se/0.01)^2 scaling of
         # the CPU per point, summed over the subset and scaled up to the grid.
@@ -203,7 +213,8 @@ def main():
             rows.append((label, s_stats, scpu, to1, (worst, worst_k, sm[worst_k], rm[worst_k], sum(sm) / len(sm) / (sum(rm) / len(rm)))))
         glare = run_glare(d, a.svetlo)
     pts = points()
-    print(f"office {L} x {W} x {H} m, 12 x {IES.name}{' (spread)' if a.spread else ''}, {len(pts)} points (0.25 m grid at 0.8 m)\n")
+    body = "black boxes (light)" if a.radiance_bodies else "bodiless (illum)"
+    print(f"office {L} x {W} x {H} m, 12 x {IES.name}{' (spread)' if a.spread else ''}, {len(pts)} points (0.25 m grid at 0.8 m); Radiance's luminaires {body}\n")
     print(f"Radiance evaluates {len(idx)} of the points (every {a.stride}th each way); its CPU column is scaled to the full grid; the Eavg ratio compares those points.\n")
     print("| estimator | Emin | Eavg | Emax | U0 | worst rel. s.e. | CPU s | CPU s to 1 % at every point | Eavg / Radiance | worst point vs Radiance (of 4σ + 2 %) |")
     print("|---|---|---|---|---|---|---|---|---|---|")
