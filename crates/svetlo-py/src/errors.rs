@@ -70,6 +70,15 @@ pub fn to_py(e: svetlo::Error) -> PyErr {
     })
 }
 
+/// A `load_dict` error at a dictionary entry: a `SceneError` whose `key` is the entry's path
+/// (it has no file or line of its own).
+pub fn scene_key_err(msg: String, key: &str) -> PyErr {
+    Python::with_gil(|py| {
+        let k = key.into_pyobject(py).map(|o| o.into_any().unbind()).unwrap_or_else(|_| py.None());
+        with_attrs::<SceneError>(msg, &[("file", py.None()), ("line", py.None()), ("column", py.None()), ("key", k)])
+    })
+}
+
 /// An error reading or writing an image file: an `ImageError` naming the file.
 pub fn to_py_image(e: svetlo::Error) -> PyErr {
     match &e {

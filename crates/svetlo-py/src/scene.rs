@@ -30,7 +30,7 @@ fn mat(m: &Mat4) -> Vec<Vec<f32>> {
 }
 
 /// `-D name=value` pairs from a dict of parameters (values already strings).
-fn defines(params: Option<Vec<(String, String)>>) -> PyResult<Vec<(String, String)>> {
+pub(crate) fn defines(params: Option<Vec<(String, String)>>) -> PyResult<Vec<(String, String)>> {
     let params = params.unwrap_or_default();
     for (k, _) in &params {
         if k.is_empty() || !k.chars().all(|c| c.is_ascii_alphanumeric() || c == '_') {
@@ -60,6 +60,10 @@ pub fn load_string(py: Python<'_>, text: &str, origin: PathBuf, params: Option<V
 }
 
 impl PyScene {
+    pub(crate) fn new(scene: Scene, origin: &std::path::Path) -> Self {
+        PyScene { scene: Arc::new(scene), origin: origin.display().to_string() }
+    }
+
     fn camera_dict<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyDict>> {
         let c = &self.scene.camera;
         let d = PyDict::new(py);

@@ -226,3 +226,27 @@ def test_errors_name_the_key():
         svetlo.load_dict(lit({"ball": ball({"type": "ref", "id": "nowhere"})}))
     with pytest.raises(svetlo.SceneError, match="finite"):
         svetlo.load_dict(lit({"ball": ball({"type": "diffuse", "reflectance": rgb(float("nan"), 0, 0)})}))
+
+
+def test_the_tree_is_its_printed_xml():
+    # load_dict hands its element tree to the loader; the XML it prints (to_xml) is the same
+    # tree as text: both load to bit-identical renders, and an error's line in that text is
+    # the line whose key load_dict names.
+    from svetlo import _dict
+
+    d = lit({"ball": ball({"type": "roughconductor", "alpha": 0.2}), "floor": {"type": "rectangle", "to_world": svetlo.ScalarTransform4f().rotate([1, 0, 0], -90).scale(3),
+             "bsdf": {"type": "twosided", "bsdf": {"type": "diffuse", "reflectance": {"type": "checkerboard", "color0": rgb(0.2), "color1": rgb(0.8)}}}}})
+    text, keys = _dict.to_xml(d)
+    assert len(keys) == text.count("\n")
+    a = svetlo.render(svetlo.load_dict(d), integrator="path", spp=4, seed=2, progress=False)
+    b = svetlo.render(svetlo.load_string(text), integrator="path", spp=4, seed=2, progress=False)
+    assert a.tobytes() == b.tobytes()
+    # The bad entry comes after elements that take several lines (a transform, nested bsdfs).
+    bad = lit({"floor": d["floor"], "ball": ball({"type": "roughconductor", "alpha": "very"})})
+    text, keys = _dict.to_xml(bad)
+    with pytest.raises(svetlo.SceneError) as from_text:
+        svetlo.load_string(text)
+    with pytest.raises(svetlo.SceneError) as from_dict:
+        svetlo.load_dict(bad)
+    assert from_text.value.line is not None and from_dict.value.line is None
+    assert keys[from_text.value.line - 1] == from_dict.value.key == "scene['ball']['bsdf']['alpha']"

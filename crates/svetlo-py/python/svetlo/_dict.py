@@ -1,11 +1,11 @@
-"""Mitsuba 3's dictionary scene format, translated into the Mitsuba XML that svetlo's loader reads.
+"""Mitsuba 3's dictionary scene format, read by svetlo's one Mitsuba loader.
 
-Why XML: the XML loader is svetlo's one scene reader, with every plugin, default, unit and
-check already in it and tested against Mitsuba; a second path from dicts into the scene
-builder would duplicate all of it and drift. The translation (``dict_to_xml`` in the
-extension, crates/svetlo-py/src/dict.rs) is mechanical, one element per line, so that an error
-the loader reports at a line is mapped back here to the dictionary key that produced it
-(``SceneError.key``, e.g. ``scene['box']['bsdf']``). Attribute values are escaped.
+Why that loader: it is svetlo's one scene reader, with every plugin, default, unit and check
+already in it and tested against Mitsuba; a second path from dicts into the scene builder
+would duplicate all of it and drift. The extension (crates/svetlo-py/src/dict.rs) turns the
+dict into the element tree the XML would parse to, numbering its elements by the lines of
+that XML (``to_xml`` prints it), so that an error the loader reports at a line is told as the
+dictionary key that produced it (``SceneError.key``, e.g. ``scene['box']['bsdf']``).
 """
 
 from __future__ import annotations
@@ -18,7 +18,6 @@ from typing import Any, List, Sequence, Tuple
 import numpy as np
 
 from . import _svetlo
-from ._svetlo import SceneError
 
 class ScalarTransform4f:
     """A 4x4 affine transform with Mitsuba's builder methods, for dicts written without Mitsuba.
@@ -102,21 +101,9 @@ def load_dict(scene: Mapping[str, Any], origin: "os.PathLike[str] | str | None" 
     Raises :class:`SceneError` whose ``key`` is the dictionary path of the offending entry,
     e.g. ``scene['box']['bsdf']``.
     """
-    from . import _params
-
-    text, keys = to_xml(scene)
     where = os.fspath(origin) if origin is not None else os.path.join(os.getcwd(), "<dict>")
-    try:
-        return _svetlo.load_string(text, where, _params(params))
-    except SceneError as e:
-        line = getattr(e, "line", None)
-        if isinstance(line, int) and 1 <= line <= len(keys):
-            key = keys[line - 1]
-            msg = str(e)
-            # The loader's "FILE:LINE:COL: message", told as the dictionary entry instead.
-            prefix = f"{where}:{line}:{getattr(e, 'column', '')}: "
-            msg = msg[len(prefix):] if msg.startswith(prefix) else msg
-            err = SceneError(f"load_dict: {key}: {msg}")
-            err.file, err.line, err.column, err.key = None, None, None, key
-            raise err from None
-        raise
+    if params:
+        from . import _params
+
+        return _svetlo.load_dict(scene, where, _params(params))
+    return _svetlo.load_dict(scene, where)

@@ -1,7 +1,7 @@
 """Types of the extension module (the Rust layer); the public API is re-exported by `svetlo`."""
 
 import os
-from typing import Any, Callable, Dict, List, Optional, Sequence, Tuple, Union
+from typing import Any, Callable, Dict, List, Mapping, Optional, Sequence, Tuple, Union
 
 import numpy as np
 import numpy.typing as npt
@@ -91,6 +91,8 @@ class RadiositySolution:
 
 def load_file(path: _Path, params: Optional[Sequence[Tuple[str, str]]] = None) -> Scene: ...
 def load_string(text: str, origin: _Path, params: Optional[Sequence[Tuple[str, str]]] = None) -> Scene: ...
+def load_dict(scene: Mapping[str, Any], origin: _Path, params: Optional[Sequence[Tuple[str, str]]] = None) -> Scene: ...
+def dict_to_xml(scene: Mapping[str, Any]) -> Tuple[str, List[str]]: ...
 def render(
     scene: Scene,
     integrator: Optional[str] = None,

@@ -23,6 +23,7 @@ mod xml;
 pub use props::{look_at, parse_transform};
 pub use sensor::fov_x_from_axis;
 pub use support::{unsupported_plugins, Consequence, Unsupported};
+pub use xml::{Loc, Node};
 
 use crate::error::{Error, Result};
 use crate::scene::{Scene, SceneBuilder};
@@ -30,7 +31,6 @@ use crate::texture::Bitmap;
 use std::collections::HashMap;
 use std::path::{Path, PathBuf};
 use std::sync::Arc;
-use xml::Node;
 
 /// Load a Mitsuba XML scene; `defaults` fill `<default>` parameters (`-D name=value`) and
 /// take precedence over the file's own defaults.
@@ -43,6 +43,13 @@ pub fn load_scene(path: &Path, defaults: &[(String, String)]) -> Result<Scene> {
 /// (includes, meshes, textures) are resolved against its folder.
 pub fn load_scene_from_str(text: &str, origin: &Path, defaults: &[(String, String)]) -> Result<Scene> {
     load_parsed(xml::parse_str(text, origin, defaults)?, origin)
+}
+
+/// Load a scene given as its element tree, as a file would parse (for front ends that build
+/// scenes without text: Python's `load_dict`); `<default>`, `$name` and includes apply as in
+/// a file. `origin` stands for the file: relative names resolve against its folder.
+pub fn load_scene_from_tree(root: Node, origin: &Path, defaults: &[(String, String)]) -> Result<Scene> {
+    load_parsed(xml::expand_tree(root, origin, defaults)?, origin)
 }
 
 fn load_parsed(parsed: xml::Parsed, path: &Path) -> Result<Scene> {

@@ -8,12 +8,12 @@ use crate::limits::{MAX_ELEMENT_DEPTH, MAX_INCLUDES, MAX_SCENE_TEXT};
 use std::cell::Cell;
 use std::collections::HashMap;
 use std::path::{Path, PathBuf};
-use std::rc::Rc;
+use std::sync::Arc;
 
 /// Where an element was written.
 #[derive(Clone, Debug)]
 pub struct Loc {
-    pub file: Rc<PathBuf>,
+    pub file: Arc<PathBuf>,
     pub line: u32,
     pub col: u32,
 }
@@ -75,6 +75,22 @@ struct Ctx {
 }
 
 impl Ctx {
+    fn new(origin: &Path, defaults: &[(String, String)]) -> Self {
+        Ctx {
+            params: defaults.iter().cloned().collect(),
+            used: Default::default(),
+            search_paths: vec![origin.parent().map(Path::to_path_buf).unwrap_or_default()],
+            stack: Vec::new(),
+            includes: 0,
+            text_bytes: 0,
+        }
+    }
+
+    fn into_parsed(self, root: Node, defaults: &[(String, String)]) -> Parsed {
+        let unused_params = defaults.iter().map(|(k, _)| k.clone()).filter(|k| !self.used.contains(k)).collect();
+        Parsed { root, search_paths: self.search_paths, unused_params }
+    }
+
     fn charge(&mut self, path: &Path, bytes: usize) -> Result<()> {
         self.text_bytes += bytes as u64;
         if self.text_bytes > MAX_SCENE_TEXT {
@@ -101,18 +117,10 @@ pub fn parse_str(text: &str, origin: &Path, defaults: &[(String, String)]) -> Re
 }
 
 fn parse_text(text: &str, path: &Path, canon: Option<PathBuf>, defaults: &[(String, String)]) -> Result<Parsed> {
-    let mut ctx = Ctx {
-        params: defaults.iter().cloned().collect(),
-        used: Default::default(),
-        search_paths: vec![path.parent().map(Path::to_path_buf).unwrap_or_default()],
-        stack: Vec::new(),
-        includes: 0,
-        text_bytes: 0,
-    };
+    let mut ctx = Ctx::new(path, defaults);
     ctx.charge(path, text.len())?;
     let root = parse_document(text, path, canon, &mut ctx)?;
-    let unused_params = defaults.iter().map(|(k, _)| k.clone()).filter(|k| !ctx.used.contains(k)).collect();
-    Ok(Parsed { root, search_paths: ctx.search_paths, unused_params })
+    Ok(ctx.into_parsed(root, defaults))
 }
 
 fn parse_file(path: &Path, ctx: &mut Ctx) -> Result<Node> {
@@ -134,23 +142,49 @@ fn parse_document(text: &str, path: &Path, canon: Option<PathBuf>, ctx: &mut Ctx
         let p = e.pos();
         Error::SceneAt { file: path.to_path_buf(), line: p.row, col: p.col, msg: format!("malformed XML: {e}") }
     })?;
-    let d = Doc { lines: LineIndex::new(text), file: Rc::new(path.to_path_buf()) };
+    let d = Doc { lines: LineIndex::new(text), file: Arc::new(path.to_path_buf()) };
     let root = doc.root_element();
     let loc = d.loc(root);
     if root.tag_name().name() != "scene" {
         return Err(loc.err(format!("not a Mitsuba scene: the root element is <{}>, not <scene>", root.tag_name().name())));
     }
+    let attrs = root.attributes().map(|a| (a.name().to_string(), a.value().to_string())).collect();
+    let raw = Node { tag: "scene".into(), attrs, children: read_children(&d, root, 1)?, loc };
+    expand_document(raw, canon, ctx)
+}
+
+/// A scene's root element, built by other means than parsing text (Python's `load_dict`),
+/// expanded as a parsed file is: `<default>`, `$name`, `<path>`, `<include>` and the 0.6
+/// dialect's names. `origin` stands for the file: relative names resolve against its folder.
+pub fn expand_tree(root: Node, origin: &Path, defaults: &[(String, String)]) -> Result<Parsed> {
+    if root.tag != "scene" {
+        return Err(root.loc.err(format!("not a Mitsuba scene: the root element is <{}>, not <scene>", root.tag)));
+    }
+    fn check_depth(n: &Node, depth: usize) -> Result<()> {
+        if depth >= MAX_ELEMENT_DEPTH {
+            return Err(n.loc.err(format!("elements nest more than {MAX_ELEMENT_DEPTH} deep")));
+        }
+        n.children.iter().try_for_each(|c| check_depth(c, depth + 1))
+    }
+    root.children.iter().try_for_each(|c| check_depth(c, 1))?;
+    let mut ctx = Ctx::new(origin, defaults);
+    let root = expand_document(root, None, &mut ctx)?;
+    Ok(ctx.into_parsed(root, defaults))
+}
+
+/// A document's raw tree with its includes, defaults and parameters applied.
+fn expand_document(mut root: Node, canon: Option<PathBuf>, ctx: &mut Ctx) -> Result<Node> {
     if ctx.stack.len() >= MAX_ELEMENT_DEPTH {
-        return Err(loc.err(format!("includes nest more than {MAX_ELEMENT_DEPTH} deep")));
+        return Err(root.loc.err(format!("includes nest more than {MAX_ELEMENT_DEPTH} deep")));
     }
     let pushed = canon.is_some();
     ctx.stack.extend(canon);
-    let children = expand_children(&d, root, 1, ctx);
+    let children = expand(std::mem::take(&mut root.children), ctx);
     if pushed {
         ctx.stack.pop();
     }
-    let attrs = root.attributes().map(|a| (a.name().to_string(), a.value().to_string())).collect();
-    Ok(Node { tag: "scene".into(), attrs, children: children?, loc })
+    root.children = children?;
+    Ok(root)
 }
 
 /// Line and column (1-based, in characters) of byte offsets, asked in increasing order as the
@@ -191,7 +225,7 @@ impl<'t> LineIndex<'t> {
 /// One parsed document: where its elements are, and the file they came from.
 struct Doc<'t> {
     lines: LineIndex<'t>,
-    file: Rc<PathBuf>,
+    file: Arc<PathBuf>,
 }
 
 impl Doc<'_> {
@@ -201,7 +235,9 @@ impl Doc<'_> {
     }
 }
 
-fn expand_children(d: &Doc, parent: roxmltree::Node, depth: usize, ctx: &mut Ctx) -> Result<Vec<Node>> {
+/// The elements under `parent` as written (tags of the 0.6 dialect normalised), each with
+/// where it was written.
+fn read_children(d: &Doc, parent: roxmltree::Node, depth: usize) -> Result<Vec<Node>> {
     let mut out = Vec::new();
     for n in parent.children().filter(|n| n.is_element()) {
         let loc = d.loc(n);
@@ -209,17 +245,25 @@ fn expand_children(d: &Doc, parent: roxmltree::Node, depth: usize, ctx: &mut Ctx
         if depth >= MAX_ELEMENT_DEPTH {
             return Err(loc.err(format!("elements nest more than {MAX_ELEMENT_DEPTH} deep")));
         }
-        let tag = normalise_tag(n.tag_name().name());
-        let mut attrs = Vec::new();
-        for a in n.attributes() {
-            let v = substitute(a.value(), &loc, ctx)?;
-            let k = a.name().to_string();
+        let attrs = n.attributes().map(|a| (a.name().to_string(), a.value().to_string())).collect();
+        let children = read_children(d, n, depth + 1)?;
+        out.push(Node { tag: normalise_tag(n.tag_name().name()), attrs, children, loc });
+    }
+    Ok(out)
+}
+
+/// Apply `$name` parameters and the 0.6 dialect's property names to `nodes` in document
+/// order, take `<default>` and `<path>` into the context and replace `<include>` by the
+/// included file's elements.
+fn expand(nodes: Vec<Node>, ctx: &mut Ctx) -> Result<Vec<Node>> {
+    let mut out = Vec::with_capacity(nodes.len());
+    for mut node in nodes {
+        for (k, v) in &mut node.attrs {
+            let sub = substitute(v, &node.loc, ctx)?;
             // Property names of the 0.6 dialect are camelCase (toWorld, sampleCount, intIOR).
             // (Parameter names of <default> are left alone: `$resX` must still find them.)
-            let v = if k == "name" && tag != "default" { camel_to_snake(&v) } else { v };
-            attrs.push((k, v));
+            *v = if k == "name" && node.tag != "default" { camel_to_snake(&sub) } else { sub };
         }
-        let node = Node { tag, attrs, children: Vec::new(), loc };
         match node.tag.as_str() {
             "default" => {
                 let name = node.req("name")?.to_string();
@@ -243,8 +287,7 @@ fn expand_children(d: &Doc, parent: roxmltree::Node, depth: usize, ctx: &mut Ctx
                 out.extend(inc.children);
             }
             _ => {
-                let mut node = node;
-                node.children = expand_children(d, n, depth + 1, ctx)?;
+                node.children = expand(std::mem::take(&mut node.children), ctx)?;
                 out.push(node);
             }
         }
