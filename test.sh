@@ -18,6 +18,12 @@ fi
 (cd crates/svetlo-cli/tests/browser && npm ci --no-audit --no-fund --silent)
 export SVETLO_BROWSER_TEST=1
 
+# --- Radiance (issue #14): crates/svetlo/tests/radiance.rs compares work-plane illuminance with
+# rtrace -I; the pyradiance wheel bundles ies2rad, oconv and rtrace. With SVETLO_RADIANCE_TEST
+# set, that test fails instead of skipping when Radiance is missing.
+python3 -m pip install --quiet --disable-pip-version-check pyradiance
+export SVETLO_RADIANCE_TEST=1
+
 # --- Rust: every crate of the default workspace.
 cargo test --release
 

@@ -5,6 +5,7 @@ use super::blinn::BlinnPhong;
 use super::conductor::{RoughConductor, SmoothConductor};
 use super::cook_torrance::CookTorrance;
 use super::dielectric::{RoughDielectric, SmoothDielectric, ThinDielectric};
+use super::glass::ThinGlass;
 use super::lobes::glossy_sampling_weight;
 use super::microfacet::Microfacet;
 use super::oren_nayar::OrenNayar;
@@ -42,6 +43,9 @@ pub enum Material {
     Dielectric { eta: f32, specular_reflectance: Texture, specular_transmittance: Texture, roughness: Option<Roughness> },
     /// Mitsuba `thindielectric`.
     ThinDielectric { eta: f32, specular_reflectance: Texture, specular_transmittance: Texture },
+    /// svetlo's `glass`: a thin absorbing pane of clear glazing (`bsdf/glass.rs`), the
+    /// per-channel internal transmissivity along the normal.
+    Glass { eta: f32, transmissivity: Rgb },
     /// Mitsuba `plastic` and `roughplastic`: diffuse base under a dielectric coating.
     Plastic { diffuse_reflectance: Texture, specular_reflectance: Texture, eta: f32, nonlinear: bool, roughness: Option<Roughness> },
     /// Mitsuba 0.6 `phong`: the modified (energy-conserving) Phong of Lafortune and Willems.
@@ -172,6 +176,7 @@ impl Material {
             Material::Conductor { roughness, .. } => rough(roughness.is_some(), "conductor", "roughconductor"),
             Material::Dielectric { roughness, .. } => rough(roughness.is_some(), "dielectric", "roughdielectric"),
             Material::ThinDielectric { .. } => "thindielectric".into(),
+            Material::Glass { .. } => "glass".into(),
             Material::Plastic { roughness, .. } => rough(roughness.is_some(), "plastic", "roughplastic"),
             Material::Phong { .. } => "phong".into(),
             Material::BlinnPhong { .. } => "blinnphong".into(),
@@ -225,7 +230,7 @@ impl Material {
             }
             Material::Mix { amount, a, b } => c(amount) && a.is_uniform() && b.is_uniform(),
             Material::DiffuseTransmission { reflectance, transmittance } => c(reflectance) && c(transmittance),
-            Material::Null => true,
+            Material::Null | Material::Glass { .. } => true,
             Material::NormalMap { .. } | Material::BumpMap { .. } => false,
             Material::Blend { weight, a, b } => c(weight) && a.is_uniform() && b.is_uniform(),
             Material::Principled(p) => p.is_uniform(),
@@ -255,6 +260,7 @@ impl Material {
                 specular_reflectance: specular_reflectance.eval(uv),
                 specular_transmittance: specular_transmittance.eval(uv),
             })),
+            Material::Glass { eta, transmissivity } => Some(BsdfModel::ThinGlass(ThinGlass { eta: *eta, transmissivity: *transmissivity })),
             Material::Plastic { diffuse_reflectance, specular_reflectance, eta, nonlinear, roughness } => {
                 let weight = plastic::specular_sampling_weight(sampling_mean(diffuse_reflectance, uv), sampling_mean(specular_reflectance, uv));
                 let diffuse = diffuse_reflectance.eval(uv).clamp(0.0, 1.0);
@@ -449,7 +455,7 @@ impl Material {
                 out.push(opacity);
                 out.extend(inner.textures_mut());
             }
-            Material::Null => {}
+            Material::Null | Material::Glass { .. } => {}
             Material::NormalMap { normals, inner } => {
                 out.push(normals);
                 out.extend(inner.textures_mut());

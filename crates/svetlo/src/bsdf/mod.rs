@@ -12,6 +12,7 @@ pub mod dielectric;
 pub mod diffuse;
 pub mod diffuse_transmission;
 pub mod fresnel;
+pub mod glass;
 pub mod lobes;
 pub mod material;
 pub mod microfacet;
@@ -116,6 +117,8 @@ pub enum BsdfModel {
     SmoothDielectric(dielectric::SmoothDielectric),
     RoughDielectric(dielectric::RoughDielectric),
     ThinDielectric(dielectric::ThinDielectric),
+    /// svetlo's `glass`: a thin absorbing pane, polarisation by polarisation (Radiance's `glass`).
+    ThinGlass(glass::ThinGlass),
     SmoothPlastic(plastic::SmoothPlastic),
     RoughPlastic(plastic::RoughPlastic),
     Phong(phong::Phong),
@@ -147,6 +150,7 @@ macro_rules! dispatch {
             BsdfModel::SmoothDielectric($m) => $e,
             BsdfModel::RoughDielectric($m) => $e,
             BsdfModel::ThinDielectric($m) => $e,
+            BsdfModel::ThinGlass($m) => $e,
             BsdfModel::SmoothPlastic($m) => $e,
             BsdfModel::RoughPlastic($m) => $e,
             BsdfModel::Phong($m) => $e,
@@ -400,6 +404,16 @@ fn model_delta_probability(m: &BsdfModel, wo: Vec3, lobe: LobeFlags) -> f32 {
         }
         BsdfModel::ThinDielectric(d) => {
             let r = d.reflectance(wo.z);
+            if lobe == LobeFlags::SPECULAR_REFLECTION {
+                r
+            } else if lobe == LobeFlags::SPECULAR_TRANSMISSION {
+                1.0 - r
+            } else {
+                0.0
+            }
+        }
+        BsdfModel::ThinGlass(g) => {
+            let r = g.reflection_probability(wo.z);
             if lobe == LobeFlags::SPECULAR_REFLECTION {
                 r
             } else if lobe == LobeFlags::SPECULAR_TRANSMISSION {

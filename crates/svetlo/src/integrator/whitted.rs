@@ -73,6 +73,11 @@ fn model_branches(model: &BsdfModel, wo: Vec3, out: &mut Vec<(Vec3, Rgb)>) {
             push(m.sample(wo, 0.0, Vec2::ZERO, mode), r);
             push(m.sample(wo, 1.0, Vec2::ZERO, mode), 1.0 - r);
         }
+        BsdfModel::ThinGlass(m) => {
+            let r = m.reflection_probability(wo.z);
+            push(m.sample(wo, 0.0, Vec2::ZERO, mode), r);
+            push(m.sample(wo, 1.0, Vec2::ZERO, mode), 1.0 - r);
+        }
         BsdfModel::SmoothPlastic(m) if wo.z > 0.0 => {
             let f = fresnel::dielectric(wo.z, m.eta).0;
             out.push((fresnel::reflect_z(wo), m.specular_reflectance * f));

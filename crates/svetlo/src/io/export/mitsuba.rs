@@ -159,6 +159,19 @@ impl Writer<'_> {
                 self.color(d + 1, "specular_reflectance", specular_reflectance)?;
                 self.color(d + 1, "specular_transmittance", specular_transmittance)?;
             }
+            Material::Glass { eta, transmissivity } => {
+                // Mitsuba 3 has no absorbing pane: its thindielectric with the normal
+                // transmittance's share of a lossless pane's as the transmittance scale.
+                self.files.warn("svetlo's glass is written as Mitsuba's thindielectric (no polarisation, absorption as a constant transmittance scale)");
+                open(self, "thindielectric");
+                ior(self, *eta);
+                let scale = |t: f32| {
+                    let pane = |tn: f32| crate::bsdf::glass::pane(1.0, *eta as f64, tn as f64).1;
+                    (pane(t) / pane(1.0)) as f32
+                };
+                let s = Rgb::new(scale(transmissivity.r), scale(transmissivity.g), scale(transmissivity.b));
+                self.line(d + 1, &format!(r#"<rgb name="specular_transmittance" value="{}"/>"#, rgb(s)));
+            }
             Material::Plastic { diffuse_reflectance, specular_reflectance, eta, nonlinear, roughness } => {
                 open(self, if roughness.is_some() { "roughplastic" } else { "plastic" });
                 ior(self, *eta);

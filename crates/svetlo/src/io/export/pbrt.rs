@@ -165,6 +165,10 @@ impl Writer<'_> {
                 self.white("specular_transmittance", specular_transmittance);
                 format!(r#""string type" "thindielectric" "float eta" {eta}"#)
             }
+            Material::Glass { eta, .. } => {
+                self.once("glass", "svetlo's glass is written as pbrt-v4's thindielectric (no absorption, no polarisation)");
+                format!(r#""string type" "thindielectric" "float eta" {eta}"#)
+            }
             Material::Plastic { diffuse_reflectance, specular_reflectance, eta, roughness, .. } => {
                 self.once(
                     "plastic",
@@ -386,6 +390,7 @@ pub(super) fn write(scene: &Scene, files: &mut Files) -> Result<String> {
             Material::TwoSided { .. }
                 | Material::Dielectric { .. }
                 | Material::ThinDielectric { .. }
+                | Material::Glass { .. }
                 | Material::DiffuseTransmission { .. }
                 | Material::Null
                 | Material::Mask { .. }

@@ -248,6 +248,36 @@ impl<'a> Loader<'a> {
                 specular_reflectance: self.spectrum(node, "specular_reflectance", white, refl)?,
                 specular_transmittance: self.spectrum(node, "specular_transmittance", white, refl)?,
             },
+            "glass" => {
+                // svetlo's thin pane (Radiance's glass): the normal transmittance τn of a data
+                // sheet, or the internal transmissivity directly; neither: lossless.
+                let eta = self.eta(node, 1.52)?;
+                let has = |w: &Self, n: &str| w.prop(node, n).map(|p| p.is_some());
+                let transmissivity = match (has(self, "transmittance")?, has(self, "transmissivity")?) {
+                    (true, true) => return Err(node.loc.err("glass: give 'transmittance' (normal) or 'transmissivity', not both")),
+                    (true, false) => {
+                        let tau = self.constant_color(node, "transmittance", Rgb::WHITE, SpectrumKind::Reflectance)?;
+                        let conv = |t: f32| {
+                            crate::bsdf::glass::transmissivity_from_normal(t as f64, eta as f64).map(|x| x as f32).ok_or_else(|| {
+                                let r = ((eta - 1.0) / (eta + 1.0)).powi(2);
+                                node.loc.err(format!(
+                                    "glass: normal transmittance {t} is outside 0..{:.4}, what a lossless pane of index {eta} transmits",
+                                    (1.0 - r) / (1.0 + r)
+                                ))
+                            })
+                        };
+                        Rgb::new(conv(tau.r)?, conv(tau.g)?, conv(tau.b)?)
+                    }
+                    (false, _) => {
+                        let t = self.constant_color(node, "transmissivity", Rgb::WHITE, SpectrumKind::Reflectance)?;
+                        if ![t.r, t.g, t.b].iter().all(|x| (0.0..=1.0).contains(x)) {
+                            return Err(node.loc.err(format!("glass: transmissivity must lie in 0..1, got {t:?}")));
+                        }
+                        t
+                    }
+                };
+                Material::Glass { eta, transmissivity }
+            }
             "plastic" | "roughplastic" => {
                 let roughness = if ty == "roughplastic" {
                     let r = self.roughness(node)?;

@@ -18,6 +18,7 @@ const SUPPORTED: &[(&str, &[&str])] = &[
             "dielectric",
             "roughdielectric",
             "thindielectric",
+            "glass",
             "plastic",
             "roughplastic",
             "twosided",
