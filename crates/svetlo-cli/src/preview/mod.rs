@@ -97,7 +97,7 @@ impl Live {
             let s = self.session.lock();
             (s.run, s.config.spp)
         };
-        let progress = Arc::new(Progress::observed(self.session.observer(run, 0, spp)));
+        let progress = Arc::new(Progress::watched(self.session.observer(run, 0, spp)));
         self.session.start_slot(run, 0, progress.clone(), None);
         progress
     }
@@ -189,7 +189,7 @@ pub fn serve(a: &ServeArgs) -> Result<ExitCode> {
             let mut settings = job.settings.clone();
             settings.spp = config.spp;
             settings.max_depth = config.max_depth;
-            let progress = Arc::new(Progress::observed(session.observer(run, i, settings.spp)));
+            let progress = Arc::new(Progress::watched(session.observer(run, i, settings.spp)));
             session.start_slot(run, i, progress.clone(), settings.time_limit);
             let result = svetlo::methods::by_name(m).and_then(|integ| integ.render(&job.scene, &settings, &progress));
             match result {

@@ -6,7 +6,7 @@
 use std::sync::{Arc, Condvar, Mutex, MutexGuard};
 use std::time::{Duration, Instant};
 use svetlo::film::{compare::rel_mse, Film, Image};
-use svetlo::integrator::Progress;
+use svetlo::integrator::{PassObserver, Progress};
 
 /// The image layers every film has; a page can also choose the film's AOV layers, which follow
 /// these in [`Info::layers`] and [`Frame::layers`].
@@ -257,25 +257,9 @@ impl Session {
         });
     }
 
-    /// The pass observer of method `slot` of `run`: develops the film (on the render thread:
-    /// two passes over the pixels), measures its error and publishes it. Passes that come
-    /// sooner after the last development than [`WATCH_BUDGET`] allows are skipped (only on
-    /// large films: at 512² a development takes milliseconds), except the one that completes
-    /// `planned_spp`.
-    pub fn observer(self: &Arc<Self>, run: u64, slot: usize, planned_spp: u32) -> impl Fn(&Film) + Send + Sync + 'static {
-        let session = self.clone();
-        let last: Mutex<Option<(Instant, Duration)>> = Mutex::new(None);
-        move |film: &Film| {
-            let start = Instant::now();
-            let previous = *last.lock().unwrap_or_else(|e| e.into_inner());
-            if let Some((at, cost)) = previous {
-                if film.spp_done != planned_spp && start.duration_since(at).as_secs_f64() * WATCH_BUDGET < cost.as_secs_f64() {
-                    return;
-                }
-            }
-            session.publish(run, slot, Frame::develop(film));
-            *last.lock().unwrap_or_else(|e| e.into_inner()) = Some((start, start.elapsed()));
-        }
+    /// The pass observer of method `slot` of `run` (see [`Watcher`]).
+    pub fn observer(self: &Arc<Self>, run: u64, slot: usize, planned_spp: u32) -> Watcher {
+        Watcher { session: self.clone(), run, slot, planned_spp, last: Mutex::new(None) }
     }
 
     /// A new frame for method `slot` of `run`, with its point on the error curve.
@@ -501,6 +485,35 @@ pub fn f16_bits(x: f32) -> u16 {
     }
     // A carry out of the mantissa steps the exponent, up to infinity: still the right bits.
     sign | round(((e as u32) << 10) | (man >> 13), man & 0x1fff, 0x1000) as u16
+}
+
+/// Watches one method's render: develops the film (on the render thread: two passes over
+/// the pixels), measures its error and publishes it. Passes that come sooner after the last
+/// development than [`WATCH_BUDGET`] allows are declined before the render assembles their
+/// film (only on large films: at 512² a development takes milliseconds), except the one that
+/// completes the planned spp.
+pub struct Watcher {
+    session: Arc<Session>,
+    run: u64,
+    slot: usize,
+    planned_spp: u32,
+    /// When the last development started and what it cost.
+    last: Mutex<Option<(Instant, Duration)>>,
+}
+
+impl PassObserver for Watcher {
+    fn wants(&self, spp_done: u32) -> bool {
+        let previous = *self.last.lock().unwrap_or_else(|e| e.into_inner());
+        match previous {
+            Some((at, cost)) => spp_done == self.planned_spp || at.elapsed().as_secs_f64() * WATCH_BUDGET >= cost.as_secs_f64(),
+            None => true,
+        }
+    }
+    fn show(&self, film: &Film) {
+        let start = Instant::now();
+        self.session.publish(self.run, self.slot, Frame::develop(film));
+        *self.last.lock().unwrap_or_else(|e| e.into_inner()) = Some((start, start.elapsed()));
+    }
 }
 
 #[cfg(test)]

@@ -124,10 +124,28 @@ impl RenderSettings {
     }
 }
 
-/// Called with the film as it stands after each complete pass (camera methods), round of
-/// mutations (Metropolis) or iteration (SPPM), on the render's own thread: it should copy what
-/// it needs and return quickly (the preview develops the image and hands it to its server).
-pub type PassObserver = dyn Fn(&Film) + Send + Sync;
+/// Who watches a render form: shown the film as it stands after each complete pass (camera
+/// methods), round of mutations (Metropolis) or iteration (SPPM), on the render's own thread.
+pub trait PassObserver: Send + Sync {
+    /// Whether it wants the film of the pass that brings the render to `spp_done` samples per
+    /// pixel. Assembling that film costs work (the passes summed so far), so a watcher that
+    /// would skip it says so here, before the render builds it.
+    fn wants(&self, _spp_done: u32) -> bool {
+        true
+    }
+    /// The film: copy what is needed and return quickly (the preview develops the image and
+    /// hands it to its server).
+    fn show(&self, film: &Film);
+}
+
+/// A closure that wants every pass.
+struct EveryPass<F>(F);
+
+impl<F: Fn(&Film) + Send + Sync> PassObserver for EveryPass<F> {
+    fn show(&self, film: &Film) {
+        (self.0)(film)
+    }
+}
 
 /// Progress of a render, shared with whoever shows it; setting `cancel` stops the render
 /// after the current pass, keeping the samples done.
@@ -138,7 +156,7 @@ pub struct Progress {
     pub total: AtomicU64,
     pub cancel: AtomicBool,
     /// Who watches the film form; `None` costs one branch per pass.
-    observer: Option<Box<PassObserver>>,
+    observer: Option<Box<dyn PassObserver>>,
 }
 
 impl std::fmt::Debug for Progress {
@@ -158,16 +176,25 @@ impl Progress {
     }
     /// Progress whose film is shown to `observer` after every pass.
     pub fn observed(observer: impl Fn(&Film) + Send + Sync + 'static) -> Self {
+        Self::watched(EveryPass(observer))
+    }
+    /// Progress watched by `observer`, which chooses the passes it is shown.
+    pub fn watched(observer: impl PassObserver + 'static) -> Self {
         Progress { observer: Some(Box::new(observer)), ..Self::default() }
     }
-    /// Whether anyone watches (methods whose intermediate film costs work to develop ask).
+    /// Whether anyone watches at all.
     pub fn is_observed(&self) -> bool {
         self.observer.is_some()
+    }
+    /// Whether the film of the pass reaching `spp_done` samples per pixel should be built and
+    /// shown ([`Self::pass_done`]); false when nobody watches.
+    pub fn wants_pass(&self, spp_done: u32) -> bool {
+        self.observer.as_ref().is_some_and(|o| o.wants(spp_done))
     }
     /// A pass is complete: show the film to the observer, if any.
     pub fn pass_done(&self, film: &Film) {
         if let Some(o) = &self.observer {
-            o(film);
+            o.show(film);
         }
     }
     pub fn cancelled(&self) -> bool {

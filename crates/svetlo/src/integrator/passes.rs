@@ -135,12 +135,20 @@ impl<T> TreeSum<T> {
         Some(acc)
     }
 
-    /// The sum so far, without consuming (for observers of a render in progress).
-    pub fn peek(&self, add: impl Fn(&mut T, T)) -> Option<T>
+    /// The sum so far, without consuming (for observers of a render in progress): a copy of
+    /// the newest subtree's sum with the older ones added into it by reference, so only one
+    /// sum is copied. `add(acc, older)` must be commutative per element (float additions are),
+    /// so the result has the bits [`Self::finish`] would give.
+    pub fn peek(&self, add: impl Fn(&mut T, &T)) -> Option<T>
     where
         T: Clone,
     {
-        TreeSum { stack: self.stack.clone() }.finish(add)
+        let ((_, newest), older) = self.stack.split_last()?;
+        let mut acc = newest.clone();
+        for (_, left) in older.iter().rev() {
+            add(&mut acc, left);
+        }
+        Some(acc)
     }
 }
 
@@ -202,6 +210,31 @@ mod tests {
                 t.push(i.to_string(), bracket);
             }
             assert_eq!(t.finish(bracket).unwrap(), recursive(0, n), "{n} passes");
+        }
+    }
+
+    /// A peek in the middle of a render has the bits the render would finish with there,
+    /// though it adds the subtrees in the other order (float addition commutes).
+    #[test]
+    fn a_peek_has_the_bits_of_finishing_there() {
+        let add = |a: &mut Vec<f32>, b: &Vec<f32>| a.iter_mut().zip(b).for_each(|(x, y)| *x += *y);
+        let mut rng = crate::sampling::rng::Pcg32::new(7, 1);
+        let passes: Vec<Vec<f32>> = (0..37).map(|_| (0..16).map(|_| rng.next_f32() * 1e3 - 1.0).collect()).collect();
+        let mut t = TreeSum::default();
+        for (i, p) in passes.iter().enumerate() {
+            t.push(p.clone(), |a, b| add(a, &b));
+            let mut whole = TreeSum::default();
+            for q in &passes[..=i] {
+                whole.push(q.clone(), |a, b| add(a, &b));
+            }
+            let finished = whole.finish(|a, b| add(a, &b)).unwrap();
+            let peeked = t.peek(add).unwrap();
+            assert_eq!(
+                peeked.iter().map(|x| x.to_bits()).collect::<Vec<_>>(),
+                finished.iter().map(|x| x.to_bits()).collect::<Vec<_>>(),
+                "after {} passes",
+                i + 1
+            );
         }
     }
 

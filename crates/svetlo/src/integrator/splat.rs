@@ -182,7 +182,7 @@ pub(super) fn render_chunked<E: SplatEstimator>(
     };
     // A pass's film and extra channels; passes add up by the pass tree.
     type PassSum = (Film, Vec<Vec<Rgb>>);
-    let add = |a: &mut PassSum, b: PassSum| {
+    let add = |a: &mut PassSum, b: &PassSum| {
         a.0.add(&b.0);
         for (d, s) in a.1.iter_mut().zip(&b.1) {
             for (x, y) in d.iter_mut().zip(s) {
@@ -273,9 +273,9 @@ pub(super) fn render_chunked<E: SplatEstimator>(
         }
         spp_done += n;
         film.spp_done = n;
-        sum.push((film, extra), add);
+        sum.push((film, extra), |a, b| add(a, &b));
         pass += 1;
-        if progress.is_observed() {
+        if progress.wants_pass(spp_done) {
             // The splats' scale so far, so that an observer sees a developed image.
             if let Some((mut f, _)) = sum.peek(add) {
                 f.splat_scale = spp_done as f32;
@@ -285,7 +285,7 @@ pub(super) fn render_chunked<E: SplatEstimator>(
         pass_spp = next_pass_spp(pass_spp, w as u64 * h as u64, settings.time_limit.map(|t| (t.as_secs_f64(), start.elapsed().as_secs_f64(), spp_done)));
     }
     let (mut film, mut extra) = sum
-        .finish(add)
+        .finish(|a, b| add(a, &b))
         .unwrap_or_else(|| (Film::with_layers(w, h, settings.filter, settings.aovs().names()), vec![vec![Rgb::BLACK; (w * h) as usize]; channels]));
     film.spp_done = spp_done;
     // Each pixel sample traced one light path: N = W H spp paths, and the camera's
@@ -379,6 +379,34 @@ mod tests {
         let (spp, last) = seen.last().unwrap();
         assert_eq!(*spp, 6);
         assert_eq!(*last, plain.film.image().data, "the last pass shown is the result, splats scaled");
+    }
+
+    /// A watcher that declines passes is asked about each one and shown only those it wants.
+    #[test]
+    fn declined_passes_are_not_shown() {
+        use crate::integrator::PassObserver;
+        use std::sync::Mutex;
+        struct OnlyTheEnd {
+            asked: Mutex<Vec<u32>>,
+            shown: Mutex<Vec<u32>>,
+        }
+        impl PassObserver for std::sync::Arc<OnlyTheEnd> {
+            fn wants(&self, spp_done: u32) -> bool {
+                self.asked.lock().unwrap().push(spp_done);
+                spp_done == 6
+            }
+            fn show(&self, film: &Film) {
+                self.shown.lock().unwrap().push(film.spp_done);
+            }
+        }
+        let scene = lit_ball(16, 12);
+        let settings = RenderSettings { spp: 6, max_depth: 3, ..Default::default() };
+        let est = crate::integrator::bdpt::test_estimator(&scene, &settings);
+        let w = std::sync::Arc::new(OnlyTheEnd { asked: Mutex::default(), shown: Mutex::default() });
+        let progress = Progress::watched(w.clone());
+        render_chunked(&scene, &settings, &progress, &est, 0, u64::MAX).unwrap();
+        assert_eq!(*w.asked.lock().unwrap(), [1, 3, 6], "asked once per pass (1, 2, 3 spp)");
+        assert_eq!(*w.shown.lock().unwrap(), [6]);
     }
 
     /// Counts the pixel samples it is asked for, per pixel.

@@ -460,9 +460,10 @@ pub fn run<T: MetropolisTarget>(
             done += st.mutations;
         }
         progress.done.store(done, Ordering::Relaxed);
-        if progress.is_observed() && done > 0 {
+        let spp_so_far = ((done as f64 / npix as f64).round() as u32).max(1);
+        if done > 0 && progress.wants_pass(spp_so_far) {
             film.splat_scale = (done as f64 / npix as f64) as f32;
-            film.spp_done = ((done as f64 / npix as f64).round() as u32).max(1);
+            film.spp_done = spp_so_far;
             progress.pass_done(&film);
         }
         if let Some(t) = settings.time_limit {

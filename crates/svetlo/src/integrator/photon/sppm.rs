@@ -222,7 +222,7 @@ impl Integrator for Sppm {
             iterations += 1;
             per_iteration_s = start.elapsed().as_secs_f64() / iterations as f64;
             progress.done.fetch_add((w * h) as u64, Ordering::Relaxed);
-            if progress.is_observed() {
+            if progress.wants_pass(iterations) {
                 progress.pass_done(&develop(scene, &direct, &stats, slots, per_iter, iterations));
             }
         }
