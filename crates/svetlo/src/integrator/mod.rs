@@ -64,7 +64,7 @@ impl Default for RenderSettings {
             rr_depth: 5,
             seed: 0,
             threads: 0,
-            sampler: SamplerKind::Independent,
+            sampler: SamplerKind::default(),
             filter: Filter::default(),
             hide_emitters: false,
             lpe: None,

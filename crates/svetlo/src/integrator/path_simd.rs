@@ -9,7 +9,7 @@
 //!
 //! Scope: static scenes of triangle meshes, (two-sided) Lambertian
 //! materials of constant reflectance, area lights of constant radiance on meshes, no
-//! environment light, the independent sampler. `SimdPathTracer` checks that
+//! environment light; either sampler. `SimdPathTracer` checks that
 //! (`SimdKernel::new`) and otherwise, or without AVX2, runs the scalar tracer.
 //!
 //! Each lane draws its random numbers from its own copy of the scalar tracer's sampler, in
@@ -28,8 +28,7 @@ use crate::geometry::Ray;
 use crate::geometry::{Geometry, TriangleShading};
 use crate::light::{AreaLight, Light};
 use crate::math::{warp, Frame, INV_PI, PI};
-use crate::sampling::sampler::IndependentSampler;
-use crate::sampling::{power_heuristic, Distribution1D, Sampler, SamplerKind};
+use crate::sampling::{power_heuristic, Distribution1D, IndependentSampler, Sampler, SamplerKind, SobolSampler};
 use crate::scene::Scene;
 use crate::spectrum::Rgb;
 use crate::texture::Texture;
@@ -201,8 +200,8 @@ fn area_of(scene: &Scene, li: u32) -> Option<&AreaLight> {
 
 impl SimdKernel {
     /// The kernel's data, or None when the scene or the settings are out of its scope.
-    pub fn new(scene: &Scene, settings: &RenderSettings) -> Option<SimdKernel> {
-        if settings.sampler != SamplerKind::Independent || !scene.moving.is_empty() || !scene.static_shapes.is_empty() || !scene.environment_lights.is_empty() {
+    pub fn new(scene: &Scene, _settings: &RenderSettings) -> Option<SimdKernel> {
+        if !scene.moving.is_empty() || !scene.static_shapes.is_empty() || !scene.environment_lights.is_empty() {
             return None;
         }
         let mut lights = Vec::with_capacity(scene.lights.len());
@@ -276,21 +275,38 @@ impl SimdKernel {
     }
 
     pub fn render(&self, scene: &Scene, settings: &RenderSettings, progress: &Progress) -> Result<Film> {
-        render_tiles(scene, settings, progress, &|tile: &mut FilmTile, rect: [u32; 4], s0: u32, n: u32| {
-            #[cfg(target_arch = "x86_64")]
-            if crate::accel::packet::avx2() {
-                // SAFETY: `avx2()` detects AVX2 at run time, and
-                // `avx512` only where AVX-512F and VL were.
-                return unsafe {
-                    if self.avx512 {
-                        self.render_tile_avx512(scene, settings, tile, rect, s0, n)
-                    } else {
-                        self.render_tile_avx2(scene, settings, tile, rect, s0, n)
-                    }
-                };
-            }
-            self.render_tile(scene, settings, tile, rect, s0, n)
+        render_tiles(scene, settings, progress, &|tile: &mut FilmTile, rect: [u32; 4], s0: u32, n: u32| match settings.sampler {
+            // One build of the kernel per sampler: each lane's draws inline.
+            SamplerKind::Independent => self.render_tile_on_cpu(scene, settings, tile, rect, s0, n, IndependentSampler::new(settings.spp, settings.seed)),
+            SamplerKind::Sobol => self.render_tile_on_cpu(scene, settings, tile, rect, s0, n, SobolSampler::new(settings.spp, settings.seed)),
         })
+    }
+
+    /// `render_tile` in the build for this CPU.
+    #[allow(clippy::too_many_arguments)]
+    fn render_tile_on_cpu<S: Sampler + Clone>(
+        &self,
+        scene: &Scene,
+        settings: &RenderSettings,
+        tile: &mut FilmTile,
+        rect: [u32; 4],
+        s0: u32,
+        n: u32,
+        sampler: S,
+    ) {
+        #[cfg(target_arch = "x86_64")]
+        if crate::accel::packet::avx2() {
+            // SAFETY: `avx2()` detects AVX2 at run time, and
+            // `avx512` only where AVX-512F and VL were.
+            return unsafe {
+                if self.avx512 {
+                    self.render_tile_avx512(scene, settings, tile, rect, s0, n, sampler)
+                } else {
+                    self.render_tile_avx2(scene, settings, tile, rect, s0, n, sampler)
+                }
+            };
+        }
+        self.render_tile(scene, settings, tile, rect, s0, n, sampler)
     }
 
     /// `render_tile` compiled for AVX2 (the lanes' scalar shading too: VEX code, no FMA
@@ -300,8 +316,18 @@ impl SimdKernel {
     /// The CPU must support AVX2.
     #[cfg(target_arch = "x86_64")]
     #[target_feature(enable = "avx2")]
-    unsafe fn render_tile_avx2(&self, scene: &Scene, settings: &RenderSettings, tile: &mut FilmTile, rect: [u32; 4], s0: u32, n: u32) {
-        self.render_tile(scene, settings, tile, rect, s0, n)
+    #[allow(clippy::too_many_arguments)]
+    unsafe fn render_tile_avx2<S: Sampler + Clone>(
+        &self,
+        scene: &Scene,
+        settings: &RenderSettings,
+        tile: &mut FilmTile,
+        rect: [u32; 4],
+        s0: u32,
+        n: u32,
+        sampler: S,
+    ) {
+        self.render_tile(scene, settings, tile, rect, s0, n, sampler)
     }
 
     /// `render_tile` compiled for AVX-512VL: the same 256-bit code with 32 vector registers
@@ -311,15 +337,26 @@ impl SimdKernel {
     /// The CPU must support AVX2, AVX-512F and AVX-512VL.
     #[cfg(target_arch = "x86_64")]
     #[target_feature(enable = "avx2,avx512f,avx512vl")]
-    unsafe fn render_tile_avx512(&self, scene: &Scene, settings: &RenderSettings, tile: &mut FilmTile, rect: [u32; 4], s0: u32, n: u32) {
-        self.render_tile(scene, settings, tile, rect, s0, n)
+    #[allow(clippy::too_many_arguments)]
+    unsafe fn render_tile_avx512<S: Sampler + Clone>(
+        &self,
+        scene: &Scene,
+        settings: &RenderSettings,
+        tile: &mut FilmTile,
+        rect: [u32; 4],
+        s0: u32,
+        n: u32,
+        sampler: S,
+    ) {
+        self.render_tile(scene, settings, tile, rect, s0, n, sampler)
     }
 
     /// Samples `s0..s0 + n` of every pixel of `rect` (the tile's own pixels; the film tile
     /// extends past them by the filter radius), eight paths in lockstep; a lane whose path
-    /// ends takes the next camera sample.
+    /// ends takes the next camera sample; each lane draws from its own copy of `sampler`.
     #[inline(always)]
-    fn render_tile(&self, scene: &Scene, settings: &RenderSettings, tile: &mut FilmTile, rect: [u32; 4], s0: u32, n: u32) {
+    #[allow(clippy::too_many_arguments)]
+    fn render_tile<S: Sampler + Clone>(&self, scene: &Scene, settings: &RenderSettings, tile: &mut FilmTile, rect: [u32; 4], s0: u32, n: u32, sampler: S) {
         let [x0, y0, x1, y1] = rect;
         let w = x1 - x0;
         let jobs = (w * (y1 - y0) * n) as usize;
@@ -330,7 +367,7 @@ impl SimdKernel {
         };
         let mut results: Vec<(Vec2, Rgb)> = vec![(Vec2::ZERO, Rgb::BLACK); jobs];
         let cam = scene.camera.ray_generator();
-        let mut st = Paths::new(IndependentSampler::new(settings.spp, settings.seed));
+        let mut st = Paths::new(sampler);
         let mut rays = Rays8::default();
         let mut shadow = Rays8::default();
         let mut next = 0usize;
@@ -404,7 +441,18 @@ impl SimdKernel {
     /// is left in `v` for `shade8`. False when the path ends here.
     #[allow(clippy::too_many_arguments)]
     #[inline(always)]
-    fn gather(&self, scene: &Scene, settings: &RenderSettings, st: &mut Paths, l: usize, prim: u32, b1: f32, b2: f32, d: Vec3, v: &mut Soa) -> bool {
+    fn gather<S: Sampler>(
+        &self,
+        scene: &Scene,
+        settings: &RenderSettings,
+        st: &mut Paths<S>,
+        l: usize,
+        prim: u32,
+        b1: f32,
+        b2: f32,
+        d: Vec3,
+        v: &mut Soa,
+    ) -> bool {
         st.depth[l] += 1;
         let depth = st.depth[l];
         let Some(tri) = self.tris.get(prim as usize) else { return false };
@@ -570,7 +618,7 @@ fn offset3(p: [f32; 3], ng: [f32; 3], w: [f32; 3]) -> [f32; 3] {
 /// Russian roulette), branch-free per lane so that it compiles to vector code; the same
 /// operations in the same order as the scalar tracer.
 #[inline(always)]
-fn shade8(v: &Soa, rr_depth: i32, st: &mut Paths, rays: &mut Rays8, shadow: &mut Rays8, o: &mut Out) {
+fn shade8<S>(v: &Soa, rr_depth: i32, st: &mut Paths<S>, rays: &mut Rays8, shadow: &mut Rays8, o: &mut Out) {
     for l in 0..LANES {
         let g = |a: &[[f32; LANES]; 3]| [a[0][l], a[1][l], a[2][l]];
         let (p, ng, fs, ft, fnn) = (g(&v.p), g(&v.ng), g(&v.fs), g(&v.ft), g(&v.fnn));
@@ -664,8 +712,8 @@ fn shade8(v: &Soa, rr_depth: i32, st: &mut Paths, rays: &mut Rays8, shadow: &mut
 
 /// The eight paths in flight: each lane's sampler and film sample, and the state that
 /// `shade8` reads and updates, as structure of arrays.
-struct Paths {
-    sampler: [IndependentSampler; LANES],
+struct Paths<S> {
+    sampler: [S; LANES],
     job: [usize; LANES],
     raster: [Vec2; LANES],
     /// Radiance gathered so far.
@@ -677,8 +725,8 @@ struct Paths {
     prev_p: [[f32; LANES]; 3],
 }
 
-impl Paths {
-    fn new(sampler: IndependentSampler) -> Paths {
+impl<S: Clone> Paths<S> {
+    fn new(sampler: S) -> Paths<S> {
         Paths {
             sampler: std::array::from_fn(|_| sampler.clone()),
             job: [0; LANES],
@@ -691,7 +739,9 @@ impl Paths {
             prev_p: [[0.0; LANES]; 3],
         }
     }
+}
 
+impl<S> Paths<S> {
     /// Lane `l` starts camera sample `job` at `raster`.
     fn start(&mut self, l: usize, job: usize, raster: Vec2) {
         self.job[l] = job;

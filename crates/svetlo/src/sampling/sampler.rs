@@ -22,9 +22,12 @@ pub trait Sampler: Send + Sync {
 /// Which sampler a render uses (scene file `<sampler type=...>` or the CLI).
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Default)]
 pub enum SamplerKind {
+    /// Uniform random numbers (PCG32 per pixel sample): the default, until BDPT's unweighted
+    /// (2,2) strategy agrees with the path tracer under Sobol too (tests/bidir.rs).
     #[default]
     Independent,
-    /// Owen-scrambled Sobol (low discrepancy).
+    /// Padded Owen-scrambled Sobol (0,2)-sequences (low discrepancy; lower error than
+    /// independent at every spp on the Cornell box).
     Sobol,
 }
 

@@ -1,157 +1,38 @@
-//! Owen-scrambled Sobol sampler.
+//! Padded Owen-scrambled Sobol sampler (Burley, "Practical hash-based Owen scrambling",
+//! JCGT 9(4), 2020).
 //!
-//! * Points: the Sobol sequence in base 2 with the Joe–Kuo direction numbers
-//!   (S. Joe and F. Y. Kuo, "Constructing Sobol sequences with better two-dimensional
-//!   projections", SIAM J. Sci. Comput. 30, 2008; file `new-joe-kuo-6.21201`), first 64
-//!   dimensions. The generator matrices are built from the table at compile time.
-//! * Scrambling: nested uniform (Owen) scrambling by hashing, as proposed by Laine and
-//!   Karras (2011) and made practical by Burley ("Practical hash-based Owen scrambling",
-//!   JCGT 2020): reverse the bits, apply a hash in which every output bit depends only on
-//!   the input bits below it, reverse back. The hash constants are N. Vegdahl's (2021).
-//!   Each dimension of each pixel has its own seed, so pixels are decorrelated.
-//! * Order: the sample index is itself Owen-scrambled per pixel (Burley's shuffle). This
-//!   permutes samples only inside aligned power-of-two blocks, so the first 2^k samples
-//!   of a pixel still form a (0,k,2)-net in dimensions 0 and 1.
-//! * Dimensions beyond the table are padded with hashed random numbers of
-//!   (pixel, sample index, dimension).
+//! Every call of `next_1d` or `next_2d` opens a new *slot* of the pixel sample. A 2-D slot
+//! takes the first two dimensions of the Sobol sequence, a (0,2)-sequence in base 2; a 1-D
+//! slot takes the first, van der Corput. Each slot of each pixel has its own seeds for
+//! 1. an index shuffle: a nested uniform (Owen) scramble of the sample index's bits, which
+//!    permutes indices only inside aligned power-of-two blocks, so the first `2^k` samples
+//!    of a pixel still use one whole aligned block of the sequence, and different slots
+//!    use unrelated orders (no correlation between, say, the light sample and the BSDF
+//!    sample of a vertex);
+//! 2. an Owen scramble of each coordinate (every bit flipped by a hash of the bits above it).
 //!
-//! Every value is a pure function of (seed, pixel, index, dimension): the image does not
-//! depend on the thread count or the order of tiles.
+//! So every slot, whatever its depth in the path, is an Owen-scrambled (0,2)-sequence: the
+//! first `2^k` samples of a pixel put exactly one point in every elementary interval of
+//! area `2^-k` of every 2-D slot, and one in every interval of length `2^-k` of a 1-D
+//! slot. A global high-dimensional Sobol sequence (the previous sampler here) has 2-D
+//! projections whose quality falls with the dimension, which stopped its error from
+//! falling faster than `1/spp` past 64 spp on the Cornell box.
+//!
+//! Cost: the scrambles are worked in reversed-bit order, where the Laine–Karras hash
+//! (constants by N. Vegdahl, 2021) has the nested property; Sobol's second dimension in
+//! reversed order is a subset transform of the index's bit positions, five shift-and-xor
+//! steps, and van der Corput in reversed order is the index itself.
+//!
+//! Every value is a pure function of (seed, pixel, sample index, slot): the image does not
+//! depend on the thread count, the tile order or how the samples are split into passes.
 
 use super::rng::{hash_seed, mix64};
 use super::Sampler;
-
-/// Dimensions with Sobol points; later ones are hashed random numbers.
-pub const SOBOL_DIMENSIONS: usize = 64;
-
-/// Joe–Kuo parameters of dimensions 2..=64 (dimension 1 is van der Corput): degree `s` of
-/// the primitive polynomial, its inner coefficients `a`, and the initial direction
-/// numbers m_1..m_s (odd, m_i < 2^i).
-const JOE_KUO: [(u32, u32, [u32; 9]); SOBOL_DIMENSIONS - 1] = [
-    (1, 0, [1, 0, 0, 0, 0, 0, 0, 0, 0]),
-    (2, 1, [1, 3, 0, 0, 0, 0, 0, 0, 0]),
-    (3, 1, [1, 3, 1, 0, 0, 0, 0, 0, 0]),
-    (3, 2, [1, 1, 1, 0, 0, 0, 0, 0, 0]),
-    (4, 1, [1, 1, 3, 3, 0, 0, 0, 0, 0]),
-    (4, 4, [1, 3, 5, 13, 0, 0, 0, 0, 0]),
-    (5, 2, [1, 1, 5, 5, 17, 0, 0, 0, 0]),
-    (5, 4, [1, 1, 5, 5, 5, 0, 0, 0, 0]),
-    (5, 7, [1, 1, 7, 11, 19, 0, 0, 0, 0]),
-    (5, 11, [1, 1, 5, 1, 1, 0, 0, 0, 0]),
-    (5, 13, [1, 1, 1, 3, 11, 0, 0, 0, 0]),
-    (5, 14, [1, 3, 5, 5, 31, 0, 0, 0, 0]),
-    (6, 1, [1, 3, 3, 9, 7, 49, 0, 0, 0]),
-    (6, 13, [1, 1, 1, 15, 21, 21, 0, 0, 0]),
-    (6, 16, [1, 3, 1, 13, 27, 49, 0, 0, 0]),
-    (6, 19, [1, 1, 1, 15, 7, 5, 0, 0, 0]),
-    (6, 22, [1, 3, 1, 15, 13, 25, 0, 0, 0]),
-    (6, 25, [1, 1, 5, 5, 19, 61, 0, 0, 0]),
-    (7, 1, [1, 3, 7, 11, 23, 15, 103, 0, 0]),
-    (7, 4, [1, 3, 7, 13, 13, 15, 69, 0, 0]),
-    (7, 7, [1, 1, 3, 13, 7, 35, 63, 0, 0]),
-    (7, 8, [1, 3, 5, 9, 1, 25, 53, 0, 0]),
-    (7, 14, [1, 3, 1, 13, 9, 35, 107, 0, 0]),
-    (7, 19, [1, 3, 1, 5, 27, 61, 31, 0, 0]),
-    (7, 21, [1, 1, 5, 11, 19, 41, 61, 0, 0]),
-    (7, 28, [1, 3, 5, 3, 3, 13, 69, 0, 0]),
-    (7, 31, [1, 1, 7, 13, 1, 19, 1, 0, 0]),
-    (7, 32, [1, 3, 7, 5, 13, 19, 59, 0, 0]),
-    (7, 37, [1, 1, 3, 9, 25, 29, 41, 0, 0]),
-    (7, 41, [1, 3, 5, 13, 23, 1, 55, 0, 0]),
-    (7, 42, [1, 3, 7, 3, 13, 59, 17, 0, 0]),
-    (7, 50, [1, 3, 1, 3, 5, 53, 69, 0, 0]),
-    (7, 55, [1, 1, 5, 5, 23, 33, 13, 0, 0]),
-    (7, 56, [1, 1, 7, 7, 1, 61, 123, 0, 0]),
-    (7, 59, [1, 1, 7, 9, 13, 61, 49, 0, 0]),
-    (7, 62, [1, 3, 3, 5, 3, 55, 33, 0, 0]),
-    (8, 14, [1, 3, 1, 15, 31, 13, 49, 245, 0]),
-    (8, 21, [1, 3, 5, 15, 31, 59, 63, 97, 0]),
-    (8, 22, [1, 3, 1, 11, 11, 11, 77, 249, 0]),
-    (8, 38, [1, 3, 1, 11, 27, 43, 71, 9, 0]),
-    (8, 47, [1, 1, 7, 15, 21, 11, 81, 45, 0]),
-    (8, 49, [1, 3, 7, 3, 25, 31, 65, 79, 0]),
-    (8, 50, [1, 3, 1, 1, 19, 11, 3, 205, 0]),
-    (8, 52, [1, 1, 5, 9, 19, 21, 29, 157, 0]),
-    (8, 56, [1, 3, 7, 11, 1, 33, 89, 185, 0]),
-    (8, 67, [1, 3, 3, 3, 15, 9, 79, 71, 0]),
-    (8, 70, [1, 3, 7, 11, 15, 39, 119, 27, 0]),
-    (8, 84, [1, 1, 3, 1, 11, 31, 97, 225, 0]),
-    (8, 97, [1, 1, 1, 3, 23, 43, 57, 177, 0]),
-    (8, 103, [1, 3, 7, 7, 17, 17, 37, 71, 0]),
-    (8, 115, [1, 3, 1, 5, 27, 63, 123, 213, 0]),
-    (8, 122, [1, 1, 3, 5, 11, 43, 53, 133, 0]),
-    (9, 8, [1, 3, 5, 5, 29, 17, 47, 173, 479]),
-    (9, 13, [1, 3, 3, 11, 3, 1, 109, 9, 69]),
-    (9, 16, [1, 1, 1, 5, 17, 39, 23, 5, 343]),
-    (9, 22, [1, 3, 1, 5, 25, 15, 31, 103, 499]),
-    (9, 25, [1, 1, 1, 11, 11, 17, 63, 105, 183]),
-    (9, 44, [1, 1, 5, 11, 9, 29, 97, 231, 363]),
-    (9, 47, [1, 1, 5, 15, 19, 45, 41, 7, 383]),
-    (9, 52, [1, 3, 7, 7, 31, 19, 83, 137, 221]),
-    (9, 55, [1, 1, 1, 3, 23, 15, 111, 223, 83]),
-    (9, 59, [1, 1, 5, 13, 31, 15, 55, 25, 161]),
-    (9, 62, [1, 1, 3, 13, 25, 47, 39, 87, 257]),
-];
-
-/// Generator matrices: column k of dimension d (as a 32-bit fraction) is XORed into the
-/// point when bit k of the index is set.
-const fn build_matrices() -> [[u32; 32]; SOBOL_DIMENSIONS] {
-    let mut out = [[0u32; 32]; SOBOL_DIMENSIONS];
-    let mut k = 0;
-    while k < 32 {
-        out[0][k] = 1u32 << (31 - k);
-        k += 1;
-    }
-    let mut d = 1;
-    while d < SOBOL_DIMENSIONS {
-        let (s, a, m) = JOE_KUO[d - 1];
-        let s = s as usize;
-        let mut v = [0u32; 32];
-        let mut i = 0;
-        while i < s {
-            v[i] = m[i] << (31 - i);
-            i += 1;
-        }
-        // Bratley–Fox recurrence of the direction numbers from the primitive polynomial.
-        while i < 32 {
-            let mut x = v[i - s] ^ (v[i - s] >> s);
-            let mut k = 1;
-            while k < s {
-                if (a >> (s - 1 - k)) & 1 == 1 {
-                    x ^= v[i - k];
-                }
-                k += 1;
-            }
-            v[i] = x;
-            i += 1;
-        }
-        out[d] = v;
-        d += 1;
-    }
-    out
-}
-
-static SOBOL_MATRICES: [[u32; 32]; SOBOL_DIMENSIONS] = build_matrices();
-
-/// Unscrambled Sobol point `index` in dimension `dim` (< SOBOL_DIMENSIONS), as a 32-bit fraction.
-#[inline]
-pub fn sobol_u32(mut index: u32, dim: usize) -> u32 {
-    let m = &SOBOL_MATRICES[dim];
-    let mut x = 0u32;
-    let mut k = 0;
-    while index != 0 {
-        if index & 1 != 0 {
-            x ^= m[k];
-        }
-        index >>= 1;
-        k += 1;
-    }
-    x
-}
+use glam::Vec2;
 
 /// A bijection of u32 in which output bit i depends only on input bits 0..=i
 /// (Laine–Karras style; constants from Vegdahl's improved hash).
-#[inline]
+#[inline(always)]
 fn lk_hash(mut x: u32, seed: u32) -> u32 {
     x ^= x.wrapping_mul(0x3d20_adea);
     x = x.wrapping_add(seed);
@@ -163,59 +44,89 @@ fn lk_hash(mut x: u32, seed: u32) -> u32 {
 
 /// Nested uniform (Owen) scramble of a 32-bit fraction: each bit is flipped by a hash of
 /// the bits above it, so every dyadic interval is permuted as a whole.
-#[inline]
+#[inline(always)]
 pub fn owen_scramble(x: u32, seed: u32) -> u32 {
     lk_hash(x.reverse_bits(), seed).reverse_bits()
 }
 
+/// Sobol's second dimension at `index`, bit-reversed: bit `p` of the result (fraction bit
+/// `p` from the top) is the parity of the index bits `k` with `p ⊆ k` (as 5-bit numbers),
+/// the Pascal matrix mod 2 by Lucas' theorem; a superset-sum over the positions' bits.
+#[inline(always)]
+pub fn sobol1_reversed(index: u32) -> u32 {
+    let mut u = index;
+    u ^= (u >> 1) & 0x5555_5555;
+    u ^= (u >> 2) & 0x3333_3333;
+    u ^= (u >> 4) & 0x0f0f_0f0f;
+    u ^= (u >> 8) & 0x00ff_00ff;
+    u ^= (u >> 16) & 0x0000_ffff;
+    u
+}
+
 /// A 32-bit fraction to a float in [0, 1) (24 bits keep it below 1 and exact).
-#[inline]
+#[inline(always)]
 fn to_unit(x: u32) -> f32 {
     (x >> 8) as f32 * (1.0 / (1u32 << 24) as f32)
 }
 
-const SHUFFLE_SALT: u64 = 0x5348_5546_464c_4521;
+/// Odd multiplier that spreads slot numbers before the seed hash.
+const SLOT_STEP: u64 = 0x9e37_79b9_7f4a_7c15;
 
 #[derive(Clone, Debug)]
 pub struct SobolSampler {
     seed: u64,
     spp: u32,
-    pixel_seed: u64,
-    index: u32,
-    /// The index after the per-pixel shuffle: the Sobol point this sample uses.
-    sobol_index: u32,
-    dim: u32,
+    /// Hash of (seed, pixel) and the pixel it was computed for.
+    pixel_key: u64,
+    pixel: (u32, u32),
+    /// The sample index, bit-reversed (the input of the index shuffle).
+    index_reversed: u32,
+    slot: u64,
 }
 
 impl SobolSampler {
     pub fn new(spp: u32, seed: u64) -> Self {
-        SobolSampler { seed, spp, pixel_seed: 0, index: 0, sobol_index: 0, dim: 0 }
+        SobolSampler { seed, spp, pixel_key: hash_seed(&[seed, 0, 0]), pixel: (0, 0), index_reversed: 0, slot: 0 }
     }
 
-    /// The sample value of dimension `dim` for the current pixel and index.
-    #[inline]
-    fn value(&self, dim: u32) -> u32 {
-        if (dim as usize) < SOBOL_DIMENSIONS {
-            let scramble = mix64(self.pixel_seed ^ mix64(dim as u64 + 1)) as u32;
-            owen_scramble(sobol_u32(self.sobol_index, dim as usize), scramble)
-        } else {
-            (hash_seed(&[self.pixel_seed, self.index as u64, dim as u64]) >> 32) as u32
-        }
+    /// The next slot's seeds (shuffle, first coordinate).
+    #[inline(always)]
+    fn slot_seeds(&mut self) -> u64 {
+        self.slot += 1;
+        mix64(self.pixel_key ^ self.slot.wrapping_mul(SLOT_STEP))
+    }
+
+    /// The slot's shuffled sample index.
+    #[inline(always)]
+    fn shuffled(&self, seed: u32) -> u32 {
+        lk_hash(self.index_reversed, seed).reverse_bits()
     }
 }
 
 impl Sampler for SobolSampler {
     fn start_pixel_sample(&mut self, x: u32, y: u32, index: u32) {
-        self.pixel_seed = hash_seed(&[self.seed, x as u64, y as u64]);
-        self.index = index;
-        self.sobol_index = owen_scramble(index, mix64(self.pixel_seed ^ SHUFFLE_SALT) as u32);
-        self.dim = 0;
+        if (x, y) != self.pixel {
+            self.pixel = (x, y);
+            self.pixel_key = hash_seed(&[self.seed, x as u64, y as u64]);
+        }
+        self.index_reversed = index.reverse_bits();
+        self.slot = 0;
     }
     #[inline]
     fn next_1d(&mut self) -> f32 {
-        let v = self.value(self.dim);
-        self.dim += 1;
-        to_unit(v)
+        let h = self.slot_seeds();
+        let i = self.shuffled(h as u32);
+        // Van der Corput of `i` in reversed order is `i`: scramble it, reverse once.
+        to_unit(lk_hash(i, (h >> 32) as u32).reverse_bits())
+    }
+    #[inline]
+    fn next_2d(&mut self) -> Vec2 {
+        let h = self.slot_seeds();
+        let i = self.shuffled(h as u32);
+        let sy = mix64(h) as u32;
+        let x = lk_hash(i, (h >> 32) as u32).reverse_bits();
+        let y = lk_hash(sobol1_reversed(i), sy).reverse_bits();
+        Vec2::new(to_unit(x), to_unit(y))
     }
     fn samples_per_pixel(&self) -> u32 {
         self.spp
@@ -228,43 +139,25 @@ impl Sampler for SobolSampler {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::sampling::stats::chi2_sf;
     use crate::sampling::IndependentSampler;
 
-    /// Multiplicative order of x modulo the polynomial `poly` (degree `s`) over GF(2).
-    fn order_of_x(poly: u32, s: u32) -> u32 {
-        let mut r = 1u32;
-        for k in 1..=(1u32 << s) {
-            r <<= 1;
-            if r & (1 << s) != 0 {
-                r ^= poly;
-            }
-            if r == 1 {
-                return k;
-            }
+    /// Sobol's second dimension from its direction numbers (m_k = 1, polynomial x + 1), the
+    /// textbook way: XOR of the columns the index's bits select.
+    fn sobol1_reference(index: u32) -> u32 {
+        let mut v = [0u32; 32];
+        v[0] = 1 << 31;
+        for k in 1..32 {
+            v[k] = v[k - 1] ^ (v[k - 1] >> 1);
         }
-        0
+        (0..32).filter(|k| index >> k & 1 == 1).fold(0, |x, k| x ^ v[k])
     }
 
     #[test]
-    fn table_is_joe_kuo_shaped() {
-        // Joe–Kuo use the primitive polynomials in order of degree, then of `a`: degrees
-        // 1..=8 completely, then the first 11 of degree 9. Checking primitivity and that
-        // order catches any mistyped `a`.
-        let mut expected = Vec::new();
-        for s in 1..=9u32 {
-            for a in 0..(1u32 << (s - 1)) {
-                let poly = (1 << s) | (a << 1) | 1;
-                if order_of_x(poly, s) == (1 << s) - 1 {
-                    expected.push((s, a));
-                }
-            }
-        }
-        let got: Vec<(u32, u32)> = JOE_KUO.iter().map(|&(s, a, _)| (s, a)).collect();
-        assert_eq!(&expected[..got.len()], &got[..]);
-        for &(s, _, m) in &JOE_KUO {
-            for (i, &mi) in m.iter().enumerate().take(s as usize) {
-                assert!(mi % 2 == 1 && mi < (2 << i), "m_{} = {mi}", i + 1);
-            }
+    fn second_dimension_is_sobols() {
+        let mut r = crate::sampling::Pcg32::new(3, 0);
+        for i in (0..4096u32).chain((0..4096).map(|_| r.next_u32())) {
+            assert_eq!(sobol1_reversed(i).reverse_bits(), sobol1_reference(i), "index {i}");
         }
     }
 
@@ -273,77 +166,133 @@ mod tests {
         (v as f64 * (1u64 << bits) as f64) as usize
     }
 
+    /// Draws `slots` slots (2-D where `two[s]`) of samples `first..first + n` of a pixel.
+    fn draw(s: &mut SobolSampler, px: (u32, u32), first: u32, n: u32, two: &[bool]) -> Vec<Vec<Vec2>> {
+        (first..first + n)
+            .map(|i| {
+                s.start_pixel_sample(px.0, px.1, i);
+                two.iter().map(|&t| if t { s.next_2d() } else { Vec2::new(s.next_1d(), 0.0) }).collect()
+            })
+            .collect()
+    }
+
+    /// A path's slot pattern: camera (2, 2, 1), then per vertex (1, 2, 1, 2, 1), ten vertices.
+    fn path_slots() -> Vec<bool> {
+        let mut v = vec![true, true, false];
+        for _ in 0..10 {
+            v.extend([false, true, false, true, false]);
+        }
+        v
+    }
+
     #[test]
-    fn first_points_are_nets() {
+    fn every_slot_is_a_net_for_power_of_two_counts() {
+        // Any aligned block of 2^k samples (the first ones, or a later block as a pass of a
+        // progressive render sees them) fills every elementary interval of area 2^-k of every
+        // 2-D slot once, and every interval of length 2^-k of each coordinate.
+        let slots = path_slots();
         let mut s = SobolSampler::new(1024, 7);
-        for &(px, py) in &[(0u32, 0u32), (13, 5), (1000, 77)] {
+        for &px in &[(0u32, 0u32), (13, 5), (1000, 77)] {
             for k in 0..=10u32 {
-                let n = 1usize << k;
-                let pts: Vec<Vec<f32>> = (0..n as u32)
-                    .map(|i| {
-                        s.start_pixel_sample(px, py, i);
-                        (0..SOBOL_DIMENSIONS).map(|_| s.next_1d()).collect()
-                    })
-                    .collect();
-                // 2-D: every elementary interval of area 2^-k in dimensions 0 and 1 has one point.
-                for a in 0..=k {
-                    let mut count = vec![0u32; n];
-                    for p in &pts {
-                        count[(cell(p[0], a) << (k - a)) | cell(p[1], k - a)] += 1;
+                let n = 1u32 << k;
+                for first in [0, n, 5 * n] {
+                    let pts = draw(&mut s, px, first, n, &slots);
+                    for (d, &two) in slots.iter().enumerate() {
+                        let splits = if two { 0..=k } else { k..=k };
+                        for a in splits {
+                            let mut count = vec![0u32; n as usize];
+                            for p in &pts {
+                                let c = if two { (cell(p[d].x, a) << (k - a)) | cell(p[d].y, k - a) } else { cell(p[d].x, k) };
+                                count[c] += 1;
+                            }
+                            assert!(count.iter().all(|&c| c == 1), "pixel {px:?} samples {first}+{n} slot {d} split {a}");
+                        }
+                        if two {
+                            let mut count = vec![0u32; n as usize];
+                            for p in &pts {
+                                count[cell(p[d].y, k)] += 1;
+                            }
+                            assert!(count.iter().all(|&c| c == 1), "pixel {px:?} slot {d}.y k={k}");
+                        }
                     }
-                    assert!(count.iter().all(|&c| c == 1), "pixel ({px},{py}) k={k} split {a}");
-                }
-                // 1-D: every dimension of the table is stratified.
-                for d in 0..SOBOL_DIMENSIONS {
-                    let mut count = vec![0u32; n];
-                    for p in &pts {
-                        count[cell(p[d], k)] += 1;
-                    }
-                    assert!(count.iter().all(|&c| c == 1), "dim {d} k={k}");
                 }
             }
         }
     }
 
     #[test]
-    fn uniform_and_independent_across_pixels() {
-        // Mean of each dimension (table and padding) over 64x64 pixels x 4 samples: within
-        // 4.5 sigma of 1/2 (sigma of independent uniforms, an upper bound for stratified ones).
-        let mut s = SobolSampler::new(4, 1);
-        let dims = SOBOL_DIMENSIONS + 8;
-        let (w, spp) = (64u32, 4u32);
-        let mut sum = vec![0.0f64; dims];
-        let mut prod = 0.0f64; // correlation of horizontally adjacent pixels, dimension 0..dims
-        let mut prev: Vec<f32> = Vec::new();
-        let mut pairs = 0usize;
+    fn every_slot_is_uniform() {
+        // Chi-square of each coordinate of each slot over 32x32 pixels x 3 samples (not a
+        // power of two, so strata do not make the counts exact), 64 bins; and of 2-D slots'
+        // joint 8x8 histogram. Bonferroni over all the tests.
+        let slots = path_slots();
+        let mut s = SobolSampler::new(3, 11);
+        let (w, spp) = (32u32, 3u32);
+        let coords: usize = slots.iter().map(|&t| if t { 3 } else { 1 }).sum();
+        let mut hist = vec![vec![0f64; 64]; coords];
         for y in 0..w {
             for x in 0..w {
-                for i in 0..spp {
-                    s.start_pixel_sample(x, y, i);
-                    let v: Vec<f32> = (0..dims).map(|_| s.next_1d()).collect();
-                    for d in 0..dims {
-                        sum[d] += v[d] as f64;
-                    }
-                    if i == 0 {
-                        if x > 0 {
-                            for d in 0..dims {
-                                prod += (v[d] as f64 - 0.5) * (prev[d] as f64 - 0.5);
-                                pairs += 1;
-                            }
+                for p in draw(&mut s, (x, y), 0, spp, &slots) {
+                    let mut c = 0;
+                    for (d, &two) in slots.iter().enumerate() {
+                        hist[c][cell(p[d].x, 6)] += 1.0;
+                        c += 1;
+                        if two {
+                            hist[c][cell(p[d].y, 6)] += 1.0;
+                            hist[c + 1][cell(p[d].x, 3) * 8 + cell(p[d].y, 3)] += 1.0;
+                            c += 2;
                         }
-                        prev = v;
                     }
                 }
             }
         }
         let n = (w * w * spp) as f64;
-        let sigma = (1.0 / 12.0 / n).sqrt();
-        for (d, &s) in sum.iter().enumerate() {
-            assert!((s / n - 0.5).abs() < 4.5 * sigma, "dim {d}: mean {}", s / n);
+        let alpha = 1e-3 / coords as f64;
+        for (c, h) in hist.iter().enumerate() {
+            let e = n / 64.0;
+            let chi2: f64 = h.iter().map(|&o| (o - e) * (o - e) / e).sum();
+            let p = chi2_sf(chi2, 63.0);
+            assert!(p > alpha, "coordinate {c}: chi2 {chi2:.1}, p {p:.2e}");
         }
-        // Correlation coefficient of neighbours: sigma of the estimate is 1/sqrt(pairs).
-        let r = prod / pairs as f64 * 12.0;
-        assert!(r.abs() < 4.5 / (pairs as f64).sqrt(), "neighbour correlation {r}");
+    }
+
+    #[test]
+    fn pixels_and_slots_are_decorrelated() {
+        // Correlation coefficient of the same slot in neighbouring pixels, and of consecutive
+        // slots in one pixel (the shuffle must make them independent, not only each uniform):
+        // each within 4.5 standard errors (1/sqrt(pairs)) of 0.
+        let slots = path_slots();
+        let mut s = SobolSampler::new(16, 2);
+        let (w, spp) = (48u32, 16u32);
+        let (mut across, mut within, mut n_across, mut n_within) = (0f64, 0f64, 0usize, 0usize);
+        let mut prev: Vec<Vec<Vec2>> = Vec::new();
+        for y in 0..w {
+            for x in 0..w {
+                let pts = draw(&mut s, (x, y), 0, spp, &slots);
+                for (i, p) in pts.iter().enumerate() {
+                    for d in 0..slots.len() {
+                        if x > 0 {
+                            across += (p[d].x as f64 - 0.5) * (prev[i][d].x as f64 - 0.5);
+                            n_across += 1;
+                        }
+                        if d > 0 {
+                            within += (p[d].x as f64 - 0.5) * (p[d - 1].x as f64 - 0.5);
+                            n_within += 1;
+                        }
+                    }
+                }
+                prev = pts;
+            }
+        }
+        let r_across = across / n_across as f64 * 12.0;
+        let r_within = within / n_within as f64 * 12.0;
+        assert!(r_across.abs() < 4.5 / (n_across as f64).sqrt(), "neighbour pixels: r = {r_across}");
+        assert!(r_within.abs() < 4.5 / (n_within as f64).sqrt(), "consecutive slots: r = {r_within}");
+        // No shared pattern: a pixel's samples are a permutation of nothing another pixel has.
+        let a = draw(&mut s, (3, 3), 0, 64, &slots);
+        let b = draw(&mut s, (4, 3), 0, 64, &slots);
+        let same = a.iter().flatten().zip(b.iter().flatten()).filter(|(p, q)| p == q).count();
+        assert!(same <= 1, "{same} equal points in two pixels");
     }
 
     #[test]
@@ -357,54 +306,48 @@ mod tests {
         b.start_pixel_sample(5, 9, 11);
         let vb: Vec<f32> = (0..80).map(|_| b.next_1d()).collect();
         assert_eq!(va, vb);
-        // Different pixels give different sequences.
-        b.start_pixel_sample(6, 9, 11);
-        let vc: Vec<f32> = (0..80).map(|_| b.next_1d()).collect();
+        // Another seed, another sequence.
+        let mut c = SobolSampler::new(16, 4);
+        c.start_pixel_sample(5, 9, 11);
+        let vc: Vec<f32> = (0..80).map(|_| c.next_1d()).collect();
         assert_ne!(va, vc);
     }
 
-    #[test]
-    fn converges_faster_than_independent() {
-        // Smooth integrand on [0,1]^2: sin(pi u) e^v, integral (2/pi)(e - 1).
-        let exact = 2.0 / std::f64::consts::PI * (std::f64::consts::E - 1.0);
-        let f = |u: f32, v: f32| (std::f64::consts::PI * u as f64).sin() * (v as f64).exp();
-        let rmse = |s: &mut dyn Sampler, n: u32| {
-            let pixels = 256u32;
-            let mut se = 0.0;
-            for p in 0..pixels {
-                let mut acc = 0.0;
-                for i in 0..n {
-                    s.start_pixel_sample(p, 0, i);
-                    let u = s.next_2d();
-                    acc += f(u.x, u.y);
-                }
-                se += (acc / n as f64 - exact).powi(2);
-            }
-            (se / pixels as f64).sqrt()
-        };
-        let n = 256;
-        let e_sobol = rmse(&mut SobolSampler::new(n, 0), n);
-        let e_indep = rmse(&mut IndependentSampler::new(n, 0), n);
-        // Independent: ~ sigma_f / 16 = 0.03; Owen-scrambled Sobol: ~ n^-1.5 for smooth f.
-        assert!(e_sobol < 0.05 * e_indep, "sobol {e_sobol:e} vs independent {e_indep:e}");
-        // Also in a dimension pair deep in the table (dims 40, 41) it must beat random clearly.
-        let mut s = SobolSampler::new(n, 0);
+    /// RMS error over 256 pixels of the mean of `f` over `n` samples of 2-D slot `depth`.
+    fn rmse(s: &mut dyn Sampler, n: u32, depth: usize, f: &dyn Fn(Vec2) -> f64, exact: f64) -> f64 {
         let mut se = 0.0;
         for p in 0..256u32 {
             let mut acc = 0.0;
             for i in 0..n {
                 s.start_pixel_sample(p, 0, i);
-                for _ in 0..40 {
-                    s.next_1d();
+                for _ in 0..depth {
+                    s.next_2d();
                 }
-                let u = s.next_2d();
-                acc += f(u.x, u.y);
+                acc += f(s.next_2d());
             }
             se += (acc / n as f64 - exact).powi(2);
         }
-        let e_deep = (se / 256.0).sqrt();
-        // High dimensions of Sobol have weaker 2-D projections (larger t): less gain, still a gain.
-        eprintln!("rmse at n = {n}: independent {e_indep:e}, sobol dims 0-1 {e_sobol:e}, dims 40-41 {e_deep:e}");
-        assert!(e_deep < 0.5 * e_indep, "dims 40-41: {e_deep:e} vs independent {e_indep:e}");
+        (se / 256.0).sqrt()
+    }
+
+    #[test]
+    fn converges_faster_than_independent_in_every_slot() {
+        // Smooth integrand sin(pi u) e^v (integral (2/pi)(e - 1)) and a discontinuous one (the
+        // disk of radius 0.7 about the origin, as a shadow edge: area pi 0.49 / 4).
+        let smooth = |u: Vec2| (std::f64::consts::PI * u.x as f64).sin() * (u.y as f64).exp();
+        let smooth_exact = 2.0 / std::f64::consts::PI * (std::f64::consts::E - 1.0);
+        let disk = |u: Vec2| if u.length_squared() < 0.49 { 1.0 } else { 0.0 };
+        let disk_exact = std::f64::consts::PI * 0.49 / 4.0;
+        let n = 256;
+        for depth in [0, 1, 20] {
+            let e_ind = rmse(&mut IndependentSampler::new(n, 0), n, depth, &smooth, smooth_exact);
+            let e_sob = rmse(&mut SobolSampler::new(n, 0), n, depth, &smooth, smooth_exact);
+            // Independent: sigma_f / 16 ~ 0.03; Owen-scrambled (0,2): ~ n^-1.5.
+            assert!(e_sob < 0.05 * e_ind, "smooth, slot {depth}: sobol {e_sob:e} vs independent {e_ind:e}");
+            let e_ind = rmse(&mut IndependentSampler::new(n, 0), n, depth, &disk, disk_exact);
+            let e_sob = rmse(&mut SobolSampler::new(n, 0), n, depth, &disk, disk_exact);
+            // Edge in 2-D: ~ n^-0.75, at n = 256 a quarter of n^-0.5 or less.
+            assert!(e_sob < 0.4 * e_ind, "disk, slot {depth}: sobol {e_sob:e} vs independent {e_ind:e}");
+        }
     }
 }

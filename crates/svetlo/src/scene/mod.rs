@@ -89,7 +89,7 @@ impl Default for SceneSettings {
             max_depth: -1,
             rr_depth: 5,
             spp: 16,
-            sampler: SamplerKind::Independent,
+            sampler: SamplerKind::default(),
             seed: 0,
             filter: Filter::default(),
             hide_emitters: false,
