@@ -347,12 +347,12 @@ fn light_tracing_warns_about_environment_emitters() {
 fn info_lists_unsupported_plugins() {
     let d = tmp("unsupported");
     let scene = d.join("u.xml");
-    let text = "<scene version=\"3.0.0\">\n<sensor type=\"perspective\"/>\n<shape type=\"sdfgrid\"/>\n<shape type=\"sphere\">\n<bsdf type=\"hair\"/>\n</shape>\n</scene>\n";
+    let text = "<scene version=\"3.0.0\">\n<sensor type=\"perspective\"/>\n<shape type=\"bsplinecurve\"/>\n<shape type=\"sphere\">\n<bsdf type=\"hair\"/>\n</shape>\n</scene>\n";
     std::fs::write(&scene, text).unwrap();
     let (code, stdout, err) = run(&["info", s(&scene)]);
     assert_eq!(code, 3, "{stdout}{err}");
     assert!(stdout.contains("unsupported 2"), "{stdout}");
-    assert!(stdout.contains("u.xml:3: <shape type=\"sdfgrid\"> not supported: skipped"), "{stdout}");
+    assert!(stdout.contains("u.xml:3: <shape type=\"bsplinecurve\"> not supported: skipped"), "{stdout}");
     assert!(stdout.contains("u.xml:5: <bsdf type=\"hair\"> not supported: the scene does not load"), "{stdout}");
     assert!(err.contains("hair"), "{err}");
 }

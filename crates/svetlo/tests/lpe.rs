@@ -6,7 +6,9 @@
 //! Scenes: `scenes/caustic.xml` of this repository (diffuse floor and wall, a glass sphere,
 //! a small spherical light), rendered small.
 
-use std::path::Path;
+mod common;
+
+use common::lpe::{aovs, assert_close, repo_scene, sum};
 use std::sync::Arc;
 use svetlo::film::{Film, Image};
 use svetlo::integrator::{Progress, RenderSettings};
@@ -14,15 +16,7 @@ use svetlo::lpe::AovSet;
 use svetlo::scene::Scene;
 
 fn caustic(res: u32) -> Scene {
-    let p = Path::new(env!("CARGO_MANIFEST_DIR")).join("../../scenes/caustic.xml");
-    svetlo::io::load_scene(&p, &[("res".into(), res.to_string())]).expect("scenes/caustic.xml")
-}
-
-fn aovs(scene: &Scene, list: &[(&str, &str)], beauty: Option<&str>) -> Arc<AovSet> {
-    let l: Vec<(String, String)> = list.iter().map(|(a, b)| (a.to_string(), b.to_string())).collect();
-    let mut set = AovSet::compile(&l, beauty).expect("expressions");
-    assert!(set.bind(scene).is_empty());
-    Arc::new(set)
+    repo_scene("caustic.xml", res)
 }
 
 fn render(scene: &Scene, method: &str, s: &RenderSettings) -> Film {
@@ -31,28 +25,6 @@ fn render(scene: &Scene, method: &str, s: &RenderSettings) -> Film {
 
 fn settings(spp: u32, max_depth: i32, seed: u64, set: Option<Arc<AovSet>>) -> RenderSettings {
     RenderSettings { spp, max_depth, seed, threads: 2, lpe: set, ..Default::default() }
-}
-
-fn sum(imgs: &[Image]) -> Image {
-    let mut out = imgs[0].clone();
-    for i in &imgs[1..] {
-        for (a, b) in out.data.iter_mut().zip(&i.data) {
-            *a += *b;
-        }
-    }
-    out
-}
-
-/// Per pixel channel, equal up to float rounding (relative 1e-4 of the larger, or 1e-6).
-fn assert_close(a: &Image, b: &Image, what: &str) {
-    let mut worst = 0.0f32;
-    for (x, y) in a.data.iter().zip(&b.data) {
-        for (u, v) in [(x.r, y.r), (x.g, y.g), (x.b, y.b)] {
-            let tol = 1e-4 * u.abs().max(v.abs()) + 1e-6;
-            worst = worst.max((u - v).abs() / tol);
-        }
-    }
-    assert!(worst <= 1.0, "{what}: differs by {worst} tolerances");
 }
 
 /// A partition of all paths: by the first scattering event (none, diffuse and then the

@@ -12,15 +12,15 @@
 //! - The caustic scene: the AOVs of a partition of path space sum to the beauty, `--lpe`
 //!   restricts the beauty to its AOV, and AOVs leave the beauty as it was.
 
+mod common;
+
+use common::lpe::{aovs, assert_close, render, repo_scene, sum};
 use glam::{Mat4, Vec3};
-use std::path::Path;
-use std::sync::Arc;
 use svetlo::bsdf::Material;
 use svetlo::camera::Camera;
-use svetlo::film::{Film, Filter, Image};
+use svetlo::film::{Film, Image};
 use svetlo::geometry::{Geometry, Sphere};
 use svetlo::integrator::{Progress, RenderSettings};
-use svetlo::lpe::AovSet;
 use svetlo::sampling::stats::two_sided_p;
 use svetlo::scene::{Scene, SceneBuilder};
 use svetlo::texture::Texture;
@@ -33,45 +33,6 @@ fn furnace(rho: f32) -> Scene {
     b.add_shape(Geometry::Sphere(s), m, Some(Texture::Constant(Rgb::WHITE)), "furnace").expect("shape");
     b.set_camera(Camera::pinhole(Mat4::IDENTITY, 60.0, 8, 8));
     b.build().expect("scene")
-}
-
-fn repo_scene(name: &str, res: u32) -> Scene {
-    let p = Path::new(env!("CARGO_MANIFEST_DIR")).join("../../scenes").join(name);
-    svetlo::io::load_scene(&p, &[("res".into(), res.to_string())]).expect("scene")
-}
-
-fn aovs(scene: &Scene, list: &[(&str, &str)], beauty: Option<&str>) -> Arc<AovSet> {
-    let l: Vec<(String, String)> = list.iter().map(|(a, b)| (a.to_string(), b.to_string())).collect();
-    let mut set = AovSet::compile(&l, beauty).expect("expressions");
-    assert!(set.bind(scene).is_empty());
-    Arc::new(set)
-}
-
-fn render(scene: &Scene, method: &str, spp: u32, max_depth: i32, seed: u64, set: Option<Arc<AovSet>>) -> Film {
-    let s = RenderSettings { spp, max_depth, seed, threads: 2, filter: Filter::Box, lpe: set, ..Default::default() };
-    svetlo::methods::by_name(method).expect("method").render(scene, &s, &Progress::new()).expect("render")
-}
-
-/// Per pixel channel, equal up to float rounding (relative 1e-4 of the larger, or 1e-6).
-fn assert_close(a: &Image, b: &Image, what: &str) {
-    let mut worst = 0.0f32;
-    for (x, y) in a.data.iter().zip(&b.data) {
-        for (u, v) in [(x.r, y.r), (x.g, y.g), (x.b, y.b)] {
-            let tol = 1e-4 * u.abs().max(v.abs()) + 1e-6;
-            worst = worst.max((u - v).abs() / tol);
-        }
-    }
-    assert!(worst <= 1.0, "{what}: differs by {worst} tolerances");
-}
-
-fn sum(imgs: &[Image]) -> Image {
-    let mut out = imgs[0].clone();
-    for i in &imgs[1..] {
-        for (a, b) in out.data.iter_mut().zip(&i.data) {
-            *a += *b;
-        }
-    }
-    out
 }
 
 const FURNACE_AOVS: &[(&str, &str)] = &[("emit", "C L"), ("d1", "C D L"), ("d2", "C D D L"), ("dmore", "C D D D+ L")];

@@ -213,68 +213,50 @@ impl Accel {
                 best = Some(PrimHit { t: t_max, shape, prim: id - first, b1, b2 });
             }
         }
-        if !self.sph_nodes.is_empty() {
-            let mut hit = None;
-            traverse::<ANY, AVX>(
-                &self.sph_nodes,
-                &bray,
-                &mut t_max,
-                self.prefetch,
-                |_| {},
-                |code, t_max| {
-                    let (start, count) = leaf_range(code);
-                    let mut found = false;
-                    for i in start..start + count {
-                        if let Some(t) = self.spheres[i].intersect(ray.o, ray.d, *t_max) {
-                            *t_max = t;
-                            hit = Some(i);
-                            found = true;
-                            if ANY {
-                                break;
-                            }
-                        }
-                    }
-                    found
-                },
-            );
-            if let Some(i) = hit {
-                if ANY {
-                    return Some(PrimHit { t: t_max, shape: 0, prim: 0, b1: 0.0, b2: 0.0 });
-                }
-                best = Some(PrimHit { t: t_max, shape: self.sph_shapes[i], prim: 0, b1: 0.0, b2: 0.0 });
+        if let Some(i) = nearest_prim::<ANY, AVX, _>(&self.sph_nodes, &bray, &mut t_max, self.prefetch, &self.spheres, |s, t| s.intersect(ray.o, ray.d, t)) {
+            if ANY {
+                return Some(PrimHit { t: t_max, shape: 0, prim: 0, b1: 0.0, b2: 0.0 });
             }
+            best = Some(PrimHit { t: t_max, shape: self.sph_shapes[i], prim: 0, b1: 0.0, b2: 0.0 });
         }
-        if !self.sdf_nodes.is_empty() {
-            let mut hit = None;
-            traverse::<ANY, AVX>(
-                &self.sdf_nodes,
-                &bray,
-                &mut t_max,
-                self.prefetch,
-                |_| {},
-                |code, t_max| {
-                    let (start, count) = leaf_range(code);
-                    let mut found = false;
-                    for &(g, k) in &self.voxels[start..start + count] {
-                        if let Some(t) = self.grids[g as usize].0.intersect_voxel(k as usize, ray.o, ray.d, *t_max) {
-                            *t_max = t;
-                            hit = Some((g, k));
-                            found = true;
-                            if ANY {
-                                break;
-                            }
-                        }
-                    }
-                    found
-                },
-            );
-            if let Some((g, k)) = hit {
-                // prim: the voxel's number in its grid (`SdfGrid::normals_at`).
-                best = Some(PrimHit { t: t_max, shape: self.grids[g as usize].1, prim: k, b1: 0.0, b2: 0.0 });
-            }
+        let voxel = |&(g, k): &(u32, u32), t| self.grids[g as usize].0.intersect_voxel(k as usize, ray.o, ray.d, t);
+        if let Some(i) = nearest_prim::<ANY, AVX, _>(&self.sdf_nodes, &bray, &mut t_max, self.prefetch, &self.voxels, voxel) {
+            let (g, k) = self.voxels[i];
+            // prim: the voxel's number in its grid (`SdfGrid::normals_at`).
+            best = Some(PrimHit { t: t_max, shape: self.grids[g as usize].1, prim: k, b1: 0.0, b2: 0.0 });
         }
         best
     }
+}
+
+/// The nearest primitive of `prims` (with `ANY`, any) that a ray meets in the leaves of
+/// `nodes`, `intersect(prim, t_max)` giving its distance: its index, with `t_max` set to it.
+#[inline(always)]
+fn nearest_prim<const ANY: bool, const AVX: bool, P>(
+    nodes: &[Node],
+    bray: &BoxRay,
+    t_max: &mut f32,
+    prefetch: bool,
+    prims: &[P],
+    intersect: impl Fn(&P, f32) -> Option<f32>,
+) -> Option<usize> {
+    let mut hit = None;
+    traverse::<ANY, AVX>(nodes, bray, t_max, prefetch, |_| {}, |code, t_max| {
+        let (start, count) = leaf_range(code);
+        let mut found = false;
+        for (i, p) in prims[start..start + count].iter().enumerate() {
+            if let Some(t) = intersect(p, *t_max) {
+                *t_max = t;
+                hit = Some(start + i);
+                found = true;
+                if ANY {
+                    break;
+                }
+            }
+        }
+        found
+    });
+    hit
 }
 
 /// The triangle block test of one ray, by instruction set.

@@ -3,6 +3,7 @@
 //! sphere, agreement of `sample` with `eval`/`pdf`, reciprocity and white-furnace albedo.
 #![allow(dead_code)]
 
+pub mod lpe;
 pub mod scenes;
 
 use glam::{Vec2, Vec3};
