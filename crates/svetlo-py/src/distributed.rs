@@ -256,7 +256,7 @@ pub fn sppm_iterate<'py>(
         .allow_threads(|| {
             let mut st = match state {
                 Some(b) => SppmRows::from_bytes(&b)?,
-                None => sppm.start_rows(&r.scene, start..end)?,
+                None => sppm.start_rows(&r.scene, &r.settings, start..end)?,
             };
             if st.rows != (start..end) {
                 return Err(svetlo::Error::Invalid(format!("sppm: the state is of rows {}..{}, not {start}..{end}", st.rows.start, st.rows.end)));
@@ -279,7 +279,7 @@ pub fn sppm_develop<'py>(py: Python<'py>, scene: &PyScene, parts: Vec<Vec<u8>>, 
     let film = py
         .allow_threads(|| {
             let rows = parts.iter().map(|b| SppmRows::from_bytes(b)).collect::<svetlo::Result<Vec<_>>>()?;
-            let film = sppm.develop_rows(&r.scene, rows)?;
+            let film = sppm.develop_rows(&r.scene, &r.settings, rows)?;
             Ok::<_, svetlo::Error>(PartialFilm { passes: 0..1, passes_total: 1, film, mutations: 0 }.to_bytes())
         })
         .map_err(to_py)?;

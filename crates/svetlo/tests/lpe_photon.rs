@@ -1,5 +1,4 @@
-//! Light path expressions on photon mapping (`photon`; `sppm` refuses them until its row-wise
-//! distributed iterations carry the per-layer sums, see tests/lpe.rs): photons carry their light
+//! Light path expressions on the photon methods (`photon`, `sppm`): photons carry their light
 //! subpath's events as a reverse-automaton state, and each density estimate is split by photon
 //! into the layers its whole path (camera prefix, lookup point, photon path) matches.
 //!
@@ -73,8 +72,11 @@ fn photon_aovs_in_the_furnace_match_closed_form_and_the_path_tracer() {
     let expected = [1.0, 0.5, 0.25, 0.25];
     let seeds = 10u64;
     let path = furnace_stats(&scene, "path", 16, -1, seeds);
-    let methods: &[(&str, u32)] =
-        &[("photon:photons=5000,caustic-photons=1000,gather=4,k=16", 2), ("photon:photons=5000,caustic-photons=1000,gather=0,k=16", 2)];
+    let methods: &[(&str, u32)] = &[
+        ("photon:photons=5000,caustic-photons=1000,gather=4,k=16", 2),
+        ("photon:photons=5000,caustic-photons=1000,gather=0,k=16", 2),
+        ("sppm:photons=4000", 64),
+    ];
     let pixels = path[0].0.len();
     // Šidák: every pixel of every AOV, against the closed form and the path tracer, per method
     // and for the path tracer itself.
@@ -103,7 +105,7 @@ fn photon_aovs_in_the_furnace_match_closed_form_and_the_path_tracer() {
 fn photon_aovs_respect_max_depth() {
     let scene = furnace(0.5);
     let set = aovs(&scene, FURNACE_AOVS, None);
-    for method in ["photon:photons=3000,caustic-photons=500,gather=2,k=16", "photon:photons=3000,caustic-photons=500,gather=0,k=16"] {
+    for method in ["photon:photons=3000,caustic-photons=500,gather=2,k=16", "photon:photons=3000,caustic-photons=500,gather=0,k=16", "sppm:photons=2000"] {
         let f = render(&scene, method, 4, 3, 9, Some(set.clone()));
         assert!(f.layer("d2").expect("layer").mean().mean() > 0.1, "{method}: C D D L empty");
         assert!(f.layer("dmore").expect("layer").data.iter().all(|c| c.is_black()), "{method}: three bounces at max_depth 3");
@@ -113,7 +115,8 @@ fn photon_aovs_respect_max_depth() {
 const PARTITION: &[(&str, &str)] =
     &[("emit", "C [LB]"), ("d1", "C D [LB]"), ("dmore", "C D [^LB]+ [LB]"), ("spec", "C [GS] .* [LB]"), ("caustic", "C D S+ [LB]")];
 
-const PHOTON_METHODS: &[&str] = &["photon:photons=4000,caustic-photons=4000,gather=2,precompute=0", "photon:photons=4000,caustic-photons=4000,gather=0"];
+const PHOTON_METHODS: &[&str] =
+    &["photon:photons=4000,caustic-photons=4000,gather=2,precompute=0", "photon:photons=4000,caustic-photons=4000,gather=0", "sppm:photons=2000"];
 
 /// The caustic scene (diffuse floor and wall, glass sphere): a partition's AOVs sum to the
 /// beauty, the caustic (`C D S+ L`: the caustic map, and photons through the glass) is not

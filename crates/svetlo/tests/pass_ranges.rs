@@ -174,6 +174,29 @@ fn malformed_bytes_are_errors() {
     assert!(bits(&back.film.image()) == bits(&part.film.image()));
 }
 
+/// An SPPM render advanced in `blocks` row blocks from `batches` photon batches per
+/// iteration, every state passed through bytes between iterations, the blocks developed
+/// together (in reverse order).
+fn sppm_in_rows(sppm: &svetlo::integrator::photon::Sppm, sc: &Scene, s: &RenderSettings, blocks: u32, batches: u64, threads: usize) -> Film {
+    use svetlo::integrator::photon::SppmRows;
+    let st = RenderSettings { threads, ..s.clone() };
+    let (h, per) = (sc.camera.height, sppm.photons_per_iteration(sc));
+    let mut states: Vec<SppmRows> = (0..blocks).map(|b| sppm.start_rows(sc, &st, b * h / blocks..(b + 1) * h / blocks).unwrap()).collect();
+    for it in 0..s.spp {
+        let cuts: Vec<u64> = (0..=batches).map(|k| k * per / batches).collect();
+        let photons: Vec<Vec<u8>> = cuts.windows(2).map(|c| sppm.photon_batch(sc, &st, it, c[0]..c[1]).unwrap()).collect();
+        let refs: Vec<&[u8]> = photons.iter().map(|b| b.as_slice()).collect();
+        for state in states.iter_mut() {
+            // Through bytes, as between iterations on a cluster.
+            let mut back = SppmRows::from_bytes(&state.to_bytes()).unwrap();
+            sppm.iterate_rows(sc, &st, &mut back, &refs).unwrap();
+            *state = back;
+        }
+    }
+    states.reverse();
+    sppm.develop_rows(sc, &st, states).unwrap()
+}
+
 #[test]
 fn sppm_in_row_blocks_from_photon_batches_is_the_local_render_bit_for_bit() {
     use svetlo::integrator::photon::{Sppm, SppmOptions, SppmRows};
@@ -182,38 +205,50 @@ fn sppm_in_row_blocks_from_photon_batches_is_the_local_render_bit_for_bit() {
     let sppm = Sppm { options: SppmOptions { photons: Some(3000), ..Default::default() } };
     let local = svetlo::integrator::Integrator::render(&sppm, &cbox, &s, &Progress::new()).unwrap();
     assert!(local.image().data.iter().any(|c| c.r > 0.0));
-    let per = sppm.photons_per_iteration(&cbox);
     for (blocks, batches, threads) in [(1, 1, 1), (2, 3, 2), (11, 2, 1)] {
-        let st = RenderSettings { threads, ..s.clone() };
-        let h = cbox.camera.height;
-        let mut states: Vec<SppmRows> = (0..blocks).map(|b| sppm.start_rows(&cbox, b * h / blocks..(b + 1) * h / blocks).unwrap()).collect();
-        for it in 0..s.spp {
-            let cuts: Vec<u64> = (0..=batches).map(|k| k * per / batches).collect();
-            let photons: Vec<Vec<u8>> = cuts.windows(2).map(|c| sppm.photon_batch(&cbox, &st, it, c[0]..c[1]).unwrap()).collect();
-            let refs: Vec<&[u8]> = photons.iter().map(|b| b.as_slice()).collect();
-            for state in states.iter_mut() {
-                // Through bytes, as between iterations on a cluster.
-                let mut back = SppmRows::from_bytes(&state.to_bytes()).unwrap();
-                sppm.iterate_rows(&cbox, &st, &mut back, &refs).unwrap();
-                *state = back;
-            }
-        }
-        states.reverse();
-        let film = sppm.develop_rows(&cbox, states).unwrap();
+        let film = sppm_in_rows(&sppm, &cbox, &s, blocks, batches, threads);
         assert_same(&film, &local, &format!("sppm: {blocks} row blocks, {batches} photon batches, {threads} threads"));
     }
     // Rows that leave a gap, states of another render and malformed bytes are refused.
-    let a = sppm.start_rows(&cbox, 0..5).unwrap();
-    assert!(sppm.develop_rows(&cbox, vec![a.clone()]).is_err());
+    let a = sppm.start_rows(&cbox, &s, 0..5).unwrap();
+    assert!(sppm.develop_rows(&cbox, &s, vec![a.clone()]).is_err());
     let bytes = a.to_bytes();
-    for cut in [0, 8, 27, bytes.len() - 1] {
+    for cut in [0, 8, 27, 31, bytes.len() - 1] {
         assert!(SppmRows::from_bytes(&bytes[..cut]).is_err(), "cut at {cut}");
     }
+    // A header asking for more layers than the bytes hold.
+    let mut layered = bytes.clone();
+    layered[24..28].copy_from_slice(&u32::MAX.to_le_bytes());
+    assert!(SppmRows::from_bytes(&layered).is_err(), "layers in the header");
     let mut done = a.clone();
     let four = RenderSettings { spp: 0, ..s.clone() };
     assert!(sppm.iterate_rows(&cbox, &four, &mut done, &[]).is_err(), "no iteration left");
     assert!(sppm.iterate_rows(&cbox, &s, &mut done, &[b"SVLPHOT1\x01"]).is_err(), "malformed photons");
-    assert!(sppm.start_rows(&cbox, 5..12).is_err());
+    assert!(sppm.start_rows(&cbox, &s, 5..12).is_err());
+}
+
+#[test]
+fn sppm_aov_layers_in_row_blocks_are_the_local_render_bit_for_bit() {
+    use svetlo::integrator::photon::{Sppm, SppmOptions};
+    let p = Path::new(env!("CARGO_MANIFEST_DIR")).join("../../scenes/caustic.xml");
+    let sc = svetlo::io::load_scene(&p, &[("res".into(), "12".into())]).expect("scenes/caustic.xml");
+    let list = vec![("caustic".to_string(), "C D S+ L".to_string()), ("d1".to_string(), "C D [LB]".to_string())];
+    let mut set = svetlo::lpe::AovSet::compile(&list, None).expect("expressions");
+    assert!(set.bind(&sc).is_empty());
+    let s = RenderSettings { spp: 3, max_depth: 6, seed: 4, threads: 2, filter: svetlo::film::Filter::Box, lpe: Some(Arc::new(set)), ..Default::default() };
+    let sppm = Sppm { options: SppmOptions { photons: Some(3000), ..Default::default() } };
+    let local = svetlo::integrator::Integrator::render(&sppm, &sc, &s, &Progress::new()).unwrap();
+    assert_eq!(local.layer_names().len(), 2);
+    assert!(local.layer_images().iter().all(|(_, img)| img.data.iter().any(|c| c.r > 0.0)), "every layer has light");
+    for (blocks, batches, threads) in [(1, 1, 1), (3, 2, 2)] {
+        let film = sppm_in_rows(&sppm, &sc, &s, blocks, batches, threads);
+        assert_same(&film, &local, &format!("sppm with AOVs: {blocks} row blocks, {batches} photon batches, {threads} threads"));
+    }
+    // A state without the layers is of another render.
+    let plain = RenderSettings { lpe: None, ..s.clone() };
+    let mut st = sppm.start_rows(&sc, &plain, 0..4).unwrap();
+    assert!(sppm.iterate_rows(&sc, &s, &mut st, &[]).is_err(), "state without layers");
+    assert!(sppm.develop_rows(&sc, &s, vec![sppm.start_rows(&sc, &plain, 0..sc.camera.height).unwrap()]).is_err());
 }
 
 #[test]
