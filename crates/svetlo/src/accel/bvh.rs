@@ -241,21 +241,28 @@ fn nearest_prim<const ANY: bool, const AVX: bool, P>(
     intersect: impl Fn(&P, f32) -> Option<f32>,
 ) -> Option<usize> {
     let mut hit = None;
-    traverse::<ANY, AVX>(nodes, bray, t_max, prefetch, |_| {}, |code, t_max| {
-        let (start, count) = leaf_range(code);
-        let mut found = false;
-        for (i, p) in prims[start..start + count].iter().enumerate() {
-            if let Some(t) = intersect(p, *t_max) {
-                *t_max = t;
-                hit = Some(start + i);
-                found = true;
-                if ANY {
-                    break;
+    traverse::<ANY, AVX>(
+        nodes,
+        bray,
+        t_max,
+        prefetch,
+        |_| {},
+        |code, t_max| {
+            let (start, count) = leaf_range(code);
+            let mut found = false;
+            for (i, p) in prims[start..start + count].iter().enumerate() {
+                if let Some(t) = intersect(p, *t_max) {
+                    *t_max = t;
+                    hit = Some(start + i);
+                    found = true;
+                    if ANY {
+                        break;
+                    }
                 }
             }
-        }
-        found
-    });
+            found
+        },
+    );
     hit
 }
 
