@@ -92,17 +92,7 @@ impl CieSky {
     /// (cos² Z, azimuth): E = ∫ L cos Z dω = π ∫∫ L d(cos² Z) d(az / 2π), which puts the
     /// nodes where the cosine weight is.
     pub fn horizontal_illuminance(&self) -> f64 {
-        let (n, m) = (256, 256);
-        let mut sum = 0.0;
-        for i in 0..n {
-            let cos_z = (((i as f64) + 0.5) / n as f64).sqrt();
-            let sin_z = (1.0 - cos_z * cos_z).sqrt();
-            for j in 0..m {
-                let az = 2.0 * PI * ((j as f64) + 0.5) / m as f64;
-                sum += self.luminance(Vec3::new((sin_z * az.sin()) as f32, (sin_z * az.cos()) as f32, cos_z as f32));
-            }
-        }
-        PI * sum / (n * m) as f64
+        cosine_weighted_integral(256, |[x, y, z]| self.luminance(Vec3::new(y, x, z)))
     }
 
     /// The sky as an environment map `width` texels around (radiance in W/(m² sr) by 683 lm/W,
@@ -140,24 +130,27 @@ pub fn unobstructed_illuminance(scene: &Scene, up: Vec3) -> f64 {
         match l {
             Light::Directional { direction, irradiance } => e += irradiance.luminance() as f64 * (-direction.dot(up)).max(0.0) as f64,
             Light::Constant { radiance } => e += PI * radiance.luminance() as f64,
-            Light::EnvMap(env) => {
-                let (n, m) = (512, 512);
-                let mut sum = 0.0;
-                for i in 0..n {
-                    let cos_z = (((i as f64) + 0.5) / n as f64).sqrt();
-                    let sin_z = (1.0 - cos_z * cos_z).sqrt();
-                    for j in 0..m {
-                        let az = 2.0 * PI * ((j as f64) + 0.5) / m as f64;
-                        let local = Vec3::new((sin_z * az.cos()) as f32, (sin_z * az.sin()) as f32, cos_z as f32);
-                        sum += env.eval(frame.to_world(local)).luminance() as f64;
-                    }
-                }
-                e += PI * sum / (n * m) as f64;
-            }
+            Light::EnvMap(env) => e += cosine_weighted_integral(512, |[x, y, z]| env.eval(frame.to_world(Vec3::new(x, y, z))).luminance() as f64),
             _ => {}
         }
     }
     e * super::LM_PER_W
+}
+
+/// ∫ f(ω) cos θ dω over the hemisphere about +z by a midpoint rule on `n` × `n` cells of
+/// (cos² θ, azimuth), which puts the nodes where the cosine weight is: π times the mean of f
+/// at the nodes. `f` takes the direction (sin θ cos φ, sin θ sin φ, cos θ).
+fn cosine_weighted_integral(n: usize, f: impl Fn([f32; 3]) -> f64) -> f64 {
+    let mut sum = 0.0;
+    for i in 0..n {
+        let cos_z = (((i as f64) + 0.5) / n as f64).sqrt();
+        let sin_z = (1.0 - cos_z * cos_z).sqrt();
+        for j in 0..n {
+            let az = 2.0 * PI * ((j as f64) + 0.5) / n as f64;
+            sum += f([(sin_z * az.cos()) as f32, (sin_z * az.sin()) as f32, cos_z as f32]);
+        }
+    }
+    PI * sum / (n * n) as f64
 }
 
 #[cfg(test)]
