@@ -72,13 +72,14 @@ def points():
     return [((i + 0.5) * SPACING, (j + 0.5) * SPACING, Z_PLANE) for i in range(nu) for j in range(nv)]
 
 
-def svetlo_scene(spread):
+def svetlo_scene(spread, faces=None):
+    faces = FACES if faces is None else faces
     out = ['<scene version="3.0.0">',
            '<sensor type="perspective"><film type="hdrfilm"><integer name="width" value="8"/><integer name="height" value="8"/></film></sensor>']
     for x, y, z in LUMINAIRES:
         sp = '<boolean name="spread" value="true"/>' if spread else ""
         out.append(f'<emitter type="ies"><string name="filename" value="{IES}"/>{sp}<transform name="to_world"><translate value="{x},{y},{z}"/></transform></emitter>')
-    for name, rho, c, a, b in FACES:
+    for name, rho, c, a, b in faces:
         # Mitsuba's rectangle spans [-1, 1]^2 with normal +z: columns a/2, b/2, a x b, centre.
         n = (a[1] * b[2] - a[2] * b[1], a[2] * b[0] - a[0] * b[2], a[0] * b[1] - a[1] * b[0])
         ln = sum(v * v for v in n) ** 0.5
@@ -91,9 +92,10 @@ def svetlo_scene(spread):
     return "\n".join(out) + "\n"
 
 
-def radiance_scene():
+def radiance_scene(faces=None):
+    faces = FACES if faces is None else faces
     out = []
-    for name, rho, c, a, b in FACES:
+    for name, rho, c, a, b in faces:
         out.append(f"void plastic m_{name} 0 0 5 {rho} {rho} {rho} 0 0")
         vs = [c, add(c, a), add(add(c, a), b), add(c, b)]
         out.append(f"m_{name} polygon {name} 0 0 12 " + " ".join(f"{v[0]} {v[1]} {v[2]}" for v in vs))
