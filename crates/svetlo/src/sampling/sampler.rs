@@ -22,12 +22,11 @@ pub trait Sampler: Send + Sync {
 /// Which sampler a render uses (scene file `<sampler type=...>` or the CLI).
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Default)]
 pub enum SamplerKind {
-    /// Uniform random numbers (PCG32 per pixel sample): the default, until BDPT's unweighted
-    /// (2,2) strategy agrees with the path tracer under Sobol too (tests/bidir.rs).
-    #[default]
+    /// Uniform random numbers (PCG32 per pixel sample).
     Independent,
-    /// Padded Owen-scrambled Sobol (0,2)-sequences (low discrepancy; lower error than
-    /// independent at every spp on the Cornell box).
+    /// Padded Owen-scrambled Sobol (0,2)-sequences: the default (low discrepancy; lower error
+    /// than independent at every spp on the Cornell box, at 0.4-0.9 of its cost at equal error).
+    #[default]
     Sobol,
 }
 
