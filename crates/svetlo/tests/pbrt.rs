@@ -439,7 +439,7 @@ fn coffee_metal_and_glass_match_tungsten() {
     assert_silver_under_mirror(&converted, &diffs);
 }
 
-/// The same at Tungsten's 200×250 and 256 spp (two renders, about 7 minutes on 2 cores).
+/// The same at Tungsten's 200×250 and 256 spp (two renders, 4 minutes on 2 cores).
 #[test]
 #[ignore = "heavy (minutes on 2 cores): cargo test --release --test pbrt -- --ignored"]
 fn coffee_full_resolution_matches_tungsten() {
@@ -451,15 +451,15 @@ fn coffee_full_resolution_matches_tungsten() {
 
 /// With Tungsten's materials, metal and plastic agree with Tungsten within 4 standard errors
 /// of the render's mean (Šidák-safe for the comparisons) plus what no spp removes: 1 % for
-/// metal (measured +0.1/-0.1/-0.1 % at 200×250), 2.5 % for plastic (measured -1.6/-0.5/-0.5 %:
+/// metal (measured -0.1/+0.1/+0.1 % at 200×250), 2.5 % for plastic (measured -1.6/-0.5/-0.5 %:
 /// Tungsten's rough plastic against Mitsuba's, which svetlo's `Plastic` follows).
 ///
 /// Glass cannot be compared that closely: Tungsten skips every intersection closer than
 /// 5e-4 scene units to a ray's origin (`DefaultEpsilon` in its `TraceableScene`), a quarter
 /// of the pot's 2 mm wall, and so loses the light piped along the wall by total internal
 /// reflection that svetlo (offsets of 2e-6) keeps. Emulating that epsilon in svetlo (an
-/// experiment, not a feature) brings the glass region to +0.0/-0.0/-0.0 % (200×250, 128 spp);
-/// without it svetlo's glass is 13-15 % brighter, growing with the depth as light piping does
+/// experiment, not a feature) brings the glass region to +0.0/-0.0/-0.0 % (100×125, 128 spp);
+/// without it svetlo's glass is 12-15 % brighter, growing with the depth as light piping does
 /// (-4 % at 10 segments, +15 % at 16, +24 % at 30), and svetlo's dielectric keeps a white
 /// furnace at 1 with this mesh. So glass must be at least Tungsten's (less the noise and 1 %)
 /// and at most 25 % above it.
