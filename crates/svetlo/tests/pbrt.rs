@@ -327,9 +327,56 @@ impl ClassDiff {
     }
 }
 
-/// Render the coffee scene at `w`×`h` (box filter) and compare it with Tungsten's reference
-/// block-averaged to that size, class by class.
-fn coffee_by_class(w: u32, h: u32, spp: u32) -> Option<Vec<(CoffeeClass, ClassDiff)>> {
+/// Which materials the coffee maker is rendered with.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+enum CoffeeMaterials {
+    /// The pbrt-v4 file as written: silver (`metal-Ag-eta/k`) and `coateddiffuse`.
+    AsConverted,
+    /// What Tungsten rendered: the metal a perfect mirror and the plastics Tungsten's
+    /// plastic (an interface over a Lambertian base with its internal reflections summed in
+    /// closed form: svetlo's nonlinear `Plastic`), with the file's reflectance, IOR and
+    /// roughness. See [`as_tungsten`] for the evidence.
+    AsTungsten,
+}
+
+/// The coffee maker's materials back as Tungsten rendered them. The pbrt-v4 file is pbrt-v4's
+/// `--upgrade` of Bitterli's pbrt-v3 export: pbrt-v4's upgrader (`upgradeMaterial` in
+/// `src/pbrt/parser.cpp`) writes a pbrt-v3 `mirror` as `conductor` followed by exactly
+/// the file's three lines `"float roughness" [ 0 ]`, `"spectrum eta" [ "metal-Ag-eta" ]`,
+/// `"spectrum k" [ "metal-Ag-k" ]`, and a pbrt-v3 `plastic` as `coateddiffuse`. Measured:
+/// with a perfect mirror the metal region agrees with Tungsten to 0.1 % (200×250, 64 spp);
+/// with the silver it is 3/5/10 % darker, silver's Fresnel reflectance.
+fn as_tungsten(m: &mut svetlo::bsdf::Material) {
+    use svetlo::bsdf::material::CoatedBase;
+    use svetlo::bsdf::Material;
+    match m {
+        Material::TwoSided { front, back } => {
+            as_tungsten(front);
+            as_tungsten(back);
+        }
+        Material::Conductor { eta, k, roughness: None, .. } => {
+            (*eta, *k) = svetlo::io::spectra::named_conductor("none").expect("mirror");
+        }
+        Material::Coated(c) => {
+            if let CoatedBase::Diffuse(base) = &c.base {
+                *m = Material::Plastic {
+                    diffuse_reflectance: base.clone(),
+                    specular_reflectance: svetlo::texture::Texture::Constant(svetlo::spectrum::Rgb::WHITE),
+                    eta: c.eta,
+                    nonlinear: true,
+                    roughness: c.roughness.clone(),
+                };
+            }
+        }
+        _ => {}
+    }
+}
+
+/// Render the coffee scene at `w`×`h` (box filter) with `materials` and compare it with
+/// Tungsten's reference block-averaged to that size, class by class. The classes come from
+/// the file's materials. Depth: 16 segments, the README's convention for Tungsten's
+/// references of Bitterli's files (pbrt `maxdepth` 17, which svetlo reads as 18 segments).
+fn coffee_by_class(w: u32, h: u32, spp: u32, materials: CoffeeMaterials) -> Option<Vec<(CoffeeClass, ClassDiff)>> {
     let root = shared()?;
     let dir = root.join("bitterli/coffee");
     let reference = read_image(&dir.join("TungstenRender_box4x4_200x250.pfm")).expect("reference");
@@ -337,13 +384,17 @@ fn coffee_by_class(w: u32, h: u32, spp: u32) -> Option<Vec<(CoffeeClass, ClassDi
     let k = 200 / w as usize;
     assert_eq!((w as usize * k, h as usize * k), (200, 250), "the size must divide 200x250");
     let reference = block_average(&reference, k);
-    let scene = with_res(load_pbrt(&dir.join("pbrt-v4/scene-v4.pbrt")).expect("load"), w, h);
+    let mut scene = with_res(load_pbrt(&dir.join("pbrt-v4/scene-v4.pbrt")).expect("load"), w, h);
     assert_eq!(scene.settings.max_depth, 18, "pbrt maxdepth 17 is 18 segments");
     let classes = coffee_classes(&scene);
+    if materials == CoffeeMaterials::AsTungsten {
+        scene.materials.iter_mut().for_each(as_tungsten);
+    }
     let (img, var, n) = render(&scene, |s| {
         s.spp = spp;
         s.seed = 7;
         s.filter = Filter::Box;
+        s.max_depth = 16;
     });
     let mut out = Vec::new();
     for class in [CoffeeClass::Metal, CoffeeClass::Glass, CoffeeClass::Plastic, CoffeeClass::Emitter] {
@@ -363,7 +414,7 @@ fn coffee_by_class(w: u32, h: u32, spp: u32) -> Option<Vec<(CoffeeClass, ClassDi
             / (3.0 * m);
         let d = ClassDiff { pixels: idx.len(), ours: mean(&img), reference: mean(&reference), std_err, rel_mse };
         println!(
-            "coffee {w}x{h} {n} spp, {class:?}: {} px, ours {:.4?} Tungsten {:.4?}, rel. diff {:+.4?}, z {:+.2?}, relMSE {:.3e}",
+            "coffee {materials:?} {w}x{h} {n} spp, {class:?}: {} px, ours {:.4?} Tungsten {:.4?}, rel. diff {:+.4?}, z {:+.2?}, relMSE {:.3e}",
             d.pixels,
             d.ours,
             d.reference,
@@ -376,43 +427,79 @@ fn coffee_by_class(w: u32, h: u32, spp: u32) -> Option<Vec<(CoffeeClass, ClassDi
     Some(out)
 }
 
-/// Coffee maker at 40×50 (Tungsten's 200×250 box average block-averaged 5×5), 32 spp: the
-/// metal and glass regions agree with Tungsten within what the render's own noise allows
-/// plus 2 % (see [`assert_coffee_agrees`]); the plastics are reported. At this noise level it
-/// catches gross errors only: the full-resolution test below shows (and fails on) systematic
-/// differences of 5-12 % in both regions that are not resolved yet.
+/// Coffee maker at 40×50 (Tungsten's 200×250 box average block-averaged 5×5), 64 spp, with
+/// the materials Tungsten rendered: see [`assert_coffee_agrees`]. The file's own materials
+/// are rendered too and reported (pbrt-v4's silver and `coateddiffuse`), and their metal must
+/// be darker than the mirror by silver's reflectance.
 #[test]
 fn coffee_metal_and_glass_match_tungsten() {
-    let Some(diffs) = coffee_by_class(40, 50, 32) else { return };
-    assert_coffee_agrees(&diffs, 32);
+    let Some(diffs) = coffee_by_class(40, 50, 64, CoffeeMaterials::AsTungsten) else { return };
+    assert_coffee_agrees(&diffs, 64);
+    let converted = coffee_by_class(40, 50, 64, CoffeeMaterials::AsConverted).expect("shared data");
+    assert_silver_under_mirror(&converted, &diffs);
 }
 
-/// The same at Tungsten's 200×250 and 256 spp. Fails at present (metal -5/-5/-10 %, glass
-/// +11/+12/+10 %, far beyond the noise): an open discrepancy, kept as the test to pass.
+/// The same at Tungsten's 200×250 and 256 spp (two renders, 4 minutes on 2 cores).
 #[test]
 #[ignore = "heavy (minutes on 2 cores): cargo test --release --test pbrt -- --ignored"]
 fn coffee_full_resolution_matches_tungsten() {
-    let Some(diffs) = coffee_by_class(200, 250, 256) else { return };
+    let Some(diffs) = coffee_by_class(200, 250, 256, CoffeeMaterials::AsTungsten) else { return };
     assert_coffee_agrees(&diffs, 256);
+    let converted = coffee_by_class(200, 250, 256, CoffeeMaterials::AsConverted).expect("shared data");
+    assert_silver_under_mirror(&converted, &diffs);
 }
 
-/// The region means of metal and glass are within 4 standard errors of the render's mean
-/// (Šidák-safe for 6 comparisons) plus the part no spp removes: the RGB rendering of a
-/// spectral reference. That part is bounded by the relative difference of the emitter
-/// pixels, where both renderers see the same radiance (2, 2, 2) and only the reference's
-/// own noise and colour handling remain, with a floor of 2 %.
+/// With Tungsten's materials, metal and plastic agree with Tungsten within 4 standard errors
+/// of the render's mean (Šidák-safe for the comparisons) plus what no spp removes: 1 % for
+/// metal (measured -0.1/+0.1/+0.1 % at 200×250), 2.5 % for plastic (measured -1.6/-0.5/-0.5 %:
+/// Tungsten's rough plastic against Mitsuba's, which svetlo's `Plastic` follows).
+///
+/// Glass cannot be compared that closely: Tungsten skips every intersection closer than
+/// 5e-4 scene units to a ray's origin (`DefaultEpsilon` in its `TraceableScene`), a quarter
+/// of the pot's 2 mm wall, and so loses the light piped along the wall by total internal
+/// reflection that svetlo (offsets of 2e-6) keeps. Emulating that epsilon in svetlo (an
+/// experiment, not a feature) brings the glass region to +0.0/-0.0/-0.0 % (100×125, 128 spp);
+/// without it svetlo's glass is 12-15 % brighter, growing with the depth as light piping does
+/// (-4 % at 10 segments, +15 % at 16, +24 % at 30), and svetlo's dielectric keeps a white
+/// furnace at 1 with this mesh. So glass must be at least Tungsten's (less the noise and 1 %)
+/// and at most 25 % above it.
 fn assert_coffee_agrees(diffs: &[(CoffeeClass, ClassDiff)], spp: u32) {
     let get = |c: CoffeeClass| diffs.iter().find(|(k, _)| *k == c).map(|(_, d)| d);
     let metal = get(CoffeeClass::Metal).expect("metal pixels");
     let glass = get(CoffeeClass::Glass).expect("glass pixels");
+    let plastic = get(CoffeeClass::Plastic).expect("plastic pixels");
     assert!(metal.pixels >= 20 && glass.pixels >= 20, "too few classified pixels: metal {}, glass {}", metal.pixels, glass.pixels);
-    let spectral = get(CoffeeClass::Emitter).map_or(0.0, |e| e.rel_diff().iter().fold(0.0f64, |a, d| a.max(d.abs()))).max(0.02);
-    for (name, d) in [("metal", metal), ("glass", glass)] {
+    for (name, d, floor) in [("metal", metal, 0.01), ("plastic", plastic, 0.025)] {
         for c in 0..3 {
-            let tol = 4.0 * d.std_err[c] + spectral * d.reference[c];
+            let tol = 4.0 * d.std_err[c] + floor * d.reference[c];
             let diff = (d.ours[c] - d.reference[c]).abs();
             assert!(diff <= tol, "{name} channel {c} at {spp} spp: |{:.5} - {:.5}| = {diff:.5} > {tol:.5}", d.ours[c], d.reference[c]);
         }
+    }
+    for c in 0..3 {
+        let (o, r, se) = (glass.ours[c], glass.reference[c], glass.std_err[c]);
+        assert!(o >= r * 0.99 - 4.0 * se && o <= r * 1.25 + 4.0 * se, "glass channel {c} at {spp} spp: {o:.5} against Tungsten's {r:.5} (± {se:.5})");
+    }
+}
+
+/// The file's silver against the mirror Tungsten rendered (both renders of svetlo, same
+/// seed): the metal region is darker by about silver's reflectance, which at normal
+/// incidence is (0.975, 0.958, 0.906) in svetlo's RGB; grazing views, light reflected twice
+/// and the darker `coateddiffuse` it reflects make it a little darker (measured 0.95/0.95/0.90
+/// at 40×50), never brighter. Tolerance: 4 standard errors of the ratio (the two renders'
+/// errors added as if independent) and 0.06 below R0. The other classes are the plastics' difference
+/// (`coateddiffuse` against Tungsten's plastic: -11/-5/-5 % at 200×250) and glass seen
+/// through them; they are reported by [`coffee_by_class`].
+fn assert_silver_under_mirror(silver: &[(CoffeeClass, ClassDiff)], mirror: &[(CoffeeClass, ClassDiff)]) {
+    let get = |v: &[(CoffeeClass, ClassDiff)]| v.iter().find(|(k, _)| *k == CoffeeClass::Metal).map(|(_, d)| (d.ours, d.std_err)).expect("metal pixels");
+    let ((s, se_s), (m, se_m)) = (get(silver), get(mirror));
+    let (eta, k) = svetlo::io::spectra::named_conductor("Ag").expect("silver");
+    for c in 0..3 {
+        let r0 = (((eta[c] - 1.0).powi(2) + k[c] * k[c]) / ((eta[c] + 1.0).powi(2) + k[c] * k[c])) as f64;
+        let ratio = s[c] / m[c];
+        let se = ratio * ((se_s[c] / s[c]).powi(2) + (se_m[c] / m[c]).powi(2)).sqrt();
+        println!("coffee metal channel {c}: silver / mirror {ratio:.4} (± {se:.4}), silver's normal reflectance {r0:.4}");
+        assert!(ratio <= 1.0 + 4.0 * se && ratio >= r0 - 0.06 - 4.0 * se, "channel {c}: silver / mirror = {ratio:.4} (± {se:.4}), silver's R0 {r0:.4}");
     }
 }
 
