@@ -131,21 +131,26 @@ fn depth_identity_light_and_bdpt() {
 }
 
 /// One AOV from path, light and BDPT agrees (image means within 5 standard errors over 6
-/// batches): the caustic seen on the floor and every path that reaches the camera from a
-/// diffuse surface.
+/// batches): the caustic seen on the floor and the paths seen on a diffuse surface that
+/// reach the light from a non-singular one.
 #[test]
 fn aov_agrees_across_integrators() {
     let scene = caustic(12);
-    let set = aovs(&scene, &[("caustic", "C D S+ L"), ("diffuse_last", "C D .* L")], None);
-    // The path tracer rarely finds the small light through the glass: the caustic is
-    // compared between the methods that trace from the light.
-    for (aov, methods) in [("caustic", &["light", "bdpt"][..]), ("diffuse_last", &["path", "light", "bdpt"][..])] {
+    // The path tracer rarely finds the small light through the glass, so paths that reach it
+    // right after a singular event (caustics) make its estimate heavy-tailed: its batch means
+    // fall short (by the caustic's 0.01 of 0.26, z ~ -4 under independent sampling, -8 under
+    // Sobol, whose error bars are narrower). The caustic is compared between the methods that
+    // trace from the light, and all three compare the paths whose last scattering before the
+    // light is not singular, which the path tracer reaches by light sampling.
+    let set = aovs(&scene, &[("caustic", "C D S+ L"), ("diffuse_nee", "C D (.* [DG])? L")], None);
+    for (aov, methods) in [("caustic", &["light", "bdpt"][..]), ("diffuse_nee", &["path", "light", "bdpt"][..])] {
         let mut res = Vec::new();
         for &method in methods {
             let v: Vec<f64> =
                 (0..6u64).map(|b| render(&scene, method, &settings(8, 8, 40 + b, Some(set.clone()))).layer(aov).expect("layer").mean().mean() as f64).collect();
             res.push((method, mean_se(&v)));
         }
+        println!("{aov}: {res:?}");
         for i in 0..res.len() {
             for j in i + 1..res.len() {
                 let ((a, (ma, sa)), (b, (mb, sb))) = (res[i], res[j]);
