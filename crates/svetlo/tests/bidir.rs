@@ -466,8 +466,9 @@ fn strategies_match_path(sampler: SamplerKind) {
     // The path tracer's increment is a paired difference of its batches at depths d and d - 1
     // (the same seeds), so its standard error comes from those pairs.
     const K: usize = 8;
-    let path_batches: Vec<Vec<f64>> =
-        (0..=max_depth).map(|d| if d == 0 { vec![0.0; K] } else { batches(&scene, "path", &RenderSettings { max_depth: d, ..st.clone() }, K).batch_means }).collect();
+    let path_batches: Vec<Vec<f64>> = (0..=max_depth)
+        .map(|d| if d == 0 { vec![0.0; K] } else { batches(&scene, "path", &RenderSettings { max_depth: d, ..st.clone() }, K).batch_means })
+        .collect();
     let mean_se = |xs: &[f64]| {
         let k = xs.len() as f64;
         let m = xs.iter().sum::<f64>() / k;

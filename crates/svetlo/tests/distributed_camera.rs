@@ -40,8 +40,9 @@ fn edge_scene(d: f32, n: Vec2, projection: Projection, height: u32) -> Scene {
     b.build().expect("scene")
 }
 
+/// A render with the independent sampler (`distributed` switches it to Sobol itself).
 fn render_with(scene: &Scene, name: &str, spp: u32, seed: u64) -> Film {
-    let settings = RenderSettings { spp, max_depth: 1, seed, filter: Filter::Box, ..Default::default() };
+    let settings = RenderSettings { spp, max_depth: 1, seed, filter: Filter::Box, sampler: svetlo::sampling::SamplerKind::Independent, ..Default::default() };
     svetlo::methods::by_name(name).expect("integrator").render(scene, &settings, &Progress::new()).expect("render")
 }
 
