@@ -9,6 +9,7 @@ use crate::camera::Projection;
 use crate::error::Result;
 use crate::film::Filter;
 use crate::geometry::Geometry;
+use crate::light::projector::ProjectorModel;
 use crate::light::Light;
 use crate::sampling::SamplerKind;
 use crate::scene::Scene;
@@ -368,7 +369,34 @@ pub(super) fn write(scene: &Scene, files: &mut Files) -> Result<String> {
                 let _ = writeln!(w.out, r#"  LightSource "infinite" "string filename" {} "float scale" {}"#, q(&file), e.scale);
                 w.out += "AttributeEnd\n";
             }
-            Light::Projector(_) => w.files.warn("a projector light is not exported yet; left out"),
+            Light::Projector(pr) => {
+                // pbrt's projection: image = intensity / scale; its frame is the projector's
+                // with x negated; fov across the shorter axis.
+                let (iw, ih) = match &pr.irradiance {
+                    Texture::Bitmap { image, .. } => (image.width, image.height),
+                    _ => ((64.0 * pr.aspect().max(1.0)).round() as usize, (64.0 / pr.aspect().min(1.0)).round() as usize),
+                };
+                if pr.model == ProjectorModel::Irradiance {
+                    w.once("projector", "Mitsuba's projector (irradiance E, I = π E / cos³θ) is written as pbrt's projection with the intensity image π E / cos³θ at texel centres (pbrt looks it up nearest)");
+                }
+                let img = Arc::new(pr.image_for(ProjectorModel::Intensity, iw.max(1), ih.max(1)));
+                let file = w.files.image(&img)?;
+                let tan_short = (0.5 * pr.fov_x_deg().to_radians()).tan() / pr.aspect().max(1.0);
+                let fov = 2.0 * tan_short.atan().to_degrees();
+                let ctm = pr.to_world() * Mat4::from_scale(Vec3::new(-1.0, 1.0, 1.0));
+                let _ = writeln!(w.out, "AttributeBegin\n  ConcatTransform [ {} ]", cols(&ctm));
+                let _ = writeln!(w.out, r#"  LightSource "projection" "string filename" {} "float fov" {fov} "float scale" {}"#, q(&file), pr.scale);
+                w.out += "AttributeEnd\n";
+            }
+            Light::Goniometric(g) => {
+                // The reader composes CTM · swapYZ; swapYZ is its own inverse.
+                let ctm = g.to_world() * crate::light::Goniometric::pbrt_swap_yz();
+                let img = Arc::new(Bitmap::new(g.res, g.res, g.values.iter().map(|&v| Rgb::splat(v)).collect()));
+                let file = w.files.image(&img)?;
+                let _ = writeln!(w.out, "AttributeBegin\n  ConcatTransform [ {} ]", cols(&ctm));
+                let _ = writeln!(w.out, r#"  LightSource "goniometric" "rgb I" {} "string filename" {}"#, rgb(g.intensity), q(&file));
+                w.out += "AttributeEnd\n";
+            }
             Light::Luminaire(_) => w.files.warn("an ies luminaire is not exported yet (its photometric file is not carried over); left out"),
         }
     }
