@@ -104,6 +104,12 @@ impl Writer<'_> {
                 to_uv(self, a);
                 self.line(d, "</texture>");
             }
+            Texture::Procedural(pt) => {
+                // Mitsuba 3 has none of pbrt's procedural textures (nor a texture mix).
+                let m = t.mean();
+                self.files.warn(format!("{name}: pbrt's '{}' texture has no Mitsuba 3 equal: its mean {} is written as a constant", pt.pbrt_name(), rgb(m)));
+                self.line(d, &format!(r#"<rgb name="{name}" value="{}"/>"#, rgb(m)));
+            }
             Texture::MeshAttribute(_) | Texture::UnboundAttribute(_) => {
                 self.files
                     .warn(format!("{name}: mesh_attribute textures are not exported (the meshes are written without their attributes): grey 0.5 is written"));
