@@ -520,11 +520,12 @@ fn own_scenes_render() {
     assert!(mean > 1e-3, "procedural: black ({mean})");
 }
 
-/// The path tracer and BDPT agree on `lights.pbrt` (per-pixel Z-test): the goniometric and
-/// projection lights' NEE and their importance-sampled emission give the same image.
+/// The path tracer, BDPT and the light tracer agree on `lights.pbrt` (per-pixel Z-test): the
+/// goniometric and projection lights' NEE and their importance-sampled emission give the
+/// same image.
+/// (48 × 32: a few seconds.)
 #[test]
-#[ignore = "heavy (a minute on 2 cores): cargo test --release --test pbrt_lights -- --ignored"]
-fn lights_scene_path_and_bdpt_agree() {
+fn lights_scene_path_bdpt_and_light_tracing_agree() {
     use svetlo::film::compare::z_test;
     use svetlo::film::Image;
     let scene = svetlo::io::load_pbrt(&own_scene("lights.pbrt")).expect("lights.pbrt");
@@ -540,7 +541,39 @@ fn lights_scene_path_and_bdpt_agree() {
     let var = Image::new(va.width, va.height, va.data.iter().zip(&vb.data).map(|(x, y)| *x + *y).collect());
     let z = z_test(&a, &b, &var, n).expect("z-test");
     println!("path vs bdpt: {:.3} % pass, relMSE {:.2e}", 100.0 * z.fraction_passing, z.relmse);
-    assert!(z.pass, "{:.3} % pass", 100.0 * z.fraction_passing);
+    assert!(z.pass, "path vs bdpt: {:.3} % pass", 100.0 * z.fraction_passing);
+    // The light tracer splats, so its film has no per-pixel sample variance: compare the
+    // luminance of 8 × 8-pixel blocks over independent batches (Student's t on 2 × 11 dof;
+    // |t| < 5 for all 24 blocks fails by chance with probability about 1 %).
+    let batches = |integ: &str, base: u64| -> Vec<Vec<f64>> {
+        (0..12u64)
+            .map(|k| {
+                let mut s = RenderSettings::from_scene(&scene);
+                s.spp = 32;
+                s.seed = base + k;
+                let img = svetlo::methods::by_name(integ).unwrap().render(&scene, &s, &Progress::new()).unwrap().image();
+                let mut blocks = vec![0.0f64; (img.width / 8 * (img.height / 8)) as usize];
+                for y in 0..img.height {
+                    for x in 0..img.width {
+                        blocks[((y / 8) * (img.width / 8) + x / 8) as usize] += img.data[(y * img.width + x) as usize].luminance() as f64 / 64.0;
+                    }
+                }
+                blocks
+            })
+            .collect()
+    };
+    let stats = |b: &[Vec<f64>], i: usize| {
+        let n = b.len() as f64;
+        let m = b.iter().map(|v| v[i]).sum::<f64>() / n;
+        let var = b.iter().map(|v| (v[i] - m).powi(2)).sum::<f64>() / (n - 1.0);
+        (m, var / n)
+    };
+    let (pa, lb) = (batches("path", 100), batches("light", 200));
+    for i in 0..pa[0].len() {
+        let ((ma, sa), (mb, sb)) = (stats(&pa, i), stats(&lb, i));
+        let t = (ma - mb) / (sa + sb).sqrt().max(1e-12);
+        assert!(t.abs() < 5.0, "block {i}: path {ma:.5} vs light tracing {mb:.5} (t = {t:.2})");
+    }
 }
 
 /// The equal-area map the goniometric light uses is the infinite light's: texel centres
