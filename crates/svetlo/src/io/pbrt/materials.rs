@@ -457,6 +457,9 @@ impl Loader {
             }
             other => return Err(loc.err(format!("unknown texture class '{other}'"))),
         };
+        if matches!(class, "fbm" | "wrinkled" | "windy" | "marble") {
+            self.warn(loc, format!("texture '{class}': no ray differentials, so every octave is summed (pbrt fades those finer than a pixel)"));
+        }
         // Images and checkerboards under a non-uv mapping: looked up at the mapping's (s, t).
         let t = match (&mapping, &t) {
             (Mapping2D::Uv { .. }, _) => t,
