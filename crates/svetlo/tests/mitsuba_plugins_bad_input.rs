@@ -108,7 +108,7 @@ fn mesh_attribute_bad_input_and_values() {
         let m = &s.materials[s.shapes[0].material as usize];
         for prim in 0..2u32 {
             for bary in [glam::Vec2::ZERO, glam::Vec2::new(1.0, 0.0), glam::Vec2::new(0.25, 0.5)] {
-                let p = svetlo::texture::TexPoint { uv: glam::Vec2::ZERO, prim, bary };
+                let p = svetlo::texture::TexPoint { uv: glam::Vec2::ZERO, prim, bary, ..Default::default() };
                 let svetlo::bsdf::Material::Diffuse { reflectance } = m else { panic!("{m:?}") };
                 let got = reflectance.eval(p);
                 match want {

@@ -157,12 +157,12 @@ impl Roughness {
     }
 }
 
-/// Mean of a texture for sampling heuristics. Bitmaps would need a pass over every texel
-/// per hit, so they use the local value: that changes only how samples are spread
+/// Mean of a texture for sampling heuristics. Bitmaps (and procedural textures) would need
+/// a pass over every texel per hit, so they use the local value: that changes only how samples are spread
 /// between lobes (the estimate stays unbiased), not the BSDF.
 fn sampling_mean(t: &Texture, uv: TexPoint) -> f32 {
     match t {
-        Texture::Bitmap { .. } => t.eval(uv).mean(),
+        Texture::Bitmap { .. } | Texture::Procedural(_) => t.eval(uv).mean(),
         _ => t.mean().mean(),
     }
 }

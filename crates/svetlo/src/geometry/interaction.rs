@@ -29,7 +29,7 @@ impl SurfaceInteraction {
     /// Where textures are looked up at this point.
     #[inline]
     pub fn tex_point(&self) -> crate::texture::TexPoint {
-        crate::texture::TexPoint { uv: self.uv, prim: self.prim, bary: self.bary }
+        crate::texture::TexPoint { uv: self.uv, prim: self.prim, bary: self.bary, p: self.p, n: self.ng }
     }
     #[inline]
     pub fn to_local(&self, w: Vec3) -> Vec3 {

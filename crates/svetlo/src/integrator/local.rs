@@ -131,7 +131,7 @@ impl LocalLights {
     fn sample_general(&self, scene: &Scene, i: usize, p: Vec3) -> Option<PointLightSample> {
         let light = &scene.lights[i];
         match light {
-            Light::Point { .. } | Light::Spot { .. } | Light::Luminaire(_) | Light::Projector(_) => {
+            Light::Point { .. } | Light::Spot { .. } | Light::Luminaire(_) | Light::Projector(_) | Light::Goniometric(_) => {
                 let ls = light.sample_li(p, Vec2::splat(0.5), &scene.bounds)?;
                 Some(PointLightSample { wi: ls.wi, li: ls.li, p: Some(ls.p) })
             }

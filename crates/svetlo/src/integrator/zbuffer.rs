@@ -193,6 +193,7 @@ impl ZBuffer {
                     Light::Point { position, .. } | Light::Spot { position, .. } => Some(ShadowMap::point(*position, res, &occluders, near)),
                     Light::Luminaire(lum) => Some(ShadowMap::point(lum.position, res, &occluders, near)),
                     Light::Projector(pr) => Some(ShadowMap::point(pr.position, res, &occluders, near)),
+                    Light::Goniometric(g) => Some(ShadowMap::point(g.position, res, &occluders, near)),
                     Light::Area(_) => {
                         // The proxy's position seen from the scene's centre (fixed for meshes).
                         let s = lights.sample(scene, i, scene.bounds.center)?;

@@ -1,7 +1,8 @@
 //! Emitters, with Mitsuba 3's semantics. Area lights are shapes with an emitting material
 //! (`area.rs`); the others are standalone: point and spot (`point.rs`), directional and the
 //! geometry of rays from infinity (`directional.rs`), constant, and the lat-long
-//! environment map (`envmap.rs`), the projector (`projector.rs`).
+//! environment map (`envmap.rs`), the projector (`projector.rs`), pbrt-v4's goniometric
+//! light (`goniometric.rs`).
 //!
 //! Two families of sampling, with the measures they use:
 //! * From a reference point (next-event estimation): `sample_li` returns a direction toward
@@ -17,12 +18,14 @@
 pub mod area;
 mod directional;
 pub mod envmap;
+pub mod goniometric;
 pub mod luminaire;
 mod point;
 pub mod projector;
 
 pub use area::AreaLight;
 pub use envmap::EnvMap;
+pub use goniometric::Goniometric;
 pub use luminaire::Luminaire;
 pub use projector::Projector;
 
@@ -102,6 +105,9 @@ pub enum Light {
     Luminaire(Box<Luminaire>),
     /// A pinhole projecting an image (Mitsuba `projector`, see `projector.rs`).
     Projector(Box<Projector>),
+    /// pbrt-v4's `goniometric` light (`goniometric.rs`): a point with an equal-area image
+    /// of its intensity.
+    Goniometric(Box<Goniometric>),
 }
 
 /// Context for light sampling: the scene's bounding sphere (infinite lights need it).
@@ -130,11 +136,12 @@ impl Light {
             Light::Constant { .. } => "constant",
             Light::EnvMap(_) => "envmap",
             Light::Luminaire(_) => "ies",
+            Light::Goniometric(_) => "goniometric",
         }
     }
 
     pub fn is_delta(&self) -> bool {
-        matches!(self, Light::Point { .. } | Light::Spot { .. } | Light::Directional { .. } | Light::Luminaire(_) | Light::Projector(_))
+        matches!(self, Light::Point { .. } | Light::Spot { .. } | Light::Directional { .. } | Light::Luminaire(_) | Light::Projector(_) | Light::Goniometric(_))
     }
 
     pub fn is_infinite(&self) -> bool {
@@ -200,6 +207,7 @@ impl Light {
                 Some(LightSample { wi, li: env.eval(wi), pdf, p: point_at_infinity(bounds, p_ref, wi), n: Vec3::ZERO, infinite: true })
             }
             Light::Luminaire(l) => l.sample_li(p_ref, u),
+            Light::Goniometric(g) => g.sample_li(p_ref),
         }
     }
 
@@ -223,7 +231,7 @@ impl Light {
 
     /// Emitted power (luminance), for choosing lights in proportion to it:
     /// * area: π A · mean radiance (one-sided Lambertian);
-    /// * point: 4π I; spot: I ∫ profile dω = 2π I [1 - (sin c - sin b) / (c - b)] for cutoff c
+    /// * point: 4π I; goniometric: 4π I × the image's mean; spot: I ∫ profile dω = 2π I [1 - (sin c - sin b) / (c - b)] for cutoff c
     ///   and beam width b (exact for Mitsuba's linear-in-angle profile);
     /// * directional: E π R² (what crosses the scene's bounding disk);
     /// * constant: 4π L π R²; envmap: π R² ∫ L dω. The infinite lights' values count light
@@ -243,6 +251,7 @@ impl Light {
             Light::Constant { radiance } => 4.0 * PI * disk * radiance.luminance(),
             Light::EnvMap(env) => disk * env.luminance_integral(),
             Light::Luminaire(l) => l.power(),
+            Light::Goniometric(g) => g.power(),
         }
         .max(0.0)
     }
@@ -282,6 +291,7 @@ impl Light {
                 Some(EmissionSample { ray, le: ls.li, pdf_pos, pdf_dir: ls.pdf, n: d })
             }
             Light::Luminaire(l) => l.sample_le(u_pos, u_dir, time),
+            Light::Goniometric(g) => g.sample_le(u_dir, time),
         }
     }
 
@@ -296,6 +306,7 @@ impl Light {
             Light::Directional { .. } => (disk_pdf(bounds), 0.0),
             Light::Constant { .. } | Light::EnvMap(_) => (disk_pdf(bounds), self.pdf_li_escaped(-ray.d)),
             Light::Luminaire(l) => (0.0, l.pdf_dir(ray.d)),
+            Light::Goniometric(g) => (0.0, g.pdf_dir(ray.d)),
         }
     }
 }

@@ -105,6 +105,45 @@ pub fn square_to_uniform_triangle(u: Vec2) -> Vec2 {
     Vec2::new(b0, b1)
 }
 
+/// pbrt-v4's EqualAreaSphereToSquare (Clarberg's octahedral equal-area map): a unit
+/// direction to [0,1]². Every region of the square maps to a region of the sphere 4π
+/// times its area (pbrt's infinite and goniometric lights' images).
+pub fn equal_area_sphere_to_square(d: Vec3) -> Vec2 {
+    let (x, y, z) = (d.x.abs(), d.y.abs(), d.z.abs());
+    let r = (1.0 - z).max(0.0).sqrt();
+    let a = x.max(y);
+    let b = if a == 0.0 { 0.0 } else { x.min(y) / a };
+    let mut phi = b.atan() * 2.0 / PI;
+    if x < y {
+        phi = 1.0 - phi;
+    }
+    let mut v = phi * r;
+    let mut u = r - v;
+    if d.z < 0.0 {
+        std::mem::swap(&mut u, &mut v);
+        u = 1.0 - u;
+        v = 1.0 - v;
+    }
+    u = u.copysign(d.x);
+    v = v.copysign(d.y);
+    Vec2::new(0.5 * (u + 1.0), 0.5 * (v + 1.0))
+}
+
+/// The inverse of [`equal_area_sphere_to_square`].
+pub fn equal_area_square_to_sphere(p: Vec2) -> Vec3 {
+    let (u, v) = (2.0 * p.x - 1.0, 2.0 * p.y - 1.0);
+    let (up, vp) = (u.abs(), v.abs());
+    let sd = 1.0 - (up + vp);
+    let d = sd.abs();
+    let r = 1.0 - d;
+    let phi = if r == 0.0 { 1.0 } else { (vp - up) / r + 1.0 } * PI / 4.0;
+    let z = (1.0 - r * r).copysign(sd);
+    let cos_phi = phi.cos().copysign(u);
+    let sin_phi = phi.sin().copysign(v);
+    let s = r * (2.0 - r * r).max(0.0).sqrt();
+    Vec3::new(cos_phi * s, sin_phi * s, z)
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

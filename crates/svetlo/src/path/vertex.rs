@@ -303,6 +303,7 @@ impl Vertex {
             }
             l @ (Light::Spot { .. } | Light::Luminaire(_)) => l.spot_intensity(w),
             Light::Projector(pr) => pr.intensity(w),
+            Light::Goniometric(g) => g.eval(w),
             Light::Point { .. } => self.le,
             _ => Rgb::BLACK,
         }

@@ -1,10 +1,17 @@
 //! Textures: RGB-valued functions of a surface point (its uv, or for Mitsuba's
 //! `mesh_attribute` its triangle and barycentrics). Scalar parameters (roughness, opacity,
-//! weights) use the same textures, read as Mitsuba's `eval_1` reads them.
+//! weights) use the same textures, read as Mitsuba's `eval_1` reads them. pbrt-v4's
+//! procedural textures (`procedural.rs`, on Perlin noise in `noise.rs`) also read the
+//! point's position and normal.
+
+pub mod noise;
+pub mod procedural;
 
 use crate::spectrum::Rgb;
-use glam::{Affine2, Vec2};
+use glam::{Affine2, Vec2, Vec3};
 use std::sync::Arc;
+
+pub use procedural::{Mapping2D, Procedural};
 
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Default)]
 pub enum FilterMode {
@@ -45,12 +52,16 @@ impl Bitmap {
 }
 
 /// Where a texture is looked up: the uv, and the triangle with the barycentrics (b1, b2) of
-/// the point inside it, which per-vertex and per-face mesh attributes need.
+/// the point inside it, which per-vertex and per-face mesh attributes need; the world
+/// position and geometric normal, which pbrt's 3-D and direction textures need (zero where
+/// a caller knows only the uv).
 #[derive(Clone, Copy, Debug, Default, PartialEq)]
 pub struct TexPoint {
     pub uv: Vec2,
     pub prim: u32,
     pub bary: Vec2,
+    pub p: Vec3,
+    pub n: Vec3,
 }
 
 impl TexPoint {
@@ -61,7 +72,7 @@ impl TexPoint {
 
 impl From<Vec2> for TexPoint {
     fn from(uv: Vec2) -> Self {
-        TexPoint { uv, prim: TexPoint::NO_PRIM, bary: Vec2::ZERO }
+        TexPoint { uv, prim: TexPoint::NO_PRIM, ..Default::default() }
     }
 }
 
@@ -109,6 +120,8 @@ pub enum Texture {
     MeshAttribute(Arc<MeshAttribute>),
     /// A `mesh_attribute` not yet bound to a mesh (the loader binds it per shape).
     UnboundAttribute(String),
+    /// pbrt-v4's procedural textures and textured mixes (`procedural.rs`).
+    Procedural(Arc<Procedural>),
 }
 
 impl Default for Texture {
@@ -158,6 +171,7 @@ impl Texture {
             Texture::Constant(c) => *c,
             Texture::MeshAttribute(a) => a.eval(p),
             Texture::UnboundAttribute(_) => Rgb::BLACK,
+            Texture::Procedural(t) => t.eval(&p),
             Texture::Checkerboard { color0, color1, to_uv } => {
                 let p = to_uv.transform_point2(uv);
                 let (fx, fy) = (p.x - p.x.floor(), p.y - p.y.floor());
@@ -240,6 +254,7 @@ impl Texture {
             Texture::Bitmap { image, .. } => image.mean(),
             Texture::MeshAttribute(a) => a.mean(),
             Texture::UnboundAttribute(_) => Rgb::BLACK,
+            Texture::Procedural(t) => t.mean(),
         }
     }
     pub fn is_constant(&self) -> bool {

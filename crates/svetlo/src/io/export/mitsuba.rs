@@ -8,6 +8,7 @@ use crate::camera::Projection;
 use crate::error::Result;
 use crate::film::Filter;
 use crate::geometry::Geometry;
+use crate::light::projector::ProjectorModel;
 use crate::light::Light;
 use crate::sampling::SamplerKind;
 use crate::scene::Scene;
@@ -102,6 +103,12 @@ impl Writer<'_> {
                 self.line(d + 1, &format!(r#"<rgb name="color1" value="{}"/>"#, rgb(*color1)));
                 to_uv(self, a);
                 self.line(d, "</texture>");
+            }
+            Texture::Procedural(pt) => {
+                // Mitsuba 3 has none of pbrt's procedural textures (nor a texture mix).
+                let m = t.mean();
+                self.files.warn(format!("{name}: pbrt's '{}' texture has no Mitsuba 3 equal: its mean {} is written as a constant", pt.pbrt_name(), rgb(m)));
+                self.line(d, &format!(r#"<rgb name="{name}" value="{}"/>"#, rgb(m)));
             }
             Texture::MeshAttribute(_) | Texture::UnboundAttribute(_) => {
                 self.files
@@ -424,7 +431,38 @@ pub(super) fn write(scene: &Scene, files: &mut Files) -> Result<String> {
                 w.line(2, &format!(r#"<transform name="to_world"><matrix value="{}"/></transform>"#, matrix(&e.to_world)));
                 w.line(1, "</emitter>");
             }
-            Light::Projector(_) => w.files.warn("a projector light is not exported yet; left out"),
+            Light::Projector(pr) => {
+                let (iw, ih) = match &pr.irradiance {
+                    Texture::Bitmap { image, .. } => (image.width, image.height),
+                    _ => (0, 0),
+                };
+                w.line(1, r#"<emitter type="projector">"#);
+                w.line(2, &format!(r#"<transform name="to_world"><matrix value="{}"/></transform>"#, matrix(&pr.to_world())));
+                w.line(2, &format!(r#"<float name="fov" value="{}"/>"#, pr.fov_x_deg()));
+                w.line(2, r#"<string name="fov_axis" value="x"/>"#);
+                w.line(2, &format!(r#"<float name="scale" value="{}"/>"#, pr.scale));
+                if pr.model == ProjectorModel::Intensity && iw > 0 {
+                    w.files.warn("pbrt's projection light (the image is the intensity) is written as Mitsuba's projector with the irradiance image P cos³θ / π at texel centres (nearest texels, as pbrt)");
+                    let image = std::sync::Arc::new(pr.image_for(ProjectorModel::Irradiance, iw, ih));
+                    let t = Texture::Bitmap { image, filter: FilterMode::Nearest, wrap: WrapMode::Clamp, to_uv: Affine2::IDENTITY };
+                    w.texture(2, "irradiance", &t)?;
+                } else {
+                    w.texture(2, "irradiance", &pr.irradiance)?;
+                }
+                w.line(1, "</emitter>");
+            }
+            Light::Goniometric(g) => {
+                // Mitsuba 3 has no goniometric light: a point light of the same power.
+                w.files.warn(
+                    "Mitsuba 3 has no goniometric light: written as a point light of the same power (its mean intensity); the directional distribution is lost",
+                );
+                let i = g.intensity * (g.solid_angle_weight() / (4.0 * crate::math::PI));
+                let p = g.position;
+                w.line(1, r#"<emitter type="point">"#);
+                w.line(2, &format!(r#"<point name="position" x="{}" y="{}" z="{}"/>"#, p.x, p.y, p.z));
+                w.line(2, &format!(r#"<rgb name="intensity" value="{}"/>"#, rgb(i)));
+                w.line(1, "</emitter>");
+            }
             Light::Luminaire(_) => w.files.warn("an ies luminaire is not exported yet (its photometric file is not carried over); left out"),
         }
     }

@@ -39,7 +39,9 @@ struct Files {
     created: bool,
     meshes: usize,
     /// Bitmaps already written, by identity (a shared texture is written once).
-    images: HashMap<usize, String>,
+    /// By the image's address; the image is held so that its address cannot be reused by
+    /// another (exporters also write images they build on the fly).
+    images: HashMap<usize, (Arc<Bitmap>, String)>,
     warnings: Vec<String>,
 }
 
@@ -76,7 +78,7 @@ impl Files {
     /// Write a bitmap as EXR (linear, as svetlo holds it), once per bitmap.
     fn image(&mut self, image: &Arc<Bitmap>) -> Result<String> {
         let key = Arc::as_ptr(image) as usize;
-        if let Some(n) = self.images.get(&key) {
+        if let Some((_, n)) = self.images.get(&key) {
             return Ok(n.clone());
         }
         self.ensure_dir()?;
@@ -84,7 +86,7 @@ impl Files {
         let img = crate::film::Image::new(image.width, image.height, image.data.clone());
         crate::io::image_io::write_exr(&self.dir.join(&name), &img)?;
         let rel = format!("{}/{name}", self.rel);
-        self.images.insert(key, rel.clone());
+        self.images.insert(key, (image.clone(), rel.clone()));
         Ok(rel)
     }
 }

@@ -9,11 +9,12 @@ use crate::camera::Projection;
 use crate::error::Result;
 use crate::film::Filter;
 use crate::geometry::Geometry;
+use crate::light::projector::ProjectorModel;
 use crate::light::Light;
 use crate::sampling::SamplerKind;
 use crate::scene::Scene;
 use crate::spectrum::Rgb;
-use crate::texture::{Bitmap, FilterMode, Texture, WrapMode};
+use crate::texture::{Bitmap, FilterMode, Mapping2D, Procedural, Texture, WrapMode};
 use glam::{Affine2, Mat4, Vec2, Vec3};
 use std::fmt::Write as _;
 use std::sync::Arc;
@@ -66,6 +67,18 @@ impl Writer<'_> {
         let name = format!("tex{}", self.textures);
         self.textures += 1;
         let kind = if float { "float" } else { "spectrum" };
+        let (body, ctm) = self.texture_body(t, float)?;
+        if let Some(m) = ctm {
+            // The texture space is the CTM at the directive.
+            let _ = writeln!(self.out, "AttributeBegin\n  Transform [ {} ]\n  Texture \"{name}\" \"{kind}\" {body}\nAttributeEnd", cols(&m));
+        } else {
+            let _ = writeln!(self.out, "Texture \"{name}\" \"{kind}\" {body}");
+        }
+        Ok(name)
+    }
+
+    /// A texture's class and parameters, and the texture space it needs (world from texture).
+    fn texture_body(&mut self, t: &Texture, float: bool) -> Result<(String, Option<Mat4>)> {
         let body = match t {
             Texture::Constant(c) => {
                 if float {
@@ -100,6 +113,7 @@ impl Writer<'_> {
                     format!(r#""checkerboard" "rgb tex1" {} "rgb tex2" {} {uv}"#, rgb(*color0), rgb(*color1))
                 }
             }
+            Texture::Procedural(pt) => return self.procedural(pt, float),
             Texture::MeshAttribute(_) | Texture::UnboundAttribute(_) => {
                 self.once(
                     "mesh_attribute",
@@ -112,8 +126,81 @@ impl Writer<'_> {
                 }
             }
         };
-        let _ = writeln!(self.out, "Texture \"{name}\" \"{kind}\" {body}");
-        Ok(name)
+        Ok((body, None))
+    }
+
+    /// A 2-D mapping's parameters, and the texture space (world from texture) it needs.
+    fn mapping(m: &Mapping2D) -> (String, Option<Mat4>) {
+        match m {
+            Mapping2D::Uv { su, sv, du, dv } => (format!(r#""float uscale" {su} "float vscale" {sv} "float udelta" {du} "float vdelta" {dv}"#), None),
+            Mapping2D::Spherical { world_to_texture } => (r#""string mapping" "spherical""#.to_string(), Some(world_to_texture.inverse())),
+            Mapping2D::Cylindrical { world_to_texture } => (r#""string mapping" "cylindrical""#.to_string(), Some(world_to_texture.inverse())),
+            Mapping2D::Planar { world_to_texture, v1, v2, ds, dt } => (
+                format!(
+                    r#""string mapping" "planar" "vector3 v1" [ {} {} {} ] "vector3 v2" [ {} {} {} ] "float udelta" {ds} "float vdelta" {dt}"#,
+                    v1.x, v1.y, v1.z, v2.x, v2.y, v2.z
+                ),
+                Some(world_to_texture.inverse()),
+            ),
+        }
+    }
+
+    /// A texture parameter `name` of a float or spectrum texture.
+    fn param(&mut self, name: &str, t: &Texture, float: bool) -> Result<String> {
+        if float {
+            self.scalar(name, t)
+        } else {
+            self.color(name, t)
+        }
+    }
+
+    /// pbrt's own procedural textures: the body of the `Texture` line, and its texture space.
+    fn procedural(&mut self, pt: &Procedural, float: bool) -> Result<(String, Option<Mat4>)> {
+        let val = |c: Rgb| if float { format!("{}", c.r) } else { rgb(c) };
+        let ty = if float { "float" } else { "rgb" };
+        Ok(match pt {
+            Procedural::Bilerp { mapping, v00, v01, v10, v11 } => {
+                let (m, ctm) = Self::mapping(mapping);
+                (format!(r#""bilerp" "{ty} v00" {} "{ty} v01" {} "{ty} v10" {} "{ty} v11" {} {m}"#, val(*v00), val(*v01), val(*v10), val(*v11)), ctm)
+            }
+            Procedural::DirectionMix { tex1, tex2, dir } => {
+                let (a, b) = (self.param("tex1", tex1, float)?, self.param("tex2", tex2, float)?);
+                (format!(r#""directionmix" {a} {b} "vector3 dir" [ {} {} {} ]"#, dir.x, dir.y, dir.z), None)
+            }
+            Procedural::Dots { mapping, inside, outside } => {
+                let (a, b) = (self.param("inside", inside, float)?, self.param("outside", outside, float)?);
+                let (m, ctm) = Self::mapping(mapping);
+                (format!(r#""dots" {a} {b} {m}"#), ctm)
+            }
+            Procedural::Fbm { world_to_texture, omega, octaves } => {
+                (format!(r#""fbm" "float roughness" {omega} "integer octaves" {octaves}"#), Some(world_to_texture.inverse()))
+            }
+            Procedural::Wrinkled { world_to_texture, omega, octaves } => {
+                (format!(r#""wrinkled" "float roughness" {omega} "integer octaves" {octaves}"#), Some(world_to_texture.inverse()))
+            }
+            Procedural::Windy { world_to_texture } => (r#""windy""#.to_string(), Some(world_to_texture.inverse())),
+            Procedural::Marble { world_to_texture, omega, octaves, scale, variation } => (
+                format!(r#""marble" "float roughness" {omega} "integer octaves" {octaves} "float scale" {scale} "float variation" {variation}"#),
+                Some(world_to_texture.inverse()),
+            ),
+            Procedural::Mix { tex1, tex2, amount } => {
+                let (a, b, c) = (self.param("tex1", tex1, float)?, self.param("tex2", tex2, float)?, self.scalar("amount", amount)?);
+                (format!(r#""mix" {a} {b} {c}"#), None)
+            }
+            Procedural::Scale { tex, scale } => {
+                let (a, b) = (self.param("tex", tex, float)?, self.scalar("scale", scale)?);
+                (format!(r#""scale" {a} {b}"#), None)
+            }
+            Procedural::Mapped { mapping, inner } => {
+                // The inner texture's own uv transform is pbrt's identity uv mapping (the
+                // reader's flip); the mapping's parameters replace it.
+                let (body, _) = self.texture_body(inner, float)?;
+                let identity = Affine2::from_mat2_translation(glam::Mat2::from_diagonal(Vec2::new(1.0, -1.0)), Vec2::new(0.0, 1.0));
+                let id = self.uv_params(&identity);
+                let (m, ctm) = Self::mapping(mapping);
+                (body.replace(&id, &m), ctm)
+            }
+        })
     }
 
     fn color(&mut self, name: &str, t: &Texture) -> Result<String> {
@@ -368,7 +455,34 @@ pub(super) fn write(scene: &Scene, files: &mut Files) -> Result<String> {
                 let _ = writeln!(w.out, r#"  LightSource "infinite" "string filename" {} "float scale" {}"#, q(&file), e.scale);
                 w.out += "AttributeEnd\n";
             }
-            Light::Projector(_) => w.files.warn("a projector light is not exported yet; left out"),
+            Light::Projector(pr) => {
+                // pbrt's projection: image = intensity / scale; its frame is the projector's
+                // with x negated; fov across the shorter axis.
+                let (iw, ih) = match &pr.irradiance {
+                    Texture::Bitmap { image, .. } => (image.width, image.height),
+                    _ => ((64.0 * pr.aspect().max(1.0)).round() as usize, (64.0 / pr.aspect().min(1.0)).round() as usize),
+                };
+                if pr.model == ProjectorModel::Irradiance {
+                    w.once("projector", "Mitsuba's projector (irradiance E, I = π E / cos³θ) is written as pbrt's projection with the intensity image π E / cos³θ at texel centres (pbrt looks it up nearest)");
+                }
+                let img = Arc::new(pr.image_for(ProjectorModel::Intensity, iw.max(1), ih.max(1)));
+                let file = w.files.image(&img)?;
+                let tan_short = (0.5 * pr.fov_x_deg().to_radians()).tan() / pr.aspect().max(1.0);
+                let fov = 2.0 * tan_short.atan().to_degrees();
+                let ctm = pr.to_world() * Mat4::from_scale(Vec3::new(-1.0, 1.0, 1.0));
+                let _ = writeln!(w.out, "AttributeBegin\n  ConcatTransform [ {} ]", cols(&ctm));
+                let _ = writeln!(w.out, r#"  LightSource "projection" "string filename" {} "float fov" {fov} "float scale" {}"#, q(&file), pr.scale);
+                w.out += "AttributeEnd\n";
+            }
+            Light::Goniometric(g) => {
+                // The reader composes CTM · swapYZ; swapYZ is its own inverse.
+                let ctm = g.to_world() * crate::light::Goniometric::pbrt_swap_yz();
+                let img = Arc::new(Bitmap::new(g.res, g.res, g.values.iter().map(|&v| Rgb::splat(v)).collect()));
+                let file = w.files.image(&img)?;
+                let _ = writeln!(w.out, "AttributeBegin\n  ConcatTransform [ {} ]", cols(&ctm));
+                let _ = writeln!(w.out, r#"  LightSource "goniometric" "rgb I" {} "string filename" {}"#, rgb(g.intensity), q(&file));
+                w.out += "AttributeEnd\n";
+            }
             Light::Luminaire(_) => w.files.warn("an ies luminaire is not exported yet (its photometric file is not carried over); left out"),
         }
     }

@@ -14,7 +14,7 @@ use super::{AreaEmission, Loader};
 use crate::error::Result;
 use crate::geometry::Geometry;
 use crate::io::spectra::SpectrumKind;
-use crate::light::{EnvMap, Light};
+use crate::light::{EnvMap, Goniometric, Light, Projector};
 use crate::math::PI;
 use crate::spectrum::Rgb;
 use crate::texture::Texture;
@@ -128,15 +128,80 @@ impl Loader {
                     }
                 }
             }
-            "goniometric" | "projection" => {
-                self.warn(loc, format!("light '{ty}' is not supported yet; skipped"));
-                return Ok(());
-            }
+            "goniometric" => self.goniometric(p, &m, loc)?,
+            "projection" => self.projection(p, &m, loc)?,
             other => return Err(loc.err(format!("unknown light '{other}'"))),
         };
         self.warn_unused(&format!("LightSource \"{ty}\""), p);
         self.b.add_light(light);
         Ok(())
+    }
+
+    /// pbrt-v4's goniometric light (light/goniometric.rs): `I` × `scale` (pbrt's emitter
+    /// convention) × the image's channel mean per texel; `power` rescales to that many watts
+    /// (luminance), over the image's 4π × mean.
+    fn goniometric(&mut self, p: &ParamList, m: &Mat4, loc: &Loc) -> Result<Light> {
+        let mut i = self.emitted(p, "I", loc)?;
+        let (values, res) = match p.string("filename")?.map(str::to_string) {
+            None => {
+                self.warn(loc, "goniometric: no 'filename'; it emits like a point light");
+                (vec![1.0], 1)
+            }
+            Some(file) => {
+                let path = self.resolve(&file, loc);
+                let img = self.bitmap(&path, false, loc)?;
+                if img.width != img.height {
+                    return Err(loc.err(format!(
+                        "goniometric: '{file}' is {}x{}; pbrt-v4's goniometric images are square (equal-area octahedral)",
+                        img.width, img.height
+                    )));
+                }
+                // pbrt keeps one channel: the mean of R, G and B.
+                (img.data.iter().map(|c| ((c.r + c.g + c.b) / 3.0).max(0.0)).collect(), img.width)
+            }
+        };
+        let to_world = *m * Goniometric::pbrt_swap_yz();
+        let g = Goniometric::new(&to_world, i, values.clone(), res).ok_or_else(|| loc.err("goniometric: degenerate transform or image"))?;
+        if let Some(power) = p.opt_float("power")? {
+            if !(power >= 0.0 && power.is_finite()) {
+                return Err(loc.err(format!("goniometric: 'power' must be non-negative, got {power}")));
+            }
+            if power > 0.0 {
+                i = rescale(i, power, g.solid_angle_weight());
+                let g = Goniometric::new(&to_world, i, values, res).ok_or_else(|| loc.err("goniometric: degenerate transform or image"))?;
+                return Ok(Light::Goniometric(Box::new(g)));
+            }
+        }
+        Ok(Light::Goniometric(Box::new(g)))
+    }
+
+    /// pbrt-v4's projection light (light/projector.rs, pbrt's model): the image is the
+    /// radiant intensity × `scale`, `fov` (default 90°) across its shorter axis; `power`
+    /// rescales to that many watts (luminance).
+    fn projection(&mut self, p: &ParamList, m: &Mat4, loc: &Loc) -> Result<Light> {
+        let file = p.string("filename")?.ok_or_else(|| loc.err("projection: needs \"string filename\""))?.to_string();
+        let scale = p.float("scale", 1.0)?;
+        if !(scale >= 0.0 && scale.is_finite()) {
+            return Err(loc.err(format!("light 'scale' must be non-negative, got {scale}")));
+        }
+        let fov = p.float("fov", 90.0)?;
+        if !(fov > 0.0 && fov < 180.0) {
+            return Err(loc.err(format!("projection: 'fov' must be in (0, 180) degrees, got {fov}")));
+        }
+        let path = self.resolve(&file, loc);
+        let img = self.bitmap(&path, false, loc)?;
+        let scale = scale * self.imaging_ratio;
+        let mut pr = Projector::pbrt(m, fov, img.clone(), scale).ok_or_else(|| loc.err("projection: degenerate transform"))?;
+        if let Some(power) = p.opt_float("power")? {
+            if !(power >= 0.0 && power.is_finite()) {
+                return Err(loc.err(format!("projection: 'power' must be non-negative, got {power}")));
+            }
+            let unit = pr.unit_power();
+            if power > 0.0 && unit > 0.0 {
+                pr = Projector::pbrt(m, fov, img, power / unit).ok_or_else(|| loc.err("projection: degenerate transform"))?;
+            }
+        }
+        Ok(Light::Projector(Box::new(pr)))
     }
 
     pub(super) fn area_light_source(&mut self, ty: &str, p: &ParamList, loc: &Loc) -> Result<()> {

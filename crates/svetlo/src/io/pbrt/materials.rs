@@ -7,6 +7,13 @@
 //! primaries' luminous weights peak) since svetlo's dielectrics are not dispersive.
 //! Roughness: `remaproughness` (default true) maps pbrt's roughness r to alpha = sqrt(r)
 //! (pbrt-v4's TrowbridgeReitz RoughnessToAlpha); alphas below 1e-3 are smooth, as in pbrt.
+//! Textures: pbrt's procedural ones (`bilerp`, `directionmix`, `dots`, `fbm`, `wrinkled`,
+//! `windy`, `marble`) and textured `mix`/`scale` become [`Procedural`] (texture/procedural.rs,
+//! with what is approximated); every 2-D texture takes pbrt's uv, spherical, cylindrical and
+//! planar mappings, in the texture space of the CTM at the `Texture` directive. `ptex` is
+//! not supported. pbrt-v4's source hands `dots`' "inside" to its outside-the-dots slot
+//! (its Create passes inside, outside to a constructor taking outside, inside); svetlo
+//! follows the parameters' names, so a pbrt-v4 render shows the two swapped.
 
 use super::lexer::Loc;
 use super::params::{ParamList, SpectrumValue};
@@ -16,8 +23,8 @@ use crate::bsdf::Material;
 use crate::error::Result;
 use crate::io::spectra::{self, SpectrumKind};
 use crate::spectrum::Rgb;
-use crate::texture::{FilterMode, Texture, WrapMode};
-use glam::{Affine2, Mat2, Vec2};
+use crate::texture::{FilterMode, Mapping2D, Procedural, Texture, WrapMode};
+use glam::{Affine2, Mat2, Vec2, Vec3};
 
 /// Sellmeier coefficients (B1, B2, B3, C1, C2, C3; C in µm²) of pbrt-v4's named glasses
 /// (Schott's catalogue).
@@ -320,6 +327,9 @@ impl Loader {
             }
         };
         let to_uv = self.uv_mapping(p, loc)?;
+        let mapping = self.mapping2d(p, loc)?;
+        let world_to_texture = self.gs.ctm[0].inverse();
+        let proc = |t: Procedural| Texture::Procedural(std::sync::Arc::new(t));
         let t = match class {
             "constant" => get(self, "value", 1.0)?,
             "imagemap" => {
@@ -387,20 +397,74 @@ impl Loader {
                     (Texture::Checkerboard { color0, color1, to_uv }, Texture::Constant(b)) => {
                         Texture::Checkerboard { color0: color0 * b.r, color1: color1 * b.r, to_uv }
                     }
-                    _ => return Err(loc.err("scale texture: only a constant scale of a constant or image texture is supported yet")),
+                    (tex, scale) => proc(Procedural::Scale { tex, scale }),
                 }
             }
             "mix" => {
                 let (a, b, amt) = (get(self, "tex1", 0.0)?, get(self, "tex2", 1.0)?, self.float_param(p, "amount", 0.5)?);
                 match (a, b, amt) {
                     (Texture::Constant(a), Texture::Constant(b), Texture::Constant(t)) => Texture::Constant(a * (1.0 - t.r) + b * t.r),
-                    _ => return Err(loc.err("mix texture: only constants are supported yet")),
+                    (tex1, tex2, amount) => proc(Procedural::Mix { tex1, tex2, amount }),
                 }
             }
-            "bilerp" | "directionmix" | "dots" | "fbm" | "wrinkled" | "windy" | "marble" | "ptex" => {
-                return Err(loc.err(format!("texture '{class}' is not supported yet")));
+            "bilerp" => {
+                let corner = |l: &Loader, k: &str, d: f32| -> Result<Rgb> {
+                    match get(l, k, d)? {
+                        Texture::Constant(c) => Ok(c),
+                        _ => Err(loc.err(format!("bilerp: '{k}' must be a value, not a texture"))),
+                    }
+                };
+                let (v00, v01, v10, v11) = (corner(self, "v00", 0.0)?, corner(self, "v01", 1.0)?, corner(self, "v10", 0.0)?, corner(self, "v11", 1.0)?);
+                proc(Procedural::Bilerp { mapping: mapping.clone(), v00, v01, v10, v11 })
+            }
+            "directionmix" => {
+                let (tex1, tex2) = (get(self, "tex1", 0.0)?, get(self, "tex2", 1.0)?);
+                let dir = self.gs.ctm[0].transform_vector3(p.point3("dir", Vec3::Y)?).normalize_or_zero();
+                if dir == Vec3::ZERO || !dir.is_finite() {
+                    return Err(loc.err("directionmix: 'dir' must be a non-zero vector"));
+                }
+                proc(Procedural::DirectionMix { tex1, tex2, dir })
+            }
+            "dots" => {
+                let (inside, outside) = (get(self, "inside", 1.0)?, get(self, "outside", 0.0)?);
+                proc(Procedural::Dots { mapping: mapping.clone(), inside, outside })
+            }
+            "fbm" | "wrinkled" | "marble" => {
+                let octaves = p.int("octaves", 8)?;
+                let omega = p.float("roughness", 0.5)?;
+                if !(0..=64).contains(&octaves) || !omega.is_finite() {
+                    return Err(loc.err(format!("{class}: need 0 <= octaves <= 64 ({octaves}) and a finite roughness ({omega})")));
+                }
+                let octaves = octaves as u32;
+                match class {
+                    "fbm" => proc(Procedural::Fbm { world_to_texture, omega, octaves }),
+                    "wrinkled" => proc(Procedural::Wrinkled { world_to_texture, omega, octaves }),
+                    _ => {
+                        if is_float {
+                            return Err(loc.err("marble is a spectrum texture in pbrt-v4 (Texture \"name\" \"spectrum\" \"marble\")"));
+                        }
+                        let (scale, variation) = (p.float("scale", 1.0)?, p.float("variation", 0.2)?);
+                        if !(scale.is_finite() && variation.is_finite()) {
+                            return Err(loc.err(format!("marble: 'scale' ({scale}) and 'variation' ({variation}) must be finite")));
+                        }
+                        proc(Procedural::Marble { world_to_texture, omega, octaves, scale, variation })
+                    }
+                }
+            }
+            "windy" => proc(Procedural::Windy { world_to_texture }),
+            "ptex" => {
+                return Err(loc.err("texture 'ptex' is not supported (svetlo reads no Ptex files)"));
             }
             other => return Err(loc.err(format!("unknown texture class '{other}'"))),
+        };
+        if matches!(class, "fbm" | "wrinkled" | "windy" | "marble") {
+            self.warn(loc, format!("texture '{class}': no ray differentials, so every octave is summed (pbrt fades those finer than a pixel)"));
+        }
+        // Images and checkerboards under a non-uv mapping: looked up at the mapping's (s, t).
+        let t = match (&mapping, &t) {
+            (Mapping2D::Uv { .. }, _) => t,
+            (_, Texture::Bitmap { .. } | Texture::Checkerboard { .. }) => proc(Procedural::Mapped { mapping, inner: t }),
+            _ => t,
         };
         self.warn_unused(&format!("Texture \"{name}\""), p);
         if is_float {
@@ -412,14 +476,34 @@ impl Loader {
     }
 
     /// pbrt's uv mapping (s = su u + du, t = sv v + dv) to svetlo's lookup, whose v = 0 is
-    /// the image's top row where pbrt's t = 0 is its bottom.
-    fn uv_mapping(&mut self, p: &ParamList, loc: &Loc) -> Result<Affine2> {
-        let mapping = p.string("mapping")?.unwrap_or("uv").to_string();
-        if mapping != "uv" {
-            return Err(loc.err(format!("texture mapping '{mapping}' is not supported yet (uv)")));
-        }
-        let (su, sv, du, dv) = (p.float("uscale", 1.0)?, p.float("vscale", 1.0)?, p.float("udelta", 0.0)?, p.float("vdelta", 0.0)?);
+    /// the image's top row where pbrt's t = 0 is its bottom. Under another mapping the
+    /// lookup takes (s, t) as given ([`Self::mapping2d`] computes them).
+    fn uv_mapping(&mut self, p: &ParamList, _loc: &Loc) -> Result<Affine2> {
+        let uv = p.string("mapping")?.is_none_or(|m| m == "uv");
+        let (su, sv, du, dv) =
+            if uv { (p.float("uscale", 1.0)?, p.float("vscale", 1.0)?, p.float("udelta", 0.0)?, p.float("vdelta", 0.0)?) } else { (1.0, 1.0, 0.0, 0.0) };
         Ok(Affine2::from_mat2_translation(Mat2::from_diagonal(Vec2::new(su, -sv)), Vec2::new(du, 1.0 - dv)))
+    }
+
+    /// pbrt's 2-D mapping of a texture, in the texture space of the current CTM.
+    fn mapping2d(&mut self, p: &ParamList, loc: &Loc) -> Result<Mapping2D> {
+        let world_to_texture = self.gs.ctm[0].inverse();
+        if !world_to_texture.is_finite() {
+            return Err(loc.err("texture: the current transform is not invertible"));
+        }
+        Ok(match p.string("mapping")?.unwrap_or("uv") {
+            "uv" => Mapping2D::Uv { su: p.float("uscale", 1.0)?, sv: p.float("vscale", 1.0)?, du: p.float("udelta", 0.0)?, dv: p.float("vdelta", 0.0)? },
+            "spherical" => Mapping2D::Spherical { world_to_texture },
+            "cylindrical" => Mapping2D::Cylindrical { world_to_texture },
+            "planar" => Mapping2D::Planar {
+                world_to_texture,
+                v1: p.point3("v1", Vec3::X)?,
+                v2: p.point3("v2", Vec3::Y)?,
+                ds: p.float("udelta", 0.0)?,
+                dt: p.float("vdelta", 0.0)?,
+            },
+            other => return Err(loc.err(format!("texture mapping '{other}' is unknown (uv, spherical, cylindrical, planar)"))),
+        })
     }
 
     /// An image as linear RGB: 8-bit files are sRGB-decoded unless `linear`.
