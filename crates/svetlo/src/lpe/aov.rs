@@ -5,7 +5,7 @@
 //! beauty (always set when the beauty is not restricted). Trackers are `Copy` arrays: a walk
 //! keeps one and copies it at branches, with no allocation.
 
-use super::{Event, Lpe, LpeError};
+use super::{ClassPart, Event, Lpe, LpeError};
 use crate::scene::Scene;
 use crate::spectrum::Rgb;
 
@@ -362,15 +362,58 @@ impl AovSet {
     /// The layers that take every path of a class (see [`Lpe::class_verdict`]); Err names
     /// an expression that takes only some of them.
     pub fn class_layers(&self, prefix: &[Event], repeat: &[Event], min_repeat: usize, ends: &[Event]) -> Result<LayerMask, String> {
+        let mut parts: Vec<ClassPart> = prefix.iter().map(ClassPart::one).collect();
+        parts.push(ClassPart { events: repeat, min: min_repeat, more: true });
+        self.class_layers_of(&parts, ends)
+    }
+
+    /// [`Self::class_layers`] of the class `parts` then one of `ends` (see [`Lpe::class_verdict_of`]).
+    pub fn class_layers_of(&self, parts: &[ClassPart], ends: &[Event]) -> Result<LayerMask, String> {
         let mut m = self.base_mask();
         for (i, l) in self.lpes.iter().enumerate() {
-            match l.class_verdict(prefix, repeat, min_repeat, ends) {
+            match l.class_verdict_of(parts, ends) {
                 Some(true) => m |= self.bit(i),
                 Some(false) => {}
                 None => return Err(l.source.clone()),
             }
         }
         Ok(m)
+    }
+
+    /// Routes for classes of paths that continue traced camera prefixes: for every path of
+    /// `prefix` (the events a method traces before it reads a value that stands for a whole
+    /// class), each class `(parts, ends)` must be taken whole or not at all by every
+    /// expression. Err names the AOV (or the beauty's restriction) that takes only some paths
+    /// of a class after some prefix.
+    pub fn class_router(&self, prefix: &[ClassPart], classes: &[(&[ClassPart], &[Event])]) -> Result<ClassRouter, String> {
+        let mut verdicts = Vec::with_capacity(classes.len());
+        for &(parts, ends) in classes {
+            let mut per_lpe = Vec::with_capacity(self.lpes.len());
+            for (i, l) in self.lpes.iter().enumerate() {
+                let v = l.state_verdicts(parts, ends);
+                let reach = l.class_states(Lpe::START, prefix);
+                if reach.iter().zip(&v).any(|(r, v)| *r && v.is_none()) {
+                    return Err(match self.names.get(i) {
+                        Some(n) => format!("AOV '{n}' ('{}')", l.source),
+                        None => format!("--lpe '{}'", l.source),
+                    });
+                }
+                per_lpe.push(v.iter().map(|v| *v == Some(true)).collect::<Vec<bool>>());
+            }
+            verdicts.push(per_lpe);
+        }
+        // With the product automaton: each product state's layers per class, one lookup.
+        let product = self.product.as_ref().map(|p| {
+            p.states
+                .iter()
+                .flat_map(|st| {
+                    verdicts
+                        .iter()
+                        .map(move |per_lpe| per_lpe.iter().enumerate().filter(|(i, v)| v[st[*i] as usize]).fold(self.base_mask(), |m, (i, _)| m | self.bit(i)))
+                })
+                .collect()
+        });
+        Ok(ClassRouter { classes: classes.len(), verdicts, product })
     }
 
     /// The events of reaching each of the scene's emitters.
@@ -489,6 +532,35 @@ impl<'a> Tracker<'a> {
             Some(rp) => rp.meets.get(self.q as usize * rp.states + r as usize).copied().filter(|_| (r as usize) < rp.states).unwrap_or(0),
             None => self.set.base_mask(),
         }
+    }
+}
+
+/// Which layers take a class of paths after a camera prefix (see [`AovSet::class_router`]).
+#[derive(Clone, Debug)]
+pub struct ClassRouter {
+    classes: usize,
+    /// Per class, per expression, per state: whether the expression takes the class there.
+    verdicts: Vec<Vec<Vec<bool>>>,
+    /// Per product state, per class: the layers (when the set has its product automaton).
+    product: Option<Vec<LayerMask>>,
+}
+
+impl ClassRouter {
+    /// The layers that take class `c` (an index into the router's classes) after the prefix
+    /// `t` has read. A state that no prefix of the router's reaches goes nowhere.
+    #[inline]
+    pub fn layers(&self, t: &Tracker, c: usize) -> LayerMask {
+        if let Some(p) = &self.product {
+            return p[t.q as usize * self.classes + c];
+        }
+        let set = t.set;
+        let mut m = set.base_mask();
+        for (i, (s, v)) in t.st.iter().zip(&self.verdicts[c]).enumerate() {
+            if v.get(*s as usize).copied().unwrap_or(false) {
+                m |= set.bit(i);
+            }
+        }
+        m
     }
 }
 
