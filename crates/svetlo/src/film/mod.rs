@@ -69,9 +69,10 @@ impl FilmTile {
                 while m != 0 {
                     let i = m.trailing_zeros() as usize;
                     m &= m - 1;
-                    let v = aov[i];
-                    if v.is_finite() {
-                        if let Some(px) = self.layers.get_mut(i).and_then(|layer| layer.get_mut(k)) {
+                    if let (Some(px), Some(&v)) = (self.layers.get_mut(i).and_then(|l| l.get_mut(k)), aov.get(i)) {
+                        // Finite values only: x - x is 0 for finite x, NaN otherwise (one
+                        // compare for the three channels).
+                        if (v.r - v.r) + (v.g - v.g) + (v.b - v.b) == 0.0 {
                             *px += v;
                         }
                     }

@@ -38,8 +38,9 @@ struct Product {
     masks: Vec<u32>,
     n_classes: usize,
     table: Vec<u32>,
-    /// Per product state: the layers whose automaton accepts there (with the base mask).
-    accept: Vec<LayerMask>,
+    /// Per (state, class): the layers that take a path ending there with that event (those
+    /// whose automaton accepts after the step, with the base mask), in one lookup.
+    ends: Vec<LayerMask>,
     /// Per product state: each automaton's own state (for meeting light subpaths).
     states: Vec<[u32; MAX_LAYERS + 1]>,
     /// The product of the reverse automata and, per (forward, reverse) pair of product
@@ -223,9 +224,11 @@ impl AovSet {
         let nc = super::automaton::BASE_COUNT * masks.len();
         let n = self.lpes.len();
         let (states, table) = product_search(&masks, n, |i, q, e| self.lpes[i].step(q, e), |_| true)?;
-        let accept = states.iter().map(|st| (0..n).filter(|&i| self.lpes[i].accepts(st[i])).fold(self.base_mask(), |m, i| m | self.bit(i))).collect();
+        let accept: Vec<LayerMask> =
+            states.iter().map(|st| (0..n).filter(|&i| self.lpes[i].accepts(st[i])).fold(self.base_mask(), |m, i| m | self.bit(i))).collect();
+        let ends = table.iter().map(|&q| accept[q as usize]).collect();
         let rev = self.build_rev_product(&masks, &states);
-        Some(Product { masks, n_classes: nc, table, accept, states, rev })
+        Some(Product { masks, n_classes: nc, table, ends, states, rev })
     }
 
     /// The reverse automata's product (breadth-first from the start) and its meeting table.
@@ -319,6 +322,33 @@ impl AovSet {
         }
         let flags = v.bsdf.as_ref().map_or(crate::bsdf::LobeFlags::NONE, |b| b.flags());
         Some(Event::scatter(flags, v.delta, v.event.transmission, self.shape_labels(v.shape)))
+    }
+
+    /// The event of reflecting at subpath vertex `v` by its BSDF's non-delta lobes: from it
+    /// [`Self::sampled_from`] and [`Self::connected`] make the vertex's other events without
+    /// another look at the BSDF (for methods that connect a vertex many times).
+    #[inline]
+    pub fn reflect_event(&self, v: &crate::path::Vertex) -> Event {
+        let flags = v.bsdf.as_ref().map_or(crate::bsdf::LobeFlags::NONE, |b| b.flags());
+        Event::scatter(flags, false, false, self.shape_labels(v.shape))
+    }
+
+    /// [`Self::sampled_event`] from the vertex's reflection event ([`Self::reflect_event`]).
+    #[inline]
+    pub fn sampled_from(reflect: Event, v: &crate::path::Vertex) -> Option<Event> {
+        if v.event.kind == crate::path::EventKind::Null {
+            return None;
+        }
+        // Singular when the walk chose a delta lobe (base 5 = 3 + S), else the lobes' kind.
+        let base = if v.delta { 5 } else { reflect.base };
+        Some(Event { base: base + 3 * v.event.transmission as u8, ..reflect })
+    }
+
+    /// [`Self::connected_event`] from the vertex's reflection event ([`Self::reflect_event`]).
+    #[inline]
+    pub fn connected(reflect: Event, v: &crate::path::Vertex, q: glam::Vec3) -> Event {
+        let through = (v.wo.dot(v.ng) > 0.0) != ((q - v.p).dot(v.ng) > 0.0);
+        Event { base: reflect.base + 3 * through as u8, ..reflect }
     }
 
     /// The event of scattering at subpath vertex `v` toward point `q` (a connection).
@@ -458,6 +488,10 @@ impl Product {
     fn step(&self, q: u32, e: Event) -> u32 {
         self.table[q as usize * self.n_classes + self.class(e)]
     }
+    #[inline(always)]
+    fn ends(&self, q: u32, e: Event) -> LayerMask {
+        self.ends[q as usize * self.n_classes + self.class(e)]
+    }
 }
 
 impl<'a> Tracker<'a> {
@@ -483,7 +517,7 @@ impl<'a> Tracker<'a> {
     #[inline(always)]
     pub fn ends(&self, e: Event) -> LayerMask {
         if let Some(p) = &self.set.product {
-            return p.accept[p.step(self.q, e) as usize];
+            return p.ends(self.q, e);
         }
         let mut m = self.set.base_mask();
         for (i, (s, l)) in self.st.iter().zip(&self.set.lpes).enumerate() {
@@ -495,10 +529,10 @@ impl<'a> Tracker<'a> {
     }
     /// The layers that take a path ending with events `a` then `b` (next-event estimation:
     /// the scattering vertex, then the light).
-    #[inline]
+    #[inline(always)]
     pub fn ends2(&self, a: Event, b: Event) -> LayerMask {
         if let Some(p) = &self.set.product {
-            return p.accept[p.step(p.step(self.q, a), b) as usize];
+            return p.ends(p.step(self.q, a), b);
         }
         let mut t = *self;
         t.push(a);
