@@ -70,9 +70,7 @@ impl FilmTile {
                     let i = m.trailing_zeros() as usize;
                     m &= m - 1;
                     if let (Some(px), Some(&v)) = (self.layers.get_mut(i).and_then(|l| l.get_mut(k)), aov.get(i)) {
-                        // Finite values only: x - x is 0 for finite x, NaN otherwise (one
-                        // compare for the three channels).
-                        if (v.r - v.r) + (v.g - v.g) + (v.b - v.b) == 0.0 {
+                        if v.is_finite() {
                             *px += v;
                         }
                     }
