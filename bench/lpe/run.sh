@@ -1,6 +1,7 @@
 #!/usr/bin/env bash
-# Overhead of AOVs against none at equal spp, one thread, alternating runs; prints the
-# median ratio of CPU time (user+sys) per method. Usage: bench/lpe/run.sh [scene.xml] [spp] [res]
+# Overhead of AOVs against none at equal spp, one thread, alternating runs; prints per method
+# the ratio of the median CPU times (user+sys) with and without AOVs, and the per-pair ratios
+# with their median. Usage: bench/lpe/run.sh [scene.xml] [spp] [res]
 # METHODS='a b' picks the methods; RUNS the alternating runs; PRESET=lecture renders the
 # lecture preset's five AOVs instead of the eight below; MEASURE=instructions counts
 # instructions under valgrind (callgrind) instead of CPU time: deterministic, so one run
@@ -8,7 +9,7 @@
 set -euo pipefail
 cd "$(dirname "$0")/../.."
 BIN=${BIN:-target/release/svetlo}
-SCENE=${1:-scenes/caustic.xml}; SPP=${2:-16}; RES=${3:-64}; RUNS=${RUNS:-3}
+SCENE=${1:-scenes/caustic.xml}; SPP=${2:-16}; RES=${3:-64}; RUNS=${RUNS:-5}
 if [ "${PRESET:-}" = lecture ]; then
   AOVS=(--aov-preset lecture)
 else
@@ -24,12 +25,15 @@ cpu() {
     /usr/bin/time -f "%U %S" -o "$tmp/t" "$@" >/dev/null 2>&1; awk '{print $1+$2}' "$tmp/t"
   fi
 }
+median() { printf '%s\n' "$@" | sort -g | awk '{v[NR]=$1} END{print (NR%2) ? v[(NR+1)/2] : (v[NR/2]+v[NR/2+1])/2}'; }
 for m in ${METHODS:-"path:simd=false" bdpt "mlt:bootstrap=20000"}; do
-  ratios=()
+  ratios=(); bases=(); withs=()
   for i in $(seq "$RUNS"); do
     base=$(cpu $BIN render "$SCENE" -Dres=$RES --spp $SPP --threads 1 --integrator "$m" -o "$tmp/n.exr")
     with=$(cpu $BIN render "$SCENE" -Dres=$RES --spp $SPP --threads 1 --integrator "$m" "${AOVS[@]}" -o "$tmp/a.exr")
+    bases+=("$base"); withs+=("$with")
     ratios+=("$(awk -v a="$with" -v b="$base" 'BEGIN{printf "%.3f", a/b}')")
   done
-  echo "$m: ${PRESET:-8} AOVs / none ${MEASURE:-cpu} ratios ${ratios[*]} (median $(printf '%s\n' "${ratios[@]}" | sort -n | sed -n "$(( (RUNS+1)/2 ))p"))"
+  mb=$(median "${bases[@]}"); mw=$(median "${withs[@]}")
+  echo "$m: ${PRESET:-8} AOVs / none, ${MEASURE:-cpu}: medians $mw / $mb = $(awk -v a="$mw" -v b="$mb" 'BEGIN{printf "%.3f", a/b}'); pair ratios ${ratios[*]} (median $(median "${ratios[@]}"))"
 done

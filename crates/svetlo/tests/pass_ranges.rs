@@ -278,3 +278,30 @@ fn photon_maps_from_batches_traced_apart_are_the_local_render_bit_for_bit() {
     }
     assert!(svetlo::methods::shared_batch(spec, &cbox, &s, 3000..4001, &Progress::new()).is_err());
 }
+
+/// Photons carry their light state in their bytes: batches traced apart with AOVs give the
+/// local render's beauty and layers bit for bit (the caustic layer's photons come from the
+/// caustic map, the diffuse one's from the global map).
+#[test]
+fn photon_batches_with_aovs_are_the_local_render_bit_for_bit() {
+    let p = Path::new(env!("CARGO_MANIFEST_DIR")).join("../../scenes/caustic.xml");
+    let sc = svetlo::io::load_scene(&p, &[("res".into(), "16".into())]).expect("scenes/caustic.xml");
+    let list = vec![("caustic".to_string(), "C D S+ L".to_string()), ("d2".to_string(), "C D D .* L".to_string())];
+    let mut set = svetlo::lpe::AovSet::compile(&list, None).expect("expressions");
+    assert!(set.bind(&sc).is_empty());
+    let s = RenderSettings { spp: 3, max_depth: 6, seed: 5, threads: 2, filter: svetlo::film::Filter::Box, lpe: Some(Arc::new(set)), ..Default::default() };
+    let spec = "photon:photons=3000,caustic-photons=2000,gather=2";
+    let local = svetlo::methods::by_name(spec).unwrap().render(&sc, &s, &Progress::new()).unwrap();
+    assert_eq!(local.layer_names().len(), 2);
+    assert!(local.layer_images().iter().all(|(_, img)| img.data.iter().any(|c| c.r > 0.0)), "every layer has light");
+    let plan = pass_plan(s.spp, 16 * 16);
+    for cuts in [vec![0, 5000], vec![0, 1700, 3000, 4100, 5000]] {
+        let batches: Vec<Vec<u8>> = cuts.windows(2).map(|c| svetlo::methods::shared_batch(spec, &sc, &s, c[0]..c[1], &Progress::new()).unwrap()).collect();
+        let refs: Vec<&[u8]> = batches.iter().map(|b| b.as_slice()).collect();
+        let parts = chunk_nodes(&plan, 2)
+            .into_iter()
+            .map(|r| svetlo::methods::render_passes(spec, &sc, &RenderSettings { threads: 1, ..s.clone() }, r, &refs, &Progress::new()).unwrap())
+            .collect();
+        assert_same(&PartialFilm::merge(parts).unwrap(), &local, &format!("photon batches with AOVs cut at {cuts:?}"));
+    }
+}

@@ -69,9 +69,8 @@ impl FilmTile {
                 while m != 0 {
                     let i = m.trailing_zeros() as usize;
                     m &= m - 1;
-                    let v = aov[i];
-                    if v.is_finite() {
-                        if let Some(px) = self.layers.get_mut(i).and_then(|layer| layer.get_mut(k)) {
+                    if let (Some(px), Some(&v)) = (self.layers.get_mut(i).and_then(|l| l.get_mut(k)), aov.get(i)) {
+                        if v.is_finite() {
                             *px += v;
                         }
                     }

@@ -105,7 +105,7 @@ pub(crate) fn sample_bdpt(
     light_subpath(scene, cfg, ray.time, sampler, &mut sc.light);
     let aovs = settings.aovs();
     let mut l = Rgb::BLACK;
-    let mut router = StrategyRouter::new(aovs);
+    let mut router = StrategyRouter::new(aovs, &sc.light, &sc.camera);
     for t in 1..=sc.camera.len() {
         router.at_t(&sc.camera, t);
         for s in 0..=sc.light.len() {
@@ -131,6 +131,46 @@ pub(crate) fn sample_bdpt(
     l
 }
 
+/// Vertices whose events a [`StrategyRouter`] keeps (the rest are computed when asked).
+const CACHED: usize = 8;
+
+/// The reflection events of a subpath's first vertices ([`AovSet::reflect_event`]: one look
+/// at each BSDF per sample), from which its sampled and connected events follow.
+struct SubpathEvents {
+    reflect: [Event; CACHED],
+    n: usize,
+}
+
+impl SubpathEvents {
+    #[inline]
+    fn new(aovs: &AovSet, path: &[Vertex]) -> Self {
+        let mut e = SubpathEvents { reflect: [Event::CAMERA; CACHED], n: 0 };
+        if !aovs.is_empty() {
+            e.n = path.len().min(CACHED);
+            for (r, v) in e.reflect.iter_mut().zip(path) {
+                *r = aovs.reflect_event(v);
+            }
+        }
+        e
+    }
+    #[inline]
+    fn reflect(&self, aovs: &AovSet, path: &[Vertex], i: usize) -> Event {
+        if i < self.n {
+            self.reflect[i]
+        } else {
+            aovs.reflect_event(&path[i])
+        }
+    }
+    #[inline]
+    fn sampled(&self, aovs: &AovSet, path: &[Vertex], i: usize) -> Option<Event> {
+        AovSet::sampled_from(self.reflect(aovs, path, i), &path[i])
+    }
+    #[inline]
+    fn connected(&self, aovs: &AovSet, path: &[Vertex], i: usize, q: glam::Vec3) -> Event {
+        AovSet::connected(self.reflect(aovs, path, i), &path[i], q)
+    }
+}
+
 /// The automata along both subpaths of a BDPT sample as its loops advance t (outer) and s
 /// (inner), so that routing strategy (s, t) costs a few steps, not a walk of both subpaths.
 pub(crate) struct StrategyRouter<'a> {
@@ -139,11 +179,14 @@ pub(crate) struct StrategyRouter<'a> {
     cam: Tracker<'a>,
     /// Reverse automata over light[0..max(s-1, 1)] as sampled.
     light: Option<LightTracker<'a>>,
+    /// The subpaths' vertex events (with AOVs), computed once per sample, not per strategy.
+    le: SubpathEvents,
+    ce: SubpathEvents,
 }
 
 impl<'a> StrategyRouter<'a> {
-    pub fn new(aovs: &'a AovSet) -> Self {
-        StrategyRouter { aovs, cam: Tracker::camera(aovs), light: None }
+    pub fn new(aovs: &'a AovSet, light: &[Vertex], camera: &[Vertex]) -> Self {
+        StrategyRouter { aovs, cam: Tracker::camera(aovs), light: None, le: SubpathEvents::new(aovs, light), ce: SubpathEvents::new(aovs, camera) }
     }
     #[inline]
     pub fn at_t(&mut self, camera: &[Vertex], t: usize) {
@@ -151,7 +194,7 @@ impl<'a> StrategyRouter<'a> {
             return;
         }
         if t >= 3 {
-            if let Some(e) = self.aovs.sampled_event(&camera[t - 2]) {
+            if let Some(e) = self.ce.sampled(self.aovs, camera, t - 2) {
                 self.cam.push(e);
             }
         }
@@ -162,10 +205,11 @@ impl<'a> StrategyRouter<'a> {
         if self.aovs.is_empty() || s == 0 {
             return;
         }
+        let le = &self.le;
         match &mut self.light {
             None => self.light = Some(LightTracker::light(self.aovs, self.aovs.endpoint_event(scene, &light[0]))),
             Some(lt) if s >= 3 => {
-                if let Some(e) = self.aovs.sampled_event(&light[s - 2]) {
+                if let Some(e) = le.sampled(self.aovs, light, s - 2) {
                     lt.push(e);
                 }
             }
@@ -181,6 +225,7 @@ impl<'a> StrategyRouter<'a> {
         if aovs.is_empty() {
             return crate::lpe::aov::BEAUTY;
         }
+        let (le, ce) = (&self.le, &self.ce);
         let mut cam = self.cam;
         if s == 0 {
             // The camera subpath found an emitter (or escaped) at vertex t - 1.
@@ -197,14 +242,14 @@ impl<'a> StrategyRouter<'a> {
         };
         if t == 1 {
             if s >= 2 {
-                lt.push(aovs.connected_event(&light[s - 1], c.sampled_p));
+                lt.push(le.connected(aovs, light, s - 1, c.sampled_p));
             }
             return lt.meets_camera();
         }
         let toward = if s == 1 { c.sampled_p } else { light[s - 1].p };
-        cam.push(aovs.connected_event(&camera[t - 1], toward));
+        cam.push(ce.connected(aovs, camera, t - 1, toward));
         if s >= 2 {
-            lt.push(aovs.connected_event(&light[s - 1], camera[t - 1].p));
+            lt.push(le.connected(aovs, light, s - 1, camera[t - 1].p));
         }
         lt.meets(&cam)
     }

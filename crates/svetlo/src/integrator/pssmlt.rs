@@ -259,7 +259,7 @@ impl BdptTarget<'_> {
         let mut here = crate::spectrum::Rgb::BLACK;
         let mut layers = LayerSample::default();
         // Each strategy's path routed as BDPT routes it.
-        let mut router = StrategyRouter::new(aovs);
+        let mut router = StrategyRouter::new(aovs, &st.light, &st.camera);
         for t in 1..=st.camera.len() {
             router.at_t(&st.camera, t);
             for sl in 0..=st.light.len() {

@@ -25,16 +25,18 @@ const TILE: u32 = 16;
 const MAX_PASS_SAMPLES: u64 = 1 << 19;
 
 /// A contribution away from the filtered pixel sample: channel 0 is the film's splat
-/// buffer, channel c > 0 the extra image c - 1.
+/// buffer, channel c > 0 the extra image c - 1, [`NO_CHANNEL`] none of them; and bit i of
+/// `layers` AOV layer i (one entry for all the layers a contribution goes to).
 #[derive(Clone, Copy, Debug)]
 pub struct Splat {
     pub raster: Vec2,
     pub channel: u32,
     pub value: Rgb,
+    pub layers: u32,
 }
 
-/// Splat channels from here on are AOV layers (layer = channel - LAYER_CHANNEL).
-pub const LAYER_CHANNEL: u32 = 1 << 16;
+/// A splat for AOV layers only (a restricted beauty that does not take it).
+pub const NO_CHANNEL: u32 = u32::MAX;
 
 /// What one pixel sample produced.
 pub struct SampleOut<'a> {
@@ -47,13 +49,10 @@ impl SampleOut<'_> {
     /// Splat `value` to the beauty and the AOV layers of `mask`.
     #[inline]
     pub fn splat_layers(&mut self, mask: crate::lpe::LayerMask, raster: Vec2, value: Rgb) {
-        if mask & crate::lpe::aov::BEAUTY != 0 {
-            self.push(0, raster, value);
-        }
-        let mut m = mask & !crate::lpe::aov::BEAUTY;
-        while m != 0 {
-            self.push(LAYER_CHANNEL + m.trailing_zeros(), raster, value);
-            m &= m - 1;
+        let channel = if mask & crate::lpe::aov::BEAUTY != 0 { 0 } else { NO_CHANNEL };
+        let layers = mask & !crate::lpe::aov::BEAUTY;
+        if channel != NO_CHANNEL || layers != 0 {
+            self.push_layers(channel, raster, value, layers);
         }
     }
     #[inline]
@@ -62,8 +61,12 @@ impl SampleOut<'_> {
     }
     #[inline]
     pub fn push(&mut self, channel: u32, raster: Vec2, value: Rgb) {
+        self.push_layers(channel, raster, value, 0);
+    }
+    #[inline]
+    fn push_layers(&mut self, channel: u32, raster: Vec2, value: Rgb, layers: u32) {
         if !value.is_black() && value.is_finite() {
-            self.splats.push(Splat { raster, channel, value });
+            self.splats.push(Splat { raster, channel, value, layers });
         }
     }
 }
@@ -243,12 +246,22 @@ pub(super) fn render_chunked<E: SplatEstimator>(
                     if !(x >= 0.0 && y >= 0.0 && (x as u32) < w && (y as u32) < h) {
                         continue;
                     }
-                    let slot = if sp.channel >= LAYER_CHANNEL { 1 + channels + (sp.channel - LAYER_CHANNEL) as usize } else { sp.channel as usize };
-                    if let Some(buf) = pass_splats.get_mut(slot) {
-                        if buf.is_empty() {
-                            *buf = vec![Rgb::BLACK; (w * h) as usize];
+                    let k = (y as u32 * w + x as u32) as usize;
+                    let mut add = |slot: usize| {
+                        if let Some(buf) = pass_splats.get_mut(slot) {
+                            if buf.is_empty() {
+                                *buf = vec![Rgb::BLACK; (w * h) as usize];
+                            }
+                            buf[k] += sp.value;
                         }
-                        buf[(y as u32 * w + x as u32) as usize] += sp.value;
+                    };
+                    if sp.channel != NO_CHANNEL {
+                        add(sp.channel as usize);
+                    }
+                    let mut m = sp.layers;
+                    while m != 0 {
+                        add(1 + channels + m.trailing_zeros() as usize);
+                        m &= m - 1;
                     }
                 }
             }

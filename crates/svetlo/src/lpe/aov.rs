@@ -5,7 +5,7 @@
 //! beauty (always set when the beauty is not restricted). Trackers are `Copy` arrays: a walk
 //! keeps one and copies it at branches, with no allocation.
 
-use super::{Event, Lpe, LpeError};
+use super::{ClassPart, Event, Lpe, LpeError};
 use crate::scene::Scene;
 use crate::spectrum::Rgb;
 
@@ -38,8 +38,9 @@ struct Product {
     masks: Vec<u32>,
     n_classes: usize,
     table: Vec<u32>,
-    /// Per product state: the layers whose automaton accepts there (with the base mask).
-    accept: Vec<LayerMask>,
+    /// Per (state, class): the layers that take a path ending there with that event (those
+    /// whose automaton accepts after the step, with the base mask), in one lookup.
+    ends: Vec<LayerMask>,
     /// Per product state: each automaton's own state (for meeting light subpaths).
     states: Vec<[u32; MAX_LAYERS + 1]>,
     /// The product of the reverse automata and, per (forward, reverse) pair of product
@@ -223,9 +224,11 @@ impl AovSet {
         let nc = super::automaton::BASE_COUNT * masks.len();
         let n = self.lpes.len();
         let (states, table) = product_search(&masks, n, |i, q, e| self.lpes[i].step(q, e), |_| true)?;
-        let accept = states.iter().map(|st| (0..n).filter(|&i| self.lpes[i].accepts(st[i])).fold(self.base_mask(), |m, i| m | self.bit(i))).collect();
+        let accept: Vec<LayerMask> =
+            states.iter().map(|st| (0..n).filter(|&i| self.lpes[i].accepts(st[i])).fold(self.base_mask(), |m, i| m | self.bit(i))).collect();
+        let ends = table.iter().map(|&q| accept[q as usize]).collect();
         let rev = self.build_rev_product(&masks, &states);
-        Some(Product { masks, n_classes: nc, table, accept, states, rev })
+        Some(Product { masks, n_classes: nc, table, ends, states, rev })
     }
 
     /// The reverse automata's product (breadth-first from the start) and its meeting table.
@@ -321,6 +324,33 @@ impl AovSet {
         Some(Event::scatter(flags, v.delta, v.event.transmission, self.shape_labels(v.shape)))
     }
 
+    /// The event of reflecting at subpath vertex `v` by its BSDF's non-delta lobes: from it
+    /// [`Self::sampled_from`] and [`Self::connected`] make the vertex's other events without
+    /// another look at the BSDF (for methods that connect a vertex many times).
+    #[inline]
+    pub fn reflect_event(&self, v: &crate::path::Vertex) -> Event {
+        let flags = v.bsdf.as_ref().map_or(crate::bsdf::LobeFlags::NONE, |b| b.flags());
+        Event::scatter(flags, false, false, self.shape_labels(v.shape))
+    }
+
+    /// [`Self::sampled_event`] from the vertex's reflection event ([`Self::reflect_event`]).
+    #[inline]
+    pub fn sampled_from(reflect: Event, v: &crate::path::Vertex) -> Option<Event> {
+        if v.event.kind == crate::path::EventKind::Null {
+            return None;
+        }
+        // Singular when the walk chose a delta lobe (base 5 = 3 + S), else the lobes' kind.
+        let base = if v.delta { 5 } else { reflect.base };
+        Some(Event { base: base + 3 * v.event.transmission as u8, ..reflect })
+    }
+
+    /// [`Self::connected_event`] from the vertex's reflection event ([`Self::reflect_event`]).
+    #[inline]
+    pub fn connected(reflect: Event, v: &crate::path::Vertex, q: glam::Vec3) -> Event {
+        let through = (v.wo.dot(v.ng) > 0.0) != ((q - v.p).dot(v.ng) > 0.0);
+        Event { base: reflect.base + 3 * through as u8, ..reflect }
+    }
+
     /// The event of scattering at subpath vertex `v` toward point `q` (a connection).
     #[inline]
     pub fn connected_event(&self, v: &crate::path::Vertex, q: glam::Vec3) -> Event {
@@ -362,15 +392,58 @@ impl AovSet {
     /// The layers that take every path of a class (see [`Lpe::class_verdict`]); Err names
     /// an expression that takes only some of them.
     pub fn class_layers(&self, prefix: &[Event], repeat: &[Event], min_repeat: usize, ends: &[Event]) -> Result<LayerMask, String> {
+        let mut parts: Vec<ClassPart> = prefix.iter().map(ClassPart::one).collect();
+        parts.push(ClassPart { events: repeat, min: min_repeat, more: true });
+        self.class_layers_of(&parts, ends)
+    }
+
+    /// [`Self::class_layers`] of the class `parts` then one of `ends` (see [`Lpe::class_verdict_of`]).
+    pub fn class_layers_of(&self, parts: &[ClassPart], ends: &[Event]) -> Result<LayerMask, String> {
         let mut m = self.base_mask();
         for (i, l) in self.lpes.iter().enumerate() {
-            match l.class_verdict(prefix, repeat, min_repeat, ends) {
+            match l.class_verdict_of(parts, ends) {
                 Some(true) => m |= self.bit(i),
                 Some(false) => {}
                 None => return Err(l.source.clone()),
             }
         }
         Ok(m)
+    }
+
+    /// Routes for classes of paths that continue traced camera prefixes: for every path of
+    /// `prefix` (the events a method traces before it reads a value that stands for a whole
+    /// class), each class `(parts, ends)` must be taken whole or not at all by every
+    /// expression. Err names the AOV (or the beauty's restriction) that takes only some paths
+    /// of a class after some prefix.
+    pub fn class_router(&self, prefix: &[ClassPart], classes: &[(&[ClassPart], &[Event])]) -> Result<ClassRouter, String> {
+        let mut verdicts = Vec::with_capacity(classes.len());
+        for &(parts, ends) in classes {
+            let mut per_lpe = Vec::with_capacity(self.lpes.len());
+            for (i, l) in self.lpes.iter().enumerate() {
+                let v = l.state_verdicts(parts, ends);
+                let reach = l.class_states(Lpe::START, prefix);
+                if reach.iter().zip(&v).any(|(r, v)| *r && v.is_none()) {
+                    return Err(match self.names.get(i) {
+                        Some(n) => format!("AOV '{n}' ('{}')", l.source),
+                        None => format!("--lpe '{}'", l.source),
+                    });
+                }
+                per_lpe.push(v.iter().map(|v| *v == Some(true)).collect::<Vec<bool>>());
+            }
+            verdicts.push(per_lpe);
+        }
+        // With the product automaton: each product state's layers per class, one lookup.
+        let product = self.product.as_ref().map(|p| {
+            p.states
+                .iter()
+                .flat_map(|st| {
+                    verdicts
+                        .iter()
+                        .map(move |per_lpe| per_lpe.iter().enumerate().filter(|(i, v)| v[st[*i] as usize]).fold(self.base_mask(), |m, (i, _)| m | self.bit(i)))
+                })
+                .collect()
+        });
+        Ok(ClassRouter { classes: classes.len(), verdicts, product })
     }
 
     /// The events of reaching each of the scene's emitters.
@@ -415,6 +488,10 @@ impl Product {
     fn step(&self, q: u32, e: Event) -> u32 {
         self.table[q as usize * self.n_classes + self.class(e)]
     }
+    #[inline(always)]
+    fn ends(&self, q: u32, e: Event) -> LayerMask {
+        self.ends[q as usize * self.n_classes + self.class(e)]
+    }
 }
 
 impl<'a> Tracker<'a> {
@@ -440,7 +517,7 @@ impl<'a> Tracker<'a> {
     #[inline(always)]
     pub fn ends(&self, e: Event) -> LayerMask {
         if let Some(p) = &self.set.product {
-            return p.accept[p.step(self.q, e) as usize];
+            return p.ends(self.q, e);
         }
         let mut m = self.set.base_mask();
         for (i, (s, l)) in self.st.iter().zip(&self.set.lpes).enumerate() {
@@ -452,10 +529,10 @@ impl<'a> Tracker<'a> {
     }
     /// The layers that take a path ending with events `a` then `b` (next-event estimation:
     /// the scattering vertex, then the light).
-    #[inline]
+    #[inline(always)]
     pub fn ends2(&self, a: Event, b: Event) -> LayerMask {
         if let Some(p) = &self.set.product {
-            return p.accept[p.step(p.step(self.q, a), b) as usize];
+            return p.ends(p.step(self.q, a), b);
         }
         let mut t = *self;
         t.push(a);
@@ -489,6 +566,35 @@ impl<'a> Tracker<'a> {
             Some(rp) => rp.meets.get(self.q as usize * rp.states + r as usize).copied().filter(|_| (r as usize) < rp.states).unwrap_or(0),
             None => self.set.base_mask(),
         }
+    }
+}
+
+/// Which layers take a class of paths after a camera prefix (see [`AovSet::class_router`]).
+#[derive(Clone, Debug)]
+pub struct ClassRouter {
+    classes: usize,
+    /// Per class, per expression, per state: whether the expression takes the class there.
+    verdicts: Vec<Vec<Vec<bool>>>,
+    /// Per product state, per class: the layers (when the set has its product automaton).
+    product: Option<Vec<LayerMask>>,
+}
+
+impl ClassRouter {
+    /// The layers that take class `c` (an index into the router's classes) after the prefix
+    /// `t` has read. A state that no prefix of the router's reaches goes nowhere.
+    #[inline]
+    pub fn layers(&self, t: &Tracker, c: usize) -> LayerMask {
+        if let Some(p) = &self.product {
+            return p[t.q as usize * self.classes + c];
+        }
+        let set = t.set;
+        let mut m = set.base_mask();
+        for (i, (s, v)) in t.st.iter().zip(&self.verdicts[c]).enumerate() {
+            if v.get(*s as usize).copied().unwrap_or(false) {
+                m |= set.bit(i);
+            }
+        }
+        m
     }
 }
 

@@ -13,7 +13,7 @@ pub mod aov;
 pub mod automaton;
 pub mod parse;
 
-pub use aov::{AovSet, LayerMask, LightTracker, Tracker, MAX_LAYERS};
+pub use aov::{AovSet, ClassRouter, LayerMask, LightTracker, Tracker, MAX_LAYERS};
 
 use automaton::{Dfa, BASE_COUNT};
 
@@ -104,6 +104,30 @@ impl Event {
     }
 }
 
+/// One part of a class of paths (see [`Lpe::class_verdict_of`]): `min` events, each any of
+/// `events`, and with `more` any number of further ones.
+#[derive(Clone, Copy, Debug)]
+pub struct ClassPart<'a> {
+    pub events: &'a [Event],
+    pub min: usize,
+    pub more: bool,
+}
+
+impl<'a> ClassPart<'a> {
+    /// Exactly the event `e`.
+    pub fn one(e: &'a Event) -> Self {
+        ClassPart { events: std::slice::from_ref(e), min: 1, more: false }
+    }
+    /// Exactly one of `events`.
+    pub fn any(events: &'a [Event]) -> Self {
+        ClassPart { events, min: 1, more: false }
+    }
+    /// Any number (none too) of `events`.
+    pub fn star(events: &'a [Event]) -> Self {
+        ClassPart { events, min: 0, more: true }
+    }
+}
+
 /// A compiled expression.
 #[derive(Clone, Debug)]
 pub struct Lpe {
@@ -189,35 +213,54 @@ impl Lpe {
     /// `repeat` and `end` any of `ends`, camera first: how methods that solve for a whole
     /// class of paths at once (radiosity, the local model) learn which layers take it.
     pub fn class_verdict(&self, prefix: &[Event], repeat: &[Event], min_repeat: usize, ends: &[Event]) -> Option<bool> {
+        let mut parts: Vec<ClassPart> = prefix.iter().map(ClassPart::one).collect();
+        parts.push(ClassPart { events: repeat, min: min_repeat, more: true });
+        self.class_verdict_of(&parts, ends)
+    }
+
+    /// [`Self::class_verdict`] of the class `parts` (concatenated, camera first) then one of `ends`.
+    pub fn class_verdict_of(&self, parts: &[ClassPart], ends: &[Event]) -> Option<bool> {
+        self.ends_verdict(&self.class_states(Self::START, parts), ends)
+    }
+
+    /// The states the automaton can be in after reading any path of `parts` from state `q`.
+    pub fn class_states(&self, q: u32, parts: &[ClassPart]) -> Vec<bool> {
         let n = self.dfa.states();
-        let q0 = prefix.iter().fold(Self::START, |q, &e| self.step(q, e));
         let mut set = vec![false; n];
-        set[q0 as usize] = true;
-        let step_all = |set: &[bool]| {
+        set[q as usize] = true;
+        let step_all = |set: &[bool], events: &[Event]| {
             let mut out = vec![false; n];
             for q in (0..n).filter(|&q| set[q]) {
-                for &e in repeat {
+                for &e in events {
                     out[self.step(q as u32, e) as usize] = true;
                 }
             }
             out
         };
-        for _ in 0..min_repeat {
-            set = step_all(&set);
-        }
-        if min_repeat > 0 || !repeat.is_empty() {
-            // Any number of further repeats: the closure.
-            loop {
-                let next = step_all(&set);
-                let grown: Vec<bool> = set.iter().zip(&next).map(|(a, b)| *a || *b).collect();
-                if grown == set {
-                    break;
+        for p in parts {
+            for _ in 0..p.min {
+                set = step_all(&set, p.events);
+            }
+            if p.more && !p.events.is_empty() {
+                // Any number of further events: the closure.
+                loop {
+                    let next = step_all(&set, p.events);
+                    let grown: Vec<bool> = set.iter().zip(&next).map(|(a, b)| *a || *b).collect();
+                    if grown == set {
+                        break;
+                    }
+                    set = grown;
                 }
-                set = grown;
             }
         }
+        set
+    }
+
+    /// Whether paths in the states `set` that end with one of `ends` all match, none does,
+    /// or some do (`None`).
+    fn ends_verdict(&self, set: &[bool], ends: &[Event]) -> Option<bool> {
         let (mut any, mut all) = (false, true);
-        for q in (0..n).filter(|&q| set[q]) {
+        for q in (0..set.len()).filter(|&q| set[q]) {
             for &e in ends {
                 let a = self.accepts(self.step(q as u32, e));
                 any |= a;
@@ -231,6 +274,12 @@ impl Lpe {
         } else {
             None
         }
+    }
+
+    /// Per automaton state q: the verdict on the paths `q · parts · end` (see
+    /// [`Self::class_verdict`]), for a class that continues a path traced up to q.
+    pub fn state_verdicts(&self, parts: &[ClassPart], ends: &[Event]) -> Vec<Option<bool>> {
+        (0..self.dfa.states() as u32).map(|q| self.ends_verdict(&self.class_states(q, parts), ends)).collect()
     }
 
     /// The base classes (as symbols) that can occur in some matching path.

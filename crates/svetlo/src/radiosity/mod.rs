@@ -181,8 +181,9 @@ pub struct Solved {
     /// Gouraud values at the display vertices when the solver provides its own (hierarchical:
     /// interpolated over its leaves); None: area-weighted means of the elements around each vertex.
     pub vertex_b: Option<Vec<Rgb>>,
-    /// The light of exactly one diffuse bounce, ρ F E (paths `L D E`), for light path
-    /// expressions; None where the solver keeps no form-factor matrix to compute it from.
+    /// The light of exactly one diffuse bounce, ρ F E plus the positional lights' `lit`
+    /// (paths `L D E`, with extended form factors `L S* D E`), for light path expressions;
+    /// None where the solver keeps no form-factor matrix to compute it from.
     pub b_one: Option<Vec<Rgb>>,
 }
 
@@ -286,23 +287,30 @@ pub fn solve_observed(
         None => kind.solve(&sys, &opts.solve)?,
     };
     let solve_seconds = t2.elapsed().as_secs_f64();
-    let b_one = match (&matrix, bounces) {
-        (_, Some(0)) => Some(vec![Rgb::BLACK; sys.n()]),
-        (Some(m), _) => Some((0..sys.n()).map(|i| sys.gather(m, &sys.emission, i)).collect()),
+    // One bounce: the light of the positional lights (`lit`, already reflected once) and the
+    // emission gathered once (not the lit light, which would be a second bounce).
+    let emitted: Vec<Rgb> = mesh.elements.iter().map(|e| e.emission).collect();
+    let mut b_one: Vec<Rgb> = mesh.elements.iter().map(|e| e.lit).collect();
+    match (&matrix, bounces) {
+        (_, Some(0)) => {}
+        (Some(m), _) => {
+            for (i, o) in b_one.iter_mut().enumerate() {
+                *o += sys.gather(m, &emitted, i);
+            }
+        }
         // Rows on demand: only the emitters' rows, by reciprocity F_ij A_i = F_ji A_j.
         (None, _) => {
-            let mut one = vec![Rgb::BLACK; sys.n()];
-            for j in (0..sys.n()).filter(|&j| !sys.emission[j].is_black()) {
+            for j in (0..sys.n()).filter(|&j| !emitted[j].is_black()) {
                 for (i, f) in sys.rows.row(j) {
                     let i = i as usize;
                     if sys.area[i] > 0.0 {
-                        one[i] += sys.reflectance[i] * sys.emission[j] * (f * sys.area[j] / sys.area[i]);
+                        b_one[i] += sys.reflectance[i] * emitted[j] * (f * sys.area[j] / sys.area[i]);
                     }
                 }
             }
-            Some(one)
         }
-    };
+    }
+    let b_one = Some(b_one);
     let rows_computed = source.rows_computed.load(std::sync::atomic::Ordering::Relaxed);
     let (nnz, matrix_bytes) = matrix.as_ref().map(|m| (m.nnz(), m.memory())).unwrap_or((0, 0));
     drop(sys);

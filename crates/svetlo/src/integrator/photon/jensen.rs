@@ -171,6 +171,7 @@ impl PhotonMapper {
         if range.start >= range.end || range.end > self.photon_paths() {
             return Err(Error::Settings(format!("photon: photon paths {}..{} of {}", range.start, range.end, self.photon_paths())));
         }
+        check_light_states("photon", settings)?;
         let pool = rayon::ThreadPoolBuilder::new().num_threads(settings.threads).build().map_err(|e| Error::Settings(format!("thread pool: {e}")))?;
         let t = pool.install(|| self.trace(scene, settings, range.clone()));
         let photons: Vec<Photon> = t.global.iter().map(|x| x.0).collect();
@@ -253,7 +254,8 @@ impl PhotonMapper {
     /// traced apart, covering all photon paths in order: the local render bit for bit.
     pub fn render_from_batches(&self, scene: &Scene, settings: &RenderSettings, batches: &[&[u8]], progress: &Progress) -> Result<Film> {
         settings.validate()?;
-        settings.check_lpe_support("photon", false)?;
+        // The photons' bytes carry their light states (of the same AOVs as this render's).
+        check_light_states("photon", settings)?;
         if settings.time_limit.is_some() {
             return Err(Error::Settings("photon: a render from photon batches has no time limit".into()));
         }
