@@ -169,7 +169,16 @@ pub struct RadiosityIntegrator {
 impl crate::integrator::Integrator for RadiosityIntegrator {
     fn render(&self, scene: &Scene, settings: &RenderSettings, progress: &crate::integrator::Progress) -> Result<crate::film::Film> {
         settings.validate()?;
-        let mut solved = super::solve(scene, &self.options, settings.max_depth)?;
+        let solved = super::solve(scene, &self.options, settings.max_depth)?;
+        self.render_solved(scene, settings, progress, solved)
+    }
+}
+
+impl RadiosityIntegrator {
+    /// Show a solution of this integrator's system (made here or by
+    /// [`super::split::solve_from_rows`] elsewhere) through the camera.
+    pub fn render_solved(&self, scene: &Scene, settings: &RenderSettings, progress: &crate::integrator::Progress, mut solved: super::Solved) -> Result<crate::film::Film> {
+        settings.validate()?;
         if settings.hide_emitters {
             // Hidden emitters show only the light they reflect.
             let emission: Vec<Rgb> = solved.mesh.elements.iter().map(|e| e.emission).collect();
