@@ -41,10 +41,10 @@ def cluster(n):
 def schemes(a):
     """Speed-up of the non-separable schemes: median wall time on 1 worker over 2 workers."""
     cases = [
-        # ~1300 elements, hemicube 32: the form factors dominate, the display is cheap.
-        ("radiosity", dict(integrator="radiosity", options={"element-size": 0.35, "form-factors": "hemicube", "hemicube-resolution": 32}, spp=4, width=64, height=64), {}),
-        ("photon", dict(integrator="photon", options={"photons": 200000, "caustic_photons": 20000, "gather": 16}, spp=4, width=64, height=64), {}),
-        ("sppm", dict(integrator="sppm", options={"photons": 100000}, spp=4, width=64, height=64), {}),
+        # ~4400 elements, hemicube 64: the form factors dominate, the display is cheap.
+        ("radiosity", dict(integrator="radiosity", options={"element-size": 0.25, "form-factors": "hemicube", "hemicube-resolution": 64}, spp=4, width=64, height=64), {}),
+        ("photon", dict(integrator="photon", options={"photons": 100000, "caustic_photons": 10000, "gather": 8}, spp=4, width=64, height=64), {}),
+        ("sppm", dict(integrator="sppm", options={"photons": 50000}, spp=4, width=64, height=64), {}),
         ("pssmlt", dict(integrator="pssmlt", options={"chains": 64, "bootstrap": 20000}, spp=16, width=64, height=64), {}),
     ]
     clusters = {n: cluster(n) for n in (1, 2)}
@@ -78,6 +78,26 @@ def schemes(a):
             mp = statistics.median(times["per-chunk solve, 2"])
             line += f"; every chunk solving, 2 workers {mp:6.2f} s ({mp / m2:4.2f}x the shared solve)"
         print(line, flush=True)
+        if name == "radiosity":
+            # What spreads and what does not, on one thread in this process: the rows, then
+            # the solve from them (mesh, assembly, solver) and one display chunk.
+            opts = dict(spp=kw["spp"], seed=1, width=kw["width"], height=kw["height"], integrator=svetlo._method_spec(kw["integrator"], kw["options"], None))
+            plan = _svetlo.plan_chunks(scene, 4, opts)
+            t = time.perf_counter()
+            rows = _svetlo.radiosity_rows(scene, 0, plan["rows"], opts, threads=1)
+            t_rows = time.perf_counter() - t
+            t = time.perf_counter()
+            sol = _svetlo.radiosity_solve(scene, [rows], opts, threads=1)
+            t_solve = time.perf_counter() - t
+            a0, a1, _, _ = plan["nodes"][0]
+            t = time.perf_counter()
+            _svetlo.render_passes(scene, a0, a1, opts, shared=[sol], threads=1)
+            t_show = time.perf_counter() - t
+            f = t_rows / (t_rows + t_solve)
+            print(
+                f"    one thread: {plan['rows']} rows {t_rows:.2f} s ({len(rows) / 1e6:.1f} MB), solve from them {t_solve:.2f} s (solution {len(sol) / 1e3:.0f} kB), "
+                f"one display chunk {t_show:.2f} s: rows are {f:.0%} of the solve, so 2 workers can at best be {1 / (1 - f / 2):.2f}x"
+            )
     for c, client in clusters.values():
         client.close()
         c.close()

@@ -69,19 +69,25 @@ pub fn module_args(a: &RenderArgs, address: &str) -> Result<Vec<OsString>> {
         opt("--height", x.to_string());
     }
     if let Some(f) = a.filter {
-        opt("--filter", match f {
-            FilterArg::Box => "box",
-            FilterArg::Tent => "tent",
-            FilterArg::Gaussian => "gaussian",
-        }
-        .into());
+        opt(
+            "--filter",
+            match f {
+                FilterArg::Box => "box",
+                FilterArg::Tent => "tent",
+                FilterArg::Gaussian => "gaussian",
+            }
+            .into(),
+        );
     }
     if let Some(s) = a.sampler {
-        opt("--sampler", match s {
-            SamplerArg::Independent => "independent",
-            SamplerArg::Sobol => "sobol",
-        }
-        .into());
+        opt(
+            "--sampler",
+            match s {
+                SamplerArg::Independent => "independent",
+                SamplerArg::Sobol => "sobol",
+            }
+            .into(),
+        );
     }
     if let Some(c) = a.chunks {
         opt("--chunks", c.to_string());
@@ -104,7 +110,9 @@ pub fn run(a: &RenderArgs, address: &str) -> Result<ExitCode> {
     let args = module_args(a, address)?;
     let py = python();
     let shown = py.to_string_lossy().into_owned();
-    let hint = format!("install the svetlo Python package and dask[distributed] (pip install svetlo 'dask[distributed]'), or set {PYTHON_VAR} to a Python that has them");
+    let hint = format!(
+        "install the svetlo Python package and dask[distributed] (pip install svetlo 'dask[distributed]'), or set {PYTHON_VAR} to a Python that has them"
+    );
     // Ask first, so that a missing package is named rather than shown as a traceback.
     let probe = match Command::new(&py).args(["-c", "import svetlo.distributed, distributed"]).output() {
         Ok(o) => o,

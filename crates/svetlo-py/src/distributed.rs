@@ -1,8 +1,9 @@
 //! The pieces of a render split over processes (`svetlo.distributed`): the plan of a render's
 //! work units (sample passes, or Metropolis chain blocks) cut into chunks, what the chunks
 //! share computed once (the Metropolis bootstrap), one chunk rendered to raw film sums
-//! (bytes), and sums merged into the local render's film; and SPPM's steps (photon batches,
-//! row blocks advanced one iteration, rows developed). The settings go through the same
+//! (bytes), and sums merged into the local render's film; SPPM's steps (photon batches,
+//! row blocks advanced one iteration, rows developed); and radiosity's (ranges of
+//! form-factor rows, the one solve from them whose solution every chunk shows). The settings go through the same
 //! CLI-ordered overrides as `render`, so a piece is a piece of exactly the render
 //! `svetlo.render` would make. Settings come as the dict of keywords Python passes on.
 

@@ -372,7 +372,13 @@ fn radiosity_rows_and_solutions_that_do_not_fit_are_errors() {
     for cut in [0, 8, 30, sol.len() / 2, sol.len() - 1] {
         assert!(svetlo::methods::render_passes(spec, &cbox, &s, 0..1, &[&sol[..cut]], &Progress::new()).is_err(), "solution cut at {cut}");
     }
-    let theirs = svetlo::methods::radiosity_solve(other, &cbox, &s, &[&svetlo::methods::radiosity_row_batch(other, &cbox, &s, 0..svetlo::methods::radiosity_rows(other, &cbox, &s).unwrap()).unwrap()]).unwrap();
+    let theirs = svetlo::methods::radiosity_solve(
+        other,
+        &cbox,
+        &s,
+        &[&svetlo::methods::radiosity_row_batch(other, &cbox, &s, 0..svetlo::methods::radiosity_rows(other, &cbox, &s).unwrap()).unwrap()],
+    )
+    .unwrap();
     let mut wrong_mesh = theirs.clone();
     // Same values, this mesh's options: the element count does not match.
     let opts_at = 8 + 2 + 1;

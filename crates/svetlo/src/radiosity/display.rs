@@ -177,7 +177,13 @@ impl crate::integrator::Integrator for RadiosityIntegrator {
 impl RadiosityIntegrator {
     /// Show a solution of this integrator's system (made here or by
     /// [`super::split::solve_from_rows`] elsewhere) through the camera.
-    pub fn render_solved(&self, scene: &Scene, settings: &RenderSettings, progress: &crate::integrator::Progress, mut solved: super::Solved) -> Result<crate::film::Film> {
+    pub fn render_solved(
+        &self,
+        scene: &Scene,
+        settings: &RenderSettings,
+        progress: &crate::integrator::Progress,
+        mut solved: super::Solved,
+    ) -> Result<crate::film::Film> {
         settings.validate()?;
         if settings.hide_emitters {
             // Hidden emitters show only the light they reflect.

@@ -20,6 +20,9 @@ use crate::spectrum::Rgb;
 use rayon::prelude::*;
 use std::ops::Range;
 
+/// Sparse rows of F: (column, value) sorted by column.
+type Rows = Vec<Vec<(u32, f32)>>;
+
 const ROWS_MAGIC: &[u8; 8] = b"SVLFFRW1";
 const SOLUTION_MAGIC: &[u8; 8] = b"SVLRADS1";
 
@@ -48,7 +51,7 @@ pub fn form_factor_rows(scene: &Scene, opts: &RadiosityOptions, max_depth: i32, 
         return Err(Error::Settings(format!("radiosity: the solve spreads rows 0..{have}, not {}..{}", range.start, range.end)));
     }
     let source = RowSource::new(scene, &p.mesh, opts.form_factors)?;
-    let rows: Vec<Vec<(u32, f32)>> = (range.start as usize..range.end as usize).into_par_iter().map(|i| source.row(i)).collect();
+    let rows: Rows = (range.start as usize..range.end as usize).into_par_iter().map(|i| source.row(i)).collect();
     let nnz: usize = rows.iter().map(Vec::len).sum();
     let mut out = Vec::with_capacity(32 + 4 * rows.len() + 8 * nnz);
     out.extend_from_slice(ROWS_MAGIC);
@@ -115,7 +118,7 @@ impl<'a> Reader<'a> {
 /// The rows in `blocks` (from [`form_factor_rows`], in any order), checked to be every row of
 /// an `n`-element matrix exactly once, in row order.
 fn assemble(blocks: &[&[u8]], n: u64) -> Result<FormFactors> {
-    let mut parts: Vec<(u64, Vec<Vec<(u32, f32)>>)> = Vec::with_capacity(blocks.len());
+    let mut parts: Vec<(u64, Rows)> = Vec::with_capacity(blocks.len());
     for b in blocks {
         let mut r = Reader { b, at: 0, what: "form-factor rows" };
         if r.take(8).ok() != Some(&ROWS_MAGIC[..]) {
