@@ -23,6 +23,7 @@ macro_rules! tell {
 
 mod compare;
 mod convert;
+mod dask;
 mod glare;
 mod illuminance;
 mod info;

@@ -109,6 +109,14 @@ pub struct RenderArgs {
     /// Logarithmic false-colour scale.
     #[arg(long, requires = "false_colour")]
     pub log: bool,
+    /// Render on a Dask cluster: a scheduler's ADDRESS (tcp://host:8786) or local:N for N local
+    /// worker processes. Runs `python3 -m svetlo.distributed` (the Python package, with
+    /// dask[distributed]; SVETLO_PYTHON names another Python); the image is the local one, bit for bit.
+    #[arg(long, value_name = "ADDRESS")]
+    pub dask: Option<String>,
+    /// With --dask: the number of render tasks (default: 4 per worker).
+    #[arg(long, value_name = "N", requires = "dask", value_parser = value_parser!(u32).range(1..))]
+    pub chunks: Option<u32>,
 }
 
 fn parse_aov(s: &str) -> std::result::Result<(String, String), String> {
@@ -462,6 +470,9 @@ pub fn run(a: &RenderArgs) -> Result<ExitCode> {
         }
     }
     let out = OutputPaths::new(&a.scene, a.output.as_deref())?;
+    if let Some(address) = &a.dask {
+        return crate::dask::run(a, address);
+    }
     limit_global_threads(a.threads as usize);
     let scene = crate::load_scene(&a.scene, a.format, &a.define)?;
     for w in &scene.warnings {

@@ -386,3 +386,41 @@ fn pbrt_convert_render_and_errors() {
     assert!(err.contains("bad.pbrt:3"), "{err}");
     let _ = std::fs::remove_dir_all(&d);
 }
+
+/// `render --dask` with `SVETLO_PYTHON` set to `python` (never a real cluster: dask is not
+/// needed by cargo test).
+fn run_dask(python: &str, args: &[&str]) -> (i32, String) {
+    let o = Command::new(env!("CARGO_BIN_EXE_svetlo")).args(args).env("SVETLO_PYTHON", python).env("RUST_BACKTRACE", "1").output().expect("the binary runs");
+    let err = String::from_utf8_lossy(&o.stderr).into_owned();
+    assert!(!err.contains("panicked"), "{args:?} panicked:\n{err}");
+    (o.status.code().unwrap_or(-1), err)
+}
+
+#[test]
+fn dask_without_a_python_or_its_package_is_a_clear_error() {
+    let d = tmp("dask");
+    let out = d.join("out.exr");
+    let args = ["render", "scene.xml", "--dask", "tcp://127.0.0.1:8786", "--spp", "4", "-o", s(&out)];
+    let (code, err) = run_dask("/nonexistent/python3", &args);
+    assert_eq!(code, 1, "{err}");
+    assert!(err.contains("no Python at '/nonexistent/python3'") && err.contains("SVETLO_PYTHON") && err.contains("dask[distributed]"), "{err}");
+    // A program that runs but cannot import the package (`false` exits 1 whatever it is given).
+    if Path::new("/bin/false").exists() {
+        let (code, err) = run_dask("/bin/false", &args);
+        assert_eq!(code, 1, "{err}");
+        assert!(err.contains("cannot import svetlo.distributed") && err.contains("SVETLO_PYTHON"), "{err}");
+    }
+    // Options a distributed render does not take, and bad addresses, are usage errors before
+    // any Python runs.
+    for extra in [&["--time", "3"][..], &["--lpe", "C D L"], &["--variance"]] {
+        let mut a = args.to_vec();
+        a.extend_from_slice(extra);
+        let (code, err) = run_dask("/nonexistent/python3", &a);
+        assert_eq!(code, 2, "{extra:?}: {err}");
+        assert!(err.contains("--dask does not take"), "{err}");
+    }
+    let (code, err) = run_dask("/nonexistent/python3", &["render", "scene.xml", "--dask", "local:0", "-o", s(&out)]);
+    assert_eq!(code, 2, "{err}");
+    let (code, err) = run_dask("/nonexistent/python3", &["render", "scene.xml", "--chunks", "3", "-o", s(&out)]);
+    assert_eq!(code, 2, "--chunks without --dask: {err}");
+}

@@ -1,8 +1,9 @@
 //! The pieces of a render split over processes (`svetlo.distributed`): the plan of a render's
 //! work units (sample passes, or Metropolis chain blocks) cut into chunks, what the chunks
 //! share computed once (the Metropolis bootstrap), one chunk rendered to raw film sums
-//! (bytes), and sums merged into the local render's film; and SPPM's steps (photon batches,
-//! row blocks advanced one iteration, rows developed). The settings go through the same
+//! (bytes), and sums merged into the local render's film; SPPM's steps (photon batches,
+//! row blocks advanced one iteration, rows developed); and radiosity's (ranges of
+//! form-factor rows, the one solve from them whose solution every chunk shows). The settings go through the same
 //! CLI-ordered overrides as `render`, so a piece is a piece of exactly the render
 //! `svetlo.render` would make. Settings come as the dict of keywords Python passes on.
 
@@ -99,7 +100,9 @@ fn splittable(r: &Resolved) -> PyResult<()> {
 /// width, height; for passes and chains also units (samples per pixel or chains in all),
 /// shared (the units of what all chunks share: 1 for a bootstrap, photon paths for photon
 /// mapping, 0 for nothing), passes (the number of work units) and nodes, a list of (first unit, end unit, first
-/// sample or chain, end sample or chain); for sppm photons (per iteration).
+/// sample or chain, end sample or chain), solve (radiosity: one solve that every chunk shows,
+/// from `radiosity_solve`) and rows (the form-factor rows that solve spreads over
+/// `radiosity_rows` tasks; 0: it makes its own); for sppm photons (per iteration).
 #[pyfunction]
 #[pyo3(signature = (scene, chunks, opts))]
 pub fn plan_chunks<'py>(py: Python<'py>, scene: &PyScene, chunks: usize, opts: &Bound<'py, PyDict>) -> PyResult<Bound<'py, PyDict>> {
@@ -129,6 +132,10 @@ pub fn plan_chunks<'py>(py: Python<'py>, scene: &PyScene, chunks: usize, opts: &
             (n.start, n.end, first.0, last.0 + last.1)
         })
         .collect();
+    let radiosity = r.name.split(':').next() == Some("radiosity");
+    let rows = if radiosity { svetlo::methods::radiosity_rows(&r.name, &r.scene, &r.settings).map_err(to_py)? } else { 0 };
+    d.set_item("solve", radiosity)?;
+    d.set_item("rows", rows)?;
     d.set_item("units", plan.last().map_or(0, |p| p.0 + p.1))?;
     d.set_item("shared", svetlo::methods::shared_units(&r.name).map_err(to_py)?)?;
     d.set_item("passes", plan.len())?;
@@ -284,4 +291,36 @@ pub fn sppm_develop<'py>(py: Python<'py>, scene: &PyScene, parts: Vec<Vec<u8>>, 
         })
         .map_err(to_py)?;
     Ok(PyBytes::new(py, &film))
+}
+
+/// Radiosity: rows `start..end` of the form-factor matrix (of `plan_chunks`'s rows), as bytes.
+#[pyfunction]
+#[pyo3(signature = (scene, start, end, opts, threads=0))]
+pub fn radiosity_rows<'py>(py: Python<'py>, scene: &PyScene, start: u64, end: u64, opts: &Bound<'py, PyDict>, threads: usize) -> PyResult<Bound<'py, PyBytes>> {
+    let r = resolve(scene, opts, threads)?;
+    let b = py.allow_threads(|| svetlo::methods::radiosity_row_batch(&r.name, &r.scene, &r.settings, start..end)).map_err(to_py)?;
+    Ok(PyBytes::new(py, &b))
+}
+
+/// Radiosity: the solve from every block of rows (bytes from `radiosity_rows`, any order;
+/// none where the plan spreads no rows), as the solution's bytes: `render_passes`'s one
+/// shared batch.
+#[pyfunction]
+#[pyo3(signature = (scene, rows, opts, threads=0))]
+pub fn radiosity_solve<'py>(py: Python<'py>, scene: &PyScene, rows: Vec<Vec<u8>>, opts: &Bound<'py, PyDict>, threads: usize) -> PyResult<Bound<'py, PyBytes>> {
+    let r = resolve(scene, opts, threads)?;
+    let refs: Vec<&[u8]> = rows.iter().map(|b| b.as_slice()).collect();
+    let b = py.allow_threads(|| svetlo::methods::radiosity_solve(&r.name, &r.scene, &r.settings, &refs)).map_err(to_py)?;
+    Ok(PyBytes::new(py, &b))
+}
+
+/// This process's radiosity counters: solves begun and form-factor rows computed since it
+/// started (a dict with `solves` and `rows`; tests read them on the workers).
+#[pyfunction]
+pub fn radiosity_counters(py: Python<'_>) -> PyResult<Bound<'_, PyDict>> {
+    let (solves, rows) = svetlo::radiosity::counters();
+    let d = PyDict::new(py);
+    d.set_item("solves", solves)?;
+    d.set_item("rows", rows)?;
+    Ok(d)
 }

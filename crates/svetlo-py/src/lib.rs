@@ -39,6 +39,9 @@ fn _svetlo(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_function(wrap_pyfunction!(distributed::sppm_photons, m)?)?;
     m.add_function(wrap_pyfunction!(distributed::sppm_iterate, m)?)?;
     m.add_function(wrap_pyfunction!(distributed::sppm_develop, m)?)?;
+    m.add_function(wrap_pyfunction!(distributed::radiosity_rows, m)?)?;
+    m.add_function(wrap_pyfunction!(distributed::radiosity_solve, m)?)?;
+    m.add_function(wrap_pyfunction!(distributed::radiosity_counters, m)?)?;
     m.add("__version__", env!("CARGO_PKG_VERSION"))?;
     Ok(())
 }

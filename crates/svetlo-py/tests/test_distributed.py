@@ -266,3 +266,64 @@ def test_independent_chains_agree_with_a_long_local_render(client, integrator):
     se = np.sqrt(per_render.var(axis=0, ddof=1) / n + ref.variance.mean(axis=(0, 1)) / (1024 * 256))
     t = (per_render.mean(axis=0) - ref.image.mean(axis=(0, 1))) / se
     assert np.all(np.abs(t) < T7_0001), f"{integrator}: t = {t} against the path-traced reference"
+
+
+def worker_radiosity_counters(client):
+    """Radiosity solves begun and form-factor rows computed, summed over the workers."""
+    per = client.run(sd.radiosity_counters)
+    return sum(c["solves"] for c in per.values()), sum(c["rows"] for c in per.values())
+
+
+@pytest.mark.parametrize(
+    "options",
+    [
+        {"element-size": 1},
+        {"element-size": 1, "form-factors": "hemicube", "hemicube-resolution": 16},
+        {"element-size": 1, "form-factors": "raycast", "rays": 64, "shading": "flat", "reciprocity": True},
+        {"element-size": 1, "solver": "hierarchical", "epsilon": 0.2},
+    ],
+    ids=["analytic", "hemicube", "raycast", "hierarchical"],
+)
+def test_radiosity_rows_spread_over_workers_and_one_solve_shared(client, options):
+    """Form-factor rows computed by ranges on the workers (7 batches that do not divide the
+    rows), one task solving from them, every display chunk showing that solution: the local
+    render bit for bit, with exactly one solve and each row computed once on the workers."""
+    kw = dict(integrator="radiosity", options=options, spp=5, seed=3, width=16, height=12, max_depth=-1)
+    ref = local(CBOX, **kw)
+    assert ref.image.max() > 0
+    before = worker_radiosity_counters(client)
+    job = sd.submit(CBOX, client=client, chunks=3, form_factor_batches=7, **kw)
+    r = job.result()
+    solves, rows = (a - b for a, b in zip(worker_radiosity_counters(client), before))
+    hierarchical = options.get("solver") == "hierarchical"
+    assert len(job.shared) == 1 and len(job.futures) == 3
+    if hierarchical:
+        # Its links are refined between solves: the solve task makes them, nothing is spread.
+        assert job.plan["rows"] == 0 and job.row_tasks == [] and rows == 0
+    else:
+        assert job.plan["rows"] > 7 and job.plan["rows"] % 7 != 0 and len(job.row_tasks) == 7
+        assert rows == job.plan["rows"], "every form-factor row computed once, by the row tasks"
+    assert solves == 1, "one solve for the three chunks"
+    assert r.spp == 5 and not r.interrupted
+    assert np.array_equal(bits(r.image), bits(ref.image)), f"{options}: the merged image is not the local one"
+    assert np.array_equal(bits(r.variance), bits(ref.variance))
+
+
+def test_the_module_command_line_renders_the_local_image(tmp_path):
+    """python -m svetlo.distributed on its own LocalCluster of 2 workers: the image file is
+    the local render's, bit for bit, and progress lines are printed."""
+    import subprocess
+    import sys
+
+    out = tmp_path / "out.exr"
+    args = ["--integrator", "bdpt", "--spp", "7", "--seed", "4", "--width", "16", "--height", "12", "--chunks", "3"]
+    p = subprocess.run([sys.executable, "-m", "svetlo.distributed", str(CBOX), "--workers", "2", "-o", str(out), *args], capture_output=True, text=True, timeout=300)
+    assert p.returncode == 0, p.stderr
+    assert "7/7 spp" in p.stderr and "wrote" in p.stderr, p.stderr
+    assert (tmp_path / "out.png").is_file()
+    ref = local(CBOX, integrator="bdpt", spp=7, seed=4, width=16, height=12).image
+    svetlo.write(tmp_path / "ref.exr", ref)
+    assert np.array_equal(bits(svetlo.read(out)), bits(svetlo.read(tmp_path / "ref.exr")))
+    # Bad options exit 2 with a message, before any cluster starts.
+    p = subprocess.run([sys.executable, "-m", "svetlo.distributed", str(CBOX), "--workers", "0"], capture_output=True, text=True, timeout=60)
+    assert p.returncode == 2 and "--workers" in p.stderr

@@ -67,7 +67,8 @@ pub fn by_name(spec: &str) -> Result<Box<dyn Integrator>> {
 /// The methods whose image is a sum over the camera-side pass driver, so that a range of its
 /// passes can be rendered anywhere ([`render_passes`]). `photon` and `radiosity` qualify
 /// because their precomputation (the photon maps, the radiosity solve) is a deterministic
-/// function of the scene and seed: every range recomputes it, identically.
+/// function of the scene and seed: a range recomputes it identically, or takes it computed
+/// once ([`shared_batch`], [`radiosity_solve`]).
 pub const PASS_SEPARABLE: &[&str] = &["path", "light", "ptracer", "bdpt", "direct", "whitted", "distributed", "photon", "radiosity"];
 
 /// The Metropolis methods: their chains split by blocks of [`CHAINS_PER_BLOCK`] chains, all
@@ -169,6 +170,37 @@ pub fn shared_batch(
     }
 }
 
+fn radiosity_options(spec: &str) -> Result<crate::radiosity::RadiosityOptions> {
+    if base_name(spec) != "radiosity" {
+        return Err(Error::Settings(format!("integrator '{spec}' is not radiosity")));
+    }
+    crate::radiosity::RadiosityOptions::parse(spec.split_once(':').map_or("", |(_, o)| o))
+}
+
+fn pool(settings: &integrator::RenderSettings) -> Result<rayon::ThreadPool> {
+    rayon::ThreadPoolBuilder::new().num_threads(settings.threads).build().map_err(|e| Error::Settings(format!("thread pool: {e}")))
+}
+
+/// Radiosity split over processes: the form-factor rows its solve spreads (0: the solve makes
+/// its own, see [`crate::radiosity::split`]).
+pub fn radiosity_rows(spec: &str, scene: &crate::scene::Scene, settings: &integrator::RenderSettings) -> Result<u64> {
+    crate::radiosity::split::row_count(scene, &radiosity_options(spec)?, settings.max_depth)
+}
+
+/// Rows `range` of radiosity's form-factor matrix as bytes, on `settings.threads` threads.
+pub fn radiosity_row_batch(spec: &str, scene: &crate::scene::Scene, settings: &integrator::RenderSettings, range: std::ops::Range<u64>) -> Result<Vec<u8>> {
+    let o = radiosity_options(spec)?;
+    pool(settings)?.install(|| crate::radiosity::split::form_factor_rows(scene, &o, settings.max_depth, range))
+}
+
+/// The radiosity solution from every row batch ([`radiosity_row_batch`]), as bytes that
+/// [`render_passes`] takes as its one shared batch: the chunks show it, none solves again.
+pub fn radiosity_solve(spec: &str, scene: &crate::scene::Scene, settings: &integrator::RenderSettings, rows: &[&[u8]]) -> Result<Vec<u8>> {
+    let o = radiosity_options(spec)?;
+    let solved = pool(settings)?.install(|| crate::radiosity::split::solve_from_rows(scene, &o, settings.max_depth, rows))?;
+    Ok(solved.to_bytes())
+}
+
 /// Render work units `range` (a node of the tree over [`unit_plan`]) of `scene` with the
 /// method `spec`, from the batches of [`shared_batch`] in order (`shared`; empty: computed
 /// here): the raw sums
@@ -215,6 +247,12 @@ pub fn render_passes(
     } else if base_name(spec) == "photon" {
         let o = spec.split_once(':').map_or("", |(_, o)| o);
         integrator::photon::PhotonMapper { options: integrator::photon::PhotonOptions::parse(o)? }.render_from_batches(scene, &s, shared, progress)?
+    } else if base_name(spec) == "radiosity" {
+        let [solution] = shared else {
+            return Err(Error::Settings(format!("'{spec}' shares one solution, not {} batches", shared.len())));
+        };
+        let solved = crate::radiosity::Solved::from_bytes(scene, solution)?;
+        crate::radiosity::display::RadiosityIntegrator { options: radiosity_options(spec)? }.render_solved(scene, &s, progress, solved)?
     } else {
         return Err(Error::Settings(format!("'{spec}' shares nothing between its passes")));
     };

@@ -305,3 +305,111 @@ fn photon_batches_with_aovs_are_the_local_render_bit_for_bit() {
         assert_same(&PartialFilm::merge(parts).unwrap(), &local, &format!("photon batches with AOVs cut at {cuts:?}"));
     }
 }
+
+/// Radiosity in pieces: the form-factor rows in `batches` ranges (each through bytes, handed
+/// over in reverse order), one solve from them, and the display's passes in `chunks` nodes,
+/// each from the solution's bytes.
+fn radiosity_in_pieces(spec: &str, sc: &Scene, s: &RenderSettings, batches: u64, chunks: usize) -> (Film, u64) {
+    let rows = svetlo::methods::radiosity_rows(spec, sc, s).unwrap_or_else(|e| panic!("{spec}: {e}"));
+    let k = batches.min(rows).max(1);
+    let cuts: Vec<u64> = if rows == 0 { vec![] } else { (0..=k).map(|i| i * rows / k).collect() };
+    let mut blocks: Vec<Vec<u8>> = cuts.windows(2).map(|w| svetlo::methods::radiosity_row_batch(spec, sc, s, w[0]..w[1]).expect("rows")).collect();
+    blocks.reverse();
+    let refs: Vec<&[u8]> = blocks.iter().map(|b| b.as_slice()).collect();
+    let solution = svetlo::methods::radiosity_solve(spec, sc, s, &refs).expect("solve");
+    let plan = pass_plan(s.spp, sc.camera.width as u64 * sc.camera.height as u64);
+    let parts = chunk_nodes(&plan, chunks)
+        .into_iter()
+        .map(|r| {
+            let part = svetlo::methods::render_passes(spec, sc, s, r, &[&solution], &Progress::new()).expect("passes");
+            PartialFilm::from_bytes(&part.to_bytes()).expect("round trip")
+        })
+        .collect();
+    (PartialFilm::merge(parts).expect("merge"), rows)
+}
+
+#[test]
+fn radiosity_from_rows_computed_apart_and_one_shared_solve_is_the_local_render_bit_for_bit() {
+    let cbox = scene("cornell-box.xml", 16, 12);
+    let s = RenderSettings { spp: 5, max_depth: -1, seed: 3, threads: 2, ..RenderSettings::from_scene(&cbox) };
+    let solve_here = |spec: &str| {
+        let o = svetlo::radiosity::RadiosityOptions::parse(spec.split_once(':').map_or("", |(_, o)| o)).unwrap();
+        svetlo::radiosity::solve(&cbox, &o, s.max_depth).unwrap()
+    };
+    for (spec, spread) in [
+        ("radiosity:element-size=1", true),
+        ("radiosity:element-size=1,form-factors=hemicube,hemicube-resolution=16", true),
+        ("radiosity:element-size=1,form-factors=raycast,rays=64,seed=2,shading=flat,reciprocity=true,solver=jacobi", true),
+        ("radiosity:element-size=1,form-factors=hemicube,hemicube-resolution=16,hybrid=true,gather=2", true),
+        ("radiosity:element-size=1,solver=progressive", false),
+        ("radiosity:solver=hierarchical,element-size=1,epsilon=0.2", false),
+    ] {
+        let local = svetlo::methods::by_name(spec).unwrap().render(&cbox, &s, &Progress::new()).unwrap();
+        assert!(local.image().mean().max_component() > 0.0, "{spec}: black image");
+        let n = solve_here(spec).b.len() as u64;
+        // 7 batches do not divide the rows; one batch is the whole matrix.
+        for (batches, chunks) in [(7, 3), (1, 1)] {
+            let (film, rows) = radiosity_in_pieces(spec, &cbox, &s, batches, chunks);
+            assert_eq!(rows > 0, spread, "{spec}: rows spread");
+            if spread {
+                assert_eq!(rows, n, "{spec}: one row per element");
+                assert_ne!(rows % 7, 0, "{spec}: the test wants 7 batches that do not divide {rows} rows");
+            }
+            assert_same(&local, &film, &format!("{spec}, {batches} row batches, {chunks} chunks"));
+        }
+    }
+    // The solve from rows computes none itself.
+    let spec = "radiosity:element-size=1,form-factors=hemicube,hemicube-resolution=8";
+    let o = svetlo::radiosity::RadiosityOptions::parse("element-size=1,form-factors=hemicube,hemicube-resolution=8").unwrap();
+    let rows = svetlo::methods::radiosity_rows(spec, &cbox, &s).unwrap();
+    let all = svetlo::methods::radiosity_row_batch(spec, &cbox, &s, 0..rows).unwrap();
+    let solved = svetlo::radiosity::split::solve_from_rows(&cbox, &o, s.max_depth, &[&all]).unwrap();
+    assert_eq!(solved.rows_computed, rows);
+}
+
+#[test]
+fn radiosity_rows_and_solutions_that_do_not_fit_are_errors() {
+    let cbox = scene("cornell-box.xml", 8, 6);
+    let s = RenderSettings { spp: 2, ..RenderSettings::from_scene(&cbox) };
+    let spec = "radiosity:element-size=1,form-factors=hemicube,hemicube-resolution=8";
+    let rows = svetlo::methods::radiosity_rows(spec, &cbox, &s).unwrap();
+    assert!(rows > 4);
+    let half = rows / 2;
+    let a = svetlo::methods::radiosity_row_batch(spec, &cbox, &s, 0..half).unwrap();
+    let b = svetlo::methods::radiosity_row_batch(spec, &cbox, &s, half..rows).unwrap();
+    let solve = |blocks: &[&[u8]]| svetlo::methods::radiosity_solve(spec, &cbox, &s, blocks);
+    assert!(solve(&[&a]).unwrap_err().to_string().contains(&format!("rows 0..{half} of {rows}")));
+    assert!(solve(&[&a, &a, &b]).is_err(), "a block twice");
+    assert!(svetlo::methods::radiosity_row_batch(spec, &cbox, &s, 0..rows + 1).is_err(), "rows past the mesh");
+    assert!(svetlo::methods::radiosity_row_batch(spec, &cbox, &s, 3..3).is_err(), "no rows");
+    for cut in [0, 7, 20, b.len() - 1] {
+        assert!(solve(&[&a, &b[..cut]]).is_err(), "rows cut at {cut}");
+    }
+    // Rows of another mesh (another element size) do not fit.
+    let other = "radiosity:element-size=0.7,form-factors=hemicube,hemicube-resolution=8";
+    let c = svetlo::methods::radiosity_row_batch(other, &cbox, &s, 0..1).unwrap();
+    assert!(solve(&[&a, &b, &c]).is_err());
+    // Hierarchical radiosity spreads no rows: given some, the solve refuses them.
+    let hr = "radiosity:solver=hierarchical,element-size=1,epsilon=0.2";
+    assert_eq!(svetlo::methods::radiosity_rows(hr, &cbox, &s).unwrap(), 0);
+    assert!(svetlo::methods::radiosity_solve(hr, &cbox, &s, &[&a]).is_err());
+    assert!(svetlo::methods::radiosity_row_batch(hr, &cbox, &s, 0..1).is_err());
+    // A solution: truncated, or of another mesh, is an error, never a panic.
+    let sol = solve(&[&b, &a]).unwrap();
+    for cut in [0, 8, 30, sol.len() / 2, sol.len() - 1] {
+        assert!(svetlo::methods::render_passes(spec, &cbox, &s, 0..1, &[&sol[..cut]], &Progress::new()).is_err(), "solution cut at {cut}");
+    }
+    let theirs = svetlo::methods::radiosity_solve(
+        other,
+        &cbox,
+        &s,
+        &[&svetlo::methods::radiosity_row_batch(other, &cbox, &s, 0..svetlo::methods::radiosity_rows(other, &cbox, &s).unwrap()).unwrap()],
+    )
+    .unwrap();
+    let mut wrong_mesh = theirs.clone();
+    // Same values, this mesh's options: the element count does not match.
+    let opts_at = 8 + 2 + 1;
+    wrong_mesh[opts_at..opts_at + 4].copy_from_slice(&1.0f32.to_le_bytes());
+    assert!(svetlo::methods::render_passes(spec, &cbox, &s, 0..1, &[&wrong_mesh], &Progress::new()).is_err());
+    assert!(svetlo::methods::render_passes(spec, &cbox, &s, 0..1, &[&sol, &sol], &Progress::new()).is_err(), "two solutions");
+}

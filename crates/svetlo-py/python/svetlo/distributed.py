@@ -23,16 +23,24 @@ shared file system). Workers must run the same svetlo build on the same kind of 
 tracer's eight-wide kernel depends on AVX2 (``integrator="path:simd=false"`` does not).
 
 Every method but zbuffer splits, each into the local render's image bit for bit: the methods
-that are sums of independent pixel samples (path, light, bdpt, direct, whitted, distributed,
-radiosity) by passes; photon by passes too, its photon paths traced once by index batches
-that every chunk builds the maps from; pssmlt and mlt by blocks of 16 chains started from one
+that are sums of independent pixel samples (path, light, bdpt, direct, whitted, distributed)
+by passes; photon by passes too, its photon paths traced once by index batches
+that every chunk builds the maps from; radiosity by passes of its display, showing one
+solution that one task solves from the form-factor rows that ``form_factor_batches`` tasks
+compute by ranges (hierarchical radiosity, whose links are refined between solves, and
+progressive refinement with rows on demand solve in that one task, not spread); pssmlt and mlt by blocks of 16 chains started from one
 bootstrap that a single task computes; sppm iteration by iteration, photon batches then
 blocks of rows (:class:`SppmRender`). :func:`render_independent` averages independent
 renders with distinct seeds, for any method.
+
+From a shell, ``python -m svetlo.distributed scene.xml --workers 2 --spp 256 -o out.exr``
+(or ``--scheduler tcp://host:8786``) renders the same image and prints progress as chunks
+complete (:func:`main`; ``svetlo render --dask ADDRESS`` runs it).
 """
 
 from __future__ import annotations
 
+import argparse
 import collections
 import dataclasses
 import hashlib
@@ -53,7 +61,7 @@ from svetlo import OptionError, RenderInterrupted, RenderResult, Scene, SvetloEr
 
 PathLike = Union[str, "os.PathLike[str]"]
 
-__all__ = ["render", "submit", "render_independent", "DistributedRender", "SceneSource", "scene_source"]
+__all__ = ["render", "submit", "render_independent", "DistributedRender", "SceneSource", "scene_source", "radiosity_counters"]
 
 # Attribute values that may name a file (Mitsuba: filename="..." on includes, meshes,
 # textures, spectra, IES files; <string name="filename" value="..."/>).
@@ -224,6 +232,20 @@ def _shared_task(src: SceneSource, start: int, end: int, opts: Dict[str, Any], t
     return _svetlo.shared_batch(_scene(src), start, end, opts, threads=_threads(threads))
 
 
+def _radiosity_rows_task(src: SceneSource, start: int, end: int, opts: Dict[str, Any], threads: Optional[int]) -> bytes:
+    return _svetlo.radiosity_rows(_scene(src), start, end, opts, threads=_threads(threads))
+
+
+def _radiosity_solve_task(src: SceneSource, opts: Dict[str, Any], threads: Optional[int], *rows: bytes) -> bytes:
+    return _svetlo.radiosity_solve(_scene(src), list(rows), opts, threads=_threads(threads))
+
+
+def radiosity_counters() -> Dict[str, int]:
+    """This process's radiosity solves begun and form-factor rows computed (for tests and
+    monitoring: ``client.run(svetlo.distributed.radiosity_counters)`` reads the workers')."""
+    return dict(_svetlo.radiosity_counters())
+
+
 def _render_task(src: SceneSource, start: int, end: int, opts: Dict[str, Any], threads: Optional[int], compress: int, *shared: bytes) -> Tuple[float, bytes]:
     t0 = time.perf_counter()
     raw = _svetlo.render_passes(_scene(src), start, end, opts, shared=list(shared), threads=_threads(threads))
@@ -307,7 +329,7 @@ class DistributedRender:
     stops the chunks not yet done, ``result()`` waits and merges.
     """
 
-    def __init__(self, client, src: SceneSource, plan: Dict[str, Any], opts: Dict[str, Any], threads: Optional[int], compress: int, shipped, batches: int = 1):
+    def __init__(self, client, src: SceneSource, plan: Dict[str, Any], opts: Dict[str, Any], threads: Optional[int], compress: int, shipped, batches: int = 1, row_batches: int = 1):
         self.client, self.source, self.plan, self.opts = client, src, plan, opts
         self._shipped = shipped
         self.start_time = time.perf_counter()
@@ -322,6 +344,17 @@ class DistributedRender:
         self.shared = [
             client.submit(_shared_task, ref, a, b, opts, threads, key=f"svetlo-shared-{token}-{a}-{b}", pure=False) for a, b in zip(cuts, cuts[1:])
         ]
+        # Radiosity: `row_batches` tasks compute ranges of form-factor rows, one task solves
+        # from all of them, and every chunk shows that solution (none solves again).
+        self.row_tasks: List[Any] = []
+        if plan.get("solve"):
+            rows = plan["rows"]
+            k = max(1, min(row_batches, rows))
+            rcuts = [i * rows // k for i in range(k + 1)] if rows else []
+            self.row_tasks = [
+                client.submit(_radiosity_rows_task, ref, a, b, opts, threads, key=f"svetlo-ff-rows-{token}-{a}-{b}", pure=False) for a, b in zip(rcuts, rcuts[1:])
+            ]
+            self.shared = [client.submit(_radiosity_solve_task, ref, opts, threads, *self.row_tasks, key=f"svetlo-radiosity-solve-{token}", pure=False)]
         self.futures = [
             client.submit(_render_task, ref, a, b, opts, threads, compress, *self.shared, key=f"svetlo-passes-{token}-{a}-{b}", pure=False, retries=0)
             for a, b, _, _ in self.nodes
@@ -545,6 +578,7 @@ def submit(
     threads: Optional[int] = None,
     compress: int = 0,
     photon_batches: Optional[int] = None,
+    form_factor_batches: Optional[int] = None,
     **settings: Any,
 ) -> DistributedRender:
     """Start a distributed render and return its :class:`DistributedRender` at once.
@@ -569,7 +603,9 @@ def submit(
         chunks = 4 * workers
     if photon_batches is None:
         photon_batches = workers
-    for name, v in (("chunks", chunks), ("photon_batches", photon_batches)):
+    if form_factor_batches is None:
+        form_factor_batches = chunks
+    for name, v in (("chunks", chunks), ("photon_batches", photon_batches), ("form_factor_batches", form_factor_batches)):
         if isinstance(v, bool) or not isinstance(v, int) or v < 1:
             raise OptionError(f"{name} must be a positive integer, got {v!r}")
     if not (0 <= compress <= 9):
@@ -581,7 +617,7 @@ def submit(
     plan = client.submit(_plan_task, ref, chunks, opts, pure=False).result()
     if plan["scheme"] == "sppm":
         return SppmRender(client, src, plan, opts, threads, shipped, row_blocks=chunks, photon_batches=photon_batches)
-    return DistributedRender(client, src, plan, opts, threads, compress, shipped, batches=photon_batches)
+    return DistributedRender(client, src, plan, opts, threads, compress, shipped, batches=photon_batches, row_batches=form_factor_batches)
 
 
 def render(
@@ -598,6 +634,7 @@ def render(
     threads: Optional[int] = None,
     compress: int = 0,
     photon_batches: Optional[int] = None,
+    form_factor_batches: Optional[int] = None,
     progress: Union[bool, None, Callable[[int, int, float], Any]] = None,
     result: bool = False,
     **settings: Any,
@@ -615,6 +652,9 @@ def render(
             sppm: the blocks of rows, each a task per iteration.
         photon_batches: photon and sppm: tasks tracing the photon maps' paths (each
             iteration's, for sppm) by index (default: one per worker).
+        form_factor_batches: radiosity: tasks computing ranges of the form-factor matrix's
+            rows before the one solve task (default: ``chunks``; the hierarchical solver and
+            progressive rows on demand make their own in the solve task).
         ship: send the scene's files to the workers (default) or let them read the path.
         threads: threads per task (default: the worker's cores over its task slots).
         compress: zlib level for the film sums sent back, after regrouping their bytes by
@@ -628,7 +668,7 @@ def render(
     of the chunks done.
     """
     job = submit(
-        scene, client=client, integrator=integrator, options=options, chunks=chunks, params=params, ship=ship, threads=threads, compress=compress, photon_batches=photon_batches, spp=spp, seed=seed, **settings
+        scene, client=client, integrator=integrator, options=options, chunks=chunks, params=params, ship=ship, threads=threads, compress=compress, photon_batches=photon_batches, form_factor_batches=form_factor_batches, spp=spp, seed=seed, **settings
     )
     bar = None
     if progress is None or progress is True:
@@ -693,3 +733,131 @@ def render_independent(
     for img in images:
         mean += img
     return (mean / renders).astype(np.float32), images
+
+
+# --- Command line: python -m svetlo.distributed.
+
+
+def _cli_parser() -> argparse.ArgumentParser:
+    p = argparse.ArgumentParser(
+        prog="python -m svetlo.distributed",
+        description="Render a scene on a Dask cluster: the image a local render makes, bit for bit.",
+    )
+    p.add_argument("scene", help="scene file (Mitsuba XML)")
+    where = p.add_mutually_exclusive_group()
+    where.add_argument("--scheduler", metavar="ADDRESS", help="a running Dask scheduler, e.g. tcp://host:8786")
+    where.add_argument("--workers", metavar="N", type=int, help="start a LocalCluster of N worker processes (default: one per core)")
+    p.add_argument("-o", "--output", metavar="OUT", help="image to write (.exr, .png, .pfm; an .exr gets OUT.png beside it). Default: <scene name>.exr")
+    p.add_argument("--integrator", metavar="NAME", help="method, with options as NAME:key=value,... (default: the scene's)")
+    p.add_argument("--spp", type=int, metavar="N")
+    p.add_argument("--seed", type=int, metavar="S")
+    p.add_argument("--max-depth", type=int, metavar="D")
+    p.add_argument("--width", type=int, metavar="W")
+    p.add_argument("--height", type=int, metavar="H")
+    p.add_argument("--filter", choices=["box", "tent", "gaussian"])
+    p.add_argument("--sampler", choices=["independent", "sobol"])
+    p.add_argument("--chunks", type=int, metavar="N", help="render tasks (default: 4 per worker)")
+    p.add_argument("--photon-batches", type=int, metavar="N", help="photon and sppm: photon tracing tasks (default: one per worker)")
+    p.add_argument("--form-factor-batches", type=int, metavar="N", help="radiosity: form-factor row tasks (default: --chunks)")
+    p.add_argument("--threads", type=int, metavar="N", help="threads per task (default: the worker's cores over its task slots)")
+    p.add_argument("--compress", type=int, default=0, metavar="LEVEL", help="zlib level for the film sums sent back (lossless; 0: none)")
+    p.add_argument("--no-ship", action="store_true", help="workers read the scene's path (a shared file system) instead of being sent its files")
+    p.add_argument("-D", dest="define", action="append", default=[], metavar="NAME=VALUE", help="scene parameter for <default> / $name (repeatable)")
+    p.add_argument("-q", "--quiet", action="store_true", help="no progress lines")
+    return p
+
+
+def _write_outputs(out: str, image: np.ndarray) -> List[str]:
+    svetlo.write(out, image)
+    written = [out]
+    if out.lower().endswith(".exr"):
+        png = out[:-4] + ".png"
+        svetlo.write(png, image)
+        written.append(png)
+    return written
+
+
+def main(argv: Optional[List[str]] = None) -> int:
+    """``python -m svetlo.distributed``: render on a cluster, write the image. Exit status 0,
+    2 for bad options, 3 for a scene error, 1 for other failures, 130 when interrupted (the
+    image of the chunks done is written)."""
+    a = _cli_parser().parse_args(argv)
+    say = (lambda *m: None) if a.quiet else (lambda *m: print("svetlo.distributed:", *m, file=sys.stderr, flush=True))
+    params = {}
+    for d in a.define:
+        name, eq, value = d.partition("=")
+        if not eq or not name:
+            print(f"error: -D takes NAME=VALUE, got {d!r}", file=sys.stderr)
+            return 2
+        params[name] = value
+    if a.workers is not None and a.workers < 1:
+        print(f"error: --workers must be at least 1, got {a.workers}", file=sys.stderr)
+        return 2
+    out = a.output or os.path.splitext(os.path.basename(a.scene))[0] + ".exr"
+    try:
+        from distributed import Client, LocalCluster
+    except ImportError:
+        print("error: svetlo.distributed needs dask's distributed scheduler: pip install 'dask[distributed]'", file=sys.stderr)
+        return 1
+    settings = dict(spp=a.spp, seed=a.seed, max_depth=a.max_depth, width=a.width, height=a.height, filter=a.filter, sampler=a.sampler)
+    cluster = None
+    t0 = time.perf_counter()
+    try:
+        if a.scheduler:
+            say(f"connecting to {a.scheduler}")
+            client = Client(a.scheduler)
+        else:
+            n = a.workers or os.cpu_count() or 1
+            say(f"starting a local cluster of {n} worker processes")
+            cluster = LocalCluster(n_workers=n, threads_per_worker=1, processes=True, dashboard_address=None)
+            client = Client(cluster)
+        with client:
+            workers = len(client.scheduler_info().get("workers", {}))
+            job = submit(
+                a.scene,
+                client=client,
+                integrator=a.integrator,
+                chunks=a.chunks,
+                params=params or None,
+                ship=not a.no_ship,
+                threads=a.threads,
+                compress=a.compress,
+                photon_batches=a.photon_batches,
+                form_factor_batches=a.form_factor_batches,
+                **{k: v for k, v in settings.items() if v is not None},
+            )
+            say(f"{job.plan['integrator']}: {len(job.futures)} tasks on {workers} workers, {job.spp_planned} spp planned")
+            cb = (lambda d, t, secs: say(f"{d}/{t} spp ({secs:.1f} s)")) if not a.quiet else None
+            try:
+                r = job.result(cb)
+            except RenderInterrupted as e:
+                written = _write_outputs(out, e.image)
+                print(f"interrupted: wrote the {e.result.spp} spp done to {', '.join(written)}", file=sys.stderr)
+                return 130
+    except KeyboardInterrupt:
+        print("interrupted before any chunk was done", file=sys.stderr)
+        return 130
+    except svetlo.SceneError as e:
+        print(f"error: {e}", file=sys.stderr)
+        return 3
+    except (OptionError, TypeError) as e:
+        print(f"error: {e}", file=sys.stderr)
+        return 2
+    except (SvetloError, OSError) as e:
+        print(f"error: {e}", file=sys.stderr)
+        return 1
+    finally:
+        if cluster is not None:
+            cluster.close()
+    written = _write_outputs(out, r.image)
+    h, w = r.image.shape[:2]
+    say(f"wrote {', '.join(written)}: {w}x{h}, {r.spp} spp, {time.perf_counter() - t0:.1f} s, {job.bytes_received} bytes of film sums received")
+    return 0
+
+
+if __name__ == "__main__":
+    # Run the imported module's main, not this __main__ copy: tasks must refer to
+    # svetlo.distributed's functions (and its scene cache), which the workers import.
+    from svetlo.distributed import main as _main
+
+    sys.exit(_main())

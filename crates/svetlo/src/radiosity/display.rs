@@ -249,7 +249,22 @@ pub struct RadiosityIntegrator {
 impl crate::integrator::Integrator for RadiosityIntegrator {
     fn render(&self, scene: &Scene, settings: &RenderSettings, progress: &crate::integrator::Progress) -> Result<crate::film::Film> {
         settings.validate()?;
-        let mut solved = super::solve(scene, &self.options, settings.max_depth)?;
+        let solved = super::solve(scene, &self.options, settings.max_depth)?;
+        self.render_solved(scene, settings, progress, solved)
+    }
+}
+
+impl RadiosityIntegrator {
+    /// Show a solution of this integrator's system (made here or by
+    /// [`super::split::solve_from_rows`] elsewhere) through the camera.
+    pub fn render_solved(
+        &self,
+        scene: &Scene,
+        settings: &RenderSettings,
+        progress: &crate::integrator::Progress,
+        mut solved: super::Solved,
+    ) -> Result<crate::film::Film> {
+        settings.validate()?;
         // The hybrid display leaves out the emitters' own light itself (its reflected values
         // are B − E).
         if settings.hide_emitters && !self.options.hybrid {

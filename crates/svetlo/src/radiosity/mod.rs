@@ -13,6 +13,7 @@ pub mod hierarchical;
 pub mod hybrid;
 pub mod mesh;
 pub mod solver;
+pub mod split;
 
 use crate::error::{Error, Result};
 use crate::scene::Scene;
@@ -20,6 +21,7 @@ use crate::spectrum::Rgb;
 use form_factor::{FormFactors, Method, RowSource};
 use mesh::{MeshOptions, RadiosityMesh};
 use solver::{SolveOptions, SolverKind, Step, System};
+use std::sync::atomic::{AtomicU64, Ordering};
 use std::time::Instant;
 
 /// How radiosity is shown: one value per element, or interpolated from the vertices.
@@ -178,6 +180,8 @@ pub struct Solved {
     pub solve_seconds: f64,
     /// Links, nodes and leaves of a hierarchical solve.
     pub hierarchy: Option<hierarchical::Stats>,
+    /// What `mesh` was built from ([`RadiosityMesh::build`] makes it again from them).
+    pub mesh_options: MeshOptions,
     /// Gouraud values at the display vertices when the solver provides its own (hierarchical:
     /// interpolated over its leaves); None: area-weighted means of the elements around each vertex.
     pub vertex_b: Option<Vec<Rgb>>,
@@ -234,8 +238,47 @@ pub fn solve_observed(
     max_depth: i32,
     observe: &mut dyn FnMut(&RadiosityMesh, usize, &solver::progressive::State),
 ) -> Result<Solved> {
+    match plan(scene, opts, max_depth)? {
+        Plan::Hierarchical(o) => solve_hierarchical(scene, &o, max_depth),
+        Plan::Matrix(p) => solve_matrix(scene, opts, p, None, observe),
+    }
+}
+
+/// Solves begun by this process and form-factor rows it computed, since it started: a
+/// distributed render's tests read them to show that no chunk repeats the solve.
+static SOLVES: AtomicU64 = AtomicU64::new(0);
+static FORM_FACTOR_ROWS: AtomicU64 = AtomicU64::new(0);
+
+/// (solves begun, form-factor rows computed) by this process so far.
+pub fn counters() -> (u64, u64) {
+    (SOLVES.load(Ordering::Relaxed), FORM_FACTOR_ROWS.load(Ordering::Relaxed))
+}
+
+/// How a scene's solve goes, decided before any form factor is computed.
+pub enum Plan {
+    /// Quadtrees and links, with these options (the automatic choice's element size filled in).
+    Hierarchical(RadiosityOptions),
+    Matrix(MatrixPlan),
+}
+
+/// A solve on the regular mesh's form-factor matrix.
+pub struct MatrixPlan {
+    pub mesh: RadiosityMesh,
+    pub mesh_seconds: f64,
+    /// The solver that runs (never hierarchical).
+    pub kind: SolverKind,
+    /// Diffuse bounces that `max_depth` allows (None: unbounded).
+    bounces: Option<usize>,
+    /// Bounces made exactly by Jacobi sweeps, where the bound matters above the tolerance.
+    truncate: Option<usize>,
+    /// Progressive refinement computing only the rows it shoots from.
+    pub on_demand: bool,
+}
+
+/// Mesh the scene and choose the solver (see [`RadiosityOptions::solver_for`]).
+pub fn plan(scene: &Scene, opts: &RadiosityOptions, max_depth: i32) -> Result<Plan> {
     if opts.solver == SolverKind::Hierarchical {
-        return solve_hierarchical(scene, opts, max_depth);
+        return Ok(Plan::Hierarchical(opts.clone()));
     }
     let t0 = Instant::now();
     let mesh = RadiosityMesh::build(scene, &opts.mesh)?;
@@ -256,21 +299,42 @@ pub fn solve_observed(
         // (the hierarchy only refines where the oracle asks; bench/radiosity README).
         let mut o = opts.clone();
         o.mesh.max_edge = o.mesh.max_edge.or(Some(scene.bounds.radius.max(1e-6) / AUTO_HIERARCHICAL_EDGE_DIVISOR));
-        return solve_hierarchical(scene, &o, max_depth);
+        return Ok(Plan::Hierarchical(o));
     }
-    let source = RowSource::new(scene, &mesh, opts.form_factors)?;
     let rho_max = mesh.elements.iter().map(|e| e.reflectance.max_component()).fold(0.0f32, f32::max) as f64;
     let bounces = if max_depth >= 0 { Some((max_depth - 1).max(0) as usize) } else { None };
     let truncate = bounces.filter(|&k| rho_max.powi(k as i32) > opts.solve.tolerance * 1e-2);
     let on_demand = kind == SolverKind::Progressive && !opts.reciprocity && truncate.is_none();
+    Ok(Plan::Matrix(MatrixPlan { mesh, mesh_seconds, kind, bounces, truncate, on_demand }))
+}
+
+/// Solve a matrix plan, its form factors computed here, or `given` (every row, computed
+/// elsewhere by [`form_factor::RowSource::row`]: the same matrix).
+pub(crate) fn solve_matrix(
+    scene: &Scene,
+    opts: &RadiosityOptions,
+    plan: MatrixPlan,
+    given: Option<FormFactors>,
+    observe: &mut dyn FnMut(&RadiosityMesh, usize, &solver::progressive::State),
+) -> Result<Solved> {
+    SOLVES.fetch_add(1, Ordering::Relaxed);
+    let MatrixPlan { mesh, mesh_seconds, kind, bounces, truncate, on_demand } = plan;
+    let source = RowSource::new(scene, &mesh, opts.form_factors)?;
+    let given_rows = given.as_ref().map_or(0, |m| m.n() as u64);
     let t1 = Instant::now();
-    let matrix: Option<FormFactors> = if on_demand {
-        None
-    } else {
-        let m = source.matrix();
-        let areas: Vec<f32> = mesh.elements.iter().map(|e| e.area).collect();
-        Some(if opts.reciprocity { m.reciprocal(&areas) } else { m })
+    let matrix: Option<FormFactors> = match given {
+        Some(m) => Some(m),
+        None if on_demand => None,
+        None => Some(source.matrix()),
     };
+    let matrix = matrix.map(|m| {
+        if opts.reciprocity {
+            let areas: Vec<f32> = mesh.elements.iter().map(|e| e.area).collect();
+            m.reciprocal(&areas)
+        } else {
+            m
+        }
+    });
     let form_factor_seconds = t1.elapsed().as_secs_f64();
     let rows = match &matrix {
         Some(m) => solver::Rows::Matrix(m),
@@ -311,7 +375,7 @@ pub fn solve_observed(
         }
     }
     let b_one = Some(b_one);
-    let rows_computed = source.rows_computed.load(std::sync::atomic::Ordering::Relaxed);
+    let rows_computed = source.rows_computed.load(Ordering::Relaxed) + given_rows;
     let (nnz, matrix_bytes) = matrix.as_ref().map(|m| (m.nnz(), m.memory())).unwrap_or((0, 0));
     drop(sys);
     Ok(Solved {
@@ -327,12 +391,14 @@ pub fn solve_observed(
         form_factor_seconds,
         solve_seconds,
         hierarchy: None,
+        mesh_options: opts.mesh.clone(),
         vertex_b: None,
         b_one,
     })
 }
 
 fn solve_hierarchical(scene: &Scene, opts: &RadiosityOptions, max_depth: i32) -> Result<Solved> {
+    SOLVES.fetch_add(1, Ordering::Relaxed);
     opts.solve.validate()?;
     let t = Instant::now();
     let bounces = if max_depth >= 0 { Some((max_depth - 1).max(0) as usize) } else { None };
@@ -354,6 +420,7 @@ fn solve_hierarchical(scene: &Scene, opts: &RadiosityOptions, max_depth: i32) ->
         form_factor_seconds: o.stats.refine_seconds,
         solve_seconds: total - o.stats.refine_seconds,
         hierarchy: Some(o.stats),
+        mesh_options: o.mesh_options,
         vertex_b: Some(o.vertex_b),
         b_one: Some(o.b_one),
     })

@@ -87,6 +87,7 @@ impl<'a> RowSource<'a> {
     /// Row i: (j, F_ij) sorted by j.
     pub fn row(&self, i: usize) -> Vec<(u32, f32)> {
         self.rows_computed.fetch_add(1, Ordering::Relaxed);
+        super::FORM_FACTOR_ROWS.fetch_add(1, Ordering::Relaxed);
         match self.method {
             Method::Analytic { vis_grid, src_grid } => analytic::row(self.scene, self.mesh, i, vis_grid, src_grid),
             Method::Hemicube { .. } => hemicube::row(self.scene, self.mesh, i, &self.hemicube),

@@ -393,7 +393,7 @@ impl<'a> Hierarchy<'a> {
             cap -= 1;
         }
         let splits: Vec<u32> = depth.iter().map(|d| 1u32 << d.min(&cap)).collect();
-        let display = RadiosityMesh::build(self.scene, &MeshOptions { shape_splits: splits.clone(), max_elements: usize::MAX, ..mesh.clone() })?;
+        let display = RadiosityMesh::build(self.scene, &display_options(mesh, &splits))?;
         Ok((display, splits))
     }
 
@@ -451,9 +451,16 @@ impl<'a> Hierarchy<'a> {
     }
 }
 
+/// The display mesh's options: `mesh`'s, each shape split `splits` times per edge.
+fn display_options(mesh: &MeshOptions, splits: &[u32]) -> MeshOptions {
+    MeshOptions { shape_splits: splits.to_vec(), max_elements: usize::MAX, ..mesh.clone() }
+}
+
 /// Everything [`super::solve`] needs back.
 pub struct Outcome {
     pub mesh: RadiosityMesh,
+    /// What `mesh` was built from.
+    pub mesh_options: MeshOptions,
     pub b: Vec<Rgb>,
     /// Gouraud values at the display mesh's vertices.
     pub vertex_b: Vec<Rgb>,
@@ -552,5 +559,5 @@ pub fn solve(scene: &Scene, mesh: &MeshOptions, opts: &HierarchicalOptions, tole
         h.jacobi_sweep();
         h.node_values(&display, &splits).iter().zip(&e).map(|(b1, e)| (*b1 - *e).map(|x| x.max(0.0))).collect()
     };
-    Ok(Outcome { mesh: display, b, vertex_b, b_one, history, converged, stats: h.stats })
+    Ok(Outcome { mesh: display, mesh_options: display_options(mesh, &splits), b, vertex_b, b_one, history, converged, stats: h.stats })
 }
