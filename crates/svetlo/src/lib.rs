@@ -7,6 +7,7 @@
 
 pub mod accel;
 pub mod bsdf;
+pub(crate) mod bytes;
 pub mod camera;
 pub mod error;
 pub mod film;

@@ -5,6 +5,7 @@
 //! length has been checked against what the header announces.
 
 use super::{Film, Filter, Pixel};
+use crate::bytes::ByteReader;
 use crate::error::{Error, Result};
 use crate::spectrum::Rgb;
 use std::ops::Range;
@@ -27,38 +28,6 @@ pub struct PartialFilm {
 
 fn bad(msg: impl std::fmt::Display) -> Error {
     Error::Invalid(format!("partial film: {msg}"))
-}
-
-struct Reader<'a> {
-    b: &'a [u8],
-    at: usize,
-}
-
-impl<'a> Reader<'a> {
-    fn take(&mut self, n: usize) -> Result<&'a [u8]> {
-        let end = self.at.checked_add(n).filter(|&e| e <= self.b.len()).ok_or_else(|| bad(format!("truncated at byte {}", self.at)))?;
-        let s = &self.b[self.at..end];
-        self.at = end;
-        Ok(s)
-    }
-    fn u8(&mut self) -> Result<u8> {
-        Ok(self.take(1)?[0])
-    }
-    fn u32(&mut self) -> Result<u32> {
-        Ok(u32::from_le_bytes(self.take(4)?.try_into().expect("4 bytes")))
-    }
-    fn f32(&mut self) -> Result<f32> {
-        Ok(f32::from_le_bytes(self.take(4)?.try_into().expect("4 bytes")))
-    }
-    fn f64(&mut self) -> Result<f64> {
-        Ok(f64::from_le_bytes(self.take(8)?.try_into().expect("8 bytes")))
-    }
-    fn rgb(&mut self) -> Result<Rgb> {
-        Ok(Rgb { r: self.f32()?, g: self.f32()?, b: self.f32()? })
-    }
-    fn rgbs(&mut self, n: usize) -> Result<Vec<Rgb>> {
-        (0..n).map(|_| self.rgb()).collect()
-    }
 }
 
 fn put_rgb(out: &mut Vec<u8>, c: Rgb) {
@@ -124,7 +93,7 @@ impl PartialFilm {
 
     /// Read sums written by [`Self::to_bytes`].
     pub fn from_bytes(b: &[u8]) -> Result<PartialFilm> {
-        let mut r = Reader { b, at: 0 };
+        let mut r = ByteReader::new(b, "partial film");
         if r.take(MAGIC.len()).ok() != Some(&MAGIC[..]) {
             return Err(bad("not svetlo film sums (bad magic)"));
         }
@@ -156,8 +125,8 @@ impl PartialFilm {
         let px = (width as u64) * (height as u64);
         let buffers = n_layers as u64 + has_splats as u64 + layer_has.iter().filter(|&&h| h).count() as u64;
         let want = px.checked_mul(PIXEL_BYTES as u64 + 12 * buffers).ok_or_else(|| bad("size overflows"))?;
-        if want != (b.len() - r.at) as u64 {
-            return Err(bad(format!("{width}x{height} with {buffers} buffers needs {want} bytes of sums, got {}", b.len() - r.at)));
+        if want != (r.left()) as u64 {
+            return Err(bad(format!("{width}x{height} with {buffers} buffers needs {want} bytes of sums, got {}", r.left())));
         }
         let px = px as usize;
         let mut film = Film::with_layers(width, height, filter, &names);

@@ -14,6 +14,7 @@ use super::form_factor::{FormFactors, RowSource};
 use super::mesh::{MeshOptions, RadiosityMesh};
 use super::solver::SolverKind;
 use super::{plan, solve_hierarchical, solve_matrix, Plan, RadiosityOptions, Solved};
+use crate::bytes::ByteReader;
 use crate::error::{Error, Result};
 use crate::scene::Scene;
 use crate::spectrum::Rgb;
@@ -68,59 +69,12 @@ pub fn form_factor_rows(scene: &Scene, opts: &RadiosityOptions, max_depth: i32, 
     Ok(out)
 }
 
-/// Bytes read with typed errors for truncation.
-struct Reader<'a> {
-    b: &'a [u8],
-    at: usize,
-    what: &'static str,
-}
-
-impl<'a> Reader<'a> {
-    fn take(&mut self, n: usize) -> Result<&'a [u8]> {
-        let end = self.at.checked_add(n).filter(|&e| e <= self.b.len()).ok_or_else(|| bad(self.what, format!("truncated at byte {}", self.at)))?;
-        let s = &self.b[self.at..end];
-        self.at = end;
-        Ok(s)
-    }
-    fn u8(&mut self) -> Result<u8> {
-        Ok(self.take(1)?[0])
-    }
-    fn u32(&mut self) -> Result<u32> {
-        Ok(u32::from_le_bytes(self.take(4)?.try_into().expect("4 bytes")))
-    }
-    fn u64(&mut self) -> Result<u64> {
-        Ok(u64::from_le_bytes(self.take(8)?.try_into().expect("8 bytes")))
-    }
-    fn f32(&mut self) -> Result<f32> {
-        Ok(f32::from_le_bytes(self.take(4)?.try_into().expect("4 bytes")))
-    }
-    /// A length that the rest of the buffer can hold at `each` bytes per item.
-    fn count(&mut self, each: usize) -> Result<usize> {
-        let n = self.u64()?;
-        let left = (self.b.len() - self.at) as u64;
-        if n.checked_mul(each as u64).is_none_or(|x| x > left) {
-            return Err(bad(self.what, format!("{n} items do not fit in the {left} bytes left")));
-        }
-        Ok(n as usize)
-    }
-    fn rgbs(&mut self) -> Result<Vec<Rgb>> {
-        let n = self.count(12)?;
-        (0..n).map(|_| Ok(Rgb::new(self.f32()?, self.f32()?, self.f32()?))).collect()
-    }
-    fn end(&self) -> Result<()> {
-        if self.at != self.b.len() {
-            return Err(bad(self.what, format!("{} bytes left over", self.b.len() - self.at)));
-        }
-        Ok(())
-    }
-}
-
 /// The rows in `blocks` (from [`form_factor_rows`], in any order), checked to be every row of
 /// an `n`-element matrix exactly once, in row order.
 fn assemble(blocks: &[&[u8]], n: u64) -> Result<FormFactors> {
     let mut parts: Vec<(u64, Rows)> = Vec::with_capacity(blocks.len());
     for b in blocks {
-        let mut r = Reader { b, at: 0, what: "form-factor rows" };
+        let mut r = ByteReader::new(b, "radiosity form-factor rows");
         if r.take(8).ok() != Some(&ROWS_MAGIC[..]) {
             return Err(bad("form-factor rows", "not svetlo form-factor rows (bad magic)"));
         }
@@ -131,7 +85,7 @@ fn assemble(blocks: &[&[u8]], n: u64) -> Result<FormFactors> {
         let mut rows = Vec::with_capacity((end - start) as usize);
         for _ in start..end {
             let k = r.u32()? as usize;
-            if k as u64 * 8 > (r.b.len() - r.at) as u64 {
+            if k as u64 * 8 > r.left() as u64 {
                 return Err(bad("form-factor rows", "truncated row"));
             }
             let row = (0..k)
@@ -248,7 +202,7 @@ impl Solved {
     /// The solution of [`Self::to_bytes`] for `scene` (the one it was solved on), its mesh
     /// built again; statistics of the solve are not carried (zero).
     pub fn from_bytes(scene: &Scene, b: &[u8]) -> Result<Solved> {
-        let mut r = Reader { b, at: 0, what: "solution" };
+        let mut r = ByteReader::new(b, "radiosity solution");
         if r.take(8).ok() != Some(&SOLUTION_MAGIC[..]) {
             return Err(bad("solution", "not a svetlo radiosity solution (bad magic)"));
         }
@@ -265,9 +219,9 @@ impl Solved {
             sphere_segments: usize::try_from(sphere_segments).map_err(|_| bad("solution", "sphere segments out of range"))?,
             shape_splits,
         };
-        let bv = r.rgbs()?;
-        let vertex_b = if r.u8()? != 0 { Some(r.rgbs()?) } else { None };
-        let b_one = if r.u8()? != 0 { Some(r.rgbs()?) } else { None };
+        let bv = r.counted_rgbs()?;
+        let vertex_b = if r.u8()? != 0 { Some(r.counted_rgbs()?) } else { None };
+        let b_one = if r.u8()? != 0 { Some(r.counted_rgbs()?) } else { None };
         r.end()?;
         let mesh = RadiosityMesh::build(scene, &mesh_options)?;
         let (ne, nv) = (mesh.elements.len(), mesh.vertices.len());
