@@ -149,13 +149,23 @@ impl FilmTile {
         let xmax = floor_i(p.x - 0.5 + r).min(self.x1 as i64 - 1);
         let ymin = (-floor_i(-(p.y - 0.5 - r))).max(self.y0 as i64);
         let ymax = floor_i(p.y - 0.5 + r).min(self.y1 as i64 - 1);
+        // The x weights once per sample, not once per row (a Gaussian's are two exp each).
+        const SPAN: usize = 16;
+        let nx = (xmax - xmin + 1).max(0) as usize;
+        let mut fx = [0.0f32; SPAN];
+        let cached = nx <= SPAN;
+        if cached {
+            for (i, f) in fx[..nx].iter_mut().enumerate() {
+                *f = self.filter.eval((xmin + i as i64) as f32 + 0.5 - p.x);
+            }
+        }
         for y in ymin..=ymax {
             let fy = self.filter.eval(y as f32 + 0.5 - p.y);
             if fy == 0.0 {
                 continue;
             }
             for x in xmin..=xmax {
-                let wgt = fy * self.filter.eval(x as f32 + 0.5 - p.x);
+                let wgt = fy * if cached { fx[(x - xmin) as usize] } else { self.filter.eval(x as f32 + 0.5 - p.x) };
                 if wgt == 0.0 {
                     continue;
                 }

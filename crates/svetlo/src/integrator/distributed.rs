@@ -13,8 +13,8 @@
 //! weight cannot be split between the lobes; its delta lobes (smooth plastic's coating)
 //! still reflect. So with max_depth 2 it is direct illumination and equals `path`.
 //!
-//! Pixel samples are stratified: when the settings ask for the independent sampler (the
-//! default), the Owen-scrambled Sobol sampler is used instead.
+//! Pixel samples are stratified, as Cook's method defines it: when the settings ask for the
+//! independent sampler (the default), the Owen-scrambled Sobol sampler is used instead.
 
 use super::path::{camera_walk, WalkRules};
 use super::{render_pixels, Integrator, PixelEstimator, Progress, RenderSettings};

@@ -81,7 +81,7 @@ pub(crate) fn light_mis_to(
     if f.is_black() {
         return NONE;
     }
-    let blocked = if ls.infinite { scene.occluded_dir_at(p, ng, ls.wi, time) } else { scene.occluded_at(p, ng, ls.p, time) };
+    let blocked = if ls.infinite { scene.occluded_dir_at(p, ng, ls.wi, time) } else { scene.occluded_between(p, ng, ls.p, ls.n, time) };
     if blocked {
         return NONE;
     }

@@ -658,8 +658,10 @@ fn shade8<S>(v: &Soa, rr_depth: i32, st: &mut Paths<S>, rays: &mut Rays8, shadow
         for k in 0..3 {
             o.c[k][l] = beta[k] * ((f[k] * li[k]) * s);
         }
+        // Both ends off their surfaces, as `Scene::occluded_between`.
         let so = offset3(p, ng, dl);
-        let d2 = [lp[0] - so[0], lp[1] - so[1], lp[2] - so[2]];
+        let q = offset3(lp, ln, [-dl[0], -dl[1], -dl[2]]);
+        let d2 = [q[0] - so[0], q[1] - so[1], q[2] - so[2]];
         let dist = dot3(d2, d2).sqrt();
         for k in 0..3 {
             shadow.o[k][l] = so[k];

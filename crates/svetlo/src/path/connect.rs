@@ -112,7 +112,7 @@ pub fn connect(
         if l.is_black() {
             return None;
         }
-        let blocked = if ls.infinite { scene.occluded_dir_at(pt.p, pt.ng, ls.wi, pt.time) } else { scene.occluded_at(pt.p, pt.ng, ls.p, pt.time) };
+        let blocked = if ls.infinite { scene.occluded_dir_at(pt.p, pt.ng, ls.wi, pt.time) } else { scene.occluded_between(pt.p, pt.ng, ls.p, ls.n, pt.time) };
         if blocked {
             return None;
         }

@@ -391,7 +391,7 @@ pub(crate) fn geometry_term(scene: &Scene, a: &Vertex, b: &Vertex) -> f32 {
         return 0.0;
     }
     let g = a.abs_cos_to(b) * b.abs_cos_to(a) / d2;
-    if g == 0.0 || scene.occluded_at(a.p, a.ng, b.p, a.time) {
+    if g == 0.0 || scene.occluded_between(a.p, a.ng, b.p, b.ng, a.time) {
         return 0.0;
     }
     g

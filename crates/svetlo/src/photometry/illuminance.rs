@@ -214,7 +214,7 @@ fn delta_irradiance(scene: &Scene, light: &Light, p: Vec3, n: Vec3, u: Vec2) -> 
     if cos <= 0.0 || ls.pdf <= 0.0 {
         return 0.0;
     }
-    let blocked = if ls.infinite { scene.occluded_dir(p, n, ls.wi) } else { scene.occluded(p, n, ls.p) };
+    let blocked = if ls.infinite { scene.occluded_dir(p, n, ls.wi) } else { scene.occluded_between(p, n, ls.p, ls.n, 0.0) };
     if blocked {
         0.0
     } else {

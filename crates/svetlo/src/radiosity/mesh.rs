@@ -302,7 +302,7 @@ impl RadiosityMesh {
                     if cos <= 0.0 {
                         continue;
                     }
-                    let blocked = if ls.infinite { scene.occluded_dir(*p, e.normal, ls.wi) } else { scene.occluded(*p, e.normal, ls.p) };
+                    let blocked = if ls.infinite { scene.occluded_dir(*p, e.normal, ls.wi) } else { scene.occluded_between(*p, e.normal, ls.p, ls.n, 0.0) };
                     if !blocked {
                         irradiance += ls.li * (cos / ls.pdf);
                     }
