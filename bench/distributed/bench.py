@@ -153,7 +153,7 @@ def main():
     print("  bytes per task (one node of the pass tree, independent of its spp):")
     for size in (64, 256, 512, 1024):
         for integ in ("path", "bdpt"):
-            raw = _svetlo.render_passes(scene, 0, 1, integrator=integ, spp=1, width=size, height=size, max_depth=3)
+            raw = _svetlo.render_passes(scene, 0, 1, dict(integrator=integ, spp=1, width=size, height=size, max_depth=3))
             z = zlib.compress(raw, 1)
             print(f"    {integ:5s} {size:5d}^2: {len(raw) / 1e6:8.2f} MB raw ({len(raw) / size ** 2:.0f} B/pixel), zlib-1 {len(z) / 1e6:8.2f} MB ({len(z) / len(raw):.0%})")
     for c, client in clusters.values():

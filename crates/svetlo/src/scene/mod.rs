@@ -269,8 +269,8 @@ impl Scene {
     /// their surfaces (normals `n0`, `n1`; a zero normal leaves that end where it is) and the
     /// far end also stops short. Stopping short alone fails on grazing segments, such as a
     /// short chord inside a concave emitter: the target surface's hit is then uncertain by
-    /// its rounding over the cosine, more than the margin, and a light sample was lost about
-    /// once in 10⁴.
+    /// its rounding over the cosine, more than the margin, and inside an emitting sphere about
+    /// one light sample in 70 000 was lost.
     pub fn occluded_between(&self, p0: Vec3, n0: Vec3, p1: Vec3, n1: Vec3, time: f32) -> bool {
         let d = p1 - p0;
         let o = crate::geometry::ray::offset_ray_origin(p0, n0, d);
