@@ -54,13 +54,14 @@ impl FilmTile {
     /// (the others are skipped: most samples reach few of the layers).
     #[inline]
     pub fn add_sample_touched(&mut self, p: Vec2, l: Rgb, aov: &[Rgb], touched: u32) {
-        self.add_sample(p, l);
         let touched = touched & if aov.len() >= 32 { u32::MAX } else { (1u32 << aov.len()) - 1 };
         if touched == 0 {
+            self.add_sample(p, l);
             return;
         }
         let w = self.x1 - self.x0;
         if self.filter == Filter::Box {
+            self.add_sample(p, l);
             // One pixel takes the whole sample: find it once for every layer.
             let (ox, oy) = (floor_i(p.x), floor_i(p.y));
             if ox >= self.x0 as i64 && oy >= self.y0 as i64 && ox < self.x1 as i64 && oy < self.y1 as i64 {
@@ -78,36 +79,20 @@ impl FilmTile {
             }
             return;
         }
-        let r = self.filter.radius();
-        let xmin = (-floor_i(-(p.x - 0.5 - r))).max(self.x0 as i64);
-        let xmax = floor_i(p.x - 0.5 + r).min(self.x1 as i64 - 1);
-        let ymin = (-floor_i(-(p.y - 0.5 - r))).max(self.y0 as i64);
-        let ymax = floor_i(p.y - 0.5 + r).min(self.y1 as i64 - 1);
-        if xmax < xmin || ymax < ymin {
-            return;
-        }
-        // The filter's separable weights, evaluated once for all layers.
-        const SPAN: usize = 16;
-        let (nx, ny) = ((xmax - xmin + 1) as usize, (ymax - ymin + 1) as usize);
-        let (mut fx, mut fy) = ([0.0f32; SPAN], [0.0f32; SPAN]);
-        let cached = nx <= SPAN && ny <= SPAN;
-        if cached {
-            for (i, f) in fx[..nx].iter_mut().enumerate() {
-                *f = self.filter.eval((xmin + i as i64) as f32 + 0.5 - p.x);
-            }
-            for (j, f) in fy[..ny].iter_mut().enumerate() {
-                *f = self.filter.eval((ymin + j as i64) as f32 + 0.5 - p.y);
-            }
-        }
+        // The beauty and the layers share one footprint.
+        let l = if l.is_finite() { l } else { Rgb::BLACK };
+        self.add_to_owner(p, l);
+        let Some(fp) = self.footprint(p) else { return };
+        self.add_filtered(&fp, l);
         for (i, (layer, &v)) in self.layers.iter_mut().zip(aov).enumerate() {
             let v = if v.is_finite() && touched >> i & 1 == 1 { v } else { Rgb::BLACK };
             if v.is_black() {
                 continue;
             }
-            for y in ymin..=ymax {
-                let wy = if cached { fy[(y - ymin) as usize] } else { self.filter.eval(y as f32 + 0.5 - p.y) };
-                for x in xmin..=xmax {
-                    let wgt = wy * if cached { fx[(x - xmin) as usize] } else { self.filter.eval(x as f32 + 0.5 - p.x) };
+            for y in fp.ymin..=fp.ymax {
+                let wy = fp.wy(&self.filter, y);
+                for x in fp.xmin..=fp.xmax {
+                    let wgt = wy * fp.wx(&self.filter, x);
                     if wgt != 0.0 {
                         layer[((y as u32 - self.y0) * w + (x as u32 - self.x0)) as usize] += v * wgt;
                     }
@@ -121,51 +106,46 @@ impl FilmTile {
     #[inline]
     pub fn add_sample(&mut self, p: Vec2, l: Rgb) {
         let l = if l.is_finite() { l } else { Rgb::BLACK };
-        let (w, h) = (self.x1 - self.x0, self.y1 - self.y0);
-        // The pixel that owns the sample, for variance statistics.
-        let (ox, oy) = (floor_i(p.x) - self.x0 as i64, floor_i(p.y) - self.y0 as i64);
-        let owned = ox >= 0 && oy >= 0 && (ox as u32) < w && (oy as u32) < h;
-        if owned {
-            let px = &mut self.pixels[(oy as u32 * w + ox as u32) as usize];
-            px.s1 += l;
-            px.s2 += l * l;
-            px.n += 1;
-            if self.filter == Filter::Box {
-                // The box filter's support is exactly the owning pixel, with weight 1.
-                px.sum += l;
-                px.weight += 1.0;
-                return;
-            }
+        if self.add_to_owner(p, l) {
+            return;
         }
-        self.add_filtered(p, l);
+        if let Some(fp) = self.footprint(p) {
+            self.add_filtered(&fp, l);
+        }
+    }
+
+    /// The variance statistics of the pixel that owns the sample; with the box filter, whose
+    /// support is exactly that pixel with weight 1, also its filtered sum (then true: done).
+    #[inline]
+    fn add_to_owner(&mut self, p: Vec2, l: Rgb) -> bool {
+        let (w, h) = (self.x1 - self.x0, self.y1 - self.y0);
+        let (ox, oy) = (floor_i(p.x) - self.x0 as i64, floor_i(p.y) - self.y0 as i64);
+        if ox < 0 || oy < 0 || ox as u32 >= w || oy as u32 >= h {
+            return false;
+        }
+        let px = &mut self.pixels[(oy as u32 * w + ox as u32) as usize];
+        px.s1 += l;
+        px.s2 += l * l;
+        px.n += 1;
+        if self.filter == Filter::Box {
+            px.sum += l;
+            px.weight += 1.0;
+            return true;
+        }
+        false
     }
 
     /// The filter's share of a sample for every pixel of the tile within its radius.
     #[inline(never)]
-    fn add_filtered(&mut self, p: Vec2, l: Rgb) {
-        let r = self.filter.radius();
+    fn add_filtered(&mut self, fp: &Footprint, l: Rgb) {
         let w = self.x1 - self.x0;
-        let xmin = (-floor_i(-(p.x - 0.5 - r))).max(self.x0 as i64);
-        let xmax = floor_i(p.x - 0.5 + r).min(self.x1 as i64 - 1);
-        let ymin = (-floor_i(-(p.y - 0.5 - r))).max(self.y0 as i64);
-        let ymax = floor_i(p.y - 0.5 + r).min(self.y1 as i64 - 1);
-        // The x weights once per sample, not once per row (a Gaussian's are two exp each).
-        const SPAN: usize = 16;
-        let nx = (xmax - xmin + 1).max(0) as usize;
-        let mut fx = [0.0f32; SPAN];
-        let cached = nx <= SPAN;
-        if cached {
-            for (i, f) in fx[..nx].iter_mut().enumerate() {
-                *f = self.filter.eval((xmin + i as i64) as f32 + 0.5 - p.x);
-            }
-        }
-        for y in ymin..=ymax {
-            let fy = self.filter.eval(y as f32 + 0.5 - p.y);
+        for y in fp.ymin..=fp.ymax {
+            let fy = fp.wy(&self.filter, y);
             if fy == 0.0 {
                 continue;
             }
-            for x in xmin..=xmax {
-                let wgt = fy * if cached { fx[(x - xmin) as usize] } else { self.filter.eval(x as f32 + 0.5 - p.x) };
+            for x in fp.xmin..=fp.xmax {
+                let wgt = fy * fp.wx(&self.filter, x);
                 if wgt == 0.0 {
                     continue;
                 }
@@ -174,6 +154,75 @@ impl FilmTile {
                 px.sum += l * wgt;
                 px.weight += wgt as f64;
             }
+        }
+    }
+
+    /// The pixels of this tile within the filter's radius of `p` (None: none), with the
+    /// filter's separable weights evaluated once per sample for the beauty and every layer
+    /// (a Gaussian's cost two `exp` each).
+    #[inline]
+    fn footprint(&self, p: Vec2) -> Option<Footprint> {
+        let r = self.filter.radius();
+        let xmin = (-floor_i(-(p.x - 0.5 - r))).max(self.x0 as i64);
+        let xmax = floor_i(p.x - 0.5 + r).min(self.x1 as i64 - 1);
+        let ymin = (-floor_i(-(p.y - 0.5 - r))).max(self.y0 as i64);
+        let ymax = floor_i(p.y - 0.5 + r).min(self.y1 as i64 - 1);
+        if xmax < xmin || ymax < ymin {
+            return None;
+        }
+        let (nx, ny) = ((xmax - xmin + 1) as usize, (ymax - ymin + 1) as usize);
+        let mut fp = Footprint {
+            xmin,
+            xmax,
+            ymin,
+            ymax,
+            p,
+            fx: [0.0; Footprint::SPAN],
+            fy: [0.0; Footprint::SPAN],
+            cached: nx <= Footprint::SPAN && ny <= Footprint::SPAN,
+        };
+        if fp.cached {
+            for (i, f) in fp.fx[..nx].iter_mut().enumerate() {
+                *f = self.filter.eval((xmin + i as i64) as f32 + 0.5 - p.x);
+            }
+            for (j, f) in fp.fy[..ny].iter_mut().enumerate() {
+                *f = self.filter.eval((ymin + j as i64) as f32 + 0.5 - p.y);
+            }
+        }
+        Some(fp)
+    }
+}
+
+/// A sample's filter footprint on a tile: its pixel range and, when the range is small enough
+/// to cache, the filter's weights along each axis.
+struct Footprint {
+    xmin: i64,
+    xmax: i64,
+    ymin: i64,
+    ymax: i64,
+    p: Vec2,
+    fx: [f32; Footprint::SPAN],
+    fy: [f32; Footprint::SPAN],
+    cached: bool,
+}
+
+impl Footprint {
+    /// Widest cached range (pixels per axis); wider filters evaluate each weight in place.
+    const SPAN: usize = 16;
+    #[inline(always)]
+    fn wx(&self, filter: &Filter, x: i64) -> f32 {
+        if self.cached {
+            self.fx[(x - self.xmin) as usize]
+        } else {
+            filter.eval(x as f32 + 0.5 - self.p.x)
+        }
+    }
+    #[inline(always)]
+    fn wy(&self, filter: &Filter, y: i64) -> f32 {
+        if self.cached {
+            self.fy[(y - self.ymin) as usize]
+        } else {
+            filter.eval(y as f32 + 0.5 - self.p.y)
         }
     }
 }

@@ -350,13 +350,9 @@ impl<'a> Space<'a> {
 
     /// Whether the segment a–b is unblocked.
     pub fn visible(&self, a: &Vertex, b: &Vertex) -> bool {
-        if a.kind == VertexKind::Camera {
-            return !self.scene.occluded_between(b.p, b.ng, a.p, a.ng, 0.0);
-        }
-        if b.kind == VertexKind::Camera {
-            return !self.scene.occluded_between(a.p, a.ng, b.p, b.ng, 0.0);
-        }
-        !self.scene.occluded_between(a.p, a.ng, b.p, b.ng, 0.0)
+        // From the surface toward the camera's lens point.
+        let (from, to) = if a.kind == VertexKind::Camera { (b, a) } else { (a, b) };
+        !self.scene.occluded_between(from.p, from.ng, to.p, to.ng, 0.0)
     }
 
     /// Check the structure of a path: area emitter at 0, scattering vertices inside (as
