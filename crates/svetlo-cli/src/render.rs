@@ -66,7 +66,7 @@ pub struct RenderArgs {
     /// Worker threads (0: all cores; at most 1024).
     #[arg(long, value_name = "N", default_value_t = 0, allow_negative_numbers = true, value_parser = value_parser!(u16).range(0..=1024))]
     pub threads: u16,
-    /// Sample generator.
+    /// Sample generator (default: the scene's `<sampler>`, else sobol).
     #[arg(long, value_enum)]
     pub sampler: Option<SamplerArg>,
     /// Scene parameter for <default> / $name substitution (repeatable).

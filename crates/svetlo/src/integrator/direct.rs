@@ -10,7 +10,7 @@
 //! test, a textured spot under a constant sky, that choice was most of the variance) for one
 //! shadow ray per delta light.
 
-use super::path::light_mis_to;
+use super::path::{bsdf_pdf_toward, light_mis_to};
 use super::{render_pixels, Integrator, PixelEstimator, Progress, RenderSettings};
 use crate::bsdf::{LobeFlags, TransportMode};
 use crate::error::Result;
@@ -202,9 +202,11 @@ impl DirectEstimator {
             }
             let wi = si.to_world(bs.wi);
             let r = si.spawn_ray(wi);
+            let mut hit = None;
             let (le, pdf_light, end) = match scene.intersect(&r) {
                 Some(s2) => match scene.area_light(&s2) {
                     Some((li, area)) => {
+                        hit = Some(s2.p);
                         (area.l(s2.ng, s2.uv, s2.wo), self.lights.pmf[li as usize] * area.pdf_li(si.p, s2.p, s2.ng), aovs.light_event(Some(s2.shape)))
                     }
                     None => continue,
@@ -227,7 +229,13 @@ impl DirectEstimator {
             if le.is_black() {
                 continue;
             }
-            let w = if bs.lobe.is_specular() || emitter_samples == 0 { 1.0 } else { power_heuristic(nb, bs.pdf, ne, pdf_light) };
+            let w = if bs.lobe.is_specular() || emitter_samples == 0 {
+                1.0
+            } else {
+                // The density toward the emitter point, as next-event estimation weighs it.
+                let pdf_bsdf = hit.and_then(|y| bsdf_pdf_toward(&bsdf, &si.shading, wo, si.p, y)).unwrap_or(bs.pdf);
+                power_heuristic(nb, pdf_bsdf, ne, pdf_light)
+            };
             let c = le * bs.weight() * (w / nb);
             l += c;
             if !aovs.is_empty() {

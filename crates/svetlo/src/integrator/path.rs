@@ -102,6 +102,40 @@ impl PixelEstimator for PathTracer {
     }
 }
 
+/// A vertex that scattered by its BSDF, kept for the MIS weight of an emitter its sample
+/// hits.
+pub(crate) struct ScatterPoint {
+    pub p: Vec3,
+    pub frame: crate::math::Frame,
+    /// Toward the previous vertex, local shading frame.
+    pub wo: Vec3,
+    pub bsdf: Bsdf,
+}
+
+impl ScatterPoint {
+    /// See [`bsdf_pdf_toward`].
+    pub fn pdf_toward(&self, y: Vec3) -> Option<f32> {
+        bsdf_pdf_toward(&self.bsdf, &self.frame, self.wo, self.p, y)
+    }
+}
+
+/// The density (solid angle, radiance transport) of `bsdf` at `p`, seen along `wo` (local
+/// frame `frame`), for the direction from `p` to `y`. The MIS weight of an emitter point `y`
+/// found by BSDF sampling takes this density rather than that of the sampled direction: the
+/// sampled ray leaves from an offset origin, so its direction differs from the direction
+/// `p → y` that next-event estimation weighs for the same `y`. Both strategies must weigh
+/// one pair of densities per point for their weights to sum to one; on grazing chords (a
+/// concave emitter seen from itself) the two directions' cosines differ by tens of percent.
+/// None where `y` is `p`.
+pub(crate) fn bsdf_pdf_toward(bsdf: &Bsdf, frame: &crate::math::Frame, wo: Vec3, p: Vec3, y: Vec3) -> Option<f32> {
+    let d = y - p;
+    let len = d.length();
+    if !(len > 0.0 && len.is_finite()) {
+        return None;
+    }
+    Some(bsdf.pdf(wo, frame.to_local(d / len), TransportMode::Radiance))
+}
+
 /// A camera-path vertex where the walk is about to scatter.
 pub(crate) struct WalkVertex<'a> {
     pub si: &'a SurfaceInteraction,
@@ -159,10 +193,13 @@ pub(crate) fn camera_walk<R: WalkRules + ?Sized>(
     let mut ray = *camera_ray;
     // Segments traced so far; the camera ray is segment 1.
     let mut depth = 0i32;
-    // State of the previous vertex, for MIS on emitters found by BSDF sampling.
+    // State of the previous vertex, for MIS on emitters found by BSDF sampling: whether its
+    // sample was specular, its BSDF direction's density, and its BSDF (for the density
+    // toward the hit point, see `bsdf_pdf_toward`).
     let mut prev_specular = true;
     let mut prev_pdf = 0.0f32;
     let mut prev_p = ray.o;
+    let mut prev: Option<ScatterPoint> = None;
     let mut eta_scale = 1.0f32;
     // The rules ended the walk at this hit: only its emission counts.
     let mut last = false;
@@ -187,7 +224,12 @@ pub(crate) fn camera_walk<R: WalkRules + ?Sized>(
         if let Some((li, area)) = scene.area_light(&si) {
             let le = area.l(si.ng, si.uv, si.wo);
             if !le.is_black() && !hide {
-                let w = if prev_specular { 1.0 } else { power_heuristic(1.0, prev_pdf, 1.0, scene.light_pmf(li) * area.pdf_li(prev_p, si.p, si.ng)) };
+                let w = if prev_specular {
+                    1.0
+                } else {
+                    let pdf_bsdf = prev.as_ref().and_then(|v| v.pdf_toward(si.p)).unwrap_or(prev_pdf);
+                    power_heuristic(1.0, pdf_bsdf, 1.0, scene.light_pmf(li) * area.pdf_li(prev_p, si.p, si.ng))
+                };
                 l += beta * le * w;
                 layers.add(events.ends(aovs.light_event(Some(si.shape))), beta * le * w);
             }
@@ -229,6 +271,9 @@ pub(crate) fn camera_walk<R: WalkRules + ?Sized>(
         prev_p = si.p;
         last = rules.ends_after(flags, bs.lobe);
         ray = si.spawn_ray(si.to_world(bs.wi));
+        if !prev_specular {
+            prev = Some(ScatterPoint { p: si.p, frame: si.shading, wo, bsdf });
+        }
         let u_rr = sampler.next_1d();
         if depth >= settings.rr_depth && !last {
             let q = (beta * eta_scale).max_component().min(0.95);

@@ -475,7 +475,13 @@ impl SimdKernel {
                 } else {
                     let prev_p = Vec3::new(st.prev_p[0][l], st.prev_p[1][l], st.prev_p[2][l]);
                     let pdf_li = area_of(scene, li).map_or(0.0, |a| a.pdf_li(prev_p, p, ng));
-                    power_heuristic(1.0, st.prev_pdf[l], 1.0, scene.light_pmf(li) * pdf_li)
+                    // The diffuse BSDF's density toward the hit point, as the scalar
+                    // tracer's `bsdf_pdf_toward` (the same operations).
+                    let prev_n = Vec3::new(st.prev_n[0][l], st.prev_n[1][l], st.prev_n[2][l]);
+                    let dp = p - prev_p;
+                    let len = dp.length();
+                    let pdf_bsdf = if len > 0.0 && len.is_finite() { (dp / len).dot(prev_n).max(0.0) * INV_PI } else { st.prev_pdf[l] };
+                    power_heuristic(1.0, pdf_bsdf, 1.0, scene.light_pmf(li) * pdf_li)
                 };
                 let beta = Rgb::new(st.beta[0][l], st.beta[1][l], st.beta[2][l]);
                 st.add(l, beta * le * w);
@@ -702,6 +708,7 @@ fn shade8<S>(v: &Soa, rr_depth: i32, st: &mut Paths<S>, rays: &mut Rays8, shadow
         for k in 0..3 {
             st.beta[k][l] = if moved { nb[k] } else { beta[k] };
             st.prev_p[k][l] = if moved { p[k] } else { st.prev_p[k][l] };
+            st.prev_n[k][l] = if moved { fnn[k] * flip } else { st.prev_n[k][l] };
             rays.o[k][l] = no[k];
             rays.d[k][l] = dir[k];
         }
@@ -725,6 +732,8 @@ struct Paths<S> {
     prev_specular: [bool; LANES],
     prev_pdf: [f32; LANES],
     prev_p: [[f32; LANES]; 3],
+    /// The previous vertex's shading normal on the side its sample left by.
+    prev_n: [[f32; LANES]; 3],
 }
 
 impl<S: Clone> Paths<S> {
@@ -739,6 +748,7 @@ impl<S: Clone> Paths<S> {
             prev_specular: [true; LANES],
             prev_pdf: [0.0; LANES],
             prev_p: [[0.0; LANES]; 3],
+            prev_n: [[0.0; LANES]; 3],
         }
     }
 }
@@ -752,6 +762,7 @@ impl<S> Paths<S> {
             self.l[k][l] = 0.0;
             self.beta[k][l] = 1.0;
             self.prev_p[k][l] = 0.0;
+            self.prev_n[k][l] = 0.0;
         }
         self.depth[l] = 0;
         self.prev_specular[l] = true;

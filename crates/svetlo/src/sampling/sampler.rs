@@ -22,12 +22,12 @@ pub trait Sampler: Send + Sync {
 /// Which sampler a render uses (scene file `<sampler type=...>` or the CLI).
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Default)]
 pub enum SamplerKind {
-    /// Uniform random numbers (PCG32 per pixel sample): the default, until the path tracer's
-    /// rare loss of a light sample inside concave emitters is fixed (README, "Samplers").
-    #[default]
+    /// Uniform random numbers (PCG32 per pixel sample); Mitsuba's test scenes ask for it.
     Independent,
-    /// Padded Owen-scrambled Sobol (0,2)-sequences (low discrepancy; lower error than
-    /// independent at every spp on the Cornell box, at 0.4-0.9 of its cost at equal error).
+    /// Padded Owen-scrambled Sobol (0,2)-sequences, the default: low discrepancy, lower
+    /// error than independent at every spp on the Cornell box, at 0.4-0.9 of its cost at
+    /// equal error (README, "Samplers").
+    #[default]
     Sobol,
 }
 
