@@ -36,13 +36,29 @@ pub struct FilmTile {
     pub y1: u32,
     filter: Filter,
     pixels: Vec<Pixel>,
-    /// Per AOV layer: filter-weighted sums, sharing the beauty's weights.
-    layers: Vec<Vec<Rgb>>,
+    /// The AOV layers' filter-weighted sums (sharing the beauty's weights), pixel by pixel:
+    /// channel c of pixel k's layer i at `(k * n_layers + i) * 3 + c`, so that a sample's
+    /// footprint is walked once for all its layers, each pixel's in one vector loop.
+    layers: Vec<f32>,
+    n_layers: usize,
 }
 
 impl FilmTile {
     pub fn new(x0: u32, y0: u32, x1: u32, y1: u32, filter: Filter) -> Self {
-        FilmTile { x0, y0, x1, y1, filter, pixels: vec![Pixel::default(); ((x1 - x0) * (y1 - y0)) as usize], layers: Vec::new() }
+        FilmTile { x0, y0, x1, y1, filter, pixels: vec![Pixel::default(); ((x1 - x0) * (y1 - y0)) as usize], layers: Vec::new(), n_layers: 0 }
+    }
+
+    /// Gives the tile `n` AOV layers, all black.
+    fn set_layers(&mut self, n: usize) {
+        self.n_layers = n;
+        self.layers = vec![0.0; self.pixels.len() * n * 3];
+    }
+
+    /// Layer `i`'s sum at pixel index `k`.
+    #[inline]
+    fn layer_sum(&self, k: usize, i: usize) -> Rgb {
+        let j = (k * self.n_layers + i) * 3;
+        Rgb::new(self.layers[j], self.layers[j + 1], self.layers[j + 2])
     }
 
     /// Add a sample to the beauty and, with the same filter weights, `aov[i]` to layer i.
@@ -54,47 +70,81 @@ impl FilmTile {
     /// (the others are skipped: most samples reach few of the layers).
     #[inline]
     pub fn add_sample_touched(&mut self, p: Vec2, l: Rgb, aov: &[Rgb], touched: u32) {
-        let touched = touched & if aov.len() >= 32 { u32::MAX } else { (1u32 << aov.len()) - 1 };
+        let n = self.n_layers.min(aov.len());
+        let touched = touched & if n >= 32 { u32::MAX } else { (1u32 << n) - 1 };
         if touched == 0 {
             self.add_sample(p, l);
             return;
         }
+        // The layers this sample reaches, with their values; and all the layers' values as
+        // one row (zero where it reaches none: adding a zero leaves a sum as it is).
+        let mut reach = [(0usize, Rgb::BLACK); crate::lpe::aov::MAX_LAYERS];
+        let mut row = [0.0f32; 3 * crate::lpe::aov::MAX_LAYERS];
+        let mut nr = 0;
+        let mut m = touched;
+        while m != 0 {
+            let i = m.trailing_zeros() as usize;
+            m &= m - 1;
+            let v = aov[i];
+            if v.is_finite() && !v.is_black() && nr < reach.len() {
+                reach[nr] = (i, v);
+                row[3 * i..3 * i + 3].copy_from_slice(&[v.r, v.g, v.b]);
+                nr += 1;
+            }
+        }
+        let reach = &reach[..nr];
         let w = self.x1 - self.x0;
+        let n3 = 3 * self.n_layers;
+        let row = &row[..n3.min(row.len())];
         if self.filter == Filter::Box {
             self.add_sample(p, l);
             // One pixel takes the whole sample: find it once for every layer.
             let (ox, oy) = (floor_i(p.x), floor_i(p.y));
             if ox >= self.x0 as i64 && oy >= self.y0 as i64 && ox < self.x1 as i64 && oy < self.y1 as i64 {
                 let k = ((oy as u32 - self.y0) * w + (ox as u32 - self.x0)) as usize;
-                let mut m = touched;
-                while m != 0 {
-                    let i = m.trailing_zeros() as usize;
-                    m &= m - 1;
-                    if let (Some(px), Some(&v)) = (self.layers.get_mut(i).and_then(|l| l.get_mut(k)), aov.get(i)) {
-                        if v.is_finite() {
-                            *px += v;
+                if let Some(px) = self.layers.get_mut(k * n3..(k + 1) * n3) {
+                    for &(i, v) in reach {
+                        if let Some(c) = px.get_mut(3 * i..3 * i + 3) {
+                            c[0] += v.r;
+                            c[1] += v.g;
+                            c[2] += v.b;
                         }
                     }
                 }
             }
             return;
         }
-        // The beauty and the layers share one footprint.
+        // The beauty and the layers share one footprint, walked once for all of them.
         let l = if l.is_finite() { l } else { Rgb::BLACK };
         self.add_to_owner(p, l);
         let Some(fp) = self.footprint(p) else { return };
         self.add_filtered(&fp, l);
-        for (i, (layer, &v)) in self.layers.iter_mut().zip(aov).enumerate() {
-            let v = if v.is_finite() && touched >> i & 1 == 1 { v } else { Rgb::BLACK };
-            if v.is_black() {
-                continue;
-            }
-            for y in fp.ymin..=fp.ymax {
-                let wy = fp.wy(&self.filter, y);
-                for x in fp.xmin..=fp.xmax {
-                    let wgt = wy * fp.wx(&self.filter, x);
-                    if wgt != 0.0 {
-                        layer[((y as u32 - self.y0) * w + (x as u32 - self.x0)) as usize] += v * wgt;
+        if reach.is_empty() {
+            return;
+        }
+        // A sample reaching a third of the layers or more adds the whole row (a vector loop),
+        // fewer add theirs one by one; the sums are the same either way.
+        let dense = 3 * nr >= self.n_layers;
+        for y in fp.ymin..=fp.ymax {
+            let wy = fp.wy(&self.filter, y);
+            for x in fp.xmin..=fp.xmax {
+                let wgt = wy * fp.wx(&self.filter, x);
+                if wgt == 0.0 {
+                    continue;
+                }
+                let k = ((y as u32 - self.y0) * w + (x as u32 - self.x0)) as usize;
+                let Some(px) = self.layers.get_mut(k * n3..(k + 1) * n3) else { continue };
+                if dense {
+                    for (d, s) in px.iter_mut().zip(row) {
+                        *d += s * wgt;
+                    }
+                } else {
+                    for &(i, v) in reach {
+                        if let Some(c) = px.get_mut(3 * i..3 * i + 3) {
+                            c[0] += v.r * wgt;
+                            c[1] += v.g * wgt;
+                            c[2] += v.b * wgt;
+                        }
                     }
                 }
             }
@@ -265,7 +315,7 @@ impl Film {
     pub fn with_layers(width: u32, height: u32, filter: Filter, names: &[String]) -> Self {
         let mut f = Film::new(width, height, filter);
         f.layer_names = names.to_vec();
-        f.full.layers = vec![vec![Rgb::BLACK; (width * height) as usize]; names.len()];
+        f.full.set_layers(names.len());
         f.layer_splats = vec![Vec::new(); names.len()];
         f
     }
@@ -294,8 +344,9 @@ impl Film {
     /// Layer `i` developed like the beauty: its filtered sums over the beauty's weights plus
     /// its scaled splats.
     pub fn layer_image(&self, i: usize) -> Image {
-        let sums = &self.full.layers[i];
-        let mut data: Vec<Rgb> = self.full.pixels.iter().zip(sums).map(|(p, s)| if p.weight > 0.0 { *s / p.weight as f32 } else { Rgb::BLACK }).collect();
+        let t = &self.full;
+        let mut data: Vec<Rgb> =
+            t.pixels.iter().enumerate().map(|(k, p)| if p.weight > 0.0 { t.layer_sum(k, i) / p.weight as f32 } else { Rgb::BLACK }).collect();
         for (d, s) in data.iter_mut().zip(&self.layer_splats[i]) {
             *d += *s / self.splat_scale;
         }
@@ -317,7 +368,7 @@ impl Film {
         // Extend by the filter radius so samples near the border reach neighbours.
         let r = self.filter.radius().ceil() as u32;
         let mut t = FilmTile::new(x0.saturating_sub(r), y0.saturating_sub(r), (x1 + r).min(self.width), (y1 + r).min(self.height), self.filter);
-        t.layers = vec![vec![Rgb::BLACK; t.pixels.len()]; self.layer_names.len()];
+        t.set_layers(self.layer_names.len());
         t
     }
 
@@ -334,10 +385,14 @@ impl Film {
                 d.n += s.n;
             }
         }
-        for (dl, sl) in self.full.layers.iter_mut().zip(&t.layers) {
+        let nl = self.full.n_layers;
+        if nl > 0 && t.n_layers == nl {
             for y in t.y0..t.y1 {
                 for x in t.x0..t.x1 {
-                    dl[(y * self.width + x) as usize] += sl[((y - t.y0) * tw + (x - t.x0)) as usize];
+                    let (d, s) = ((y * self.width + x) as usize * 3 * nl, ((y - t.y0) * tw + (x - t.x0)) as usize * 3 * nl);
+                    for (dv, sv) in self.full.layers[d..d + 3 * nl].iter_mut().zip(&t.layers[s..s + 3 * nl]) {
+                        *dv += *sv;
+                    }
                 }
             }
         }
@@ -364,10 +419,8 @@ impl Film {
             d.s2 += s.s2;
             d.n += s.n;
         }
-        for (dl, sl) in self.full.layers.iter_mut().zip(&o.full.layers) {
-            for (d, s) in dl.iter_mut().zip(sl) {
-                *d += *s;
-            }
+        for (d, s) in self.full.layers.iter_mut().zip(&o.full.layers) {
+            *d += *s;
         }
         add_buffer(&mut self.splats, &o.splats);
         for (d, s) in self.layer_splats.iter_mut().zip(&o.layer_splats) {

@@ -81,8 +81,10 @@ impl PartialFilm {
             put_rgb(&mut out, p.s2);
             out.extend_from_slice(&p.n.to_le_bytes());
         }
-        for l in &f.full.layers {
-            l.iter().for_each(|c| put_rgb(&mut out, *c));
+        // Layer by layer on the wire (the tile keeps them pixel by pixel).
+        let nl = f.full.n_layers;
+        for i in 0..nl {
+            f.full.layers.chunks_exact(3).skip(i).step_by(nl).for_each(|c| put_rgb(&mut out, Rgb::new(c[0], c[1], c[2])));
         }
         f.splats.iter().for_each(|c| put_rgb(&mut out, *c));
         for s in &f.layer_splats {
@@ -133,8 +135,10 @@ impl PartialFilm {
         for p in film.full.pixels.iter_mut() {
             *p = Pixel { sum: r.rgb()?, weight: r.f64()?, s1: r.rgb()?, s2: r.rgb()?, n: r.u32()? };
         }
-        for l in film.full.layers.iter_mut() {
-            *l = r.rgbs(px)?;
+        for i in 0..n_layers {
+            for (d, s) in film.full.layers.chunks_exact_mut(3).skip(i).step_by(n_layers).zip(r.rgbs(px)?) {
+                d.copy_from_slice(&[s.r, s.g, s.b]);
+            }
         }
         if has_splats {
             film.splats = r.rgbs(px)?;
