@@ -76,6 +76,31 @@ impl FilmTile {
             self.add_sample(p, l);
             return;
         }
+        let w = self.x1 - self.x0;
+        let n3 = 3 * self.n_layers;
+        if self.filter == Filter::Box {
+            self.add_sample(p, l);
+            // One pixel takes the whole sample: find it once for every layer.
+            let (ox, oy) = (floor_i(p.x), floor_i(p.y));
+            if ox >= self.x0 as i64 && oy >= self.y0 as i64 && ox < self.x1 as i64 && oy < self.y1 as i64 {
+                let k = ((oy as u32 - self.y0) * w + (ox as u32 - self.x0)) as usize;
+                if let Some(px) = self.layers.get_mut(k * n3..(k + 1) * n3) {
+                    let mut m = touched;
+                    while m != 0 {
+                        let i = m.trailing_zeros() as usize;
+                        m &= m - 1;
+                        if let (Some(c), Some(&v)) = (px.get_mut(3 * i..3 * i + 3), aov.get(i)) {
+                            if v.is_finite() {
+                                c[0] += v.r;
+                                c[1] += v.g;
+                                c[2] += v.b;
+                            }
+                        }
+                    }
+                }
+            }
+            return;
+        }
         // The layers this sample reaches, with their values; and all the layers' values as
         // one row (zero where it reaches none: adding a zero leaves a sum as it is).
         let mut reach = [(0usize, Rgb::BLACK); crate::lpe::aov::MAX_LAYERS];
@@ -93,27 +118,7 @@ impl FilmTile {
             }
         }
         let reach = &reach[..nr];
-        let w = self.x1 - self.x0;
-        let n3 = 3 * self.n_layers;
         let row = &row[..n3.min(row.len())];
-        if self.filter == Filter::Box {
-            self.add_sample(p, l);
-            // One pixel takes the whole sample: find it once for every layer.
-            let (ox, oy) = (floor_i(p.x), floor_i(p.y));
-            if ox >= self.x0 as i64 && oy >= self.y0 as i64 && ox < self.x1 as i64 && oy < self.y1 as i64 {
-                let k = ((oy as u32 - self.y0) * w + (ox as u32 - self.x0)) as usize;
-                if let Some(px) = self.layers.get_mut(k * n3..(k + 1) * n3) {
-                    for &(i, v) in reach {
-                        if let Some(c) = px.get_mut(3 * i..3 * i + 3) {
-                            c[0] += v.r;
-                            c[1] += v.g;
-                            c[2] += v.b;
-                        }
-                    }
-                }
-            }
-            return;
-        }
         // The beauty and the layers share one footprint, walked once for all of them.
         let l = if l.is_finite() { l } else { Rgb::BLACK };
         self.add_to_owner(p, l);
