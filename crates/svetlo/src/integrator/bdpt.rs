@@ -179,6 +179,8 @@ pub(crate) struct StrategyRouter<'a> {
     cam: Tracker<'a>,
     /// Reverse automata over light[0..max(s-1, 1)] as sampled.
     light: Option<LightTracker<'a>>,
+    /// `light` for each s below CACHED as the first t left it (it does not depend on t).
+    light_at: [Option<LightTracker<'a>>; CACHED],
     /// The subpaths' vertex events (with AOVs), computed once per sample, not per strategy.
     le: SubpathEvents,
     ce: SubpathEvents,
@@ -186,7 +188,7 @@ pub(crate) struct StrategyRouter<'a> {
 
 impl<'a> StrategyRouter<'a> {
     pub fn new(aovs: &'a AovSet, light: &[Vertex], camera: &[Vertex]) -> Self {
-        StrategyRouter { aovs, cam: Tracker::camera(aovs), light: None, le: SubpathEvents::new(aovs, light), ce: SubpathEvents::new(aovs, camera) }
+        StrategyRouter { aovs, cam: Tracker::camera(aovs), light: None, light_at: [None; CACHED], le: SubpathEvents::new(aovs, light), ce: SubpathEvents::new(aovs, camera) }
     }
     #[inline]
     pub fn at_t(&mut self, camera: &[Vertex], t: usize) {
@@ -205,6 +207,10 @@ impl<'a> StrategyRouter<'a> {
         if self.aovs.is_empty() || s == 0 {
             return;
         }
+        if let Some(Some(lt)) = self.light_at.get(s) {
+            self.light = Some(*lt);
+            return;
+        }
         let le = &self.le;
         match &mut self.light {
             None => self.light = Some(LightTracker::light(self.aovs, self.aovs.endpoint_event(scene, &light[0]))),
@@ -214,6 +220,9 @@ impl<'a> StrategyRouter<'a> {
                 }
             }
             Some(_) => {}
+        }
+        if let Some(c) = self.light_at.get_mut(s) {
+            *c = self.light;
         }
     }
 
