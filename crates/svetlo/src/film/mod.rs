@@ -297,8 +297,11 @@ pub struct Film {
     pub spp_done: u32,
     /// Names of the AOV layers (light path expressions), in order.
     layer_names: Vec<String>,
-    /// Per layer: splats, scaled like the beauty's.
-    layer_splats: Vec<Vec<Rgb>>,
+    /// The layers' splats, scaled like the beauty's, pixel by pixel as the tiles keep their
+    /// sums (channel c of pixel k's layer i at `(k * layers + i) * 3 + c`): a light path's
+    /// splat into several layers writes one or two cache lines, not one per layer. Empty
+    /// until the first splat.
+    layer_splats: Vec<f32>,
 }
 
 impl Film {
@@ -321,7 +324,6 @@ impl Film {
         let mut f = Film::new(width, height, filter);
         f.layer_names = names.to_vec();
         f.full.set_layers(names.len());
-        f.layer_splats = vec![Vec::new(); names.len()];
         f
     }
 
@@ -332,18 +334,45 @@ impl Film {
 
     /// Add an unfiltered contribution to layer `i` (see [`Film::splat`]).
     pub fn splat_layer(&mut self, i: usize, p: Vec2, l: Rgb) {
-        if !l.is_finite() || p.x < 0.0 || p.y < 0.0 || i >= self.layer_splats.len() {
+        if i < 32 {
+            self.splat_layers(1 << i, p, l);
+        }
+    }
+
+    /// Add an unfiltered contribution to each layer of bit mask `layers` (bit i: layer i).
+    pub fn splat_layers(&mut self, layers: u32, p: Vec2, l: Rgb) {
+        let n = self.layer_names.len();
+        if layers == 0 || !l.is_finite() || p.x < 0.0 || p.y < 0.0 {
             return;
         }
         let (x, y) = (p.x as u32, p.y as u32);
         if x >= self.width || y >= self.height {
             return;
         }
-        let buf = &mut self.layer_splats[i];
-        if buf.is_empty() {
-            *buf = vec![Rgb::BLACK; (self.width * self.height) as usize];
+        if self.layer_splats.is_empty() {
+            self.layer_splats = vec![0.0; (self.width * self.height) as usize * n * 3];
         }
-        buf[(y * self.width + x) as usize] += l;
+        let k = (y * self.width + x) as usize * n * 3;
+        let Some(px) = self.layer_splats.get_mut(k..k + n * 3) else { return };
+        let mut m = layers;
+        while m != 0 {
+            let i = m.trailing_zeros() as usize;
+            m &= m - 1;
+            if let Some(c) = px.get_mut(3 * i..3 * i + 3) {
+                c[0] += l.r;
+                c[1] += l.g;
+                c[2] += l.b;
+            }
+        }
+    }
+
+    /// Layer `i`'s splat at pixel index `k` (black before any splat).
+    fn layer_splat(&self, k: usize, i: usize) -> Rgb {
+        let j = (k * self.layer_names.len() + i) * 3;
+        match self.layer_splats.get(j..j + 3) {
+            Some(c) => Rgb::new(c[0], c[1], c[2]),
+            None => Rgb::BLACK,
+        }
     }
 
     /// Layer `i` developed like the beauty: its filtered sums over the beauty's weights plus
@@ -352,8 +381,10 @@ impl Film {
         let t = &self.full;
         let mut data: Vec<Rgb> =
             t.pixels.iter().enumerate().map(|(k, p)| if p.weight > 0.0 { t.layer_sum(k, i) / p.weight as f32 } else { Rgb::BLACK }).collect();
-        for (d, s) in data.iter_mut().zip(&self.layer_splats[i]) {
-            *d += *s / self.splat_scale;
+        if !self.layer_splats.is_empty() {
+            for (k, d) in data.iter_mut().enumerate() {
+                *d += self.layer_splat(k, i) / self.splat_scale;
+            }
         }
         Image::new(self.width as usize, self.height as usize, data)
     }
@@ -428,8 +459,13 @@ impl Film {
             *d += *s;
         }
         add_buffer(&mut self.splats, &o.splats);
-        for (d, s) in self.layer_splats.iter_mut().zip(&o.layer_splats) {
-            add_buffer(d, s);
+        if !o.layer_splats.is_empty() {
+            if self.layer_splats.is_empty() {
+                self.layer_splats = vec![0.0; o.layer_splats.len()];
+            }
+            for (d, s) in self.layer_splats.iter_mut().zip(&o.layer_splats) {
+                *d += *s;
+            }
         }
         self.spp_done += o.spp_done;
     }

@@ -71,8 +71,8 @@ impl PartialFilm {
             out.extend_from_slice(n.as_bytes());
         }
         out.push(!f.splats.is_empty() as u8);
-        for s in &f.layer_splats {
-            out.push(!s.is_empty() as u8);
+        for _ in f.layer_names() {
+            out.push(!f.layer_splats.is_empty() as u8);
         }
         for p in &f.full.pixels {
             put_rgb(&mut out, p.sum);
@@ -87,8 +87,10 @@ impl PartialFilm {
             f.full.layers.chunks_exact(3).skip(i).step_by(nl).for_each(|c| put_rgb(&mut out, Rgb::new(c[0], c[1], c[2])));
         }
         f.splats.iter().for_each(|c| put_rgb(&mut out, *c));
-        for s in &f.layer_splats {
-            s.iter().for_each(|c| put_rgb(&mut out, *c));
+        if !f.layer_splats.is_empty() {
+            for i in 0..nl {
+                f.layer_splats.chunks_exact(3).skip(i).step_by(nl).for_each(|c| put_rgb(&mut out, Rgb::new(c[0], c[1], c[2])));
+            }
         }
         out
     }
@@ -143,9 +145,14 @@ impl PartialFilm {
         if has_splats {
             film.splats = r.rgbs(px)?;
         }
+        if layer_has.iter().any(|&h| h) {
+            film.layer_splats = vec![0.0; px * n_layers * 3];
+        }
         for (i, has) in layer_has.iter().enumerate() {
             if *has {
-                film.layer_splats[i] = r.rgbs(px)?;
+                for (d, s) in film.layer_splats.chunks_exact_mut(3).skip(i).step_by(n_layers).zip(r.rgbs(px)?) {
+                    d.copy_from_slice(&[s.r, s.g, s.b]);
+                }
             }
         }
         film.spp_done = spp_done;

@@ -188,7 +188,14 @@ pub(crate) struct StrategyRouter<'a> {
 
 impl<'a> StrategyRouter<'a> {
     pub fn new(aovs: &'a AovSet, light: &[Vertex], camera: &[Vertex]) -> Self {
-        StrategyRouter { aovs, cam: Tracker::camera(aovs), light: None, light_at: [None; CACHED], le: SubpathEvents::new(aovs, light), ce: SubpathEvents::new(aovs, camera) }
+        StrategyRouter {
+            aovs,
+            cam: Tracker::camera(aovs),
+            light: None,
+            light_at: [None; CACHED],
+            le: SubpathEvents::new(aovs, light),
+            ce: SubpathEvents::new(aovs, camera),
+        }
     }
     #[inline]
     pub fn at_t(&mut self, camera: &[Vertex], t: usize) {

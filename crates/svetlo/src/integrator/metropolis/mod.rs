@@ -600,11 +600,7 @@ pub fn run_blocks<T: MetropolisTarget>(
                             *v += l[k] as f64;
                         }
                     }
-                    let mut aov = m & AOV_BITS;
-                    while aov != 0 {
-                        film.splat_layer(aov.trailing_zeros() as usize, r, l);
-                        aov &= aov - 1;
-                    }
+                    film.splat_layers(m & AOV_BITS, r, l);
                 }
                 for (k, v) in cs.iter().enumerate() {
                     stats.chain_sums[c][k] += v;
