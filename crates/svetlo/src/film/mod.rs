@@ -291,17 +291,16 @@ pub struct Film {
     full: FilmTile,
     /// Light-side estimators (light tracing, BDPT t=1, MLT) splat here; the value is divided by
     /// `splat_scale` when the image is developed (e.g. the number of light paths per pixel).
-    splats: Vec<Rgb>,
+    /// One row per pixel: the beauty's splat, then each AOV layer's (channel c of layer i of
+    /// pixel k at `k * stride + 3 + 3 * i + c`, stride `3 * (1 + layers)`), so that a light
+    /// path's deposit into the beauty and its layers writes one row. Empty until the first
+    /// splat.
+    splats: Vec<f32>,
     pub splat_scale: f32,
     /// Samples per pixel actually taken (the render may have been cancelled).
     pub spp_done: u32,
     /// Names of the AOV layers (light path expressions), in order.
     layer_names: Vec<String>,
-    /// The layers' splats, scaled like the beauty's, pixel by pixel as the tiles keep their
-    /// sums (channel c of pixel k's layer i at `(k * layers + i) * 3 + c`): a light path's
-    /// splat into several layers writes one or two cache lines, not one per layer. Empty
-    /// until the first splat.
-    layer_splats: Vec<f32>,
 }
 
 impl Film {
@@ -315,7 +314,6 @@ impl Film {
             splat_scale: 1.0,
             spp_done: 0,
             layer_names: Vec::new(),
-            layer_splats: Vec::new(),
         }
     }
 
@@ -341,24 +339,15 @@ impl Film {
 
     /// Add an unfiltered contribution to each layer of bit mask `layers` (bit i: layer i).
     pub fn splat_layers(&mut self, layers: u32, p: Vec2, l: Rgb) {
-        let n = self.layer_names.len();
-        if layers == 0 || !l.is_finite() || p.x < 0.0 || p.y < 0.0 {
+        if layers == 0 {
             return;
         }
-        let (x, y) = (p.x as u32, p.y as u32);
-        if x >= self.width || y >= self.height {
-            return;
-        }
-        if self.layer_splats.is_empty() {
-            self.layer_splats = vec![0.0; (self.width * self.height) as usize * n * 3];
-        }
-        let k = (y * self.width + x) as usize * n * 3;
-        let Some(px) = self.layer_splats.get_mut(k..k + n * 3) else { return };
+        let Some(row) = self.splat_row(p, l) else { return };
         let mut m = layers;
         while m != 0 {
             let i = m.trailing_zeros() as usize;
             m &= m - 1;
-            if let Some(c) = px.get_mut(3 * i..3 * i + 3) {
+            if let Some(c) = row.get_mut(3 + 3 * i..6 + 3 * i) {
                 c[0] += l.r;
                 c[1] += l.g;
                 c[2] += l.b;
@@ -366,10 +355,36 @@ impl Film {
         }
     }
 
-    /// Layer `i`'s splat at pixel index `k` (black before any splat).
-    fn layer_splat(&self, k: usize, i: usize) -> Rgb {
-        let j = (k * self.layer_names.len() + i) * 3;
-        match self.layer_splats.get(j..j + 3) {
+    /// Floats per pixel in `splats`.
+    #[inline]
+    fn splat_stride(&self) -> usize {
+        3 * (1 + self.layer_names.len())
+    }
+
+    /// The splat row of the pixel at `p` (allocating the buffer on first use), or None where
+    /// `p` is off the film or `l` is not finite.
+    #[inline]
+    fn splat_row(&mut self, p: Vec2, l: Rgb) -> Option<&mut [f32]> {
+        if !l.is_finite() || p.x < 0.0 || p.y < 0.0 {
+            return None;
+        }
+        let (x, y) = (p.x as u32, p.y as u32);
+        if x >= self.width || y >= self.height {
+            return None;
+        }
+        let stride = self.splat_stride();
+        if self.splats.is_empty() {
+            self.splats = vec![0.0; (self.width * self.height) as usize * stride];
+        }
+        let k = (y * self.width + x) as usize * stride;
+        self.splats.get_mut(k..k + stride)
+    }
+
+    /// The splat at pixel index `k` of the beauty (`slot` 0) or of layer `slot - 1` (black
+    /// before any splat).
+    fn splat_at(&self, k: usize, slot: usize) -> Rgb {
+        let j = k * self.splat_stride() + 3 * slot;
+        match self.splats.get(j..j + 3) {
             Some(c) => Rgb::new(c[0], c[1], c[2]),
             None => Rgb::BLACK,
         }
@@ -381,9 +396,9 @@ impl Film {
         let t = &self.full;
         let mut data: Vec<Rgb> =
             t.pixels.iter().enumerate().map(|(k, p)| if p.weight > 0.0 { t.layer_sum(k, i) / p.weight as f32 } else { Rgb::BLACK }).collect();
-        if !self.layer_splats.is_empty() {
+        if !self.splats.is_empty() {
             for (k, d) in data.iter_mut().enumerate() {
-                *d += self.layer_splat(k, i) / self.splat_scale;
+                *d += self.splat_at(k, 1 + i) / self.splat_scale;
             }
         }
         Image::new(self.width as usize, self.height as usize, data)
@@ -458,12 +473,11 @@ impl Film {
         for (d, s) in self.full.layers.iter_mut().zip(&o.full.layers) {
             *d += *s;
         }
-        add_buffer(&mut self.splats, &o.splats);
-        if !o.layer_splats.is_empty() {
-            if self.layer_splats.is_empty() {
-                self.layer_splats = vec![0.0; o.layer_splats.len()];
+        if !o.splats.is_empty() {
+            if self.splats.is_empty() {
+                self.splats = vec![0.0; o.splats.len()];
             }
-            for (d, s) in self.layer_splats.iter_mut().zip(&o.layer_splats) {
+            for (d, s) in self.splats.iter_mut().zip(&o.splats) {
                 *d += *s;
             }
         }
@@ -472,25 +486,19 @@ impl Film {
 
     /// Add an unfiltered contribution at raster position `p` (box reconstruction).
     pub fn splat(&mut self, p: Vec2, l: Rgb) {
-        if !l.is_finite() || p.x < 0.0 || p.y < 0.0 {
-            return;
+        if let Some(c) = self.splat_row(p, l) {
+            c[0] += l.r;
+            c[1] += l.g;
+            c[2] += l.b;
         }
-        let (x, y) = (p.x as u32, p.y as u32);
-        if x >= self.width || y >= self.height {
-            return;
-        }
-        if self.splats.is_empty() {
-            self.splats = vec![Rgb::BLACK; (self.width * self.height) as usize];
-        }
-        self.splats[(y * self.width + x) as usize] += l;
     }
 
     /// The developed image: filtered samples plus scaled splats.
     pub fn image(&self) -> Image {
         let mut data: Vec<Rgb> = self.full.pixels.iter().map(|p| if p.weight > 0.0 { p.sum / p.weight as f32 } else { Rgb::BLACK }).collect();
         if !self.splats.is_empty() {
-            for (d, s) in data.iter_mut().zip(&self.splats) {
-                *d += *s / self.splat_scale;
+            for (k, d) in data.iter_mut().enumerate() {
+                *d += self.splat_at(k, 0) / self.splat_scale;
             }
         }
         Image::new(self.width as usize, self.height as usize, data)
@@ -513,19 +521,6 @@ impl Film {
             })
             .collect();
         Image::new(self.width as usize, self.height as usize, data)
-    }
-}
-
-/// `dst += src` for lazily allocated buffers (empty: all zero).
-fn add_buffer(dst: &mut Vec<Rgb>, src: &[Rgb]) {
-    if src.is_empty() {
-        return;
-    }
-    if dst.is_empty() {
-        *dst = vec![Rgb::BLACK; src.len()];
-    }
-    for (d, s) in dst.iter_mut().zip(src) {
-        *d += *s;
     }
 }
 

@@ -70,9 +70,10 @@ impl PartialFilm {
             out.extend_from_slice(&(n.len() as u32).to_le_bytes());
             out.extend_from_slice(n.as_bytes());
         }
-        out.push(!f.splats.is_empty() as u8);
-        for _ in f.layer_names() {
-            out.push(!f.layer_splats.is_empty() as u8);
+        // The beauty's splats, then each layer's, each a whole buffer on the wire (the film
+        // keeps them in one row per pixel).
+        for _ in 0..=f.layer_names().len() {
+            out.push(!f.splats.is_empty() as u8);
         }
         for p in &f.full.pixels {
             put_rgb(&mut out, p.sum);
@@ -86,10 +87,9 @@ impl PartialFilm {
         for i in 0..nl {
             f.full.layers.chunks_exact(3).skip(i).step_by(nl).for_each(|c| put_rgb(&mut out, Rgb::new(c[0], c[1], c[2])));
         }
-        f.splats.iter().for_each(|c| put_rgb(&mut out, *c));
-        if !f.layer_splats.is_empty() {
-            for i in 0..nl {
-                f.layer_splats.chunks_exact(3).skip(i).step_by(nl).for_each(|c| put_rgb(&mut out, Rgb::new(c[0], c[1], c[2])));
+        if !f.splats.is_empty() {
+            for slot in 0..=nl {
+                f.splats.chunks_exact(3).skip(slot).step_by(nl + 1).for_each(|c| put_rgb(&mut out, Rgb::new(c[0], c[1], c[2])));
             }
         }
         out
@@ -142,15 +142,13 @@ impl PartialFilm {
                 d.copy_from_slice(&[s.r, s.g, s.b]);
             }
         }
-        if has_splats {
-            film.splats = r.rgbs(px)?;
+        let has: Vec<bool> = std::iter::once(has_splats).chain(layer_has.iter().copied()).collect();
+        if has.iter().any(|&h| h) {
+            film.splats = vec![0.0; px * (n_layers + 1) * 3];
         }
-        if layer_has.iter().any(|&h| h) {
-            film.layer_splats = vec![0.0; px * n_layers * 3];
-        }
-        for (i, has) in layer_has.iter().enumerate() {
-            if *has {
-                for (d, s) in film.layer_splats.chunks_exact_mut(3).skip(i).step_by(n_layers).zip(r.rgbs(px)?) {
+        for (slot, &h) in has.iter().enumerate() {
+            if h {
+                for (d, s) in film.splats.chunks_exact_mut(3).skip(slot).step_by(n_layers + 1).zip(r.rgbs(px)?) {
                     d.copy_from_slice(&[s.r, s.g, s.b]);
                 }
             }
