@@ -51,14 +51,26 @@ impl FilmTile {
     /// Gives the tile `n` AOV layers, all black.
     fn set_layers(&mut self, n: usize) {
         self.n_layers = n;
-        self.layers = vec![0.0; self.pixels.len() * n * 3];
+        self.layers = Vec::new();
+    }
+
+    /// Allocates the layer sums on first use: films that only take splats (light tracing,
+    /// Metropolis) never need them.
+    #[inline]
+    fn ensure_layers(&mut self) {
+        if self.layers.is_empty() && self.n_layers > 0 {
+            self.layers = vec![0.0; self.pixels.len() * self.n_layers * 3];
+        }
     }
 
     /// Layer `i`'s sum at pixel index `k`.
     #[inline]
     fn layer_sum(&self, k: usize, i: usize) -> Rgb {
         let j = (k * self.n_layers + i) * 3;
-        Rgb::new(self.layers[j], self.layers[j + 1], self.layers[j + 2])
+        match self.layers.get(j..j + 3) {
+            Some(c) => Rgb::new(c[0], c[1], c[2]),
+            None => Rgb::BLACK,
+        }
     }
 
     /// Add a sample to the beauty and, with the same filter weights, `aov[i]` to layer i.
@@ -84,6 +96,7 @@ impl FilmTile {
             let (ox, oy) = (floor_i(p.x), floor_i(p.y));
             if ox >= self.x0 as i64 && oy >= self.y0 as i64 && ox < self.x1 as i64 && oy < self.y1 as i64 {
                 let k = ((oy as u32 - self.y0) * w + (ox as u32 - self.x0)) as usize;
+                self.ensure_layers();
                 if let Some(px) = self.layers.get_mut(k * n3..(k + 1) * n3) {
                     let mut m = touched;
                     while m != 0 {
@@ -127,6 +140,7 @@ impl FilmTile {
         if reach.is_empty() {
             return;
         }
+        self.ensure_layers();
         // A sample reaching a third of the layers or more adds the whole row (a vector loop),
         // fewer add theirs one by one; the sums are the same either way.
         let dense = 3 * nr >= self.n_layers;
@@ -437,7 +451,8 @@ impl Film {
             }
         }
         let nl = self.full.n_layers;
-        if nl > 0 && t.n_layers == nl {
+        if nl > 0 && t.n_layers == nl && !t.layers.is_empty() {
+            self.full.ensure_layers();
             for y in t.y0..t.y1 {
                 for x in t.x0..t.x1 {
                     let (d, s) = ((y * self.width + x) as usize * 3 * nl, ((y - t.y0) * tw + (x - t.x0)) as usize * 3 * nl);
@@ -470,8 +485,11 @@ impl Film {
             d.s2 += s.s2;
             d.n += s.n;
         }
-        for (d, s) in self.full.layers.iter_mut().zip(&o.full.layers) {
-            *d += *s;
+        if !o.full.layers.is_empty() {
+            self.full.ensure_layers();
+            for (d, s) in self.full.layers.iter_mut().zip(&o.full.layers) {
+                *d += *s;
+            }
         }
         if !o.splats.is_empty() {
             if self.splats.is_empty() {

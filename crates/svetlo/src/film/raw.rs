@@ -85,7 +85,12 @@ impl PartialFilm {
         // Layer by layer on the wire (the tile keeps them pixel by pixel).
         let nl = f.full.n_layers;
         for i in 0..nl {
-            f.full.layers.chunks_exact(3).skip(i).step_by(nl).for_each(|c| put_rgb(&mut out, Rgb::new(c[0], c[1], c[2])));
+            if f.full.layers.is_empty() {
+                // Never allocated: all zero.
+                out.resize(out.len() + f.full.pixels.len() * 12, 0);
+            } else {
+                f.full.layers.chunks_exact(3).skip(i).step_by(nl).for_each(|c| put_rgb(&mut out, Rgb::new(c[0], c[1], c[2])));
+            }
         }
         if !f.splats.is_empty() {
             for slot in 0..=nl {
@@ -137,6 +142,7 @@ impl PartialFilm {
         for p in film.full.pixels.iter_mut() {
             *p = Pixel { sum: r.rgb()?, weight: r.f64()?, s1: r.rgb()?, s2: r.rgb()?, n: r.u32()? };
         }
+        film.full.ensure_layers();
         for i in 0..n_layers {
             for (d, s) in film.full.layers.chunks_exact_mut(3).skip(i).step_by(n_layers).zip(r.rgbs(px)?) {
                 d.copy_from_slice(&[s.r, s.g, s.b]);
