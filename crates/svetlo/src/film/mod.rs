@@ -66,11 +66,7 @@ impl FilmTile {
     /// Layer `i`'s sum at pixel index `k`.
     #[inline]
     fn layer_sum(&self, k: usize, i: usize) -> Rgb {
-        let j = (k * self.n_layers + i) * 3;
-        match self.layers.get(j..j + 3) {
-            Some(c) => Rgb::new(c[0], c[1], c[2]),
-            None => Rgb::BLACK,
-        }
+        rgb_at(&self.layers, (k * self.n_layers + i) * 3)
     }
 
     /// Add a sample to the beauty and, with the same filter weights, `aov[i]` to layer i.
@@ -102,12 +98,8 @@ impl FilmTile {
                     while m != 0 {
                         let i = m.trailing_zeros() as usize;
                         m &= m - 1;
-                        if let (Some(c), Some(&v)) = (px.get_mut(3 * i..3 * i + 3), aov.get(i)) {
-                            if v.is_finite() {
-                                c[0] += v.r;
-                                c[1] += v.g;
-                                c[2] += v.b;
-                            }
+                        if let Some(&v) = aov.get(i).filter(|v| v.is_finite()) {
+                            add_rgb(px, 3 * i, v);
                         }
                     }
                 }
@@ -159,11 +151,7 @@ impl FilmTile {
                     }
                 } else {
                     for &(i, v) in reach {
-                        if let Some(c) = px.get_mut(3 * i..3 * i + 3) {
-                            c[0] += v.r * wgt;
-                            c[1] += v.g * wgt;
-                            c[2] += v.b * wgt;
-                        }
+                        add_rgb(px, 3 * i, v * wgt);
                     }
                 }
             }
@@ -361,11 +349,7 @@ impl Film {
         while m != 0 {
             let i = m.trailing_zeros() as usize;
             m &= m - 1;
-            if let Some(c) = row.get_mut(3 + 3 * i..6 + 3 * i) {
-                c[0] += l.r;
-                c[1] += l.g;
-                c[2] += l.b;
-            }
+            add_rgb(row, 3 + 3 * i, l);
         }
     }
 
@@ -397,11 +381,7 @@ impl Film {
     /// The splat at pixel index `k` of the beauty (`slot` 0) or of layer `slot - 1` (black
     /// before any splat).
     fn splat_at(&self, k: usize, slot: usize) -> Rgb {
-        let j = k * self.splat_stride() + 3 * slot;
-        match self.splats.get(j..j + 3) {
-            Some(c) => Rgb::new(c[0], c[1], c[2]),
-            None => Rgb::BLACK,
-        }
+        rgb_at(&self.splats, k * self.splat_stride() + 3 * slot)
     }
 
     /// Layer `i` developed like the beauty: its filtered sums over the beauty's weights plus
@@ -485,29 +465,15 @@ impl Film {
             d.s2 += s.s2;
             d.n += s.n;
         }
-        if !o.full.layers.is_empty() {
-            self.full.ensure_layers();
-            for (d, s) in self.full.layers.iter_mut().zip(&o.full.layers) {
-                *d += *s;
-            }
-        }
-        if !o.splats.is_empty() {
-            if self.splats.is_empty() {
-                self.splats = vec![0.0; o.splats.len()];
-            }
-            for (d, s) in self.splats.iter_mut().zip(&o.splats) {
-                *d += *s;
-            }
-        }
+        add_buffer(&mut self.full.layers, &o.full.layers);
+        add_buffer(&mut self.splats, &o.splats);
         self.spp_done += o.spp_done;
     }
 
     /// Add an unfiltered contribution at raster position `p` (box reconstruction).
     pub fn splat(&mut self, p: Vec2, l: Rgb) {
-        if let Some(c) = self.splat_row(p, l) {
-            c[0] += l.r;
-            c[1] += l.g;
-            c[2] += l.b;
+        if let Some(row) = self.splat_row(p, l) {
+            add_rgb(row, 0, l);
         }
     }
 
@@ -539,6 +505,38 @@ impl Film {
             })
             .collect();
         Image::new(self.width as usize, self.height as usize, data)
+    }
+}
+
+/// The colour at `buf[j..j + 3]` (black past the end: a buffer not allocated yet).
+#[inline]
+fn rgb_at(buf: &[f32], j: usize) -> Rgb {
+    match buf.get(j..j + 3) {
+        Some(c) => Rgb::new(c[0], c[1], c[2]),
+        None => Rgb::BLACK,
+    }
+}
+
+/// `buf[j..j + 3] += v`.
+#[inline(always)]
+fn add_rgb(buf: &mut [f32], j: usize, v: Rgb) {
+    if let Some(c) = buf.get_mut(j..j + 3) {
+        c[0] += v.r;
+        c[1] += v.g;
+        c[2] += v.b;
+    }
+}
+
+/// `dst += src` for lazily allocated buffers of the same layout (empty: all zero).
+fn add_buffer(dst: &mut Vec<f32>, src: &[f32]) {
+    if src.is_empty() {
+        return;
+    }
+    if dst.is_empty() {
+        *dst = vec![0.0; src.len()];
+    }
+    for (d, s) in dst.iter_mut().zip(src) {
+        *d += *s;
     }
 }
 

@@ -102,20 +102,23 @@ impl PixelEstimator for PathTracer {
     }
 }
 
-/// A vertex that scattered by its BSDF, kept for the MIS weight of an emitter its sample
-/// hits.
-pub(crate) struct ScatterPoint {
-    pub p: Vec3,
-    pub frame: crate::math::Frame,
+/// A camera-path vertex that scattered by a non-specular BSDF sample, kept for the MIS
+/// weight of the emitter (or the environment) its sample reaches.
+struct ScatterPoint {
+    p: Vec3,
+    frame: crate::math::Frame,
     /// Toward the previous vertex, local shading frame.
-    pub wo: Vec3,
-    pub bsdf: Bsdf,
+    wo: Vec3,
+    bsdf: Bsdf,
+    /// The density of the sampled direction.
+    pdf: f32,
 }
 
 impl ScatterPoint {
-    /// See [`bsdf_pdf_toward`].
-    pub fn pdf_toward(&self, y: Vec3) -> Option<f32> {
-        bsdf_pdf_toward(&self.bsdf, &self.frame, self.wo, self.p, y)
+    /// The BSDF's density toward emitter point `y` ([`bsdf_pdf_toward`]); the sampled
+    /// direction's where `y` is the point itself.
+    fn pdf_toward(&self, y: Vec3) -> f32 {
+        bsdf_pdf_toward(&self.bsdf, &self.frame, self.wo, self.p, y).unwrap_or(self.pdf)
     }
 }
 
@@ -193,12 +196,8 @@ pub(crate) fn camera_walk<R: WalkRules + ?Sized>(
     let mut ray = *camera_ray;
     // Segments traced so far; the camera ray is segment 1.
     let mut depth = 0i32;
-    // State of the previous vertex, for MIS on emitters found by BSDF sampling: whether its
-    // sample was specular, its BSDF direction's density, and its BSDF (for the density
-    // toward the hit point, see `bsdf_pdf_toward`).
-    let mut prev_specular = true;
-    let mut prev_pdf = 0.0f32;
-    let mut prev_p = ray.o;
+    // The previous vertex, for MIS on emitters found by BSDF sampling; None where there is
+    // no other strategy (the camera, a specular sample).
     let mut prev: Option<ScatterPoint> = None;
     let mut eta_scale = 1.0f32;
     // The rules ended the walk at this hit: only its emission counts.
@@ -214,7 +213,7 @@ pub(crate) fn camera_walk<R: WalkRules + ?Sized>(
                     if le.is_black() {
                         continue;
                     }
-                    let w = if prev_specular { 1.0 } else { power_heuristic(1.0, prev_pdf, 1.0, scene.light_pmf(ei) * light.pdf_li_escaped(ray.d)) };
+                    let w = prev.as_ref().map_or(1.0, |v| power_heuristic(1.0, v.pdf, 1.0, scene.light_pmf(ei) * light.pdf_li_escaped(ray.d)));
                     l += beta * le * w;
                     layers.add(events.ends(Event::BACKGROUND), beta * le * w);
                 }
@@ -224,12 +223,7 @@ pub(crate) fn camera_walk<R: WalkRules + ?Sized>(
         if let Some((li, area)) = scene.area_light(&si) {
             let le = area.l(si.ng, si.uv, si.wo);
             if !le.is_black() && !hide {
-                let w = if prev_specular {
-                    1.0
-                } else {
-                    let pdf_bsdf = prev.as_ref().and_then(|v| v.pdf_toward(si.p)).unwrap_or(prev_pdf);
-                    power_heuristic(1.0, pdf_bsdf, 1.0, scene.light_pmf(li) * area.pdf_li(prev_p, si.p, si.ng))
-                };
+                let w = prev.as_ref().map_or(1.0, |v| power_heuristic(1.0, v.pdf_toward(si.p), 1.0, scene.light_pmf(li) * area.pdf_li(v.p, si.p, si.ng)));
                 l += beta * le * w;
                 layers.add(events.ends(aovs.light_event(Some(si.shape))), beta * le * w);
             }
@@ -266,14 +260,9 @@ pub(crate) fn camera_walk<R: WalkRules + ?Sized>(
         if bs.lobe.contains(LobeFlags::TRANSMISSION) {
             eta_scale *= bs.eta * bs.eta;
         }
-        prev_specular = bs.lobe.is_specular();
-        prev_pdf = bs.pdf;
-        prev_p = si.p;
         last = rules.ends_after(flags, bs.lobe);
         ray = si.spawn_ray(si.to_world(bs.wi));
-        if !prev_specular {
-            prev = Some(ScatterPoint { p: si.p, frame: si.shading, wo, bsdf });
-        }
+        prev = (!bs.lobe.is_specular()).then(|| ScatterPoint { p: si.p, frame: si.shading, wo, bsdf, pdf: bs.pdf });
         let u_rr = sampler.next_1d();
         if depth >= settings.rr_depth && !last {
             let q = (beta * eta_scale).max_component().min(0.95);
