@@ -262,7 +262,7 @@ pub(crate) fn camera_walk<R: WalkRules + ?Sized>(
         }
         last = rules.ends_after(flags, bs.lobe);
         ray = si.spawn_ray(si.to_world(bs.wi));
-        prev = (!bs.lobe.is_specular()).then(|| ScatterPoint { p: si.p, frame: si.shading, wo, bsdf, pdf: bs.pdf });
+        prev = (!bs.lobe.is_specular()).then_some(ScatterPoint { p: si.p, frame: si.shading, wo, bsdf, pdf: bs.pdf });
         let u_rr = sampler.next_1d();
         if depth >= settings.rr_depth && !last {
             let q = (beta * eta_scale).max_component().min(0.95);
