@@ -12,6 +12,7 @@ use crate::images::to_array;
 use crate::render::{resized, settings, Overrides, PyFilm};
 use crate::scene::PyScene;
 use pyo3::prelude::*;
+use pyo3::pybacked::PyBackedBytes;
 use pyo3::types::{PyBytes, PyDict};
 use std::sync::Arc;
 use svetlo::film::raw::PartialFilm;
@@ -164,7 +165,7 @@ pub fn render_passes<'py>(
     start: u32,
     end: u32,
     opts: &Bound<'py, PyDict>,
-    shared: Vec<Vec<u8>>,
+    shared: Vec<PyBackedBytes>,
     threads: usize,
 ) -> PyResult<Bound<'py, PyBytes>> {
     let r = resolve(scene, opts, threads)?;
@@ -172,13 +173,13 @@ pub fn render_passes<'py>(
     if start >= end {
         return Err(option_err(format!("passes {start}..{end} are empty")));
     }
-    let refs: Vec<&[u8]> = shared.iter().map(|b| b.as_slice()).collect();
+    let refs: Vec<&[u8]> = shared.iter().map(|b| &b[..]).collect();
     let part = py.allow_threads(|| svetlo::methods::render_passes(&r.name, &r.scene, &r.settings, start..end, &refs, &Progress::new())).map_err(to_py)?;
     let bytes = py.allow_threads(|| part.to_bytes());
     Ok(PyBytes::new(py, &bytes))
 }
 
-fn parse(parts: Vec<Vec<u8>>) -> svetlo::Result<Vec<PartialFilm>> {
+fn parse(parts: Vec<PyBackedBytes>) -> svetlo::Result<Vec<PartialFilm>> {
     parts.iter().map(|b| PartialFilm::from_bytes(b)).collect()
 }
 
@@ -201,7 +202,7 @@ fn film_dict(py: Python<'_>, film: Film) -> PyResult<Bound<'_, PyDict>> {
 /// summed in unit order (an image of the render so far). Returns a dict: image, film, spp.
 #[pyfunction]
 #[pyo3(signature = (parts, exact=true))]
-pub fn merge_films(py: Python<'_>, parts: Vec<Vec<u8>>, exact: bool) -> PyResult<Bound<'_, PyDict>> {
+pub fn merge_films(py: Python<'_>, parts: Vec<PyBackedBytes>, exact: bool) -> PyResult<Bound<'_, PyDict>> {
     let film = py
         .allow_threads(|| {
             let parts = parse(parts)?;
@@ -213,6 +214,17 @@ pub fn merge_films(py: Python<'_>, parts: Vec<Vec<u8>>, exact: bool) -> PyResult
         })
         .map_err(to_py)?;
     film_dict(py, film)
+}
+
+/// Join the raw sums of two sibling nodes of the pass tree (bytes from `render_passes` or an
+/// earlier join) into their parent's: the addition the tree makes there, so parts joined as
+/// they arrive merge into the local render's bits.
+#[pyfunction]
+pub fn join_films<'py>(py: Python<'py>, left: PyBackedBytes, right: PyBackedBytes) -> PyResult<Bound<'py, PyBytes>> {
+    let bytes = py
+        .allow_threads(|| -> svetlo::Result<Vec<u8>> { Ok(PartialFilm::join(PartialFilm::from_bytes(&left)?, PartialFilm::from_bytes(&right)?)?.to_bytes()) })
+        .map_err(to_py)?;
+    Ok(PyBytes::new(py, &bytes))
 }
 
 fn sppm_of(name: &str) -> PyResult<Sppm> {
@@ -252,8 +264,8 @@ pub fn sppm_iterate<'py>(
     scene: &PyScene,
     start: u32,
     end: u32,
-    state: Option<Vec<u8>>,
-    batches: Vec<Vec<u8>>,
+    state: Option<PyBackedBytes>,
+    batches: Vec<PyBackedBytes>,
     opts: &Bound<'py, PyDict>,
     threads: usize,
 ) -> PyResult<Bound<'py, PyBytes>> {
@@ -268,7 +280,7 @@ pub fn sppm_iterate<'py>(
             if st.rows != (start..end) {
                 return Err(svetlo::Error::Invalid(format!("sppm: the state is of rows {}..{}, not {start}..{end}", st.rows.start, st.rows.end)));
             }
-            let refs: Vec<&[u8]> = batches.iter().map(|b| b.as_slice()).collect();
+            let refs: Vec<&[u8]> = batches.iter().map(|b| &b[..]).collect();
             sppm.iterate_rows(&r.scene, &r.settings, &mut st, &refs)?;
             Ok(st.to_bytes())
         })
@@ -280,7 +292,7 @@ pub fn sppm_iterate<'py>(
 /// raw sums of one whole-render part (bytes for `merge_films`).
 #[pyfunction]
 #[pyo3(signature = (scene, parts, opts))]
-pub fn sppm_develop<'py>(py: Python<'py>, scene: &PyScene, parts: Vec<Vec<u8>>, opts: &Bound<'py, PyDict>) -> PyResult<Bound<'py, PyBytes>> {
+pub fn sppm_develop<'py>(py: Python<'py>, scene: &PyScene, parts: Vec<PyBackedBytes>, opts: &Bound<'py, PyDict>) -> PyResult<Bound<'py, PyBytes>> {
     let r = resolve(scene, opts, 0)?;
     let sppm = sppm_of(&r.name)?;
     let film = py
@@ -307,9 +319,15 @@ pub fn radiosity_rows<'py>(py: Python<'py>, scene: &PyScene, start: u64, end: u6
 /// shared batch.
 #[pyfunction]
 #[pyo3(signature = (scene, rows, opts, threads=0))]
-pub fn radiosity_solve<'py>(py: Python<'py>, scene: &PyScene, rows: Vec<Vec<u8>>, opts: &Bound<'py, PyDict>, threads: usize) -> PyResult<Bound<'py, PyBytes>> {
+pub fn radiosity_solve<'py>(
+    py: Python<'py>,
+    scene: &PyScene,
+    rows: Vec<PyBackedBytes>,
+    opts: &Bound<'py, PyDict>,
+    threads: usize,
+) -> PyResult<Bound<'py, PyBytes>> {
     let r = resolve(scene, opts, threads)?;
-    let refs: Vec<&[u8]> = rows.iter().map(|b| b.as_slice()).collect();
+    let refs: Vec<&[u8]> = rows.iter().map(|b| &b[..]).collect();
     let b = py.allow_threads(|| svetlo::methods::radiosity_solve(&r.name, &r.scene, &r.settings, &refs)).map_err(to_py)?;
     Ok(PyBytes::new(py, &b))
 }

@@ -35,6 +35,7 @@ fn _svetlo(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_function(wrap_pyfunction!(distributed::plan_chunks, m)?)?;
     m.add_function(wrap_pyfunction!(distributed::render_passes, m)?)?;
     m.add_function(wrap_pyfunction!(distributed::merge_films, m)?)?;
+    m.add_function(wrap_pyfunction!(distributed::join_films, m)?)?;
     m.add_function(wrap_pyfunction!(distributed::shared_batch, m)?)?;
     m.add_function(wrap_pyfunction!(distributed::sppm_photons, m)?)?;
     m.add_function(wrap_pyfunction!(distributed::sppm_iterate, m)?)?;

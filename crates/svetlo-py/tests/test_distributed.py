@@ -41,7 +41,8 @@ def local(path, **kw):
 
 @pytest.mark.parametrize("integrator", ["path", "direct", "light", "bdpt", "whitted", "distributed"])
 def test_bitwise_equal_to_the_local_render(client, integrator):
-    # 13 spp on 32x24: passes of 1, 2, 4 and 6 samples; 3 chunks do not divide either.
+    # 13 spp on 32x24: thirteen passes of 1 sample (a render has at least 8 passes); 3
+    # chunks do not divide them.
     kw = dict(integrator=integrator, spp=13, seed=5, width=32, height=24, max_depth=5)
     r = sd.render(CBOX, client=client, chunks=3, progress=False, result=True, **kw)
     ref = local(CBOX, **kw)
@@ -49,6 +50,26 @@ def test_bitwise_equal_to_the_local_render(client, integrator):
     assert ref.image.max() > 0
     assert np.array_equal(bits(r.image), bits(ref.image)), f"{integrator}: the merged image is not the local one"
     assert np.array_equal(bits(r.variance), bits(ref.variance)), f"{integrator}: variance"
+
+
+def test_chunks_are_joined_as_they_arrive_into_the_local_bits(client):
+    # 8 spp: eight passes of 1 sample, so 8 chunks carry equal work. The client joins two
+    # siblings of the pass tree as soon as both are in, whatever order they come in.
+    kw = dict(integrator="bdpt", spp=8, seed=3, width=24, height=16)
+    ref = local(CBOX, **kw)
+    job = sd.submit(CBOX, client=client, chunks=8, **kw)
+    assert [n[3] - n[2] for n in job.nodes] == [1] * 8, job.nodes
+    held = []
+    r = job.result(lambda done, total, secs: held.append(len(job._sums)))
+    assert list(job._sums) == [(0, 8)], "every chunk joined into the root"
+    assert max(held) <= 4, f"at most one part per level of the tree held: {held}"
+    assert np.array_equal(bits(r.image), bits(ref.image)) and np.array_equal(bits(r.variance), bits(ref.variance))
+    # The tree's families as the client walks them (passes::split in Rust).
+    assert sd._family((0, 8), 11) == ((0, 11), (8, 11), True)
+    assert sd._family((8, 10), 11) == ((8, 11), (10, 11), True)
+    assert sd._family((10, 11), 11) == ((8, 11), (8, 10), False)
+    with pytest.raises(svetlo.SvetloError):
+        sd._family((1, 3), 11)
 
 
 def test_any_chunk_count_gives_the_same_bits(client):

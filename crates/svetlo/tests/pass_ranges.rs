@@ -51,7 +51,7 @@ fn assert_same(a: &Film, b: &Film, what: &str) {
 #[test]
 fn merged_ranges_are_the_local_render_bit_for_bit() {
     let cbox = scene("cornell-box.xml", 20, 16);
-    // 37 spp on 320 pixels: passes 1, 2, 4, 8, 16, 6 (six passes, a ragged tree).
+    // 37 spp on 320 pixels: passes 1, 2, 4, then 4s and a 2 (eleven passes, a ragged tree).
     let s = RenderSettings { spp: 37, max_depth: 5, seed: 7, threads: 2, ..RenderSettings::from_scene(&cbox) };
     for spec in [
         "path",
@@ -134,7 +134,7 @@ fn metropolis_chain_blocks_merge_into_the_local_render_bit_for_bit() {
 fn ranges_that_are_not_tree_nodes_and_unseparable_methods_are_refused() {
     let cbox = scene("cornell-box.xml", 8, 8);
     let s = RenderSettings { spp: 10, ..RenderSettings::from_scene(&cbox) };
-    // 10 spp: passes 1, 2, 4, 3; 1..3 straddles the tree's first split (0..2 | 2..4).
+    // 10 spp: ten passes of 1; 1..3 straddles a split of the tree (0..2 | 2..4).
     let e = svetlo::methods::render_passes("path", &cbox, &s, 1..3, &[], &Progress::new()).unwrap_err();
     assert!(e.to_string().contains("not a node"), "{e}");
     for spec in ["sppm", "zbuffer"] {
@@ -412,4 +412,66 @@ fn radiosity_rows_and_solutions_that_do_not_fit_are_errors() {
     wrong_mesh[opts_at..opts_at + 4].copy_from_slice(&1.0f32.to_le_bytes());
     assert!(svetlo::methods::render_passes(spec, &cbox, &s, 0..1, &[&wrong_mesh], &Progress::new()).is_err());
     assert!(svetlo::methods::render_passes(spec, &cbox, &s, 0..1, &[&sol, &sol], &Progress::new()).is_err(), "two solutions");
+}
+
+/// Parts joined with their siblings as they arrive (as the Dask client does), in any arrival
+/// order, merge into the local render's bits; parts that are not two halves of a node do not
+/// join.
+#[test]
+fn parts_joined_as_they_arrive_are_the_local_render_bit_for_bit() {
+    let cbox = scene("cornell-box.xml", 12, 10);
+    let mut set = svetlo::lpe::AovSet::compile(&[("direct".to_string(), "C <R.> L".to_string())], None).expect("expression");
+    assert!(set.bind(&cbox).is_empty());
+    let s = RenderSettings { spp: 37, max_depth: 4, seed: 3, threads: 1, lpe: Some(Arc::new(set)), ..RenderSettings::from_scene(&cbox) };
+    let plan = pass_plan(s.spp, 120);
+    let total = plan.len() as u32;
+    let local = svetlo::methods::by_name("bdpt").unwrap().render(&cbox, &s, &Progress::new()).unwrap();
+    let nodes = chunk_nodes(&plan, 6);
+    let parts: Vec<PartialFilm> =
+        nodes.iter().map(|r| svetlo::methods::render_passes("bdpt", &cbox, &s, r.clone(), &[], &Progress::new()).expect("part")).collect();
+    // The sibling and side of a node, found from the root as the client finds them.
+    let family = |r: &std::ops::Range<u32>| -> (std::ops::Range<u32>, bool) {
+        let (mut a, mut b) = (0, total);
+        loop {
+            let m = svetlo::integrator::passes::split(a, b);
+            if *r == (a..m) || *r == (m..b) {
+                return if r.start == a { (m..b, true) } else { (a..m, false) };
+            }
+            (a, b) = if r.end <= m { (a, m) } else { (m, b) };
+        }
+    };
+    let mut rng = svetlo::sampling::rng::Pcg32::new(11, 5);
+    for round in 0..6 {
+        let mut order: Vec<usize> = (0..parts.len()).collect();
+        if round > 0 {
+            for i in (1..order.len()).rev() {
+                order.swap(i, (rng.next_u32() as usize) % (i + 1));
+            }
+        }
+        let mut held: Vec<PartialFilm> = Vec::new();
+        let mut most = 0;
+        for &i in &order {
+            let mut p = PartialFilm::from_bytes(&parts[i].to_bytes()).expect("round trip");
+            while p.passes != (0..total) {
+                let (sib, left) = family(&p.passes);
+                let Some(k) = held.iter().position(|q| q.passes == sib) else { break };
+                let q = held.swap_remove(k);
+                p = if left { PartialFilm::join(p, q) } else { PartialFilm::join(q, p) }.expect("siblings join");
+            }
+            held.push(p);
+            most = most.max(held.len());
+        }
+        assert_eq!(held.len(), 1, "order {order:?}: one part left");
+        assert!(most <= 1 + (total as f32).log2().ceil() as usize, "order {order:?}: held {most} parts at once");
+        assert_same(&local, &PartialFilm::merge(held).expect("merge"), &format!("arrival order {order:?}"));
+    }
+    // Not siblings: neighbours across a split, a part with itself, parts of another render.
+    let (a, b, c) = (&parts[0], &parts[1], &parts[2]);
+    assert!(svetlo::integrator::passes::is_node(&(a.passes.start..b.passes.end), total));
+    assert!(PartialFilm::join(b.clone(), c.clone()).is_err(), "{:?} and {:?}", b.passes, c.passes);
+    assert!(PartialFilm::join(b.clone(), a.clone()).is_err(), "the wrong way round");
+    assert!(PartialFilm::join(a.clone(), a.clone()).is_err(), "a part with itself");
+    let other = scene("cornell-box.xml", 12, 11);
+    let o = svetlo::methods::render_passes("bdpt", &other, &s, b.passes.clone(), &[], &Progress::new()).expect("part");
+    assert!(PartialFilm::join(a.clone(), o).is_err(), "another film size");
 }

@@ -321,6 +321,25 @@ def _default_client(client):
 _OPTS = ("spp", "seed", "max_depth", "width", "height", "filter", "sampler", "rr_depth", "hide_emitters")
 
 
+def _split(a: int, b: int) -> int:
+    """Where the pass tree splits passes [a, b): after the largest power of two below b - a
+    (``integrator::passes::split``)."""
+    return a + (1 << ((b - a - 1).bit_length() - 1))
+
+
+def _family(node: Tuple[int, int], passes: int) -> Tuple[Tuple[int, int], Tuple[int, int], bool]:
+    """(parent, sibling, whether `node` is the left child) of a node of the tree over passes."""
+    a, b = 0, passes
+    while True:
+        if b - a < 2:
+            raise SvetloError(f"passes {node[0]}..{node[1]} are not a node of the tree over {passes} passes")
+        m = _split(a, b)
+        left, right = (a, m), (m, b)
+        if node == left or node == right:
+            return (a, b), (right if node == left else left), node == left
+        a, b = left if node[1] <= m else right
+
+
 class DistributedRender:
     """A render in flight on a cluster (from :func:`submit`).
 
@@ -359,7 +378,12 @@ class DistributedRender:
             client.submit(_render_task, ref, a, b, opts, threads, compress, *self.shared, key=f"svetlo-passes-{token}-{a}-{b}", pure=False, retries=0)
             for a, b, _, _ in self.nodes
         ]
-        self._parts: Dict[int, bytes] = {}
+        # Chunks done, and their sums joined as they arrive: two siblings of the pass tree
+        # are added into their parent at once (the addition the whole tree's merge makes
+        # there), so the client holds at most one part per level and the last merge is short.
+        self._done: Dict[int, bool] = {}
+        self._sums: Dict[Tuple[int, int], bytes] = {}
+        self._passes = int(plan["passes"])
         self.task_seconds: Dict[int, float] = {}
         self.bytes_received = 0
         self._lock = threading.Lock()
@@ -372,13 +396,28 @@ class DistributedRender:
     def _collect(self, i: int, fut) -> None:
         secs, data = fut.result()
         with self._lock:
+            if i in self._done:
+                return
             self.bytes_received += len(data)
-            self._parts[i] = unpack(data)
+            self._done[i] = True
             self.task_seconds[i] = secs
+            a, b = self.nodes[i][0], self.nodes[i][1]
+            self._add_node((a, b), unpack(data))
+
+    def _add_node(self, node: Tuple[int, int], raw: bytes) -> None:
+        """Keep the sums of `node`, joined with its sibling's (and up) where those are here."""
+        while node != (0, self._passes):
+            parent, sibling, is_left = _family(node, self._passes)
+            other = self._sums.pop(sibling, None)
+            if other is None:
+                break
+            raw = _svetlo.join_films(raw, other) if is_left else _svetlo.join_films(other, raw)
+            node = parent
+        self._sums[node] = raw
 
     def _poll(self) -> None:
         for i, f in enumerate(self.futures):
-            if i not in self._parts and f.status == "finished":
+            if i not in self._done and f.status == "finished":
                 self._collect(i, f)
             elif f.status == "error":
                 f.result()  # raises the task's exception
@@ -387,14 +426,14 @@ class DistributedRender:
         """(samples per pixel done, planned); for Metropolis chains, the chains' share of spp."""
         self._poll()
         with self._lock:
-            done = sum(self.nodes[i][3] - self.nodes[i][2] for i in self._parts)
+            done = sum(self.nodes[i][3] - self.nodes[i][2] for i in self._done)
         return done * self.spp_planned // max(1, self.plan["units"]), self.spp_planned
 
     def partial(self) -> Optional[np.ndarray]:
         """The image of the chunks done so far (None before the first)."""
         self._poll()
         with self._lock:
-            parts = list(self._parts.values())
+            parts = list(self._sums.values())
         if not parts:
             return None
         return _svetlo.merge_films(parts, exact=False)["image"]
@@ -402,14 +441,14 @@ class DistributedRender:
     def cancel(self) -> None:
         """Cancel the chunks not yet done; those done stay."""
         self.cancelled = True
-        self.client.cancel([f for i, f in enumerate(self.futures) if i not in self._parts])
+        self.client.cancel([f for i, f in enumerate(self.futures) if i not in self._done])
 
     def _complete(self) -> bool:
-        return len(self._parts) == len(self.nodes)
+        return len(self._done) == len(self.nodes)
 
     def _merged(self) -> Dict[str, Any]:
         with self._lock:
-            parts = [self._parts[i] for i in sorted(self._parts)]
+            parts = [self._sums[k] for k in sorted(self._sums)]
         return _svetlo.merge_films(parts, exact=self._complete())
 
     def _result(self, interrupted: bool) -> RenderResult:
@@ -432,7 +471,7 @@ class DistributedRender:
         )
 
     def _pending(self) -> List[Any]:
-        return [f for i, f in enumerate(self.futures) if i not in self._parts]
+        return [f for i, f in enumerate(self.futures) if i not in self._done]
 
     def _take(self, f) -> None:
         self._collect(self._index[f.key], f)

@@ -184,6 +184,32 @@ impl PartialFilm {
         Ok(film)
     }
 
+    /// The sum of two sibling nodes of the pass tree: `left` and `right` must be the two
+    /// halves the tree splits their union into. This is the very addition the whole tree's
+    /// merge makes there, so a client may join parts as they arrive (holding at most one part
+    /// per level of the tree) and still end with the local render's bits.
+    pub fn join(mut left: PartialFilm, right: PartialFilm) -> Result<PartialFilm> {
+        let (l, r) = (&left.film, &right.film);
+        if (left.passes_total, l.width, l.height, l.filter) != (right.passes_total, r.width, r.height, r.filter) || l.layer_names != r.layer_names {
+            return Err(bad("parts of different renders"));
+        }
+        let union = left.passes.start..right.passes.end;
+        let siblings = left.passes.end == right.passes.start
+            && union.end - union.start >= 2
+            && crate::integrator::passes::split(union.start, union.end) == left.passes.end
+            && crate::integrator::passes::is_node(&union, left.passes_total);
+        if !siblings {
+            return Err(bad(format!(
+                "passes {}..{} and {}..{} are not the two halves of a node of the pass tree",
+                left.passes.start, left.passes.end, right.passes.start, right.passes.end
+            )));
+        }
+        left.film.add(&right.film);
+        left.mutations += right.mutations;
+        left.passes = union;
+        Ok(left)
+    }
+
     /// The sum of any parts of one render, for a look at a render in progress: pass order,
     /// not the tree's, so close to the final image but not its bits.
     pub fn preview(parts: &[PartialFilm]) -> Result<Film> {

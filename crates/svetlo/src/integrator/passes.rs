@@ -14,14 +14,20 @@ use std::ops::Range;
 /// Pixel samples of one pass at most (without a time limit): bounds the work a cancel drops.
 pub const PASS_PIXEL_SAMPLES: u64 = 1 << 22;
 
-/// Samples per pixel of the next pass after one of `last`. Passes are summed into the film by
-/// the pass tree, so their sizes fix the float summation order: without a time limit they
-/// double (1, 2, 4, ... up to 64 and about `PASS_PIXEL_SAMPLES`) whatever the timing, which
-/// keeps the image independent of the machine's speed and the thread count. With one
-/// (`(limit, elapsed, spp_done)` in seconds) they aim at half-second passes that end at the limit.
-pub fn next_pass_spp(last: u32, pixels: u64, timed: Option<(f64, f64, u32)>) -> u32 {
+/// Passes an untimed render has at least (when it has that many samples per pixel): work
+/// split over processes goes by whole passes, so a render of few samples must still have
+/// passes of about equal size to share out.
+pub const MIN_PASSES: u32 = 8;
+
+/// Samples per pixel of the next pass after one of `last`, in a render of `spp` over `pixels`.
+/// Passes are summed into the film by the pass tree, so their sizes fix the float summation
+/// order: without a time limit they double (1, 2, 4, ...) up to the least of 64, about
+/// `PASS_PIXEL_SAMPLES` per pass and `spp / MIN_PASSES`, whatever the timing, which keeps the
+/// image independent of the machine's speed and the thread count. With a time limit
+/// (`(limit, elapsed, spp_done)` in seconds) they aim at half-second passes that end at it.
+pub fn next_pass_spp(last: u32, spp: u32, pixels: u64, timed: Option<(f64, f64, u32)>) -> u32 {
     match timed {
-        None => (last.saturating_mul(2)).min((PASS_PIXEL_SAMPLES / pixels.max(1)).clamp(1, 64) as u32),
+        None => (last.saturating_mul(2)).min(untimed_pass_cap(spp, pixels)),
         Some((limit, elapsed, done)) => {
             let per_spp = elapsed / done.max(1) as f64;
             if per_spp > 0.0 {
@@ -33,6 +39,11 @@ pub fn next_pass_spp(last: u32, pixels: u64, timed: Option<(f64, f64, u32)>) -> 
     }
 }
 
+/// The largest pass of an untimed render of `spp` over `pixels`.
+fn untimed_pass_cap(spp: u32, pixels: u64) -> u32 {
+    ((PASS_PIXEL_SAMPLES / pixels.max(1)).clamp(1, 64) as u32).min((spp / MIN_PASSES).max(1))
+}
+
 /// The passes of an untimed render of `spp` samples per pixel over `pixels` pixels: each
 /// pass's first sample index and sample count, in order.
 pub fn pass_plan(spp: u32, pixels: u64) -> Vec<(u32, u32)> {
@@ -42,7 +53,7 @@ pub fn pass_plan(spp: u32, pixels: u64) -> Vec<(u32, u32)> {
         let n = size.min(spp - done);
         plan.push((done, n));
         done += n;
-        size = next_pass_spp(size, pixels, None);
+        size = next_pass_spp(size, spp, pixels, None);
     }
     plan
 }
@@ -270,9 +281,19 @@ mod tests {
 
     #[test]
     fn the_plan_follows_the_pass_sizes() {
-        assert_eq!(pass_plan(10, 100), [(0, 1), (1, 2), (3, 4), (7, 3)]);
+        assert_eq!(pass_plan(10, 100), (0..10).map(|i| (i, 1)).collect::<Vec<_>>());
+        assert_eq!(pass_plan(40, 100), [(0, 1), (1, 2), (3, 4), (7, 5), (12, 5), (17, 5), (22, 5), (27, 5), (32, 5), (37, 3)]);
         let big = pass_plan(1000, 512 * 512);
         assert!(big.iter().skip(4).all(|p| p.1 == 16 || p.0 + p.1 == 1000));
+        // A render of few samples still has passes to share out, of equal size.
+        for spp in [1, 2, 5, 8, 13, 15] {
+            let plan = pass_plan(spp, 512 * 512);
+            assert_eq!(plan.len(), spp as usize, "{spp} spp");
+            assert!(plan.iter().all(|p| p.1 == 1));
+        }
+        for spp in 16..600 {
+            assert!(pass_plan(spp, 256 * 256).len() >= MIN_PASSES as usize, "{spp} spp");
+        }
         assert_eq!(big.iter().map(|p| p.1).sum::<u32>(), 1000);
         // Chunks carry similar sample counts.
         let plan = pass_plan(4096, 64 * 64);

@@ -295,7 +295,8 @@ pub(super) fn render_chunked<E: SplatEstimator>(
                 progress.pass_done(&f);
             }
         }
-        pass_spp = next_pass_spp(pass_spp, w as u64 * h as u64, settings.time_limit.map(|t| (t.as_secs_f64(), start.elapsed().as_secs_f64(), spp_done)));
+        pass_spp =
+            next_pass_spp(pass_spp, settings.spp, w as u64 * h as u64, settings.time_limit.map(|t| (t.as_secs_f64(), start.elapsed().as_secs_f64(), spp_done)));
     }
     let (mut film, mut extra) = sum
         .finish(|a, b| add(a, &b))
@@ -330,14 +331,15 @@ mod tests {
         // The image is the sum of its passes in order: their sizes must not follow timing.
         let mut seq = vec![1u32];
         while seq.len() < 9 {
-            seq.push(next_pass_spp(*seq.last().unwrap_or(&1), 256 * 256, None));
+            seq.push(next_pass_spp(*seq.last().unwrap_or(&1), 4096, 256 * 256, None));
         }
         assert_eq!(seq, [1, 2, 4, 8, 16, 32, 64, 64, 64]);
-        assert_eq!(next_pass_spp(8, 1920 * 1080, None), 2, "large films take small passes");
-        assert_eq!(next_pass_spp(8, 8000 * 8000, None), 1);
+        assert_eq!(next_pass_spp(8, 4096, 1920 * 1080, None), 2, "large films take small passes");
+        assert_eq!(next_pass_spp(8, 4096, 8000 * 8000, None), 1);
+        assert_eq!(next_pass_spp(8, 64, 256 * 256, None), 8, "at least MIN_PASSES passes");
         // With a time limit the passes end near it.
-        assert_eq!(next_pass_spp(1, 100, Some((10.0, 9.9, 100))), 1);
-        assert_eq!(next_pass_spp(1, 100, Some((10.0, 1.0, 100))), 50);
+        assert_eq!(next_pass_spp(1, 4096, 100, Some((10.0, 9.9, 100))), 1);
+        assert_eq!(next_pass_spp(1, 4096, 100, Some((10.0, 1.0, 100))), 50);
     }
 
     /// A point-lit diffuse ball seen by a `w` x `h` pinhole camera.
@@ -418,7 +420,7 @@ mod tests {
         let w = std::sync::Arc::new(OnlyTheEnd { asked: Mutex::default(), shown: Mutex::default() });
         let progress = Progress::watched(w.clone());
         render_chunked(&scene, &settings, &progress, &est, 0, u64::MAX).unwrap();
-        assert_eq!(*w.asked.lock().unwrap(), [1, 3, 6], "asked once per pass (1, 2, 3 spp)");
+        assert_eq!(*w.asked.lock().unwrap(), [1, 2, 3, 4, 5, 6], "asked once per pass (six of 1 spp)");
         assert_eq!(*w.shown.lock().unwrap(), [6]);
     }
 
