@@ -24,6 +24,7 @@ fn refused(a: &RenderArgs) -> Option<&'static str> {
         (a.lpe.is_some(), "--lpe"),
         (a.variance, "--variance"),
         (a.format.is_some(), "--format"),
+        (a.ray_epsilon.is_some(), "--ray-epsilon"),
         (a.false_colour.is_some(), "--false-colour"),
         (a.live.preview || a.live.tev.is_some(), "--preview and --tev"),
     ]

@@ -201,7 +201,7 @@ fn area_of(scene: &Scene, li: u32) -> Option<&AreaLight> {
 impl SimdKernel {
     /// The kernel's data, or None when the scene or the settings are out of its scope.
     pub fn new(scene: &Scene, _settings: &RenderSettings) -> Option<SimdKernel> {
-        if !scene.moving.is_empty() || !scene.static_shapes.is_empty() || !scene.environment_lights.is_empty() {
+        if !scene.moving.is_empty() || !scene.static_shapes.is_empty() || !scene.environment_lights.is_empty() || scene.settings.ray_epsilon > 0.0 {
             return None;
         }
         let mut lights = Vec::with_capacity(scene.lights.len());

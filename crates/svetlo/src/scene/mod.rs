@@ -68,6 +68,11 @@ pub struct SceneSettings {
     pub filter: Filter,
     pub hide_emitters: bool,
     pub light_selection: LightSelection,
+    /// Hits closer than this to a ray's origin are skipped, on every ray (0: none, the
+    /// default; origins are offset off their surfaces anyway). Tungsten skips 5e-4 scene
+    /// units (its `DefaultEpsilon`), which drops light piped along thin walls: comparing
+    /// with its references on such scenes needs the same (`--ray-epsilon`).
+    pub ray_epsilon: f32,
 }
 
 /// How next-event estimation picks a light.
@@ -94,6 +99,7 @@ impl Default for SceneSettings {
             filter: Filter::default(),
             hide_emitters: false,
             light_selection: LightSelection::Mixed,
+            ray_epsilon: 0.0,
         }
     }
 }
@@ -130,15 +136,14 @@ impl Scene {
     /// The closest hit; for a moving shape also the ray carried into its reference pose and
     /// the transform from that pose to the world at the ray's time.
     fn closest(&self, ray: &Ray) -> Option<(PrimHit, Option<(Ray, Mat4)>)> {
+        let (ray, skip) = self.past_epsilon(ray);
+        let ray = &ray;
         let mut best = self.accel.intersect(ray).map(|mut h| {
             if !self.static_shapes.is_empty() {
                 h.shape = self.static_shapes[h.shape as usize];
             }
             (h, None)
         });
-        if self.moving.is_empty() {
-            return best;
-        }
         let mut t_max = best.as_ref().map_or(ray.t_max, |(h, _)| h.t);
         let inv_d = ray.d.recip();
         for mv in &self.moving {
@@ -152,7 +157,26 @@ impl Scene {
                 best = Some((h, Some((local, m))));
             }
         }
+        if skip > 0.0 {
+            // t from the caller's origin; a moving shape's local ray starts there too.
+            best = best.map(|(mut h, mv)| {
+                h.t += skip;
+                (h, mv.map(|(local, m)| (Ray { o: local.o - local.d * skip, t_max: local.t_max + skip, ..local }, m)))
+            });
+        }
         best
+    }
+
+    /// `ray` with its first `settings.ray_epsilon` cut off, and that length (t of a hit on
+    /// the cut ray plus it is t on `ray`: the integrators' directions are unit vectors).
+    #[inline]
+    fn past_epsilon(&self, ray: &Ray) -> (Ray, f32) {
+        let e = self.settings.ray_epsilon;
+        if e > 0.0 {
+            (Ray { o: ray.at(e), t_max: ray.t_max - e, ..*ray }, e)
+        } else {
+            (*ray, 0.0)
+        }
     }
 
     /// `ray` in the reference pose of a moving shape (same parameter t), and the transform back.
@@ -165,7 +189,7 @@ impl Scene {
 
     /// Closest surface along the ray.
     pub fn intersect(&self, ray: &Ray) -> Option<SurfaceInteraction> {
-        if self.moving.is_empty() {
+        if self.moving.is_empty() && self.settings.ray_epsilon <= 0.0 {
             // Static scenes (the common case): no pose transform to carry through `closest`.
             let mut hit = self.accel.intersect(ray)?;
             if !self.static_shapes.is_empty() {
@@ -246,6 +270,11 @@ impl Scene {
 
     /// Is anything in the way along `ray` (static or, at the ray's time, moving)?
     fn blocked(&self, ray: &Ray) -> bool {
+        let (ray, _) = self.past_epsilon(ray);
+        let ray = &ray;
+        if ray.t_max <= 0.0 {
+            return false;
+        }
         if self.accel.occluded(ray) {
             return true;
         }
