@@ -144,6 +144,9 @@ impl Scene {
             }
             (h, None)
         });
+        if self.moving.is_empty() && skip == 0.0 {
+            return best;
+        }
         let mut t_max = best.as_ref().map_or(ray.t_max, |(h, _)| h.t);
         let inv_d = ray.d.recip();
         for mv in &self.moving {
