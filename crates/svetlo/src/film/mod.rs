@@ -87,11 +87,18 @@ impl FilmTile {
         let w = self.x1 - self.x0;
         let n3 = 3 * self.n_layers;
         if self.filter == Filter::Box {
-            self.add_sample(p, l);
-            // One pixel takes the whole sample: find it once for every layer.
+            // One pixel takes the whole sample: find it once for the beauty and every layer.
             let (ox, oy) = (floor_i(p.x), floor_i(p.y));
             if ox >= self.x0 as i64 && oy >= self.y0 as i64 && ox < self.x1 as i64 && oy < self.y1 as i64 {
                 let k = ((oy as u32 - self.y0) * w + (ox as u32 - self.x0)) as usize;
+                let l = if l.is_finite() { l } else { Rgb::BLACK };
+                if let Some(px) = self.pixels.get_mut(k) {
+                    px.s1 += l;
+                    px.s2 += l * l;
+                    px.n += 1;
+                    px.sum += l;
+                    px.weight += 1.0;
+                }
                 self.ensure_layers();
                 if let Some(px) = self.layers.get_mut(k * n3..(k + 1) * n3) {
                     let mut m = touched;

@@ -101,17 +101,18 @@ pub trait SplatEstimator: Sync {
         let [x0, y0, x1, y1] = t.rect;
         let cam = t.scene.camera.ray_generator();
         let aovs = t.settings.aovs();
+        let mut out = SampleOut { splats, layers: Default::default() };
         for y in y0..y1 {
             for x in x0..x1 {
                 for s in t.s0..t.s0 + t.n {
                     let (raster, ray) = super::camera_sample(&cam, sampler, x, y, s);
-                    let mut out = SampleOut { splats, layers: Default::default() };
                     let l = self.sample(t.scene, t.settings, &ray, raster, sampler, scratch, &mut out);
                     if aovs.is_empty() {
                         t.tile.add_sample(raster, l);
                     } else {
                         let beauty = if aovs.restricts_beauty() { out.layers.beauty } else { l };
                         t.tile.add_sample_touched(raster, beauty, &out.layers.aov[..aovs.aov_count()], out.layers.touched);
+                        out.layers.clear();
                     }
                 }
             }

@@ -696,13 +696,36 @@ impl LayerSample {
         }
     }
 
-    /// Multiply every layer and the beauty by `k`.
+    /// Multiply every layer and the beauty by `k` (the untouched layers stay zero, whatever
+    /// `k` is: [`Self::clear`] relies on it).
     #[inline]
     pub fn scale(&mut self, k: f32) {
         self.beauty *= k;
-        for a in &mut self.aov {
-            *a *= k;
+        let mut m = self.touched;
+        while m != 0 {
+            let i = m.trailing_zeros() as usize;
+            m &= m - 1;
+            if let Some(a) = self.aov.get_mut(i) {
+                *a *= k;
+            }
         }
+    }
+
+    /// Back to black for the next sample, clearing only the layers it touched: the others
+    /// are zero already (every write marks its layer), and zeroing all fifteen per camera
+    /// sample cost about 1 % of a path-traced render with AOVs.
+    #[inline]
+    pub fn clear(&mut self) {
+        let mut m = self.touched;
+        while m != 0 {
+            let i = m.trailing_zeros() as usize;
+            m &= m - 1;
+            if let Some(a) = self.aov.get_mut(i) {
+                *a = Rgb::BLACK;
+            }
+        }
+        self.beauty = Rgb::BLACK;
+        self.touched = 0;
     }
 
     /// Route `value` to the layers of `mask`.

@@ -228,3 +228,22 @@ fn nested_repetitions_stay_small() {
     let mixed = format!("C (D{})+ L", "+*?".repeat(12));
     assert_eq!(Lpe::new(&mixed).expect("mixed nesting compiles").size().0, Lpe::new("C D* L").unwrap().size().0);
 }
+
+#[test]
+fn layer_sample_clear_leaves_every_layer_black() {
+    use crate::lpe::aov::LayerSample;
+    use crate::spectrum::Rgb;
+    let mut s = LayerSample::default();
+    s.add(0b1010 | crate::lpe::aov::BEAUTY, Rgb::new(1.0, 2.0, 3.0));
+    s.add(0b0100, Rgb::new(0.5, 0.5, 0.5));
+    assert_eq!(s.touched, 0b1110);
+    // Scaling by a non-finite factor must not reach the untouched layers (a later sample
+    // reusing the struct would inherit NaN there).
+    s.scale(f32::INFINITY);
+    assert!(s.aov[0] == Rgb::BLACK && s.aov[4] == Rgb::BLACK);
+    assert!(s.aov[1].r.is_infinite() && s.aov[2].r.is_infinite());
+    s.clear();
+    assert_eq!(s.touched, 0);
+    assert_eq!(s.beauty, Rgb::BLACK);
+    assert!(s.aov.iter().all(|a| *a == Rgb::BLACK), "{:?}", s.aov);
+}
