@@ -216,6 +216,28 @@ fn radiosity_routes_its_parts() {
     }
 }
 
+/// The routers of the camera-side, light-tracing, bidirectional and Metropolis methods give the same layers, bit for
+/// bit, through the product automata and through one automaton step per AOV (the fallback
+/// of sets too large for a product).
+#[test]
+fn renders_route_alike_with_and_without_the_product_automata() {
+    let scene = repo_scene("caustic.xml", 12);
+    let list = [("emit", "C [LB]"), ("d1", "C D [LB]"), ("caustic", "C D S+ L"), ("refl", "C <R.> L"), ("rest", "C . .+ L"), ("lde", "L D* E")];
+    let with = aovs(&scene, &list, None);
+    assert!(with.product_view().is_some(), "the set has its product automata");
+    let without = std::sync::Arc::new((*with).clone().without_products());
+    assert!(without.product_view().is_none());
+    for method in ["path:simd=false", "bdpt", "light", "pssmlt:chains=4,bootstrap=500", "mlt:chains=4,bootstrap=500", "direct"] {
+        let (a, b) = (render(&scene, method, 4, 6, 5, Some(with.clone())), render(&scene, method, 4, 6, 5, Some(without.clone())));
+        let lit = a.layer_images().iter().filter(|(_, i)| i.mean().max_component() > 0.0).count();
+        assert!(lit >= 3, "{method}: only {lit} layers hold light");
+        for ((n, x), (_, y)) in a.layer_images().into_iter().zip(b.layer_images()) {
+            assert!(x.data == y.data, "{method}: layer {n} differs between the two routings");
+        }
+        assert!(a.image().data == b.image().data, "{method}: beauty differs");
+    }
+}
+
 /// The product automata (one state per camera path and one per light subpath, built when a
 /// set is bound to a scene) route exactly as the automata stepped one by one (the unbound
 /// set): every event sequence up to 4 scattering vertices over the classes the scene's

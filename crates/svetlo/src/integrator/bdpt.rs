@@ -15,7 +15,7 @@ use super::{Integrator, Progress, RenderSettings};
 use crate::error::Result;
 use crate::film::{Film, Image};
 use crate::geometry::Ray;
-use crate::lpe::{AovSet, Event, LayerMask, LightTracker, Tracker};
+use crate::lpe::{AovSet, Event, LayerMask, LightTracker, ProductView, Tracker};
 use crate::path::{camera_subpath, connect, light_subpath, Connection, PathConfig, Vertex};
 use crate::sampling::Sampler;
 use crate::scene::Scene;
@@ -175,61 +175,117 @@ impl SubpathEvents {
 /// (inner), so that routing strategy (s, t) costs a few steps, not a walk of both subpaths.
 pub(crate) struct StrategyRouter<'a> {
     aovs: &'a AovSet,
-    /// Forward automata over camera[0..t-1] (the vertices before the connected one).
-    cam: Tracker<'a>,
-    /// Reverse automata over light[0..max(s-1, 1)] as sampled.
-    light: Option<LightTracker<'a>>,
-    /// `light` for each s below CACHED as the first t left it (it does not depend on t).
-    light_at: [Option<LightTracker<'a>>; CACHED],
+    states: RouterStates<'a>,
     /// The subpaths' vertex events (with AOVs), computed once per sample, not per strategy.
     le: SubpathEvents,
     ce: SubpathEvents,
 }
 
+/// A light state not yet computed.
+const NO_STATE: u32 = u32::MAX;
+
+/// The automata's states as the loops left them.
+enum RouterStates<'a> {
+    /// No AOVs: every path goes to the beauty.
+    Off,
+    /// The set's product automata (the common case): one integer per subpath.
+    Product {
+        view: ProductView<'a>,
+        /// Forward state over camera[0..t-1].
+        cam: u32,
+        /// Reverse state over light[0..max(s-1, 1)] as sampled ([`NO_STATE`]: none yet).
+        light: u32,
+        /// `light` for each s below CACHED as the first t left it (it does not depend on t).
+        light_at: [u32; CACHED],
+    },
+    /// One state per automaton (sets too large for a product; boxed, as the other variants
+    /// are a few words and the router is made once per sample).
+    Each(Box<EachStates<'a>>),
+}
+
+/// [`RouterStates::Each`]'s states, as `Product`'s but one per automaton.
+struct EachStates<'a> {
+    cam: Tracker<'a>,
+    light: Option<LightTracker<'a>>,
+    light_at: [Option<LightTracker<'a>>; CACHED],
+}
+
 impl<'a> StrategyRouter<'a> {
     pub fn new(aovs: &'a AovSet, light: &[Vertex], camera: &[Vertex]) -> Self {
-        StrategyRouter {
-            aovs,
-            cam: Tracker::camera(aovs),
-            light: None,
-            light_at: [None; CACHED],
-            le: SubpathEvents::new(aovs, light),
-            ce: SubpathEvents::new(aovs, camera),
-        }
+        let states = if aovs.is_empty() {
+            RouterStates::Off
+        } else if let Some(view) = aovs.product_view() {
+            RouterStates::Product { view, cam: view.camera(), light: NO_STATE, light_at: [NO_STATE; CACHED] }
+        } else {
+            RouterStates::Each(Box::new(EachStates { cam: Tracker::camera(aovs), light: None, light_at: [None; CACHED] }))
+        };
+        StrategyRouter { aovs, states, le: SubpathEvents::new(aovs, light), ce: SubpathEvents::new(aovs, camera) }
     }
     #[inline]
     pub fn at_t(&mut self, camera: &[Vertex], t: usize) {
-        if self.aovs.is_empty() {
+        if matches!(self.states, RouterStates::Off) {
             return;
         }
-        if t >= 3 {
-            if let Some(e) = self.ce.sampled(self.aovs, camera, t - 2) {
-                self.cam.push(e);
+        let sampled = if t >= 3 { self.ce.sampled(self.aovs, camera, t - 2) } else { None };
+        match &mut self.states {
+            RouterStates::Off => {}
+            RouterStates::Product { view, cam, light, .. } => {
+                if let Some(e) = sampled {
+                    *cam = view.step(*cam, e);
+                }
+                *light = NO_STATE;
+            }
+            RouterStates::Each(st) => {
+                if let Some(e) = sampled {
+                    st.cam.push(e);
+                }
+                st.light = None;
             }
         }
-        self.light = None;
     }
     #[inline]
     pub fn at_s(&mut self, scene: &Scene, light: &[Vertex], s: usize) {
-        if self.aovs.is_empty() || s == 0 {
+        if s == 0 {
             return;
         }
-        if let Some(Some(lt)) = self.light_at.get(s) {
-            self.light = Some(*lt);
-            return;
-        }
-        let le = &self.le;
-        match &mut self.light {
-            None => self.light = Some(LightTracker::light(self.aovs, self.aovs.endpoint_event(scene, &light[0]))),
-            Some(lt) if s >= 3 => {
-                if let Some(e) = le.sampled(self.aovs, light, s - 2) {
-                    lt.push(e);
+        let (aovs, le) = (self.aovs, &self.le);
+        match &mut self.states {
+            RouterStates::Off => {}
+            RouterStates::Product { view, light: r, light_at, .. } => {
+                if let Some(&cached) = light_at.get(s).filter(|c| **c != NO_STATE) {
+                    *r = cached;
+                    return;
+                }
+                if *r == NO_STATE {
+                    *r = view.light(aovs.endpoint_event(scene, &light[0]));
+                } else if s >= 3 {
+                    if let Some(e) = le.sampled(aovs, light, s - 2) {
+                        *r = view.rev_step(*r, e);
+                    }
+                }
+                if let Some(c) = light_at.get_mut(s) {
+                    *c = *r;
                 }
             }
-            Some(_) => {}
-        }
-        if let Some(c) = self.light_at.get_mut(s) {
-            *c = self.light;
+            RouterStates::Each(st) => {
+                let EachStates { light: lt, light_at, .. } = &mut **st;
+                if let Some(Some(cached)) = light_at.get(s) {
+                    *lt = Some(*cached);
+                    return;
+                }
+                match lt {
+                    None => *lt = Some(LightTracker::light(aovs, aovs.endpoint_event(scene, &light[0]))),
+                    Some(lt) if s >= 3 => {
+                        if let Some(e) = le.sampled(aovs, light, s - 2) {
+                            lt.push(e);
+                        }
+                    }
+                    Some(_) => {}
+                }
+                if let Some(c) = light_at.get_mut(s) {
+                    *c = *lt;
+                }
+            }
         }
     }
 
@@ -238,36 +294,71 @@ impl<'a> StrategyRouter<'a> {
     #[inline]
     pub fn layers(&self, scene: &Scene, light: &[Vertex], camera: &[Vertex], s: usize, t: usize, c: &Connection) -> LayerMask {
         let aovs = self.aovs;
-        if aovs.is_empty() {
-            return crate::lpe::aov::BEAUTY;
-        }
         let (le, ce) = (&self.le, &self.ce);
-        let mut cam = self.cam;
-        if s == 0 {
-            // The camera subpath found an emitter (or escaped) at vertex t - 1.
-            return cam.ends(aovs.endpoint_event(scene, &camera[t - 1]));
-        }
-        let mut lt = if s == 1 && t >= 2 {
-            let sampled = c.sampled_light.map_or(Event::BACKGROUND, |li| aovs.emitter_event(&scene.lights[li as usize]));
-            LightTracker::light(aovs, sampled)
-        } else {
-            match self.light {
-                Some(lt) => lt,
-                None => LightTracker::along(aovs, scene, light, (s - 1).max(1)),
+        match &self.states {
+            RouterStates::Off => crate::lpe::aov::BEAUTY,
+            RouterStates::Product { view, cam, light: r, .. } => {
+                if s == 0 {
+                    // The camera subpath found an emitter (or escaped) at vertex t - 1.
+                    return view.ends(*cam, aovs.endpoint_event(scene, &camera[t - 1]));
+                }
+                let mut r = if s == 1 && t >= 2 {
+                    view.light(Self::sampled_light_event(aovs, scene, c))
+                } else if *r != NO_STATE {
+                    *r
+                } else {
+                    let mut r = view.light(aovs.endpoint_event(scene, &light[0]));
+                    for e in light[1..(s - 1).max(1)].iter().filter_map(|v| aovs.sampled_event(v)) {
+                        r = view.rev_step(r, e);
+                    }
+                    r
+                };
+                if t == 1 {
+                    if s >= 2 {
+                        r = view.rev_step(r, le.connected(aovs, light, s - 1, c.sampled_p));
+                    }
+                    return view.meets(view.camera(), r);
+                }
+                let toward = if s == 1 { c.sampled_p } else { light[s - 1].p };
+                let q = view.step(*cam, ce.connected(aovs, camera, t - 1, toward));
+                if s >= 2 {
+                    r = view.rev_step(r, le.connected(aovs, light, s - 1, camera[t - 1].p));
+                }
+                view.meets(q, r)
             }
-        };
-        if t == 1 {
-            if s >= 2 {
-                lt.push(le.connected(aovs, light, s - 1, c.sampled_p));
+            RouterStates::Each(st) => {
+                let (mut cam, lt) = (st.cam, &st.light);
+                if s == 0 {
+                    return cam.ends(aovs.endpoint_event(scene, &camera[t - 1]));
+                }
+                let mut lt = if s == 1 && t >= 2 {
+                    LightTracker::light(aovs, Self::sampled_light_event(aovs, scene, c))
+                } else {
+                    match lt {
+                        Some(lt) => *lt,
+                        None => LightTracker::along(aovs, scene, light, (s - 1).max(1)),
+                    }
+                };
+                if t == 1 {
+                    if s >= 2 {
+                        lt.push(le.connected(aovs, light, s - 1, c.sampled_p));
+                    }
+                    return lt.meets_camera();
+                }
+                let toward = if s == 1 { c.sampled_p } else { light[s - 1].p };
+                cam.push(ce.connected(aovs, camera, t - 1, toward));
+                if s >= 2 {
+                    lt.push(le.connected(aovs, light, s - 1, camera[t - 1].p));
+                }
+                lt.meets(&cam)
             }
-            return lt.meets_camera();
         }
-        let toward = if s == 1 { c.sampled_p } else { light[s - 1].p };
-        cam.push(ce.connected(aovs, camera, t - 1, toward));
-        if s >= 2 {
-            lt.push(le.connected(aovs, light, s - 1, camera[t - 1].p));
-        }
-        lt.meets(&cam)
+    }
+
+    /// The light event of strategy (1, t)'s sampled light point.
+    #[inline]
+    fn sampled_light_event(aovs: &AovSet, scene: &Scene, c: &Connection) -> Event {
+        c.sampled_light.map_or(Event::BACKGROUND, |li| aovs.emitter_event(&scene.lights[li as usize]))
     }
 }
 

@@ -209,6 +209,13 @@ impl AovSet {
         warn
     }
 
+    /// The set without its product automata: paths are then routed by one step per
+    /// automaton, as sets too large for a product are (tests compare the two routings).
+    pub fn without_products(mut self) -> Self {
+        self.product = None;
+        self
+    }
+
     /// The product automaton by breadth-first search from the start, None when it would
     /// exceed [`MAX_PRODUCT_STATES`].
     fn build_product(&self) -> Option<Product> {
@@ -248,6 +255,15 @@ impl AovSet {
     /// state), which photons carry from the light to the lookup that completes their path.
     pub fn light_states_fit(&self) -> bool {
         self.is_empty() || self.product.as_ref().is_some_and(|p| p.rev.is_some())
+    }
+
+    /// The forward and reverse product automata as plain integer states, when both were
+    /// built: what a method that routes many joined paths per sample (BDPT's strategies)
+    /// steps without carrying a state per automaton.
+    #[inline]
+    pub fn product_view(&self) -> Option<ProductView<'_>> {
+        let p = self.product.as_ref()?;
+        Some(ProductView { p, rp: p.rev.as_ref()? })
     }
 
     /// States of the product automaton (0: none was built).
@@ -320,7 +336,7 @@ impl AovSet {
         if v.event.kind == crate::path::EventKind::Null {
             return None;
         }
-        let flags = v.bsdf.as_ref().map_or(crate::bsdf::LobeFlags::NONE, |b| b.flags());
+        let flags = v.lobes;
         Some(Event::scatter(flags, v.delta, v.event.transmission, self.shape_labels(v.shape)))
     }
 
@@ -329,7 +345,7 @@ impl AovSet {
     /// another look at the BSDF (for methods that connect a vertex many times).
     #[inline]
     pub fn reflect_event(&self, v: &crate::path::Vertex) -> Event {
-        let flags = v.bsdf.as_ref().map_or(crate::bsdf::LobeFlags::NONE, |b| b.flags());
+        let flags = v.lobes;
         Event::scatter(flags, false, false, self.shape_labels(v.shape))
     }
 
@@ -354,7 +370,7 @@ impl AovSet {
     /// The event of scattering at subpath vertex `v` toward point `q` (a connection).
     #[inline]
     pub fn connected_event(&self, v: &crate::path::Vertex, q: glam::Vec3) -> Event {
-        let flags = v.bsdf.as_ref().map_or(crate::bsdf::LobeFlags::NONE, |b| b.flags());
+        let flags = v.lobes;
         let through = (v.wo.dot(v.ng) > 0.0) != ((q - v.p).dot(v.ng) > 0.0);
         Event::scatter(flags, false, through, self.shape_labels(v.shape))
     }
@@ -368,7 +384,7 @@ impl AovSet {
         if v.event.kind == EventKind::Null {
             return None;
         }
-        let flags = v.bsdf.as_ref().map_or(crate::bsdf::LobeFlags::NONE, |b| b.flags());
+        let flags = v.lobes;
         let through = ((a - v.p).dot(v.ng) > 0.0) != ((b - v.p).dot(v.ng) > 0.0);
         Some(Event::scatter(flags, v.delta, through, self.shape_labels(v.shape)))
     }
@@ -466,6 +482,46 @@ impl AovSet {
         } else {
             BEAUTY
         }
+    }
+}
+
+/// The product automata of an [`AovSet`] ([`AovSet::product_view`]): forward states `q`
+/// (a camera prefix, as [`Tracker`] holds them) and reverse states `r` (a light subpath, as
+/// [`LightTracker`] holds them), with the same steps.
+#[derive(Clone, Copy, Debug)]
+pub struct ProductView<'a> {
+    p: &'a Product,
+    rp: &'a RevProduct,
+}
+
+impl ProductView<'_> {
+    /// The state of a path that has left the camera ([`Tracker::camera`]).
+    #[inline]
+    pub fn camera(&self) -> u32 {
+        self.p.step(0, Event::CAMERA)
+    }
+    #[inline]
+    pub fn step(&self, q: u32, e: Event) -> u32 {
+        self.p.step(q, e)
+    }
+    /// The layers that take a camera prefix in state `q` ending with event `e`.
+    #[inline]
+    pub fn ends(&self, q: u32, e: Event) -> LayerMask {
+        self.p.ends(q, e)
+    }
+    /// The reverse state of a light subpath that starts with event `e` ([`LightTracker::light`]).
+    #[inline]
+    pub fn light(&self, e: Event) -> u32 {
+        self.rev_step(0, e)
+    }
+    #[inline]
+    pub fn rev_step(&self, r: u32, e: Event) -> u32 {
+        self.rp.table[r as usize * self.p.n_classes + self.p.class(e)]
+    }
+    /// The layers that take camera prefix `q` joined to light subpath `r` ([`LightTracker::meets`]).
+    #[inline]
+    pub fn meets(&self, q: u32, r: u32) -> LayerMask {
+        self.rp.meets[q as usize * self.rp.states + r as usize]
     }
 }
 

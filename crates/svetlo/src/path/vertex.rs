@@ -90,6 +90,9 @@ pub struct Vertex {
     /// infinity: the unit direction from the scene toward the light.
     pub wo: Vec3,
     pub bsdf: Option<Bsdf>,
+    /// The BSDF's lobes (`bsdf.flags()`, NONE without one), looked up once per vertex:
+    /// connections and path events ask for them per strategy.
+    pub lobes: LobeFlags,
     /// The light of a light endpoint, or the emitter of a surface; None for a camera ray
     /// that escaped (all environment lights together).
     pub light: Option<u32>,
@@ -146,6 +149,7 @@ impl Vertex {
             uv: Vec2::ZERO,
             wo: Vec3::ZERO,
             bsdf: None,
+            lobes: LobeFlags::NONE,
             light: None,
             le: Rgb::BLACK,
             infinite: false,
@@ -179,6 +183,7 @@ impl Vertex {
     /// A surface hit with its BSDF; `pdf_fwd` is set by the walk.
     pub fn surface(scene: &Scene, si: &SurfaceInteraction, beta: Rgb) -> Self {
         let bsdf = scene.bsdf(si);
+        let lobes = bsdf.flags();
         let light = scene.area_light(si).map(|(i, _)| i);
         Vertex {
             p: si.p,
@@ -187,6 +192,7 @@ impl Vertex {
             uv: si.uv,
             wo: si.wo,
             bsdf: Some(bsdf),
+            lobes,
             light,
             beta,
             time: si.time,
@@ -221,7 +227,7 @@ impl Vertex {
         match self.kind {
             VertexKind::Camera => true,
             VertexKind::Light => !self.light.is_some_and(|i| matches!(scene.lights[i as usize], Light::Directional { .. })),
-            VertexKind::Surface => self.bsdf.as_ref().is_some_and(|b| b.flags().has_non_specular()),
+            VertexKind::Surface => self.bsdf.is_some() && self.lobes.has_non_specular(),
         }
     }
 
