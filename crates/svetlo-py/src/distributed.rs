@@ -9,7 +9,7 @@
 
 use crate::errors::{option_err, to_py};
 use crate::images::to_array;
-use crate::render::{resized, settings, Overrides, PyFilm};
+use crate::render::{scene_for, settings, Overrides, PyFilm};
 use crate::scene::PyScene;
 use pyo3::prelude::*;
 use pyo3::pybacked::PyBackedBytes;
@@ -23,7 +23,7 @@ use svetlo::integrator::{Progress, RenderSettings};
 use svetlo::scene::Scene;
 
 /// The render settings keywords a piece takes (those of `render`, less time and AOVs).
-const KEYS: &[&str] = &["integrator", "spp", "seed", "max_depth", "width", "height", "filter", "sampler", "rr_depth", "hide_emitters"];
+const KEYS: &[&str] = &["integrator", "spp", "seed", "max_depth", "width", "height", "filter", "sampler", "rr_depth", "hide_emitters", "ray_epsilon"];
 
 /// A render's method, settings and (resized) scene, as `render` would make them.
 struct Resolved {
@@ -61,12 +61,13 @@ fn resolve(scene: &PyScene, opts: &Bound<'_, PyDict>, threads: usize) -> PyResul
         sampler: get(opts, "sampler")?,
         rr_depth: get(opts, "rr_depth")?,
         hide_emitters: get(opts, "hide_emitters")?,
+        ray_epsilon: get(opts, "ray_epsilon")?,
     };
     let integrator: Option<String> = get(opts, "integrator")?;
     let name = integrator.unwrap_or_else(|| scene.scene.settings.integrator.clone());
     svetlo::methods::by_name(&name).map_err(to_py)?;
     let s = settings(&scene.scene, &o)?;
-    let sc = resized(&scene.scene, o.width, o.height)?;
+    let sc = scene_for(&scene.scene, &o)?;
     svetlo::limits::check_film(sc.camera.width, sc.camera.height).map_err(to_py)?;
     Ok(Resolved { name, settings: s, scene: sc })
 }

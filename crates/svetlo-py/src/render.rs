@@ -33,6 +33,8 @@ pub(crate) struct Overrides {
     pub(crate) sampler: Option<String>,
     pub(crate) rr_depth: Option<i32>,
     pub(crate) hide_emitters: Option<bool>,
+    /// The CLI's `--ray-epsilon`: skip hits nearer than this to a ray's origin.
+    pub(crate) ray_epsilon: Option<f32>,
 }
 
 /// The CLI's `configure`, step for step: settings from the scene, then each override.
@@ -84,8 +86,24 @@ pub(crate) fn settings(scene: &svetlo::scene::Scene, o: &Overrides) -> PyResult<
     Ok(s)
 }
 
+/// The scene as the overrides change it: the resolution, as the CLI sizes it, and the ray
+/// epsilon (a copy only when something changes).
+pub(crate) fn scene_for(scene: &Arc<svetlo::scene::Scene>, o: &Overrides) -> PyResult<Arc<svetlo::scene::Scene>> {
+    let sized = resized(scene, o.width, o.height)?;
+    let Some(d) = o.ray_epsilon else { return Ok(sized) };
+    if !(0.0..1e30).contains(&d) {
+        return Err(option_err(format!("ray_epsilon: {d} is not a distance of 0 or more")));
+    }
+    if sized.settings.ray_epsilon == d {
+        return Ok(sized);
+    }
+    let mut copy = (*sized).clone();
+    copy.settings.ray_epsilon = d;
+    Ok(Arc::new(copy))
+}
+
 /// The scene at the requested resolution (a copy only when it changes), as the CLI sizes it.
-pub(crate) fn resized(scene: &Arc<svetlo::scene::Scene>, width: Option<u32>, height: Option<u32>) -> PyResult<Arc<svetlo::scene::Scene>> {
+fn resized(scene: &Arc<svetlo::scene::Scene>, width: Option<u32>, height: Option<u32>) -> PyResult<Arc<svetlo::scene::Scene>> {
     for (v, what) in [(width, "width"), (height, "height")] {
         if let Some(v) = v {
             if !(1..=65536).contains(&v) {
@@ -117,7 +135,7 @@ type Strategies = Vec<svetlo::integrator::bdpt::StrategyImage>;
 #[pyfunction]
 #[pyo3(signature = (scene, integrator=None, spp=None, time=None, seed=None, max_depth=None, width=None, height=None,
                     filter=None, threads=0, sampler=None, rr_depth=None, hide_emitters=None, strategies=None, callback=None,
-                    aovs=None, lpe=None, aov_preset=None))]
+                    aovs=None, lpe=None, aov_preset=None, ray_epsilon=None))]
 #[allow(clippy::too_many_arguments)]
 pub fn render<'py>(
     py: Python<'py>,
@@ -139,6 +157,7 @@ pub fn render<'py>(
     aovs: Option<Vec<(String, String)>>,
     lpe: Option<String>,
     aov_preset: Option<String>,
+    ray_epsilon: Option<f32>,
 ) -> PyResult<Bound<'py, PyDict>> {
     let name = integrator.unwrap_or_else(|| scene.scene.settings.integrator.clone());
     let method = svetlo::methods::by_name(&name).map_err(to_py)?;
@@ -151,9 +170,9 @@ pub fn render<'py>(
             return Err(option_err(format!("strategies: the longest path must be 1..=32 segments, got {d}")));
         }
     }
-    let o = Overrides { spp, time, seed, max_depth, width, height, filter, threads, sampler, rr_depth, hide_emitters };
+    let o = Overrides { spp, time, seed, max_depth, width, height, filter, threads, sampler, rr_depth, hide_emitters, ray_epsilon };
     let mut settings = settings(&scene.scene, &o)?;
-    let the_scene = resized(&scene.scene, o.width, o.height)?;
+    let the_scene = scene_for(&scene.scene, &o)?;
     // The CLI's --aov, --aov-preset and --lpe.
     let request = svetlo::lpe::AovSet::request(&the_scene, aovs.as_deref().unwrap_or(&[]), aov_preset.as_deref(), lpe.as_deref());
     let mut warnings = Vec::new();

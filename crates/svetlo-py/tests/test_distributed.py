@@ -52,6 +52,14 @@ def test_bitwise_equal_to_the_local_render(client, integrator):
     assert np.array_equal(bits(r.variance), bits(ref.variance)), f"{integrator}: variance"
 
 
+def test_ray_epsilon_reaches_the_workers(client):
+    kw = dict(integrator="path", spp=8, seed=2, width=24, height=16, ray_epsilon=0.05)
+    r = sd.render(CBOX, client=client, chunks=3, progress=False, result=True, **kw)
+    ref = local(CBOX, **kw)
+    assert np.array_equal(bits(r.image), bits(ref.image))
+    assert not np.array_equal(bits(ref.image), bits(local(CBOX, **{**kw, "ray_epsilon": 0}).image))
+
+
 def test_chunks_are_joined_as_they_arrive_into_the_local_bits(client):
     # 8 spp: eight passes of 1 sample, so 8 chunks carry equal work. The client joins two
     # siblings of the pass tree as soon as both are in, whatever order they come in.

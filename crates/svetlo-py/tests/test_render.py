@@ -62,6 +62,27 @@ def test_scene_defaults_and_filter_sampler_match_cli(cli, cbox_path, tmp_path):
     assert np.array_equal(img, svetlo.read(out))
 
 
+def test_ray_epsilon_equals_cli_bit_for_bit(cli, cbox_path, tmp_path):
+    out = tmp_path / "cli.exr"
+    args = [str(cli), "render", str(cbox_path), "-o", str(out), "--spp", "2", "--seed", "4", "-D", "res=24", "--ray-epsilon", "0.05", "--threads", "2"]
+    r = subprocess.run(args, capture_output=True, text=True, timeout=300)
+    assert r.returncode == 0, r.stderr
+    scene = svetlo.load_file(cbox_path, res=24)
+    img = svetlo.render(scene, spp=2, seed=4, ray_epsilon=0.05, progress=False)
+    assert np.array_equal(img, svetlo.read(out))
+    # The epsilon changes the image (hits near each origin are skipped, in corners and at
+    # the light) and one larger than the scene skips every hit; the scene itself keeps 0.
+    plain = svetlo.render(scene, spp=2, seed=4, progress=False)
+    assert not np.array_equal(img, plain)
+    assert np.array_equal(svetlo.render(scene, spp=2, seed=4, ray_epsilon=0, progress=False), plain)
+    assert svetlo.render(scene, spp=1, ray_epsilon=1e6, progress=False).max() == 0
+    for bad in (-1.0, float("nan"), float("inf")):
+        with pytest.raises(svetlo.OptionError, match="ray_epsilon"):
+            svetlo.render(scene, spp=1, ray_epsilon=bad, progress=False)
+    with pytest.raises(TypeError, match="ray_epsilon"):
+        svetlo.render(scene, spp=1, ray_epsilon="5e-4", progress=False)
+
+
 def test_array_is_not_a_copy(cbox_path):
     scene = svetlo.load_file(cbox_path, res=16, spp=1)
     res = svetlo.render_result(scene, progress=False)

@@ -229,6 +229,7 @@ def render_result(
     sampler: Optional[str] = None,
     rr_depth: Optional[int] = None,
     hide_emitters: Optional[bool] = None,
+    ray_epsilon: Optional[float] = None,
     aovs: Optional[Mapping[str, str]] = None,
     lpe: Optional[str] = None,
     aov_preset: Optional[str] = None,
@@ -257,6 +258,11 @@ def render_result(
             raise TypeError(f"render: time must be a number of seconds, got {type(time).__name__}")
         if not (np.isfinite(time) and time > 0):
             raise OptionError(f"time must be a positive number of seconds, got {time}")
+    if ray_epsilon is not None:
+        if isinstance(ray_epsilon, bool) or not isinstance(ray_epsilon, (int, float, np.integer, np.floating)):
+            raise TypeError(f"render: ray_epsilon must be a distance (a number), got {type(ray_epsilon).__name__}")
+        if not (np.isfinite(ray_epsilon) and ray_epsilon >= 0):
+            raise OptionError(f"ray_epsilon must be a distance of 0 or more, got {ray_epsilon}")
     spec = _method_spec(integrator, options, scene)
     if aovs is not None:
         if not isinstance(aovs, Mapping) or not all(isinstance(k, str) and isinstance(v, str) for k, v in aovs.items()):
@@ -294,6 +300,7 @@ def render_result(
             aovs=None if aovs is None else list(aovs.items()),
             lpe=lpe,
             aov_preset=aov_preset,
+            ray_epsilon=None if ray_epsilon is None else float(ray_epsilon),
         )
     finally:
         if bar is not None:
@@ -338,6 +345,7 @@ def render(
     sampler: Optional[str] = None,
     rr_depth: Optional[int] = None,
     hide_emitters: Optional[bool] = None,
+    ray_epsilon: Optional[float] = None,
     aovs: Optional[Mapping[str, str]] = None,
     lpe: Optional[str] = None,
     aov_preset: Optional[str] = None,
@@ -367,6 +375,8 @@ def render(
         sampler: "independent" or "sobol".
         rr_depth: depth at which Russian roulette starts.
         hide_emitters: do not show emitters seen directly by the camera.
+        ray_epsilon: skip hits nearer than this distance to a ray's origin, on every ray
+            (the CLI's ``--ray-epsilon``; Tungsten's references of thin glass need 5e-4).
         aovs: light path expressions as ``{name: expression}`` (the CLI's ``--aov``, e.g.
             ``{"caustic": "C D S+ L"}``); their images are ``render_result(...).aovs[name]``
             (``render`` itself returns the beauty only).
@@ -400,6 +410,7 @@ def render(
         sampler=sampler,
         rr_depth=rr_depth,
         hide_emitters=hide_emitters,
+        ray_epsilon=ray_epsilon,
         aovs=aovs,
         lpe=lpe,
         aov_preset=aov_preset,

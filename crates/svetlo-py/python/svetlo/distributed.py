@@ -318,7 +318,7 @@ def _default_client(client):
     return get_client()
 
 
-_OPTS = ("spp", "seed", "max_depth", "width", "height", "filter", "sampler", "rr_depth", "hide_emitters")
+_OPTS = ("spp", "seed", "max_depth", "width", "height", "filter", "sampler", "rr_depth", "hide_emitters", "ray_epsilon")
 
 
 def _split(a: int, b: int) -> int:
@@ -685,7 +685,7 @@ def render(
             :class:`SceneSource`); ``params`` fill its ``<default>`` parameters.
         client: a ``dask.distributed.Client`` (default: the current one).
         integrator, options, spp, seed and the other settings (max_depth, width, height,
-            filter, sampler, rr_depth, hide_emitters): as :func:`svetlo.render`.
+            filter, sampler, rr_depth, hide_emitters, ray_epsilon): as :func:`svetlo.render`.
         chunks: how many tasks (nodes of the tree over the render's passes, or over its
             Metropolis chain blocks; fewer if there are fewer). Default: 4 per worker. For
             sppm: the blocks of rows, each a task per iteration.
