@@ -91,14 +91,7 @@ impl FilmTile {
             let (ox, oy) = (floor_i(p.x), floor_i(p.y));
             if ox >= self.x0 as i64 && oy >= self.y0 as i64 && ox < self.x1 as i64 && oy < self.y1 as i64 {
                 let k = ((oy as u32 - self.y0) * w + (ox as u32 - self.x0)) as usize;
-                let l = if l.is_finite() { l } else { Rgb::BLACK };
-                if let Some(px) = self.pixels.get_mut(k) {
-                    px.s1 += l;
-                    px.s2 += l * l;
-                    px.n += 1;
-                    px.sum += l;
-                    px.weight += 1.0;
-                }
+                self.add_box(k, if l.is_finite() { l } else { Rgb::BLACK });
                 self.ensure_layers();
                 if let Some(px) = self.layers.get_mut(k * n3..(k + 1) * n3) {
                     let mut m = touched;
@@ -187,16 +180,28 @@ impl FilmTile {
         if ox < 0 || oy < 0 || ox as u32 >= w || oy as u32 >= h {
             return false;
         }
-        let px = &mut self.pixels[(oy as u32 * w + ox as u32) as usize];
+        let k = (oy as u32 * w + ox as u32) as usize;
+        if self.filter == Filter::Box {
+            self.add_box(k, l);
+            return true;
+        }
+        let px = &mut self.pixels[k];
         px.s1 += l;
         px.s2 += l * l;
         px.n += 1;
-        if self.filter == Filter::Box {
+        false
+    }
+
+    /// A box-filtered sample into pixel `k`: its statistics and its whole weight.
+    #[inline]
+    fn add_box(&mut self, k: usize, l: Rgb) {
+        if let Some(px) = self.pixels.get_mut(k) {
+            px.s1 += l;
+            px.s2 += l * l;
+            px.n += 1;
             px.sum += l;
             px.weight += 1.0;
-            return true;
         }
-        false
     }
 
     /// The filter's share of a sample for every pixel of the tile within its radius.

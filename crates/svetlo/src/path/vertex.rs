@@ -227,7 +227,7 @@ impl Vertex {
         match self.kind {
             VertexKind::Camera => true,
             VertexKind::Light => !self.light.is_some_and(|i| matches!(scene.lights[i as usize], Light::Directional { .. })),
-            VertexKind::Surface => self.bsdf.is_some() && self.lobes.has_non_specular(),
+            VertexKind::Surface => self.lobes.has_non_specular(),
         }
     }
 

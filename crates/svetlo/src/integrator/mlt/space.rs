@@ -91,7 +91,7 @@ impl<'a> Space<'a> {
     /// Whether `v` can scatter in this space as it is marked: a surface with a non-delta
     /// lobe, or (marked delta) with the delta lobe of its event.
     pub fn scatters(v: &Vertex) -> bool {
-        v.kind == VertexKind::Surface && v.bsdf.is_some() && if v.delta { v.lobes.contains(lobe_of(v.event)) } else { v.lobes.has_non_specular() }
+        v.kind == VertexKind::Surface && if v.delta { v.lobes.contains(lobe_of(v.event)) } else { v.lobes.has_non_specular() }
     }
 
     /// The delta lobe of vertex p[i] followed from the neighbour `from` (i+1: radiance, from
