@@ -88,6 +88,27 @@ impl Rgb {
             ((v + 0.055) / 1.055).powf(2.4)
         }
     }
+    /// Linear -> the 8-bit sRGB code PNGs store: `(linear_to_srgb(v).clamp(0, 1) * 255 + 0.5)`
+    /// truncated, the same byte for every input (NaN and negatives give 0), from tables
+    /// instead of a `powf` per channel (see [`Srgb8Table`]).
+    #[inline]
+    pub fn linear_to_srgb8(v: f32) -> u8 {
+        if !(v > 0.0) {
+            return 0;
+        }
+        let t = SRGB8.get_or_init(Srgb8Table::new);
+        let code = t.bucket[(v.to_bits() >> 16) as usize];
+        // Within a bucket the code steps up at most once (see `Srgb8Table`).
+        match t.steps.get(code as usize) {
+            Some(&step) if v >= step => code + 1,
+            _ => code,
+        }
+    }
+    /// [`Self::linear_to_srgb8`] the slow way: the definition it reproduces.
+    #[inline]
+    pub fn linear_to_srgb8_direct(v: f32) -> u8 {
+        (Rgb::linear_to_srgb(v).clamp(0.0, 1.0) * 255.0 + 0.5) as u8
+    }
     /// Linear -> sRGB-encoded (no clamping of the input beyond 0).
     pub fn linear_to_srgb(v: f32) -> f32 {
         let v = v.max(0.0);
@@ -163,5 +184,82 @@ impl Neg for Rgb {
 impl std::iter::Sum for Rgb {
     fn sum<I: Iterator<Item = Rgb>>(iter: I) -> Rgb {
         iter.fold(Rgb::BLACK, |a, b| a + b)
+    }
+}
+
+/// The tables of [`Rgb::linear_to_srgb8`].
+///
+/// `steps[k]` is the smallest non-negative float whose code exceeds k; `bucket[b]` the code
+/// at the smallest float of bits `b << 16` (a positive float's exponent and first seven
+/// mantissa bits: buckets 0.8 % wide). The code rises by less than one per bucket (at most
+/// 0.44 * 255 / 128 on the power segment, 3294 * 0.0031 / 128 on the linear one), so the
+/// bucket's code, stepped once where `v` passes the next step, is the code.
+struct Srgb8Table {
+    steps: [f32; 255],
+    bucket: Box<[u8]>,
+}
+
+static SRGB8: std::sync::OnceLock<Srgb8Table> = std::sync::OnceLock::new();
+
+impl Srgb8Table {
+    fn new() -> Srgb8Table {
+        // Non-negative floats order as their bit patterns, and the code never falls as the
+        // value grows, so each step is found by bisection over the bits (32 halvings).
+        let mut steps = [0.0f32; 255];
+        for (k, s) in steps.iter_mut().enumerate() {
+            let (mut lo, mut hi) = (0u32, f32::INFINITY.to_bits());
+            while lo < hi {
+                let mid = lo + (hi - lo) / 2;
+                if Rgb::linear_to_srgb8_direct(f32::from_bits(mid)) as usize > k {
+                    hi = mid;
+                } else {
+                    lo = mid + 1;
+                }
+            }
+            *s = f32::from_bits(lo);
+        }
+        let bucket = (0..=(f32::INFINITY.to_bits() >> 16)).map(|b| steps.partition_point(|&t| f32::from_bits(b << 16) >= t) as u8).collect();
+        Srgb8Table { steps, bucket }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::Rgb;
+
+    fn check(v: f32) {
+        assert_eq!(Rgb::linear_to_srgb8(v), Rgb::linear_to_srgb8_direct(v), "8-bit sRGB code of {v:e} (bits {:#x})", v.to_bits());
+    }
+
+    #[test]
+    fn srgb8_table_matches_the_definition() {
+        // Every float within 4096 ulps of each step, a sweep through [0, 2], and the edges.
+        let t = super::SRGB8.get_or_init(super::Srgb8Table::new);
+        for &t in t.steps.iter() {
+            let b = t.to_bits();
+            for d in 0..4096u32 {
+                check(f32::from_bits(b + d));
+                check(f32::from_bits(b.saturating_sub(d)));
+            }
+        }
+        let mut b = 0u32;
+        while b <= 2.0f32.to_bits() {
+            check(f32::from_bits(b));
+            b += 997;
+        }
+        for v in [0.0, -0.0, -1.0, f32::MIN_POSITIVE, 1e-45, 0.0031308, 1.0, 1.0 + f32::EPSILON, 1e30, f32::INFINITY, f32::NEG_INFINITY, f32::NAN] {
+            check(v);
+        }
+        assert_eq!(Rgb::linear_to_srgb8(1.0), 255);
+        assert_eq!(Rgb::linear_to_srgb8(0.0), 0);
+    }
+
+    /// Every non-negative float up to 1.0 and beyond (about 10^9 values; `--ignored`, release).
+    #[test]
+    #[ignore]
+    fn srgb8_table_matches_the_definition_everywhere() {
+        for b in 0..=1.01f32.to_bits() {
+            check(f32::from_bits(b));
+        }
     }
 }

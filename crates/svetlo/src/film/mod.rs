@@ -48,6 +48,12 @@ impl FilmTile {
         FilmTile { x0, y0, x1, y1, filter, pixels: vec![Pixel::default(); ((x1 - x0) * (y1 - y0)) as usize], layers: Vec::new(), n_layers: 0 }
     }
 
+    /// Back to black, keeping the memory (layers already allocated stay so, as zeros).
+    fn clear(&mut self) {
+        self.pixels.fill(Pixel::default());
+        self.layers.fill(0.0);
+    }
+
     /// Gives the tile `n` AOV layers, all black.
     fn set_layers(&mut self, n: usize) {
         self.n_layers = n;
@@ -337,6 +343,15 @@ impl Film {
         f.layer_names = names.to_vec();
         f.full.set_layers(names.len());
         f
+    }
+
+    /// Back to a new film's state (black, no samples, splat scale 1), keeping its memory
+    /// for reuse.
+    pub fn clear(&mut self) {
+        self.full.clear();
+        self.splats.fill(0.0);
+        self.splat_scale = 1.0;
+        self.spp_done = 0;
     }
 
     /// The AOV layers' names, in order.

@@ -136,6 +136,20 @@ impl<T> TreeSum<T> {
         }
     }
 
+    /// [`Self::push`] adding by reference, keeping the sums it folded in in `spare` (cleared,
+    /// they hold later passes without new allocations: fresh pages cost a fault each). There
+    /// are never more of them than levels of the tree.
+    pub fn push_recycling(&mut self, value: T, add: impl Fn(&mut T, &T), spare: &mut Vec<T>) {
+        self.stack.push((1, value));
+        while self.stack.len() >= 2 && self.stack[self.stack.len() - 1].0 == self.stack[self.stack.len() - 2].0 {
+            let (n, right) = self.stack.pop().expect("two entries");
+            let left = self.stack.last_mut().expect("two entries");
+            add(&mut left.1, &right);
+            left.0 += n;
+            spare.push(right);
+        }
+    }
+
     /// The sum of every pass pushed (`None` when none was).
     pub fn finish(mut self, add: impl Fn(&mut T, T)) -> Option<T> {
         let (_, mut acc) = self.stack.pop()?;
@@ -220,6 +234,26 @@ mod tests {
             for i in 0..n {
                 t.push(i.to_string(), bracket);
             }
+            assert_eq!(t.finish(bracket).unwrap(), recursive(0, n), "{n} passes");
+        }
+    }
+
+    /// Recycling keeps the tree's order and hands back each sum folded in, never more at a
+    /// time than the tree has levels (a render reusing them holds no extra memory).
+    #[test]
+    fn recycling_sums_in_the_trees_order() {
+        let add = |l: &mut String, r: &String| *l = format!("({l}+{r})");
+        for n in 1..40u32 {
+            let mut t = TreeSum::default();
+            let (mut spare, mut folded) = (Vec::new(), 0);
+            for i in 0..n {
+                let before = spare.len();
+                t.push_recycling(i.to_string(), add, &mut spare);
+                folded += spare.len() - before;
+                assert!(spare.len() <= 32 - n.leading_zeros() as usize, "{n} passes: {} spares", spare.len());
+                spare.clear();
+            }
+            assert_eq!(folded, n as usize - t.stack.len(), "{n} passes: every sum folded in comes back");
             assert_eq!(t.finish(bracket).unwrap(), recursive(0, n), "{n} passes");
         }
     }

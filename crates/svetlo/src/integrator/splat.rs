@@ -156,7 +156,6 @@ pub(super) fn render_chunked<E: SplatEstimator>(
     settings.check_lpe_support("this method", est.supports_lpe())?;
     let cam = &scene.camera;
     let (w, h) = (cam.width, cam.height);
-    let n_layers = settings.aovs().aov_count();
     let tiles: Vec<(u32, u32, u32, u32)> = (0..h.div_ceil(TILE))
         .flat_map(|ty| (0..w.div_ceil(TILE)).map(move |tx| (tx * TILE, ty * TILE, ((tx + 1) * TILE).min(w), ((ty + 1) * TILE).min(h))))
         .collect();
@@ -195,6 +194,8 @@ pub(super) fn render_chunked<E: SplatEstimator>(
         }
     };
     let mut sum: passes::TreeSum<PassSum> = passes::TreeSum::default();
+    // Pass sums folded into the tree, reused for later passes.
+    let mut spare: Vec<PassSum> = Vec::new();
     let mut spp_done = 0u32;
     let mut pass_spp = 1u32;
     let mut pass = range.start;
@@ -207,17 +208,22 @@ pub(super) fn render_chunked<E: SplatEstimator>(
         if progress.cancelled() || settings.time_limit.is_some_and(|t| start.elapsed() >= t) {
             break;
         }
-        let mut film = Film::with_layers(w, h, settings.filter, settings.aovs().names());
-        let mut extra: Vec<Vec<Rgb>> = vec![vec![Rgb::BLACK; (w * h) as usize]; channels];
-        let film_ref = &film;
+        let (mut film, mut extra) = match spare.pop() {
+            Some((mut f, mut e)) => {
+                f.clear();
+                e.iter_mut().for_each(|c| c.fill(Rgb::BLACK));
+                (f, e)
+            }
+            None => (Film::with_layers(w, h, settings.filter, settings.aovs().names()), vec![vec![Rgb::BLACK; (w * h) as usize]; channels]),
+        };
         // Tiles go in chunks so that the splat lists in memory stay bounded on large films;
-        // each chunk's splats land in pass-local dense buffers, in chunk and tile order.
+        // each chunk's splats go into the pass's film in chunk and tile order (so each pixel
+        // sums them in an order fixed by the tiles, whatever the threads).
         let tiles_per_chunk = ((chunk_samples / (n as u64 * (TILE * TILE) as u64)).max(1)).min(tiles.len().max(1) as u64) as usize;
         let mut pass_tiles: Vec<FilmTile> = Vec::with_capacity(tiles.len());
-        // The beauty's splats, the extra channels, then the AOV layers'.
-        let mut pass_splats: Vec<Vec<Rgb>> = vec![Vec::new(); 1 + channels + n_layers];
         let mut cancelled = false;
         for chunk in tiles.chunks(tiles_per_chunk) {
+            let film_ref = &film;
             let results: Vec<Option<(FilmTile, Vec<Splat>)>> = pool.install(|| {
                 chunk
                     .par_iter()
@@ -247,23 +253,17 @@ pub(super) fn render_chunked<E: SplatEstimator>(
                     if !(x >= 0.0 && y >= 0.0 && (x as u32) < w && (y as u32) < h) {
                         continue;
                     }
-                    let k = (y as u32 * w + x as u32) as usize;
-                    let mut add = |slot: usize| {
-                        if let Some(buf) = pass_splats.get_mut(slot) {
-                            if buf.is_empty() {
-                                *buf = vec![Rgb::BLACK; (w * h) as usize];
+                    let centre = Vec2::new(x + 0.5, y + 0.5);
+                    match sp.channel {
+                        0 => film.splat(centre, sp.value),
+                        NO_CHANNEL => {}
+                        c => {
+                            if let Some(e) = extra.get_mut(c as usize - 1) {
+                                e[(y as u32 * w + x as u32) as usize] += sp.value;
                             }
-                            buf[k] += sp.value;
                         }
-                    };
-                    if sp.channel != NO_CHANNEL {
-                        add(sp.channel as usize);
                     }
-                    let mut m = sp.layers;
-                    while m != 0 {
-                        add(1 + channels + m.trailing_zeros() as usize);
-                        m &= m - 1;
-                    }
+                    film.splat_layers(sp.layers, centre, sp.value);
                 }
             }
         }
@@ -273,21 +273,9 @@ pub(super) fn render_chunked<E: SplatEstimator>(
         for t in &pass_tiles {
             film.merge_tile(t);
         }
-        for (c, buf) in pass_splats.iter().enumerate() {
-            for (i, v) in buf.iter().enumerate().filter(|(_, v)| !v.is_black()) {
-                let (x, y) = ((i as u32 % w) as f32 + 0.5, (i as u32 / w) as f32 + 0.5);
-                if c == 0 {
-                    film.splat(Vec2::new(x, y), *v);
-                } else if c > channels {
-                    film.splat_layer(c - 1 - channels, Vec2::new(x, y), *v);
-                } else {
-                    extra[c - 1][i] += *v;
-                }
-            }
-        }
         spp_done += n;
         film.spp_done = n;
-        sum.push((film, extra), |a, b| add(a, &b));
+        sum.push_recycling((film, extra), add, &mut spare);
         pass += 1;
         if progress.wants_pass(spp_done) {
             // The splats' scale so far, so that an observer sees a developed image.

@@ -133,7 +133,7 @@ pub fn encode_png(img: &Image) -> std::result::Result<Vec<u8>, image::ImageError
     let mut buf = Vec::with_capacity(img.width * img.height * 3);
     for c in &img.data {
         for v in c.to_array() {
-            buf.push((Rgb::linear_to_srgb(v).clamp(0.0, 1.0) * 255.0 + 0.5) as u8);
+            buf.push(Rgb::linear_to_srgb8(v));
         }
     }
     let mut out = Vec::new();
