@@ -93,7 +93,7 @@ impl Rgb {
     /// instead of a `powf` per channel (see [`Srgb8Table`]).
     #[inline]
     pub fn linear_to_srgb8(v: f32) -> u8 {
-        if !(v > 0.0) {
+        if v.is_nan() || v <= 0.0 {
             return 0;
         }
         let t = SRGB8.get_or_init(Srgb8Table::new);
