@@ -144,7 +144,23 @@ pub fn parse_define(s: &str) -> Result<(String, String), String> {
     Ok((name.to_string(), value.to_string()))
 }
 
+/// Keep freed memory in the process for reuse (glibc): a render allocates and frees films
+/// and tiles pass after pass, and by default glibc hands blocks of 128 kB and more back to
+/// the kernel at once, so every pass faults in fresh zeroed pages again (in a virtual machine
+/// each fault costs microseconds: 0.1 s of 1 s on a 256² render with eight AOVs). Blocks up
+/// to 32 MB (glibc's largest setting) now come from the heap, and the heap is not trimmed.
+fn keep_freed_memory() {
+    #[cfg(all(target_os = "linux", target_env = "gnu"))]
+    // SAFETY: mallopt only changes allocator parameters; called before any other thread
+    // exists.
+    unsafe {
+        libc::mallopt(libc::M_MMAP_THRESHOLD, 32 << 20);
+        libc::mallopt(libc::M_TRIM_THRESHOLD, i32::MAX);
+    }
+}
+
 fn main() -> ExitCode {
+    keep_freed_memory();
     let cli = Cli::parse();
     if let Some(m) = cli.max_memory {
         svetlo::limits::set_max_memory(m);
