@@ -234,9 +234,9 @@ mod tests {
     #[test]
     fn srgb8_table_matches_the_definition() {
         // Every float within 4096 ulps of each step, a sweep through [0, 2], and the edges.
-        let t = super::SRGB8.get_or_init(super::Srgb8Table::new);
-        for &t in t.steps.iter() {
-            let b = t.to_bits();
+        let table = super::SRGB8.get_or_init(super::Srgb8Table::new);
+        for &step in table.steps.iter() {
+            let b = step.to_bits();
             for d in 0..4096u32 {
                 check(f32::from_bits(b + d));
                 check(f32::from_bits(b.saturating_sub(d)));
