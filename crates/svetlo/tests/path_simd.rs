@@ -119,6 +119,39 @@ fn cbox_rgb_matches_scalar() {
     compare(&scene, &s, "cbox-rgb");
 }
 
+/// Lambertian materials with textures: each lane evaluates its hit's texture as the scalar
+/// tracer's `Material::bsdf` does (checkerboards over the walls' uvs, a different one on the
+/// back of the two-sided ones): the same image as the scalar tracer's, with either sampler.
+#[test]
+fn textured_diffuse_matches_scalar() {
+    use svetlo::bsdf::Material;
+    use svetlo::spectrum::Rgb;
+    use svetlo::texture::Texture;
+    fn checker(c: Rgb, k: f32, scale: f32) -> Texture {
+        Texture::Checkerboard { color0: c, color1: c * k, to_uv: glam::Affine2::from_scale(glam::Vec2::splat(scale)) }
+    }
+    fn texturize(m: &Material, k: f32) -> Material {
+        match m {
+            Material::Diffuse { reflectance: Texture::Constant(c) } => Material::Diffuse { reflectance: checker(*c, k, 5.0) },
+            Material::TwoSided { front, back } => Material::TwoSided { front: Box::new(texturize(front, k)), back: Box::new(texturize(back, 0.1)) },
+            m => m.clone(),
+        }
+    }
+    let mut scene = load(&repo_scene("cornell-box.xml"), &[], 48);
+    scene.materials = scene.materials.iter().map(|m| texturize(m, 0.35)).collect();
+    let mut s = RenderSettings::from_scene(&scene);
+    s.spp = 8;
+    s.seed = 11;
+    compare(&scene, &s, "cornell-box, checkerboard walls");
+    s.sampler = svetlo::sampling::SamplerKind::Sobol;
+    compare(&scene, &s, "cornell-box, checkerboard walls, sobol");
+    // The texture matters: the kernel's image is not the untextured one.
+    let plain = load(&repo_scene("cornell-box.xml"), &[], 48);
+    let a = render(&scene, "path", &s);
+    let b = render(&plain, "path", &s);
+    assert!(a.mean()[1] < 0.9 * b.mean()[1], "the checkerboards darken the box: {:?} vs {:?}", a.mean(), b.mean());
+}
+
 #[test]
 fn same_image_for_any_thread_count() {
     if !avx2() {

@@ -8,8 +8,9 @@
 //! has 32 registers where the CPU has them).
 //!
 //! Scope: static scenes of triangle meshes, (two-sided) Lambertian
-//! materials of constant reflectance, area lights of constant radiance on meshes, no
-//! environment light; either sampler. `SimdPathTracer` checks that
+//! materials of constant or textured reflectance (any texture: bitmaps, procedural, mesh
+//! attributes; evaluated per lane where the path hits), area lights of constant radiance on
+//! meshes, no environment light; either sampler. `SimdPathTracer` checks that
 //! (`SimdKernel::new`) and otherwise, or without AVX2, runs the scalar tracer.
 //!
 //! Each lane draws its random numbers from its own copy of the scalar tracer's sampler, in
@@ -31,7 +32,7 @@ use crate::math::{warp, Frame, INV_PI, PI};
 use crate::sampling::{power_heuristic, Distribution1D, IndependentSampler, Sampler, SamplerKind, SobolSampler};
 use crate::scene::Scene;
 use crate::spectrum::Rgb;
-use crate::texture::Texture;
+use crate::texture::{TexPoint, Texture};
 use glam::{Vec2, Vec3};
 
 /// `path`: the eight-wide kernel when the scene qualifies and the CPU has AVX2, else the
@@ -82,6 +83,8 @@ struct Tri {
     p: [Vec3; 3],
     shading: Shading,
     shape: u32,
+    /// Its index in its mesh (for uvs and mesh-attribute textures).
+    local: u32,
 }
 
 /// A triangle's normals: constant, or interpolated per hit (as `TriangleMesh::surface`).
@@ -92,12 +95,32 @@ enum Shading {
     Smooth(TriangleShading),
 }
 
+/// A Lambertian reflectance: constant, or a texture evaluated where the path hits.
+#[derive(Clone, Debug)]
+enum Albedo {
+    Constant(Rgb),
+    Textured(Texture),
+}
+
+impl Albedo {
+    /// As `Material::bsdf` evaluates it (clamped to [0, 1]).
+    #[inline(always)]
+    fn at(&self, tp: TexPoint) -> Rgb {
+        match self {
+            Albedo::Constant(c) => *c,
+            Albedo::Textured(t) => t.eval(tp).clamp(0.0, 1.0),
+        }
+    }
+}
+
 /// A shape's material and emission.
-#[derive(Clone, Copy, Debug)]
+#[derive(Clone, Debug)]
 struct ShapeData {
-    front: Rgb,
+    front: Albedo,
     /// Reflectance seen from the back (two-sided); None: black there.
-    back: Option<Rgb>,
+    back: Option<Albedo>,
+    /// Whether either side is textured (then the hit's uv is needed).
+    textured: bool,
     /// Light index and radiance when the shape emits.
     light: Option<(u32, Rgb)>,
 }
@@ -183,10 +206,11 @@ pub struct SimdKernel {
     avx512: bool,
 }
 
-/// The constant reflectance of a diffuse model, clamped as `Material::bsdf` does.
-fn diffuse_constant(m: &Material) -> Option<Rgb> {
+/// The reflectance of a diffuse model (a constant one clamped as `Material::bsdf` does).
+fn diffuse_albedo(m: &Material) -> Option<Albedo> {
     match m {
-        Material::Diffuse { reflectance: Texture::Constant(c) } => Some(c.clamp(0.0, 1.0)),
+        Material::Diffuse { reflectance: Texture::Constant(c) } => Some(Albedo::Constant(c.clamp(0.0, 1.0))),
+        Material::Diffuse { reflectance } => Some(Albedo::Textured(reflectance.clone())),
         _ => None,
     }
 }
@@ -225,11 +249,15 @@ impl SimdKernel {
         let mut verts = Vec::new();
         for (si, s) in scene.shapes.iter().enumerate() {
             let Geometry::Mesh(m) = &*s.geometry else { return None };
+            if s.detail {
+                return None;
+            }
             let mat = scene.materials.get(s.material as usize)?;
             let (front, back) = match mat {
-                Material::TwoSided { front, back } => (diffuse_constant(front)?, Some(diffuse_constant(back)?)),
-                m => (diffuse_constant(m)?, None),
+                Material::TwoSided { front, back } => (diffuse_albedo(front)?, Some(diffuse_albedo(back)?)),
+                m => (diffuse_albedo(m)?, None),
             };
+            let textured = matches!(front, Albedo::Textured(_)) || matches!(back, Some(Albedo::Textured(_)));
             let light = match s.light {
                 Some(li) => {
                     let a = area_of(scene, li)?;
@@ -238,7 +266,7 @@ impl SimdKernel {
                 }
                 None => None,
             };
-            shapes.push(ShapeData { front, back, light });
+            shapes.push(ShapeData { front, back, textured, light });
             for t in 0..m.triangle_count() {
                 let p = m.vertices(t);
                 verts.push(p);
@@ -246,7 +274,7 @@ impl SimdKernel {
                     Some((ng, frame)) => Shading::Flat(ng, frame),
                     None => Shading::Smooth(m.shading(t)),
                 };
-                tris.push(Tri { p, shading, shape: si as u32 });
+                tris.push(Tri { p, shading, shape: si as u32, local: t as u32 });
             }
         }
         let tracer = if verts.len() <= PACKET_MAX_TRIANGLES { Tracer::Packets(PacketBvh::build(&verts)) } else { single_tracer(scene) };
@@ -514,8 +542,19 @@ impl SimdKernel {
         put(&mut v.ft, frame.t);
         put(&mut v.fnn, frame.n);
         put(&mut v.wo, wo_w);
-        putc(&mut v.front, sh.front);
-        putc(&mut v.back, sh.back.unwrap_or(Rgb::BLACK));
+        // The hit's texture point, as `Scene::interaction` gives it (`SurfaceInteraction::tex_point`).
+        let tp = if sh.textured {
+            let uv = match &*scene.shapes[tri.shape as usize].geometry {
+                Geometry::Mesh(m) => m.uv(tri.local as usize, b1, b2),
+                _ => Vec2::ZERO,
+            };
+            TexPoint { uv, prim: tri.local, bary: Vec2::new(b1, b2), p, n: ng }
+        } else {
+            TexPoint::default()
+        };
+        let (front, back) = (sh.front.at(tp), sh.back.as_ref().map_or(Rgb::BLACK, |b| b.at(tp)));
+        putc(&mut v.front, front);
+        putc(&mut v.back, back);
         v.has_back[l] = sh.back.is_some();
         v.u[0][l] = u.x;
         v.u[1][l] = u.y;
