@@ -106,7 +106,7 @@ impl Rgb {
     }
     /// [`Self::linear_to_srgb8`] the slow way: the definition it reproduces.
     #[inline]
-    pub fn linear_to_srgb8_direct(v: f32) -> u8 {
+    pub(crate) fn linear_to_srgb8_direct(v: f32) -> u8 {
         (Rgb::linear_to_srgb(v).clamp(0.0, 1.0) * 255.0 + 0.5) as u8
     }
     /// Linear -> sRGB-encoded (no clamping of the input beyond 0).

@@ -554,6 +554,8 @@ pub fn run_blocks<T: MetropolisTarget>(
     let group = if timed { blocks.len() } else { (2 * pool.current_num_threads()).div_ceil(CHAINS_PER_BLOCK).max(1) };
     let mut tree: crate::integrator::passes::TreeSum<Film> = Default::default();
     let add = |a: &mut Film, b: Film| a.add(&b);
+    // Block films folded into the tree, reused for later groups (no fresh pages per group).
+    let mut spare: Vec<Film> = Vec::new();
     let mut done = 0u64;
     let mut timed_film = empty();
     let mut g0 = blocks.start;
@@ -561,7 +563,19 @@ pub fn run_blocks<T: MetropolisTarget>(
         let g1 = (g0 + group as u32).min(blocks.end);
         let c0 = g0 as usize * CHAINS_PER_BLOCK;
         let c1 = (g1 as usize * CHAINS_PER_BLOCK).min(cfg.chains);
-        let mut films: Vec<Film> = if timed { Vec::new() } else { (g0..g1).map(|_| empty()).collect() };
+        let mut films: Vec<Film> = if timed {
+            Vec::new()
+        } else {
+            (g0..g1)
+                .map(|_| match spare.pop() {
+                    Some(mut f) => {
+                        f.clear();
+                        f
+                    }
+                    None => empty(),
+                })
+                .collect()
+        };
         // Chain starts, in proportion to the bootstrap weights.
         let mut chains: Vec<Option<Chain<T::State>>> = pool.install(|| {
             (c0..c1)
@@ -626,7 +640,7 @@ pub fn run_blocks<T: MetropolisTarget>(
             }
         }
         for f in films {
-            tree.push(f, add);
+            tree.push_recycling(f, |a, b| a.add(b), &mut spare);
         }
         g0 = g1;
     }
