@@ -11,6 +11,14 @@ fn img_err(path: &Path, msg: impl std::fmt::Display) -> Error {
     Error::Image { file: path.to_path_buf(), msg: msg.to_string() }
 }
 
+/// An in-memory encoder's error, named after the file it was for.
+fn for_file(path: &Path, e: Error) -> Error {
+    match e {
+        Error::Image { msg, .. } => img_err(path, msg),
+        e => img_err(path, e),
+    }
+}
+
 fn io_err(path: &Path, source: std::io::Error) -> Error {
     Error::Io { file: path.to_path_buf(), source }
 }
@@ -41,46 +49,37 @@ pub fn write_atomic(path: &Path, bytes: &[u8]) -> Result<()> {
 
 /// The bytes of an EXR file: linear RGB as 32-bit float channels R, G, B.
 pub fn encode_exr(img: &Image) -> Result<Vec<u8>> {
-    use exr::prelude::{SpecificChannels, Vec2, WritableImage};
-    let channels = SpecificChannels::rgb(|Vec2(x, y): Vec2<usize>| {
-        let c = img.get(x, y);
-        (c.r, c.g, c.b)
-    });
-    let mut out = Vec::new();
-    exr::prelude::Image::from_channels((img.width, img.height), channels)
-        .write()
-        .to_buffered(Cursor::new(&mut out))
-        .map_err(|e| Error::Image { file: "(EXR in memory)".into(), msg: e.to_string() })?;
-    Ok(out)
+    encode_exr_layers(img, &[])
 }
 
 /// Linear RGB as 32-bit float channels R, G, B.
 pub fn write_exr(path: &Path, img: &Image) -> Result<()> {
-    let bytes = encode_exr(img).map_err(|e| img_err(path, e))?;
+    let bytes = encode_exr(img).map_err(|e| for_file(path, e))?;
     write_atomic(path, &bytes)
 }
 
-/// One EXR file with the beauty as channels R, G, B and each layer `NAME` as `NAME.R`,
-/// `NAME.G`, `NAME.B` (OpenEXR's layer naming), 32-bit float, all the beauty's size.
-pub fn write_exr_layers(path: &Path, beauty: &Image, layers: &[(String, Image)]) -> Result<()> {
-    use exr::prelude::{AnyChannel, AnyChannels, Encoding, FlatSamples, Layer, LayerAttributes, WritableImage};
+/// The bytes of [`write_exr_layers`]'s file.
+pub fn encode_exr_layers(beauty: &Image, layers: &[(String, Image)]) -> Result<Vec<u8>> {
+    use super::exr_encode::{encode_exr_channels, ExrChannel};
     let (w, h) = (beauty.width, beauty.height);
     if layers.iter().any(|(_, l)| l.width != w || l.height != h) {
-        return Err(crate::error::Error::Image { file: path.to_path_buf(), msg: "AOV layers must have the beauty's size".into() });
+        return Err(Error::Image { file: "(EXR in memory)".into(), msg: "AOV layers must have the beauty's size".into() });
     }
-    let mut channels = Vec::new();
-    let mut add = |prefix: &str, img: &Image| {
-        for (c, name) in ["R", "G", "B"].iter().enumerate() {
-            let data: Vec<f32> = img.data.iter().map(|p| [p.r, p.g, p.b][c]).collect();
-            channels.push(AnyChannel::new(format!("{prefix}{name}").as_str(), FlatSamples::F32(data)));
+    let mut channels = Vec::with_capacity(3 * (1 + layers.len()));
+    for (prefix, img) in std::iter::once((String::new(), beauty)).chain(layers.iter().map(|(n, l)| (format!("{n}."), l))) {
+        for (component, c) in ["R", "G", "B"].iter().enumerate() {
+            channels.push(ExrChannel { name: format!("{prefix}{c}"), data: &img.data, component });
         }
-    };
-    add("", beauty);
-    for (n, img) in layers {
-        add(&format!("{n}."), img);
     }
-    let layer = Layer::new((w, h), LayerAttributes::default(), Encoding::FAST_LOSSLESS, AnyChannels::sort(channels.into()));
-    exr::prelude::Image::from_layer(layer).write().to_file(path).map_err(|e| img_err(path, e))
+    encode_exr_channels(w, h, &channels)
+}
+
+/// One EXR file with the beauty as channels R, G, B and each layer `NAME` as `NAME.R`,
+/// `NAME.G`, `NAME.B` (OpenEXR's layer naming), 32-bit float, all the beauty's size; written
+/// whole or not at all.
+pub fn write_exr_layers(path: &Path, beauty: &Image, layers: &[(String, Image)]) -> Result<()> {
+    let bytes = encode_exr_layers(beauty, layers).map_err(|e| for_file(path, e))?;
+    write_atomic(path, &bytes)
 }
 
 /// Every channel of an EXR file's first layer by name (e.g. `caustic.R`), as f32.
@@ -130,11 +129,9 @@ pub fn write_png(path: &Path, img: &Image) -> Result<()> {
 
 /// The bytes of [`write_png`]'s file (for pages that embed their images).
 pub fn encode_png(img: &Image) -> std::result::Result<Vec<u8>, image::ImageError> {
-    let mut buf = Vec::with_capacity(img.width * img.height * 3);
-    for c in &img.data {
-        for v in c.to_array() {
-            buf.push(Rgb::linear_to_srgb8(v));
-        }
+    let mut buf = vec![0u8; img.data.len() * 3];
+    for (d, c) in buf.chunks_exact_mut(3).zip(&img.data) {
+        d.copy_from_slice(&c.to_array().map(Rgb::linear_to_srgb8));
     }
     let mut out = Vec::new();
     image::write_buffer_with_format(&mut Cursor::new(&mut out), &buf, img.width as u32, img.height as u32, image::ColorType::Rgb8, image::ImageFormat::Png)?;

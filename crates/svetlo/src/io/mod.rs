@@ -1,6 +1,7 @@
 //! Reading scenes and meshes, reading and writing images. Nothing else touches files.
 
 pub mod export;
+pub mod exr_encode;
 pub mod image_io;
 pub mod mesh_files;
 pub mod mitsuba;
