@@ -181,10 +181,24 @@ impl CoatingTables {
 /// incident direction `v`: the directional albedo of that lobe of a rough interface.
 /// The sampler's one-dimensional parts are evaluated once per grid line (the same values
 /// `sample_visible` would give at each node).
+///
+/// For an isotropic Beckmann surface and `v` in the xz plane, the y slope is odd in
+/// `u.y - 1/2` and the integrand even in it (it mirrors across the plane of incidence), so
+/// the nodes' mirrored halves are summed as one, doubled: half the evaluations, the same
+/// integral up to the nodes' rounding.
 fn interface_albedo(md: &Microfacet, v: Vec3, eta: f32, reflection: bool, gl: &[(f64, f64)]) -> f64 {
+    let mirrored = md.kind == MicrofacetKind::Beckmann && md.alpha_u == md.alpha_v && v.y == 0.0 && gl.len() % 2 == 0;
+    interface_albedo_grid(md, v, eta, reflection, gl, mirrored)
+}
+
+fn interface_albedo_grid(md: &Microfacet, v: Vec3, eta: f32, reflection: bool, gl: &[(f64, f64)], mirrored: bool) -> f64 {
     let sampler = VisibleSampler::new(md, v);
     let node = |x: f64| (0.5 * x + 0.5) as f32;
-    let ys: Vec<((f32, f32), f64)> = gl.iter().map(|&(y, wy)| (sampler.part_y(node(y)), wy)).collect();
+    let ys: Vec<((f32, f32), f64)> = if mirrored {
+        gl[..gl.len() / 2].iter().map(|&(y, wy)| (sampler.part_y(node(y)), 2.0 * wy)).collect()
+    } else {
+        gl.iter().map(|&(y, wy)| (sampler.part_y(node(y)), wy)).collect()
+    };
     let mut acc = 0.0f64;
     for &(x, wx) in gl {
         let px = sampler.part_x(node(x));
@@ -341,6 +355,27 @@ mod tests {
     }
 
     #[test]
+    fn mirrored_beckmann_grid_is_the_full_one() {
+        // The halved grid must give the full grid's integral: it fails if the y slope is
+        // not odd about the middle node or the integrand not mirror-symmetric.
+        for &(alpha, eta) in &[(0.05f32, 1.5f32), (0.3, 1.5), (0.7, 1.33), (0.3, 1.0 / 1.5)] {
+            let md = Microfacet::new(MicrofacetKind::Beckmann, alpha, alpha);
+            for (gl, reflection) in [(gauss_legendre(32), false), (gauss_legendre(128), true)] {
+                for mu in [1e-3f32, 0.2, 0.6, 0.97] {
+                    let v = Vec3::new((1.0 - mu * mu).sqrt(), 0.0, mu);
+                    let (half, full) = (interface_albedo_grid(&md, v, eta, reflection, &gl, true), interface_albedo_grid(&md, v, eta, reflection, &gl, false));
+                    assert!((half - full).abs() <= 2e-6 * full.abs().max(1e-3), "alpha {alpha} eta {eta} mu {mu}: {half} vs {full}");
+                }
+            }
+            // GGX's disk warp is not mirror-symmetric in u.y: it keeps the full grid.
+            let ggx = Microfacet::new(MicrofacetKind::Ggx, alpha, alpha);
+            let v = Vec3::new(0.8, 0.0, 0.6);
+            let gl = gauss_legendre(32);
+            assert_eq!(interface_albedo(&ggx, v, eta, false, &gl).to_bits(), interface_albedo_grid(&ggx, v, eta, false, &gl, false).to_bits());
+        }
+    }
+
+    #[test]
     fn coating_tables_approach_smooth_interface() {
         // A nearly smooth coating transmits 1 - F(cos) and its internal reflectance is
         // the diffuse Fresnel reflectance (up to Mitsuba's linspace averaging).
@@ -371,7 +406,7 @@ mod tests {
                         direct += interface_term(&md, v, m, eta, reflection) as f64 * wx * wy;
                     }
                 }
-                let grid = interface_albedo(&md, v, eta, reflection, &gl);
+                let grid = interface_albedo_grid(&md, v, eta, reflection, &gl, false);
                 assert_eq!(grid.to_bits(), (direct * 0.25).to_bits(), "{kind:?} mu {mu} eta {eta}");
                 assert!(grid > 0.0 && grid <= 1.0 + 1e-6, "{kind:?} mu {mu}: albedo {grid}");
             }

@@ -361,18 +361,58 @@ pub fn decode_image(bytes: &[u8], path: &Path) -> Result<Image> {
         "exr" => Err(img_err(path, "not an OpenEXR file (bad magic number)")),
         "pfm" => Err(img_err(path, "not a PFM file (bad magic number)")),
         _ => {
-            let rgb = decode_8bit(bytes, path)?.to_rgb32f();
-            let (w, h) = (rgb.width() as usize, rgb.height() as usize);
-            let data = rgb.pixels().map(|p| Rgb::new(Rgb::srgb_to_linear(p[0]), Rgb::srgb_to_linear(p[1]), Rgb::srgb_to_linear(p[2]))).collect();
+            let img = decode_8bit(bytes, path)?;
+            let (w, h) = (img.width() as usize, img.height() as usize);
+            let data = if matches!(img.color(), image::ColorType::Rgb8 | image::ColorType::Rgba8) {
+                // Eight-bit colour: 256 possible values, decoded once each. (Grey images stay
+                // on the float path: the crate's grey-to-float conversion rounds differently.)
+                let lut = srgb8_to_linear_table();
+                img.to_rgb8().pixels().map(|p| Rgb::new(lut[p[0] as usize], lut[p[1] as usize], lut[p[2] as usize])).collect()
+            } else {
+                img.to_rgb32f().pixels().map(|p| Rgb::new(Rgb::srgb_to_linear(p[0]), Rgb::srgb_to_linear(p[1]), Rgb::srgb_to_linear(p[2]))).collect()
+            };
             Ok(Image::new(w, h, data))
         }
     }
+}
+
+/// Linear value of each 8-bit sRGB code, exactly as the per-pixel path would give it (the
+/// `image` crate's conversion to float, then [`Rgb::srgb_to_linear`]): a texture's millions
+/// of texels then cost a lookup each instead of a `powf`.
+fn srgb8_to_linear_table() -> &'static [f32; 256] {
+    static TABLE: std::sync::OnceLock<[f32; 256]> = std::sync::OnceLock::new();
+    TABLE.get_or_init(|| {
+        let codes = image::RgbImage::from_fn(256, 1, |x, _| image::Rgb([x as u8; 3]));
+        let floats = image::DynamicImage::ImageRgb8(codes).to_rgb32f();
+        std::array::from_fn(|i| Rgb::srgb_to_linear(floats.get_pixel(i as u32, 0)[0]))
+    })
 }
 
 #[cfg(test)]
 mod tests {
     use super::*;
     use std::path::PathBuf;
+
+    #[test]
+    fn eight_bit_images_decode_as_the_float_path_does() {
+        // Every code in every channel, through a PNG of each 8-bit colour type.
+        let rgb = image::RgbImage::from_fn(256, 3, |x, y| image::Rgb([x as u8, (x as u8).wrapping_mul(7), (x as u8) ^ (y as u8 * 85)]));
+        for img in [
+            image::DynamicImage::ImageRgb8(rgb.clone()),
+            image::DynamicImage::ImageRgba8(image::DynamicImage::ImageRgb8(rgb.clone()).to_rgba8()),
+            image::DynamicImage::ImageLuma8(image::DynamicImage::ImageRgb8(rgb).to_luma8()),
+        ] {
+            let mut png = Vec::new();
+            img.write_to(&mut Cursor::new(&mut png), image::ImageFormat::Png).unwrap();
+            let got = decode_image(&png, Path::new("t.png")).unwrap();
+            let want: Vec<Rgb> =
+                img.to_rgb32f().pixels().map(|p| Rgb::new(Rgb::srgb_to_linear(p[0]), Rgb::srgb_to_linear(p[1]), Rgb::srgb_to_linear(p[2]))).collect();
+            assert_eq!(got.data.len(), want.len());
+            for (g, w) in got.data.iter().zip(&want) {
+                assert_eq!(g.to_array().map(f32::to_bits), w.to_array().map(f32::to_bits), "{:?}", img.color());
+            }
+        }
+    }
 
     fn tmp(name: &str) -> PathBuf {
         let dir = std::env::temp_dir().join(format!("svetlo-imgio-{}", std::process::id()));
