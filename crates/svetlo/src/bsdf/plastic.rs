@@ -187,7 +187,7 @@ impl CoatingTables {
 /// the nodes' mirrored halves are summed as one, doubled: half the evaluations, the same
 /// integral up to the nodes' rounding.
 fn interface_albedo(md: &Microfacet, v: Vec3, eta: f32, reflection: bool, gl: &[(f64, f64)]) -> f64 {
-    let mirrored = md.kind == MicrofacetKind::Beckmann && md.alpha_u == md.alpha_v && v.y == 0.0 && gl.len() % 2 == 0;
+    let mirrored = md.kind == MicrofacetKind::Beckmann && md.alpha_u == md.alpha_v && v.y == 0.0 && gl.len().is_multiple_of(2);
     interface_albedo_grid(md, v, eta, reflection, gl, mirrored)
 }
 
