@@ -197,8 +197,13 @@ impl LensConnector {
         if p.z < self.near_clip || p.z > self.far_clip {
             return None;
         }
-        let lens = warp::square_to_uniform_disk_concentric(u) * radius;
-        let o = Vec3::new(lens.x, lens.y, 0.0);
+        // A pinhole's lens is its center: no warp (a light vertex's connection is hot).
+        let o = if radius > 0.0 {
+            let lens = warp::square_to_uniform_disk_concentric(u) * radius;
+            Vec3::new(lens.x, lens.y, 0.0)
+        } else {
+            Vec3::ZERO
+        };
         let to_ref = p - o;
         let dist2 = to_ref.length_squared();
         if dist2 == 0.0 {
