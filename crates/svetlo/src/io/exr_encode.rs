@@ -52,7 +52,12 @@ pub fn encode_exr_channels(width: usize, height: usize, channels: &[ExrChannel])
             return Err(bad(format!("EXR channel {} does not match the {width}x{height} image", c.name)));
         }
     }
-    let line_bytes = order.len().checked_mul(width * 4).ok_or_else(|| bad("EXR too large"))?;
+    // A block's size is an i32 in the file: a line of all channels must fit it.
+    let line_bytes = order
+        .len()
+        .checked_mul(width * 4)
+        .filter(|&n| n <= i32::MAX as usize)
+        .ok_or_else(|| bad(format!("a {width}-pixel line of {} channels is too long for an EXR block", order.len())))?;
     let mut out = header(width, height, &order);
     let table = out.len();
     out.resize(table + 8 * height, 0);
