@@ -233,3 +233,73 @@ fn large_scenes_trace_single_rays() {
     let small = load(&repo_scene("cornell-box.xml"), &[], 16);
     assert!(SimdKernel::new(&small, &RenderSettings::from_scene(&small)).expect("qualifies").uses_packets(), "the Cornell box should trace packets");
 }
+
+/// AOVs and `--lpe` in the kernel's lanes: each lane steps its path's automata as the scalar
+/// tracer's camera walk does (custom labels, counted repetition, the vertex form, a restricted
+/// beauty), so every layer and the beauty equal the scalar tracer's: bit for bit when the
+/// kernel traces single rays (the scalar tracer's hits), up to the packet tracer's rounding
+/// otherwise; and whatever the thread count.
+#[test]
+fn aovs_in_lanes_match_scalar() {
+    use std::sync::Arc;
+    use svetlo::lpe::AovSet;
+    if !avx2() {
+        eprintln!("SKIPPED: no AVX2, the kernel falls back to the scalar tracer");
+        return;
+    }
+    let scene = load(&repo_scene("cornell-box.xml"), &[], 40);
+    let list: Vec<(String, String)> = [
+        ("emit", "C L"),
+        ("direct", "C D L"),
+        ("indirect", "C D .+ L"),
+        ("floor", "C 'floor' L"),
+        ("via_floor", "C .* 'floor' .* L"),
+        ("two", "C .{2} L"),
+        ("refl", "C <R.> <R.>+ L"),
+        ("lecture", "L D* E"),
+    ]
+    .iter()
+    .map(|(a, b)| (a.to_string(), b.to_string()))
+    .collect();
+    for (beauty, sampler) in [(None, svetlo::sampling::SamplerKind::Independent), (Some("C D{1,2} L"), svetlo::sampling::SamplerKind::Sobol)] {
+        let mut set = AovSet::compile(&list, beauty).expect("expressions");
+        assert!(set.bind(&scene).is_empty());
+        let mut s = RenderSettings::from_scene(&scene);
+        s.sampler = sampler;
+        s.spp = 6;
+        s.seed = 9;
+        s.max_depth = 5;
+        s.lpe = Some(Arc::new(set));
+        let what = format!("AOVs, beauty {beauty:?}, {sampler:?}");
+        let mut k = SimdKernel::new(&scene, &s).expect("the scene qualifies with AOVs");
+        k.use_single_rays(&scene);
+        let single = k.render(&scene, &s, &Progress::new()).expect("render");
+        let packets = svetlo::methods::by_name("path").unwrap().render(&scene, &s, &Progress::new()).expect("render");
+        let scalar = svetlo::methods::by_name("path:simd=false").unwrap().render(&scene, &s, &Progress::new()).expect("render");
+        assert_eq!(single.layer_names(), scalar.layer_names());
+        assert!(single.image().data == scalar.image().data, "{what}: beauty differs from the scalar tracer's");
+        let mut lit = 0;
+        for (name, img) in scalar.layer_images() {
+            let a = single.layer(&name).expect("layer");
+            assert!(a.data == img.data, "{what}: layer {name} differs from the scalar tracer's");
+            let b = packets.layer(&name).expect("layer");
+            let close =
+                b.data.iter().zip(&img.data).filter(|(x, y)| (0..3).all(|c| (x[c] - y[c]).abs() <= 1e-4 * x[c].abs().max(y[c].abs()).max(1e-3))).count();
+            assert!(close as f64 >= 0.99 * img.data.len() as f64, "{what}: packets: layer {name} only {close} pixels agree");
+            lit += (img.mean().max_component() > 0.0) as usize;
+        }
+        // Every layer but the one-bounce vertex form's partner classes sees light.
+        assert!(lit >= 7, "{what}: only {lit} layers are lit");
+        if beauty.is_some() {
+            // The restricted beauty is not the whole image.
+            let full = svetlo::methods::by_name("path").unwrap().render(&scene, &RenderSettings { lpe: None, ..s.clone() }, &Progress::new()).expect("render");
+            assert!(packets.image().mean()[1] < 0.95 * full.image().mean()[1], "{what}: --lpe did not restrict the beauty");
+        }
+        let mut s3 = s.clone();
+        s3.threads = 3;
+        let t3 = svetlo::methods::by_name("path").unwrap().render(&scene, &s3, &Progress::new()).expect("render");
+        for (name, img) in packets.layer_images() {
+            assert!(t3.layer(&name).expect("layer").data == img.data, "{what}: layer {name} depends on the thread count");
+        }
+    }
+}

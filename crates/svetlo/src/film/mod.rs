@@ -27,6 +27,17 @@ struct Pixel {
     n: u32,
 }
 
+impl Pixel {
+    #[inline]
+    fn add(&mut self, s: &Pixel) {
+        self.sum += s.sum;
+        self.weight += s.weight;
+        self.s1 += s.s1;
+        self.s2 += s.s2;
+        self.n += s.n;
+    }
+}
+
 /// An image in the making, or a tile of one. Coordinates are the full film's raster.
 #[derive(Clone, Debug)]
 pub struct FilmTile {
@@ -41,17 +52,36 @@ pub struct FilmTile {
     /// footprint is walked once for all its layers, each pixel's in one vector loop.
     layers: Vec<f32>,
     n_layers: usize,
+    /// Nothing added since the tile was made or cleared: every sum is zero, so clearing and
+    /// adding it can be skipped (films that only take splats never touch their pixels).
+    blank: bool,
 }
 
 impl FilmTile {
     pub fn new(x0: u32, y0: u32, x1: u32, y1: u32, filter: Filter) -> Self {
-        FilmTile { x0, y0, x1, y1, filter, pixels: vec![Pixel::default(); ((x1 - x0) * (y1 - y0)) as usize], layers: Vec::new(), n_layers: 0 }
+        FilmTile { x0, y0, x1, y1, filter, pixels: vec![Pixel::default(); ((x1 - x0) * (y1 - y0)) as usize], layers: Vec::new(), n_layers: 0, blank: true }
     }
 
     /// Back to black, keeping the memory (layers already allocated stay so, as zeros).
-    fn clear(&mut self) {
-        self.pixels.fill(Pixel::default());
-        self.layers.fill(0.0);
+    pub fn clear(&mut self) {
+        if !self.blank {
+            self.pixels.fill(Pixel::default());
+            self.layers.fill(0.0);
+            self.blank = true;
+        }
+    }
+
+    /// Add another tile's sums (the same rectangle and layers) to this one's.
+    pub fn add(&mut self, o: &FilmTile) {
+        debug_assert_eq!((self.x0, self.y0, self.x1, self.y1, self.n_layers), (o.x0, o.y0, o.x1, o.y1, o.n_layers));
+        if o.blank {
+            return;
+        }
+        self.blank = false;
+        for (d, s) in self.pixels.iter_mut().zip(&o.pixels) {
+            d.add(s);
+        }
+        add_buffer(&mut self.layers, &o.layers);
     }
 
     /// Gives the tile `n` AOV layers, all black.
@@ -84,6 +114,7 @@ impl FilmTile {
     /// (the others are skipped: most samples reach few of the layers).
     #[inline]
     pub fn add_sample_touched(&mut self, p: Vec2, l: Rgb, aov: &[Rgb], touched: u32) {
+        self.blank = false;
         let n = self.n_layers.min(aov.len());
         let touched = touched & if n >= 32 { u32::MAX } else { (1u32 << n) - 1 };
         if touched == 0 {
@@ -94,9 +125,7 @@ impl FilmTile {
         let n3 = 3 * self.n_layers;
         if self.filter == Filter::Box {
             // One pixel takes the whole sample: find it once for the beauty and every layer.
-            let (ox, oy) = (floor_i(p.x), floor_i(p.y));
-            if ox >= self.x0 as i64 && oy >= self.y0 as i64 && ox < self.x1 as i64 && oy < self.y1 as i64 {
-                let k = ((oy as u32 - self.y0) * w + (ox as u32 - self.x0)) as usize;
+            if let Some(k) = self.owner(p) {
                 self.add_box(k, if l.is_finite() { l } else { Rgb::BLACK });
                 self.ensure_layers();
                 if let Some(px) = self.layers.get_mut(k * n3..(k + 1) * n3) {
@@ -168,6 +197,7 @@ impl FilmTile {
     /// over every pixel of this tile within its radius.
     #[inline]
     pub fn add_sample(&mut self, p: Vec2, l: Rgb) {
+        self.blank = false;
         let l = if l.is_finite() { l } else { Rgb::BLACK };
         if self.add_to_owner(p, l) {
             return;
@@ -181,12 +211,7 @@ impl FilmTile {
     /// support is exactly that pixel with weight 1, also its filtered sum (then true: done).
     #[inline]
     fn add_to_owner(&mut self, p: Vec2, l: Rgb) -> bool {
-        let (w, h) = (self.x1 - self.x0, self.y1 - self.y0);
-        let (ox, oy) = (floor_i(p.x) - self.x0 as i64, floor_i(p.y) - self.y0 as i64);
-        if ox < 0 || oy < 0 || ox as u32 >= w || oy as u32 >= h {
-            return false;
-        }
-        let k = (oy as u32 * w + ox as u32) as usize;
+        let Some(k) = self.owner(p) else { return false };
         if self.filter == Filter::Box {
             self.add_box(k, l);
             return true;
@@ -196,6 +221,24 @@ impl FilmTile {
         px.s2 += l * l;
         px.n += 1;
         false
+    }
+
+    /// The index of the tile's pixel that owns a sample at `p`, if it is in the tile. A box
+    /// tile also keeps a sample on its far edge: `x + u` rounds up to `x + 1` for `u` just
+    /// below 1, and that sample stays in the pixel it was drawn for, so box tiles need no
+    /// border and never share a pixel (the per-tile pass sums rely on it).
+    #[inline]
+    fn owner(&self, p: Vec2) -> Option<usize> {
+        let (w, h) = (self.x1 - self.x0, self.y1 - self.y0);
+        let (mut ox, mut oy) = (floor_i(p.x) - self.x0 as i64, floor_i(p.y) - self.y0 as i64);
+        if self.filter == Filter::Box {
+            ox -= (ox == w as i64) as i64;
+            oy -= (oy == h as i64) as i64;
+        }
+        if ox < 0 || oy < 0 || ox as u32 >= w || oy as u32 >= h {
+            return None;
+        }
+        Some((oy as u32 * w + ox as u32) as usize)
     }
 
     /// A box-filtered sample into pixel `k`: its statistics and its whole weight.
@@ -437,24 +480,23 @@ impl Film {
 
     /// A tile covering `[x0,x1) x [y0,y1)` of this film, to be filled and merged back.
     pub fn tile(&self, x0: u32, y0: u32, x1: u32, y1: u32) -> FilmTile {
-        // Extend by the filter radius so samples near the border reach neighbours.
-        let r = self.filter.radius().ceil() as u32;
+        // Extend by the filter radius so samples near the border reach neighbours; a box
+        // sample reaches only its own pixel (`add_to_owner`), so box tiles do not overlap.
+        let r = if self.filter == Filter::Box { 0 } else { self.filter.radius().ceil() as u32 };
         let mut t = FilmTile::new(x0.saturating_sub(r), y0.saturating_sub(r), (x1 + r).min(self.width), (y1 + r).min(self.height), self.filter);
         t.set_layers(self.layer_names.len());
         t
     }
 
     pub fn merge_tile(&mut self, t: &FilmTile) {
+        if t.blank {
+            return;
+        }
+        self.full.blank = false;
         let tw = t.x1 - t.x0;
         for y in t.y0..t.y1 {
             for x in t.x0..t.x1 {
-                let s = &t.pixels[((y - t.y0) * tw + (x - t.x0)) as usize];
-                let d = &mut self.full.pixels[(y * self.width + x) as usize];
-                d.sum += s.sum;
-                d.weight += s.weight;
-                d.s1 += s.s1;
-                d.s2 += s.s2;
-                d.n += s.n;
+                self.full.pixels[(y * self.width + x) as usize].add(&t.pixels[((y - t.y0) * tw + (x - t.x0)) as usize]);
             }
         }
         let nl = self.full.n_layers;
@@ -485,14 +527,7 @@ impl Film {
     /// splat scale is left to the caller (it is the whole render's spp).
     pub fn add(&mut self, o: &Film) {
         debug_assert_eq!((self.width, self.height, self.layer_names.len()), (o.width, o.height, o.layer_names.len()));
-        for (d, s) in self.full.pixels.iter_mut().zip(&o.full.pixels) {
-            d.sum += s.sum;
-            d.weight += s.weight;
-            d.s1 += s.s1;
-            d.s2 += s.s2;
-            d.n += s.n;
-        }
-        add_buffer(&mut self.full.layers, &o.full.layers);
+        self.full.add(&o.full);
         add_buffer(&mut self.splats, &o.splats);
         self.spp_done += o.spp_done;
     }
@@ -576,5 +611,55 @@ fn floor_i(x: f32) -> i64 {
         t - 1
     } else {
         t
+    }
+}
+
+#[cfg(test)]
+mod tile_tests {
+    use super::*;
+
+    /// Box tiles have no border: a sample whose raster position rounded up onto the tile's far
+    /// edge stays in the last pixel it was drawn for, and tiles never share a pixel.
+    #[test]
+    fn box_tiles_keep_far_edge_samples_and_share_no_pixel() {
+        let film = Film::new(32, 32, Filter::Box);
+        let mut t = film.tile(16, 0, 32, 16);
+        assert_eq!((t.x0, t.y0, t.x1, t.y1), (16, 0, 32, 16), "a box tile is its own pixels");
+        // 31 + u for u just below 1 rounds to 32: the far edge.
+        t.add_sample(Vec2::new(32.0, 16.0), Rgb::splat(2.0));
+        let mut f = Film::new(32, 32, Filter::Box);
+        f.merge_tile(&t);
+        let img = f.image();
+        assert_eq!(img.data[(15 * 32 + 31) as usize], Rgb::splat(2.0), "kept in the tile's corner pixel");
+        assert_eq!(img.data.iter().filter(|p| !p.is_black()).count(), 1, "nowhere else");
+        // A filter wider than a pixel still extends tiles by its radius.
+        let g = Film::new(32, 32, Filter::Gaussian { stddev: 0.5 }).tile(16, 16, 32, 32);
+        assert_eq!((g.x0, g.y0), (14, 14));
+    }
+
+    /// Tile sums (the driver's per-tile pass tree) add exactly as films do, and a blank tile
+    /// (nothing added since it was cleared) adds nothing.
+    #[test]
+    fn tile_sums_add_like_films() {
+        let film = Film::with_layers(8, 8, Filter::Box, &["a".to_string()]);
+        let mut a = film.tile(0, 0, 8, 8);
+        let mut b = film.tile(0, 0, 8, 8);
+        a.add_sample_touched(Vec2::new(1.5, 2.5), Rgb::splat(0.25), &[Rgb::splat(0.5)], 1);
+        b.add_sample_touched(Vec2::new(1.5, 2.5), Rgb::splat(0.125), &[Rgb::splat(1.0)], 1);
+        let mut direct = Film::with_layers(8, 8, Filter::Box, &["a".to_string()]);
+        direct.merge_tile(&a);
+        direct.merge_tile(&b);
+        a.add(&b);
+        let mut summed = Film::with_layers(8, 8, Filter::Box, &["a".to_string()]);
+        summed.merge_tile(&a);
+        assert_eq!(summed.image().data, direct.image().data);
+        assert_eq!(summed.layer_image(0).data, direct.layer_image(0).data);
+        assert_eq!(summed.variance_image().data, direct.variance_image().data);
+        b.clear();
+        a.add(&b);
+        let mut again = Film::with_layers(8, 8, Filter::Box, &["a".to_string()]);
+        again.merge_tile(&a);
+        assert_eq!(again.image().data, direct.image().data);
+        assert_eq!(again.layer_image(0).data, direct.layer_image(0).data);
     }
 }

@@ -142,6 +142,7 @@ impl PartialFilm {
         for p in film.full.pixels.iter_mut() {
             *p = Pixel { sum: r.rgb()?, weight: r.f64()?, s1: r.rgb()?, s2: r.rgb()?, n: r.u32()? };
         }
+        film.full.blank = false;
         film.full.ensure_layers();
         for i in 0..n_layers {
             for (d, s) in film.full.layers.chunks_exact_mut(3).skip(i).step_by(n_layers).zip(r.rgbs(px)?) {

@@ -264,13 +264,14 @@ pub fn render_pixels(scene: &Scene, settings: &RenderSettings, progress: &Progre
 /// samples innermost, for the same image whatever the thread count).
 pub(crate) type TileFn<'a> = dyn Fn(&mut crate::film::FilmTile, [u32; 4], u32, u32) + Sync + 'a;
 
-/// The pass and tile driver of [`render_pixels`] for kernels that take a whole tile at once.
-pub(crate) fn render_tiles(scene: &Scene, settings: &RenderSettings, progress: &Progress, render_tile: &TileFn) -> Result<Film> {
-    Ok(splat::render_chunked(scene, settings, progress, &TileKernel(render_tile), 0, u64::MAX)?.film)
+/// The pass and tile driver of [`render_pixels`] for kernels that take a whole tile at once;
+/// `supports_lpe`: the kernel routes its samples to the AOV layers itself.
+pub(crate) fn render_tiles(scene: &Scene, settings: &RenderSettings, progress: &Progress, supports_lpe: bool, render_tile: &TileFn) -> Result<Film> {
+    Ok(splat::render_chunked(scene, settings, progress, &TileKernel(render_tile, supports_lpe), 0, u64::MAX)?.film)
 }
 
 /// A whole-tile kernel seen as a splatting estimator that never splats.
-struct TileKernel<'a, 'b>(&'a TileFn<'b>);
+struct TileKernel<'a, 'b>(&'a TileFn<'b>, bool);
 
 impl splat::SplatEstimator for TileKernel<'_, '_> {
     type Scratch = ();
@@ -282,7 +283,7 @@ impl splat::SplatEstimator for TileKernel<'_, '_> {
         (self.0)(t.tile, t.rect, t.s0, t.n)
     }
     fn supports_lpe(&self) -> bool {
-        false
+        self.1
     }
 }
 

@@ -10,7 +10,8 @@
 //! Scope: static scenes of triangle meshes, (two-sided) Lambertian
 //! materials of constant or textured reflectance (any texture: bitmaps, procedural, mesh
 //! attributes; evaluated per lane where the path hits), area lights of constant radiance on
-//! meshes, no environment light; either sampler. `SimdPathTracer` checks that
+//! meshes, no environment light; either sampler; AOVs and `--lpe` (each lane steps its path's
+//! automata as the scalar tracer does: see [`LaneLayers`]). `SimdPathTracer` checks that
 //! (`SimdKernel::new`) and otherwise, or without AVX2, runs the scalar tracer.
 //!
 //! Each lane draws its random numbers from its own copy of the scalar tracer's sampler, in
@@ -28,6 +29,8 @@ use crate::geometry::ray::SHADOW_EPSILON;
 use crate::geometry::Ray;
 use crate::geometry::{Geometry, TriangleShading};
 use crate::light::{AreaLight, Light};
+use crate::lpe::aov::LayerSample;
+use crate::lpe::{AovSet, ForwardView, MAX_LAYERS};
 use crate::math::{warp, Frame, INV_PI, PI};
 use crate::sampling::{power_heuristic, Distribution1D, IndependentSampler, Sampler, SamplerKind, SobolSampler};
 use crate::scene::Scene;
@@ -64,11 +67,13 @@ impl SimdPathTracer {
 
 impl Integrator for SimdPathTracer {
     fn render(&self, scene: &Scene, settings: &RenderSettings, progress: &Progress) -> Result<Film> {
-        // The lanes do not track path events: AOVs and --lpe take the scalar tracer.
-        if !settings.aovs().is_empty() && self.simd {
-            eprintln!("note: light path expressions use the scalar path tracer (the eight-wide kernel does not track path events)");
+        // The lanes step the AOVs' product automaton (built when the set is bound to the scene);
+        // a set too large for one takes the scalar tracer's automaton-by-automaton steps.
+        let lanes_route = settings.aovs().is_empty() || settings.aovs().forward_view().is_some();
+        if self.simd && !lanes_route {
+            eprintln!("note: these light path expressions take the scalar path tracer (their product automaton is too large for the eight-wide kernel)");
         }
-        if self.simd && crate::accel::packet::avx2() && settings.aovs().is_empty() {
+        if self.simd && lanes_route && crate::accel::packet::avx2() {
             if let Some(k) = SimdKernel::new(scene, settings) {
                 return k.render(scene, settings, progress);
             }
@@ -303,10 +308,16 @@ impl SimdKernel {
     }
 
     pub fn render(&self, scene: &Scene, settings: &RenderSettings, progress: &Progress) -> Result<Film> {
-        render_tiles(scene, settings, progress, &|tile: &mut FilmTile, rect: [u32; 4], s0: u32, n: u32| match settings.sampler {
+        let events = LaneEvents::new(scene, settings.aovs());
+        let events = &events;
+        // Without a product automaton the lanes cannot route: AOVs are then refused here.
+        let routes = settings.aovs().is_empty() || events.view.is_some();
+        render_tiles(scene, settings, progress, routes, &|tile: &mut FilmTile, rect: [u32; 4], s0: u32, n: u32| match settings.sampler {
             // One build of the kernel per sampler: each lane's draws inline.
-            SamplerKind::Independent => self.render_tile_on_cpu(scene, settings, tile, rect, s0, n, IndependentSampler::new(settings.spp, settings.seed)),
-            SamplerKind::Sobol => self.render_tile_on_cpu(scene, settings, tile, rect, s0, n, SobolSampler::new(settings.spp, settings.seed)),
+            SamplerKind::Independent => {
+                self.render_tile_on_cpu(scene, settings, events, tile, rect, s0, n, IndependentSampler::new(settings.spp, settings.seed))
+            }
+            SamplerKind::Sobol => self.render_tile_on_cpu(scene, settings, events, tile, rect, s0, n, SobolSampler::new(settings.spp, settings.seed)),
         })
     }
 
@@ -316,6 +327,7 @@ impl SimdKernel {
         &self,
         scene: &Scene,
         settings: &RenderSettings,
+        events: &LaneEvents,
         tile: &mut FilmTile,
         rect: [u32; 4],
         s0: u32,
@@ -328,13 +340,13 @@ impl SimdKernel {
             // `avx512` only where AVX-512F and VL were.
             return unsafe {
                 if self.avx512 {
-                    self.render_tile_avx512(scene, settings, tile, rect, s0, n, sampler)
+                    self.render_tile_avx512(scene, settings, events, tile, rect, s0, n, sampler)
                 } else {
-                    self.render_tile_avx2(scene, settings, tile, rect, s0, n, sampler)
+                    self.render_tile_avx2(scene, settings, events, tile, rect, s0, n, sampler)
                 }
             };
         }
-        self.render_tile(scene, settings, tile, rect, s0, n, sampler)
+        self.render_tile(scene, settings, events, tile, rect, s0, n, sampler)
     }
 
     /// `render_tile` compiled for AVX2 (the lanes' scalar shading too: VEX code, no FMA
@@ -349,13 +361,14 @@ impl SimdKernel {
         &self,
         scene: &Scene,
         settings: &RenderSettings,
+        events: &LaneEvents,
         tile: &mut FilmTile,
         rect: [u32; 4],
         s0: u32,
         n: u32,
         sampler: S,
     ) {
-        self.render_tile(scene, settings, tile, rect, s0, n, sampler)
+        self.render_tile(scene, settings, events, tile, rect, s0, n, sampler)
     }
 
     /// `render_tile` compiled for AVX-512VL: the same 256-bit code with 32 vector registers
@@ -370,13 +383,14 @@ impl SimdKernel {
         &self,
         scene: &Scene,
         settings: &RenderSettings,
+        events: &LaneEvents,
         tile: &mut FilmTile,
         rect: [u32; 4],
         s0: u32,
         n: u32,
         sampler: S,
     ) {
-        self.render_tile(scene, settings, tile, rect, s0, n, sampler)
+        self.render_tile(scene, settings, events, tile, rect, s0, n, sampler)
     }
 
     /// Samples `s0..s0 + n` of every pixel of `rect` (the tile's own pixels; the film tile
@@ -384,7 +398,18 @@ impl SimdKernel {
     /// ends takes the next camera sample; each lane draws from its own copy of `sampler`.
     #[inline(always)]
     #[allow(clippy::too_many_arguments)]
-    fn render_tile<S: Sampler + Clone>(&self, scene: &Scene, settings: &RenderSettings, tile: &mut FilmTile, rect: [u32; 4], s0: u32, n: u32, sampler: S) {
+    #[allow(clippy::too_many_arguments)]
+    fn render_tile<S: Sampler + Clone>(
+        &self,
+        scene: &Scene,
+        settings: &RenderSettings,
+        events: &LaneEvents,
+        tile: &mut FilmTile,
+        rect: [u32; 4],
+        s0: u32,
+        n: u32,
+        sampler: S,
+    ) {
         let [x0, y0, x1, y1] = rect;
         let w = x1 - x0;
         let jobs = (w * (y1 - y0) * n) as usize;
@@ -394,6 +419,8 @@ impl SimdKernel {
             (x0 + pix % w, y0 + pix / w, s0 + s)
         };
         let mut results: Vec<(Vec2, Rgb)> = vec![(Vec2::ZERO, Rgb::BLACK); jobs];
+        let aovs = settings.aovs();
+        let mut layers = LaneLayers::new(events, aovs, jobs);
         let cam = scene.camera.ray_generator();
         let mut st = Paths::new(sampler);
         let mut rays = Rays8::default();
@@ -411,6 +438,7 @@ impl SimdKernel {
                 let (x, y, s) = job_xys(next);
                 let (raster, ray) = camera_sample(&cam, &mut st.sampler[l], x, y, s);
                 st.start(l, next, raster);
+                layers.start(l);
                 set_ray(&mut rays, l, ray.o, ray.d, ray.t_max);
                 active |= 1 << l;
                 next += 1;
@@ -426,7 +454,7 @@ impl SimdKernel {
                     continue;
                 }
                 let d = Vec3::new(rays.d[0][l], rays.d[1][l], rays.d[2][l]);
-                if self.gather(scene, settings, &mut st, l, hits.prim[l], hits.b1[l], hits.b2[l], d, &mut v) {
+                if self.gather(scene, settings, &mut st, &mut layers, l, hits.prim[l], hits.b1[l], hits.b2[l], d, &mut v) {
                     go |= 1 << l;
                 } else {
                     ends |= 1 << l;
@@ -440,7 +468,10 @@ impl SimdKernel {
                     continue;
                 }
                 match o.nee[l] {
-                    1 => st.add(l, o.contribution(l)),
+                    1 => {
+                        st.add(l, o.contribution(l));
+                        layers.nee(&v, l, o.contribution(l));
+                    }
                     2 => smask |= 1 << l,
                     _ => {}
                 }
@@ -452,15 +483,27 @@ impl SimdKernel {
             for l in 0..LANES {
                 if clear & (1 << l) != 0 {
                     st.add(l, o.contribution(l));
+                    layers.nee(&v, l, o.contribution(l));
                 }
                 if ends & (1 << l) != 0 {
-                    results[st.job[l]] = (st.raster[l], Rgb::new(st.l[0][l], st.l[1][l], st.l[2][l]));
+                    let beauty = Rgb::new(st.l[0][l], st.l[1][l], st.l[2][l]);
+                    results[st.job[l]] = (st.raster[l], layers.finish(l, st.job[l], beauty));
+                } else if go & (1 << l) != 0 {
+                    // The path goes on from the BSDF's (diffuse) sample: its event.
+                    layers.scatter(&v, l);
                 }
             }
             active &= !ends;
         }
-        for (raster, l) in results {
-            tile.add_sample(raster, l);
+        if events.view.is_some() {
+            for (j, (raster, l)) in results.into_iter().enumerate() {
+                let (aov, touched) = layers.row(j);
+                tile.add_sample_touched(raster, l, &aov[..aovs.aov_count()], touched);
+            }
+        } else {
+            for (raster, l) in results {
+                tile.add_sample(raster, l);
+            }
         }
     }
 
@@ -474,6 +517,7 @@ impl SimdKernel {
         scene: &Scene,
         settings: &RenderSettings,
         st: &mut Paths<S>,
+        layers: &mut LaneLayers,
         l: usize,
         prim: u32,
         b1: f32,
@@ -513,6 +557,7 @@ impl SimdKernel {
                 };
                 let beta = Rgb::new(st.beta[0][l], st.beta[1][l], st.beta[2][l]);
                 st.add(l, beta * le * w);
+                layers.emission(tri.shape, l, beta * le * w);
             }
         }
         if !settings.depth_allows(depth + 1) {
@@ -556,6 +601,7 @@ impl SimdKernel {
         putc(&mut v.front, front);
         putc(&mut v.back, back);
         v.has_back[l] = sh.back.is_some();
+        v.shape[l] = tri.shape;
         v.u[0][l] = u.x;
         v.u[1][l] = u.y;
         // The light point (as `MeshLight::sample_li` up to the distance test).
@@ -574,6 +620,7 @@ impl SimdKernel {
                 put(&mut v.ln, n);
                 putc(&mut v.lrad, ml.radiance);
                 v.pmf[l] = pmf;
+                v.light[l] = li as u32;
                 v.pdf_area[l] = ml.pdf_area;
                 v.nee_ok[l] = true;
             }
@@ -595,6 +642,9 @@ struct Soa {
     front: [[f32; LANES]; 3],
     back: [[f32; LANES]; 3],
     has_back: [bool; LANES],
+    /// The scene shape hit, and the light sampled (for the paths' events).
+    shape: [u32; LANES],
+    light: [u32; LANES],
     /// The BSDF sample's square point (cosine-warped in `shade8`).
     u: [[f32; LANES]; 2],
     u_rr: [f32; LANES],
@@ -604,6 +654,141 @@ struct Soa {
     lrad: [[f32; LANES]; 3],
     pmf: [f32; LANES],
     pdf_area: [f32; LANES],
+}
+
+/// The events of the kernel's paths as classes of the AOVs' product automaton (the scene's
+/// labels bound): a diffuse reflection at each shape, reaching each shape's or light's emission.
+struct LaneEvents<'a> {
+    /// None without AOVs (or without a product automaton: then the scalar tracer renders).
+    view: Option<ForwardView<'a>>,
+    /// Per scene shape: the diffuse reflection there (sampled or toward a light sample alike:
+    /// a Lambertian reflection is never singular, and a light sample it counts lies on its side).
+    scatter: Vec<u32>,
+    /// Per scene shape: its emission found by a path.
+    light: Vec<u32>,
+    /// Per scene light: its emission reached by a light sample.
+    emitter: Vec<u32>,
+}
+
+impl<'a> LaneEvents<'a> {
+    fn new(scene: &Scene, aovs: &'a AovSet) -> LaneEvents<'a> {
+        let Some(view) = aovs.forward_view().filter(|_| !aovs.is_empty()) else {
+            return LaneEvents { view: None, scatter: Vec::new(), light: Vec::new(), emitter: Vec::new() };
+        };
+        let shapes = 0..scene.shapes.len() as u32;
+        LaneEvents {
+            view: Some(view),
+            scatter: shapes.clone().map(|s| view.class(aovs.scatter_event(s, crate::bsdf::LobeFlags::DIFFUSE_REFLECTION, None, false))).collect(),
+            light: shapes.map(|s| view.class(aovs.light_event(Some(s)))).collect(),
+            emitter: scene.lights.iter().map(|l| view.class(aovs.emitter_event(l))).collect(),
+        }
+    }
+}
+
+/// With AOVs or `--lpe`: each lane's state of the AOVs' product automaton along its path (as
+/// the scalar tracer's `camera_walk` steps its tracker), what its sample adds to the layers,
+/// and the layers of every finished sample of the tile, kept until the samples go to the film
+/// in the scalar order. Without, each method is one untaken branch.
+struct LaneLayers<'a> {
+    events: &'a LaneEvents<'a>,
+    restricts_beauty: bool,
+    q: [u32; LANES],
+    sample: [LayerSample; LANES],
+    /// Per job: where its touched layers start in `values`, and which they are.
+    rows: Vec<(u32, u32)>,
+    /// The touched layers' values of the finished jobs, in bit order.
+    values: Vec<Rgb>,
+}
+
+impl<'a> LaneLayers<'a> {
+    fn new(events: &'a LaneEvents<'a>, aovs: &AovSet, jobs: usize) -> Self {
+        LaneLayers {
+            events,
+            restricts_beauty: aovs.restricts_beauty(),
+            q: [0; LANES],
+            sample: [LayerSample::default(); LANES],
+            rows: if events.view.is_some() { vec![(0, 0); jobs] } else { Vec::new() },
+            values: Vec::new(),
+        }
+    }
+
+    /// Lane `l` starts a camera sample.
+    #[inline(always)]
+    fn start(&mut self, l: usize) {
+        if let Some(view) = self.events.view {
+            self.q[l] = view.camera();
+            self.sample[l].clear();
+        }
+    }
+
+    /// The path of lane `l` finds the emission of scene shape `shape`, adding `c`.
+    #[inline(always)]
+    fn emission(&mut self, shape: u32, l: usize, c: Rgb) {
+        if let Some(view) = self.events.view {
+            let m = view.ends(self.q[l], self.events.light[shape as usize]);
+            self.sample[l].add(m, c);
+        }
+    }
+
+    /// A light sample's contribution `c` at the vertex in `v` (diffuse there, then the light).
+    #[inline(always)]
+    fn nee(&mut self, v: &Soa, l: usize, c: Rgb) {
+        if let Some(view) = self.events.view {
+            if !c.is_black() {
+                let e = self.events;
+                let m = view.ends(view.step(self.q[l], e.scatter[v.shape[l] as usize]), e.emitter[v.light[l] as usize]);
+                self.sample[l].add(m, c);
+            }
+        }
+    }
+
+    /// Lane `l`'s path scatters at the vertex in `v` (its BSDF sample, always diffuse).
+    #[inline(always)]
+    fn scatter(&mut self, v: &Soa, l: usize) {
+        if let Some(view) = self.events.view {
+            self.q[l] = view.step(self.q[l], self.events.scatter[v.shape[l] as usize]);
+        }
+    }
+
+    /// Lane `l`'s sample (job `job`) is done with radiance `beauty`: keeps its layers and
+    /// returns what the beauty takes (all of it, or the paths of `--lpe`).
+    #[inline(always)]
+    fn finish(&mut self, l: usize, job: usize, beauty: Rgb) -> Rgb {
+        if self.events.view.is_none() {
+            return beauty;
+        }
+        let s = &self.sample[l];
+        if let Some(r) = self.rows.get_mut(job) {
+            *r = (self.values.len() as u32, s.touched);
+        }
+        let mut m = s.touched;
+        while m != 0 {
+            let i = m.trailing_zeros() as usize;
+            m &= m - 1;
+            self.values.push(s.aov.get(i).copied().unwrap_or(Rgb::BLACK));
+        }
+        if self.restricts_beauty {
+            s.beauty
+        } else {
+            beauty
+        }
+    }
+
+    /// Job `job`'s layers and which of them its paths touched.
+    fn row(&self, job: usize) -> ([Rgb; MAX_LAYERS], u32) {
+        let (start, touched) = self.rows.get(job).copied().unwrap_or((0, 0));
+        let mut aov = [Rgb::BLACK; MAX_LAYERS];
+        let (mut k, mut m) = (start as usize, touched);
+        while m != 0 {
+            let i = m.trailing_zeros() as usize;
+            m &= m - 1;
+            if let (Some(a), Some(v)) = (aov.get_mut(i), self.values.get(k)) {
+                *a = *v;
+            }
+            k += 1;
+        }
+        (aov, touched)
+    }
 }
 
 /// What `shade8` decided per lane.

@@ -10,7 +10,7 @@
 use super::passes::{self, next_pass_spp, pass_plan};
 use super::{Progress, RenderSettings};
 use crate::error::{Error, Result};
-use crate::film::{Film, FilmTile};
+use crate::film::{Film, FilmTile, Filter};
 use crate::geometry::Ray;
 use crate::sampling::{sampler::make_sampler, Sampler};
 use crate::scene::Scene;
@@ -196,6 +196,17 @@ pub(super) fn render_chunked<E: SplatEstimator>(
     let mut sum: passes::TreeSum<PassSum> = passes::TreeSum::default();
     // Pass sums folded into the tree, reused for later passes.
     let mut spare: Vec<PassSum> = Vec::new();
+    // Box tiles share no pixel (`Film::tile`): each tile's passes then add up by the pass
+    // tree on their own, with the bits the pass films' tree would give, and the pass films
+    // keep only splats; no pass copies its tiles into a film or clears one.
+    let own_tiles = settings.filter == Filter::Box;
+    let mut tile_sums: Vec<passes::TreeSum<FilmTile>> = if own_tiles { tiles.iter().map(|_| Default::default()).collect() } else { Vec::new() };
+    let mut tile_spare: Vec<Vec<FilmTile>> = vec![Vec::new(); tile_sums.len()];
+    let tile_sums_peek = |f: &mut Film, sums: &[passes::TreeSum<FilmTile>]| {
+        for t in sums.iter().filter_map(|s| s.peek(|a, b| a.add(b))) {
+            f.merge_tile(&t);
+        }
+    };
     let mut spp_done = 0u32;
     let mut pass_spp = 1u32;
     let mut pass = range.start;
@@ -222,16 +233,25 @@ pub(super) fn render_chunked<E: SplatEstimator>(
         let tiles_per_chunk = ((chunk_samples / (n as u64 * (TILE * TILE) as u64)).max(1)).min(tiles.len().max(1) as u64) as usize;
         let mut pass_tiles: Vec<FilmTile> = Vec::with_capacity(tiles.len());
         let mut cancelled = false;
-        for chunk in tiles.chunks(tiles_per_chunk) {
+        for (ci, chunk) in tiles.chunks(tiles_per_chunk).enumerate() {
             let film_ref = &film;
+            // Tiles folded into their sums before, cleared, for this pass.
+            let reused: Vec<Option<FilmTile>> = (0..chunk.len()).map(|i| tile_spare.get_mut(ci * tiles_per_chunk + i).and_then(|s| s.pop())).collect();
             let results: Vec<Option<(FilmTile, Vec<Splat>)>> = pool.install(|| {
                 chunk
                     .par_iter()
-                    .map(|&(x0, y0, x1, y1)| {
+                    .zip(reused)
+                    .map(|(&(x0, y0, x1, y1), reused)| {
                         if progress.cancelled() {
                             return None;
                         }
-                        let mut tile = film_ref.tile(x0, y0, x1, y1);
+                        let mut tile = match reused {
+                            Some(mut t) => {
+                                t.clear();
+                                t
+                            }
+                            None => film_ref.tile(x0, y0, x1, y1),
+                        };
                         let mut splats = Vec::new();
                         let mut sampler = proto.clone_box();
                         let mut scratch = est.scratch();
@@ -270,8 +290,14 @@ pub(super) fn render_chunked<E: SplatEstimator>(
         if cancelled {
             break; // cancelled mid-pass: drop the incomplete pass
         }
-        for t in &pass_tiles {
-            film.merge_tile(t);
+        if own_tiles {
+            for ((t, s), spare) in pass_tiles.into_iter().zip(&mut tile_sums).zip(&mut tile_spare) {
+                s.push_recycling(t, |a, b| a.add(b), spare);
+            }
+        } else {
+            for t in &pass_tiles {
+                film.merge_tile(t);
+            }
         }
         spp_done += n;
         film.spp_done = n;
@@ -280,6 +306,7 @@ pub(super) fn render_chunked<E: SplatEstimator>(
         if progress.wants_pass(spp_done) {
             // The splats' scale so far, so that an observer sees a developed image.
             if let Some((mut f, _)) = sum.peek(add) {
+                tile_sums_peek(&mut f, &tile_sums);
                 f.splat_scale = spp_done as f32;
                 progress.pass_done(&f);
             }
@@ -290,6 +317,9 @@ pub(super) fn render_chunked<E: SplatEstimator>(
     let (mut film, mut extra) = sum
         .finish(|a, b| add(a, &b))
         .unwrap_or_else(|| (Film::with_layers(w, h, settings.filter, settings.aovs().names()), vec![vec![Rgb::BLACK; (w * h) as usize]; channels]));
+    for t in tile_sums.into_iter().filter_map(|s| s.finish(|a, b| a.add(&b))) {
+        film.merge_tile(&t);
+    }
     film.spp_done = spp_done;
     // Each pixel sample traced one light path: N = W H spp paths, and the camera's
     // importance is normalised so that splats scale by W H / N = 1 / spp.

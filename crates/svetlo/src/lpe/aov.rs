@@ -266,6 +266,14 @@ impl AovSet {
         Some(ProductView { p, rp: p.rev.as_ref()? })
     }
 
+    /// The forward product automaton with events as precomputed classes, when it was built
+    /// (sets bound to a scene and not too large): what a kernel that steps many camera
+    /// paths at once keeps per path, one integer.
+    #[inline]
+    pub fn forward_view(&self) -> Option<ForwardView<'_>> {
+        self.product.as_ref().map(|p| ForwardView { p })
+    }
+
     /// States of the product automaton (0: none was built).
     pub fn product_states(&self) -> usize {
         self.product.as_ref().map_or(0, |p| p.states.len())
@@ -522,6 +530,37 @@ impl ProductView<'_> {
     #[inline]
     pub fn meets(&self, q: u32, r: u32) -> LayerMask {
         self.rp.meets[q as usize * self.rp.states + r as usize]
+    }
+}
+
+/// The forward product automaton of an [`AovSet`] ([`AovSet::forward_view`]) over event
+/// classes: an event's class ([`ForwardView::class`]) is found once, where the events of a
+/// scene's shapes are tabulated, and each vertex of a path is then one table step.
+#[derive(Clone, Copy, Debug)]
+pub struct ForwardView<'a> {
+    p: &'a Product,
+}
+
+impl ForwardView<'_> {
+    /// The class of event `e` in the tables.
+    #[inline]
+    pub fn class(&self, e: Event) -> u32 {
+        self.p.class(e) as u32
+    }
+    /// The state of a path that has left the camera (as [`Tracker::camera`]).
+    #[inline]
+    pub fn camera(&self) -> u32 {
+        self.p.step(0, Event::CAMERA)
+    }
+    /// The state after event class `c` in state `q` (as [`Tracker::push`]).
+    #[inline(always)]
+    pub fn step(&self, q: u32, c: u32) -> u32 {
+        self.p.table[q as usize * self.p.n_classes + c as usize]
+    }
+    /// The layers that take a path in state `q` ending with event class `c` (as [`Tracker::ends`]).
+    #[inline(always)]
+    pub fn ends(&self, q: u32, c: u32) -> LayerMask {
+        self.p.ends[q as usize * self.p.n_classes + c as usize]
     }
 }
 

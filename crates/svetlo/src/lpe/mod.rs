@@ -13,7 +13,7 @@ pub mod aov;
 pub mod automaton;
 pub mod parse;
 
-pub use aov::{AovSet, ClassRouter, LayerMask, LightTracker, ProductView, Tracker, MAX_LAYERS};
+pub use aov::{AovSet, ClassRouter, ForwardView, LayerMask, LightTracker, ProductView, Tracker, MAX_LAYERS};
 
 use automaton::{Dfa, BASE_COUNT};
 
