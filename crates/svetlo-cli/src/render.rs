@@ -287,15 +287,27 @@ pub fn execute(job: &Job, progress: &Progress) -> Result<(Film, Duration)> {
 /// `execute` for any render function that also returns something besides the film.
 fn execute_with<T>(job: &Job, progress: &Progress, render: impl FnOnce() -> svetlo::Result<(Film, T)>) -> Result<(Film, T, Duration)> {
     let start = Instant::now();
-    let finished = AtomicBool::new(false);
     let pixels = job.scene.camera.width as u64 * job.scene.camera.height as u64;
-    let (film, extra) = std::thread::scope(|s| {
-        s.spawn(|| drive_bar(progress, &finished, start, job.settings.time_limit, pixels));
-        let r = render();
-        finished.store(true, Ordering::Relaxed);
-        r
-    })?;
+    let (film, extra) = with_progress_bar(progress, start, job.settings.time_limit, pixels, render)?;
     Ok((film, extra, start.elapsed()))
+}
+
+/// Runs `work` while a second thread draws the progress bar. The bar's thread is told to end
+/// however `work` ends, a panic included: the panic then reaches the caller (and the process
+/// exits with it) instead of leaving the scope waiting for the bar forever.
+fn with_progress_bar<R>(progress: &Progress, start: Instant, time_limit: Option<Duration>, pixels: u64, work: impl FnOnce() -> R) -> R {
+    struct Finish<'a>(&'a AtomicBool);
+    impl Drop for Finish<'_> {
+        fn drop(&mut self) {
+            self.0.store(true, Ordering::Relaxed);
+        }
+    }
+    let finished = AtomicBool::new(false);
+    std::thread::scope(|s| {
+        s.spawn(|| drive_bar(progress, &finished, start, time_limit, pixels));
+        let _finish = Finish(&finished);
+        work()
+    })
 }
 
 /// BDPT with one image per strategy, written into `dir` (created if missing).
@@ -519,6 +531,21 @@ pub mod tests {
     use svetlo::scene::SceneBuilder;
     use svetlo::texture::Texture;
     use svetlo::Rgb;
+
+    /// A render that panics (a bug) ends the process with the panic, not in a hang: the
+    /// progress bar's thread is told to stop however the render ends.
+    #[test]
+    fn a_panicking_render_does_not_hang() {
+        let progress = Progress::new();
+        let (tx, rx) = std::sync::mpsc::channel();
+        std::thread::spawn(move || {
+            let r = std::panic::catch_unwind(std::panic::AssertUnwindSafe(|| {
+                with_progress_bar(&progress, Instant::now(), None, 1, || -> u32 { panic!("a bug in a render") })
+            }));
+            let _ = tx.send(r.is_err());
+        });
+        assert_eq!(rx.recv_timeout(Duration::from_secs(30)), Ok(true), "the panic must reach the caller");
+    }
 
     /// A lit diffuse sphere seen by a 32x24 pinhole camera.
     pub fn tiny_scene() -> Scene {

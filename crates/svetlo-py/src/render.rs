@@ -202,7 +202,8 @@ pub fn render<'py>(
         });
         loop {
             py.allow_threads(|| std::thread::park_timeout(POLL));
-            if finished.load(Ordering::Acquire) {
+            // A worker that panicked (a bug) never sets `finished`: its end is noticed too.
+            if finished.load(Ordering::Acquire) || worker.is_finished() {
                 break;
             }
             if interrupt.is_none() {
