@@ -29,7 +29,6 @@ use crate::geometry::ray::SHADOW_EPSILON;
 use crate::geometry::Ray;
 use crate::geometry::{Geometry, TriangleShading};
 use crate::light::{AreaLight, Light};
-use crate::lpe::aov::LayerSample;
 use crate::lpe::{AovSet, ForwardView, MAX_LAYERS};
 use crate::math::{warp, Frame, INV_PI, PI};
 use crate::sampling::{power_heuristic, Distribution1D, IndependentSampler, Sampler, SamplerKind, SobolSampler};
@@ -454,7 +453,7 @@ impl SimdKernel {
                     continue;
                 }
                 let d = Vec3::new(rays.d[0][l], rays.d[1][l], rays.d[2][l]);
-                if self.gather(scene, settings, &mut st, &mut layers, l, hits.prim[l], hits.b1[l], hits.b2[l], d, &mut v) {
+                if self.gather(scene, settings, &mut st, l, hits.prim[l], hits.b1[l], hits.b2[l], d, &mut v) {
                     go |= 1 << l;
                 } else {
                     ends |= 1 << l;
@@ -462,7 +461,7 @@ impl SimdKernel {
             }
             // Writes every lane's next ray, shadow ray and state; only `go` lanes' count.
             shade8(&v, settings.rr_depth, &mut st, &mut rays, &mut shadow, &mut o);
-            let mut smask = 0u8;
+            let (mut smask, mut counted) = (0u8, 0u8);
             for l in 0..LANES {
                 if go & (1 << l) == 0 {
                     continue;
@@ -470,7 +469,7 @@ impl SimdKernel {
                 match o.nee[l] {
                     1 => {
                         st.add(l, o.contribution(l));
-                        layers.nee(&v, l, o.contribution(l));
+                        counted |= 1 << l;
                     }
                     2 => smask |= 1 << l,
                     _ => {}
@@ -480,17 +479,16 @@ impl SimdKernel {
                 }
             }
             let clear = smask & !self.tracer.occluded(scene, &shadow, smask);
+            if layers.on() {
+                layers.route(&v, &o, active, counted | clear, go & !ends);
+            }
             for l in 0..LANES {
                 if clear & (1 << l) != 0 {
                     st.add(l, o.contribution(l));
-                    layers.nee(&v, l, o.contribution(l));
                 }
                 if ends & (1 << l) != 0 {
                     let beauty = Rgb::new(st.l[0][l], st.l[1][l], st.l[2][l]);
                     results[st.job[l]] = (st.raster[l], layers.finish(l, st.job[l], beauty));
-                } else if go & (1 << l) != 0 {
-                    // The path goes on from the BSDF's (diffuse) sample: its event.
-                    layers.scatter(&v, l);
                 }
             }
             active &= !ends;
@@ -498,7 +496,7 @@ impl SimdKernel {
         if events.view.is_some() {
             for (j, (raster, l)) in results.into_iter().enumerate() {
                 let (aov, touched) = layers.row(j);
-                tile.add_sample_touched(raster, l, &aov[..aovs.aov_count()], touched);
+                tile.add_sample_touched(raster, l, aov, touched);
             }
         } else {
             for (raster, l) in results {
@@ -517,7 +515,6 @@ impl SimdKernel {
         scene: &Scene,
         settings: &RenderSettings,
         st: &mut Paths<S>,
-        layers: &mut LaneLayers,
         l: usize,
         prim: u32,
         b1: f32,
@@ -527,8 +524,10 @@ impl SimdKernel {
     ) -> bool {
         st.depth[l] += 1;
         let depth = st.depth[l];
+        v.emitted[l] = false;
         let Some(tri) = self.tris.get(prim as usize) else { return false };
         let sh = &self.shapes[tri.shape as usize];
+        v.shape[l] = tri.shape;
         let p = tri.p[0] * (1.0 - b1 - b2) + tri.p[1] * b1 + tri.p[2] * b2;
         let (ng, frame) = match tri.shading {
             Shading::Flat(ng, frame) => (ng, frame),
@@ -557,7 +556,8 @@ impl SimdKernel {
                 };
                 let beta = Rgb::new(st.beta[0][l], st.beta[1][l], st.beta[2][l]);
                 st.add(l, beta * le * w);
-                layers.emission(tri.shape, l, beta * le * w);
+                v.emitted[l] = true;
+                put_rgb(&mut v.emit, l, beta * le * w);
             }
         }
         if !settings.depth_allows(depth + 1) {
@@ -576,11 +576,7 @@ impl SimdKernel {
             a[1][l] = x.y;
             a[2][l] = x.z;
         };
-        let putc = |a: &mut [[f32; LANES]; 3], x: Rgb| {
-            a[0][l] = x.r;
-            a[1][l] = x.g;
-            a[2][l] = x.b;
-        };
+        let putc = |a: &mut [[f32; LANES]; 3], x: Rgb| put_rgb(a, l, x);
         put(&mut v.p, p);
         put(&mut v.ng, ng);
         put(&mut v.fs, frame.s);
@@ -601,7 +597,6 @@ impl SimdKernel {
         putc(&mut v.front, front);
         putc(&mut v.back, back);
         v.has_back[l] = sh.back.is_some();
-        v.shape[l] = tri.shape;
         v.u[0][l] = u.x;
         v.u[1][l] = u.y;
         // The light point (as `MeshLight::sample_li` up to the distance test).
@@ -642,9 +637,12 @@ struct Soa {
     front: [[f32; LANES]; 3],
     back: [[f32; LANES]; 3],
     has_back: [bool; LANES],
-    /// The scene shape hit, and the light sampled (for the paths' events).
+    /// The scene shape hit, the light sampled, and the emission found at the hit when
+    /// `emitted` (for the paths' events).
     shape: [u32; LANES],
     light: [u32; LANES],
+    emitted: [bool; LANES],
+    emit: [[f32; LANES]; 3],
     /// The BSDF sample's square point (cosine-warped in `shade8`).
     u: [[f32; LANES]; 2],
     u_rr: [f32; LANES],
@@ -685,30 +683,42 @@ impl<'a> LaneEvents<'a> {
     }
 }
 
+/// Accumulators per lane: the AOVs' (indices below [`MAX_LAYERS`]) and the restricted
+/// beauty's (index [`MAX_LAYERS`]), one array per colour channel so that routing a
+/// contribution is a few vector selects.
+const ACC: usize = MAX_LAYERS + 1;
+
 /// With AOVs or `--lpe`: each lane's state of the AOVs' product automaton along its path (as
-/// the scalar tracer's `camera_walk` steps its tracker), what its sample adds to the layers,
-/// and the layers of every finished sample of the tile, kept until the samples go to the film
-/// in the scalar order. Without, each method is one untaken branch.
+/// the scalar tracer's `camera_walk` steps its tracker) and what its sample adds to each layer
+/// (the same sums in the same order as its `LayerSample`), and the layers of every finished
+/// sample of the tile, kept until the samples go to the film in the scalar order. Without,
+/// each method is one untaken branch.
 struct LaneLayers<'a> {
     events: &'a LaneEvents<'a>,
+    /// AOVs of the render.
+    n: usize,
     restricts_beauty: bool,
     q: [u32; LANES],
-    sample: [LayerSample; LANES],
-    /// Per job: where its touched layers start in `values`, and which they are.
-    rows: Vec<(u32, u32)>,
-    /// The touched layers' values of the finished jobs, in bit order.
-    values: Vec<Rgb>,
+    acc: [[[f32; ACC]; 3]; LANES],
+    touched: [u32; LANES],
+    /// Per job: its `n` layers, and which of them its paths touched.
+    rows: Vec<Rgb>,
+    row_touched: Vec<u32>,
 }
 
 impl<'a> LaneLayers<'a> {
     fn new(events: &'a LaneEvents<'a>, aovs: &AovSet, jobs: usize) -> Self {
+        let on = events.view.is_some();
+        let n = aovs.aov_count().min(MAX_LAYERS);
         LaneLayers {
             events,
+            n,
             restricts_beauty: aovs.restricts_beauty(),
             q: [0; LANES],
-            sample: [LayerSample::default(); LANES],
-            rows: if events.view.is_some() { vec![(0, 0); jobs] } else { Vec::new() },
-            values: Vec::new(),
+            acc: [[[0.0; ACC]; 3]; LANES],
+            touched: [0; LANES],
+            rows: if on { vec![Rgb::BLACK; jobs * n] } else { Vec::new() },
+            row_touched: if on { vec![0; jobs] } else { Vec::new() },
         }
     }
 
@@ -717,36 +727,54 @@ impl<'a> LaneLayers<'a> {
     fn start(&mut self, l: usize) {
         if let Some(view) = self.events.view {
             self.q[l] = view.camera();
-            self.sample[l].clear();
+            self.acc[l] = [[0.0; ACC]; 3];
+            self.touched[l] = 0;
         }
     }
 
-    /// The path of lane `l` finds the emission of scene shape `shape`, adding `c`.
+    /// Adds `c` to lane `l`'s layers of `mask` (as `LayerSample::add`; the others add +0,
+    /// a channel's bits masked off: branch-free, and no infinity reaches them).
     #[inline(always)]
-    fn emission(&mut self, shape: u32, l: usize, c: Rgb) {
-        if let Some(view) = self.events.view {
-            let m = view.ends(self.q[l], self.events.light[shape as usize]);
-            self.sample[l].add(m, c);
-        }
-    }
-
-    /// A light sample's contribution `c` at the vertex in `v` (diffuse there, then the light).
-    #[inline(always)]
-    fn nee(&mut self, v: &Soa, l: usize, c: Rgb) {
-        if let Some(view) = self.events.view {
-            if !c.is_black() {
-                let e = self.events;
-                let m = view.ends(view.step(self.q[l], e.scatter[v.shape[l] as usize]), e.emitter[v.light[l] as usize]);
-                self.sample[l].add(m, c);
+    fn add(&mut self, mask: crate::lpe::LayerMask, l: usize, c: Rgb) {
+        // Bit i of the mask for AOV i, the beauty's bit (31) for the last accumulator.
+        let keep: [u32; ACC] = std::array::from_fn(|i| 0u32.wrapping_sub((mask >> if i < MAX_LAYERS { i } else { 31 }) & 1));
+        for (a, v) in self.acc[l].iter_mut().zip([c.r, c.g, c.b]) {
+            for (x, &k) in a.iter_mut().zip(&keep) {
+                *x += f32::from_bits(v.to_bits() & k);
             }
         }
+        self.touched[l] |= mask & !crate::lpe::aov::BEAUTY;
     }
 
-    /// Lane `l`'s path scatters at the vertex in `v` (its BSDF sample, always diffuse).
+    fn on(&self) -> bool {
+        self.events.view.is_some()
+    }
+
+    /// One vertex of the lanes' paths, in the scalar tracer's order: the emission found at
+    /// the hit (lanes of `active` whose `v.emitted`), the light samples that count (`nee`;
+    /// diffuse there, then the light), and the diffuse scattering of the paths that go on.
     #[inline(always)]
-    fn scatter(&mut self, v: &Soa, l: usize) {
-        if let Some(view) = self.events.view {
-            self.q[l] = view.step(self.q[l], self.events.scatter[v.shape[l] as usize]);
+    fn route(&mut self, v: &Soa, o: &Out, active: u8, nee: u8, goes_on: u8) {
+        let Some(view) = self.events.view else { return };
+        let e = self.events;
+        for l in 0..LANES {
+            if active & (1 << l) == 0 {
+                continue;
+            }
+            let shape = v.shape[l] as usize;
+            if v.emitted[l] {
+                let c = Rgb::new(v.emit[0][l], v.emit[1][l], v.emit[2][l]);
+                self.add(view.ends(self.q[l], e.light[shape]), l, c);
+            }
+            if nee & (1 << l) != 0 {
+                let c = o.contribution(l);
+                if !c.is_black() {
+                    self.add(view.ends(view.step(self.q[l], e.scatter[shape]), e.emitter[v.light[l] as usize]), l, c);
+                }
+            }
+            if goes_on & (1 << l) != 0 {
+                self.q[l] = view.step(self.q[l], e.scatter[shape]);
+            }
         }
     }
 
@@ -757,37 +785,26 @@ impl<'a> LaneLayers<'a> {
         if self.events.view.is_none() {
             return beauty;
         }
-        let s = &self.sample[l];
-        if let Some(r) = self.rows.get_mut(job) {
-            *r = (self.values.len() as u32, s.touched);
+        let a = &self.acc[l];
+        if let Some(row) = self.rows.get_mut(job * self.n..(job + 1) * self.n) {
+            for (i, d) in row.iter_mut().enumerate() {
+                *d = Rgb::new(a[0][i], a[1][i], a[2][i]);
+            }
         }
-        let mut m = s.touched;
-        while m != 0 {
-            let i = m.trailing_zeros() as usize;
-            m &= m - 1;
-            self.values.push(s.aov.get(i).copied().unwrap_or(Rgb::BLACK));
+        if let Some(t) = self.row_touched.get_mut(job) {
+            *t = self.touched[l];
         }
         if self.restricts_beauty {
-            s.beauty
+            Rgb::new(a[0][MAX_LAYERS], a[1][MAX_LAYERS], a[2][MAX_LAYERS])
         } else {
             beauty
         }
     }
 
     /// Job `job`'s layers and which of them its paths touched.
-    fn row(&self, job: usize) -> ([Rgb; MAX_LAYERS], u32) {
-        let (start, touched) = self.rows.get(job).copied().unwrap_or((0, 0));
-        let mut aov = [Rgb::BLACK; MAX_LAYERS];
-        let (mut k, mut m) = (start as usize, touched);
-        while m != 0 {
-            let i = m.trailing_zeros() as usize;
-            m &= m - 1;
-            if let (Some(a), Some(v)) = (aov.get_mut(i), self.values.get(k)) {
-                *a = *v;
-            }
-            k += 1;
-        }
-        (aov, touched)
+    #[inline]
+    fn row(&self, job: usize) -> (&[Rgb], u32) {
+        (self.rows.get(job * self.n..(job + 1) * self.n).unwrap_or(&[]), self.row_touched.get(job).copied().unwrap_or(0))
     }
 }
 
@@ -1000,6 +1017,14 @@ impl<S> Paths<S> {
         self.l[1][l] += c.g;
         self.l[2][l] += c.b;
     }
+}
+
+/// Lane `l` of a structure-of-arrays colour.
+#[inline(always)]
+fn put_rgb(a: &mut [[f32; LANES]; 3], l: usize, x: Rgb) {
+    a[0][l] = x.r;
+    a[1][l] = x.g;
+    a[2][l] = x.b;
 }
 
 #[inline(always)]
