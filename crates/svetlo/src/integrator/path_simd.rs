@@ -322,7 +322,7 @@ impl SimdKernel {
 
     /// `render_tile` in the build for this CPU.
     #[allow(clippy::too_many_arguments)]
-    fn render_tile_on_cpu<S: Sampler + Clone>(
+    fn render_tile_on_cpu<S: LaneSampler>(
         &self,
         scene: &Scene,
         settings: &RenderSettings,
@@ -356,7 +356,7 @@ impl SimdKernel {
     #[cfg(target_arch = "x86_64")]
     #[target_feature(enable = "avx2")]
     #[allow(clippy::too_many_arguments)]
-    unsafe fn render_tile_avx2<S: Sampler + Clone>(
+    unsafe fn render_tile_avx2<S: LaneSampler>(
         &self,
         scene: &Scene,
         settings: &RenderSettings,
@@ -378,7 +378,7 @@ impl SimdKernel {
     #[cfg(target_arch = "x86_64")]
     #[target_feature(enable = "avx2,avx512f,avx512vl")]
     #[allow(clippy::too_many_arguments)]
-    unsafe fn render_tile_avx512<S: Sampler + Clone>(
+    unsafe fn render_tile_avx512<S: LaneSampler>(
         &self,
         scene: &Scene,
         settings: &RenderSettings,
@@ -398,7 +398,7 @@ impl SimdKernel {
     #[inline(always)]
     #[allow(clippy::too_many_arguments)]
     #[allow(clippy::too_many_arguments)]
-    fn render_tile<S: Sampler + Clone>(
+    fn render_tile<S: LaneSampler>(
         &self,
         scene: &Scene,
         settings: &RenderSettings,
@@ -446,6 +446,10 @@ impl SimdKernel {
                 break;
             }
             let hits = self.tracer.intersect(scene, &rays, active);
+            // Every active lane's numbers for this vertex, where the sampler draws them for
+            // all lanes at once (a lane that ends before it needs them restarts its sampler
+            // with its next camera sample).
+            let draws = if S::BATCHED { S::vertex_draws(&mut st.sampler, active) } else { [[0.0; LANES]; 7] };
             let mut ends = 0u8;
             let mut go = 0u8;
             for l in 0..LANES {
@@ -453,7 +457,7 @@ impl SimdKernel {
                     continue;
                 }
                 let d = Vec3::new(rays.d[0][l], rays.d[1][l], rays.d[2][l]);
-                if self.gather(scene, settings, &mut st, l, hits.prim[l], hits.b1[l], hits.b2[l], d, &mut v) {
+                if self.gather(scene, settings, &mut st, &draws, l, hits.prim[l], hits.b1[l], hits.b2[l], d, &mut v) {
                     go |= 1 << l;
                 } else {
                     ends |= 1 << l;
@@ -510,11 +514,12 @@ impl SimdKernel {
     /// is left in `v` for `shade8`. False when the path ends here.
     #[allow(clippy::too_many_arguments)]
     #[inline(always)]
-    fn gather<S: Sampler>(
+    fn gather<S: LaneSampler>(
         &self,
         scene: &Scene,
         settings: &RenderSettings,
         st: &mut Paths<S>,
+        draws: &[[f32; LANES]; 7],
         l: usize,
         prim: u32,
         b1: f32,
@@ -565,12 +570,16 @@ impl SimdKernel {
         }
         // All of the vertex's numbers, in the scalar order (u_rr is drawn even where the path
         // ends before it: the lane's sampler restarts with its next camera sample).
-        let sampler = &mut st.sampler[l];
-        let u_light = sampler.next_1d();
-        let u_l2 = sampler.next_2d();
-        let _uc = sampler.next_1d();
-        let u = sampler.next_2d();
-        v.u_rr[l] = sampler.next_1d();
+        let (u_light, u_l2, u, u_rr) = if S::BATCHED {
+            (draws[0][l], Vec2::new(draws[1][l], draws[2][l]), Vec2::new(draws[4][l], draws[5][l]), draws[6][l])
+        } else {
+            let sampler = &mut st.sampler[l];
+            let u_light = sampler.next_1d();
+            let u_l2 = sampler.next_2d();
+            let _uc = sampler.next_1d();
+            (u_light, u_l2, sampler.next_2d(), sampler.next_1d())
+        };
+        v.u_rr[l] = u_rr;
         let put = |a: &mut [[f32; LANES]; 3], x: Vec3| {
             a[0][l] = x.x;
             a[1][l] = x.y;
@@ -957,6 +966,41 @@ fn shade8<S>(v: &Soa, rr_depth: i32, st: &mut Paths<S>, rays: &mut Rays8, shadow
         st.prev_pdf[l] = if moved { bpdf } else { st.prev_pdf[l] };
         st.prev_specular[l] &= !moved;
         o.cont[l] = cont;
+    }
+}
+
+/// A sampler of the kernel's lanes: one vertex's numbers for all of them at once, in the
+/// scalar tracer's order per vertex (light choice, light point, BSDF lobe, BSDF direction,
+/// Russian roulette: 1, 2, 1, 2 and 1 dimensions), each lane from its own sampler.
+pub(crate) trait LaneSampler: Sampler + Clone {
+    /// Whether the kernel takes a vertex's numbers from [`Self::vertex_draws`] (worth it where
+    /// drawing is costly and vectorises) or lane by lane inside `gather` (cheap generators).
+    const BATCHED: bool = false;
+    /// Rows: light choice, light point (2), lobe, direction (2), roulette; lanes of `lanes` only.
+    #[inline(always)]
+    fn vertex_draws(s: &mut [Self; LANES], lanes: u8) -> [[f32; LANES]; 7] {
+        let mut d = [[0.0; LANES]; 7];
+        for (l, s) in s.iter_mut().enumerate().filter(|(l, _)| lanes & (1 << l) != 0) {
+            d[0][l] = s.next_1d();
+            let a = s.next_2d();
+            (d[1][l], d[2][l]) = (a.x, a.y);
+            d[3][l] = s.next_1d();
+            let b = s.next_2d();
+            (d[4][l], d[5][l]) = (b.x, b.y);
+            d[6][l] = s.next_1d();
+        }
+        d
+    }
+}
+
+impl LaneSampler for IndependentSampler {}
+
+impl LaneSampler for SobolSampler {
+    const BATCHED: bool = true;
+    /// The Owen scrambles of the eight lanes side by side (`SobolSampler::vertex_draws8`).
+    #[inline(always)]
+    fn vertex_draws(s: &mut [Self; LANES], lanes: u8) -> [[f32; LANES]; 7] {
+        SobolSampler::vertex_draws8(s, lanes)
     }
 }
 

@@ -103,6 +103,50 @@ impl SobolSampler {
     }
 }
 
+/// Slots of one path vertex as the eight-wide path kernel draws them: light choice (1-D),
+/// light point (2-D), BSDF lobe (1-D), BSDF direction (2-D), Russian roulette (1-D).
+pub(crate) const VERTEX_SLOTS: [bool; 5] = [false, true, false, true, false];
+
+impl SobolSampler {
+    /// The draws of [`VERTEX_SLOTS`] for eight samplers at once (those of `lanes`), in
+    /// order (1-D slots one value, 2-D slots two): the same values as each sampler's
+    /// `next_1d`/`next_2d` calls, with each lane's slot seeds hashed in 64 bits one by one
+    /// and the 32-bit scrambles of all eight lanes worked side by side (vector code where
+    /// the caller is compiled for AVX2).
+    #[inline(always)]
+    pub(crate) fn vertex_draws8(s: &mut [SobolSampler; 8], lanes: u8) -> [[f32; 8]; 7] {
+        const N: usize = VERTEX_SLOTS.len();
+        let mut shuffle = [[0u32; 8]; N];
+        let mut sx = [[0u32; 8]; N];
+        let mut sy = [[0u32; 8]; N];
+        let mut idx = [0u32; 8];
+        for l in (0..8).filter(|l| lanes & (1 << l) != 0) {
+            let sl = &mut s[l];
+            idx[l] = sl.index_reversed;
+            for (k, &two) in VERTEX_SLOTS.iter().enumerate() {
+                let h = sl.slot_seeds();
+                shuffle[k][l] = h as u32;
+                sx[k][l] = (h >> 32) as u32;
+                if two {
+                    sy[k][l] = mix64(h) as u32;
+                }
+            }
+        }
+        let mut out = [[0.0f32; 8]; 7];
+        let mut o = 0;
+        for (k, &two) in VERTEX_SLOTS.iter().enumerate() {
+            let i: [u32; 8] = std::array::from_fn(|l| lk_hash(idx[l], shuffle[k][l]).reverse_bits());
+            out[o] = std::array::from_fn(|l| to_unit(lk_hash(i[l], sx[k][l]).reverse_bits()));
+            o += 1;
+            if two {
+                out[o] = std::array::from_fn(|l| to_unit(lk_hash(sobol1_reversed(i[l]), sy[k][l]).reverse_bits()));
+                o += 1;
+            }
+        }
+        out
+    }
+}
+
 impl Sampler for SobolSampler {
     fn start_pixel_sample(&mut self, x: u32, y: u32, index: u32) {
         if (x, y) != self.pixel {
@@ -151,6 +195,43 @@ mod tests {
             v[k] = v[k - 1] ^ (v[k - 1] >> 1);
         }
         (0..32).filter(|k| index >> k & 1 == 1).fold(0, |x, k| x ^ v[k])
+    }
+
+    /// The eight-lane vertex draws are each lane's `next_1d`/`next_2d` values, bit for bit,
+    /// and leave each sampler where those calls would; lanes outside the mask are untouched.
+    #[test]
+    fn vertex_draws8_are_the_samplers_draws() {
+        let mut lanes: [SobolSampler; 8] = std::array::from_fn(|_| SobolSampler::new(64, 21));
+        let mut one = lanes.clone();
+        for (l, (a, b)) in lanes.iter_mut().zip(one.iter_mut()).enumerate() {
+            let (x, y, i) = (l as u32 * 7, 3 + l as u32, 5 * l as u32 + 1);
+            a.start_pixel_sample(x, y, i);
+            b.start_pixel_sample(x, y, i);
+            // Lanes at different depths of their paths.
+            for _ in 0..l {
+                a.next_2d();
+                b.next_2d();
+            }
+        }
+        for mask in [0xffu8, 0b1010_0110] {
+            let got = SobolSampler::vertex_draws8(&mut lanes, mask);
+            for l in (0..8).filter(|l| mask & (1 << l) != 0) {
+                let s = &mut one[l];
+                let u0 = s.next_1d();
+                let a = s.next_2d();
+                let u1 = s.next_1d();
+                let b = s.next_2d();
+                let u2 = s.next_1d();
+                let want = [u0, a.x, a.y, u1, b.x, b.y, u2];
+                for (k, w) in want.iter().enumerate() {
+                    assert_eq!(got[k][l].to_bits(), w.to_bits(), "lane {l}, draw {k}");
+                }
+            }
+        }
+        // Every sampler is where its own calls left it (masked-out lanes were not moved).
+        for (a, b) in lanes.iter_mut().zip(one.iter_mut()) {
+            assert_eq!(a.next_2d(), b.next_2d());
+        }
     }
 
     #[test]
