@@ -10,9 +10,13 @@
 //! Scope: static scenes of triangle meshes, (two-sided) Lambertian
 //! materials of constant or textured reflectance (any texture: bitmaps, procedural, mesh
 //! attributes; evaluated per lane where the path hits), area lights of constant radiance on
-//! meshes, no environment light; either sampler; AOVs and `--lpe` (each lane steps its path's
-//! automata as the scalar tracer does: see [`LaneLayers`]). `SimdPathTracer` checks that
-//! (`SimdKernel::new`) and otherwise, or without AVX2, runs the scalar tracer.
+//! meshes (sampled by the kernel's own unpacked copy), and every other light the scalar tracer
+//! takes (point, spot, directional, one constant or bitmap environment), each lane sampling it
+//! through its own `Light::sample_li` and seeing the environment where its ray escapes;
+//! either sampler (Sobol's scrambles for all lanes at once: [`LaneSampler`]); AOVs and
+//! `--lpe` (each lane steps its path's automata as the scalar tracer does: see
+//! [`LaneLayers`]). `SimdPathTracer` checks that (`SimdKernel::new`) and otherwise, or
+//! without AVX2, runs the scalar tracer.
 //!
 //! Each lane draws its random numbers from its own copy of the scalar tracer's sampler, in
 //! the same order, and the samples of a tile are added to the film in the scalar order, so
@@ -204,8 +208,9 @@ pub struct SimdKernel {
     tracer: Tracer,
     tris: Vec<Tri>,
     shapes: Vec<ShapeData>,
-    /// Per light of the scene.
-    lights: Vec<MeshLight>,
+    /// Per light of the scene: a mesh area light unpacked, or None for a light the lanes
+    /// sample through its own `Light::sample_li` (point, spot, directional, environment).
+    lights: Vec<Option<MeshLight>>,
     /// Run the AVX-512VL build of the kernel (detected at run time; tests may clear it).
     avx512: bool,
 }
@@ -229,12 +234,16 @@ fn area_of(scene: &Scene, li: u32) -> Option<&AreaLight> {
 impl SimdKernel {
     /// The kernel's data, or None when the scene or the settings are out of its scope.
     pub fn new(scene: &Scene, _settings: &RenderSettings) -> Option<SimdKernel> {
-        if !scene.moving.is_empty() || !scene.static_shapes.is_empty() || !scene.environment_lights.is_empty() || scene.settings.ray_epsilon > 0.0 {
+        // One environment at most: a lane adds what its escaped ray sees as one contribution.
+        if !scene.moving.is_empty() || !scene.static_shapes.is_empty() || scene.environment_lights.len() > 1 || scene.settings.ray_epsilon > 0.0 {
             return None;
         }
         let mut lights = Vec::with_capacity(scene.lights.len());
         for l in &scene.lights {
-            let Light::Area(a) = l else { return None };
+            let Light::Area(a) = l else {
+                lights.push(None);
+                continue;
+            };
             let (Geometry::Mesh(m), Texture::Constant(radiance), Some(dist)) = (&*a.geometry, &a.radiance, &a.tri_distribution) else { return None };
             if dist.is_empty() {
                 return None;
@@ -246,7 +255,7 @@ impl SimdKernel {
                 })
                 .collect();
             let pdf_area = if a.area > 0.0 { 1.0 / a.area } else { 0.0 };
-            lights.push(MeshLight { pdf_area, tri_distribution: dist.clone(), tris, radiance: *radiance });
+            lights.push(Some(MeshLight { pdf_area, tri_distribution: dist.clone(), tris, radiance: *radiance }));
         }
         let mut shapes = Vec::with_capacity(scene.shapes.len());
         let mut tris = Vec::new();
@@ -530,7 +539,10 @@ impl SimdKernel {
         st.depth[l] += 1;
         let depth = st.depth[l];
         v.emitted[l] = false;
-        let Some(tri) = self.tris.get(prim as usize) else { return false };
+        let Some(tri) = self.tris.get(prim as usize) else {
+            self.escaped(scene, settings, st, l, d, v);
+            return false;
+        };
         let sh = &self.shapes[tri.shape as usize];
         v.shape[l] = tri.shape;
         let p = tri.p[0] * (1.0 - b1 - b2) + tri.p[1] * b1 + tri.p[2] * b2;
@@ -610,9 +622,30 @@ impl SimdKernel {
         v.u[1][l] = u.y;
         // The light point (as `MeshLight::sample_li` up to the distance test).
         v.nee_ok[l] = false;
+        v.generic[l] = false;
         if !scene.lights.is_empty() {
             let (li, pmf, _) = scene.light_distribution.sample_discrete(u_light);
-            if let Some(ml) = self.lights.get(li).filter(|ml| pmf > 0.0 && ml.pdf_area > 0.0 && !ml.radiance.is_black()) {
+            v.pmf[l] = pmf;
+            v.light[l] = li as u32;
+            match self.lights.get(li) {
+                Some(None) if pmf > 0.0 => {
+                    // Any other light by its own sampling (`path::light_mis_to`'s first tests).
+                    let light = &scene.lights[li];
+                    if let Some(ls) = light.sample_li(p, u_l2, &scene.bounds).filter(|ls| ls.pdf > 0.0 && !ls.li.is_black()) {
+                        put(&mut v.lp, ls.p);
+                        put(&mut v.ln, ls.n);
+                        put(&mut v.gwi, ls.wi);
+                        putc(&mut v.lrad, ls.li);
+                        v.gpdf[l] = ls.pdf;
+                        v.infinite[l] = ls.infinite;
+                        v.delta[l] = light.is_delta();
+                        v.generic[l] = true;
+                        v.nee_ok[l] = true;
+                    }
+                }
+                _ => {}
+            }
+            if let Some(ml) = self.lights.get(li).and_then(|m| m.as_ref()).filter(|ml| pmf > 0.0 && ml.pdf_area > 0.0 && !ml.radiance.is_black()) {
                 let (t, _, ur) = ml.tri_distribution.sample_discrete(u_l2.x);
                 let b = warp::square_to_uniform_triangle(Vec2::new(ur, u_l2.y));
                 let ([p0, e1, e2], n) = ml.tris[t];
@@ -623,15 +656,39 @@ impl SimdKernel {
                 put(&mut v.lp, p0 + e1 * b.x + e2 * b.y);
                 put(&mut v.ln, n);
                 putc(&mut v.lrad, ml.radiance);
-                v.pmf[l] = pmf;
-                v.light[l] = li as u32;
                 v.pdf_area[l] = ml.pdf_area;
+                v.infinite[l] = false;
+                v.delta[l] = false;
                 v.nee_ok[l] = true;
             }
         }
         true
     }
+
+    /// Lane `l`'s ray along `d` left the scene: what the environment adds there, weighted
+    /// against the previous vertex's BSDF sample as the scalar tracer weighs it.
+    #[inline(always)]
+    fn escaped<S: Sampler>(&self, scene: &Scene, settings: &RenderSettings, st: &mut Paths<S>, l: usize, d: Vec3, v: &mut Soa) {
+        if st.depth[l] == 1 && settings.hide_emitters {
+            return;
+        }
+        let Some(&ei) = scene.environment_lights.first() else { return };
+        let light = &scene.lights[ei as usize];
+        let le = light.le_escaped(d);
+        if le.is_black() {
+            return;
+        }
+        let w = if st.prev_specular[l] { 1.0 } else { power_heuristic(1.0, st.prev_pdf[l], 1.0, scene.light_pmf(ei) * light.pdf_li_escaped(d)) };
+        let beta = Rgb::new(st.beta[0][l], st.beta[1][l], st.beta[2][l]);
+        st.add(l, beta * le * w);
+        v.emitted[l] = true;
+        v.shape[l] = ESCAPED;
+        put_rgb(&mut v.emit, l, beta * le * w);
+    }
 }
+
+/// `Soa::shape` of a lane whose ray left the scene.
+const ESCAPED: u32 = u32::MAX;
 
 /// One vertex of eight paths, structure of arrays: what `gather` collected.
 #[derive(Default)]
@@ -656,6 +713,14 @@ struct Soa {
     u: [[f32; LANES]; 2],
     u_rr: [f32; LANES],
     nee_ok: [bool; LANES],
+    /// The light sample came from `Light::sample_li` (direction `gwi`, density `gpdf` in
+    /// solid angle, radiance in `lrad`, point and normal in `lp`, `ln`), not a mesh light.
+    generic: [bool; LANES],
+    gwi: [[f32; LANES]; 3],
+    gpdf: [f32; LANES],
+    /// Its shadow ray runs to infinity (along `gwi`); a delta light takes no MIS weight.
+    infinite: [bool; LANES],
+    delta: [bool; LANES],
     lp: [[f32; LANES]; 3],
     ln: [[f32; LANES]; 3],
     lrad: [[f32; LANES]; 3],
@@ -673,6 +738,8 @@ struct LaneEvents<'a> {
     scatter: Vec<u32>,
     /// Per scene shape: its emission found by a path.
     light: Vec<u32>,
+    /// The environment seen by an escaped ray.
+    background: u32,
     /// Per scene light: its emission reached by a light sample.
     emitter: Vec<u32>,
 }
@@ -680,13 +747,14 @@ struct LaneEvents<'a> {
 impl<'a> LaneEvents<'a> {
     fn new(scene: &Scene, aovs: &'a AovSet) -> LaneEvents<'a> {
         let Some(view) = aovs.forward_view().filter(|_| !aovs.is_empty()) else {
-            return LaneEvents { view: None, scatter: Vec::new(), light: Vec::new(), emitter: Vec::new() };
+            return LaneEvents { view: None, scatter: Vec::new(), light: Vec::new(), background: 0, emitter: Vec::new() };
         };
         let shapes = 0..scene.shapes.len() as u32;
         LaneEvents {
             view: Some(view),
             scatter: shapes.clone().map(|s| view.class(aovs.scatter_event(s, crate::bsdf::LobeFlags::DIFFUSE_REFLECTION, None, false))).collect(),
             light: shapes.map(|s| view.class(aovs.light_event(Some(s)))).collect(),
+            background: view.class(crate::lpe::Event::BACKGROUND),
             emitter: scene.lights.iter().map(|l| view.class(aovs.emitter_event(l))).collect(),
         }
     }
@@ -773,7 +841,8 @@ impl<'a> LaneLayers<'a> {
             let shape = v.shape[l] as usize;
             if v.emitted[l] {
                 let c = Rgb::new(v.emit[0][l], v.emit[1][l], v.emit[2][l]);
-                self.add(view.ends(self.q[l], e.light[shape]), l, c);
+                let class = if v.shape[l] == ESCAPED { e.background } else { e.light[shape] };
+                self.add(view.ends(self.q[l], class), l, c);
             }
             if nee & (1 << l) != 0 {
                 let c = o.contribution(l);
@@ -893,16 +962,20 @@ fn shade8<S>(v: &Soa, rr_depth: i32, st: &mut Paths<S>, rays: &mut Rays8, shadow
         let dl = [lp[0] - p[0], lp[1] - p[1], lp[2] - p[2]];
         let dist2 = dot3(dl, dl);
         let r = dist2.sqrt();
-        let wi_w = [dl[0] / r, dl[1] / r, dl[2] / r];
         let ln = g(&v.ln);
+        // A mesh light's direction and density from its point, as `AreaLight::sample_li`;
+        // any other light's as its `sample_li` gave them.
+        let generic = v.generic[l];
+        let wi_w = if generic { g(&v.gwi) } else { [dl[0] / r, dl[1] / r, dl[2] / r] };
         let cos_l = dot3(ln, [-wi_w[0], -wi_w[1], -wi_w[2]]);
-        let pdf = v.pdf_area[l] * dist2 / cos_l;
+        let pdf = if generic { v.gpdf[l] } else { v.pdf_area[l] * dist2 / cos_l };
         let wi = [dot3(wi_w, fs), dot3(wi_w, ft), dot3(wi_w, fnn)];
-        let nee = v.nee_ok[l] && dist2 != 0.0 && cos_l > 0.0 && pdf > 0.0 && side_ok && wo_up && wi[2] * flip > 0.0 && !f_black;
+        let sampled = generic || (dist2 != 0.0 && cos_l > 0.0 && pdf > 0.0);
+        let nee = v.nee_ok[l] && sampled && side_ok && wo_up && wi[2] * flip > 0.0 && !f_black;
         let pdf_light = v.pmf[l] * pdf;
         let bsdf_pdf = (wi[2] * flip).max(0.0) * INV_PI;
         let (f2, g2) = (pdf_light * pdf_light, bsdf_pdf * bsdf_pdf);
-        let w = if pdf_light.is_infinite() {
+        let w = if v.delta[l] || pdf_light.is_infinite() {
             1.0
         } else if f2 + g2 == 0.0 {
             0.0
@@ -914,19 +987,21 @@ fn shade8<S>(v: &Soa, rr_depth: i32, st: &mut Paths<S>, rays: &mut Rays8, shadow
         for k in 0..3 {
             o.c[k][l] = beta[k] * ((f[k] * li[k]) * s);
         }
-        // Both ends off their surfaces, as `Scene::occluded_between`.
-        let so = offset3(p, ng, dl);
+        // Both ends off their surfaces, as `Scene::occluded_between`; toward a light at
+        // infinity from the offset point along the direction, as `Scene::occluded_dir_at`.
+        let inf = v.infinite[l];
+        let so = offset3(p, ng, if inf { wi_w } else { dl });
         let q = offset3(lp, ln, [-dl[0], -dl[1], -dl[2]]);
         let d2 = [q[0] - so[0], q[1] - so[1], q[2] - so[2]];
         let dist = dot3(d2, d2).sqrt();
         for k in 0..3 {
             shadow.o[k][l] = so[k];
-            shadow.d[k][l] = d2[k] / dist;
+            shadow.d[k][l] = if inf { wi_w[k] } else { d2[k] / dist };
         }
-        shadow.t_max[l] = dist * (1.0 - SHADOW_EPSILON);
+        shadow.t_max[l] = if inf { f32::INFINITY } else { dist * (1.0 - SHADOW_EPSILON) };
         o.nee[l] = if !nee {
             0
-        } else if dist == 0.0 {
+        } else if dist == 0.0 && !inf {
             1
         } else {
             2
