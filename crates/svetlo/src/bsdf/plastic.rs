@@ -157,24 +157,41 @@ impl CoatingTables {
     /// The tables for this coating, computed once per process and roughness (quantised to
     /// ~1e-4 relative, which bounds the cache for textured roughness).
     pub fn get(kind: MicrofacetKind, alpha: f32, eta: f32) -> &'static CoatingTables {
-        type Key = (u8, u32, u32);
         thread_local! {
-            static LOCAL: RefCell<HashMap<Key, &'static CoatingTables>> = RefCell::new(HashMap::new());
+            static LOCAL: RefCell<HashMap<TableKey, &'static CoatingTables>> = RefCell::new(HashMap::new());
         }
-        static GLOBAL: OnceLock<Mutex<HashMap<Key, &'static CoatingTables>>> = OnceLock::new();
-        let alpha = f32::from_bits(alpha.max(super::microfacet::MIN_ALPHA).to_bits() & !0x3ff);
-        let key = (kind as u8, alpha.to_bits(), eta.to_bits());
+        let (key, alpha) = table_key(kind, alpha, eta);
         if let Some(t) = LOCAL.with(|l| l.borrow().get(&key).copied()) {
             return t;
         }
         let t = {
-            let mut g = GLOBAL.get_or_init(|| Mutex::new(HashMap::new())).lock().unwrap_or_else(|e| e.into_inner());
+            let mut g = global_tables().lock().unwrap_or_else(|e| e.into_inner());
             // Leaked on purpose: a handful of small tables live as long as the process.
             *g.entry(key).or_insert_with(|| Box::leak(Box::new(CoatingTables::compute(kind, alpha, eta))))
         };
         LOCAL.with(|l| l.borrow_mut().insert(key, t));
         t
     }
+}
+
+type TableKey = (u8, u32, u32);
+
+/// The key of a coating's tables and the roughness they are computed for.
+fn table_key(kind: MicrofacetKind, alpha: f32, eta: f32) -> (TableKey, f32) {
+    let alpha = f32::from_bits(alpha.max(super::microfacet::MIN_ALPHA).to_bits() & !0x3ff);
+    ((kind as u8, alpha.to_bits(), eta.to_bits()), alpha)
+}
+
+/// Every thread's tables, built once per process.
+fn global_tables() -> &'static Mutex<HashMap<TableKey, &'static CoatingTables>> {
+    static GLOBAL: OnceLock<Mutex<HashMap<TableKey, &'static CoatingTables>>> = OnceLock::new();
+    GLOBAL.get_or_init(|| Mutex::new(HashMap::new()))
+}
+
+/// The tables of this coating if some thread built them already.
+#[cfg(test)]
+pub(crate) fn cached_tables(kind: MicrofacetKind, alpha: f32, eta: f32) -> Option<&'static CoatingTables> {
+    global_tables().lock().unwrap_or_else(|e| e.into_inner()).get(&table_key(kind, alpha, eta).0).copied()
 }
 
 /// ∫ over visible normals of (1 - F) G1(wt) (transmission) or F G1(wr) (reflection) for
@@ -283,6 +300,12 @@ impl RoughPlastic {
         let distribution = Microfacet::new(kind, alpha, alpha);
         let tables = CoatingTables::get(kind, distribution.alpha_u, eta);
         RoughPlastic { distribution, diffuse_reflectance, specular_reflectance, eta, nonlinear, specular_sampling_weight, tables }
+    }
+    /// Build the coating tables that [`Self::new`] will look up for this roughness and IOR
+    /// (once per process): at scene load, as Mitsuba builds them when it loads the plugin,
+    /// rather than at the first hit, inside the render.
+    pub fn prepare_tables(kind: MicrofacetKind, alpha: f32, eta: f32) {
+        CoatingTables::get(kind, Microfacet::new(kind, alpha, alpha).alpha_u, eta);
     }
     pub fn flags(&self) -> LobeFlags {
         LobeFlags::GLOSSY_REFLECTION | LobeFlags::DIFFUSE_REFLECTION
