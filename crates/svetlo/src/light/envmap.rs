@@ -80,7 +80,21 @@ impl EnvMap {
 
     /// Radiance arriving from direction `w` (pointing away from the scene).
     pub fn eval(&self, w: Vec3) -> Rgb {
-        let (g, _) = self.dir_to_grid(w);
+        self.eval_grid(self.dir_to_grid(w).0)
+    }
+
+    /// [`Self::eval`] and, where `with_pdf` and the radiance is not black, [`Self::pdf`] of
+    /// the same direction (else 0), the direction located once: the same values as the two.
+    pub fn eval_pdf(&self, w: Vec3, with_pdf: bool) -> (Rgb, f32) {
+        let (g, sin_t) = self.dir_to_grid(w);
+        let le = self.eval_grid(g);
+        if !with_pdf || le.is_black() || sin_t <= 0.0 {
+            return (le, 0.0);
+        }
+        (le, self.dist.pdf(g) / (2.0 * PI * PI * sin_t))
+    }
+
+    fn eval_grid(&self, g: Vec2) -> Rgb {
         let (ix, iy, fx, fy) = locate(g, self.cols, self.rows);
         let stride = self.cols + 1;
         let at = |x: usize, y: usize| self.grid[y * stride + x];
@@ -234,6 +248,22 @@ mod tests {
             }
         }
         assert!((s / (n * n) as f64 - 1.0).abs() < 1e-4, "{}", s / (n * n) as f64);
+    }
+
+    #[test]
+    fn eval_pdf_is_eval_and_pdf() {
+        let (w, h) = (16usize, 8usize);
+        let data: Vec<Rgb> = (0..w * h).map(|i| Rgb::new((i % 7) as f32, (i % 3) as f32 * 0.5, if i % 5 == 0 { 0.0 } else { 1.0 })).collect();
+        let env = EnvMap::new(Arc::new(Bitmap::new(w, h, data)), Mat4::from_rotation_x(0.3), 1.5);
+        let mut rng = crate::sampling::rng::Pcg32::new(3, 4);
+        for k in 0..2000 {
+            let d = if k == 0 { Vec3::Y } else { crate::math::warp::square_to_uniform_sphere(Vec2::new(rng.next_f32(), rng.next_f32())) };
+            let (le, pdf) = env.eval_pdf(d, true);
+            assert_eq!(le, env.eval(d));
+            let want = if le.is_black() { 0.0 } else { env.pdf(d) };
+            assert_eq!(pdf.to_bits(), want.to_bits(), "{d}");
+            assert_eq!(env.eval_pdf(d, false), (le, 0.0));
+        }
     }
 
     #[test]
