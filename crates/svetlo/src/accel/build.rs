@@ -23,6 +23,8 @@ const BINS: usize = 32;
 const _: () = assert!(BINS <= 32);
 /// Subtrees smaller than this are built on the current thread.
 const PARALLEL_MIN: usize = 8 * 1024;
+/// Nodes of at least this many primitives bin into two sets of bins (see `best_split`).
+const TWO_BIN_SETS_MIN: usize = 256;
 /// Below this depth SAH splits give way to median splits, which bounds the depth
 /// (and so the traversal stack) on pathological inputs.
 const SAH_MAX_DEPTH: usize = 40;
@@ -249,10 +251,10 @@ fn split_into(p: LeafParams, boxes: &mut [Box3], order: &mut [u32], first: usize
 }
 
 /// `(((c - lo) * scale) as usize).min(BINS - 1)` on the three axes at once, with the same
-/// result: the distance `(c - lo) * scale` is non-negative or NaN (0 * inf); the minimum
-/// with BINS - 1 is taken first, keeping a NaN (`minps` returns its second operand when one
-/// is NaN), then truncation turns a NaN into i32::MIN, which goes to 0, as the saturating
-/// `as usize` turns a NaN into 0.
+/// result: the distance `(c - lo) * scale` is non-negative or NaN (0 * inf). `minps` and
+/// `maxps` return their second operand when one is NaN (or both are zeros): the minimum with
+/// BINS - 1 keeps a NaN, the maximum with 0 then turns it (and -0) into 0, as the saturating
+/// `as usize` does, and truncation of what is left, in [0, BINS - 1], is the cast's.
 #[inline(always)]
 fn bin_indices(c: Vec3A, lo: Vec3A, scale: Vec3A) -> [usize; 3] {
     let v = (c - lo) * scale;
@@ -261,12 +263,12 @@ fn bin_indices(c: Vec3A, lo: Vec3A, scale: Vec3A) -> [usize; 3] {
         use std::arch::x86_64::*;
         // SAFETY: SSE2 is part of the x86_64 baseline.
         let i = unsafe {
-            let m = _mm_min_ps(_mm_set1_ps((BINS - 1) as f32), v.into());
+            let m = _mm_max_ps(_mm_min_ps(_mm_set1_ps((BINS - 1) as f32), v.into()), _mm_setzero_ps());
             let mut out = [0i32; 4];
             _mm_storeu_si128(out.as_mut_ptr() as *mut __m128i, _mm_cvttps_epi32(m));
             out
         };
-        [i[0].max(0) as usize, i[1].max(0) as usize, i[2].max(0) as usize]
+        [i[0] as usize, i[1] as usize, i[2] as usize]
     }
     #[cfg(not(target_arch = "x86_64"))]
     {
@@ -280,11 +282,35 @@ fn bin_indices(c: Vec3A, lo: Vec3A, scale: Vec3A) -> [usize; 3] {
 fn best_split(boxes: &[Box3], lo: Vec3A, scale: Vec3A, g: usize) -> Option<(f32, usize, usize)> {
     let mut bin_b = [[Box3::EMPTY; BINS]; 3];
     let mut bin_n = [[0u32; BINS]; 3];
-    for b in boxes {
+    let mut add = |bin_b: &mut [[Box3; BINS]; 3], b: &Box3| {
         let k = bin_indices(b.center(), lo, scale);
         for axis in 0..3 {
             bin_b[axis][k[axis]] = bin_b[axis][k[axis]].union(*b);
             bin_n[axis][k[axis]] += 1;
+        }
+    };
+    if boxes.len() >= TWO_BIN_SETS_MIN {
+        // Neighbours often land in the same bin: two sets of boxes (even and odd primitives)
+        // halve the chains of unions through memory. Unions are exact in any order: the
+        // merged boxes are one set's (a zero's sign aside).
+        let mut odd_b = [[Box3::EMPTY; BINS]; 3];
+        let pairs = boxes.chunks_exact(2);
+        let rest = pairs.remainder();
+        for pair in pairs {
+            add(&mut bin_b, &pair[0]);
+            add(&mut odd_b, &pair[1]);
+        }
+        for b in rest {
+            add(&mut bin_b, b);
+        }
+        for (set, odd) in bin_b.iter_mut().zip(&odd_b) {
+            for (b, o) in set.iter_mut().zip(odd) {
+                *b = b.union(*o);
+            }
+        }
+    } else {
+        for b in boxes {
+            add(&mut bin_b, b);
         }
     }
     // ceil(n / g) without a division where g is a power of two (leaf groups are).
