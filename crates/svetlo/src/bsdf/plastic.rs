@@ -336,7 +336,7 @@ impl RoughPlastic {
         let spec = if hi > 0.0 { self.distribution.pdf_visible(wo, h) / (4.0 * hi) } else { 0.0 };
         ps * spec + (1.0 - ps) * warp::square_to_cosine_hemisphere_pdf(wi)
     }
-    pub fn sample(&self, wo: Vec3, uc: f32, u: Vec2, mode: TransportMode) -> Option<BsdfSample> {
+    pub fn sample(&self, wo: Vec3, uc: f32, u: Vec2, _mode: TransportMode) -> Option<BsdfSample> {
         if wo.z <= 0.0 {
             return None;
         }
@@ -350,11 +350,32 @@ impl RoughPlastic {
         if wi.z <= 0.0 {
             return None;
         }
-        let pdf = self.pdf(wo, wi, mode);
+        let (f, pdf) = self.eval_pdf(wo, wi);
         if !super::positive_finite(pdf) {
             return None;
         }
-        Some(BsdfSample { wi, f: self.eval(wo, wi, mode), pdf, lobe, eta: 1.0 })
+        Some(BsdfSample { wi, f, pdf, lobe, eta: 1.0 })
+    }
+    /// ([`Self::eval`], [`Self::pdf`]) with the half vector, D, G1(wo) and the coating's
+    /// transmittance toward `wo` computed once: the same values as the two calls.
+    pub(crate) fn eval_pdf(&self, wo: Vec3, wi: Vec3) -> (Rgb, f32) {
+        if wo.z <= 0.0 || wi.z <= 0.0 {
+            return (Rgb::BLACK, 0.0);
+        }
+        let h = (wo + wi).normalize();
+        let md = &self.distribution;
+        let (d, g1o) = (md.d(h), md.g1(wo, h));
+        let t = self.tables;
+        let t_o = t.transmittance_at(wo.z);
+        let ps = self.prob_specular(t_o);
+        let hi = wi.dot(h);
+        let spec_pdf = if hi > 0.0 { Microfacet::pdf_visible_given(wo, h, d, g1o) / (4.0 * hi) } else { 0.0 };
+        let pdf = ps * spec_pdf + (1.0 - ps) * warp::square_to_cosine_hemisphere_pdf(wi);
+        let f = fresnel::dielectric(wo.dot(h), self.eta).0;
+        let spec = self.specular_reflectance * (f * d * (g1o * md.g1(wi, h)) / (4.0 * wo.z * wi.z));
+        let diff =
+            base_albedo(self.diffuse_reflectance, t.internal_reflectance, self.nonlinear) * (INV_PI / (self.eta * self.eta) * t_o * t.transmittance_at(wi.z));
+        (spec + diff, pdf)
     }
     /// Hemispherical average of the diffuse lobe's albedo (for radiosity).
     pub fn diffuse_albedo(&self) -> Rgb {
