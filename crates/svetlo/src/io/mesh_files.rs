@@ -13,7 +13,7 @@ fn mesh_err(path: &Path, msg: impl std::fmt::Display) -> Error {
 }
 
 /// A mesh read from a file, with what was adapted on the way.
-#[derive(Clone, Debug)]
+#[derive(Clone)]
 pub struct LoadedMesh {
     pub mesh: TriangleMesh,
     pub warnings: Vec<String>,

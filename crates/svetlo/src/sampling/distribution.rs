@@ -96,7 +96,8 @@ impl Distribution1D {
         let g = self.guide.len();
         // A NaN u goes to entry 0, as the binary search sends it.
         let mut i = self.guide[((u * g as f32) as usize).min(g - 1)] as usize;
-        while i > 0 && !(self.cdf[i] <= u) {
+        // Down past entries above u (all of them for a NaN u: nothing compares with it).
+        while i > 0 && !matches!(self.cdf[i].partial_cmp(&u), Some(std::cmp::Ordering::Less | std::cmp::Ordering::Equal)) {
             i -= 1;
         }
         while i + 1 < self.cdf.len() && self.cdf[i + 1] <= u {
