@@ -331,6 +331,33 @@ fn obj_and_ply_round_trip() {
     }
 }
 
+/// A mesh file that several shapes name is read once and shared: each shape gets the file's
+/// mesh under its own transform, and a shape that reads it with other options
+/// (`flip_tex_coords`) gets its own reading.
+#[test]
+fn shapes_naming_one_mesh_file_each_get_it() {
+    let d = scratch("sharedobj");
+    write(&d, "quad.obj", "v 0 0 0\nv 1 0 0\nv 1 1 0\nv 0 1 0\nvt 0 0\nvt 1 0\nvt 1 1\nvt 0 0.25\nf 1/1 2/2 3/3 4/4\n");
+    let shape = |t: &str, extra: &str| {
+        format!(r#"<shape type="obj"><string name="filename" value="quad.obj"/>{extra}<transform name="to_world"><translate x="{t}"/></transform></shape>"#)
+    };
+    let body = format!("{}{}{}<emitter type=\"constant\"/>", shape("0", ""), shape("5", ""), shape("-3", r#"<boolean name="flip_tex_coords" value="false"/>"#));
+    let s = load_str(&d, &body).unwrap();
+    let (a, b, c) = (mesh(&s, 0), mesh(&s, 1), mesh(&s, 2));
+    assert_eq!(a.triangle_count(), 2);
+    assert_eq!((a.indices.clone(), a.uvs.clone()), (b.indices.clone(), b.uvs.clone()));
+    for (p, q) in a.positions.iter().zip(&b.positions) {
+        assert_eq!(*q, *p + glam::Vec3::new(5.0, 0.0, 0.0));
+    }
+    for (p, q) in a.positions.iter().zip(&c.positions) {
+        assert_eq!(*q, *p + glam::Vec3::new(-3.0, 0.0, 0.0));
+    }
+    // OBJ flips v by default; the third shape asked for the file's own v.
+    for (ua, uc) in a.uvs.iter().zip(&c.uvs) {
+        assert_eq!(ua.y, 1.0 - uc.y);
+    }
+}
+
 /// Binary and ASCII PLY give the same mesh, whatever the property types (double uvs,
 /// unsigned indices), with an element the loader does not use between vertices and faces,
 /// and a quad split into a fan.

@@ -2,14 +2,29 @@
 //! into the wide (WIDTH-ary) tree. Knows nothing of what a primitive is: it sees boxes only.
 //! Leaves are emitted through a callback that packs the primitives however the
 //! caller stores them and returns the leaf's child code.
+//!
+//! The primitives' boxes travel with the primitive order (contiguous, in SIMD registers, no
+//! lookup through the order), all three axes are binned in one pass, and the pass that
+//! partitions a node also bounds its two children (boxes and centroids): two passes over a
+//! node's primitives where there were five. The tree is the one the straightforward build
+//! (`reference`, kept for the tests) gives: the same splits, the same primitive order, the
+//! same boxes (min and max are exact, whatever the order of the unions; only the sign of a
+//! zero may differ, which no comparison sees).
 
 use super::wide::{Node, EMPTY_CHILD, LEAF_BIT, WIDTH};
 use crate::geometry::Aabb;
-use glam::Vec3;
+use glam::Vec3A;
+
+#[cfg(test)]
+mod reference;
 
 const BINS: usize = 32;
+// The split search keeps a bin's occupancy in one bit of a u32.
+const _: () = assert!(BINS <= 32);
 /// Subtrees smaller than this are built on the current thread.
 const PARALLEL_MIN: usize = 8 * 1024;
+/// Nodes of at least this many primitives bin into two sets of bins (see `best_split`).
+const TWO_BIN_SETS_MIN: usize = 256;
 /// Below this depth SAH splits give way to median splits, which bounds the depth
 /// (and so the traversal stack) on pathological inputs.
 const SAH_MAX_DEPTH: usize = 40;
@@ -33,10 +48,37 @@ enum BNode {
     Inner { bounds: [Aabb; 2], children: Box<[BNode; 2]> },
 }
 
-struct Ctx<'a> {
-    bounds: &'a [Aabb],
-    centroids: &'a [Vec3],
-    params: LeafParams,
+/// A box in SIMD registers (lanes x, y, z; w unused).
+#[derive(Clone, Copy, Debug)]
+struct Box3 {
+    min: Vec3A,
+    max: Vec3A,
+}
+
+impl Box3 {
+    const EMPTY: Box3 = Box3 { min: Vec3A::INFINITY, max: Vec3A::NEG_INFINITY };
+
+    #[inline(always)]
+    fn new(b: &Aabb) -> Box3 {
+        Box3 { min: b.min.into(), max: b.max.into() }
+    }
+    #[inline(always)]
+    fn union(self, o: Box3) -> Box3 {
+        Box3 { min: self.min.min(o.min), max: self.max.max(o.max) }
+    }
+    #[inline(always)]
+    fn grow(self, p: Vec3A) -> Box3 {
+        Box3 { min: self.min.min(p), max: self.max.max(p) }
+    }
+    /// The centroid, by the operations of [`Aabb::center`] lane by lane (the same bits).
+    #[inline(always)]
+    fn center(self) -> Vec3A {
+        0.5 * (self.min + self.max)
+    }
+    #[inline(always)]
+    fn aabb(self) -> Aabb {
+        Aabb { min: self.min.into(), max: self.max.into() }
+    }
 }
 
 /// Builds the wide tree over `bounds`. Returns the nodes (root first; none when
@@ -48,10 +90,12 @@ pub fn build_wide(bounds: &[Aabb], params: LeafParams, mut emit_leaf: impl FnMut
     if bounds.is_empty() {
         return (Vec::new(), order);
     }
-    let centroids: Vec<Vec3> = bounds.iter().map(|b| b.center()).collect();
-    let ctx = Ctx { bounds, centroids: &centroids, params };
-    let root_bounds = bounds.iter().fold(Aabb::EMPTY, |a, b| a.union(*b));
-    let root = build_rec(&ctx, &mut order, 0, root_bounds, 0);
+    let mut boxes: Vec<Box3> = bounds.iter().map(Box3::new).collect();
+    let root_box = boxes.iter().fold(Box3::EMPTY, |a, b| a.union(*b));
+    let root_centroids = boxes.iter().fold(Box3::EMPTY, |a, b| a.grow(b.center()));
+    let root_bounds = root_box.aabb();
+    let root = build_rec(params, &mut boxes, &mut order, 0, root_bounds, root_centroids, 0);
+    drop(boxes);
     let mut nodes = Vec::with_capacity(bounds.len() / 2 + 1);
     // The root is always an inner node, even over a single leaf, so that traversal starts uniformly.
     let (root_children, root_boxes) = match &root {
@@ -110,25 +154,36 @@ fn groups(n: usize, group: usize) -> f32 {
     n.div_ceil(group) as f32
 }
 
-fn build_rec(ctx: &Ctx, order: &mut [u32], first: usize, bb: Aabb, depth: usize) -> BNode {
+/// The subtree over `boxes` (and the primitive ids `order`, permuted alongside), which start
+/// at `first` in the whole order, bounded by `bb`, their centroids by `cb`.
+fn build_rec(p: LeafParams, boxes: &mut [Box3], order: &mut [u32], first: usize, bb: Aabb, cb: Box3, depth: usize) -> BNode {
     let n = order.len();
-    let p = ctx.params;
     let leaf = BNode::Leaf { start: first as u32, count: n as u32 };
     if n <= 1 {
         return leaf;
     }
-    let cb = order.iter().fold(Aabb::EMPTY, |b, &i| b.grow(ctx.centroids[i as usize]));
-    let ext = cb.extent();
-    let mut mid = n / 2;
+    let ext = cb.aabb().extent();
+    let mid = n / 2;
     if depth >= SAH_MAX_DEPTH {
         if n <= p.max_leaf {
             return leaf;
         }
+        #[cfg(test)]
+        MEDIAN_SPLITS.fetch_add(1, std::sync::atomic::Ordering::Relaxed);
         let axis = ext.max_position();
-        order.select_nth_unstable_by(mid, |&a, &b| ctx.centroids[a as usize][axis].total_cmp(&ctx.centroids[b as usize][axis]));
-        return split_at(ctx, order, first, mid, depth);
+        // The permutation that selecting on the order itself would give (same comparisons in
+        // the same places), applied to both arrays.
+        let mut idx: Vec<u32> = (0..n as u32).collect();
+        idx.select_nth_unstable_by(mid, |&a, &b| boxes[a as usize].center()[axis].total_cmp(&boxes[b as usize].center()[axis]));
+        let (old_boxes, old_order) = (boxes.to_vec(), order.to_vec());
+        for (k, &i) in idx.iter().enumerate() {
+            boxes[k] = old_boxes[i as usize];
+            order[k] = old_order[i as usize];
+        }
+        return split_folded(p, boxes, order, first, mid, depth);
     }
-    let split = best_split(ctx, order, &cb);
+    let scale = Vec3A::select(Vec3A::from(ext).cmpgt(Vec3A::ZERO), Vec3A::splat(BINS as f32) / Vec3A::from(ext), Vec3A::ZERO);
+    let split = best_split(boxes, cb.min, scale, p.group);
     let leaf_cost = groups(n, p.group);
     match split {
         Some((cost, axis, bin)) => {
@@ -137,18 +192,25 @@ fn build_rec(ctx: &Ctx, order: &mut [u32], first: usize, bb: Aabb, depth: usize)
             if n <= p.max_leaf && leaf_cost <= split_cost {
                 return leaf;
             }
-            let scale = BINS as f32 / ext[axis];
-            let lo = cb.min[axis];
+            // Partition by bin, bounding both sides (boxes and centroids) on the way.
+            let (mut lb, mut rb, mut lc, mut rc) = (Box3::EMPTY, Box3::EMPTY, Box3::EMPTY, Box3::EMPTY);
             let mut l = 0;
             for k in 0..n {
-                let c = ctx.centroids[order[k] as usize][axis];
-                if bin_index(c, lo, scale) < bin {
+                let b = boxes[k];
+                let c = b.center();
+                if bin_indices(c, cb.min, scale)[axis] < bin {
+                    boxes.swap(k, l);
                     order.swap(k, l);
                     l += 1;
+                    lb = lb.union(b);
+                    lc = lc.grow(c);
+                } else {
+                    rb = rb.union(b);
+                    rc = rc.grow(c);
                 }
             }
             if l > 0 && l < n {
-                mid = l;
+                return split_into(p, boxes, order, first, l, depth, [lb, rb], [lc, rc]);
             }
         }
         None => {
@@ -158,67 +220,255 @@ fn build_rec(ctx: &Ctx, order: &mut [u32], first: usize, bb: Aabb, depth: usize)
             }
         }
     }
-    split_at(ctx, order, first, mid, depth)
+    split_folded(p, boxes, order, first, mid, depth)
 }
 
-fn split_at(ctx: &Ctx, order: &mut [u32], first: usize, mid: usize, depth: usize) -> BNode {
+/// Median splits made (the tests check that they reach that path).
+#[cfg(test)]
+static MEDIAN_SPLITS: std::sync::atomic::AtomicUsize = std::sync::atomic::AtomicUsize::new(0);
+
+/// Splits at `mid`, bounding each side by a pass over it.
+fn split_folded(p: LeafParams, boxes: &mut [Box3], order: &mut [u32], first: usize, mid: usize, depth: usize) -> BNode {
+    let (left, right) = boxes.split_at(mid);
+    let bound = |s: &[Box3]| s.iter().fold((Box3::EMPTY, Box3::EMPTY), |(b, c), x| (b.union(*x), c.grow(x.center())));
+    let ((lb, lc), (rb, rc)) = (bound(left), bound(right));
+    split_into(p, boxes, order, first, mid, depth, [lb, rb], [lc, rc])
+}
+
+/// Builds the two children of a split at `mid`, given their boxes and centroid bounds.
+#[allow(clippy::too_many_arguments)]
+fn split_into(p: LeafParams, boxes: &mut [Box3], order: &mut [u32], first: usize, mid: usize, depth: usize, bounds: [Box3; 2], centroids: [Box3; 2]) -> BNode {
     let n = order.len();
-    let (left, right) = order.split_at_mut(mid);
-    let lb = left.iter().fold(Aabb::EMPTY, |b, &i| b.union(ctx.bounds[i as usize]));
-    let rb = right.iter().fold(Aabb::EMPTY, |b, &i| b.union(ctx.bounds[i as usize]));
+    let (lbox, rbox) = boxes.split_at_mut(mid);
+    let (lord, rord) = order.split_at_mut(mid);
+    let (lb, rb) = (bounds[0].aabb(), bounds[1].aabb());
     let (a, b) = if n >= PARALLEL_MIN {
-        rayon::join(|| build_rec(ctx, left, first, lb, depth + 1), || build_rec(ctx, right, first + mid, rb, depth + 1))
+        rayon::join(|| build_rec(p, lbox, lord, first, lb, centroids[0], depth + 1), || build_rec(p, rbox, rord, first + mid, rb, centroids[1], depth + 1))
     } else {
-        (build_rec(ctx, left, first, lb, depth + 1), build_rec(ctx, right, first + mid, rb, depth + 1))
+        (build_rec(p, lbox, lord, first, lb, centroids[0], depth + 1), build_rec(p, rbox, rord, first + mid, rb, centroids[1], depth + 1))
     };
     BNode::Inner { bounds: [lb, rb], children: Box::new([a, b]) }
 }
 
-#[inline]
-fn bin_index(c: f32, lo: f32, scale: f32) -> usize {
-    (((c - lo) * scale) as usize).min(BINS - 1)
+/// `(((c - lo) * scale) as usize).min(BINS - 1)` on the three axes at once, with the same
+/// result: the distance `(c - lo) * scale` is non-negative or NaN (0 * inf). `minps` and
+/// `maxps` return their second operand when one is NaN (or both are zeros): the minimum with
+/// BINS - 1 keeps a NaN, the maximum with 0 then turns it (and -0) into 0, as the saturating
+/// `as usize` does, and truncation of what is left, in [0, BINS - 1], is the cast's.
+#[inline(always)]
+fn bin_indices(c: Vec3A, lo: Vec3A, scale: Vec3A) -> [usize; 3] {
+    let v = (c - lo) * scale;
+    #[cfg(target_arch = "x86_64")]
+    {
+        use std::arch::x86_64::*;
+        // SAFETY: SSE2 is part of the x86_64 baseline.
+        let i = unsafe {
+            let m = _mm_max_ps(_mm_min_ps(_mm_set1_ps((BINS - 1) as f32), v.into()), _mm_setzero_ps());
+            let mut out = [0i32; 4];
+            _mm_storeu_si128(out.as_mut_ptr() as *mut __m128i, _mm_cvttps_epi32(m));
+            out
+        };
+        [i[0] as usize, i[1] as usize, i[2] as usize]
+    }
+    #[cfg(not(target_arch = "x86_64"))]
+    {
+        let one = |x: f32| (x as usize).min(BINS - 1);
+        [one(v.x), one(v.y), one(v.z)]
+    }
 }
 
-/// Best binned SAH split over the three axes: (sum of area * groups, axis, first bin of the right side).
-fn best_split(ctx: &Ctx, order: &[u32], cb: &Aabb) -> Option<(f32, usize, usize)> {
-    let ext = cb.extent();
-    let mut bin_b = [[Aabb::EMPTY; BINS]; 3];
+/// Best binned SAH split over the three axes: (sum of area * groups, axis, first bin of the
+/// right side). `lo` is the centroids' lower corner, `scale` bins per unit (0 on a flat axis).
+fn best_split(boxes: &[Box3], lo: Vec3A, scale: Vec3A, g: usize) -> Option<(f32, usize, usize)> {
+    let mut bin_b = [[Box3::EMPTY; BINS]; 3];
     let mut bin_n = [[0u32; BINS]; 3];
-    let scale = Vec3::select(ext.cmpgt(Vec3::ZERO), Vec3::splat(BINS as f32) / ext, Vec3::ZERO);
-    for &i in order {
-        let c = ctx.centroids[i as usize];
-        let b = ctx.bounds[i as usize];
+    let mut add = |bin_b: &mut [[Box3; BINS]; 3], b: &Box3| {
+        let k = bin_indices(b.center(), lo, scale);
         for axis in 0..3 {
-            let k = bin_index(c[axis], cb.min[axis], scale[axis]);
-            bin_b[axis][k] = bin_b[axis][k].union(b);
-            bin_n[axis][k] += 1;
+            bin_b[axis][k[axis]] = bin_b[axis][k[axis]].union(*b);
+            bin_n[axis][k[axis]] += 1;
+        }
+    };
+    if boxes.len() >= TWO_BIN_SETS_MIN {
+        // Neighbours often land in the same bin: two sets of boxes (even and odd primitives)
+        // halve the chains of unions through memory. Unions are exact in any order: the
+        // merged boxes are one set's (a zero's sign aside).
+        let mut odd_b = [[Box3::EMPTY; BINS]; 3];
+        let pairs = boxes.chunks_exact(2);
+        let rest = pairs.remainder();
+        for pair in pairs {
+            add(&mut bin_b, &pair[0]);
+            add(&mut odd_b, &pair[1]);
+        }
+        for b in rest {
+            add(&mut bin_b, b);
+        }
+        for (set, odd) in bin_b.iter_mut().zip(&odd_b) {
+            for (b, o) in set.iter_mut().zip(odd) {
+                *b = b.union(*o);
+            }
+        }
+    } else {
+        for b in boxes {
+            add(&mut bin_b, b);
         }
     }
-    let g = ctx.params.group;
+    // ceil(n / g) without a division where g is a power of two (leaf groups are).
+    let shift = g.is_power_of_two().then(|| g.trailing_zeros());
+    let groups_of = |n: usize| match shift {
+        Some(s) => ((n + g - 1) >> s) as f32,
+        None => groups(n, g),
+    };
     let mut best: Option<(f32, usize, usize)> = None;
     for axis in 0..3 {
-        if ext[axis] <= 0.0 {
+        // A flat axis: its scale is 0 (the extent was not positive).
+        if scale[axis] <= 0.0 {
             continue;
         }
+        let (bin_b, bin_n) = (&bin_b[axis], &bin_n[axis]);
+        let occupied = (0..BINS).fold(0u32, |m, k| m | u32::from(bin_n[k] != 0) << k);
+        // The cost of the bins from each occupied one up (bin 0 never starts a right side).
         let mut right_cost = [0.0f32; BINS];
-        let (mut acc, mut cnt) = (Aabb::EMPTY, 0usize);
-        for k in (1..BINS).rev() {
-            acc = acc.union(bin_b[axis][k]);
-            cnt += bin_n[axis][k] as usize;
-            right_cost[k] = if cnt == 0 { f32::INFINITY } else { acc.surface_area() * groups(cnt, g) };
+        let (mut acc, mut cnt) = (Box3::EMPTY, 0usize);
+        let mut m = occupied & !1;
+        while m != 0 {
+            let k = 31 - m.leading_zeros() as usize;
+            m &= !(1 << k);
+            acc = acc.union(bin_b[k]);
+            cnt += bin_n[k] as usize;
+            right_cost[k] = acc.aabb().surface_area() * groups_of(cnt);
         }
-        let (mut acc, mut cnt) = (Aabb::EMPTY, 0usize);
-        for k in 1..BINS {
-            acc = acc.union(bin_b[axis][k - 1]);
-            cnt += bin_n[axis][k - 1] as usize;
-            if cnt == 0 || !right_cost[k].is_finite() {
+        // Split candidates: between an occupied bin `a` and the next occupied one `b`, every
+        // split in a+1..=b has the same two sides, hence the same cost, and the first of equal
+        // costs wins: only a+1 is tried. An empty bin changes neither box nor count, so the
+        // unions and costs are those of a sweep over all bins.
+        let (mut acc, mut cnt) = (Box3::EMPTY, 0usize);
+        let mut m = occupied;
+        while m != 0 {
+            let a = m.trailing_zeros() as usize;
+            m &= m - 1;
+            acc = acc.union(bin_b[a]);
+            cnt += bin_n[a] as usize;
+            if m == 0 {
+                break;
+            }
+            let b = m.trailing_zeros() as usize;
+            if !right_cost[b].is_finite() {
                 continue;
             }
-            let cost = acc.surface_area() * groups(cnt, g) + right_cost[k];
-            if best.is_none_or(|b| cost < b.0) {
-                best = Some((cost, axis, k));
+            let cost = acc.aabb().surface_area() * groups_of(cnt) + right_cost[b];
+            if best.is_none_or(|x| cost < x.0) {
+                best = Some((cost, axis, a + 1));
             }
         }
     }
     best
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::sampling::rng::Pcg32;
+    use glam::Vec3;
+
+    /// Build with both builders and compare everything the caller sees: the order, the
+    /// leaves handed out (in turn), and the nodes' boxes and codes, bit for bit (a zero's sign
+    /// aside: unions in another order may pick the other zero).
+    fn same_tree(bounds: &[Aabb], params: LeafParams) {
+        let mut leaves_new = Vec::new();
+        let (nodes_new, order_new) = build_wide(bounds, params, |s| {
+            leaves_new.push(s.to_vec());
+            leaf_code_for_test(leaves_new.len())
+        });
+        let mut leaves_old = Vec::new();
+        let (nodes_old, order_old) = reference::build_wide_reference(bounds, params, |s| {
+            leaves_old.push(s.to_vec());
+            leaf_code_for_test(leaves_old.len())
+        });
+        assert_eq!(order_new, order_old);
+        assert_eq!(leaves_new, leaves_old);
+        assert_eq!(nodes_new.len(), nodes_old.len());
+        for (a, b) in nodes_new.iter().zip(&nodes_old) {
+            assert_eq!(a.bits_for_test(), b.bits_for_test());
+        }
+    }
+
+    fn leaf_code_for_test(k: usize) -> u32 {
+        super::super::wide::leaf_code(k, 1)
+    }
+
+    fn tri_box(rng: &mut Pcg32, center: Vec3, size: f32) -> Aabb {
+        let mut v = || center + size * Vec3::new(rng.next_f32() - 0.5, rng.next_f32() - 0.5, rng.next_f32() - 0.5);
+        Aabb::from_points(&[v(), v(), v()])
+    }
+
+    #[test]
+    fn same_tree_as_the_reference_build() {
+        let tri = LeafParams { group: 8, max_leaf: 16, traversal_cost: 0.15 };
+        let one = LeafParams { group: 1, max_leaf: 4, traversal_cost: 1.0 };
+        let odd = LeafParams { group: 3, max_leaf: 12, traversal_cost: 0.5 };
+        let mut rng = Pcg32::new(7, 3);
+        // A soup, large enough for the parallel split.
+        let point = |rng: &mut Pcg32| Vec3::new(rng.next_f32(), rng.next_f32(), rng.next_f32());
+        let soup: Vec<Aabb> = (0..20_000)
+            .map(|_| {
+                let c = point(&mut rng) * 10.0;
+                tri_box(&mut rng, c, 0.3)
+            })
+            .collect();
+        // Clusters of small triangles (meshes placed apart), on a plane (a flat axis), and
+        // with corners on zeros of both signs.
+        let mut clusters = Vec::new();
+        for c in 0..12 {
+            let center = Vec3::new(0.0, 3.0 * c as f32 - 18.0, (c % 3) as f32);
+            for _ in 0..700 {
+                let c = center + point(&mut rng) - 0.5;
+                clusters.push(tri_box(&mut rng, c, 0.05));
+            }
+        }
+        let flat: Vec<Aabb> = (0..3000)
+            .map(|i| {
+                let x = rng.next_f32() * 4.0;
+                let z = if i % 2 == 0 { 0.0 } else { -0.0 };
+                Aabb { min: Vec3::new(x, rng.next_f32(), z), max: Vec3::new(x + 0.01, rng.next_f32() + 1.0, -z) }
+            })
+            .collect();
+        // Identical boxes (no split by centroid), and a geometric series that runs the SAH
+        // past its depth limit into median splits.
+        let same = vec![Aabb { min: Vec3::ZERO, max: Vec3::ONE }; 100];
+        let deep: Vec<Aabb> = (0..400).map(|i| Aabb::from_points(&[Vec3::splat(0.8f32.powi(i)), Vec3::splat(0.8f32.powi(i) * 1.001)])).collect();
+        for set in [&soup, &clusters, &flat, &same, &deep] {
+            for params in [tri, one, odd] {
+                same_tree(set, params);
+            }
+        }
+        assert!(MEDIAN_SPLITS.load(std::sync::atomic::Ordering::Relaxed) > 0, "the deep set did not reach the median splits");
+        same_tree(&soup[..1], tri);
+        same_tree(&[], tri);
+    }
+
+    #[test]
+    fn bin_indices_match_the_saturating_cast() {
+        let scalar = |c: f32, lo: f32, scale: f32| (((c - lo) * scale) as usize).min(BINS - 1);
+        let cases = [
+            (0.0f32, 0.0f32, 0.0f32),
+            (-0.0, 0.0, 3.0),
+            (1.0, 0.0, 31.9),
+            (1.0, 0.0, 32.0),
+            (5.0, 1.0, 1e30),
+            (0.0, 0.0, f32::INFINITY),
+            (1e-30, 0.0, f32::INFINITY),
+            (2.0, 1.0, 31.0),
+        ];
+        for &(c, lo, scale) in &cases {
+            let got = bin_indices(Vec3A::splat(c), Vec3A::splat(lo), Vec3A::splat(scale));
+            assert_eq!(got, [scalar(c, lo, scale); 3], "c {c} lo {lo} scale {scale}");
+        }
+        let mut rng = Pcg32::new(1, 1);
+        for _ in 0..100_000 {
+            let (lo, c, scale) = (rng.next_f32() * 10.0 - 5.0, rng.next_f32() * 10.0, rng.next_f32() * 40.0);
+            let c = lo + c;
+            assert_eq!(bin_indices(Vec3A::splat(c), Vec3A::splat(lo), Vec3A::splat(scale))[1], scalar(c, lo, scale));
+        }
+    }
 }

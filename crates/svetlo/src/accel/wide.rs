@@ -60,6 +60,12 @@ impl Node {
         n
     }
 
+    /// The planes' bits (a zero's sign aside) and the child codes, for comparing trees.
+    #[cfg(test)]
+    pub(super) fn bits_for_test(&self) -> (Vec<u32>, [u32; WIDTH]) {
+        (self.planes.iter().flatten().flat_map(|v| v.to_array()).map(|x| (x + 0.0).to_bits()).collect(), self.children)
+    }
+
     /// Union of the children's boxes.
     pub fn bounds(&self) -> Aabb {
         let mut b = Aabb::EMPTY;

@@ -73,7 +73,7 @@ impl RoughConductor {
         // Visible-normal density times the Jacobian of reflection, 1 / (4 wi.m).
         self.distribution.pdf_visible(wo, m) / (4.0 * wm)
     }
-    pub fn sample(&self, wo: Vec3, _uc: f32, u: Vec2, mode: TransportMode) -> Option<BsdfSample> {
+    pub fn sample(&self, wo: Vec3, _uc: f32, u: Vec2, _mode: TransportMode) -> Option<BsdfSample> {
         if wo.z <= 0.0 {
             return None;
         }
@@ -82,10 +82,29 @@ impl RoughConductor {
         if wi.z <= 0.0 {
             return None;
         }
-        let pdf = self.pdf(wo, wi, mode);
+        let (f, pdf) = self.eval_pdf(wo, wi);
         if !super::positive_finite(pdf) {
             return None;
         }
-        Some(BsdfSample { wi, f: self.eval(wo, wi, mode), pdf, lobe: LobeFlags::GLOSSY_REFLECTION, eta: 1.0 })
+        Some(BsdfSample { wi, f, pdf, lobe: LobeFlags::GLOSSY_REFLECTION, eta: 1.0 })
+    }
+
+    /// ([`Self::eval`], [`Self::pdf`]) with the half vector, D and G1(wo) computed once: the
+    /// same values as the two calls.
+    pub(crate) fn eval_pdf(&self, wo: Vec3, wi: Vec3) -> (Rgb, f32) {
+        if wo.z <= 0.0 || wi.z <= 0.0 {
+            return (Rgb::BLACK, 0.0);
+        }
+        let m = (wo + wi).normalize();
+        let md = &self.distribution;
+        let d = md.d(m);
+        let g1o = md.g1(wo, m);
+        let wm = wi.dot(m);
+        let pdf = if wm <= 0.0 { 0.0 } else { Microfacet::pdf_visible_given(wo, m, d, g1o) / (4.0 * wm) };
+        if d == 0.0 {
+            return (Rgb::BLACK, pdf);
+        }
+        let g = g1o * md.g1(wi, m);
+        (fresnel::conductor(wo.dot(m), self.eta, self.k) * self.specular_reflectance * (d * g / (4.0 * wo.z * wi.z)), pdf)
     }
 }

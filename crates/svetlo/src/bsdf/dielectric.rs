@@ -139,11 +139,40 @@ impl RoughDielectric {
         if wi.z == 0.0 || is_reflection != (lobe == LobeFlags::GLOSSY_REFLECTION) {
             return None;
         }
-        let pdf = self.pdf(wo, wi, mode);
+        let (f, pdf) = self.eval_pdf(wo, wi, mode);
         if !super::positive_finite(pdf) {
             return None;
         }
-        Some(BsdfSample { wi, f: self.eval(wo, wi, mode), pdf, lobe, eta })
+        Some(BsdfSample { wi, f, pdf, lobe, eta })
+    }
+
+    /// ([`Self::eval`], [`Self::pdf`]) with the half vector, D, G1(wo) and the Fresnel term
+    /// computed once: the same values as the two calls. (G1 is even in its direction, so the
+    /// density's G1 of wo mirrored to +z is eval's G1 of wo.)
+    pub(crate) fn eval_pdf(&self, wo: Vec3, wi: Vec3, mode: TransportMode) -> (Rgb, f32) {
+        if wo.z == 0.0 || wi.z == 0.0 {
+            return (Rgb::BLACK, 0.0);
+        }
+        let Some((m, eta, reflect)) = half_vector(wo, wi, self.eta) else { return (Rgb::BLACK, 0.0) };
+        let md = &self.distribution;
+        let d = md.d(m);
+        let g1o = md.g1(wo, m);
+        let (om, im) = (wo.dot(m), wi.dot(m));
+        let (f, ..) = fresnel::dielectric(om, self.eta);
+        // The density.
+        let jac = if reflect { 1.0 / (4.0 * im.abs()) } else { eta * eta * im.abs() / ((om + eta * im) * (om + eta * im)) };
+        let p = Microfacet::pdf_visible_given(wo * wo.z.signum(), m, d, g1o) * if reflect { f } else { 1.0 - f } * jac;
+        let pdf = if p.is_finite() { p } else { 0.0 };
+        // The value.
+        let g = g1o * md.g1(wi, m);
+        let value = if reflect {
+            self.specular_reflectance * (f * d * g / (4.0 * wo.z.abs() * wi.z.abs()))
+        } else {
+            let denom = om + eta * im;
+            let v = radiance_scale(mode, 1.0 / eta) * (1.0 - f) * d * g * eta * eta * (om * im).abs() / ((wo.z * wi.z).abs() * denom * denom);
+            self.specular_transmittance * if v.is_finite() { v } else { 0.0 }
+        };
+        (value, pdf)
     }
 }
 

@@ -374,6 +374,27 @@ impl Material {
         }
     }
 
+    /// Build now the tables that this material's BSDFs look up at every hit (rough plastic's
+    /// coating albedos, where the roughness is a constant): scene loading calls it, so that
+    /// the render does not pay for them at its first hits (Mitsuba builds them when it
+    /// loads the plugin). Tables are built once per process; a textured roughness still
+    /// builds its tables on first use.
+    pub fn prepare_tables(&self) {
+        match self {
+            Material::Plastic { eta, roughness: Some(r), .. } => {
+                if let Texture::Constant(_) = r.alpha_u {
+                    RoughPlastic::prepare_tables(r.kind, r.alpha_u.eval_f32(TexPoint::default()), *eta);
+                }
+            }
+            Material::TwoSided { front: a, back: b } | Material::Mix { a, b, .. } | Material::Blend { a, b, .. } => {
+                a.prepare_tables();
+                b.prepare_tables();
+            }
+            Material::Mask { inner, .. } | Material::NormalMap { inner, .. } | Material::BumpMap { inner, .. } => inner.prepare_tables(),
+            _ => {}
+        }
+    }
+
     /// Does the material perturb the shading frame (a normal or bump map, outermost or
     /// under `twosided` / `mask`)? Then its BSDF needs [`Self::bsdf_with_detail`].
     pub fn has_detail(&self) -> bool {
@@ -486,5 +507,35 @@ impl Material {
             Material::Principled(p) => out.extend(p.textures_mut()),
         }
         out
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// Preparing a material builds the coating tables of the rough plastics inside it, which
+    /// its BSDFs then use; a textured roughness is left for its first use.
+    #[test]
+    fn prepare_tables_builds_rough_plastic_tables() {
+        // Roughness and IOR used by no other test, so that nothing else built these tables.
+        let (kind, alpha, eta) = (MicrofacetKind::Beckmann, 0.3217f32, 1.4321f32);
+        let plastic = |alpha: Texture| Material::Plastic {
+            diffuse_reflectance: Texture::Constant(Rgb::splat(0.5)),
+            specular_reflectance: Texture::Constant(Rgb::WHITE),
+            eta,
+            nonlinear: false,
+            roughness: Some(Roughness { kind, alpha_u: alpha.clone(), alpha_v: alpha }),
+        };
+        let m = Material::TwoSided { front: Box::new(plastic(Texture::Constant(Rgb::splat(alpha)))), back: Box::new(Material::default()) };
+        assert!(plastic::cached_tables(kind, alpha, eta).is_none());
+        m.prepare_tables();
+        let built = plastic::cached_tables(kind, alpha, eta).expect("tables built by prepare_tables");
+        let BsdfModel::RoughPlastic(rp) = m.bsdf(glam::Vec2::new(0.3, 0.7)).front else { panic!("not a rough plastic") };
+        assert!(std::ptr::eq(rp.tables, built));
+        // Not constant: nothing to prepare.
+        let checker = Texture::Checkerboard { color0: Rgb::splat(0.61), color1: Rgb::splat(0.62), to_uv: Default::default() };
+        plastic(checker).prepare_tables();
+        assert!(plastic::cached_tables(kind, 0.61, eta).is_none() && plastic::cached_tables(kind, 0.62, eta).is_none());
     }
 }

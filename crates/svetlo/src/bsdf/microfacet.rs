@@ -94,6 +94,20 @@ impl Microfacet {
         self.d(m) * self.g1(v, m) * vm / v.z
     }
 
+    /// [`Self::pdf_visible`] given `d` = D(m) and `g1` = G1(v, m), which a caller that also
+    /// evaluates the BSDF has computed already: the same value.
+    #[inline]
+    pub(crate) fn pdf_visible_given(v: Vec3, m: Vec3, d: f32, g1: f32) -> f32 {
+        if v.z <= 0.0 {
+            return 0.0;
+        }
+        let vm = v.dot(m);
+        if vm <= 0.0 {
+            return 0.0;
+        }
+        d * g1 * vm / v.z
+    }
+
     /// Draw a microfacet normal visible from `v` (upper hemisphere), proportional to
     /// D(m) G1(v, m) max(0, v.m).
     pub fn sample_visible(&self, v: Vec3, u: Vec2) -> Vec3 {

@@ -434,6 +434,37 @@ fn model_delta_probability(m: &BsdfModel, wo: Vec3, lobe: LobeFlags) -> f32 {
 mod tests {
     use super::*;
 
+    /// The rough models' fused evaluation (value and density together, as `sample` uses it)
+    /// gives the bits of `eval` and `pdf` called apart, on both sides and in both modes.
+    #[test]
+    fn fused_eval_pdf_is_eval_and_pdf() {
+        let mut rng = crate::sampling::rng::Pcg32::new(11, 2);
+        let dir = |rng: &mut crate::sampling::rng::Pcg32| crate::math::warp::square_to_uniform_sphere(Vec2::new(rng.next_f32(), rng.next_f32()));
+        for kind in [MicrofacetKind::Beckmann, MicrofacetKind::Ggx] {
+            for alpha in [0.02f32, 0.1, 0.5] {
+                let md = microfacet::Microfacet::new(kind, alpha, alpha);
+                let c =
+                    conductor::RoughConductor { distribution: md, eta: Rgb::new(0.2, 0.9, 1.1), k: Rgb::new(3.9, 2.4, 2.2), specular_reflectance: Rgb::WHITE };
+                let p = plastic::RoughPlastic::new(kind, alpha, Rgb::new(0.1, 0.27, 0.36), Rgb::WHITE, 1.9, false, 0.4);
+                let d = dielectric::RoughDielectric { distribution: md, eta: 1.5, specular_reflectance: Rgb::WHITE, specular_transmittance: Rgb::splat(0.9) };
+                for _ in 0..3000 {
+                    let (wo, wi) = (dir(&mut rng), dir(&mut rng));
+                    let bits = |(f, pdf): (Rgb, f32)| (f.r.to_bits(), f.g.to_bits(), f.b.to_bits(), pdf.to_bits());
+                    let m = TransportMode::Radiance;
+                    assert_eq!(bits(c.eval_pdf(wo, wi)), bits((c.eval(wo, wi, m), c.pdf(wo, wi, m))), "conductor {kind:?} {alpha} {wo} {wi}");
+                    assert_eq!(bits(p.eval_pdf(wo, wi)), bits((p.eval(wo, wi, m), p.pdf(wo, wi, m))), "plastic {kind:?} {alpha} {wo} {wi}");
+                    for m in [TransportMode::Radiance, TransportMode::Importance] {
+                        assert_eq!(bits(d.eval_pdf(wo, wi, m)), bits((d.eval(wo, wi, m), d.pdf(wo, wi, m))), "dielectric {kind:?} {alpha} {wo} {wi}");
+                    }
+                    // Pairs that sampling produces (reflections and refractions about one normal).
+                    let wi_r = fresnel::reflect_z(wo);
+                    assert_eq!(bits(d.eval_pdf(wo, wi_r, m)), bits((d.eval(wo, wi_r, m), d.pdf(wo, wi_r, m))));
+                    assert_eq!(bits(c.eval_pdf(wo, wi_r)), bits((c.eval(wo, wi_r, m), c.pdf(wo, wi_r, m))));
+                }
+            }
+        }
+    }
+
     /// `sample_delta` gives each delta lobe's own weight and its choice probability: their
     /// ratio is what `sample` reports, and the probabilities of a model's lobes sum to one.
     #[test]

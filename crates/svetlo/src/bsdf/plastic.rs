@@ -157,24 +157,41 @@ impl CoatingTables {
     /// The tables for this coating, computed once per process and roughness (quantised to
     /// ~1e-4 relative, which bounds the cache for textured roughness).
     pub fn get(kind: MicrofacetKind, alpha: f32, eta: f32) -> &'static CoatingTables {
-        type Key = (u8, u32, u32);
         thread_local! {
-            static LOCAL: RefCell<HashMap<Key, &'static CoatingTables>> = RefCell::new(HashMap::new());
+            static LOCAL: RefCell<HashMap<TableKey, &'static CoatingTables>> = RefCell::new(HashMap::new());
         }
-        static GLOBAL: OnceLock<Mutex<HashMap<Key, &'static CoatingTables>>> = OnceLock::new();
-        let alpha = f32::from_bits(alpha.max(super::microfacet::MIN_ALPHA).to_bits() & !0x3ff);
-        let key = (kind as u8, alpha.to_bits(), eta.to_bits());
+        let (key, alpha) = table_key(kind, alpha, eta);
         if let Some(t) = LOCAL.with(|l| l.borrow().get(&key).copied()) {
             return t;
         }
         let t = {
-            let mut g = GLOBAL.get_or_init(|| Mutex::new(HashMap::new())).lock().unwrap_or_else(|e| e.into_inner());
+            let mut g = global_tables().lock().unwrap_or_else(|e| e.into_inner());
             // Leaked on purpose: a handful of small tables live as long as the process.
             *g.entry(key).or_insert_with(|| Box::leak(Box::new(CoatingTables::compute(kind, alpha, eta))))
         };
         LOCAL.with(|l| l.borrow_mut().insert(key, t));
         t
     }
+}
+
+type TableKey = (u8, u32, u32);
+
+/// The key of a coating's tables and the roughness they are computed for.
+fn table_key(kind: MicrofacetKind, alpha: f32, eta: f32) -> (TableKey, f32) {
+    let alpha = f32::from_bits(alpha.max(super::microfacet::MIN_ALPHA).to_bits() & !0x3ff);
+    ((kind as u8, alpha.to_bits(), eta.to_bits()), alpha)
+}
+
+/// Every thread's tables, built once per process.
+fn global_tables() -> &'static Mutex<HashMap<TableKey, &'static CoatingTables>> {
+    static GLOBAL: OnceLock<Mutex<HashMap<TableKey, &'static CoatingTables>>> = OnceLock::new();
+    GLOBAL.get_or_init(|| Mutex::new(HashMap::new()))
+}
+
+/// The tables of this coating if some thread built them already.
+#[cfg(test)]
+pub(crate) fn cached_tables(kind: MicrofacetKind, alpha: f32, eta: f32) -> Option<&'static CoatingTables> {
+    global_tables().lock().unwrap_or_else(|e| e.into_inner()).get(&table_key(kind, alpha, eta).0).copied()
 }
 
 /// ∫ over visible normals of (1 - F) G1(wt) (transmission) or F G1(wr) (reflection) for
@@ -284,6 +301,12 @@ impl RoughPlastic {
         let tables = CoatingTables::get(kind, distribution.alpha_u, eta);
         RoughPlastic { distribution, diffuse_reflectance, specular_reflectance, eta, nonlinear, specular_sampling_weight, tables }
     }
+    /// Build the coating tables that [`Self::new`] will look up for this roughness and IOR
+    /// (once per process): at scene load, as Mitsuba builds them when it loads the plugin,
+    /// rather than at the first hit, inside the render.
+    pub fn prepare_tables(kind: MicrofacetKind, alpha: f32, eta: f32) {
+        CoatingTables::get(kind, Microfacet::new(kind, alpha, alpha).alpha_u, eta);
+    }
     pub fn flags(&self) -> LobeFlags {
         LobeFlags::GLOSSY_REFLECTION | LobeFlags::DIFFUSE_REFLECTION
     }
@@ -313,7 +336,7 @@ impl RoughPlastic {
         let spec = if hi > 0.0 { self.distribution.pdf_visible(wo, h) / (4.0 * hi) } else { 0.0 };
         ps * spec + (1.0 - ps) * warp::square_to_cosine_hemisphere_pdf(wi)
     }
-    pub fn sample(&self, wo: Vec3, uc: f32, u: Vec2, mode: TransportMode) -> Option<BsdfSample> {
+    pub fn sample(&self, wo: Vec3, uc: f32, u: Vec2, _mode: TransportMode) -> Option<BsdfSample> {
         if wo.z <= 0.0 {
             return None;
         }
@@ -327,11 +350,32 @@ impl RoughPlastic {
         if wi.z <= 0.0 {
             return None;
         }
-        let pdf = self.pdf(wo, wi, mode);
+        let (f, pdf) = self.eval_pdf(wo, wi);
         if !super::positive_finite(pdf) {
             return None;
         }
-        Some(BsdfSample { wi, f: self.eval(wo, wi, mode), pdf, lobe, eta: 1.0 })
+        Some(BsdfSample { wi, f, pdf, lobe, eta: 1.0 })
+    }
+    /// ([`Self::eval`], [`Self::pdf`]) with the half vector, D, G1(wo) and the coating's
+    /// transmittance toward `wo` computed once: the same values as the two calls.
+    pub(crate) fn eval_pdf(&self, wo: Vec3, wi: Vec3) -> (Rgb, f32) {
+        if wo.z <= 0.0 || wi.z <= 0.0 {
+            return (Rgb::BLACK, 0.0);
+        }
+        let h = (wo + wi).normalize();
+        let md = &self.distribution;
+        let (d, g1o) = (md.d(h), md.g1(wo, h));
+        let t = self.tables;
+        let t_o = t.transmittance_at(wo.z);
+        let ps = self.prob_specular(t_o);
+        let hi = wi.dot(h);
+        let spec_pdf = if hi > 0.0 { Microfacet::pdf_visible_given(wo, h, d, g1o) / (4.0 * hi) } else { 0.0 };
+        let pdf = ps * spec_pdf + (1.0 - ps) * warp::square_to_cosine_hemisphere_pdf(wi);
+        let f = fresnel::dielectric(wo.dot(h), self.eta).0;
+        let spec = self.specular_reflectance * (f * d * (g1o * md.g1(wi, h)) / (4.0 * wo.z * wi.z));
+        let diff =
+            base_albedo(self.diffuse_reflectance, t.internal_reflectance, self.nonlinear) * (INV_PI / (self.eta * self.eta) * t_o * t.transmittance_at(wi.z));
+        (spec + diff, pdf)
     }
     /// Hemispherical average of the diffuse lobe's albedo (for radiosity).
     pub fn diffuse_albedo(&self) -> Rgb {

@@ -95,6 +95,13 @@ impl TriangleMesh {
     /// hits then need no interpolation or normalisation. `None` for smooth-shaded triangles.
     pub fn flat_shading(&self, tri: usize) -> Option<(Vec3, crate::math::Frame)> {
         let idx = self.indices[tri].map(|i| i as usize);
+        // Smooth-shaded (the common case of a mesh with normals): nothing more to compute.
+        if !self.normals.is_empty() {
+            let [n0, n1, n2] = idx.map(|i| self.normals[i]);
+            if n0 != n1 || n0 != n2 {
+                return None;
+            }
+        }
         let [p0, p1, p2] = idx.map(|i| self.positions[i]);
         let ng = (p1 - p0).cross(p2 - p0).normalize_or_zero();
         let ns = if self.normals.is_empty() {

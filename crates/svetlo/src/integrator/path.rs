@@ -209,11 +209,11 @@ pub(crate) fn camera_walk<R: WalkRules + ?Sized>(
             if !hide {
                 for &ei in &scene.environment_lights {
                     let light = &scene.lights[ei as usize];
-                    let le = light.le_escaped(ray.d);
+                    let (le, pdf_light) = light.le_pdf_escaped(ray.d, prev.is_some());
                     if le.is_black() {
                         continue;
                     }
-                    let w = prev.as_ref().map_or(1.0, |v| power_heuristic(1.0, v.pdf, 1.0, scene.light_pmf(ei) * light.pdf_li_escaped(ray.d)));
+                    let w = prev.as_ref().map_or(1.0, |v| power_heuristic(1.0, v.pdf, 1.0, scene.light_pmf(ei) * pdf_light));
                     l += beta * le * w;
                     layers.add(events.ends(Event::BACKGROUND), beta * le * w);
                 }

@@ -13,6 +13,7 @@ fn mesh_err(path: &Path, msg: impl std::fmt::Display) -> Error {
 }
 
 /// A mesh read from a file, with what was adapted on the way.
+#[derive(Clone)]
 pub struct LoadedMesh {
     pub mesh: TriangleMesh,
     pub warnings: Vec<String>,
@@ -84,9 +85,7 @@ pub fn load_obj(path: &Path, flip_tex_coords: bool) -> Result<LoadedMesh> {
 fn check_obj(bytes: &[u8], path: &Path) -> Result<()> {
     // Vertices, texture coordinates and normals defined so far, and face corners in all.
     let (mut counts, mut corners) = ([0i64; 3], 0u64);
-    for (ln, line) in bytes.split(|&b| b == b'\n').enumerate() {
-        let line = String::from_utf8_lossy(line);
-        let mut tok = line.split_whitespace();
+    let mut check = |ln: usize, tok: &mut dyn Iterator<Item = &str>| -> Result<()> {
         match tok.next() {
             Some("v") => counts[0] += 1,
             Some("vt") => counts[1] += 1,
@@ -94,7 +93,7 @@ fn check_obj(bytes: &[u8], path: &Path) -> Result<()> {
             Some("f") | Some("l") | Some("p") => {
                 for corner in tok {
                     corners += 1;
-                    for (k, idx) in corner.split('/').enumerate().take(3) {
+                    for (k, idx) in slash_split(corner).enumerate().take(3) {
                         if idx.is_empty() && k > 0 {
                             continue;
                         }
@@ -113,6 +112,21 @@ fn check_obj(bytes: &[u8], path: &Path) -> Result<()> {
             }
             _ => {}
         }
+        Ok(())
+    };
+    match std::str::from_utf8(bytes).ok().filter(|t| t.is_ascii()) {
+        // ASCII text (the common case), split without decoding characters: the same words.
+        Some(text) => {
+            for (ln, line) in text.split('\n').enumerate() {
+                check(ln, &mut AsciiWords::new(line))?;
+            }
+        }
+        None => {
+            for (ln, line) in bytes.split(|&b| b == b'\n').enumerate() {
+                let line = String::from_utf8_lossy(line);
+                check(ln, &mut line.split_whitespace())?;
+            }
+        }
     }
     // Unindexed, every corner may become its own vertex (position, normal, uv, index).
     let bytes_needed = corners.saturating_mul(4 + 32).saturating_add((counts[0] as u64 + counts[2] as u64) * 12 + counts[1] as u64 * 8);
@@ -122,10 +136,14 @@ fn check_obj(bytes: &[u8], path: &Path) -> Result<()> {
 /// [`load_obj`] for a file held in memory; `path` names it in errors.
 pub fn load_obj_bytes(bytes: &[u8], path: &Path, flip_tex_coords: bool) -> Result<LoadedMesh> {
     check_obj(bytes, path)?;
-    let mut reader = std::io::Cursor::new(bytes);
-    let opts = tobj::LoadOptions { single_index: true, triangulate: true, ignore_points: true, ignore_lines: true };
-    let (models, _) =
-        tobj::load_obj_buf(&mut reader, &opts, |_| Ok((Vec::new(), Default::default()))).map_err(|e| mesh_err(path, format!("invalid OBJ: {e}")))?;
+    let models = match obj_single_object(bytes) {
+        Some(mesh) => vec![tobj::Model::new(mesh, String::new())],
+        None => {
+            let mut reader = std::io::Cursor::new(bytes);
+            let opts = tobj::LoadOptions { single_index: true, triangulate: true, ignore_points: true, ignore_lines: true };
+            tobj::load_obj_buf(&mut reader, &opts, |_| Ok((Vec::new(), Default::default()))).map_err(|e| mesh_err(path, format!("invalid OBJ: {e}")))?.0
+        }
+    };
     let mut mesh = TriangleMesh::default();
     let mut warnings = Vec::new();
     let (mut all_uv, mut all_n) = (true, true);
@@ -169,6 +187,168 @@ pub fn load_obj_bytes(bytes: &[u8], path: &Path, flip_tex_coords: bool) -> Resul
         return Err(mesh_err(path, "the OBJ file has no faces"));
     }
     Ok(LoadedMesh { mesh, warnings, attributes: Vec::new() })
+}
+
+/// `char::is_whitespace` on ASCII (vertical tab included): how the OBJ reader splits words.
+#[inline]
+fn obj_space(b: u8) -> bool {
+    b == b' ' || (b'\t'..=b'\r').contains(&b)
+}
+
+/// `s.split('/')`, found byte by byte: the same pieces ('/' is one byte, never inside a
+/// character), without the general searcher's set-up for every corner of every face.
+fn slash_split(s: &str) -> impl Iterator<Item = &str> {
+    let mut rest = Some(s);
+    std::iter::from_fn(move || {
+        let r = rest?;
+        match r.bytes().position(|c| c == b'/') {
+            Some(k) => {
+                rest = r.get(k + 1..);
+                r.get(..k)
+            }
+            None => rest.take(),
+        }
+    })
+}
+
+/// The words of an ASCII line: `split_whitespace` without decoding characters.
+struct AsciiWords<'a> {
+    s: &'a str,
+    i: usize,
+}
+
+impl<'a> AsciiWords<'a> {
+    fn new(s: &'a str) -> Self {
+        AsciiWords { s, i: 0 }
+    }
+}
+
+impl<'a> Iterator for AsciiWords<'a> {
+    type Item = &'a str;
+    #[inline]
+    fn next(&mut self) -> Option<&'a str> {
+        let b = self.s.as_bytes();
+        while self.i < b.len() && obj_space(b[self.i]) {
+            self.i += 1;
+        }
+        if self.i == b.len() {
+            return None;
+        }
+        let start = self.i;
+        while self.i < b.len() && !obj_space(b[self.i]) {
+            self.i += 1;
+        }
+        // Both ends sit on ASCII bytes, hence on character boundaries.
+        self.s.get(start..self.i)
+    }
+}
+
+/// The common OBJ file read without the general reader (`tobj`): ASCII, one object (no `o`
+/// or `g` after the first face, no material change), positions of three coordinates, faces
+/// (`f`) of three corners or more. It gives what `tobj` gives for such a file with the
+/// options [`load_obj_bytes`] passes (a single index in order of first use of each
+/// corner's position/uv/normal triple, polygons as fans, relative indices, the uvs and
+/// normals of the whole file), and `None` for any other file or any line it would not read
+/// the same way, which `tobj` then reads (or refuses) as before. No per-line allocation or
+/// hashing: the corner triples of a position chain from it.
+fn obj_single_object(bytes: &[u8]) -> Option<tobj::Mesh> {
+    const MISSING: usize = usize::MAX;
+    // ASCII, hence UTF-8.
+    let text = std::str::from_utf8(bytes).ok().filter(|t| t.is_ascii())?;
+    let (mut pos, mut tex, mut nor) = (Vec::<f32>::new(), Vec::<f32>::new(), Vec::<f32>::new());
+    // Corners in the order tobj adds them (faces already fanned into triangles).
+    let mut corners: Vec<[usize; 3]> = Vec::new();
+    let mut face: Vec<[usize; 3]> = Vec::new();
+    for line in text.split('\n') {
+        let mut words = AsciiWords::new(line);
+        let floats = |words: &mut dyn Iterator<Item = &str>, out: &mut Vec<f32>, n: usize| -> Option<()> {
+            for _ in 0..n {
+                out.push(words.next()?.parse::<f32>().ok()?);
+            }
+            Some(())
+        };
+        match words.next() {
+            None | Some("#") => {}
+            Some("v") => {
+                floats(&mut words, &mut pos, 3)?;
+                // A w or a colour: tobj's own rules.
+                if words.next().is_some() {
+                    return None;
+                }
+            }
+            Some("vt") => floats(&mut words, &mut tex, 2)?,
+            Some("vn") => floats(&mut words, &mut nor, 3)?,
+            Some("f") => {
+                face.clear();
+                let sizes = [pos.len() / 3, tex.len() / 2, nor.len() / 3];
+                for w in words {
+                    let mut idx = [MISSING; 3];
+                    for (k, part) in slash_split(w).enumerate() {
+                        if part.is_empty() {
+                            continue;
+                        }
+                        let x: isize = part.parse().ok()?;
+                        *idx.get_mut(k)? = if x < 0 { (sizes[k] as isize + x) as usize } else { (x - 1) as usize };
+                    }
+                    face.push(idx);
+                }
+                match face.len() {
+                    // Points and lines: tobj's options drop them.
+                    1 | 2 => {}
+                    0 => return None,
+                    _ => {
+                        for k in 2..face.len() {
+                            corners.extend([face[0], face[k - 1], face[k]]);
+                        }
+                    }
+                }
+            }
+            // A new object or group after faces: tobj starts another model.
+            Some("o") | Some("g") if !corners.is_empty() => return None,
+            // tobj reads a line as a face, of whatever arity.
+            Some("l") => return None,
+            // tobj's name rule; an empty name is its error. Names find no material (the
+            // loader gives none), so no new model either.
+            Some("usemtl") if line.split_once(' ').unwrap_or_default().1.trim().is_empty() => return None,
+            _ => {}
+        }
+    }
+    let mut mesh = tobj::Mesh::default();
+    // For each position, the corners using it: (uv, normal, index, next with that position).
+    let mut head = vec![u32::MAX; pos.len() / 3];
+    let mut chain: Vec<(usize, usize, u32, u32)> = Vec::new();
+    for &[v, vt, vn] in &corners {
+        let h = head.get_mut(v)?;
+        let mut at = *h;
+        let found = loop {
+            if at == u32::MAX {
+                break None;
+            }
+            let e = chain[at as usize];
+            if e.0 == vt && e.1 == vn {
+                break Some(e.2);
+            }
+            at = e.3;
+        };
+        if let Some(i) = found {
+            mesh.indices.push(i);
+            continue;
+        }
+        let next = chain.len() as u32;
+        chain.push((vt, vn, next, *h));
+        *h = next;
+        mesh.positions.extend_from_slice(&pos[3 * v..3 * v + 3]);
+        if !tex.is_empty() && vt != MISSING {
+            let at = vt.checked_mul(2)?;
+            mesh.texcoords.extend_from_slice(tex.get(at..at.checked_add(2)?)?);
+        }
+        if !nor.is_empty() && vn != MISSING {
+            let at = vn.checked_mul(3)?;
+            mesh.normals.extend_from_slice(nor.get(at..at.checked_add(3)?)?);
+        }
+        mesh.indices.push(next);
+    }
+    Some(mesh)
 }
 
 /// Read a PLY file (ASCII or binary). Vertex properties x, y, z; optional nx, ny, nz; uvs as
@@ -431,4 +611,84 @@ pub fn compute_vertex_normals(m: &mut TriangleMesh) {
         }
     }
     m.normals = acc.into_iter().map(|n| n.normalize_or_zero()).collect();
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// What tobj reads with the options of `load_obj_bytes`, as one mesh (None: an error).
+    fn tobj_mesh(text: &str) -> Option<Vec<tobj::Model>> {
+        let opts = tobj::LoadOptions { single_index: true, triangulate: true, ignore_points: true, ignore_lines: true };
+        tobj::load_obj_buf(&mut std::io::Cursor::new(text.as_bytes()), &opts, |_| Ok((Vec::new(), Default::default()))).ok().map(|m| m.0)
+    }
+
+    fn same(a: &tobj::Mesh, b: &tobj::Mesh) -> bool {
+        let bits = |v: &[f32]| v.iter().map(|x| x.to_bits()).collect::<Vec<_>>();
+        bits(&a.positions) == bits(&b.positions) && bits(&a.normals) == bits(&b.normals) && bits(&a.texcoords) == bits(&b.texcoords) && a.indices == b.indices
+    }
+
+    /// The single-object reader gives tobj's mesh bit for bit where it reads a file, and
+    /// leaves to tobj the files it does not read the same way.
+    #[test]
+    fn single_object_reader_is_tobj() {
+        let header = "# comment\nmtllib none.mtl\no thing\nv 0 0 0\nv 1 0 0\nv 1 1 0\nv 0 1 0\nv 0.5 0.5 1e-3\nvt 0 0\nvt 1 0 0.5\nvt 1 1\nvt 0 1\nvn 0 0 1\nvn 0 0 -1 7\n";
+        let read = [
+            "f 1 2 3\nf 1 3 4\n",
+            "f 1/1 2/2 3/3 4/4\n",
+            "f 1/1/1 2/2/1 3/3/1\nf 1/1/2 3/3/2 4/4/2\nf 1/1/1 3/3/1 5/2/1\n",
+            "usemtl red\ns off\nf -5//1 -4//1 -3//1 -2//1 -1//1\np 1\nf 1 2\nf 3\n",
+            "f 1/1 2 3/3\r\nf\t2/2/1 \x0b 4/4/1 5/1/1\r\n",
+            "g group\nf 1/-4/-2 2/-3/-1 3/-2/-2\n",
+        ];
+        for body in read {
+            let text = format!("{header}{body}");
+            let fast = obj_single_object(text.as_bytes()).unwrap_or_else(|| panic!("not read: {body:?}"));
+            let slow = tobj_mesh(&text).expect("tobj reads it");
+            assert_eq!(slow.len(), 1, "{body:?}");
+            assert!(same(&fast, &slow[0].mesh), "{body:?}");
+        }
+        // Left to tobj: another object after faces, lines, w coordinates, vertex colours, an
+        // empty face or material name, a face index tobj refuses, non-ASCII text.
+        let left = [
+            "f 1 2 3\no other\nf 1 3 4\n",
+            "f 1 2 3\nl 1 2\n",
+            "v 1 2 3 0.5\nf 1 2 3\n",
+            "v 1 2 3 0.5 0.5 0.5\nf 1 2 3\n",
+            "f\n",
+            "usemtl\nf 1 2 3\n",
+            "f 1 2 3/1/1/1\n",
+            "f 1 2 x\n",
+            "f 1 2 9\n",
+            "# \u{e9}\nf 1 2 3\n",
+        ];
+        for body in left {
+            assert!(obj_single_object(format!("{header}{body}").as_bytes()).is_none(), "{body:?}");
+        }
+    }
+
+    #[test]
+    fn slash_split_and_ascii_words_are_the_std_ones() {
+        for t in ["", "/", "//", "1", "1/2/3", "1//3", "/2/", "15/1/1/", "\u{e9}/x/\u{2003}", "-1/-2"] {
+            assert_eq!(slash_split(t).collect::<Vec<_>>(), t.split('/').collect::<Vec<_>>(), "{t:?}");
+        }
+        for t in ["", "   ", "f 1 2 3", "\tv  1.5\x0b2\x0c3\r", " vt 0 1 ", "#", "a\x1cb"] {
+            assert_eq!(AsciiWords::new(t).collect::<Vec<_>>(), t.split_whitespace().collect::<Vec<_>>(), "{t:?}");
+        }
+    }
+
+    /// The shared scenes' OBJ files: the same meshes as tobj's.
+    #[test]
+    fn single_object_reader_on_shared_meshes() {
+        let root = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../../../shared/scenes/mitsuba-data");
+        let files = ["common/meshes/sphere.obj", "common/meshes/rectangle.obj", "tests/obj/rectangle_normals_uv.obj", "scenes/cbox/meshes/cbox_largebox.obj"];
+        for f in files {
+            let Ok(text) = std::fs::read_to_string(root.join(f)) else { continue };
+            let slow = tobj_mesh(&text).expect("tobj reads it");
+            if slow.len() == 1 {
+                let fast = obj_single_object(text.as_bytes()).expect("single object");
+                assert!(same(&fast, &slow[0].mesh), "{f}");
+            }
+        }
+    }
 }

@@ -27,12 +27,21 @@ pub struct EnvMap {
     pub to_world: Mat4,
     pub scale: f32,
     to_local: Mat3,
-    /// Vertex grid, `cols + 1` by `rows + 1` (periodic column added), row 0 at the top.
-    grid: Vec<Rgb>,
     /// Cells: `cols` wide (= image width), `rows` high (= image height - 1).
     cols: usize,
     rows: usize,
+    /// The sampling density, which holds the vertex grid (radiance and weight together).
     dist: BilinearDistribution,
+}
+
+/// A vertex of the grid: its radiance and its sampling weight side by side, so that
+/// evaluating the radiance where a sample landed, or the density where a ray escaped, reads
+/// the cache lines the other one just read.
+#[derive(Clone, Copy, Debug, Default)]
+#[repr(C, align(16))]
+struct Texel {
+    rgb: Rgb,
+    weight: f32,
 }
 
 impl EnvMap {
@@ -49,16 +58,19 @@ impl EnvMap {
                 grid.push(texel(x % cols, y));
             }
         }
-        let weights: Vec<f32> = (0..=rows)
+        let texels: Vec<Texel> = (0..=rows)
             .flat_map(|y| {
                 let sin_t = (PI * y as f32 / rows as f32).sin().max(0.0);
                 let g = &grid;
-                (0..=cols).map(move |x| g[y * (cols + 1) + x].luminance().max(0.0) * sin_t)
+                (0..=cols).map(move |x| {
+                    let rgb = g[y * (cols + 1) + x];
+                    Texel { rgb, weight: rgb.luminance().max(0.0) * sin_t }
+                })
             })
             .collect();
-        let dist = BilinearDistribution::new(weights, cols, rows);
+        let dist = BilinearDistribution::new(texels, cols, rows);
         let to_local = Mat3::from_mat4(to_world).inverse();
-        EnvMap { image, to_world, scale, to_local, grid, cols, rows, dist }
+        EnvMap { image, to_world, scale, to_local, cols, rows, dist }
     }
 
     /// Grid coordinates in [0,1)² (u shifted by half a texel) of a world direction, and sin θ.
@@ -80,10 +92,24 @@ impl EnvMap {
 
     /// Radiance arriving from direction `w` (pointing away from the scene).
     pub fn eval(&self, w: Vec3) -> Rgb {
-        let (g, _) = self.dir_to_grid(w);
+        self.eval_grid(self.dir_to_grid(w).0)
+    }
+
+    /// [`Self::eval`] and, where `with_pdf` and the radiance is not black, [`Self::pdf`] of
+    /// the same direction (else 0), the direction located once: the same values as the two.
+    pub fn eval_pdf(&self, w: Vec3, with_pdf: bool) -> (Rgb, f32) {
+        let (g, sin_t) = self.dir_to_grid(w);
+        let le = self.eval_grid(g);
+        if !with_pdf || le.is_black() || sin_t <= 0.0 {
+            return (le, 0.0);
+        }
+        (le, self.dist.pdf(g) / (2.0 * PI * PI * sin_t))
+    }
+
+    fn eval_grid(&self, g: Vec2) -> Rgb {
         let (ix, iy, fx, fy) = locate(g, self.cols, self.rows);
         let stride = self.cols + 1;
-        let at = |x: usize, y: usize| self.grid[y * stride + x];
+        let at = |x: usize, y: usize| self.dist.texels[y * stride + x].rgb;
         let top = at(ix, iy) * (1.0 - fx) + at(ix + 1, iy) * fx;
         let bottom = at(ix, iy + 1) * (1.0 - fx) + at(ix + 1, iy + 1) * fx;
         (top * (1.0 - fy) + bottom * fy) * self.scale
@@ -143,7 +169,8 @@ fn sample_linear(u: f32, a: f32, b: f32) -> f32 {
 /// at the vertices of a `cols` x `rows` grid of cells.
 #[derive(Clone, Debug)]
 struct BilinearDistribution {
-    f: Vec<f32>,
+    /// The vertices' values (`weight`), with the radiance they came from.
+    texels: Vec<Texel>,
     cols: usize,
     rows: usize,
     /// Rows of cells by the sum of their cells' integrals.
@@ -155,12 +182,13 @@ struct BilinearDistribution {
 }
 
 impl BilinearDistribution {
-    fn new(f: Vec<f32>, cols: usize, rows: usize) -> Self {
+    fn new(texels: Vec<Texel>, cols: usize, rows: usize) -> Self {
         let stride = cols + 1;
+        let f = |i: usize| texels[i].weight;
         let conditional: Vec<Distribution1D> = (0..rows)
             .map(|y| {
                 let cells: Vec<f32> =
-                    (0..cols).map(|x| 0.25 * (f[y * stride + x] + f[y * stride + x + 1] + f[(y + 1) * stride + x] + f[(y + 1) * stride + x + 1])).collect();
+                    (0..cols).map(|x| 0.25 * (f(y * stride + x) + f(y * stride + x + 1) + f((y + 1) * stride + x) + f((y + 1) * stride + x + 1))).collect();
                 Distribution1D::new(&cells)
             })
             .collect();
@@ -168,13 +196,14 @@ impl BilinearDistribution {
         let row_integrals: Vec<f32> = conditional.iter().map(|c| c.integral).collect();
         let marginal = Distribution1D::new(&row_integrals);
         let integral = marginal.integral;
-        BilinearDistribution { f, cols, rows, marginal, conditional, integral }
+        BilinearDistribution { texels, cols, rows, marginal, conditional, integral }
     }
 
     #[inline]
     fn corners(&self, ix: usize, iy: usize) -> [f32; 4] {
         let s = self.cols + 1;
-        [self.f[iy * s + ix], self.f[iy * s + ix + 1], self.f[(iy + 1) * s + ix], self.f[(iy + 1) * s + ix + 1]]
+        let f = |i: usize| self.texels[i].weight;
+        [f(iy * s + ix), f(iy * s + ix + 1), f((iy + 1) * s + ix), f((iy + 1) * s + ix + 1)]
     }
 
     fn eval(&self, g: Vec2) -> f32 {
@@ -225,7 +254,7 @@ mod tests {
     #[test]
     fn bilinear_pdf_integrates_to_one() {
         let f = vec![0.0, 1.0, 4.0, 2.0, 0.5, 0.0, 3.0, 1.0, 0.0, 0.0, 7.0, 1.0];
-        let d = BilinearDistribution::new(f, 3, 2);
+        let d = BilinearDistribution::new(f.into_iter().map(|weight| Texel { rgb: Rgb::BLACK, weight }).collect(), 3, 2);
         let n = 600;
         let mut s = 0.0f64;
         for i in 0..n {
@@ -234,6 +263,22 @@ mod tests {
             }
         }
         assert!((s / (n * n) as f64 - 1.0).abs() < 1e-4, "{}", s / (n * n) as f64);
+    }
+
+    #[test]
+    fn eval_pdf_is_eval_and_pdf() {
+        let (w, h) = (16usize, 8usize);
+        let data: Vec<Rgb> = (0..w * h).map(|i| Rgb::new((i % 7) as f32, (i % 3) as f32 * 0.5, if i % 5 == 0 { 0.0 } else { 1.0 })).collect();
+        let env = EnvMap::new(Arc::new(Bitmap::new(w, h, data)), Mat4::from_rotation_x(0.3), 1.5);
+        let mut rng = crate::sampling::rng::Pcg32::new(3, 4);
+        for k in 0..2000 {
+            let d = if k == 0 { Vec3::Y } else { crate::math::warp::square_to_uniform_sphere(Vec2::new(rng.next_f32(), rng.next_f32())) };
+            let (le, pdf) = env.eval_pdf(d, true);
+            assert_eq!(le, env.eval(d));
+            let want = if le.is_black() { 0.0 } else { env.pdf(d) };
+            assert_eq!(pdf.to_bits(), want.to_bits(), "{d}");
+            assert_eq!(env.eval_pdf(d, false), (le, 0.0));
+        }
     }
 
     #[test]

@@ -220,6 +220,17 @@ impl Light {
         }
     }
 
+    /// [`Self::le_escaped`] and, where `with_pdf` and the radiance is not black,
+    /// [`Self::pdf_li_escaped`] of the same direction (else 0): an environment map locates
+    /// the direction in its image once for both.
+    pub fn le_pdf_escaped(&self, w: Vec3, with_pdf: bool) -> (Rgb, f32) {
+        if let Light::EnvMap(env) = self {
+            return env.eval_pdf(w, with_pdf);
+        }
+        let le = self.le_escaped(w);
+        (le, if with_pdf && !le.is_black() { self.pdf_li_escaped(w) } else { 0.0 })
+    }
+
     /// Solid-angle density of `sample_li` for an escaped direction `w` (infinite lights).
     pub fn pdf_li_escaped(&self, w: Vec3) -> f32 {
         match self {

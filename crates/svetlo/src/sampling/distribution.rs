@@ -9,6 +9,27 @@ pub struct Distribution1D {
     /// Normalised CDF, `func.len() + 1` entries from 0 to 1.
     pub cdf: Vec<f32>,
     pub integral: f32,
+    /// For long distributions, where the search for u in [j/G, (j+1)/G) starts: the largest
+    /// i with cdf[i] <= j/G (G = the length). Empty below [`GUIDE_MIN`] entries.
+    guide: Vec<u32>,
+}
+
+/// Distributions at least this long get a guide table: their searches would otherwise walk
+/// a binary search through a CDF larger than a few cache lines (an environment map's rows).
+const GUIDE_MIN: usize = 64;
+
+/// The guide table of `cdf` with `g` entries (see [`Distribution1D::guide`]).
+fn guide_table(cdf: &[f32], g: usize) -> Vec<u32> {
+    let mut out = Vec::with_capacity(g);
+    let mut i = 0usize;
+    for j in 0..g {
+        let t = j as f32 / g as f32;
+        while i + 1 < cdf.len() && cdf[i + 1] <= t {
+            i += 1;
+        }
+        out.push(i as u32);
+    }
+    out
 }
 
 impl Distribution1D {
@@ -34,7 +55,8 @@ impl Distribution1D {
         if n > 0 {
             cdf[n] = 1.0;
         }
-        Distribution1D { func: func.to_vec(), cdf, integral }
+        let guide = if n >= GUIDE_MIN { guide_table(&cdf, n) } else { Vec::new() };
+        Distribution1D { func: func.to_vec(), cdf, integral, guide }
     }
     pub fn len(&self) -> usize {
         self.func.len()
@@ -51,8 +73,7 @@ impl Distribution1D {
     #[inline(never)]
     fn find(&self, u: f32) -> usize {
         // Largest i with cdf[i] <= u, and a non-empty interval.
-        let mut i = self.cdf.partition_point(|&c| c <= u).saturating_sub(1);
-        i = i.min(self.func.len() - 1);
+        let mut i = self.last_at_most(u).min(self.func.len() - 1);
         if self.cdf[i + 1] > self.cdf[i] {
             return i; // the common case: the interval found is not empty
         }
@@ -60,6 +81,26 @@ impl Distribution1D {
             i -= 1;
         }
         while self.pmf(i) == 0.0 && i + 1 < self.func.len() {
+            i += 1;
+        }
+        i
+    }
+    /// The largest i with cdf[i] <= u (0 if none): a binary search, or where there is a guide
+    /// table, a short walk from its entry for u. The CDF is non-decreasing, so both find the
+    /// same index (the walk goes down past entries above u, then up past entries at most u).
+    #[inline]
+    fn last_at_most(&self, u: f32) -> usize {
+        if self.guide.is_empty() {
+            return self.cdf.partition_point(|&c| c <= u).saturating_sub(1);
+        }
+        let g = self.guide.len();
+        // A NaN u goes to entry 0, as the binary search sends it.
+        let mut i = self.guide[((u * g as f32) as usize).min(g - 1)] as usize;
+        // Down past entries above u (all of them for a NaN u: nothing compares with it).
+        while i > 0 && !matches!(self.cdf[i].partial_cmp(&u), Some(std::cmp::Ordering::Less | std::cmp::Ordering::Equal)) {
+            i -= 1;
+        }
+        while i + 1 < self.cdf.len() && self.cdf[i + 1] <= u {
             i += 1;
         }
         i
@@ -133,6 +174,48 @@ impl Distribution2D {
 
 #[cfg(test)]
 mod tests {
+    /// The guide table's walk finds the binary search's index for every u: random ones, the
+    /// CDF's own values and their neighbours, the ends and beyond, NaN; with runs of zero
+    /// weights (flat CDF stretches) and one huge weight (most of the CDF in one step).
+    #[test]
+    fn guided_search_is_the_binary_search() {
+        let mut rng = crate::sampling::rng::Pcg32::new(5, 9);
+        for case in 0..40 {
+            let n = 64 + case * 37;
+            let f: Vec<f32> = (0..n)
+                .map(|i| match case % 4 {
+                    0 => rng.next_f32(),
+                    1 => {
+                        if rng.next_f32() < 0.7 {
+                            0.0
+                        } else {
+                            rng.next_f32()
+                        }
+                    }
+                    2 => {
+                        if i == n / 3 {
+                            1e6
+                        } else {
+                            rng.next_f32() * 1e-3
+                        }
+                    }
+                    _ => 0.0,
+                })
+                .collect();
+            let d = Distribution1D::new(&f);
+            assert_eq!(d.guide.len(), n);
+            let mut us: Vec<f32> = (0..2000).map(|_| rng.next_f32()).collect();
+            for &c in &d.cdf {
+                us.extend([c, f32::from_bits(c.to_bits().saturating_sub(1)), f32::from_bits(c.to_bits() + 1)]);
+            }
+            us.extend([0.0, -0.0, -1e-9, 1.0, 1.5, f32::INFINITY, f32::NEG_INFINITY, f32::NAN, crate::math::ONE_MINUS_EPSILON]);
+            for &u in &us {
+                let want = d.cdf.partition_point(|&c| c <= u).saturating_sub(1);
+                assert_eq!(d.last_at_most(u), want, "case {case} u {u}");
+            }
+        }
+    }
+
     use super::*;
 
     #[test]

@@ -168,6 +168,15 @@ impl SceneBuilder {
             shape.detail = self.materials.get(material as usize).is_some_and(|m| m.has_detail());
             shapes.push(shape);
         }
+        // The tables the used materials' BSDFs look up, built before the render starts.
+        let mut used: Vec<u32> = shapes.iter().map(|s| s.material).collect();
+        used.sort_unstable();
+        used.dedup();
+        for m in used {
+            if let Some(m) = self.materials.get(m as usize) {
+                m.prepare_tables();
+            }
+        }
         let static_ids: Vec<u32> = (0..shapes.len() as u32).filter(|&i| shapes[i as usize].motion.is_none()).collect();
         let geoms: Vec<&Geometry> = static_ids.iter().map(|&i| &*shapes[i as usize].geometry).collect();
         let accel = Accel::build(&geoms);

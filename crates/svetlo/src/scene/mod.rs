@@ -27,7 +27,8 @@ pub struct Shape {
     /// Animated to_world (motion blur); `geometry` is then its pose at the first keyframe.
     pub motion: Option<Arc<Motion>>,
     /// Per triangle of a mesh, its shading when constant over it (`TriangleMesh::flat_shading`),
-    /// computed once so that a hit costs no normalisation; empty for other shapes.
+    /// computed once so that a hit costs no normalisation; empty for other shapes and for
+    /// meshes without a flat triangle (smooth-shaded ones: a hit interpolates, as for a None).
     pub flat: Vec<Option<(Vec3, Frame)>>,
     /// Whether the material has surface detail (normal or bump map): its BSDF then needs
     /// the partial derivatives (see [`Scene::bsdf`]).
@@ -37,7 +38,21 @@ pub struct Shape {
 impl Shape {
     pub fn new(geometry: Arc<Geometry>, material: u32, light: Option<u32>, name: String, motion: Option<Arc<Motion>>) -> Shape {
         let flat = match &*geometry {
-            Geometry::Mesh(m) => (0..m.triangle_count()).map(|t| m.flat_shading(t)).collect(),
+            Geometry::Mesh(m) => {
+                // The table starts at the first flat triangle: a smooth mesh allocates none.
+                let mut flat = Vec::new();
+                for t in 0..m.triangle_count() {
+                    let f = m.flat_shading(t);
+                    if f.is_some() && flat.is_empty() {
+                        flat.reserve_exact(m.triangle_count());
+                        flat.resize(t, None);
+                    }
+                    if f.is_some() || !flat.is_empty() {
+                        flat.push(f);
+                    }
+                }
+                flat
+            }
             Geometry::Sphere(_) | Geometry::SdfGrid(_) => Vec::new(),
         };
         Shape { geometry, material, light, name, motion, flat, detail: false }
@@ -375,5 +390,38 @@ impl Scene {
     /// Probability that light selection picks light `i`.
     pub fn light_pmf(&self, i: u32) -> f32 {
         self.light_distribution.pmf(i as usize)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::geometry::TriangleMesh;
+
+    /// A shape's table of flat triangles says for every triangle what `flat_shading` says
+    /// (absent entries as None), and a smooth mesh keeps no table.
+    #[test]
+    fn flat_table_is_flat_shading() {
+        let positions = vec![Vec3::ZERO, Vec3::X, Vec3::Y, Vec3::new(1.0, 1.0, 0.2), Vec3::new(0.0, 2.0, 0.5)];
+        let indices = vec![[0, 1, 2], [1, 3, 2], [2, 3, 4], [0, 2, 4]];
+        let n = Vec3::Z;
+        let tilted = Vec3::new(0.1, 0.0, 1.0).normalize();
+        for normals in [
+            vec![],
+            vec![n; 5],
+            vec![n, tilted, n, n, n],
+            vec![n, n, n, tilted, tilted],
+            vec![tilted, n, n, n, n],
+            (0..5).map(|i| Vec3::new(0.1 * i as f32, 0.0, 1.0).normalize()).collect(),
+        ] {
+            let m = TriangleMesh { positions: positions.clone(), normals: normals.clone(), uvs: vec![], indices: indices.clone() };
+            let shape = Shape::new(Arc::new(Geometry::Mesh(m.clone())), 0, None, "m".into(), None);
+            let any_flat = (0..4).any(|t| m.flat_shading(t).is_some());
+            assert_eq!(shape.flat.is_empty(), !any_flat, "{normals:?}");
+            for t in 0..4 {
+                let (got, want) = (shape.flat.get(t).copied().flatten(), m.flat_shading(t));
+                assert_eq!(format!("{got:?}"), format!("{want:?}"), "triangle {t}, normals {normals:?}");
+            }
+        }
     }
 }

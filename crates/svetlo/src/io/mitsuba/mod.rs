@@ -63,6 +63,7 @@ fn load_parsed(parsed: xml::Parsed, path: &Path) -> Result<Scene> {
         materials_by_id: HashMap::new(),
         default_material: None,
         bitmaps: HashMap::new(),
+        mesh_files: HashMap::new(),
         shape_count: 0,
         has_sensor: false,
         plugin_depth: 0,
@@ -103,6 +104,9 @@ pub(crate) struct Loader<'a> {
     materials_by_id: HashMap<&'a str, u32>,
     default_material: Option<u32>,
     bitmaps: HashMap<(PathBuf, bool), Arc<Bitmap>>,
+    /// Mesh files read so far, by (file, plugin type, flip_tex_coords or shape_index): a file
+    /// that several shapes name (the same sphere placed ten times) is parsed once.
+    mesh_files: HashMap<(PathBuf, &'static str, u32), Arc<crate::io::mesh_files::LoadedMesh>>,
     shape_count: usize,
     has_sensor: bool,
     /// Plugins being built (nested and referenced) and built so far: see [`Loader::nested`].

@@ -94,16 +94,15 @@ impl<'a> Loader<'a> {
             }
             "obj" | "ply" | "serialized" => {
                 let path = self.file_prop(node)?;
-                let loaded = match ty {
-                    "obj" => mesh_files::load_obj(&path, self.boolean(node, "flip_tex_coords", true)?)?,
-                    "ply" => mesh_files::load_ply(&path, self.boolean(node, "flip_tex_coords", false)?)?,
+                let (kind, param) = match ty {
+                    "obj" => ("obj", u32::from(self.boolean(node, "flip_tex_coords", true)?)),
+                    "ply" => ("ply", u32::from(self.boolean(node, "flip_tex_coords", false)?)),
                     _ => {
                         let index = self.int(node, "shape_index", 0)?;
-                        let index = u32::try_from(index).map_err(|_| node.loc.err(format!("shape_index must be non-negative, got {index}")))?;
-                        crate::io::serialized::load_serialized(&path, index)?
+                        ("serialized", u32::try_from(index).map_err(|_| node.loc.err(format!("shape_index must be non-negative, got {index}")))?)
                     }
                 };
-                let LoadedMesh { mut mesh, warnings, attributes: a } = loaded;
+                let LoadedMesh { mut mesh, warnings, attributes: a } = self.mesh_file(path, kind, param)?;
                 attributes = a;
                 for w in warnings {
                     self.warn(w);
@@ -143,6 +142,25 @@ impl<'a> Loader<'a> {
             }
             None => self.b.add_shape(geometry, material, emission, &name),
         }
+    }
+
+    /// The mesh in file `path` read by plugin `kind` (`obj`, `ply`: `param` is
+    /// flip_tex_coords; `serialized`: the shape index), parsed on the first request and
+    /// copied from the loader's cache on later ones.
+    fn mesh_file(&mut self, path: std::path::PathBuf, kind: &'static str, param: u32) -> Result<LoadedMesh> {
+        let key = (path, kind, param);
+        if let Some(m) = self.mesh_files.get(&key) {
+            return Ok((**m).clone());
+        }
+        let path = &key.0;
+        let loaded = match kind {
+            "obj" => mesh_files::load_obj(path, param != 0)?,
+            "ply" => mesh_files::load_ply(path, param != 0)?,
+            _ => crate::io::serialized::load_serialized(path, param)?,
+        };
+        let loaded = std::sync::Arc::new(loaded);
+        self.mesh_files.insert(key, loaded.clone());
+        Ok((*loaded).clone())
     }
 
     /// A material whose `mesh_attribute` textures read this shape's attributes: a copy of
