@@ -903,6 +903,16 @@ impl Out {
     }
 }
 
+/// `a` where `c`, else `b` (both evaluated: a select in vector code).
+#[inline(always)]
+fn sel(c: bool, a: f32, b: f32) -> f32 {
+    if c {
+        a
+    } else {
+        b
+    }
+}
+
 /// `glam`'s `a.dot(b)`, operation for operation.
 #[inline(always)]
 fn dot3(a: [f32; 3], b: [f32; 3]) -> f32 {
@@ -966,16 +976,17 @@ fn shade8<S>(v: &Soa, rr_depth: i32, st: &mut Paths<S>, rays: &mut Rays8, shadow
         // A mesh light's direction and density from its point, as `AreaLight::sample_li`;
         // any other light's as its `sample_li` gave them.
         let generic = v.generic[l];
-        let wi_w = if generic { g(&v.gwi) } else { [dl[0] / r, dl[1] / r, dl[2] / r] };
+        let gwi = g(&v.gwi);
+        let wi_w = [sel(generic, gwi[0], dl[0] / r), sel(generic, gwi[1], dl[1] / r), sel(generic, gwi[2], dl[2] / r)];
         let cos_l = dot3(ln, [-wi_w[0], -wi_w[1], -wi_w[2]]);
-        let pdf = if generic { v.gpdf[l] } else { v.pdf_area[l] * dist2 / cos_l };
+        let pdf = sel(generic, v.gpdf[l], v.pdf_area[l] * dist2 / cos_l);
         let wi = [dot3(wi_w, fs), dot3(wi_w, ft), dot3(wi_w, fnn)];
-        let sampled = generic || (dist2 != 0.0 && cos_l > 0.0 && pdf > 0.0);
+        let sampled = generic | (dist2 != 0.0 && cos_l > 0.0 && pdf > 0.0);
         let nee = v.nee_ok[l] && sampled && side_ok && wo_up && wi[2] * flip > 0.0 && !f_black;
         let pdf_light = v.pmf[l] * pdf;
         let bsdf_pdf = (wi[2] * flip).max(0.0) * INV_PI;
         let (f2, g2) = (pdf_light * pdf_light, bsdf_pdf * bsdf_pdf);
-        let w = if v.delta[l] || pdf_light.is_infinite() {
+        let w = if v.delta[l] | pdf_light.is_infinite() {
             1.0
         } else if f2 + g2 == 0.0 {
             0.0
@@ -990,18 +1001,18 @@ fn shade8<S>(v: &Soa, rr_depth: i32, st: &mut Paths<S>, rays: &mut Rays8, shadow
         // Both ends off their surfaces, as `Scene::occluded_between`; toward a light at
         // infinity from the offset point along the direction, as `Scene::occluded_dir_at`.
         let inf = v.infinite[l];
-        let so = offset3(p, ng, if inf { wi_w } else { dl });
+        let so = offset3(p, ng, [sel(inf, wi_w[0], dl[0]), sel(inf, wi_w[1], dl[1]), sel(inf, wi_w[2], dl[2])]);
         let q = offset3(lp, ln, [-dl[0], -dl[1], -dl[2]]);
         let d2 = [q[0] - so[0], q[1] - so[1], q[2] - so[2]];
         let dist = dot3(d2, d2).sqrt();
         for k in 0..3 {
             shadow.o[k][l] = so[k];
-            shadow.d[k][l] = if inf { wi_w[k] } else { d2[k] / dist };
+            shadow.d[k][l] = sel(inf, wi_w[k], d2[k] / dist);
         }
-        shadow.t_max[l] = if inf { f32::INFINITY } else { dist * (1.0 - SHADOW_EPSILON) };
+        shadow.t_max[l] = sel(inf, f32::INFINITY, dist * (1.0 - SHADOW_EPSILON));
         o.nee[l] = if !nee {
             0
-        } else if dist == 0.0 && !inf {
+        } else if (dist == 0.0) & !inf {
             1
         } else {
             2
