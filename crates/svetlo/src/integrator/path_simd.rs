@@ -406,7 +406,6 @@ impl SimdKernel {
     /// ends takes the next camera sample; each lane draws from its own copy of `sampler`.
     #[inline(always)]
     #[allow(clippy::too_many_arguments)]
-    #[allow(clippy::too_many_arguments)]
     fn render_tile<S: LaneSampler>(
         &self,
         scene: &Scene,
@@ -620,7 +619,7 @@ impl SimdKernel {
         v.has_back[l] = sh.back.is_some();
         v.u[0][l] = u.x;
         v.u[1][l] = u.y;
-        // The light point (as `MeshLight::sample_li` up to the distance test).
+        // The light sample.
         v.nee_ok[l] = false;
         v.generic[l] = false;
         if !scene.lights.is_empty() {
@@ -628,8 +627,8 @@ impl SimdKernel {
             v.pmf[l] = pmf;
             v.light[l] = li as u32;
             match self.lights.get(li) {
+                // Any other light by its own sampling (`path::light_mis_to`'s first tests).
                 Some(None) if pmf > 0.0 => {
-                    // Any other light by its own sampling (`path::light_mis_to`'s first tests).
                     let light = &scene.lights[li];
                     if let Some(ls) = light.sample_li(p, u_l2, &scene.bounds).filter(|ls| ls.pdf > 0.0 && !ls.li.is_black()) {
                         put(&mut v.lp, ls.p);
@@ -643,23 +642,24 @@ impl SimdKernel {
                         v.nee_ok[l] = true;
                     }
                 }
+                // A mesh light: its point, as `MeshLight::sample_li` up to the distance test.
+                Some(Some(ml)) if pmf > 0.0 && ml.pdf_area > 0.0 && !ml.radiance.is_black() => {
+                    let (t, _, ur) = ml.tri_distribution.sample_discrete(u_l2.x);
+                    let b = warp::square_to_uniform_triangle(Vec2::new(ur, u_l2.y));
+                    let ([p0, e1, e2], n) = ml.tris[t];
+                    let n = match n {
+                        Ok(n) => n,
+                        Err(s) => s.normals_at(b.x, b.y).0,
+                    };
+                    put(&mut v.lp, p0 + e1 * b.x + e2 * b.y);
+                    put(&mut v.ln, n);
+                    putc(&mut v.lrad, ml.radiance);
+                    v.pdf_area[l] = ml.pdf_area;
+                    v.infinite[l] = false;
+                    v.delta[l] = false;
+                    v.nee_ok[l] = true;
+                }
                 _ => {}
-            }
-            if let Some(ml) = self.lights.get(li).and_then(|m| m.as_ref()).filter(|ml| pmf > 0.0 && ml.pdf_area > 0.0 && !ml.radiance.is_black()) {
-                let (t, _, ur) = ml.tri_distribution.sample_discrete(u_l2.x);
-                let b = warp::square_to_uniform_triangle(Vec2::new(ur, u_l2.y));
-                let ([p0, e1, e2], n) = ml.tris[t];
-                let n = match n {
-                    Ok(n) => n,
-                    Err(s) => s.normals_at(b.x, b.y).0,
-                };
-                put(&mut v.lp, p0 + e1 * b.x + e2 * b.y);
-                put(&mut v.ln, n);
-                putc(&mut v.lrad, ml.radiance);
-                v.pdf_area[l] = ml.pdf_area;
-                v.infinite[l] = false;
-                v.delta[l] = false;
-                v.nee_ok[l] = true;
             }
         }
         true
