@@ -674,11 +674,12 @@ impl SimdKernel {
         }
         let Some(&ei) = scene.environment_lights.first() else { return };
         let light = &scene.lights[ei as usize];
-        let le = light.le_escaped(d);
+        // An environment map locates the direction once for its radiance and its density.
+        let (le, pdf_light) = light.le_pdf_escaped(d, !st.prev_specular[l]);
         if le.is_black() {
             return;
         }
-        let w = if st.prev_specular[l] { 1.0 } else { power_heuristic(1.0, st.prev_pdf[l], 1.0, scene.light_pmf(ei) * light.pdf_li_escaped(d)) };
+        let w = if st.prev_specular[l] { 1.0 } else { power_heuristic(1.0, st.prev_pdf[l], 1.0, scene.light_pmf(ei) * pdf_light) };
         let beta = Rgb::new(st.beta[0][l], st.beta[1][l], st.beta[2][l]);
         st.add(l, beta * le * w);
         v.emitted[l] = true;

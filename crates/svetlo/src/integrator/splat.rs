@@ -202,11 +202,6 @@ pub(super) fn render_chunked<E: SplatEstimator>(
     let own_tiles = settings.filter == Filter::Box;
     let mut tile_sums: Vec<passes::TreeSum<FilmTile>> = if own_tiles { tiles.iter().map(|_| Default::default()).collect() } else { Vec::new() };
     let mut tile_spare: Vec<Vec<FilmTile>> = vec![Vec::new(); tile_sums.len()];
-    let tile_sums_peek = |f: &mut Film, sums: &[passes::TreeSum<FilmTile>]| {
-        for t in sums.iter().filter_map(|s| s.peek(|a, b| a.add(b))) {
-            f.merge_tile(&t);
-        }
-    };
     let mut spp_done = 0u32;
     let mut pass_spp = 1u32;
     let mut pass = range.start;
@@ -306,7 +301,9 @@ pub(super) fn render_chunked<E: SplatEstimator>(
         if progress.wants_pass(spp_done) {
             // The splats' scale so far, so that an observer sees a developed image.
             if let Some((mut f, _)) = sum.peek(add) {
-                tile_sums_peek(&mut f, &tile_sums);
+                for t in tile_sums.iter().filter_map(|s| s.peek(|a, b| a.add(b))) {
+                    f.merge_tile(&t);
+                }
                 f.splat_scale = spp_done as f32;
                 progress.pass_done(&f);
             }
