@@ -110,6 +110,38 @@ impl FilmTile {
         self.add_sample_touched(p, l, aov, u32::MAX);
     }
 
+    /// [`Self::add_sample_touched`] for a run of samples (position, radiance, layers, touched
+    /// mask), in order. With the box filter each takes one pixel, found once for the beauty
+    /// and its layers, without the per-sample set-up of the general path.
+    pub fn add_samples_touched<'r>(&mut self, samples: impl Iterator<Item = (Vec2, Rgb, &'r [Rgb], u32)>) {
+        if self.filter != Filter::Box || self.n_layers == 0 {
+            for (p, l, aov, touched) in samples {
+                self.add_sample_touched(p, l, aov, touched);
+            }
+            return;
+        }
+        self.blank = false;
+        self.ensure_layers();
+        let n3 = 3 * self.n_layers;
+        let valid = if self.n_layers >= 32 { u32::MAX } else { (1u32 << self.n_layers) - 1 };
+        for (p, l, aov, touched) in samples {
+            let Some(k) = self.owner(p) else { continue };
+            self.add_box(k, if l.is_finite() { l } else { Rgb::BLACK });
+            let mut m = touched & valid;
+            if m == 0 {
+                continue;
+            }
+            let Some(px) = self.layers.get_mut(k * n3..(k + 1) * n3) else { continue };
+            while m != 0 {
+                let i = m.trailing_zeros() as usize;
+                m &= m - 1;
+                if let Some(&v) = aov.get(i).filter(|v| v.is_finite()) {
+                    add_rgb(px, 3 * i, v);
+                }
+            }
+        }
+    }
+
     /// [`Self::add_sample_layers`] where only the layers of bit mask `touched` may be non-zero
     /// (the others are skipped: most samples reach few of the layers).
     #[inline]

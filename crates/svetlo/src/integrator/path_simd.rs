@@ -33,7 +33,7 @@ use crate::geometry::ray::SHADOW_EPSILON;
 use crate::geometry::Ray;
 use crate::geometry::{Geometry, TriangleShading};
 use crate::light::{AreaLight, Light};
-use crate::lpe::{AovSet, ForwardView, MAX_LAYERS};
+use crate::lpe::{AovSet, ForwardView, LayerMask, MAX_LAYERS};
 use crate::math::{warp, Frame, INV_PI, PI};
 use crate::sampling::{power_heuristic, Distribution1D, IndependentSampler, Sampler, SamplerKind, SobolSampler};
 use crate::scene::Scene;
@@ -425,9 +425,14 @@ impl SimdKernel {
             let (pix, s) = (j / n, j % n);
             (x0 + pix % w, y0 + pix / w, s0 + s)
         };
-        let mut results: Vec<(Vec2, Rgb)> = vec![(Vec2::ZERO, Rgb::BLACK); jobs];
+        // A tile's samples wait in buffers reused by the thread's next tiles: allocating them
+        // per tile cost a page fault per 4 KiB each time (a tenth of the AOVs' overhead).
+        let mut scratch = SCRATCH.with(|s| s.take());
+        let mut results = std::mem::take(&mut scratch.results);
+        results.clear();
+        results.resize(jobs, (Vec2::ZERO, Rgb::BLACK));
         let aovs = settings.aovs();
-        let mut layers = LaneLayers::new(events, aovs, jobs);
+        let mut layers = LaneLayers::new(events, aovs, jobs, &mut scratch);
         let cam = scene.camera.ray_generator();
         let mut st = Paths::new(sampler);
         let mut rays = Rays8::default();
@@ -445,7 +450,7 @@ impl SimdKernel {
                 let (x, y, s) = job_xys(next);
                 let (raster, ray) = camera_sample(&cam, &mut st.sampler[l], x, y, s);
                 st.start(l, next, raster);
-                layers.start(l);
+                layers.start(l, next);
                 set_ray(&mut rays, l, ray.o, ray.d, ray.t_max);
                 active |= 1 << l;
                 next += 1;
@@ -500,21 +505,24 @@ impl SimdKernel {
                 }
                 if ends & (1 << l) != 0 {
                     let beauty = Rgb::new(st.l[0][l], st.l[1][l], st.l[2][l]);
-                    results[st.job[l]] = (st.raster[l], layers.finish(l, st.job[l], beauty));
+                    results[st.job[l]] = (st.raster[l], layers.finish(l, beauty));
                 }
             }
             active &= !ends;
         }
         if events.view.is_some() {
-            for (j, (raster, l)) in results.into_iter().enumerate() {
+            tile.add_samples_touched(results.iter().enumerate().map(|(j, &(raster, l))| {
                 let (aov, touched) = layers.row(j);
-                tile.add_sample_touched(raster, l, aov, touched);
-            }
+                (raster, l, aov, touched)
+            }));
         } else {
-            for (raster, l) in results {
+            for &(raster, l) in &results {
                 tile.add_sample(raster, l);
             }
         }
+        layers.recycle(&mut scratch);
+        scratch.results = results;
+        SCRATCH.with(|s| s.replace(scratch));
     }
 
     /// The per-lane part of one vertex (as `shade`): emission found, the depth test, the
@@ -743,85 +751,228 @@ struct LaneEvents<'a> {
     background: u32,
     /// Per scene light: its emission reached by a light sample.
     emitter: Vec<u32>,
+    /// The lookups of all lanes at once by AVX2 gathers (the CPU has AVX2 and every table
+    /// is indexable by 32-bit offsets).
+    gathers: bool,
 }
 
 impl<'a> LaneEvents<'a> {
     fn new(scene: &Scene, aovs: &'a AovSet) -> LaneEvents<'a> {
         let Some(view) = aovs.forward_view().filter(|_| !aovs.is_empty()) else {
-            return LaneEvents { view: None, scatter: Vec::new(), light: Vec::new(), background: 0, emitter: Vec::new() };
+            return LaneEvents { view: None, scatter: Vec::new(), light: Vec::new(), background: 0, emitter: Vec::new(), gathers: false };
         };
         let shapes = 0..scene.shapes.len() as u32;
-        LaneEvents {
+        let mut e = LaneEvents {
             view: Some(view),
             scatter: shapes.clone().map(|s| view.class(aovs.scatter_event(s, crate::bsdf::LobeFlags::DIFFUSE_REFLECTION, None, false))).collect(),
             light: shapes.map(|s| view.class(aovs.light_event(Some(s)))).collect(),
             background: view.class(crate::lpe::Event::BACKGROUND),
             emitter: scene.lights.iter().map(|l| view.class(aovs.emitter_event(l))).collect(),
+            gathers: false,
+        };
+        let (table, ends, _) = view.tables();
+        let fits = |t: &[u32]| (1..=i32::MAX as usize).contains(&t.len());
+        e.gathers = cfg!(target_arch = "x86_64")
+            && crate::accel::packet::avx2()
+            && [table, ends, &e.scatter, &e.light].into_iter().all(fits)
+            && (e.emitter.is_empty() || fits(&e.emitter));
+        e
+    }
+
+    /// The automaton's lookups of one vertex of the lanes' paths: per lane the layers of the
+    /// emission found (lanes `emitted`; the environment where the ray escaped), the layers
+    /// of its light sample after the diffuse reflection (lanes `nee`), and `q` stepped over
+    /// that reflection (lanes `goes_on`).
+    #[inline(always)]
+    fn lookups(&self, q: &mut [u32; LANES], shape: &[u32; LANES], light: &[u32; LANES], [emitted, nee, goes_on]: [u8; 3]) -> [[LayerMask; LANES]; 2] {
+        #[cfg(target_arch = "x86_64")]
+        if self.gathers && !self.emitter.is_empty() {
+            // SAFETY: `gathers` is set only where the CPU has AVX2.
+            return unsafe { self.lookups_avx2(q, shape, light, [emitted, nee, goes_on]) };
         }
+        self.lookups_scalar(q, shape, light, [emitted, nee, goes_on])
+    }
+
+    fn lookups_scalar(&self, q: &mut [u32; LANES], shape: &[u32; LANES], light: &[u32; LANES], [emitted, nee, goes_on]: [u8; 3]) -> [[LayerMask; LANES]; 2] {
+        let (mut emit, mut lit) = ([0; LANES], [0; LANES]);
+        let Some(view) = self.view else { return [emit, lit] };
+        for l in 0..LANES {
+            let bit = 1u8 << l;
+            if emitted & bit != 0 {
+                let class = if shape[l] == ESCAPED { self.background } else { self.light[shape[l] as usize] };
+                emit[l] = view.ends(q[l], class);
+            }
+            if (nee | goes_on) & bit != 0 {
+                let qs = view.step(q[l], self.scatter[shape[l] as usize]);
+                if nee & bit != 0 {
+                    lit[l] = view.ends(qs, self.emitter[light[l] as usize]);
+                }
+                if goes_on & bit != 0 {
+                    q[l] = qs;
+                }
+            }
+        }
+        [emit, lit]
+    }
+
+    /// [`Self::lookups_scalar`] for all lanes at once: each table read is one masked gather.
+    ///
+    /// # Safety
+    /// The CPU must support AVX2.
+    #[cfg(target_arch = "x86_64")]
+    #[target_feature(enable = "avx2")]
+    unsafe fn lookups_avx2(
+        &self,
+        q: &mut [u32; LANES],
+        shape: &[u32; LANES],
+        light: &[u32; LANES],
+        [emitted, nee, goes_on]: [u8; 3],
+    ) -> [[LayerMask; LANES]; 2] {
+        use std::arch::x86_64::*;
+        let Some(view) = self.view else { return [[0; LANES]; 2] };
+        let (table, ends, classes) = view.tables();
+        let q0 = load8(q);
+        let sh = load8(shape);
+        let escaped = _mm256_cmpeq_epi32(sh, _mm256_set1_epi32(ESCAPED as i32));
+        let row = |q: __m256i| _mm256_mullo_epi32(q, _mm256_set1_epi32(classes as i32));
+        let em = lane_mask8(emitted);
+        let hit_class = gather8(&self.light, sh, _mm256_andnot_si256(escaped, em));
+        let emit_class = _mm256_blendv_epi8(hit_class, _mm256_set1_epi32(self.background as i32), escaped);
+        let emit = gather8(ends, _mm256_add_epi32(row(q0), emit_class), em);
+        let reflects = lane_mask8(nee | goes_on);
+        let qs = gather8(table, _mm256_add_epi32(row(q0), gather8(&self.scatter, sh, reflects)), reflects);
+        let lit_m = lane_mask8(nee);
+        let lit = gather8(ends, _mm256_add_epi32(row(qs), gather8(&self.emitter, load8(light), lit_m)), lit_m);
+        store8(q, _mm256_blendv_epi8(q0, qs, lane_mask8(goes_on)));
+        let (mut e, mut n) = ([0; LANES], [0; LANES]);
+        store8(&mut e, emit);
+        store8(&mut n, lit);
+        [e, n]
     }
 }
 
-/// Accumulators per lane: the AOVs' (indices below [`MAX_LAYERS`]) and the restricted
-/// beauty's (index [`MAX_LAYERS`]), one array per colour channel so that routing a
-/// contribution is a few vector selects.
-const ACC: usize = MAX_LAYERS + 1;
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx2")]
+fn load8(a: &[u32; LANES]) -> std::arch::x86_64::__m256i {
+    // SAFETY: eight u32 are 32 readable bytes (unaligned load).
+    unsafe { std::arch::x86_64::_mm256_loadu_si256(a.as_ptr().cast()) }
+}
+
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx2")]
+fn store8(a: &mut [u32; LANES], v: std::arch::x86_64::__m256i) {
+    // SAFETY: eight u32 are 32 writable bytes (unaligned store).
+    unsafe { std::arch::x86_64::_mm256_storeu_si256(a.as_mut_ptr().cast(), v) }
+}
+
+/// All ones in the lanes of bit mask `m`.
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx2")]
+fn lane_mask8(m: u8) -> std::arch::x86_64::__m256i {
+    use std::arch::x86_64::*;
+    let bits = _mm256_setr_epi32(1, 2, 4, 8, 16, 32, 64, 128);
+    _mm256_cmpeq_epi32(_mm256_and_si256(_mm256_set1_epi32(m as i32), bits), bits)
+}
+
+/// `t[idx]` in the lanes of `mask` (all ones), 0 in the others. Indices are clamped into `t`
+/// (non-empty, at most `i32::MAX` entries), so no lane reads outside it.
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx2")]
+fn gather8(t: &[u32], idx: std::arch::x86_64::__m256i, mask: std::arch::x86_64::__m256i) -> std::arch::x86_64::__m256i {
+    use std::arch::x86_64::*;
+    let idx = _mm256_min_epu32(idx, _mm256_set1_epi32(t.len().saturating_sub(1) as i32));
+    // SAFETY: every index is within `t` (clamped above; `t.len() - 1` fits the i32 index).
+    unsafe { _mm256_mask_i32gather_epi32::<4>(_mm256_setzero_si256(), t.as_ptr().cast(), idx, mask) }
+}
+
+/// A worker thread's buffers for a tile's samples (see `render_tile`).
+#[derive(Default)]
+struct TileScratch {
+    results: Vec<(Vec2, Rgb)>,
+    rows: Vec<Rgb>,
+    row_touched: Vec<u32>,
+}
+
+thread_local! {
+    static SCRATCH: std::cell::Cell<TileScratch> = std::cell::Cell::new(TileScratch::default());
+}
 
 /// With AOVs or `--lpe`: each lane's state of the AOVs' product automaton along its path (as
-/// the scalar tracer's `camera_walk` steps its tracker) and what its sample adds to each layer
-/// (the same sums in the same order as its `LayerSample`), and the layers of every finished
-/// sample of the tile, kept until the samples go to the film in the scalar order. Without,
-/// each method is one untaken branch.
+/// the scalar tracer's `camera_walk` steps its tracker), and per job of the tile a row that
+/// sums what its sample adds to each layer, in place and in the order of its `LayerSample`
+/// (only the layers a contribution reaches are added to), kept until the samples go to the
+/// film in the scalar order. Without, each method is one untaken branch.
 struct LaneLayers<'a> {
     events: &'a LaneEvents<'a>,
-    /// AOVs of the render.
+    /// AOVs of the render; a row holds them, then the restricted beauty.
     n: usize,
-    restricts_beauty: bool,
+    /// The beauty's bit where the beauty is restricted (`--lpe`), else 0: then the beauty is
+    /// the path's radiance and needs no row of its own.
+    beauty_bit: LayerMask,
     q: [u32; LANES],
-    acc: [[[f32; ACC]; 3]; LANES],
-    touched: [u32; LANES],
-    /// Per job: its `n` layers, and which of them its paths touched.
+    /// Each lane's job: its row.
+    job: [usize; LANES],
+    /// Per job: its `n` layers and the restricted beauty (stride `n + 1`), and which of the
+    /// layers its paths touched.
     rows: Vec<Rgb>,
     row_touched: Vec<u32>,
 }
 
 impl<'a> LaneLayers<'a> {
-    fn new(events: &'a LaneEvents<'a>, aovs: &AovSet, jobs: usize) -> Self {
-        let on = events.view.is_some();
+    /// Rows for `jobs` samples, all black, in `scratch`'s memory.
+    fn new(events: &'a LaneEvents<'a>, aovs: &AovSet, jobs: usize, scratch: &mut TileScratch) -> Self {
         let n = aovs.aov_count().min(MAX_LAYERS);
+        let (mut rows, mut row_touched) = (std::mem::take(&mut scratch.rows), std::mem::take(&mut scratch.row_touched));
+        rows.clear();
+        row_touched.clear();
+        if events.view.is_some() {
+            rows.resize(jobs * (n + 1), Rgb::BLACK);
+            row_touched.resize(jobs, 0);
+        }
         LaneLayers {
             events,
             n,
-            restricts_beauty: aovs.restricts_beauty(),
+            beauty_bit: if aovs.restricts_beauty() { crate::lpe::aov::BEAUTY } else { 0 },
             q: [0; LANES],
-            acc: [[[0.0; ACC]; 3]; LANES],
-            touched: [0; LANES],
-            rows: if on { vec![Rgb::BLACK; jobs * n] } else { Vec::new() },
-            row_touched: if on { vec![0; jobs] } else { Vec::new() },
+            job: [0; LANES],
+            rows,
+            row_touched,
         }
     }
 
-    /// Lane `l` starts a camera sample.
+    /// Hands the rows' memory back for the next tile.
+    fn recycle(self, scratch: &mut TileScratch) {
+        scratch.rows = self.rows;
+        scratch.row_touched = self.row_touched;
+    }
+
+    /// Lane `l` starts a camera sample, job `job`.
     #[inline(always)]
-    fn start(&mut self, l: usize) {
+    fn start(&mut self, l: usize, job: usize) {
         if let Some(view) = self.events.view {
             self.q[l] = view.camera();
-            self.acc[l] = [[0.0; ACC]; 3];
-            self.touched[l] = 0;
+            self.job[l] = job;
         }
     }
 
-    /// Adds `c` to lane `l`'s layers of `mask` (as `LayerSample::add`; the others add +0,
-    /// a channel's bits masked off: branch-free, and no infinity reaches them).
+    /// Adds `c` to the layers of `mask` in lane `l`'s row (as `LayerSample::add`).
     #[inline(always)]
-    fn add(&mut self, mask: crate::lpe::LayerMask, l: usize, c: Rgb) {
-        // Bit i of the mask for AOV i, the beauty's bit (31) for the last accumulator.
-        let keep: [u32; ACC] = std::array::from_fn(|i| 0u32.wrapping_sub((mask >> if i < MAX_LAYERS { i } else { 31 }) & 1));
-        for (a, v) in self.acc[l].iter_mut().zip([c.r, c.g, c.b]) {
-            for (x, &k) in a.iter_mut().zip(&keep) {
-                *x += f32::from_bits(v.to_bits() & k);
-            }
+    fn add(&mut self, mask: LayerMask, l: usize, c: Rgb) {
+        let (job, n) = (self.job[l], self.n);
+        let Some(row) = self.rows.get_mut(job * (n + 1)..(job + 1) * (n + 1)) else { return };
+        if mask & self.beauty_bit != 0 {
+            row[n] += c;
         }
-        self.touched[l] |= mask & !crate::lpe::aov::BEAUTY;
+        let mut m = mask & !crate::lpe::aov::BEAUTY;
+        if let Some(t) = self.row_touched.get_mut(job) {
+            *t |= m;
+        }
+        while m != 0 {
+            if let Some(a) = row[..n].get_mut(m.trailing_zeros() as usize) {
+                *a += c;
+            }
+            m &= m - 1;
+        }
     }
 
     fn on(&self) -> bool {
@@ -833,57 +984,43 @@ impl<'a> LaneLayers<'a> {
     /// diffuse there, then the light), and the diffuse scattering of the paths that go on.
     #[inline(always)]
     fn route(&mut self, v: &Soa, o: &Out, active: u8, nee: u8, goes_on: u8) {
-        let Some(view) = self.events.view else { return };
-        let e = self.events;
-        for l in 0..LANES {
-            if active & (1 << l) == 0 {
-                continue;
-            }
-            let shape = v.shape[l] as usize;
-            if v.emitted[l] {
-                let c = Rgb::new(v.emit[0][l], v.emit[1][l], v.emit[2][l]);
-                let class = if v.shape[l] == ESCAPED { e.background } else { e.light[shape] };
-                self.add(view.ends(self.q[l], class), l, c);
+        if self.events.view.is_none() {
+            return;
+        }
+        let emitted = (0..LANES).fold(0u8, |m, l| m | (v.emitted[l] as u8) << l) & active;
+        let [emit, lit] = self.events.lookups(&mut self.q, &v.shape, &v.light, [emitted, nee & active, goes_on & active]);
+        let mut lanes = emitted | (nee & active);
+        while lanes != 0 {
+            let l = lanes.trailing_zeros() as usize;
+            lanes &= lanes - 1;
+            if emitted & (1 << l) != 0 {
+                self.add(emit[l], l, Rgb::new(v.emit[0][l], v.emit[1][l], v.emit[2][l]));
             }
             if nee & (1 << l) != 0 {
                 let c = o.contribution(l);
                 if !c.is_black() {
-                    self.add(view.ends(view.step(self.q[l], e.scatter[shape]), e.emitter[v.light[l] as usize]), l, c);
+                    self.add(lit[l], l, c);
                 }
-            }
-            if goes_on & (1 << l) != 0 {
-                self.q[l] = view.step(self.q[l], e.scatter[shape]);
             }
         }
     }
 
-    /// Lane `l`'s sample (job `job`) is done with radiance `beauty`: keeps its layers and
-    /// returns what the beauty takes (all of it, or the paths of `--lpe`).
+    /// Lane `l`'s sample is done with radiance `beauty`: what the beauty takes (all of it,
+    /// or the paths of `--lpe`).
     #[inline(always)]
-    fn finish(&mut self, l: usize, job: usize, beauty: Rgb) -> Rgb {
-        if self.events.view.is_none() {
+    fn finish(&self, l: usize, beauty: Rgb) -> Rgb {
+        if self.beauty_bit == 0 || self.events.view.is_none() {
             return beauty;
         }
-        let a = &self.acc[l];
-        if let Some(row) = self.rows.get_mut(job * self.n..(job + 1) * self.n) {
-            for (i, d) in row.iter_mut().enumerate() {
-                *d = Rgb::new(a[0][i], a[1][i], a[2][i]);
-            }
-        }
-        if let Some(t) = self.row_touched.get_mut(job) {
-            *t = self.touched[l];
-        }
-        if self.restricts_beauty {
-            Rgb::new(a[0][MAX_LAYERS], a[1][MAX_LAYERS], a[2][MAX_LAYERS])
-        } else {
-            beauty
-        }
+        let j = (self.job[l] + 1) * (self.n + 1) - 1;
+        self.rows.get(j).copied().unwrap_or(beauty)
     }
 
     /// Job `job`'s layers and which of them its paths touched.
     #[inline]
     fn row(&self, job: usize) -> (&[Rgb], u32) {
-        (self.rows.get(job * self.n..(job + 1) * self.n).unwrap_or(&[]), self.row_touched.get(job).copied().unwrap_or(0))
+        let s = self.n + 1;
+        (self.rows.get(job * s..job * s + self.n).unwrap_or(&[]), self.row_touched.get(job).copied().unwrap_or(0))
     }
 }
 
@@ -1175,4 +1312,51 @@ fn avx512() -> bool {
     }
     #[cfg(not(target_arch = "x86_64"))]
     false
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::sampling::Pcg32;
+
+    /// The lanes' gathered automaton lookups are the scalar ones, lane for lane, on random
+    /// states, shapes (some escaped), lights and lane masks.
+    #[test]
+    fn gathered_lookups_are_the_scalar_ones() {
+        if !crate::accel::packet::avx2() {
+            eprintln!("SKIPPED: no AVX2");
+            return;
+        }
+        let path = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../../scenes/cornell-box.xml");
+        let scene = crate::io::load_scene(&path, &[]).expect("the repository's Cornell box");
+        let list: Vec<(String, String)> = [("a", "C D L"), ("b", "C D .+ L"), ("c", "C .* 'floor' .* L"), ("d", "C .{2} L"), ("e", "L D* E"), ("f", "C B")]
+            .iter()
+            .map(|(a, b)| (a.to_string(), b.to_string()))
+            .collect();
+        let mut set = AovSet::compile(&list, Some("C D{1,2} [LB]")).expect("expressions");
+        assert!(set.bind(&scene).is_empty());
+        let events = LaneEvents::new(&scene, &set);
+        assert!(events.view.is_some(), "a product automaton");
+        assert!(events.gathers, "AVX2 and small tables: the lanes gather");
+        let states = set.product_states() as u32;
+        let mut rng = Pcg32::new(7, 3);
+        let mut pick = |n: u32| ((rng.next_f32() * n as f32) as u32).min(n - 1);
+        let mut differ_from_start = 0;
+        for _ in 0..2000 {
+            let q: [u32; LANES] = std::array::from_fn(|_| pick(states));
+            let shape: [u32; LANES] = std::array::from_fn(|_| if pick(5) == 0 { ESCAPED } else { pick(scene.shapes.len() as u32) });
+            let light: [u32; LANES] = std::array::from_fn(|_| pick(scene.lights.len() as u32));
+            let [emitted, nee, goes_on] = [pick(256) as u8, pick(256) as u8, pick(256) as u8];
+            let hit: u8 = (0..LANES).fold(0, |m, l| m | ((shape[l] != ESCAPED) as u8) << l);
+            let (nee, goes_on) = (nee & hit, goes_on & hit);
+            let (mut qa, mut qb) = (q, q);
+            let a = events.lookups_scalar(&mut qa, &shape, &light, [emitted, nee, goes_on]);
+            // SAFETY: AVX2 was detected above.
+            let b = unsafe { events.lookups_avx2(&mut qb, &shape, &light, [emitted, nee, goes_on]) };
+            assert_eq!(a, b, "layers for q {q:?}, shapes {shape:?}, lights {light:?}, masks {emitted:b} {nee:b} {goes_on:b}");
+            assert_eq!(qa, qb, "stepped states");
+            differ_from_start += (qa != q) as u32;
+        }
+        assert!(differ_from_start > 1000, "the walk steps states");
+    }
 }

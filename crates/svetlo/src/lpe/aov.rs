@@ -564,6 +564,14 @@ impl ForwardView<'_> {
     }
 }
 
+impl<'a> ForwardView<'a> {
+    /// The tables of [`Self::step`] and [`Self::ends`] (entry `q * classes + c`) and the
+    /// number of classes, for lookups of several paths at once.
+    pub fn tables(&self) -> (&'a [u32], &'a [LayerMask], usize) {
+        (&self.p.table, &self.p.ends, self.p.n_classes)
+    }
+}
+
 /// The automata's states along a camera subpath (forward automata, camera first): one
 /// product state when the set has its product automaton, else one state per automaton.
 #[derive(Clone, Copy, Debug)]
