@@ -132,11 +132,17 @@ impl FilmTile {
                 continue;
             }
             let Some(px) = self.layers.get_mut(k * n3..(k + 1) * n3) else { continue };
+            let (cells, _) = px.as_chunks_mut::<3>();
             while m != 0 {
                 let i = m.trailing_zeros() as usize;
                 m &= m - 1;
-                if let Some(&v) = aov.get(i).filter(|v| v.is_finite()) {
-                    add_rgb(px, 3 * i, v);
+                if let (Some(c), Some(v)) = (cells.get_mut(i), aov.get(i)) {
+                    // Non-finite values are dropped, as by `add_sample_touched`.
+                    if (v.r - v.r == 0.0) & (v.g - v.g == 0.0) & (v.b - v.b == 0.0) {
+                        c[0] += v.r;
+                        c[1] += v.g;
+                        c[2] += v.b;
+                    }
                 }
             }
         }
