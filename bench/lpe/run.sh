@@ -2,7 +2,8 @@
 # Overhead of AOVs against none at equal spp, one thread, alternating runs; prints per method
 # the ratio of the median CPU times (user+sys) with and without AOVs, the per-pair ratios
 # with their median, and the ratio of the minima (noise on a shared machine only adds time). Usage: bench/lpe/run.sh [scene.xml] [spp] [res]
-# METHODS='a b' picks the methods; RUNS the alternating runs; PRESET=lecture renders the
+# METHODS='a b' picks the methods (default: path, which is the eight-wide kernel where the scene
+# qualifies, the scalar path tracer, bdpt and mlt); RUNS the alternating runs; PRESET=lecture renders the
 # lecture preset's five AOVs instead of the eight below; MEASURE=instructions counts
 # instructions under valgrind (callgrind) instead of CPU time: deterministic, so one run
 # each is enough on a loaded machine (use a small res and spp: valgrind is ~50x slower).
@@ -27,7 +28,7 @@ cpu() {
 }
 median() { printf '%s\n' "$@" | sort -g | awk '{v[NR]=$1} END{print (NR%2) ? v[(NR+1)/2] : (v[NR/2]+v[NR/2+1])/2}'; }
 minimum() { printf '%s\n' "$@" | sort -g | head -1; }
-for m in ${METHODS:-"path:simd=false" bdpt "mlt:bootstrap=20000"}; do
+for m in ${METHODS:-path "path:simd=false" bdpt "mlt:bootstrap=20000"}; do
   ratios=(); bases=(); withs=()
   for i in $(seq "$RUNS"); do
     base=$(cpu $BIN render "$SCENE" -Dres=$RES --spp $SPP --threads 1 --integrator "$m" -o "$tmp/n.exr")
