@@ -137,8 +137,11 @@ impl FilmTile {
                 let i = m.trailing_zeros() as usize;
                 m &= m - 1;
                 if let (Some(c), Some(v)) = (cells.get_mut(i), aov.get(i)) {
-                    // Non-finite values are dropped, as by `add_sample_touched`.
-                    if (v.r - v.r == 0.0) & (v.g - v.g == 0.0) & (v.b - v.b == 0.0) {
+                    // Non-finite values are dropped, as by `add_sample_touched`: x - x is 0
+                    // exactly for finite x (NaN otherwise), the cheapest test here by count.
+                    #[allow(clippy::eq_op)]
+                    let finite = (v.r - v.r == 0.0) & (v.g - v.g == 0.0) & (v.b - v.b == 0.0);
+                    if finite {
                         c[0] += v.r;
                         c[1] += v.g;
                         c[2] += v.b;

@@ -425,14 +425,9 @@ impl SimdKernel {
             let (pix, s) = (j / n, j % n);
             (x0 + pix % w, y0 + pix / w, s0 + s)
         };
-        // A tile's samples wait in buffers reused by the thread's next tiles: allocating them
-        // per tile cost a page fault per 4 KiB each time (a tenth of the AOVs' overhead).
-        let mut scratch = SCRATCH.with(|s| s.take());
-        let mut results = std::mem::take(&mut scratch.results);
-        results.clear();
-        results.resize(jobs, (Vec2::ZERO, Rgb::BLACK));
+        let mut results: Vec<(Vec2, Rgb)> = vec![(Vec2::ZERO, Rgb::BLACK); jobs];
         let aovs = settings.aovs();
-        let mut layers = LaneLayers::new(events, aovs, jobs, &mut scratch);
+        let mut layers = LaneLayers::new(events, aovs, jobs);
         let cam = scene.camera.ray_generator();
         let mut st = Paths::new(sampler);
         let mut rays = Rays8::default();
@@ -520,9 +515,6 @@ impl SimdKernel {
                 tile.add_sample(raster, l);
             }
         }
-        layers.recycle(&mut scratch);
-        scratch.results = results;
-        SCRATCH.with(|s| s.replace(scratch));
     }
 
     /// The per-lane part of one vertex (as `shade`): emission found, the depth test, the
@@ -771,11 +763,9 @@ impl<'a> LaneEvents<'a> {
             gathers: false,
         };
         let (table, ends, _) = view.tables();
+        // (A scene without lights has no light samples to route: it keeps the scalar lookups.)
         let fits = |t: &[u32]| (1..=i32::MAX as usize).contains(&t.len());
-        e.gathers = cfg!(target_arch = "x86_64")
-            && crate::accel::packet::avx2()
-            && [table, ends, &e.scatter, &e.light].into_iter().all(fits)
-            && (e.emitter.is_empty() || fits(&e.emitter));
+        e.gathers = cfg!(target_arch = "x86_64") && crate::accel::packet::avx2() && [table, ends, &e.scatter, &e.light, &e.emitter].into_iter().all(fits);
         e
     }
 
@@ -786,13 +776,14 @@ impl<'a> LaneEvents<'a> {
     #[inline(always)]
     fn lookups(&self, q: &mut [u32; LANES], shape: &[u32; LANES], light: &[u32; LANES], [emitted, nee, goes_on]: [u8; 3]) -> [[LayerMask; LANES]; 2] {
         #[cfg(target_arch = "x86_64")]
-        if self.gathers && !self.emitter.is_empty() {
+        if self.gathers {
             // SAFETY: `gathers` is set only where the CPU has AVX2.
             return unsafe { self.lookups_avx2(q, shape, light, [emitted, nee, goes_on]) };
         }
         self.lookups_scalar(q, shape, light, [emitted, nee, goes_on])
     }
 
+    /// [`Self::lookups`] lane by lane (without AVX2, and the reference of the gathers).
     fn lookups_scalar(&self, q: &mut [u32; LANES], shape: &[u32; LANES], light: &[u32; LANES], [emitted, nee, goes_on]: [u8; 3]) -> [[LayerMask; LANES]; 2] {
         let (mut emit, mut lit) = ([0; LANES], [0; LANES]);
         let Some(view) = self.view else { return [emit, lit] };
@@ -885,18 +876,6 @@ fn gather8(t: &[u32], idx: std::arch::x86_64::__m256i, mask: std::arch::x86_64::
     unsafe { _mm256_mask_i32gather_epi32::<4>(_mm256_setzero_si256(), t.as_ptr().cast(), idx, mask) }
 }
 
-/// A worker thread's buffers for a tile's samples (see `render_tile`).
-#[derive(Default)]
-struct TileScratch {
-    results: Vec<(Vec2, Rgb)>,
-    rows: Vec<Rgb>,
-    row_touched: Vec<u32>,
-}
-
-thread_local! {
-    static SCRATCH: std::cell::Cell<TileScratch> = std::cell::Cell::new(TileScratch::default());
-}
-
 /// With AOVs or `--lpe`: each lane's state of the AOVs' product automaton along its path (as
 /// the scalar tracer's `camera_walk` steps its tracker), and per job of the tile a row that
 /// sums what its sample adds to each layer, in place and in the order of its `LayerSample`
@@ -919,31 +898,19 @@ struct LaneLayers<'a> {
 }
 
 impl<'a> LaneLayers<'a> {
-    /// Rows for `jobs` samples, all black, in `scratch`'s memory.
-    fn new(events: &'a LaneEvents<'a>, aovs: &AovSet, jobs: usize, scratch: &mut TileScratch) -> Self {
+    /// Rows for `jobs` samples, all black.
+    fn new(events: &'a LaneEvents<'a>, aovs: &AovSet, jobs: usize) -> Self {
+        let on = events.view.is_some();
         let n = aovs.aov_count().min(MAX_LAYERS);
-        let (mut rows, mut row_touched) = (std::mem::take(&mut scratch.rows), std::mem::take(&mut scratch.row_touched));
-        rows.clear();
-        row_touched.clear();
-        if events.view.is_some() {
-            rows.resize(jobs * (n + 1), Rgb::BLACK);
-            row_touched.resize(jobs, 0);
-        }
         LaneLayers {
             events,
             n,
             beauty_bit: if aovs.restricts_beauty() { crate::lpe::aov::BEAUTY } else { 0 },
             q: [0; LANES],
             job: [0; LANES],
-            rows,
-            row_touched,
+            rows: if on { vec![Rgb::BLACK; jobs * (n + 1)] } else { Vec::new() },
+            row_touched: if on { vec![0; jobs] } else { Vec::new() },
         }
-    }
-
-    /// Hands the rows' memory back for the next tile.
-    fn recycle(self, scratch: &mut TileScratch) {
-        scratch.rows = self.rows;
-        scratch.row_touched = self.row_touched;
     }
 
     /// Lane `l` starts a camera sample, job `job`.
