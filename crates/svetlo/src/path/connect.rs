@@ -125,7 +125,10 @@ pub fn connect(
         };
         v.pdf_fwd = v.pdf_light_origin(scene, pt);
         v.time = pt.time;
-        let l = pt.beta * pt.f(&v, TransportMode::Radiance) * v.beta * pt.abs_cos_to(&v);
+        // The direction toward the light point once, for the BSDF and the cosine.
+        let (w, d2) = pt.direction_to(&v);
+        let f = if d2 == 0.0 { Rgb::BLACK } else { pt.f_dir(w, TransportMode::Radiance) };
+        let l = pt.beta * f * v.beta * pt.abs_cos_dir(w);
         if l.is_black() {
             return None;
         }
