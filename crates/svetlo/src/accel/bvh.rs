@@ -189,25 +189,27 @@ impl Accel {
                 // The first block only (a constant length, so no loop): further blocks are often not reached.
                 prefetch(self.tris.as_ptr().wrapping_add(leaf_range(code).0), std::mem::size_of::<Tri8>());
             };
-            traverse::<ANY, AVX>(&self.tri_nodes, &bray, &mut t_max, self.prefetch, prefetch_leaf, |code, t_max| {
+            let any_hit = traverse::<ANY, AVX>(&self.tri_nodes, &bray, &mut t_max, self.prefetch, prefetch_leaf, |code, t_max| {
                 let (start, count) = leaf_range(code);
                 let mut found = false;
-                for (i, block) in self.tris[start..start + count].iter().enumerate() {
+                let blocks = &self.tris[start..start + count];
+                if ANY {
+                    // Any hit ends the walk: no nearest lane, no barycentrics.
+                    return blocks.iter().any(|block| tray.occludes(block, w, *t_max));
+                }
+                for (i, block) in blocks.iter().enumerate() {
                     if let Some((lane, t, b1, b2)) = tray.test(block, w, *t_max) {
                         *t_max = t;
                         hit = Some((start + i, lane, b1, b2));
                         found = true;
-                        if ANY {
-                            break;
-                        }
                     }
                 }
                 found
             });
+            if ANY && any_hit {
+                return Some(PrimHit { t: t_max, shape: 0, prim: 0, b1: 0.0, b2: 0.0 });
+            }
             if let Some((b, lane, b1, b2)) = hit {
-                if ANY {
-                    return Some(PrimHit { t: t_max, shape: 0, prim: 0, b1: 0.0, b2: 0.0 });
-                }
                 let id = self.tris[b].ids[lane];
                 let (first, shape) = self.meshes[self.tri_mesh.get(id as usize).map_or(0, |&k| k as usize)];
                 best = Some(PrimHit { t: t_max, shape, prim: id - first, b1, b2 });
@@ -270,6 +272,12 @@ fn nearest_prim<const ANY: bool, const AVX: bool, P>(
 pub(super) trait TriKernel {
     /// Nearest hit of the block in `(0, t_max]`: (lane, t, b1, b2).
     fn test(&self, block: &Tri8, w: &WatertightRay, t_max: f32) -> Option<Hit>;
+
+    /// Whether the block has any hit in `(0, t_max]` (`test(..).is_some()`).
+    #[inline(always)]
+    fn occludes(&self, block: &Tri8, w: &WatertightRay, t_max: f32) -> bool {
+        self.test(block, w, t_max).is_some()
+    }
 }
 
 impl TriKernel for TriRay {
@@ -294,6 +302,12 @@ impl TriKernel for TriRay8 {
         // SAFETY: a TriRay8 exists only on CPUs with AVX (its constructor's contract), and it is
         // used only inside `trace_avx`, which is compiled with AVX enabled.
         unsafe { block.intersect_avx(self, w, t_max) }
+    }
+
+    #[inline(always)]
+    fn occludes(&self, block: &Tri8, w: &WatertightRay, t_max: f32) -> bool {
+        // SAFETY: as in `test`.
+        unsafe { block.occludes_avx(self, w, t_max) }
     }
 }
 

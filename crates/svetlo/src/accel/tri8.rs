@@ -57,6 +57,40 @@ impl Tri8 {
     #[inline(always)]
     pub unsafe fn intersect_avx(&self, r: &TriRay8, wr: &WatertightRay, t_max: f32) -> Option<Hit> {
         use std::arch::x86_64::*;
+        let Lanes { mut mask, on_edge, t_scaled, det, v, w } = self.lanes_avx(r, t_max);
+        let (mul, zero) = (|a, b| _mm256_mul_ps(a, b), _mm256_setzero_ps());
+        let mut best: Option<Hit> = None;
+        if mask != 0 {
+            // As the scalar test: t = t_scaled * (1 / det), and t must be > 0 (it may underflow).
+            let inv = _mm256_div_ps(_mm256_set1_ps(1.0), det);
+            let t = mul(t_scaled, inv);
+            mask &= _mm256_movemask_ps(_mm256_cmp_ps::<_CMP_GT_OQ>(t, zero)) as u32;
+            if mask != 0 {
+                let mut ta = [0.0f32; LANES];
+                _mm256_storeu_ps(ta.as_mut_ptr(), t);
+                let (lane, t) = nearest_lane(mask, &ta);
+                // Barycentrics of the nearest lane only (dead code for occlusion rays).
+                let (mut b1, mut b2) = ([0.0f32; LANES], [0.0f32; LANES]);
+                _mm256_storeu_ps(b1.as_mut_ptr(), mul(v, inv));
+                _mm256_storeu_ps(b2.as_mut_ptr(), mul(w, inv));
+                best = Some((lane, t, b1[lane & (LANES - 1)], b2[lane & (LANES - 1)]));
+            }
+        }
+        if on_edge != 0 {
+            best = self.edge_lanes(on_edge, wr, t_max, best);
+        }
+        best
+    }
+
+    /// The test's lanes up to their distances: the candidate hits (`mask`, edge lanes
+    /// excluded), the lanes on an edge, and t_scaled, det, v, w.
+    ///
+    /// # Safety
+    /// As [`Self::intersect_avx`].
+    #[cfg(target_arch = "x86_64")]
+    #[inline(always)]
+    unsafe fn lanes_avx(&self, r: &TriRay8, t_max: f32) -> Lanes {
+        use std::arch::x86_64::*;
         let base = self.p.as_ptr() as *const f32;
         // SAFETY: `r.k*` are axis * LANES with axis < 3, so every offset stays inside `p`;
         // each row is 32-byte aligned by the struct's alignment.
@@ -87,28 +121,28 @@ impl Tri8 {
         let tmd = _mm256_xor_ps(mul(_mm256_set1_ps(t_max), det), sign);
         let ok = _mm256_and_ps(_mm256_cmp_ps::<_CMP_GT_OQ>(ts, zero), _mm256_cmp_ps::<_CMP_LE_OQ>(ts, tmd));
         let on_edge = _mm256_movemask_ps(edge) as u32;
-        let mut mask = _mm256_movemask_ps(ok) as u32 & !(_mm256_movemask_ps(mixed) as u32) & !on_edge;
-        let mut best: Option<Hit> = None;
+        let mask = _mm256_movemask_ps(ok) as u32 & !(_mm256_movemask_ps(mixed) as u32) & !on_edge;
+        Lanes { mask, on_edge, t_scaled, det, v, w }
+    }
+
+    /// Whether any of the eight is hit in `(0, t_max]`: `intersect_avx(..).is_some()`
+    /// without choosing the nearest lane or its barycentrics (shadow rays read neither).
+    ///
+    /// # Safety
+    /// As [`Self::intersect_avx`].
+    #[cfg(target_arch = "x86_64")]
+    #[inline(always)]
+    pub unsafe fn occludes_avx(&self, r: &TriRay8, wr: &WatertightRay, t_max: f32) -> bool {
+        use std::arch::x86_64::*;
+        let Lanes { mask, on_edge, t_scaled, det, .. } = self.lanes_avx(r, t_max);
         if mask != 0 {
-            // As the scalar test: t = t_scaled * (1 / det), and t must be > 0 (it may underflow).
-            let inv = _mm256_div_ps(_mm256_set1_ps(1.0), det);
-            let t = mul(t_scaled, inv);
-            mask &= _mm256_movemask_ps(_mm256_cmp_ps::<_CMP_GT_OQ>(t, zero)) as u32;
-            if mask != 0 {
-                let mut ta = [0.0f32; LANES];
-                _mm256_storeu_ps(ta.as_mut_ptr(), t);
-                let (lane, t) = nearest_lane(mask, &ta);
-                // Barycentrics of the nearest lane only (dead code for occlusion rays).
-                let (mut b1, mut b2) = ([0.0f32; LANES], [0.0f32; LANES]);
-                _mm256_storeu_ps(b1.as_mut_ptr(), mul(v, inv));
-                _mm256_storeu_ps(b2.as_mut_ptr(), mul(w, inv));
-                best = Some((lane, t, b1[lane & (LANES - 1)], b2[lane & (LANES - 1)]));
+            // As `intersect_avx`: t = t_scaled * (1 / det) must be > 0 (it may underflow).
+            let t = _mm256_mul_ps(t_scaled, _mm256_div_ps(_mm256_set1_ps(1.0), det));
+            if mask & _mm256_movemask_ps(_mm256_cmp_ps::<_CMP_GT_OQ>(t, _mm256_setzero_ps())) as u32 != 0 {
+                return true;
             }
         }
-        if on_edge != 0 {
-            best = self.edge_lanes(on_edge, wr, t_max, best);
-        }
-        best
+        on_edge != 0 && self.edge_lanes(on_edge, wr, t_max, None).is_some()
     }
 
     /// Lanes whose u, v or w is exactly zero: the scalar test, which falls back to f64 there.
@@ -144,6 +178,18 @@ pub(super) fn nearest_lane(mut mask: u32, t: &[f32]) -> (usize, f32) {
         }
     }
     (lane, best)
+}
+
+/// What the block test's lanes give before the distances are divided out.
+#[cfg(target_arch = "x86_64")]
+#[derive(Clone, Copy)]
+struct Lanes {
+    mask: u32,
+    on_edge: u32,
+    t_scaled: std::arch::x86_64::__m256,
+    det: std::arch::x86_64::__m256,
+    v: std::arch::x86_64::__m256,
+    w: std::arch::x86_64::__m256,
 }
 
 /// The watertight ray's permutation (as float offsets of an axis row of [`Tri8::p`]) and

@@ -84,6 +84,7 @@ impl Camera {
             near_clip: self.near_clip,
             far_clip: self.far_clip,
             n_lens: self.to_world.transform_vector3(Vec3::Z).normalize_or_zero(),
+            center: self.to_world.transform_point3(Vec3::ZERO),
         })
     }
 
@@ -127,6 +128,8 @@ pub struct LensConnector {
     far_clip: f32,
     /// The camera's forward axis (world space).
     n_lens: Vec3,
+    /// The lens center (world space): a pinhole's every connection ends there.
+    center: Vec3,
 }
 
 impl LensConnector {
@@ -212,7 +215,8 @@ impl LensConnector {
         let d = to_ref / dist2.sqrt();
         let (we, raster) = self.we_local(o, d)?;
         let pdf = dist2 / (d.z * self.lens_area);
-        let p_lens = self.to_world.transform_point3(o);
+        // The same transform of the same zero as the thin lens's, done once for a pinhole.
+        let p_lens = if radius > 0.0 { self.to_world.transform_point3(o) } else { self.center };
         let wi = (p_lens - p_ref).normalize_or_zero();
         Some(CameraSample { we, wi, pdf, raster, p_lens, n_lens: self.n_lens })
     }

@@ -57,7 +57,11 @@ pub fn connect(
     if s > 0 && t >= 2 && camera[t - 1].kind == VertexKind::Light {
         return None;
     }
+    // The vertex the strategy sampled, built only when the MIS weight reads it; its position
+    // and light are reported either way.
     let mut sampled: Option<Vertex> = None;
+    let mut sampled_p = glam::Vec3::ZERO;
+    let mut sampled_light = None;
     let mut raster = None;
     let l = if s == 0 {
         let pt = &camera[t - 1];
@@ -75,15 +79,28 @@ pub fn connect(
         if cs.pdf <= 0.0 || cs.we <= 0.0 {
             return None;
         }
-        let mut cam = Vertex::camera(cs.p_lens, cs.raster, Rgb::splat(cs.we / cs.pdf));
-        cam.time = qs.time;
-        let f = if s == 1 { qs.le(scene, &cam) } else { qs.f(&cam, TransportMode::Importance) };
-        let l = qs.beta * f * cam.beta * qs.abs_cos_to(&cam);
+        let beta_cam = Rgb::splat(cs.we / cs.pdf);
+        // The direction toward the lens once for emission or BSDF and the cosine (what
+        // `le`, `f` and `abs_cos_to` of a camera vertex there would each compute).
+        let (w, d2) = qs.direction_to_point(cs.p_lens);
+        let f = if d2 == 0.0 {
+            Rgb::BLACK
+        } else if s == 1 {
+            qs.le_dir(scene, w)
+        } else {
+            qs.f_dir(w, TransportMode::Importance)
+        };
+        let l = qs.beta * f * beta_cam * qs.abs_cos_dir(w);
         if l.is_black() || scene.occluded_at(qs.p, qs.ng, cs.p_lens, qs.time) {
             return None;
         }
         raster = Some(cs.raster);
-        sampled = Some(cam);
+        sampled_p = cs.p_lens;
+        if weighted {
+            let mut cam = Vertex::camera(cs.p_lens, cs.raster, beta_cam);
+            cam.time = qs.time;
+            sampled = Some(cam);
+        }
         l
     } else if s == 1 {
         let u_light = sampler.next_1d();
@@ -108,7 +125,10 @@ pub fn connect(
         };
         v.pdf_fwd = v.pdf_light_origin(scene, pt);
         v.time = pt.time;
-        let l = pt.beta * pt.f(&v, TransportMode::Radiance) * v.beta * pt.abs_cos_to(&v);
+        // The direction toward the light point once, for the BSDF and the cosine.
+        let (w, d2) = pt.direction_to(&v);
+        let f = if d2 == 0.0 { Rgb::BLACK } else { pt.f_dir(w, TransportMode::Radiance) };
+        let l = pt.beta * f * v.beta * pt.abs_cos_dir(w);
         if l.is_black() {
             return None;
         }
@@ -116,6 +136,7 @@ pub fn connect(
         if blocked {
             return None;
         }
+        (sampled_p, sampled_light) = (v.p, v.light);
         sampled = Some(v);
         l
     } else {
@@ -123,11 +144,16 @@ pub fn connect(
         if !qs.connectible(scene) || !pt.connectible(scene) {
             return None;
         }
-        let l = qs.beta * qs.f(pt, TransportMode::Importance) * pt.f(qs, TransportMode::Radiance) * pt.beta;
+        // Both are finite surface vertices: their directions once, for both BSDFs and G.
+        let (w_qp, w_pq, d2) = Vertex::directions_between(qs, pt);
+        if d2 == 0.0 || qs.bsdf.is_none() || pt.bsdf.is_none() {
+            return None;
+        }
+        let l = qs.beta * qs.f_dir(w_qp, TransportMode::Importance) * pt.f_dir(w_pq, TransportMode::Radiance) * pt.beta;
         if l.is_black() {
             return None;
         }
-        let g = geometry_term(scene, qs, pt);
+        let g = geometry_term(scene, qs, pt, w_qp, w_pq, d2);
         if g == 0.0 {
             return None;
         }
@@ -137,5 +163,5 @@ pub fn connect(
         return None;
     }
     let weight = if weighted { mis_weight(scene, cfg, light, camera, sampled.as_ref(), s, t) } else { 1.0 };
-    Some(Connection { l, weight, raster, sampled_p: sampled.as_ref().map_or(glam::Vec3::ZERO, |v| v.p), sampled_light: sampled.as_ref().and_then(|v| v.light) })
+    Some(Connection { l, weight, raster, sampled_p, sampled_light })
 }

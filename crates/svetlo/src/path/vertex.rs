@@ -238,15 +238,36 @@ impl Vertex {
         if other.infinite {
             return (other.wo, 1.0);
         }
+        self.direction_to_point(other.p)
+    }
+
+    /// [`Self::direction_to`] a finite point `p` (a lens point that has no vertex of its own).
+    #[inline]
+    pub fn direction_to_point(&self, p: Vec3) -> (Vec3, f32) {
         if self.infinite {
             return (-self.wo, 1.0);
         }
-        let d = other.p - self.p;
+        let d = p - self.p;
         let d2 = d.length_squared();
         if d2 == 0.0 {
             return (Vec3::ZERO, 0.0);
         }
         (d / d2.sqrt(), d2)
+    }
+
+    /// Both unit directions between two finite vertices (a to b, b to a) and the squared
+    /// distance, with one square root: each is bit for bit what `direction_to` gives.
+    #[inline]
+    pub(crate) fn directions_between(a: &Vertex, b: &Vertex) -> (Vec3, Vec3, f32) {
+        debug_assert!(!a.infinite && !b.infinite);
+        let d = b.p - a.p;
+        let d2 = d.length_squared();
+        if d2 == 0.0 {
+            return (Vec3::ZERO, Vec3::ZERO, 0.0);
+        }
+        let len = d2.sqrt();
+        // a - b rather than -(b - a): a zero component keeps the sign direction_to gives it.
+        (d / len, (a.p - b.p) / len, d2)
     }
 
     /// Convert a solid-angle density at this vertex into an area density at `next`.
@@ -255,6 +276,16 @@ impl Vertex {
             return pdf;
         }
         let (w, d2) = self.direction_to(next);
+        Self::convert_density_dir(pdf, next, w, d2)
+    }
+
+    /// [`Self::convert_density`] with the direction toward `next` and the squared distance
+    /// (`direction_to(next)`) already at hand.
+    #[inline]
+    fn convert_density_dir(pdf: f32, next: &Vertex, w: Vec3, d2: f32) -> f32 {
+        if next.infinite {
+            return pdf;
+        }
         if d2 == 0.0 {
             return 0.0;
         }
@@ -268,11 +299,21 @@ impl Vertex {
     /// BSDF toward `next` (world direction), with the shading-normal correction of
     /// importance transport. Zero for vertices without a BSDF.
     pub fn f(&self, next: &Vertex, mode: TransportMode) -> Rgb {
-        let Some(bsdf) = &self.bsdf else { return Rgb::BLACK };
+        if self.bsdf.is_none() {
+            return Rgb::BLACK;
+        }
         let (wi, d2) = self.direction_to(next);
         if d2 == 0.0 {
             return Rgb::BLACK;
         }
+        self.f_dir(wi, mode)
+    }
+
+    /// [`Self::f`] toward the unit world direction `wi` (non-zero: `direction_to` of a
+    /// distinct vertex), for connections that have it at hand.
+    #[inline]
+    pub fn f_dir(&self, wi: Vec3, mode: TransportMode) -> Rgb {
+        let Some(bsdf) = &self.bsdf else { return Rgb::BLACK };
         let f = bsdf.eval(self.shading.to_local(self.wo), self.shading.to_local(wi), mode);
         f * shading_correction(self.ng, self.shading.n, self.wo, wi, mode)
     }
@@ -282,7 +323,16 @@ impl Vertex {
         if !self.on_surface() {
             return 1.0;
         }
-        self.shading.n.dot(self.direction_to(other).0).abs()
+        self.abs_cos_dir(self.direction_to(other).0)
+    }
+
+    /// [`Self::abs_cos_to`] with the direction at hand.
+    #[inline]
+    pub fn abs_cos_dir(&self, w: Vec3) -> f32 {
+        if !self.on_surface() {
+            return 1.0;
+        }
+        self.shading.n.dot(w).abs()
     }
 
     /// Emission from this vertex toward `toward`: radiance of an area light or an environment,
@@ -292,11 +342,20 @@ impl Vertex {
             // A camera ray escaped: all environment lights (toward is the last surface).
             return scene.environment_lights.iter().fold(Rgb::BLACK, |acc, &i| acc + scene.lights[i as usize].le_escaped(self.wo));
         }
-        let Some(li) = self.light else { return Rgb::BLACK };
+        if self.light.is_none() {
+            return Rgb::BLACK;
+        }
         let (w, d2) = self.direction_to(toward);
         if d2 == 0.0 {
             return Rgb::BLACK;
         }
+        self.le_dir(scene, w)
+    }
+
+    /// [`Self::le`] of a finite vertex toward the unit direction `w` (non-zero).
+    #[inline]
+    pub fn le_dir(&self, scene: &Scene, w: Vec3) -> Rgb {
+        let Some(li) = self.light else { return Rgb::BLACK };
         match &scene.lights[li as usize] {
             Light::Area(a) => {
                 if self.kind == VertexKind::Surface {
@@ -345,7 +404,7 @@ impl Vertex {
                 bsdf.pdf(self.shading.to_local(wp), self.shading.to_local(wn), mode)
             }
         };
-        self.convert_density(pdf, next)
+        Self::convert_density_dir(pdf, next, wn, d2)
     }
 
     /// Area density at `v` of a ray leaving this light vertex toward it (emission's
@@ -391,12 +450,13 @@ pub(crate) fn infinite_light_density(scene: &Scene, d: Vec3) -> f32 {
 }
 
 /// The geometric term between two surface vertices with shading cosines, zero when blocked.
-pub(crate) fn geometry_term(scene: &Scene, a: &Vertex, b: &Vertex) -> f32 {
-    let (_, d2) = a.direction_to(b);
+/// `w_ab`, `w_ba`, `d2`: [`Vertex::directions_between`] of the two (finite) vertices.
+#[inline]
+pub(crate) fn geometry_term(scene: &Scene, a: &Vertex, b: &Vertex, w_ab: Vec3, w_ba: Vec3, d2: f32) -> f32 {
     if d2 == 0.0 {
         return 0.0;
     }
-    let g = a.abs_cos_to(b) * b.abs_cos_to(a) / d2;
+    let g = a.abs_cos_dir(w_ab) * b.abs_cos_dir(w_ba) / d2;
     if g == 0.0 || scene.occluded_between(a.p, a.ng, b.p, b.ng, a.time) {
         return 0.0;
     }

@@ -288,6 +288,13 @@ impl Scene {
 
     /// Is anything in the way along `ray` (static or, at the ray's time, moving)?
     fn blocked(&self, ray: &Ray) -> bool {
+        if self.moving.is_empty() && self.settings.ray_epsilon <= 0.0 {
+            // Static scenes, as in `intersect`: no cut ray to copy, no moving shapes to try.
+            if ray.t_max <= 0.0 {
+                return false;
+            }
+            return self.accel.occluded(ray);
+        }
         let (ray, _) = self.past_epsilon(ray);
         let ray = &ray;
         if ray.t_max <= 0.0 {

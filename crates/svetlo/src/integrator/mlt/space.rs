@@ -26,6 +26,7 @@
 //! join two non-delta vertices only.
 
 use crate::bsdf::{BsdfSample, LobeFlags, TransportMode};
+use crate::camera::LensConnector;
 use crate::geometry::Ray;
 use crate::light::Light;
 use crate::math::{warp, Frame};
@@ -56,6 +57,9 @@ impl MPath {
 pub struct Space<'a> {
     pub scene: &'a Scene,
     pub cam_pos: Vec3,
+    /// The camera's connection constants, once (None: orthographic): a connection to the
+    /// camera then costs no matrix inverse.
+    pub lens: Option<LensConnector>,
     /// Most segments (max_depth), or usize::MAX.
     pub max_k: usize,
     /// Fewest segments (2 when emitters seen directly are hidden).
@@ -78,6 +82,7 @@ impl<'a> Space<'a> {
         Space {
             scene,
             cam_pos: scene.camera.to_world.transform_point3(Vec3::ZERO),
+            lens: scene.camera.lens_connector(),
             max_k: if max_depth < 0 { usize::MAX } else { max_depth as usize },
             min_k: if hide_emitters { 2 } else { 1 },
         }
@@ -116,7 +121,7 @@ impl<'a> Space<'a> {
             return None;
         }
         let ray = Ray::new(self.cam_pos, w / d2.sqrt());
-        let (_, raster) = self.scene.camera.we(&ray)?;
+        let (_, raster) = self.lens.as_ref()?.we(&ray)?;
         let (cw, ch) = (self.scene.camera.width as f32, self.scene.camera.height as f32);
         if !(raster.x >= 0.0 && raster.y >= 0.0 && raster.x < cw && raster.y < ch) {
             return None;
