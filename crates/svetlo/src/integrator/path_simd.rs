@@ -23,15 +23,15 @@
 //! that the image equals the scalar tracer's up to float rounding (paths that meet a shared
 //! edge may pick the other triangle).
 
-use super::path::PathTracer;
+use super::path::{bsdf_pdf_toward, PathTracer};
 use super::{camera_sample, render_tiles, Integrator, Progress, RenderSettings};
 use crate::accel::packet::{Hits8, PacketBvh, Rays8, LANES};
-use crate::bsdf::Material;
+use crate::bsdf::{Bsdf, LobeFlags, Material, TransportMode};
 use crate::error::{Error, Result};
 use crate::film::{Film, FilmTile};
 use crate::geometry::ray::SHADOW_EPSILON;
 use crate::geometry::Ray;
-use crate::geometry::{Geometry, TriangleShading};
+use crate::geometry::{Geometry, SurfaceInteraction, TriangleShading};
 use crate::light::{AreaLight, Light};
 use crate::lpe::{AovSet, ForwardView, MAX_LAYERS};
 use crate::math::{warp, Frame, INV_PI, PI};
@@ -124,6 +124,9 @@ impl Albedo {
 /// A shape's material and emission.
 #[derive(Clone, Debug)]
 struct ShapeData {
+    /// Whether its lanes take the scalar `Bsdf` (any material but a plain Lambertian one, or
+    /// a normal or bump map); then `front` and `back` are unused.
+    scalar_bsdf: bool,
     front: Albedo,
     /// Reflectance seen from the back (two-sided); None: black there.
     back: Option<Albedo>,
@@ -262,13 +265,15 @@ impl SimdKernel {
         let mut verts = Vec::new();
         for (si, s) in scene.shapes.iter().enumerate() {
             let Geometry::Mesh(m) = &*s.geometry else { return None };
-            if s.detail {
-                return None;
-            }
             let mat = scene.materials.get(s.material as usize)?;
-            let (front, back) = match mat {
-                Material::TwoSided { front, back } => (diffuse_albedo(front)?, Some(diffuse_albedo(back)?)),
-                m => (diffuse_albedo(m)?, None),
+            let lambert = match mat {
+                Material::TwoSided { front, back } => diffuse_albedo(front).zip(diffuse_albedo(back).map(Some)),
+                m => diffuse_albedo(m).map(|f| (f, None)),
+            };
+            // Any other material (or surface detail) by its own scalar code, lane by lane.
+            let (scalar_bsdf, (front, back)) = match lambert {
+                Some(fb) if !s.detail => (false, fb),
+                _ => (true, (Albedo::Constant(Rgb::BLACK), None)),
             };
             let textured = matches!(front, Albedo::Textured(_)) || matches!(back, Some(Albedo::Textured(_)));
             let light = match s.light {
@@ -279,7 +284,7 @@ impl SimdKernel {
                 }
                 None => None,
             };
-            shapes.push(ShapeData { front, back, textured, light });
+            shapes.push(ShapeData { scalar_bsdf, front, back, textured, light });
             for t in 0..m.triangle_count() {
                 let p = m.vertices(t);
                 verts.push(p);
@@ -465,7 +470,7 @@ impl SimdKernel {
                     continue;
                 }
                 let d = Vec3::new(rays.d[0][l], rays.d[1][l], rays.d[2][l]);
-                if self.gather(scene, settings, &mut st, &draws, l, hits.prim[l], hits.b1[l], hits.b2[l], d, &mut v) {
+                if self.gather(scene, settings, events, &mut st, &draws, l, hits.prim[l], hits.b1[l], hits.b2[l], d, &mut v) {
                     go |= 1 << l;
                 } else {
                     ends |= 1 << l;
@@ -518,14 +523,16 @@ impl SimdKernel {
     }
 
     /// The per-lane part of one vertex (as `shade`): emission found, the depth test, the
-    /// random numbers, the light and its triangle chosen, the cosine warp; the arithmetic
-    /// is left in `v` for `shade8`. False when the path ends here.
+    /// random numbers, the light and its triangle chosen, and at a material other than a
+    /// Lambertian one its scalar BSDF's value toward the light sample and its own sample; the
+    /// arithmetic is left in `v` for `shade8`. False when the path ends here.
     #[allow(clippy::too_many_arguments)]
     #[inline(always)]
     fn gather<S: LaneSampler>(
         &self,
         scene: &Scene,
         settings: &RenderSettings,
+        events: &LaneEvents,
         st: &mut Paths<S>,
         draws: &[[f32; LANES]; 7],
         l: usize,
@@ -562,12 +569,21 @@ impl SimdKernel {
                 } else {
                     let prev_p = Vec3::new(st.prev_p[0][l], st.prev_p[1][l], st.prev_p[2][l]);
                     let pdf_li = area_of(scene, li).map_or(0.0, |a| a.pdf_li(prev_p, p, ng));
-                    // The diffuse BSDF's density toward the hit point, as the scalar
-                    // tracer's `bsdf_pdf_toward` (the same operations).
-                    let prev_n = Vec3::new(st.prev_n[0][l], st.prev_n[1][l], st.prev_n[2][l]);
-                    let dp = p - prev_p;
-                    let len = dp.length();
-                    let pdf_bsdf = if len > 0.0 && len.is_finite() { (dp / len).dot(prev_n).max(0.0) * INV_PI } else { st.prev_pdf[l] };
+                    let pdf_bsdf = match &st.prev_bsdf[l] {
+                        Some(pb) => bsdf_pdf_toward(&pb.bsdf, &pb.frame, pb.wo, prev_p, p).unwrap_or(st.prev_pdf[l]),
+                        None => {
+                            // The diffuse BSDF's density toward the hit point, as the scalar
+                            // tracer's `bsdf_pdf_toward` (the same operations).
+                            let prev_n = Vec3::new(st.prev_n[0][l], st.prev_n[1][l], st.prev_n[2][l]);
+                            let dp = p - prev_p;
+                            let len = dp.length();
+                            if len > 0.0 && len.is_finite() {
+                                (dp / len).dot(prev_n).max(0.0) * INV_PI
+                            } else {
+                                st.prev_pdf[l]
+                            }
+                        }
+                    };
                     power_heuristic(1.0, pdf_bsdf, 1.0, scene.light_pmf(li) * pdf_li)
                 };
                 let beta = Rgb::new(st.beta[0][l], st.beta[1][l], st.beta[2][l]);
@@ -581,14 +597,20 @@ impl SimdKernel {
         }
         // All of the vertex's numbers, in the scalar order (u_rr is drawn even where the path
         // ends before it: the lane's sampler restarts with its next camera sample).
-        let (u_light, u_l2, u, u_rr) = if S::BATCHED {
-            (draws[0][l], Vec2::new(draws[1][l], draws[2][l]), Vec2::new(draws[4][l], draws[5][l]), draws[6][l])
+        let (u_light, u_l2, uc, u, u_rr) = if S::BATCHED {
+            (draws[0][l], Vec2::new(draws[1][l], draws[2][l]), draws[3][l], Vec2::new(draws[4][l], draws[5][l]), draws[6][l])
         } else {
             let sampler = &mut st.sampler[l];
             let u_light = sampler.next_1d();
             let u_l2 = sampler.next_2d();
-            let _uc = sampler.next_1d();
-            (u_light, u_l2, sampler.next_2d(), sampler.next_1d())
+            // Only a scalar BSDF takes the lobe number (a Lambertian lane only steps past it).
+            let uc = if sh.scalar_bsdf {
+                sampler.next_1d()
+            } else {
+                sampler.next_1d();
+                0.0
+            };
+            (u_light, u_l2, uc, sampler.next_2d(), sampler.next_1d())
         };
         v.u_rr[l] = u_rr;
         let put = |a: &mut [[f32; LANES]; 3], x: Vec3| {
@@ -603,23 +625,25 @@ impl SimdKernel {
         put(&mut v.ft, frame.t);
         put(&mut v.fnn, frame.n);
         put(&mut v.wo, wo_w);
-        // The hit's texture point, as `Scene::interaction` gives it (`SurfaceInteraction::tex_point`).
-        let tp = if sh.textured {
-            let uv = match &*scene.shapes[tri.shape as usize].geometry {
-                Geometry::Mesh(m) => m.uv(tri.local as usize, b1, b2),
-                _ => Vec2::ZERO,
+        v.scalar_bsdf[l] = sh.scalar_bsdf;
+        if !sh.scalar_bsdf {
+            // The hit's texture point, as `Scene::interaction` gives it (`SurfaceInteraction::tex_point`).
+            let tp = if sh.textured {
+                TexPoint { uv: self.uv(scene, tri, b1, b2), prim: tri.local, bary: Vec2::new(b1, b2), p, n: ng }
+            } else {
+                TexPoint::default()
             };
-            TexPoint { uv, prim: tri.local, bary: Vec2::new(b1, b2), p, n: ng }
-        } else {
-            TexPoint::default()
-        };
-        let (front, back) = (sh.front.at(tp), sh.back.as_ref().map_or(Rgb::BLACK, |b| b.at(tp)));
-        putc(&mut v.front, front);
-        putc(&mut v.back, back);
-        v.has_back[l] = sh.back.is_some();
-        v.u[0][l] = u.x;
-        v.u[1][l] = u.y;
-        // The light sample.
+            let (front, back) = (sh.front.at(tp), sh.back.as_ref().map_or(Rgb::BLACK, |b| b.at(tp)));
+            putc(&mut v.front, front);
+            putc(&mut v.back, back);
+            v.has_back[l] = sh.back.is_some();
+            v.u[0][l] = u.x;
+            v.u[1][l] = u.y;
+            if st.prev_bsdf[l].is_some() {
+                st.prev_bsdf[l] = None;
+            }
+        }
+        // The light sample (a scalar BSDF of delta lobes only clears it: `scalar_scatter`).
         v.nee_ok[l] = false;
         v.generic[l] = false;
         if !scene.lights.is_empty() {
@@ -662,7 +686,87 @@ impl SimdKernel {
                 _ => {}
             }
         }
+        if sh.scalar_bsdf {
+            let si = SurfaceInteraction {
+                p,
+                t: 0.0,
+                ng,
+                shading: frame,
+                uv: self.uv(scene, tri, b1, b2),
+                shape: tri.shape,
+                prim: tri.local,
+                bary: Vec2::new(b1, b2),
+                wo: wo_w,
+                time: 0.0,
+            };
+            self.scalar_scatter(scene, events, st, l, v, &si, uc, u);
+        }
         true
+    }
+
+    /// The uv of a hit on `tri` at barycentrics (b1, b2).
+    #[inline(always)]
+    fn uv(&self, scene: &Scene, tri: &Tri, b1: f32, b2: f32) -> Vec2 {
+        match &*scene.shapes[tri.shape as usize].geometry {
+            Geometry::Mesh(m) => m.uv(tri.local as usize, b1, b2),
+            _ => Vec2::ZERO,
+        }
+    }
+
+    /// Lane `l`'s vertex `si` of a material other than a Lambertian one, by its scalar BSDF
+    /// (as `Scene::bsdf` makes it for the scalar tracer's hit): its value and density toward
+    /// the light sample (as `path::light_mis_to`; none for delta lobes only), its own sample
+    /// (as `camera_walk`; `uc`, `u`), and the events of both, into `v` for `shade8`; the
+    /// lane's next MIS vertex and radiance scale into `st`. Out of line: the Lambertian lanes'
+    /// `gather` stays small.
+    #[allow(clippy::too_many_arguments)]
+    #[inline(never)]
+    fn scalar_scatter<S>(&self, scene: &Scene, events: &LaneEvents, st: &mut Paths<S>, l: usize, v: &mut Soa, si: &SurfaceInteraction, uc: f32, u: Vec2) {
+        let bsdf = scene.bsdf(si);
+        let flags = bsdf.flags();
+        let (p, frame) = (si.p, si.shading);
+        let wo = frame.to_local(si.wo);
+        let lane = |a: &[[f32; LANES]; 3]| Vec3::new(a[0][l], a[1][l], a[2][l]);
+        v.nee_ok[l] &= flags.has_non_specular();
+        if v.nee_ok[l] {
+            // The light's direction as `shade8` finds it (a mesh light's as `AreaLight::sample_li`).
+            let wi_w = if v.generic[l] {
+                lane(&v.gwi)
+            } else {
+                let d = lane(&v.lp) - p;
+                d / d.length_squared().sqrt()
+            };
+            let wi = frame.to_local(wi_w);
+            let f = bsdf.eval(wo, wi, TransportMode::Radiance);
+            v.nee_ok[l] = !f.is_black();
+            put_rgb(&mut v.bf, l, f);
+            // A delta light takes no MIS weight (nor the density).
+            v.bpdf_nee[l] = if v.delta[l] { 0.0 } else { bsdf.pdf(wo, wi, TransportMode::Radiance) };
+            if let Some(view) = events.view {
+                v.class_nee[l] = view.class(events.aovs.scatter_event(v.shape[l], flags, None, wi.z * wo.z < 0.0));
+            }
+        }
+        let bs = bsdf.sample(wo, uc, u, TransportMode::Radiance).filter(|bs| bs.pdf > 0.0 && !bs.f.is_black());
+        v.bmoved[l] = bs.is_some();
+        st.prev_bsdf[l] = None;
+        let Some(bs) = bs else { return };
+        let transmission = bs.lobe.contains(LobeFlags::TRANSMISSION);
+        for k in 0..3 {
+            v.bwi[k][l] = bs.wi[k];
+        }
+        put_rgb(&mut v.bweight, l, bs.weight());
+        v.bpdf[l] = bs.pdf;
+        v.bspecular[l] = bs.lobe.is_specular();
+        if let Some(view) = events.view {
+            // A null interaction (a mask let the path through) is no event.
+            v.class_step[l] = (!bs.lobe.is_null()).then(|| view.class(events.aovs.scatter_event(v.shape[l], flags, Some(bs.lobe), transmission)));
+        }
+        if transmission {
+            st.eta_scale[l] *= bs.eta * bs.eta;
+        }
+        if !bs.lobe.is_specular() {
+            st.prev_bsdf[l] = Some(PrevBsdf { bsdf, frame, wo });
+        }
     }
 
     /// Lane `l`'s ray along `d` left the scene: what the environment adds there, weighted
@@ -727,6 +831,31 @@ struct Soa {
     lrad: [[f32; LANES]; 3],
     pmf: [f32; LANES],
     pdf_area: [f32; LANES],
+    /// The lane's material took the scalar `Bsdf` (`SimdKernel::scalar_scatter`): its value
+    /// `bf` and density `bpdf_nee` toward the light sample, and its own sample (taken when
+    /// `bmoved`): local direction `bwi`, weight f |cos| / pdf `bweight`, density `bpdf`,
+    /// whether of a delta lobe.
+    scalar_bsdf: [bool; LANES],
+    bf: [[f32; LANES]; 3],
+    bpdf_nee: [f32; LANES],
+    bmoved: [bool; LANES],
+    bwi: [[f32; LANES]; 3],
+    bweight: [[f32; LANES]; 3],
+    bpdf: [f32; LANES],
+    bspecular: [bool; LANES],
+    /// With AOVs, at a scalar BSDF: the event classes of the light sample and of the BSDF
+    /// sample (None: a null interaction, no event).
+    class_nee: [u32; LANES],
+    class_step: [Option<u32>; LANES],
+}
+
+/// A camera-path vertex of a scalar BSDF that scattered by a non-delta lobe, kept for the
+/// MIS weight of the emitter its sample reaches (as `path.rs`'s `ScatterPoint`).
+struct PrevBsdf {
+    bsdf: Bsdf,
+    frame: Frame,
+    /// Toward the vertex before it, local frame.
+    wo: Vec3,
 }
 
 /// The events of the kernel's paths as classes of the AOVs' product automaton (the scene's
@@ -734,6 +863,8 @@ struct Soa {
 struct LaneEvents<'a> {
     /// None without AOVs (or without a product automaton: then the scalar tracer renders).
     view: Option<ForwardView<'a>>,
+    /// For the events of scalar BSDFs, found per vertex.
+    aovs: &'a AovSet,
     /// Per scene shape: the diffuse reflection there (sampled or toward a light sample alike:
     /// a Lambertian reflection is never singular, and a light sample it counts lies on its side).
     scatter: Vec<u32>,
@@ -748,11 +879,12 @@ struct LaneEvents<'a> {
 impl<'a> LaneEvents<'a> {
     fn new(scene: &Scene, aovs: &'a AovSet) -> LaneEvents<'a> {
         let Some(view) = aovs.forward_view().filter(|_| !aovs.is_empty()) else {
-            return LaneEvents { view: None, scatter: Vec::new(), light: Vec::new(), background: 0, emitter: Vec::new() };
+            return LaneEvents { view: None, aovs, scatter: Vec::new(), light: Vec::new(), background: 0, emitter: Vec::new() };
         };
         let shapes = 0..scene.shapes.len() as u32;
         LaneEvents {
             view: Some(view),
+            aovs,
             scatter: shapes.clone().map(|s| view.class(aovs.scatter_event(s, crate::bsdf::LobeFlags::DIFFUSE_REFLECTION, None, false))).collect(),
             light: shapes.map(|s| view.class(aovs.light_event(Some(s)))).collect(),
             background: view.class(crate::lpe::Event::BACKGROUND),
@@ -845,14 +977,19 @@ impl<'a> LaneLayers<'a> {
                 let class = if v.shape[l] == ESCAPED { e.background } else { e.light[shape] };
                 self.add(view.ends(self.q[l], class), l, c);
             }
+            // A scalar BSDF's events are the lane's own (`SimdKernel::scalar_scatter`).
+            let sb = v.scalar_bsdf[l];
             if nee & (1 << l) != 0 {
                 let c = o.contribution(l);
                 if !c.is_black() {
-                    self.add(view.ends(view.step(self.q[l], e.scatter[shape]), e.emitter[v.light[l] as usize]), l, c);
+                    let at = if sb { v.class_nee[l] } else { e.scatter[shape] };
+                    self.add(view.ends(view.step(self.q[l], at), e.emitter[v.light[l] as usize]), l, c);
                 }
             }
             if goes_on & (1 << l) != 0 {
-                self.q[l] = view.step(self.q[l], e.scatter[shape]);
+                if let Some(at) = if sb { v.class_step[l] } else { Some(e.scatter[shape]) } {
+                    self.q[l] = view.step(self.q[l], at);
+                }
             }
         }
     }
@@ -983,9 +1120,13 @@ fn shade8<S>(v: &Soa, rr_depth: i32, st: &mut Paths<S>, rays: &mut Rays8, shadow
         let pdf = sel(generic, v.gpdf[l], v.pdf_area[l] * dist2 / cos_l);
         let wi = [dot3(wi_w, fs), dot3(wi_w, ft), dot3(wi_w, fnn)];
         let sampled = generic | (dist2 != 0.0 && cos_l > 0.0 && pdf > 0.0);
-        let nee = v.nee_ok[l] && sampled && side_ok && wo_up && wi[2] * flip > 0.0 && !f_black;
+        // A scalar BSDF's lane: its value and density as `gather` found them (a black value
+        // already cleared `nee_ok`).
+        let sb = v.scalar_bsdf[l];
+        let lambert_ok = side_ok & wo_up & (wi[2] * flip > 0.0) & !f_black;
+        let nee = v.nee_ok[l] && sampled && (sb | lambert_ok);
         let pdf_light = v.pmf[l] * pdf;
-        let bsdf_pdf = (wi[2] * flip).max(0.0) * INV_PI;
+        let bsdf_pdf = sel(sb, v.bpdf_nee[l], (wi[2] * flip).max(0.0) * INV_PI);
         let (f2, g2) = (pdf_light * pdf_light, bsdf_pdf * bsdf_pdf);
         let w = if v.delta[l] | pdf_light.is_infinite() {
             1.0
@@ -996,8 +1137,9 @@ fn shade8<S>(v: &Soa, rr_depth: i32, st: &mut Paths<S>, rays: &mut Rays8, shadow
         };
         let s = wi[2].abs() * w / pdf_light;
         let li = g(&v.lrad);
+        let bf = g(&v.bf);
         for k in 0..3 {
-            o.c[k][l] = beta[k] * ((f[k] * li[k]) * s);
+            o.c[k][l] = beta[k] * ((sel(sb, bf[k], f[k]) * li[k]) * s);
         }
         // Both ends off their surfaces, as `Scene::occluded_between`; toward a light at
         // infinity from the offset point along the direction, as `Scene::occluded_dir_at`.
@@ -1020,11 +1162,15 @@ fn shade8<S>(v: &Soa, rr_depth: i32, st: &mut Paths<S>, rays: &mut Rays8, shadow
         };
         // BSDF sample.
         let wim = cosine_hemisphere(v.u[0][l], v.u[1][l]);
-        let bpdf = wim[2].max(0.0) * INV_PI;
-        let wi = [wim[0], wim[1], wim[2] * flip];
-        let moved = side_ok && wo_up && bpdf > 0.0 && !f_black;
-        let sc = wi[2].abs() / bpdf;
-        let mut nb = [beta[0] * (f[0] * sc), beta[1] * (f[1] * sc), beta[2] * (f[2] * sc)];
+        let lpdf = wim[2].max(0.0) * INV_PI;
+        let lwi = [wim[0], wim[1], wim[2] * flip];
+        let sc = lwi[2].abs() / lpdf;
+        // Or the scalar BSDF's sample, by selects (a branch here makes the loop scalar code).
+        let (bwi, bw) = (g(&v.bwi), g(&v.bweight));
+        let wi = [sel(sb, bwi[0], lwi[0]), sel(sb, bwi[1], lwi[1]), sel(sb, bwi[2], lwi[2])];
+        let bpdf = sel(sb, v.bpdf[l], lpdf);
+        let moved = (sb & v.bmoved[l]) | (!sb & side_ok & wo_up & (lpdf > 0.0) & !f_black);
+        let mut nb = [beta[0] * sel(sb, bw[0], f[0] * sc), beta[1] * sel(sb, bw[1], f[1] * sc), beta[2] * sel(sb, bw[2], f[2] * sc)];
         let dir = [
             (fs[0] * wi[0] + ft[0] * wi[1]) + fnn[0] * wi[2],
             (fs[1] * wi[0] + ft[1] * wi[1]) + fnn[1] * wi[2],
@@ -1032,8 +1178,10 @@ fn shade8<S>(v: &Soa, rr_depth: i32, st: &mut Paths<S>, rays: &mut Rays8, shadow
         ];
         let no = offset3(p, ng, dir);
         let mut cont = moved;
+        // Loads ahead of the branches: one inside a branch keeps it a branch.
+        let (eta, specular) = (st.eta_scale[l], sb & v.bspecular[l]);
         if st.depth[l] >= rr_depth {
-            let q = nb[0].max(nb[1]).max(nb[2]).min(0.95);
+            let q = (nb[0] * eta).max(nb[1] * eta).max(nb[2] * eta).min(0.95);
             let survive = v.u_rr[l] < q;
             cont &= survive;
             if survive {
@@ -1051,7 +1199,7 @@ fn shade8<S>(v: &Soa, rr_depth: i32, st: &mut Paths<S>, rays: &mut Rays8, shadow
         }
         rays.t_max[l] = f32::INFINITY;
         st.prev_pdf[l] = if moved { bpdf } else { st.prev_pdf[l] };
-        st.prev_specular[l] &= !moved;
+        st.prev_specular[l] = if moved { specular } else { st.prev_specular[l] };
         o.cont[l] = cont;
     }
 }
@@ -1106,6 +1254,10 @@ struct Paths<S> {
     prev_p: [[f32; LANES]; 3],
     /// The previous vertex's shading normal on the side its sample left by.
     prev_n: [[f32; LANES]; 3],
+    /// The previous vertex's BSDF where it was a scalar one (None: Lambertian).
+    prev_bsdf: [Option<PrevBsdf>; LANES],
+    /// The radiance scale of the refractions so far (for Russian roulette, as `camera_walk`).
+    eta_scale: [f32; LANES],
 }
 
 impl<S: Clone> Paths<S> {
@@ -1121,6 +1273,8 @@ impl<S: Clone> Paths<S> {
             prev_pdf: [0.0; LANES],
             prev_p: [[0.0; LANES]; 3],
             prev_n: [[0.0; LANES]; 3],
+            prev_bsdf: std::array::from_fn(|_| None),
+            eta_scale: [1.0; LANES],
         }
     }
 }
@@ -1139,6 +1293,8 @@ impl<S> Paths<S> {
         self.depth[l] = 0;
         self.prev_specular[l] = true;
         self.prev_pdf[l] = 0.0;
+        self.prev_bsdf[l] = None;
+        self.eta_scale[l] = 1.0;
     }
 
     /// Adds `c` to lane `l`'s radiance (as `Rgb`'s `+=`).
