@@ -643,49 +643,6 @@ impl SimdKernel {
                 st.prev_bsdf[l] = None;
             }
         }
-        // The light sample (a scalar BSDF of delta lobes only clears it: `scalar_scatter`).
-        v.nee_ok[l] = false;
-        v.generic[l] = false;
-        if !scene.lights.is_empty() {
-            let (li, pmf, _) = scene.light_distribution.sample_discrete(u_light);
-            v.pmf[l] = pmf;
-            v.light[l] = li as u32;
-            match self.lights.get(li) {
-                // Any other light by its own sampling (`path::light_mis_to`'s first tests).
-                Some(None) if pmf > 0.0 => {
-                    let light = &scene.lights[li];
-                    if let Some(ls) = light.sample_li(p, u_l2, &scene.bounds).filter(|ls| ls.pdf > 0.0 && !ls.li.is_black()) {
-                        put(&mut v.lp, ls.p);
-                        put(&mut v.ln, ls.n);
-                        put(&mut v.gwi, ls.wi);
-                        putc(&mut v.lrad, ls.li);
-                        v.gpdf[l] = ls.pdf;
-                        v.infinite[l] = ls.infinite;
-                        v.delta[l] = light.is_delta();
-                        v.generic[l] = true;
-                        v.nee_ok[l] = true;
-                    }
-                }
-                // A mesh light: its point, as `MeshLight::sample_li` up to the distance test.
-                Some(Some(ml)) if pmf > 0.0 && ml.pdf_area > 0.0 && !ml.radiance.is_black() => {
-                    let (t, _, ur) = ml.tri_distribution.sample_discrete(u_l2.x);
-                    let b = warp::square_to_uniform_triangle(Vec2::new(ur, u_l2.y));
-                    let ([p0, e1, e2], n) = ml.tris[t];
-                    let n = match n {
-                        Ok(n) => n,
-                        Err(s) => s.normals_at(b.x, b.y).0,
-                    };
-                    put(&mut v.lp, p0 + e1 * b.x + e2 * b.y);
-                    put(&mut v.ln, n);
-                    putc(&mut v.lrad, ml.radiance);
-                    v.pdf_area[l] = ml.pdf_area;
-                    v.infinite[l] = false;
-                    v.delta[l] = false;
-                    v.nee_ok[l] = true;
-                }
-                _ => {}
-            }
-        }
         if sh.scalar_bsdf {
             let si = SurfaceInteraction {
                 p,
@@ -699,9 +656,66 @@ impl SimdKernel {
                 wo: wo_w,
                 time: 0.0,
             };
-            self.scalar_scatter(scene, events, st, l, v, &si, uc, u);
+            self.scalar_scatter(scene, events, st, l, v, &si, [u_light, u_l2.x, u_l2.y, uc, u.x, u.y]);
+        } else {
+            self.light_sample(scene, l, v, p, u_light, u_l2);
         }
         true
+    }
+
+    /// Lane `l`'s light sample from `p` (as `path::light_mis_to` up to the BSDF): the light
+    /// chosen by `u_light`, its point by `u_l2`; `nee_ok` where it counts so far.
+    #[inline(always)]
+    fn light_sample(&self, scene: &Scene, l: usize, v: &mut Soa, p: Vec3, u_light: f32, u_l2: Vec2) {
+        let put = |a: &mut [[f32; LANES]; 3], x: Vec3| {
+            a[0][l] = x.x;
+            a[1][l] = x.y;
+            a[2][l] = x.z;
+        };
+        let putc = |a: &mut [[f32; LANES]; 3], x: Rgb| put_rgb(a, l, x);
+        v.nee_ok[l] = false;
+        v.generic[l] = false;
+        if scene.lights.is_empty() {
+            return;
+        }
+        let (li, pmf, _) = scene.light_distribution.sample_discrete(u_light);
+        v.pmf[l] = pmf;
+        v.light[l] = li as u32;
+        match self.lights.get(li) {
+            // Any other light by its own sampling (`path::light_mis_to`'s first tests).
+            Some(None) if pmf > 0.0 => {
+                let light = &scene.lights[li];
+                if let Some(ls) = light.sample_li(p, u_l2, &scene.bounds).filter(|ls| ls.pdf > 0.0 && !ls.li.is_black()) {
+                    put(&mut v.lp, ls.p);
+                    put(&mut v.ln, ls.n);
+                    put(&mut v.gwi, ls.wi);
+                    putc(&mut v.lrad, ls.li);
+                    v.gpdf[l] = ls.pdf;
+                    v.infinite[l] = ls.infinite;
+                    v.delta[l] = light.is_delta();
+                    v.generic[l] = true;
+                    v.nee_ok[l] = true;
+                }
+            }
+            // A mesh light: its point, as `MeshLight::sample_li` up to the distance test.
+            Some(Some(ml)) if pmf > 0.0 && ml.pdf_area > 0.0 && !ml.radiance.is_black() => {
+                let (t, _, ur) = ml.tri_distribution.sample_discrete(u_l2.x);
+                let b = warp::square_to_uniform_triangle(Vec2::new(ur, u_l2.y));
+                let ([p0, e1, e2], n) = ml.tris[t];
+                let n = match n {
+                    Ok(n) => n,
+                    Err(s) => s.normals_at(b.x, b.y).0,
+                };
+                put(&mut v.lp, p0 + e1 * b.x + e2 * b.y);
+                put(&mut v.ln, n);
+                putc(&mut v.lrad, ml.radiance);
+                v.pdf_area[l] = ml.pdf_area;
+                v.infinite[l] = false;
+                v.delta[l] = false;
+                v.nee_ok[l] = true;
+            }
+            _ => {}
+        }
     }
 
     /// The uv of a hit on `tri` at barycentrics (b1, b2).
@@ -714,20 +728,26 @@ impl SimdKernel {
     }
 
     /// Lane `l`'s vertex `si` of a material other than a Lambertian one, by its scalar BSDF
-    /// (as `Scene::bsdf` makes it for the scalar tracer's hit): its value and density toward
-    /// the light sample (as `path::light_mis_to`; none for delta lobes only), its own sample
-    /// (as `camera_walk`; `uc`, `u`), and the events of both, into `v` for `shade8`; the
-    /// lane's next MIS vertex and radiance scale into `st`. Out of line: the Lambertian lanes'
-    /// `gather` stays small.
+    /// (as `Scene::bsdf` makes it for the scalar tracer's hit): the light sample unless the
+    /// BSDF has delta lobes only, the BSDF's value and density toward it (as
+    /// `path::light_mis_to`), its own sample (as `camera_walk`), and the events of both, into
+    /// `v` for `shade8`; the lane's next MIS vertex and radiance scale into `st`. `u`: the
+    /// vertex's numbers (light choice, light point, lobe, direction). Out of line: the
+    /// Lambertian lanes' `gather` stays small.
     #[allow(clippy::too_many_arguments)]
     #[inline(never)]
-    fn scalar_scatter<S>(&self, scene: &Scene, events: &LaneEvents, st: &mut Paths<S>, l: usize, v: &mut Soa, si: &SurfaceInteraction, uc: f32, u: Vec2) {
+    fn scalar_scatter<S>(&self, scene: &Scene, events: &LaneEvents, st: &mut Paths<S>, l: usize, v: &mut Soa, si: &SurfaceInteraction, u: [f32; 6]) {
+        let [u_light, ul_x, ul_y, uc, ux, uy] = u;
         let bsdf = scene.bsdf(si);
         let flags = bsdf.flags();
         let (p, frame) = (si.p, si.shading);
         let wo = frame.to_local(si.wo);
         let lane = |a: &[[f32; LANES]; 3]| Vec3::new(a[0][l], a[1][l], a[2][l]);
-        v.nee_ok[l] &= flags.has_non_specular();
+        if flags.has_non_specular() {
+            self.light_sample(scene, l, v, p, u_light, Vec2::new(ul_x, ul_y));
+        } else {
+            v.nee_ok[l] = false;
+        }
         if v.nee_ok[l] {
             // The light's direction as `shade8` finds it (a mesh light's as `AreaLight::sample_li`).
             let wi_w = if v.generic[l] {
@@ -746,7 +766,7 @@ impl SimdKernel {
                 v.class_nee[l] = view.class(events.aovs.scatter_event(v.shape[l], flags, None, wi.z * wo.z < 0.0));
             }
         }
-        let bs = bsdf.sample(wo, uc, u, TransportMode::Radiance).filter(|bs| bs.pdf > 0.0 && !bs.f.is_black());
+        let bs = bsdf.sample(wo, uc, Vec2::new(ux, uy), TransportMode::Radiance).filter(|bs| bs.pdf > 0.0 && !bs.f.is_black());
         v.bmoved[l] = bs.is_some();
         st.prev_bsdf[l] = None;
         let Some(bs) = bs else { return };
@@ -1293,7 +1313,7 @@ impl<S> Paths<S> {
         self.depth[l] = 0;
         self.prev_specular[l] = true;
         self.prev_pdf[l] = 0.0;
-        self.prev_bsdf[l] = None;
+        // `prev_bsdf` is read only after a non-delta sample, and `gather` sets it at each vertex.
         self.eta_scale[l] = 1.0;
     }
 
