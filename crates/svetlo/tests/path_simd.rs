@@ -236,6 +236,11 @@ fn large_scenes_trace_single_rays() {
     assert!(!k.uses_packets(), "24 200 triangles should trace single rays");
     assert!(render(&scene, "path", &s).mean().max_component() > 0.0, "the lamp lights the floor");
     compare(&scene, &s, "large floor");
+    // Not Lambertian there: the scalar tracer (the kernel gained nothing on single rays).
+    let mut glossy = scene;
+    glossy.materials[white as usize] =
+        Material::Mask { opacity: Texture::Constant(Rgb::splat(0.5)), inner: Box::new(glossy.materials[white as usize].clone()) };
+    assert!(SimdKernel::new(&glossy, &s).is_none(), "a large scene with a mask should take the scalar tracer");
     let small = load(&repo_scene("cornell-box.xml"), &[], 16);
     assert!(SimdKernel::new(&small, &RenderSettings::from_scene(&small)).expect("qualifies").uses_packets(), "the Cornell box should trace packets");
 }

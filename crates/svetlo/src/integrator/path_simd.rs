@@ -7,10 +7,16 @@
 //! as structure of arrays (compiled to AVX2 vector code; an AVX-512VL build of the same code
 //! has 32 registers where the CPU has them).
 //!
-//! Scope: static scenes of triangle meshes, (two-sided) Lambertian
-//! materials of constant or textured reflectance (any texture: bitmaps, procedural, mesh
-//! attributes; evaluated per lane where the path hits), area lights of constant radiance on
-//! meshes (sampled by the kernel's own unpacked copy), and every other light the scalar tracer
+//! Scope: static scenes of triangle meshes with any material svetlo reads. (Two-sided)
+//! Lambertian materials of constant or textured reflectance (any texture: bitmaps, procedural,
+//! mesh attributes; evaluated per lane where the path hits) are shaded as eight-lane
+//! arithmetic; every other one (conductors, dielectrics, plastics, the classic models,
+//! principled, blends, masks, normal and bump maps) lane by lane through its scalar `Bsdf`
+//! in `gather` (`scalar_scatter`: the same calls and random numbers as `path.rs`), its
+//! results selected into `shade8`'s lanes. Scenes large enough to trace single rays take the
+//! kernel only with Lambertian materials (it gained nothing there otherwise). Lights: area
+//! lights of constant radiance on meshes (sampled by the kernel's own unpacked copy), and
+//! every other light the scalar tracer
 //! takes (point, spot, directional, one constant or bitmap environment), each lane sampling it
 //! through its own `Light::sample_li` and seeing the environment where its ray escapes;
 //! either sampler (Sobol's scrambles for all lanes at once: [`LaneSampler`]); AOVs and
@@ -260,6 +266,12 @@ impl SimdKernel {
             let pdf_area = if a.area > 0.0 { 1.0 / a.area } else { 0.0 };
             lights.push(Some(MeshLight { pdf_area, tri_distribution: dist.clone(), tris, radiance: *radiance }));
         }
+        // Large scenes trace single rays; there scalar BSDFs gained nothing in the render loop
+        // and the kernel's set-up (unpacking every triangle) cost 5-10 %: bsdf_spheres' grid
+        // (325k triangles, 8 of 12 spheres not Lambertian, depth 6) took 1.06 the scalar
+        // tracer's time at 512 spp, 1.00 at 2048. Such scenes take the scalar tracer.
+        let triangles: usize = scene.shapes.iter().map(|s| if let Geometry::Mesh(m) = &*s.geometry { m.triangle_count() } else { 0 }).sum();
+        let single_rays = triangles > PACKET_MAX_TRIANGLES;
         let mut shapes = Vec::with_capacity(scene.shapes.len());
         let mut tris = Vec::new();
         let mut verts = Vec::new();
@@ -273,6 +285,7 @@ impl SimdKernel {
             // Any other material (or surface detail) by its own scalar code, lane by lane.
             let (scalar_bsdf, (front, back)) = match lambert {
                 Some(fb) if !s.detail => (false, fb),
+                _ if single_rays => return None,
                 _ => (true, (Albedo::Constant(Rgb::BLACK), None)),
             };
             let textured = matches!(front, Albedo::Textured(_)) || matches!(back, Some(Albedo::Textured(_)));
@@ -295,7 +308,7 @@ impl SimdKernel {
                 tris.push(Tri { p, shading, shape: si as u32, local: t as u32 });
             }
         }
-        let tracer = if verts.len() <= PACKET_MAX_TRIANGLES { Tracer::Packets(PacketBvh::build(&verts)) } else { single_tracer(scene) };
+        let tracer = if single_rays { single_tracer(scene) } else { Tracer::Packets(PacketBvh::build(&verts)) };
         Some(SimdKernel { tracer, tris, shapes, lights, avx512: avx512() })
     }
 
