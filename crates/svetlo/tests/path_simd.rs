@@ -496,3 +496,53 @@ fn every_bsdf_matches_scalar() {
     }
     let _ = std::fs::remove_dir_all(&dir);
 }
+
+/// A textured emitter in the kernel: sampled through its own `Light::sample_li`, its radiance
+/// looked up where a path hits it (`AreaLight::l`), so the image and an emission layer equal
+/// the scalar tracer's (bit for bit with single rays), with a glossy box that reflects it.
+#[test]
+fn textured_emitter_matches_scalar() {
+    use std::sync::Arc;
+    use svetlo::lpe::AovSet;
+    let dir = std::env::temp_dir().join(format!("svetlo-simd-textured-light-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    let base = std::fs::read_to_string(repo_scene("cornell-box.xml")).unwrap();
+    let textured = r#"<emitter type="area"><texture type="checkerboard" name="radiance"><rgb name="color0" value="17, 12, 4"/><rgb name="color1" value="3, 6, 9"/></texture></emitter>"#;
+    let constant = r#"<emitter type="area">
+            <rgb name="radiance" value="17, 12, 4"/>
+        </emitter>"#;
+    assert!(base.contains(constant), "the Cornell box's light");
+    let glossy = r#"<bsdf type="roughconductor" id="test"><float name="alpha" value="0.1"/></bsdf>
+    <!-- A rectangle"#;
+    let xml = with_material(&base.replace(constant, textured).replacen("<!-- A rectangle", glossy, 1), "tall-box", "test");
+    let path = dir.join("textured-light.xml");
+    std::fs::write(&path, xml).unwrap();
+    let scene = load(&path, &[], 32);
+    for sampler in [svetlo::sampling::SamplerKind::Independent, svetlo::sampling::SamplerKind::Sobol] {
+        let mut s = RenderSettings::from_scene(&scene);
+        s.sampler = sampler;
+        s.spp = 4;
+        s.max_depth = 5;
+        compare(&scene, &s, &format!("cornell-box with a textured light, {sampler:?}"));
+    }
+    let plain = load(&repo_scene("cornell-box.xml"), &[], 32);
+    let s = RenderSettings { spp: 4, max_depth: 5, ..RenderSettings::from_scene(&scene) };
+    let (a, b) = (render(&scene, "path", &s).mean(), render(&plain, "path", &s).mean());
+    assert!((a[2] - b[2]).abs() > 0.01 * b[2], "the texture changes the light: {a:?} vs {b:?}");
+    if !avx2() {
+        return;
+    }
+    let list: Vec<(String, String)> = [("emit", "C L"), ("glossy", "C G L"), ("all", "C .* L")].iter().map(|(a, b)| (a.to_string(), b.to_string())).collect();
+    let mut set = AovSet::compile(&list, None).expect("expressions");
+    assert!(set.bind(&scene).is_empty());
+    let s = RenderSettings { lpe: Some(Arc::new(set)), ..s };
+    let mut k = SimdKernel::new(&scene, &s).expect("qualifies");
+    k.use_single_rays(&scene);
+    let a = k.render(&scene, &s, &Progress::new()).expect("render");
+    let b = svetlo::methods::by_name("path:simd=false").unwrap().render(&scene, &s, &Progress::new()).expect("render");
+    for (layer, img) in b.layer_images() {
+        assert!(img.mean().max_component() > 0.0, "layer {layer} is lit");
+        assert!(a.layer(&layer).expect("layer").data == img.data, "layer {layer} differs from the scalar tracer's");
+    }
+    let _ = std::fs::remove_dir_all(&dir);
+}

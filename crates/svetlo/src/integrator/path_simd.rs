@@ -16,9 +16,10 @@
 //! results selected into `shade8`'s lanes. Scenes large enough to trace single rays take the
 //! kernel only with Lambertian materials (it gained nothing there otherwise). Lights: area
 //! lights of constant radiance on meshes (sampled by the kernel's own unpacked copy), and
-//! every other light the scalar tracer
-//! takes (point, spot, directional, one constant or bitmap environment), each lane sampling it
-//! through its own `Light::sample_li` and seeing the environment where its ray escapes;
+//! every other light the scalar tracer takes (textured area lights, point, spot,
+//! directional, one constant or bitmap environment), each lane sampling it through its own
+//! `Light::sample_li`, looking a textured emitter's radiance up where its path hits it and
+//! seeing the environment where its ray escapes;
 //! either sampler (Sobol's scrambles for all lanes at once: [`LaneSampler`]); AOVs and
 //! `--lpe` (each lane steps its path's automata as the scalar tracer does: see
 //! [`LaneLayers`]). `SimdPathTracer` checks that (`SimdKernel::new`) and otherwise, or
@@ -139,7 +140,8 @@ struct ShapeData {
     /// Whether either side is textured (then the hit's uv is needed).
     textured: bool,
     /// Light index and radiance when the shape emits.
-    light: Option<(u32, Rgb)>,
+    /// (None: a textured emitter, its radiance looked up at the hit by `AreaLight::l`).
+    light: Option<(u32, Option<Rgb>)>,
 }
 
 /// A mesh area light as `AreaLight::sample_li` samples it, unpacked: its triangles' vertices
@@ -253,6 +255,11 @@ impl SimdKernel {
                 lights.push(None);
                 continue;
             };
+            // A textured emitter is sampled through its own `sample_li`, as the other lights.
+            if !matches!(a.radiance, Texture::Constant(_)) {
+                lights.push(None);
+                continue;
+            }
             let (Geometry::Mesh(m), Texture::Constant(radiance), Some(dist)) = (&*a.geometry, &a.radiance, &a.tri_distribution) else { return None };
             if dist.is_empty() {
                 return None;
@@ -292,7 +299,10 @@ impl SimdKernel {
             let light = match s.light {
                 Some(li) => {
                     let a = area_of(scene, li)?;
-                    let Texture::Constant(le) = a.radiance else { return None };
+                    let le = match a.radiance {
+                        Texture::Constant(le) => Some(le),
+                        _ => None,
+                    };
                     Some((li, le))
                 }
                 None => None,
@@ -575,7 +585,16 @@ impl SimdKernel {
         let wo_w = -d;
         if let Some((li, le)) = sh.light {
             let hide = depth == 1 && settings.hide_emitters;
-            let le = if ng.dot(wo_w) <= 0.0 { Rgb::BLACK } else { le };
+            let le = match le {
+                Some(le) => {
+                    if ng.dot(wo_w) <= 0.0 {
+                        Rgb::BLACK
+                    } else {
+                        le
+                    }
+                }
+                None => area_of(scene, li).map_or(Rgb::BLACK, |a| a.l(ng, self.uv(scene, tri, b1, b2), wo_w)),
+            };
             if !le.is_black() && !hide {
                 let w = if st.prev_specular[l] {
                     1.0
