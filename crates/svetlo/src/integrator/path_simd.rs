@@ -7,12 +7,19 @@
 //! as structure of arrays (compiled to AVX2 vector code; an AVX-512VL build of the same code
 //! has 32 registers where the CPU has them).
 //!
-//! Scope: static scenes of triangle meshes, (two-sided) Lambertian
-//! materials of constant or textured reflectance (any texture: bitmaps, procedural, mesh
-//! attributes; evaluated per lane where the path hits), area lights of constant radiance on
-//! meshes (sampled by the kernel's own unpacked copy), and every other light the scalar tracer
-//! takes (point, spot, directional, one constant or bitmap environment), each lane sampling it
-//! through its own `Light::sample_li` and seeing the environment where its ray escapes;
+//! Scope: static scenes of triangle meshes with any material svetlo reads. (Two-sided)
+//! Lambertian materials of constant or textured reflectance (any texture: bitmaps, procedural,
+//! mesh attributes; evaluated per lane where the path hits) are shaded as eight-lane
+//! arithmetic; every other one (conductors, dielectrics, plastics, the classic models,
+//! principled, blends, masks, normal and bump maps) lane by lane through its scalar `Bsdf`
+//! in `gather` (`scalar_scatter`: the same calls and random numbers as `path.rs`), its
+//! results selected into `shade8`'s lanes. Scenes large enough to trace single rays take the
+//! kernel only with Lambertian materials (it gained nothing there otherwise). Lights: area
+//! lights of constant radiance on meshes (sampled by the kernel's own unpacked copy), and
+//! every other light the scalar tracer takes (textured area lights, point, spot,
+//! directional, one constant or bitmap environment), each lane sampling it through its own
+//! `Light::sample_li`, looking a textured emitter's radiance up where its path hits it and
+//! seeing the environment where its ray escapes;
 //! either sampler (Sobol's scrambles for all lanes at once: [`LaneSampler`]); AOVs and
 //! `--lpe` (each lane steps its path's automata as the scalar tracer does: see
 //! [`LaneLayers`]). `SimdPathTracer` checks that (`SimdKernel::new`) and otherwise, or
@@ -23,15 +30,15 @@
 //! that the image equals the scalar tracer's up to float rounding (paths that meet a shared
 //! edge may pick the other triangle).
 
-use super::path::PathTracer;
+use super::path::{bsdf_pdf_toward, PathTracer};
 use super::{camera_sample, render_tiles, Integrator, Progress, RenderSettings};
 use crate::accel::packet::{Hits8, PacketBvh, Rays8, LANES};
-use crate::bsdf::Material;
+use crate::bsdf::{Bsdf, LobeFlags, Material, TransportMode};
 use crate::error::{Error, Result};
 use crate::film::{Film, FilmTile};
 use crate::geometry::ray::SHADOW_EPSILON;
 use crate::geometry::Ray;
-use crate::geometry::{Geometry, TriangleShading};
+use crate::geometry::{Geometry, SurfaceInteraction, TriangleShading};
 use crate::light::{AreaLight, Light};
 use crate::lpe::{AovSet, ForwardView, LayerMask, MAX_LAYERS};
 use crate::math::{warp, Frame, INV_PI, PI};
@@ -124,13 +131,17 @@ impl Albedo {
 /// A shape's material and emission.
 #[derive(Clone, Debug)]
 struct ShapeData {
+    /// Whether its lanes take the scalar `Bsdf` (any material but a plain Lambertian one, or
+    /// a normal or bump map); then `front` and `back` are unused.
+    scalar_bsdf: bool,
     front: Albedo,
     /// Reflectance seen from the back (two-sided); None: black there.
     back: Option<Albedo>,
     /// Whether either side is textured (then the hit's uv is needed).
     textured: bool,
     /// Light index and radiance when the shape emits.
-    light: Option<(u32, Rgb)>,
+    /// (None: a textured emitter, its radiance looked up at the hit by `AreaLight::l`).
+    light: Option<(u32, Option<Rgb>)>,
 }
 
 /// A mesh area light as `AreaLight::sample_li` samples it, unpacked: its triangles' vertices
@@ -244,6 +255,11 @@ impl SimdKernel {
                 lights.push(None);
                 continue;
             };
+            // A textured emitter is sampled through its own `sample_li`, as the other lights.
+            if !matches!(a.radiance, Texture::Constant(_)) {
+                lights.push(None);
+                continue;
+            }
             let (Geometry::Mesh(m), Texture::Constant(radiance), Some(dist)) = (&*a.geometry, &a.radiance, &a.tri_distribution) else { return None };
             if dist.is_empty() {
                 return None;
@@ -257,29 +273,41 @@ impl SimdKernel {
             let pdf_area = if a.area > 0.0 { 1.0 / a.area } else { 0.0 };
             lights.push(Some(MeshLight { pdf_area, tri_distribution: dist.clone(), tris, radiance: *radiance }));
         }
+        // Large scenes trace single rays; there scalar BSDFs gained nothing in the render loop
+        // and the kernel's set-up (unpacking every triangle) cost 5-10 %: bsdf_spheres' grid
+        // (325k triangles, 8 of 12 spheres not Lambertian, depth 6) took 1.06 the scalar
+        // tracer's time at 512 spp, 1.00 at 2048. Such scenes take the scalar tracer.
+        let triangles: usize = scene.shapes.iter().map(|s| if let Geometry::Mesh(m) = &*s.geometry { m.triangle_count() } else { 0 }).sum();
+        let single_rays = triangles > PACKET_MAX_TRIANGLES;
         let mut shapes = Vec::with_capacity(scene.shapes.len());
         let mut tris = Vec::new();
         let mut verts = Vec::new();
         for (si, s) in scene.shapes.iter().enumerate() {
             let Geometry::Mesh(m) = &*s.geometry else { return None };
-            if s.detail {
-                return None;
-            }
             let mat = scene.materials.get(s.material as usize)?;
-            let (front, back) = match mat {
-                Material::TwoSided { front, back } => (diffuse_albedo(front)?, Some(diffuse_albedo(back)?)),
-                m => (diffuse_albedo(m)?, None),
+            let lambert = match mat {
+                Material::TwoSided { front, back } => diffuse_albedo(front).zip(diffuse_albedo(back).map(Some)),
+                m => diffuse_albedo(m).map(|f| (f, None)),
+            };
+            // Any other material (or surface detail) by its own scalar code, lane by lane.
+            let (scalar_bsdf, (front, back)) = match lambert {
+                Some(fb) if !s.detail => (false, fb),
+                _ if single_rays => return None,
+                _ => (true, (Albedo::Constant(Rgb::BLACK), None)),
             };
             let textured = matches!(front, Albedo::Textured(_)) || matches!(back, Some(Albedo::Textured(_)));
             let light = match s.light {
                 Some(li) => {
                     let a = area_of(scene, li)?;
-                    let Texture::Constant(le) = a.radiance else { return None };
+                    let le = match a.radiance {
+                        Texture::Constant(le) => Some(le),
+                        _ => None,
+                    };
                     Some((li, le))
                 }
                 None => None,
             };
-            shapes.push(ShapeData { front, back, textured, light });
+            shapes.push(ShapeData { scalar_bsdf, front, back, textured, light });
             for t in 0..m.triangle_count() {
                 let p = m.vertices(t);
                 verts.push(p);
@@ -290,7 +318,7 @@ impl SimdKernel {
                 tris.push(Tri { p, shading, shape: si as u32, local: t as u32 });
             }
         }
-        let tracer = if verts.len() <= PACKET_MAX_TRIANGLES { Tracer::Packets(PacketBvh::build(&verts)) } else { single_tracer(scene) };
+        let tracer = if single_rays { single_tracer(scene) } else { Tracer::Packets(PacketBvh::build(&verts)) };
         Some(SimdKernel { tracer, tris, shapes, lights, avx512: avx512() })
     }
 
@@ -465,7 +493,7 @@ impl SimdKernel {
                     continue;
                 }
                 let d = Vec3::new(rays.d[0][l], rays.d[1][l], rays.d[2][l]);
-                if self.gather(scene, settings, &mut st, &draws, l, hits.prim[l], hits.b1[l], hits.b2[l], d, &mut v) {
+                if self.gather(scene, settings, events, &mut st, &draws, l, hits.prim[l], hits.b1[l], hits.b2[l], d, &mut v) {
                     go |= 1 << l;
                 } else {
                     ends |= 1 << l;
@@ -518,14 +546,16 @@ impl SimdKernel {
     }
 
     /// The per-lane part of one vertex (as `shade`): emission found, the depth test, the
-    /// random numbers, the light and its triangle chosen, the cosine warp; the arithmetic
-    /// is left in `v` for `shade8`. False when the path ends here.
+    /// random numbers, the light and its triangle chosen, and at a material other than a
+    /// Lambertian one its scalar BSDF's value toward the light sample and its own sample; the
+    /// arithmetic is left in `v` for `shade8`. False when the path ends here.
     #[allow(clippy::too_many_arguments)]
     #[inline(always)]
     fn gather<S: LaneSampler>(
         &self,
         scene: &Scene,
         settings: &RenderSettings,
+        events: &LaneEvents,
         st: &mut Paths<S>,
         draws: &[[f32; LANES]; 7],
         l: usize,
@@ -555,19 +585,37 @@ impl SimdKernel {
         let wo_w = -d;
         if let Some((li, le)) = sh.light {
             let hide = depth == 1 && settings.hide_emitters;
-            let le = if ng.dot(wo_w) <= 0.0 { Rgb::BLACK } else { le };
+            let le = match le {
+                Some(le) => {
+                    if ng.dot(wo_w) <= 0.0 {
+                        Rgb::BLACK
+                    } else {
+                        le
+                    }
+                }
+                None => area_of(scene, li).map_or(Rgb::BLACK, |a| a.l(ng, self.uv(scene, tri, b1, b2), wo_w)),
+            };
             if !le.is_black() && !hide {
                 let w = if st.prev_specular[l] {
                     1.0
                 } else {
                     let prev_p = Vec3::new(st.prev_p[0][l], st.prev_p[1][l], st.prev_p[2][l]);
                     let pdf_li = area_of(scene, li).map_or(0.0, |a| a.pdf_li(prev_p, p, ng));
-                    // The diffuse BSDF's density toward the hit point, as the scalar
-                    // tracer's `bsdf_pdf_toward` (the same operations).
-                    let prev_n = Vec3::new(st.prev_n[0][l], st.prev_n[1][l], st.prev_n[2][l]);
-                    let dp = p - prev_p;
-                    let len = dp.length();
-                    let pdf_bsdf = if len > 0.0 && len.is_finite() { (dp / len).dot(prev_n).max(0.0) * INV_PI } else { st.prev_pdf[l] };
+                    let pdf_bsdf = match &st.prev_bsdf[l] {
+                        Some(pb) => bsdf_pdf_toward(&pb.bsdf, &pb.frame, pb.wo, prev_p, p).unwrap_or(st.prev_pdf[l]),
+                        None => {
+                            // The diffuse BSDF's density toward the hit point, as the scalar
+                            // tracer's `bsdf_pdf_toward` (the same operations).
+                            let prev_n = Vec3::new(st.prev_n[0][l], st.prev_n[1][l], st.prev_n[2][l]);
+                            let dp = p - prev_p;
+                            let len = dp.length();
+                            if len > 0.0 && len.is_finite() {
+                                (dp / len).dot(prev_n).max(0.0) * INV_PI
+                            } else {
+                                st.prev_pdf[l]
+                            }
+                        }
+                    };
                     power_heuristic(1.0, pdf_bsdf, 1.0, scene.light_pmf(li) * pdf_li)
                 };
                 let beta = Rgb::new(st.beta[0][l], st.beta[1][l], st.beta[2][l]);
@@ -581,14 +629,20 @@ impl SimdKernel {
         }
         // All of the vertex's numbers, in the scalar order (u_rr is drawn even where the path
         // ends before it: the lane's sampler restarts with its next camera sample).
-        let (u_light, u_l2, u, u_rr) = if S::BATCHED {
-            (draws[0][l], Vec2::new(draws[1][l], draws[2][l]), Vec2::new(draws[4][l], draws[5][l]), draws[6][l])
+        let (u_light, u_l2, uc, u, u_rr) = if S::BATCHED {
+            (draws[0][l], Vec2::new(draws[1][l], draws[2][l]), draws[3][l], Vec2::new(draws[4][l], draws[5][l]), draws[6][l])
         } else {
             let sampler = &mut st.sampler[l];
             let u_light = sampler.next_1d();
             let u_l2 = sampler.next_2d();
-            let _uc = sampler.next_1d();
-            (u_light, u_l2, sampler.next_2d(), sampler.next_1d())
+            // Only a scalar BSDF takes the lobe number (a Lambertian lane only steps past it).
+            let uc = if sh.scalar_bsdf {
+                sampler.next_1d()
+            } else {
+                sampler.next_1d();
+                0.0
+            };
+            (u_light, u_l2, uc, sampler.next_2d(), sampler.next_1d())
         };
         v.u_rr[l] = u_rr;
         let put = |a: &mut [[f32; LANES]; 3], x: Vec3| {
@@ -603,66 +657,168 @@ impl SimdKernel {
         put(&mut v.ft, frame.t);
         put(&mut v.fnn, frame.n);
         put(&mut v.wo, wo_w);
-        // The hit's texture point, as `Scene::interaction` gives it (`SurfaceInteraction::tex_point`).
-        let tp = if sh.textured {
-            let uv = match &*scene.shapes[tri.shape as usize].geometry {
-                Geometry::Mesh(m) => m.uv(tri.local as usize, b1, b2),
-                _ => Vec2::ZERO,
+        v.scalar_bsdf[l] = sh.scalar_bsdf;
+        if !sh.scalar_bsdf {
+            // The hit's texture point, as `Scene::interaction` gives it (`SurfaceInteraction::tex_point`).
+            let tp = if sh.textured {
+                TexPoint { uv: self.uv(scene, tri, b1, b2), prim: tri.local, bary: Vec2::new(b1, b2), p, n: ng }
+            } else {
+                TexPoint::default()
             };
-            TexPoint { uv, prim: tri.local, bary: Vec2::new(b1, b2), p, n: ng }
-        } else {
-            TexPoint::default()
-        };
-        let (front, back) = (sh.front.at(tp), sh.back.as_ref().map_or(Rgb::BLACK, |b| b.at(tp)));
-        putc(&mut v.front, front);
-        putc(&mut v.back, back);
-        v.has_back[l] = sh.back.is_some();
-        v.u[0][l] = u.x;
-        v.u[1][l] = u.y;
-        // The light sample.
-        v.nee_ok[l] = false;
-        v.generic[l] = false;
-        if !scene.lights.is_empty() {
-            let (li, pmf, _) = scene.light_distribution.sample_discrete(u_light);
-            v.pmf[l] = pmf;
-            v.light[l] = li as u32;
-            match self.lights.get(li) {
-                // Any other light by its own sampling (`path::light_mis_to`'s first tests).
-                Some(None) if pmf > 0.0 => {
-                    let light = &scene.lights[li];
-                    if let Some(ls) = light.sample_li(p, u_l2, &scene.bounds).filter(|ls| ls.pdf > 0.0 && !ls.li.is_black()) {
-                        put(&mut v.lp, ls.p);
-                        put(&mut v.ln, ls.n);
-                        put(&mut v.gwi, ls.wi);
-                        putc(&mut v.lrad, ls.li);
-                        v.gpdf[l] = ls.pdf;
-                        v.infinite[l] = ls.infinite;
-                        v.delta[l] = light.is_delta();
-                        v.generic[l] = true;
-                        v.nee_ok[l] = true;
-                    }
-                }
-                // A mesh light: its point, as `MeshLight::sample_li` up to the distance test.
-                Some(Some(ml)) if pmf > 0.0 && ml.pdf_area > 0.0 && !ml.radiance.is_black() => {
-                    let (t, _, ur) = ml.tri_distribution.sample_discrete(u_l2.x);
-                    let b = warp::square_to_uniform_triangle(Vec2::new(ur, u_l2.y));
-                    let ([p0, e1, e2], n) = ml.tris[t];
-                    let n = match n {
-                        Ok(n) => n,
-                        Err(s) => s.normals_at(b.x, b.y).0,
-                    };
-                    put(&mut v.lp, p0 + e1 * b.x + e2 * b.y);
-                    put(&mut v.ln, n);
-                    putc(&mut v.lrad, ml.radiance);
-                    v.pdf_area[l] = ml.pdf_area;
-                    v.infinite[l] = false;
-                    v.delta[l] = false;
-                    v.nee_ok[l] = true;
-                }
-                _ => {}
+            let (front, back) = (sh.front.at(tp), sh.back.as_ref().map_or(Rgb::BLACK, |b| b.at(tp)));
+            putc(&mut v.front, front);
+            putc(&mut v.back, back);
+            v.has_back[l] = sh.back.is_some();
+            v.u[0][l] = u.x;
+            v.u[1][l] = u.y;
+            if st.prev_bsdf[l].is_some() {
+                st.prev_bsdf[l] = None;
             }
         }
+        if sh.scalar_bsdf {
+            let si = SurfaceInteraction {
+                p,
+                t: 0.0,
+                ng,
+                shading: frame,
+                uv: self.uv(scene, tri, b1, b2),
+                shape: tri.shape,
+                prim: tri.local,
+                bary: Vec2::new(b1, b2),
+                wo: wo_w,
+                time: 0.0,
+            };
+            self.scalar_scatter(scene, events, st, l, v, &si, [u_light, u_l2.x, u_l2.y, uc, u.x, u.y]);
+        } else {
+            self.light_sample(scene, l, v, p, u_light, u_l2);
+        }
         true
+    }
+
+    /// Lane `l`'s light sample from `p` (as `path::light_mis_to` up to the BSDF): the light
+    /// chosen by `u_light`, its point by `u_l2`; `nee_ok` where it counts so far.
+    #[inline(always)]
+    fn light_sample(&self, scene: &Scene, l: usize, v: &mut Soa, p: Vec3, u_light: f32, u_l2: Vec2) {
+        let put = |a: &mut [[f32; LANES]; 3], x: Vec3| {
+            a[0][l] = x.x;
+            a[1][l] = x.y;
+            a[2][l] = x.z;
+        };
+        let putc = |a: &mut [[f32; LANES]; 3], x: Rgb| put_rgb(a, l, x);
+        v.nee_ok[l] = false;
+        v.generic[l] = false;
+        if scene.lights.is_empty() {
+            return;
+        }
+        let (li, pmf, _) = scene.light_distribution.sample_discrete(u_light);
+        v.pmf[l] = pmf;
+        v.light[l] = li as u32;
+        match self.lights.get(li) {
+            // Any other light by its own sampling (`path::light_mis_to`'s first tests).
+            Some(None) if pmf > 0.0 => {
+                let light = &scene.lights[li];
+                if let Some(ls) = light.sample_li(p, u_l2, &scene.bounds).filter(|ls| ls.pdf > 0.0 && !ls.li.is_black()) {
+                    put(&mut v.lp, ls.p);
+                    put(&mut v.ln, ls.n);
+                    put(&mut v.gwi, ls.wi);
+                    putc(&mut v.lrad, ls.li);
+                    v.gpdf[l] = ls.pdf;
+                    v.infinite[l] = ls.infinite;
+                    v.delta[l] = light.is_delta();
+                    v.generic[l] = true;
+                    v.nee_ok[l] = true;
+                }
+            }
+            // A mesh light: its point, as `MeshLight::sample_li` up to the distance test.
+            Some(Some(ml)) if pmf > 0.0 && ml.pdf_area > 0.0 && !ml.radiance.is_black() => {
+                let (t, _, ur) = ml.tri_distribution.sample_discrete(u_l2.x);
+                let b = warp::square_to_uniform_triangle(Vec2::new(ur, u_l2.y));
+                let ([p0, e1, e2], n) = ml.tris[t];
+                let n = match n {
+                    Ok(n) => n,
+                    Err(s) => s.normals_at(b.x, b.y).0,
+                };
+                put(&mut v.lp, p0 + e1 * b.x + e2 * b.y);
+                put(&mut v.ln, n);
+                putc(&mut v.lrad, ml.radiance);
+                v.pdf_area[l] = ml.pdf_area;
+                v.infinite[l] = false;
+                v.delta[l] = false;
+                v.nee_ok[l] = true;
+            }
+            _ => {}
+        }
+    }
+
+    /// The uv of a hit on `tri` at barycentrics (b1, b2).
+    #[inline(always)]
+    fn uv(&self, scene: &Scene, tri: &Tri, b1: f32, b2: f32) -> Vec2 {
+        match &*scene.shapes[tri.shape as usize].geometry {
+            Geometry::Mesh(m) => m.uv(tri.local as usize, b1, b2),
+            _ => Vec2::ZERO,
+        }
+    }
+
+    /// Lane `l`'s vertex `si` of a material other than a Lambertian one, by its scalar BSDF
+    /// (as `Scene::bsdf` makes it for the scalar tracer's hit): the light sample unless the
+    /// BSDF has delta lobes only, the BSDF's value and density toward it (as
+    /// `path::light_mis_to`), its own sample (as `camera_walk`), and the events of both, into
+    /// `v` for `shade8`; the lane's next MIS vertex and radiance scale into `st`. `u`: the
+    /// vertex's numbers (light choice, light point, lobe, direction). Out of line: the
+    /// Lambertian lanes' `gather` stays small.
+    #[allow(clippy::too_many_arguments)]
+    #[inline(never)]
+    fn scalar_scatter<S>(&self, scene: &Scene, events: &LaneEvents, st: &mut Paths<S>, l: usize, v: &mut Soa, si: &SurfaceInteraction, u: [f32; 6]) {
+        let [u_light, ul_x, ul_y, uc, ux, uy] = u;
+        let bsdf = scene.bsdf(si);
+        let flags = bsdf.flags();
+        let (p, frame) = (si.p, si.shading);
+        let wo = frame.to_local(si.wo);
+        let lane = |a: &[[f32; LANES]; 3]| Vec3::new(a[0][l], a[1][l], a[2][l]);
+        if flags.has_non_specular() {
+            self.light_sample(scene, l, v, p, u_light, Vec2::new(ul_x, ul_y));
+        } else {
+            v.nee_ok[l] = false;
+        }
+        if v.nee_ok[l] {
+            // The light's direction as `shade8` finds it (a mesh light's as `AreaLight::sample_li`).
+            let wi_w = if v.generic[l] {
+                lane(&v.gwi)
+            } else {
+                let d = lane(&v.lp) - p;
+                d / d.length_squared().sqrt()
+            };
+            let wi = frame.to_local(wi_w);
+            let f = bsdf.eval(wo, wi, TransportMode::Radiance);
+            v.nee_ok[l] = !f.is_black();
+            put_rgb(&mut v.bf, l, f);
+            // A delta light takes no MIS weight (nor the density).
+            v.bpdf_nee[l] = if v.delta[l] { 0.0 } else { bsdf.pdf(wo, wi, TransportMode::Radiance) };
+            if let Some(view) = events.view {
+                v.class_nee[l] = view.class(events.aovs.scatter_event(v.shape[l], flags, None, wi.z * wo.z < 0.0));
+            }
+        }
+        let bs = bsdf.sample(wo, uc, Vec2::new(ux, uy), TransportMode::Radiance).filter(|bs| bs.pdf > 0.0 && !bs.f.is_black());
+        v.bmoved[l] = bs.is_some();
+        st.prev_bsdf[l] = None;
+        let Some(bs) = bs else { return };
+        let transmission = bs.lobe.contains(LobeFlags::TRANSMISSION);
+        for k in 0..3 {
+            v.bwi[k][l] = bs.wi[k];
+        }
+        put_rgb(&mut v.bweight, l, bs.weight());
+        v.bpdf[l] = bs.pdf;
+        v.bspecular[l] = bs.lobe.is_specular();
+        if let Some(view) = events.view {
+            // A null interaction (a mask let the path through) is no event.
+            v.class_step[l] = (!bs.lobe.is_null()).then(|| view.class(events.aovs.scatter_event(v.shape[l], flags, Some(bs.lobe), transmission)));
+        }
+        if transmission {
+            st.eta_scale[l] *= bs.eta * bs.eta;
+        }
+        if !bs.lobe.is_specular() {
+            st.prev_bsdf[l] = Some(PrevBsdf { bsdf, frame, wo });
+        }
     }
 
     /// Lane `l`'s ray along `d` left the scene: what the environment adds there, weighted
@@ -727,6 +883,31 @@ struct Soa {
     lrad: [[f32; LANES]; 3],
     pmf: [f32; LANES],
     pdf_area: [f32; LANES],
+    /// The lane's material took the scalar `Bsdf` (`SimdKernel::scalar_scatter`): its value
+    /// `bf` and density `bpdf_nee` toward the light sample, and its own sample (taken when
+    /// `bmoved`): local direction `bwi`, weight f |cos| / pdf `bweight`, density `bpdf`,
+    /// whether of a delta lobe.
+    scalar_bsdf: [bool; LANES],
+    bf: [[f32; LANES]; 3],
+    bpdf_nee: [f32; LANES],
+    bmoved: [bool; LANES],
+    bwi: [[f32; LANES]; 3],
+    bweight: [[f32; LANES]; 3],
+    bpdf: [f32; LANES],
+    bspecular: [bool; LANES],
+    /// With AOVs, at a scalar BSDF: the event classes of the light sample and of the BSDF
+    /// sample (None: a null interaction, no event).
+    class_nee: [u32; LANES],
+    class_step: [Option<u32>; LANES],
+}
+
+/// A camera-path vertex of a scalar BSDF that scattered by a non-delta lobe, kept for the
+/// MIS weight of the emitter its sample reaches (as `path.rs`'s `ScatterPoint`).
+struct PrevBsdf {
+    bsdf: Bsdf,
+    frame: Frame,
+    /// Toward the vertex before it, local frame.
+    wo: Vec3,
 }
 
 /// The events of the kernel's paths as classes of the AOVs' product automaton (the scene's
@@ -734,6 +915,8 @@ struct Soa {
 struct LaneEvents<'a> {
     /// None without AOVs (or without a product automaton: then the scalar tracer renders).
     view: Option<ForwardView<'a>>,
+    /// For the events of scalar BSDFs, found per vertex.
+    aovs: &'a AovSet,
     /// Per scene shape: the diffuse reflection there (sampled or toward a light sample alike:
     /// a Lambertian reflection is never singular, and a light sample it counts lies on its side).
     scatter: Vec<u32>,
@@ -751,11 +934,12 @@ struct LaneEvents<'a> {
 impl<'a> LaneEvents<'a> {
     fn new(scene: &Scene, aovs: &'a AovSet) -> LaneEvents<'a> {
         let Some(view) = aovs.forward_view().filter(|_| !aovs.is_empty()) else {
-            return LaneEvents { view: None, scatter: Vec::new(), light: Vec::new(), background: 0, emitter: Vec::new(), gathers: false };
+            return LaneEvents { view: None, aovs, scatter: Vec::new(), light: Vec::new(), background: 0, emitter: Vec::new(), gathers: false };
         };
         let shapes = 0..scene.shapes.len() as u32;
         let mut e = LaneEvents {
             view: Some(view),
+            aovs,
             scatter: shapes.clone().map(|s| view.class(aovs.scatter_event(s, crate::bsdf::LobeFlags::DIFFUSE_REFLECTION, None, false))).collect(),
             light: shapes.map(|s| view.class(aovs.light_event(Some(s)))).collect(),
             background: view.class(crate::lpe::Event::BACKGROUND),
@@ -771,20 +955,28 @@ impl<'a> LaneEvents<'a> {
 
     /// The automaton's lookups of one vertex of the lanes' paths: per lane the layers of the
     /// emission found (lanes `emitted`; the environment where the ray escaped), the layers
-    /// of its light sample after the diffuse reflection (lanes `nee`), and `q` stepped over
-    /// that reflection (lanes `goes_on`).
+    /// of its light sample after the reflection there (lanes `nee`), and `q` stepped over the
+    /// reflection the path takes (lanes `goes_on`). The reflection is the shape's diffuse
+    /// one, or in the lanes of `own` that lane's own event classes.
     #[inline(always)]
-    fn lookups(&self, q: &mut [u32; LANES], shape: &[u32; LANES], light: &[u32; LANES], [emitted, nee, goes_on]: [u8; 3]) -> [[LayerMask; LANES]; 2] {
+    fn lookups(&self, q: &mut [u32; LANES], shape: &[u32; LANES], light: &[u32; LANES], own: &Reflection, masks: [u8; 3]) -> [[LayerMask; LANES]; 2] {
         #[cfg(target_arch = "x86_64")]
         if self.gathers {
             // SAFETY: `gathers` is set only where the CPU has AVX2.
-            return unsafe { self.lookups_avx2(q, shape, light, [emitted, nee, goes_on]) };
+            return unsafe { self.lookups_avx2(q, shape, light, own, masks) };
         }
-        self.lookups_scalar(q, shape, light, [emitted, nee, goes_on])
+        self.lookups_scalar(q, shape, light, own, masks)
     }
 
     /// [`Self::lookups`] lane by lane (without AVX2, and the reference of the gathers).
-    fn lookups_scalar(&self, q: &mut [u32; LANES], shape: &[u32; LANES], light: &[u32; LANES], [emitted, nee, goes_on]: [u8; 3]) -> [[LayerMask; LANES]; 2] {
+    fn lookups_scalar(
+        &self,
+        q: &mut [u32; LANES],
+        shape: &[u32; LANES],
+        light: &[u32; LANES],
+        own: &Reflection,
+        [emitted, nee, goes_on]: [u8; 3],
+    ) -> [[LayerMask; LANES]; 2] {
         let (mut emit, mut lit) = ([0; LANES], [0; LANES]);
         let Some(view) = self.view else { return [emit, lit] };
         for l in 0..LANES {
@@ -794,12 +986,17 @@ impl<'a> LaneEvents<'a> {
                 emit[l] = view.ends(q[l], class);
             }
             if (nee | goes_on) & bit != 0 {
-                let qs = view.step(q[l], self.scatter[shape[l] as usize]);
+                let (at_nee, at_step) = if own.lanes & bit != 0 {
+                    (own.nee[l], own.step[l])
+                } else {
+                    let c = self.scatter[shape[l] as usize];
+                    (c, c)
+                };
                 if nee & bit != 0 {
-                    lit[l] = view.ends(qs, self.emitter[light[l] as usize]);
+                    lit[l] = view.ends(view.step(q[l], at_nee), self.emitter[light[l] as usize]);
                 }
                 if goes_on & bit != 0 {
-                    q[l] = qs;
+                    q[l] = view.step(q[l], at_step);
                 }
             }
         }
@@ -817,6 +1014,7 @@ impl<'a> LaneEvents<'a> {
         q: &mut [u32; LANES],
         shape: &[u32; LANES],
         light: &[u32; LANES],
+        own: &Reflection,
         [emitted, nee, goes_on]: [u8; 3],
     ) -> [[LayerMask; LANES]; 2] {
         use std::arch::x86_64::*;
@@ -830,16 +1028,29 @@ impl<'a> LaneEvents<'a> {
         let hit_class = gather8(&self.light, sh, _mm256_andnot_si256(escaped, em));
         let emit_class = _mm256_blendv_epi8(hit_class, _mm256_set1_epi32(self.background as i32), escaped);
         let emit = gather8(ends, _mm256_add_epi32(row(q0), emit_class), em);
-        let reflects = lane_mask8(nee | goes_on);
-        let qs = gather8(table, _mm256_add_epi32(row(q0), gather8(&self.scatter, sh, reflects)), reflects);
+        let own_m = lane_mask8(own.lanes);
+        let diffuse = gather8(&self.scatter, sh, _mm256_andnot_si256(own_m, lane_mask8(nee | goes_on)));
         let lit_m = lane_mask8(nee);
-        let lit = gather8(ends, _mm256_add_epi32(row(qs), gather8(&self.emitter, load8(light), lit_m)), lit_m);
-        store8(q, _mm256_blendv_epi8(q0, qs, lane_mask8(goes_on)));
+        let at_nee = _mm256_blendv_epi8(diffuse, load8(&own.nee), own_m);
+        let q_nee = gather8(table, _mm256_add_epi32(row(q0), at_nee), lit_m);
+        let lit = gather8(ends, _mm256_add_epi32(row(q_nee), gather8(&self.emitter, load8(light), lit_m)), lit_m);
+        let step_m = lane_mask8(goes_on);
+        let at_step = _mm256_blendv_epi8(diffuse, load8(&own.step), own_m);
+        let qs = gather8(table, _mm256_add_epi32(row(q0), at_step), step_m);
+        store8(q, _mm256_blendv_epi8(q0, qs, step_m));
         let (mut e, mut n) = ([0; LANES], [0; LANES]);
         store8(&mut e, emit);
         store8(&mut n, lit);
         [e, n]
     }
+}
+
+/// The lanes whose vertex took a scalar BSDF, with the event classes of their light sample
+/// and of the reflection their path takes (elsewhere the shape's diffuse reflection).
+struct Reflection {
+    lanes: u8,
+    nee: [u32; LANES],
+    step: [u32; LANES],
 }
 
 #[cfg(target_arch = "x86_64")]
@@ -955,7 +1166,19 @@ impl<'a> LaneLayers<'a> {
             return;
         }
         let emitted = (0..LANES).fold(0u8, |m, l| m | (v.emitted[l] as u8) << l) & active;
-        let [emit, lit] = self.events.lookups(&mut self.q, &v.shape, &v.light, [emitted, nee & active, goes_on & active]);
+        // A scalar BSDF's events are the lane's own (`SimdKernel::scalar_scatter`); a null
+        // interaction (a mask let the path through) is no event, so its state stays.
+        let mut own = Reflection { lanes: 0, nee: [0; LANES], step: [0; LANES] };
+        let mut steps = goes_on & active;
+        for l in (0..LANES).filter(|&l| active & (1 << l) != 0 && v.scalar_bsdf[l]) {
+            own.lanes |= 1 << l;
+            own.nee[l] = v.class_nee[l];
+            match v.class_step[l] {
+                Some(c) => own.step[l] = c,
+                None => steps &= !(1 << l),
+            }
+        }
+        let [emit, lit] = self.events.lookups(&mut self.q, &v.shape, &v.light, &own, [emitted, nee & active, steps]);
         let mut lanes = emitted | (nee & active);
         while lanes != 0 {
             let l = lanes.trailing_zeros() as usize;
@@ -1087,9 +1310,13 @@ fn shade8<S>(v: &Soa, rr_depth: i32, st: &mut Paths<S>, rays: &mut Rays8, shadow
         let pdf = sel(generic, v.gpdf[l], v.pdf_area[l] * dist2 / cos_l);
         let wi = [dot3(wi_w, fs), dot3(wi_w, ft), dot3(wi_w, fnn)];
         let sampled = generic | (dist2 != 0.0 && cos_l > 0.0 && pdf > 0.0);
-        let nee = v.nee_ok[l] && sampled && side_ok && wo_up && wi[2] * flip > 0.0 && !f_black;
+        // A scalar BSDF's lane: its value and density as `gather` found them (a black value
+        // already cleared `nee_ok`).
+        let sb = v.scalar_bsdf[l];
+        let lambert_ok = side_ok & wo_up & (wi[2] * flip > 0.0) & !f_black;
+        let nee = v.nee_ok[l] && sampled && (sb | lambert_ok);
         let pdf_light = v.pmf[l] * pdf;
-        let bsdf_pdf = (wi[2] * flip).max(0.0) * INV_PI;
+        let bsdf_pdf = sel(sb, v.bpdf_nee[l], (wi[2] * flip).max(0.0) * INV_PI);
         let (f2, g2) = (pdf_light * pdf_light, bsdf_pdf * bsdf_pdf);
         let w = if v.delta[l] | pdf_light.is_infinite() {
             1.0
@@ -1100,8 +1327,9 @@ fn shade8<S>(v: &Soa, rr_depth: i32, st: &mut Paths<S>, rays: &mut Rays8, shadow
         };
         let s = wi[2].abs() * w / pdf_light;
         let li = g(&v.lrad);
+        let bf = g(&v.bf);
         for k in 0..3 {
-            o.c[k][l] = beta[k] * ((f[k] * li[k]) * s);
+            o.c[k][l] = beta[k] * ((sel(sb, bf[k], f[k]) * li[k]) * s);
         }
         // Both ends off their surfaces, as `Scene::occluded_between`; toward a light at
         // infinity from the offset point along the direction, as `Scene::occluded_dir_at`.
@@ -1124,11 +1352,15 @@ fn shade8<S>(v: &Soa, rr_depth: i32, st: &mut Paths<S>, rays: &mut Rays8, shadow
         };
         // BSDF sample.
         let wim = cosine_hemisphere(v.u[0][l], v.u[1][l]);
-        let bpdf = wim[2].max(0.0) * INV_PI;
-        let wi = [wim[0], wim[1], wim[2] * flip];
-        let moved = side_ok && wo_up && bpdf > 0.0 && !f_black;
-        let sc = wi[2].abs() / bpdf;
-        let mut nb = [beta[0] * (f[0] * sc), beta[1] * (f[1] * sc), beta[2] * (f[2] * sc)];
+        let lpdf = wim[2].max(0.0) * INV_PI;
+        let lwi = [wim[0], wim[1], wim[2] * flip];
+        let sc = lwi[2].abs() / lpdf;
+        // Or the scalar BSDF's sample, by selects (a branch here makes the loop scalar code).
+        let (bwi, bw) = (g(&v.bwi), g(&v.bweight));
+        let wi = [sel(sb, bwi[0], lwi[0]), sel(sb, bwi[1], lwi[1]), sel(sb, bwi[2], lwi[2])];
+        let bpdf = sel(sb, v.bpdf[l], lpdf);
+        let moved = (sb & v.bmoved[l]) | (!sb & side_ok & wo_up & (lpdf > 0.0) & !f_black);
+        let mut nb = [beta[0] * sel(sb, bw[0], f[0] * sc), beta[1] * sel(sb, bw[1], f[1] * sc), beta[2] * sel(sb, bw[2], f[2] * sc)];
         let dir = [
             (fs[0] * wi[0] + ft[0] * wi[1]) + fnn[0] * wi[2],
             (fs[1] * wi[0] + ft[1] * wi[1]) + fnn[1] * wi[2],
@@ -1136,8 +1368,10 @@ fn shade8<S>(v: &Soa, rr_depth: i32, st: &mut Paths<S>, rays: &mut Rays8, shadow
         ];
         let no = offset3(p, ng, dir);
         let mut cont = moved;
+        // Loads ahead of the branches: one inside a branch keeps it a branch.
+        let (eta, specular) = (st.eta_scale[l], sb & v.bspecular[l]);
         if st.depth[l] >= rr_depth {
-            let q = nb[0].max(nb[1]).max(nb[2]).min(0.95);
+            let q = (nb[0] * eta).max(nb[1] * eta).max(nb[2] * eta).min(0.95);
             let survive = v.u_rr[l] < q;
             cont &= survive;
             if survive {
@@ -1155,7 +1389,7 @@ fn shade8<S>(v: &Soa, rr_depth: i32, st: &mut Paths<S>, rays: &mut Rays8, shadow
         }
         rays.t_max[l] = f32::INFINITY;
         st.prev_pdf[l] = if moved { bpdf } else { st.prev_pdf[l] };
-        st.prev_specular[l] &= !moved;
+        st.prev_specular[l] = if moved { specular } else { st.prev_specular[l] };
         o.cont[l] = cont;
     }
 }
@@ -1210,6 +1444,10 @@ struct Paths<S> {
     prev_p: [[f32; LANES]; 3],
     /// The previous vertex's shading normal on the side its sample left by.
     prev_n: [[f32; LANES]; 3],
+    /// The previous vertex's BSDF where it was a scalar one (None: Lambertian).
+    prev_bsdf: [Option<PrevBsdf>; LANES],
+    /// The radiance scale of the refractions so far (for Russian roulette, as `camera_walk`).
+    eta_scale: [f32; LANES],
 }
 
 impl<S: Clone> Paths<S> {
@@ -1225,6 +1463,8 @@ impl<S: Clone> Paths<S> {
             prev_pdf: [0.0; LANES],
             prev_p: [[0.0; LANES]; 3],
             prev_n: [[0.0; LANES]; 3],
+            prev_bsdf: std::array::from_fn(|_| None),
+            eta_scale: [1.0; LANES],
         }
     }
 }
@@ -1243,6 +1483,8 @@ impl<S> Paths<S> {
         self.depth[l] = 0;
         self.prev_specular[l] = true;
         self.prev_pdf[l] = 0.0;
+        // `prev_bsdf` is read only after a non-delta sample, and `gather` sets it at each vertex.
+        self.eta_scale[l] = 1.0;
     }
 
     /// Adds `c` to lane `l`'s radiance (as `Rgb`'s `+=`).
@@ -1306,6 +1548,7 @@ mod tests {
         assert!(events.view.is_some(), "a product automaton");
         assert!(events.gathers, "AVX2 and small tables: the lanes gather");
         let states = set.product_states() as u32;
+        let classes = events.view.map_or(1, |v| v.tables().2) as u32;
         let mut rng = Pcg32::new(7, 3);
         let mut pick = |n: u32| ((rng.next_f32() * n as f32) as u32).min(n - 1);
         let mut differ_from_start = 0;
@@ -1316,10 +1559,12 @@ mod tests {
             let [emitted, nee, goes_on] = [pick(256) as u8, pick(256) as u8, pick(256) as u8];
             let hit: u8 = (0..LANES).fold(0, |m, l| m | ((shape[l] != ESCAPED) as u8) << l);
             let (nee, goes_on) = (nee & hit, goes_on & hit);
+            // Some lanes with a scalar BSDF's own classes.
+            let own = Reflection { lanes: pick(256) as u8 & hit, nee: std::array::from_fn(|_| pick(classes)), step: std::array::from_fn(|_| pick(classes)) };
             let (mut qa, mut qb) = (q, q);
-            let a = events.lookups_scalar(&mut qa, &shape, &light, [emitted, nee, goes_on]);
+            let a = events.lookups_scalar(&mut qa, &shape, &light, &own, [emitted, nee, goes_on]);
             // SAFETY: AVX2 was detected above.
-            let b = unsafe { events.lookups_avx2(&mut qb, &shape, &light, [emitted, nee, goes_on]) };
+            let b = unsafe { events.lookups_avx2(&mut qb, &shape, &light, &own, [emitted, nee, goes_on]) };
             assert_eq!(a, b, "layers for q {q:?}, shapes {shape:?}, lights {light:?}, masks {emitted:b} {nee:b} {goes_on:b}");
             assert_eq!(qa, qb, "stepped states");
             differ_from_start += (qa != q) as u32;
