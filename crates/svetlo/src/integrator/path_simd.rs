@@ -28,7 +28,10 @@
 //! Each lane draws its random numbers from its own copy of the scalar tracer's sampler, in
 //! the same order, and the samples of a tile are added to the film in the scalar order, so
 //! that the image equals the scalar tracer's up to float rounding (paths that meet a shared
-//! edge may pick the other triangle).
+//! edge may pick the other triangle); tracing single rays, bit for bit. Open: in scenes whose
+//! paths cross surfaces (dielectrics), packets part from the scene BVH's hits more often
+//! than that: on a Cornell box with a glass box (64², 256 spp, two seeds) the packet image's
+//! mean was 0.2-0.3 % below the scalar tracer's, where mirrors alone agree bit for bit.
 
 use super::path::{bsdf_pdf_toward, PathTracer};
 use super::{camera_sample, render_tiles, Integrator, Progress, RenderSettings};
