@@ -1058,14 +1058,20 @@ impl<'a> LaneEvents<'a> {
         let emit_class = _mm256_blendv_epi8(hit_class, _mm256_set1_epi32(self.background as i32), escaped);
         let emit = gather8(ends, _mm256_add_epi32(row(q0), emit_class), em);
         let own_m = lane_mask8(own.lanes);
-        let diffuse = gather8(&self.scatter, sh, _mm256_andnot_si256(own_m, lane_mask8(nee | goes_on)));
-        let lit_m = lane_mask8(nee);
-        let at_nee = _mm256_blendv_epi8(diffuse, load8(&own.nee), own_m);
-        let q_nee = gather8(table, _mm256_add_epi32(row(q0), at_nee), lit_m);
+        let (lit_m, step_m) = (lane_mask8(nee), lane_mask8(goes_on));
+        let reflects = lane_mask8(nee | goes_on);
+        let diffuse = gather8(&self.scatter, sh, _mm256_andnot_si256(own_m, reflects));
+        // The state after the reflection: one step for both the light sample and the path's
+        // next vertex, unless a lane's own BSDF gives them different event classes.
+        let (q_nee, qs) = if own.lanes == 0 {
+            let qs = gather8(table, _mm256_add_epi32(row(q0), diffuse), reflects);
+            (qs, qs)
+        } else {
+            let at_nee = _mm256_blendv_epi8(diffuse, load8(&own.nee), own_m);
+            let at_step = _mm256_blendv_epi8(diffuse, load8(&own.step), own_m);
+            (gather8(table, _mm256_add_epi32(row(q0), at_nee), lit_m), gather8(table, _mm256_add_epi32(row(q0), at_step), step_m))
+        };
         let lit = gather8(ends, _mm256_add_epi32(row(q_nee), gather8(&self.emitter, load8(light), lit_m)), lit_m);
-        let step_m = lane_mask8(goes_on);
-        let at_step = _mm256_blendv_epi8(diffuse, load8(&own.step), own_m);
-        let qs = gather8(table, _mm256_add_epi32(row(q0), at_step), step_m);
         store8(q, _mm256_blendv_epi8(q0, qs, step_m));
         let (mut e, mut n) = ([0; LANES], [0; LANES]);
         store8(&mut e, emit);
@@ -1197,10 +1203,12 @@ impl<'a> LaneLayers<'a> {
         let emitted = (0..LANES).fold(0u8, |m, l| m | (v.emitted[l] as u8) << l) & active;
         // A scalar BSDF's events are the lane's own (`SimdKernel::scalar_scatter`); a null
         // interaction (a mask let the path through) is no event, so its state stays.
-        let mut own = Reflection { lanes: 0, nee: [0; LANES], step: [0; LANES] };
+        let mut own = Reflection { lanes: (0..LANES).fold(0u8, |m, l| m | (v.scalar_bsdf[l] as u8) << l) & active, nee: [0; LANES], step: [0; LANES] };
         let mut steps = goes_on & active;
-        for l in (0..LANES).filter(|&l| active & (1 << l) != 0 && v.scalar_bsdf[l]) {
-            own.lanes |= 1 << l;
+        let mut lanes = own.lanes;
+        while lanes != 0 {
+            let l = lanes.trailing_zeros() as usize;
+            lanes &= lanes - 1;
             own.nee[l] = v.class_nee[l];
             match v.class_step[l] {
                 Some(c) => own.step[l] = c,
