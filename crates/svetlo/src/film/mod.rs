@@ -127,26 +127,12 @@ impl FilmTile {
         for (p, l, aov, touched) in samples {
             let Some(k) = self.owner(p) else { continue };
             self.add_box(k, if l.is_finite() { l } else { Rgb::BLACK });
-            let mut m = touched & valid;
+            let m = touched & valid;
             if m == 0 {
                 continue;
             }
-            let Some(px) = self.layers.get_mut(k * n3..(k + 1) * n3) else { continue };
-            let (cells, _) = px.as_chunks_mut::<3>();
-            while m != 0 {
-                let i = m.trailing_zeros() as usize;
-                m &= m - 1;
-                if let (Some(c), Some(v)) = (cells.get_mut(i), aov.get(i)) {
-                    // Non-finite values are dropped, as by `add_sample_touched`: x - x is 0
-                    // exactly for finite x (NaN otherwise), the cheapest test here by count.
-                    #[allow(clippy::eq_op)]
-                    let finite = (v.r - v.r == 0.0) & (v.g - v.g == 0.0) & (v.b - v.b == 0.0);
-                    if finite {
-                        c[0] += v.r;
-                        c[1] += v.g;
-                        c[2] += v.b;
-                    }
-                }
+            if let Some(px) = self.layers.get_mut(k * n3..(k + 1) * n3) {
+                add_touched_layers(px, aov, m);
             }
         }
     }
@@ -170,14 +156,7 @@ impl FilmTile {
                 self.add_box(k, if l.is_finite() { l } else { Rgb::BLACK });
                 self.ensure_layers();
                 if let Some(px) = self.layers.get_mut(k * n3..(k + 1) * n3) {
-                    let mut m = touched;
-                    while m != 0 {
-                        let i = m.trailing_zeros() as usize;
-                        m &= m - 1;
-                        if let Some(&v) = aov.get(i).filter(|v| v.is_finite()) {
-                            add_rgb(px, 3 * i, v);
-                        }
-                    }
+                    add_touched_layers(px, aov, touched);
                 }
             }
             return;
@@ -617,6 +596,27 @@ fn rgb_at(buf: &[f32], j: usize) -> Rgb {
     match buf.get(j..j + 3) {
         Some(c) => Rgb::new(c[0], c[1], c[2]),
         None => Rgb::BLACK,
+    }
+}
+
+/// A box-filtered pixel's layers `px` (three floats each) take the layers of bit mask `m`
+/// from `aov`; a non-finite value is dropped.
+#[inline(always)]
+fn add_touched_layers(px: &mut [f32], aov: &[Rgb], mut m: u32) {
+    let (cells, _) = px.as_chunks_mut::<3>();
+    while m != 0 {
+        let i = m.trailing_zeros() as usize;
+        m &= m - 1;
+        if let (Some(c), Some(v)) = (cells.get_mut(i), aov.get(i)) {
+            // x - x is 0 exactly for finite x (NaN otherwise): the cheapest test here by count.
+            #[allow(clippy::eq_op)]
+            let finite = (v.r - v.r == 0.0) & (v.g - v.g == 0.0) & (v.b - v.b == 0.0);
+            if finite {
+                c[0] += v.r;
+                c[1] += v.g;
+                c[2] += v.b;
+            }
+        }
     }
 }
 
