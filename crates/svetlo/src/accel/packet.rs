@@ -32,6 +32,11 @@ const STACK: usize = MAX_DEPTH + 40;
 /// Slack on the far distance of the slab test (as the single-ray traversal's): a box a
 /// triangle touches is not missed through rounding.
 const FAR_SLACK: f32 = 1.0 + 2.0 * (3.0 * f32::EPSILON * 0.5) / (1.0 - 3.0 * f32::EPSILON * 0.5);
+/// Relative distance within which a second triangle's hit ties with a lane's nearest one
+/// (`PacketBvh::intersect_ties`). Which of two such hits a walk keeps depends on the order it
+/// tests them in (the test accepts t_scaled <= t_max * det, a few ulps either way), so two
+/// trees can disagree there; 1e-5 is far above those few ulps.
+const TIE_TOL: f32 = 1e-5;
 
 /// Two child boxes (`[child][min x, y, z, max x, y, z]`) and their codes: an inner node's
 /// index, or `LEAF_BIT | start << 3 | (count - 1)` into the triangle arrays.
@@ -309,21 +314,35 @@ impl PacketBvh {
         if active == 0 {
             return h;
         }
+        self.walk_nearest::<false>(root, r, active, &mut h);
+        h
+    }
+
+    /// [`Self::intersect`], and the mask of lanes whose nearest hit ties with another
+    /// triangle's: a hit within a relative 1e-5 of it (coplanar faces, such as a glass box's
+    /// bottom lying on the floor, or a shared edge). Which triangle a lane keeps there
+    /// depends on the order of the tests, so another tree (the scene's BVH) may keep the
+    /// other; on every other lane any correct walk finds this very hit.
+    pub fn intersect_ties(&self, r: &Rays8, active: u8) -> (Hits8, u8) {
+        let mut h = Hits8 { t: r.t_max, prim: [u32::MAX; LANES], b1: [0.0; LANES], b2: [0.0; LANES] };
+        let Some(root) = self.root else { return (h, 0) };
+        if active == 0 {
+            return (h, 0);
+        }
+        let ties = self.walk_nearest::<true>(root, r, active, &mut h);
+        (h, ties)
+    }
+
+    /// The closest-hit walk on this CPU's instruction set; returns the tied lanes (with `TIES`).
+    fn walk_nearest<const TIES: bool>(&self, root: u32, r: &Rays8, active: u8, h: &mut Hits8) -> u8 {
         #[cfg(target_arch = "x86_64")]
         match self.isa {
             // SAFETY: the instruction set was detected at run time.
-            Isa::Avx512 => {
-                unsafe { self.walk_avx512::<false>(root, r, active, &mut h) };
-                return h;
-            }
-            Isa::Avx2 => {
-                unsafe { self.walk_avx2::<false>(root, r, active, &mut h) };
-                return h;
-            }
+            Isa::Avx512 => return unsafe { self.walk_avx512::<false, TIES>(root, r, active, h) },
+            Isa::Avx2 => return unsafe { self.walk_avx2::<false, TIES>(root, r, active, h) },
             Isa::Portable => {}
         }
-        self.walk_lanes::<false>(root, r, &prep(r, active), active, &mut h);
-        h
+        self.walk_lanes::<false, TIES>(root, r, &prep(r, active), active, h)
     }
 
     /// Mask of the active lanes whose ray meets any triangle in (0, t_max).
@@ -336,16 +355,18 @@ impl PacketBvh {
         #[cfg(target_arch = "x86_64")]
         match self.isa {
             // SAFETY: the instruction set was detected at run time.
-            Isa::Avx512 => return unsafe { self.walk_avx512::<true>(root, r, active, &mut h) },
-            Isa::Avx2 => return unsafe { self.walk_avx2::<true>(root, r, active, &mut h) },
+            Isa::Avx512 => return unsafe { self.walk_avx512::<true, false>(root, r, active, &mut h) },
+            Isa::Avx2 => return unsafe { self.walk_avx2::<true, false>(root, r, active, &mut h) },
             Isa::Portable => {}
         }
-        self.walk_lanes::<true>(root, r, &prep(r, active), active, &mut h)
+        self.walk_lanes::<true, false>(root, r, &prep(r, active), active, &mut h)
     }
 
-    /// Portable fallback: each lane walks the tree on its own with the scalar tests.
-    fn walk_lanes<const ANY: bool>(&self, root: u32, r: &Rays8, p: &Prep, active: u8, h: &mut Hits8) -> u8 {
+    /// Portable fallback: each lane walks the tree on its own with the scalar tests. Returns
+    /// the lanes that hit (`ANY`), or else the tied lanes (with `TIES`; see `walk_simd!`).
+    fn walk_lanes<const ANY: bool, const TIES: bool>(&self, root: u32, r: &Rays8, p: &Prep, active: u8, h: &mut Hits8) -> u8 {
         let mut blocked = 0u8;
+        let mut ties = 0u8;
         for l in 0..LANES {
             if active & (1 << l) == 0 {
                 continue;
@@ -364,6 +385,12 @@ impl PacketBvh {
                     for i in start..start + count {
                         let v = &self.verts[3 * i..3 * i + 3];
                         let pt = |k: usize| Vec3::new(v[k][0], v[k][1], v[k][2]);
+                        if TIES && !ANY && h.prim[l] != u32::MAX {
+                            let tm = h.t[l];
+                            if w.intersect(pt(0), pt(1), pt(2), tm * (1.0 + TIE_TOL)).is_some_and(|(t, _, _)| t >= tm * (1.0 - TIE_TOL)) {
+                                ties |= 1 << l;
+                            }
+                        }
                         if let Some((t, b1, b2)) = w.intersect(pt(0), pt(1), pt(2), h.t[l]) {
                             if ANY {
                                 blocked |= 1 << l;
@@ -396,7 +423,11 @@ impl PacketBvh {
                 }
             }
         }
-        blocked
+        if ANY {
+            blocked
+        } else {
+            ties
+        }
     }
 
     /// The exact test of the scalar tracer for the lanes of `lanes` (those where u, v or w
@@ -418,8 +449,12 @@ impl PacketBvh {
 
 /// The eight-wide walk, compiled once per instruction set (`$feat`). With `ANY`, lanes
 /// retire at their first hit and the walk ends when none is left; returns the mask of
-/// lanes that hit. Lanes that are not live carry t_max = -inf, which fails every box and
-/// stack test, so only the triangle test needs the live mask.
+/// lanes that hit. Without, returns (with `TIES`) the lanes where a triangle was hit within
+/// `TIE_TOL` of the lane's nearest hit so far, accepted or not: whichever of the two comes
+/// second in the walk's order meets the other as the nearest so far (a box holding a hit
+/// that close is entered: `FAR_SLACK` is wider than the triangle test's rounding). Lanes
+/// that are not live carry t_max = -inf, which fails every box and stack test, so only the
+/// triangle test needs the live mask.
 #[cfg(target_arch = "x86_64")]
 macro_rules! walk_simd {
     ($name:ident, $feat:literal) => {
@@ -427,7 +462,7 @@ macro_rules! walk_simd {
             /// # Safety
             /// The CPU must support the target features of this function.
             #[target_feature(enable = $feat)]
-            unsafe fn $name<const ANY: bool>(&self, root: u32, r: &Rays8, active: u8, h: &mut Hits8) -> u8 {
+            unsafe fn $name<const ANY: bool, const TIES: bool>(&self, root: u32, r: &Rays8, active: u8, h: &mut Hits8) -> u8 {
                 use std::arch::x86_64::*;
                 let ld = |a: &[f32; LANES]| _mm256_loadu_ps(a.as_ptr());
                 let o = [ld(&r.o[0]), ld(&r.o[1]), ld(&r.o[2])];
@@ -469,6 +504,7 @@ macro_rules! walk_simd {
                 let inf = _mm256_set1_ps(f32::INFINITY);
                 let mut t_max = _mm256_blendv_ps(_mm256_set1_ps(f32::NEG_INFINITY), ld(&h.t), live);
                 let mut hit_mask = 0u8;
+                let mut ties = 0u8;
                 let verts = self.verts.as_ptr() as *const f32;
                 // Entries: a code and the entry distances of the lanes that met its box (a
                 // popped entry that no lane can still improve on is skipped).
@@ -525,6 +561,14 @@ macro_rules! walk_simd {
                                 let tmd = _mm256_xor_ps(_mm256_mul_ps(t_max, det), sgn);
                                 let ok = _mm256_and_ps(_mm256_cmp_ps::<_CMP_GT_OQ>(ts, zero), _mm256_cmp_ps::<_CMP_LE_OQ>(ts, tmd));
                                 m = _mm256_movemask_ps(ok) as u8 & cand;
+                                if TIES && !ANY {
+                                    // Within TIE_TOL of the lane's nearest hit (t_max * |det| scaled).
+                                    let near = _mm256_and_ps(
+                                        _mm256_cmp_ps::<_CMP_GE_OQ>(ts, _mm256_mul_ps(tmd, _mm256_set1_ps(1.0 - TIE_TOL))),
+                                        _mm256_cmp_ps::<_CMP_LE_OQ>(ts, _mm256_mul_ps(tmd, _mm256_set1_ps(1.0 + TIE_TOL))),
+                                    );
+                                    ties |= _mm256_movemask_ps(near) as u8 & cand & hit_mask;
+                                }
                                 if m != 0 {
                                     let invd = _mm256_div_ps(one, det);
                                     t = _mm256_mul_ps(t_scaled, invd);
@@ -538,6 +582,15 @@ macro_rules! walk_simd {
                                 let mut tm = [0.0f32; LANES];
                                 _mm256_storeu_ps(tm.as_mut_ptr(), t_max);
                                 let ex = self.edge_lanes(r, i, edge, &tm);
+                                if TIES && !ANY && edge & hit_mask != 0 {
+                                    // The exact test of the edge lanes that have a hit, out to TIE_TOL past it.
+                                    let far = tm.map(|x| x * (1.0 + TIE_TOL));
+                                    for (l, e) in self.edge_lanes(r, i, edge & hit_mask, &far).iter().enumerate() {
+                                        if e.is_some_and(|(te, _, _)| te >= tm[l] * (1.0 - TIE_TOL)) {
+                                            ties |= 1 << l;
+                                        }
+                                    }
+                                }
                                 let (mut ta, mut b1a, mut b2a) = ([0.0f32; LANES], [0.0f32; LANES], [0.0f32; LANES]);
                                 _mm256_storeu_ps(ta.as_mut_ptr(), t);
                                 _mm256_storeu_ps(b1a.as_mut_ptr(), b1);
@@ -651,6 +704,7 @@ macro_rules! walk_simd {
                     // `prim`, `b1` and `b2` were only ever written where a lane hit.
                     let hit = _mm256_castsi256_ps(_mm256_cmpgt_epi32(_mm256_and_si256(_mm256_set1_epi32(hit_mask as i32), lane_bits), zero_i));
                     _mm256_storeu_ps(h.t.as_mut_ptr(), _mm256_blendv_ps(ld(&r.t_max), t_max, hit));
+                    return ties;
                 }
                 hit_mask
             }
@@ -816,6 +870,74 @@ mod tests {
                     assert_ne!(h.prim[l], u32::MAX, "ray {k}/{l} slipped through at ({x}, {y})");
                 }
             }
+        }
+    }
+
+    /// A box's bottom lying on a floor (coplanar, overlapping) among other triangles, rays
+    /// from above and below: where two triangles are hit at the same distance, which one a
+    /// walk keeps depends on its order of tests. `intersect_ties` flags those lanes (and
+    /// otherwise gives `intersect`'s hits): every lane whose triangle is not brute force's is
+    /// flagged, and so is every lane that meets both faces.
+    #[test]
+    fn coplanar_faces_are_flagged_as_ties() {
+        let mut rng = Pcg32::new(5, 9);
+        let mut tris = random_mesh(&mut rng, 60);
+        let quad = |s: f32, x: f32| {
+            [
+                [Vec3::new(x - s, -s, 0.0), Vec3::new(x + s, -s, 0.0), Vec3::new(x + s, s, 0.0)],
+                [Vec3::new(x - s, -s, 0.0), Vec3::new(x + s, s, 0.0), Vec3::new(x - s, s, 0.0)],
+            ]
+        };
+        // The floor first and the bottom last: brute force keeps the bottom on a tie.
+        let n_floor = 2;
+        let mut all: Vec<[Vec3; 3]> = quad(2.0, 0.0).to_vec();
+        all.append(&mut tris);
+        all.extend(quad(0.5, 0.3));
+        let bottom = [all.len() as u32 - 2, all.len() as u32 - 1];
+        let mut bvh = PacketBvh::build(&all);
+        for isa in isas() {
+            bvh.isa = isa;
+            let (mut differ, mut both, mut tied_lanes) = (0, 0, 0);
+            for _ in 0..400 {
+                let mut r = Rays8::default();
+                let active = (rng.next_u32() & 0xff) as u8 | 1;
+                for l in 0..LANES {
+                    // Aimed at a point of the plane over the bottom, from above or below.
+                    let target = Vec3::new(0.3 + rng.next_f32() - 0.5, rng.next_f32() - 0.5, 0.0);
+                    let up = if rng.next_u32().is_multiple_of(2) { 1.0 } else { -1.0 };
+                    let o = target + Vec3::new(rng.next_f32() - 0.5, rng.next_f32() - 0.5, up * (0.05 + rng.next_f32()));
+                    set_lane(&mut r, l, o, (target - o).normalize(), f32::INFINITY);
+                }
+                let plain = bvh.intersect(&r, active);
+                let (h, ties) = bvh.intersect_ties(&r, active);
+                assert_eq!((h.t, h.prim, h.b1, h.b2), (plain.t, plain.prim, plain.b1, plain.b2), "{isa:?}: the same hits");
+                for l in (0..LANES).filter(|l| active & (1 << l) != 0) {
+                    let o = Vec3::new(r.o[0][l], r.o[1][l], r.o[2][l]);
+                    let d = Vec3::new(r.d[0][l], r.d[1][l], r.d[2][l]);
+                    let tied = ties & (1 << l) != 0;
+                    tied_lanes += tied as u32;
+                    let want = brute(&all, o, d, f32::INFINITY);
+                    if want.map(|w| w.1) != Some(h.prim[l]) {
+                        differ += 1;
+                        assert!(tied, "{isa:?}: lane {l} took {} where brute force took {want:?}, not flagged", h.prim[l]);
+                    }
+                    let w = WatertightRay::new(o, d);
+                    let meets = |i: u32| w.intersect(all[i as usize][0], all[i as usize][1], all[i as usize][2], f32::INFINITY).is_some();
+                    if (0..n_floor).any(meets) && bottom.into_iter().any(meets) && want.is_some_and(|w| bottom.contains(&w.1)) {
+                        both += 1;
+                        assert!(tied, "{isa:?}: lane {l} meets the floor and the bottom at once, not flagged");
+                    }
+                    if tied {
+                        // A flagged lane meets two triangles at one distance (not necessarily its nearest).
+                        let mut ts: Vec<f32> = all.iter().filter_map(|t| w.intersect(t[0], t[1], t[2], f32::INFINITY).map(|h| h.0)).collect();
+                        ts.sort_by(f32::total_cmp);
+                        assert!(ts.windows(2).any(|p| p[1] <= p[0] * (1.0 + 2.0 * TIE_TOL)), "{isa:?}: lane {l} flagged without a tie: {ts:?}");
+                    }
+                }
+            }
+            // Most rays meet the overlap; the walk's order keeps the floor there.
+            assert!(both > 500 && differ > 0, "{isa:?}: {both} rays met both faces, {differ} took the other");
+            assert!(tied_lanes >= both, "{isa:?}: {tied_lanes} lanes flagged for {both} ties");
         }
     }
 

@@ -167,8 +167,11 @@ const PACKET_MAX_TRIANGLES: usize = 20_000;
 /// How the kernel traces its eight rays.
 enum Tracer {
     /// As one packet through a BVH of the kernel's own: wins while the eight walks share
-    /// most of their nodes (small scenes).
-    Packets(PacketBvh),
+    /// most of their nodes (small scenes). With `ties` (the kernel's index of each shape's
+    /// first triangle), the lanes whose nearest hit ties with another triangle's are traced
+    /// again through the scene's BVH, so that they take the triangle the scalar tracer takes
+    /// (see [`SimdKernel::new`]).
+    Packets { bvh: PacketBvh, ties: Option<Vec<u32>> },
     /// One by one through the scene's wide BVH: in a large scene eight incoherent rays share
     /// few nodes, and a packet pays for the union of their walks. `first`: the kernel's
     /// index of each shape's first triangle.
@@ -177,18 +180,20 @@ enum Tracer {
 
 impl Tracer {
     fn intersect(&self, scene: &Scene, rays: &Rays8, active: u8) -> Hits8 {
-        let first = match self {
-            Tracer::Packets(bvh) => return bvh.intersect(rays, active),
-            Tracer::Single { first } => first,
-        };
-        let mut h = Hits8 { t: rays.t_max, prim: [u32::MAX; LANES], b1: [0.0; LANES], b2: [0.0; LANES] };
-        for l in (0..LANES).filter(|l| active & (1 << l) != 0) {
-            if let Some(hit) = scene.accel.intersect(&lane_ray(rays, l)) {
-                h.t[l] = hit.t;
-                h.prim[l] = first[hit.shape as usize] + hit.prim;
-                h.b1[l] = hit.b1;
-                h.b2[l] = hit.b2;
+        let (mut h, lanes, first) = match self {
+            Tracer::Packets { bvh, ties: None } => return bvh.intersect(rays, active),
+            Tracer::Packets { bvh, ties: Some(first) } => {
+                let (h, tied) = bvh.intersect_ties(rays, active);
+                (h, tied, first)
             }
+            Tracer::Single { first } => (Hits8 { t: rays.t_max, prim: [u32::MAX; LANES], b1: [0.0; LANES], b2: [0.0; LANES] }, active, first),
+        };
+        for l in (0..LANES).filter(|l| lanes & (1 << l) != 0) {
+            let hit = scene.accel.intersect(&lane_ray(rays, l));
+            h.t[l] = hit.map_or(rays.t_max[l], |hit| hit.t);
+            h.prim[l] = hit.map_or(u32::MAX, |hit| first[hit.shape as usize] + hit.prim);
+            h.b1[l] = hit.map_or(0.0, |hit| hit.b1);
+            h.b2[l] = hit.map_or(0.0, |hit| hit.b2);
         }
         h
     }
@@ -196,13 +201,14 @@ impl Tracer {
     /// Mask of the active lanes whose ray is blocked.
     fn occluded(&self, scene: &Scene, rays: &Rays8, active: u8) -> u8 {
         match self {
-            Tracer::Packets(bvh) => bvh.occluded(rays, active),
+            Tracer::Packets { bvh, .. } => bvh.occluded(rays, active),
             Tracer::Single { .. } => (0..LANES).filter(|l| active & (1 << l) != 0 && scene.accel.occluded(&lane_ray(rays, *l))).fold(0, |m, l| m | 1 << l),
         }
     }
 }
 
-fn single_tracer(scene: &Scene) -> Tracer {
+/// The kernel's index of each shape's first triangle.
+fn first_triangles(scene: &Scene) -> Vec<u32> {
     let mut first = Vec::with_capacity(scene.shapes.len());
     let mut n = 0u32;
     for s in &scene.shapes {
@@ -212,7 +218,11 @@ fn single_tracer(scene: &Scene) -> Tracer {
             Geometry::Sphere(_) | Geometry::SdfGrid(_) => 0,
         };
     }
-    Tracer::Single { first }
+    first
+}
+
+fn single_tracer(scene: &Scene) -> Tracer {
+    Tracer::Single { first: first_triangles(scene) }
 }
 
 fn lane_ray(rays: &Rays8, l: usize) -> Ray {
@@ -302,12 +312,14 @@ impl SimdKernel {
         // (325k triangles, 8 of 12 spheres not Lambertian, depth 6) took 1.06 the scalar
         // tracer's time at 512 spp, 1.00 at 2048. Such scenes take the scalar tracer.
         let triangles: usize = scene.shapes.iter().map(|s| if let Geometry::Mesh(m) = &*s.geometry { m.triangle_count() } else { 0 }).sum();
-        // Paths that cross surfaces (dielectrics, masks) come out 0.2-0.3 % darker with packets
-        // than with single rays on a Cornell box with a glass box (64², 256 spp, two seeds),
-        // while single rays give the scalar tracer's image bit for bit: until the packet
-        // tracer's difference there is found, such scenes trace single rays.
+        // Where paths cross surfaces (dielectrics, masks), a path inside an object meets faces
+        // that lie on another surface (a glass box's bottom on the floor) at the same distance:
+        // a tie, which each tree breaks by its own order of tests. Packets kept the floor where
+        // the scene's BVH kept the glass: a Cornell box with a glass box came out 0.2-0.3 %
+        // darker. There the tied lanes take the scene BVH's hit (`Tracer`); elsewhere ties are
+        // shared edges and faces hidden inside opaque objects, and the walk skips the check.
         let large = triangles > PACKET_MAX_TRIANGLES;
-        let single_rays = large || scene.materials.iter().any(may_cross);
+        let crossing = scene.materials.iter().any(may_cross);
         let mut shapes = Vec::with_capacity(scene.shapes.len());
         let mut tris = Vec::new();
         let mut verts = Vec::new();
@@ -347,13 +359,14 @@ impl SimdKernel {
                 tris.push(Tri { p, shading, shape: si as u32, local: t as u32 });
             }
         }
-        let tracer = if single_rays { single_tracer(scene) } else { Tracer::Packets(PacketBvh::build(&verts)) };
+        let tracer =
+            if large { single_tracer(scene) } else { Tracer::Packets { bvh: PacketBvh::build(&verts), ties: crossing.then(|| first_triangles(scene)) } };
         Some(SimdKernel { tracer, tris, shapes, lights, avx512: avx512() })
     }
 
     /// Whether rays go as packets (else one by one through the scene's BVH).
     pub fn uses_packets(&self) -> bool {
-        matches!(self.tracer, Tracer::Packets(_))
+        matches!(self.tracer, Tracer::Packets { .. })
     }
 
     /// Traces one ray at a time through the scene's BVH whatever the scene's size (for
