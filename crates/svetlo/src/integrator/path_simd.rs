@@ -1080,6 +1080,14 @@ impl<'a> LaneEvents<'a> {
     }
 }
 
+/// The lanes whose flag is set, as a bit mask: each flag is one byte, 0 or 1, and one
+/// multiplication moves byte `l`'s bit to bit `l` of the top byte (no carries: the bits differ).
+#[inline(always)]
+fn lane_bits(flags: &[bool; LANES]) -> u8 {
+    let bytes = u64::from_le_bytes(flags.map(u8::from));
+    (bytes.wrapping_mul(0x0102_0408_1020_4080) >> 56) as u8
+}
+
 /// The lanes whose vertex took a scalar BSDF, with the event classes of their light sample
 /// and of the reflection their path takes (elsewhere the shape's diffuse reflection).
 struct Reflection {
@@ -1200,10 +1208,10 @@ impl<'a> LaneLayers<'a> {
         if self.events.view.is_none() {
             return;
         }
-        let emitted = (0..LANES).fold(0u8, |m, l| m | (v.emitted[l] as u8) << l) & active;
+        let emitted = lane_bits(&v.emitted) & active;
         // A scalar BSDF's events are the lane's own (`SimdKernel::scalar_scatter`); a null
         // interaction (a mask let the path through) is no event, so its state stays.
-        let mut own = Reflection { lanes: (0..LANES).fold(0u8, |m, l| m | (v.scalar_bsdf[l] as u8) << l) & active, nee: [0; LANES], step: [0; LANES] };
+        let mut own = Reflection { lanes: lane_bits(&v.scalar_bsdf) & active, nee: [0; LANES], step: [0; LANES] };
         let mut steps = goes_on & active;
         let mut lanes = own.lanes;
         while lanes != 0 {
@@ -1564,6 +1572,15 @@ fn avx512() -> bool {
 mod tests {
     use super::*;
     use crate::sampling::Pcg32;
+
+    /// Every combination of eight lane flags gives its bit mask.
+    #[test]
+    fn lane_bits_are_the_flags() {
+        for m in 0..=255u8 {
+            let flags: [bool; LANES] = std::array::from_fn(|l| m & (1 << l) != 0);
+            assert_eq!(lane_bits(&flags), m);
+        }
+    }
 
     /// The lanes' gathered automaton lookups are the scalar ones, lane for lane, on random
     /// states, shapes (some escaped), lights and lane masks.
