@@ -642,3 +642,19 @@ fn spheres_match_scalar() {
     }
     let _ = std::fs::remove_dir_all(&dir);
 }
+
+/// An SDF grid (Mitsuba's various_shapes test scene: a voxel torus among meshed shapes under
+/// a constant environment) in the kernel: the scene's surface record of a grid hit, so the
+/// scalar tracer's image bit for bit.
+#[test]
+fn sdf_grid_matches_scalar() {
+    let Some(root) = shared() else { return };
+    let scene = load(&root.join("mitsuba-data/tests/scenes/various_shapes/test_various_shapes_path.xml"), &[], 48);
+    assert!(scene.shapes.iter().any(|s| matches!(&*s.geometry, svetlo::geometry::Geometry::SdfGrid(_))), "the scene has an SDF grid");
+    let s = RenderSettings { spp: 4, max_depth: 4, seed: 31, ..RenderSettings::from_scene(&scene) };
+    assert!(!SimdKernel::new(&scene, &s).expect("qualifies").uses_packets(), "a grid is met through the scene's BVH");
+    compare(&scene, &s, "various_shapes with an SDF grid");
+    if avx2() {
+        assert!(render(&scene, "path", &s).data == render(&scene, "path:simd=false", &s).data, "the kernel's image differs from the scalar tracer's");
+    }
+}
