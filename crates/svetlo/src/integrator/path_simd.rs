@@ -366,7 +366,7 @@ impl SimdKernel {
                 None => None,
             };
             shapes.push(ShapeData { scalar_bsdf, front, back, textured, light });
-            // Other shapes' hits come as the scene's surface records (`SimdKernel::other_hit`).
+            // Other shapes' hits come as the scene's surface records (`other_hit`).
             let Geometry::Mesh(m) = &*s.geometry else { continue };
             for t in 0..m.triangle_count() {
                 let p = m.vertices(t);
