@@ -11,6 +11,9 @@ pub struct Rgb {
     pub b: f32,
 }
 
+// `Rgb` is laid out as `[f32; 3]`: what `as_floats` relies on.
+const _: () = assert!(std::mem::size_of::<Rgb>() == 12 && std::mem::align_of::<Rgb>() == 4);
+
 impl Rgb {
     pub const BLACK: Rgb = Rgb { r: 0.0, g: 0.0, b: 0.0 };
     pub const WHITE: Rgb = Rgb { r: 1.0, g: 1.0, b: 1.0 };
@@ -18,6 +21,13 @@ impl Rgb {
     #[inline]
     pub const fn new(r: f32, g: f32, b: f32) -> Self {
         Rgb { r, g, b }
+    }
+    /// Colours as their packed floats (r, g, b of each in turn).
+    #[inline]
+    pub fn as_floats(v: &[Rgb]) -> &[f32] {
+        // SAFETY: `repr(C)` of three f32 without padding (asserted above `impl Rgb`): the same bytes as
+        // `3 * v.len()` floats, borrowed for as long as `v`.
+        unsafe { std::slice::from_raw_parts(v.as_ptr().cast(), v.len() * 3) }
     }
     #[inline]
     pub const fn splat(v: f32) -> Self {
@@ -226,6 +236,12 @@ impl Srgb8Table {
 #[cfg(test)]
 mod tests {
     use super::Rgb;
+
+    #[test]
+    fn colours_as_floats() {
+        let v = [Rgb::new(1.0, 2.0, 3.0), Rgb::new(4.0, 5.0, 6.0)];
+        assert_eq!(Rgb::as_floats(&v), &[1.0, 2.0, 3.0, 4.0, 5.0, 6.0]);
+    }
 
     fn check(v: f32) {
         assert_eq!(Rgb::linear_to_srgb8(v), Rgb::linear_to_srgb8_direct(v), "8-bit sRGB code of {v:e} (bits {:#x})", v.to_bits());

@@ -131,8 +131,12 @@ impl FilmTile {
             if m == 0 {
                 continue;
             }
-            if let Some(px) = self.layers.get_mut(k * n3..(k + 1) * n3) {
-                add_touched_layers(px, aov, m);
+            let Some(px) = self.layers.get_mut(k * n3..(k + 1) * n3) else { continue };
+            // The untouched layers are zero, so adding the whole row gives the same sums as
+            // adding the touched ones (no sum is ever -0), as a few vector adds.
+            match Rgb::as_floats(aov).get(..n3) {
+                Some(row) if all_finite(row) => add_dense(px, row),
+                _ => add_touched_layers(px, aov, m),
             }
         }
     }
@@ -599,6 +603,34 @@ fn rgb_at(buf: &[f32], j: usize) -> Rgb {
     }
 }
 
+/// No value is infinite or NaN (`x - x` is 0 exactly for finite `x`), eight at a time
+/// without an early exit (a row of eight layers is three such blocks).
+#[inline(always)]
+fn all_finite(v: &[f32]) -> bool {
+    #[allow(clippy::eq_op)]
+    let ok = |x: f32| x - x == 0.0;
+    let (blocks, rest) = v.as_chunks::<8>();
+    let mut all = [true; 8];
+    for b in blocks {
+        all = std::array::from_fn(|i| all[i] & ok(b[i]));
+    }
+    all.iter().all(|&a| a) && rest.iter().all(|&x| ok(x))
+}
+
+/// `dst += src` (the same lengths), eight floats at a time (the compiler's own vector loop
+/// takes more floats a step than a row holds, and leaves it to its scalar tail).
+#[inline(always)]
+fn add_dense(dst: &mut [f32], src: &[f32]) {
+    let (d8, d) = dst.as_chunks_mut::<8>();
+    let (s8, s) = src.as_chunks::<8>();
+    for (d, s) in d8.iter_mut().zip(s8) {
+        *d = std::array::from_fn(|i| d[i] + s[i]);
+    }
+    for (d, s) in d.iter_mut().zip(s) {
+        *d += *s;
+    }
+}
+
 /// A box-filtered pixel's layers `px` (three floats each) take the layers of bit mask `m`
 /// from `aov`; a non-finite value is dropped.
 #[inline(always)]
@@ -676,6 +708,48 @@ mod tile_tests {
         // A filter wider than a pixel still extends tiles by its radius.
         let g = Film::new(32, 32, Filter::Gaussian { stddev: 0.5 }).tile(16, 16, 32, 32);
         assert_eq!((g.x0, g.y0), (14, 14));
+    }
+
+    /// A run of box-filtered samples (the kernel's batch, adding each row whole where it is
+    /// finite) sums every layer to the bit as sample-by-sample adds of the touched layers do,
+    /// and drops a non-finite layer value while keeping the sample's other layers.
+    #[test]
+    fn box_batches_add_like_single_samples() {
+        let names: Vec<String> = (0..9).map(|i| format!("l{i}")).collect();
+        let film = Film::with_layers(8, 8, Filter::Box, &names);
+        let (mut batch, mut single) = (film.tile(0, 0, 8, 8), film.tile(0, 0, 8, 8));
+        let mut rng = crate::sampling::Pcg32::new(3, 5);
+        let mut samples = Vec::new();
+        for k in 0..2000 {
+            let p = Vec2::new(rng.next_f32() * 8.0, rng.next_f32() * 8.0);
+            let touched = (rng.next_f32() * 512.0) as u32;
+            let row: Vec<Rgb> = (0..9)
+                .map(|i| match (touched & (1 << i) != 0, k % 97, i) {
+                    (false, _, _) => Rgb::BLACK,
+                    (true, 5, 2) => Rgb::new(f32::NAN, 1.0, 1.0),
+                    (true, 7, 4) => Rgb::new(1.0, f32::INFINITY, 1.0),
+                    _ => Rgb::new(rng.next_f32(), rng.next_f32() * 1e-3, rng.next_f32() * 1e3),
+                })
+                .collect();
+            samples.push((p, Rgb::splat(rng.next_f32()), row, touched));
+        }
+        batch.add_samples_touched(samples.iter().map(|(p, l, row, t)| (*p, *l, row.as_slice(), *t)));
+        for (p, l, row, t) in &samples {
+            single.add_sample_touched(*p, *l, row, *t);
+        }
+        let (mut a, mut b) = (Film::with_layers(8, 8, Filter::Box, &names), Film::with_layers(8, 8, Filter::Box, &names));
+        a.merge_tile(&batch);
+        b.merge_tile(&single);
+        assert_eq!(a.image().data, b.image().data);
+        for i in 0..9 {
+            let (x, y) = (a.layer_image(i).data, b.layer_image(i).data);
+            assert!(
+                x.iter().zip(&y).all(|(x, y)| x.r.to_bits() == y.r.to_bits() && x.g.to_bits() == y.g.to_bits() && x.b.to_bits() == y.b.to_bits()),
+                "layer {i}"
+            );
+            assert!(x.iter().all(Rgb::is_finite), "layer {i}: non-finite values dropped");
+        }
+        assert!(a.layer_image(2).data.iter().any(|c| !c.is_black()), "the other values of a sample with a NaN layer stay");
     }
 
     /// Tile sums (the driver's per-tile pass tree) add exactly as films do, and a blank tile

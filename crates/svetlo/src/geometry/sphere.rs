@@ -66,6 +66,17 @@ impl Sphere {
         (dpdu, dpdv)
     }
 
+    /// The normal of [`Self::surface`] alone (the same operations: the same bits).
+    #[inline]
+    pub fn normal(&self, p: Vec3) -> Vec3 {
+        let n = ((p - self.center) / self.radius).normalize_or_zero();
+        if self.flip_normals {
+            -n
+        } else {
+            n
+        }
+    }
+
     pub fn surface(&self, p: Vec3) -> (Vec3, Vec2, Vec3) {
         let local = (p - self.center) / self.radius;
         let n = local.normalize_or_zero();
@@ -76,5 +87,24 @@ impl Sphere {
         let dpdu = Vec3::new(-n.y, n.x, 0.0) * (2.0 * PI * self.radius);
         let n = if self.flip_normals { -n } else { n };
         (n, uv, dpdu)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// `normal` is `surface`'s normal bit for bit (a sphere light's samples take it), flipped or not.
+    #[test]
+    fn normal_is_the_surface_normal() {
+        let mut rng = crate::sampling::Pcg32::new(5, 1);
+        for flip_normals in [false, true] {
+            let s = Sphere { center: Vec3::new(0.3, 6.5, -2.8), radius: 0.05, flip_normals };
+            for _ in 0..1000 {
+                let d = crate::math::warp::square_to_uniform_sphere(Vec2::new(rng.next_f32(), rng.next_f32()));
+                let p = s.center + d * s.radius;
+                assert_eq!(s.normal(p).to_array().map(f32::to_bits), s.surface(p).0.to_array().map(f32::to_bits));
+            }
+        }
     }
 }

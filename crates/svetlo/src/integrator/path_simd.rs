@@ -1,24 +1,28 @@
 //! The path tracer of `path.rs`, eight paths at a time: the same estimator (next-event
 //! estimation and BSDF sampling combined by the power heuristic, Russian roulette, Mitsuba's
 //! `max_depth`), with the rays of eight paths traced as one packet (`accel::packet`), or, in
-//! scenes of more than 20 000 triangles, one by one through the scene's BVH (`Tracer`). Per
-//! vertex, `gather` does each lane's branchy part (emission found, random numbers, light and
-//! triangle choice) and `shade8` the arithmetic of all eight lanes on the paths' state kept
-//! as structure of arrays (compiled to AVX2 vector code; an AVX-512VL build of the same code
-//! has 32 registers where the CPU has them).
+//! scenes of more than 20 000 triangles or with shapes other than meshes, one by one through
+//! the scene's BVH (`Tracer`). Per vertex, `gather` does each lane's branchy part (emission
+//! found, random numbers, light and triangle choice) and `shade8` the arithmetic of all
+//! eight lanes on the paths' state kept as structure of arrays (compiled to AVX2 vector
+//! code; an AVX-512VL build of the same code has 32 registers where the CPU has them).
 //!
-//! Scope: static scenes of triangle meshes with any material svetlo reads. (Two-sided)
-//! Lambertian materials of constant or textured reflectance (any texture: bitmaps, procedural,
-//! mesh attributes; evaluated per lane where the path hits) are shaded as eight-lane
-//! arithmetic; every other one (conductors, dielectrics, plastics, the classic models,
+//! Scope: static scenes of triangle meshes, analytic spheres and SDF grids, with any material
+//! svetlo reads. A hit on a shape that is not a mesh comes as the scene's own surface record
+//! (`Scene::interaction`, as the scalar tracer's `Scene::intersect` makes it: `other_hit`),
+//! and is shaded from it as a triangle's hit is. (Two-sided) Lambertian materials of
+//! constant or textured reflectance (any texture: bitmaps, procedural, mesh attributes;
+//! evaluated per lane where the path hits) are shaded as eight-lane arithmetic, on any
+//! shape; every other one (conductors, dielectrics, plastics, the classic models,
 //! principled, blends, masks, normal and bump maps) lane by lane through its scalar `Bsdf`
 //! in `gather` (`scalar_scatter`: the same calls and random numbers as `path.rs`), its
 //! results selected into `shade8`'s lanes. Scenes large enough to trace single rays take the
 //! kernel only with Lambertian materials (it gained nothing there otherwise). Lights: area
 //! lights of constant radiance on meshes (sampled by the kernel's own unpacked copy), and
-//! every other light the scalar tracer takes (textured area lights, point, spot,
-//! directional, one constant or bitmap environment), each lane sampling it through its own
-//! `Light::sample_li`, looking a textured emitter's radiance up where its path hits it and
+//! every other light the scalar tracer takes (textured area lights, sphere lights, point,
+//! spot, directional, one constant or bitmap environment), each lane sampling it through its
+//! own `Light::sample_li` (a sphere's: the cone it subtends), looking a textured or sphere
+//! emitter's radiance and density (`AreaLight::l`, `pdf_li`) up where its path hits it and
 //! seeing the environment where its ray escapes;
 //! either sampler (Sobol's scrambles for all lanes at once: [`LaneSampler`]); AOVs and
 //! `--lpe` (each lane steps its path's automata as the scalar tracer does: see
@@ -40,7 +44,9 @@
 //! traces them again through the scene's BVH: the packet image is the scalar tracer's bit for
 //! bit, in 0.81 of the CPU time single rays took on a Cornell box with a glass box (0.60 of
 //! the scalar tracer's). Opaque scenes skip the check: their ties are shared edges and faces
-//! hidden inside closed objects.
+//! hidden inside closed objects. Scenes with spheres trace single rays (the packet BVH holds
+//! triangles only): Bitterli's veach-mis (three sphere lights, rough conductor plates) takes
+//! 0.9 of the scalar tracer's CPU time.
 
 use super::path::{bsdf_pdf_toward, PathTracer};
 use super::{camera_sample, render_tiles, Integrator, Progress, RenderSettings};
@@ -180,13 +186,27 @@ enum Tracer {
     /// (see [`SimdKernel::new`]).
     Packets { bvh: PacketBvh, ties: Option<Vec<u32>> },
     /// One by one through the scene's wide BVH: in a large scene eight incoherent rays share
-    /// few nodes, and a packet pays for the union of their walks. `first`: the kernel's
-    /// index of each shape's first triangle.
+    /// few nodes, and a packet pays for the union of their walks; the only way to shapes
+    /// other than meshes. `first`: the kernel's index of each shape's first triangle
+    /// ([`NOT_MESH`] for a shape of no triangles of the kernel's).
     Single { first: Vec<u32> },
 }
 
+/// `Tracer::Single`'s `first` of a shape that is not a mesh (sphere, SDF grid).
+const NOT_MESH: u32 = u32::MAX;
+
+/// `Hits8::prim` of a lane whose ray hit a shape that is not a mesh; its shape and primitive
+/// are then in the lane's [`OtherHits`] entry.
+const OTHER: u32 = u32::MAX - 1;
+
+/// Per lane, the (shape, primitive) of a hit on a shape that is not a mesh.
+type OtherHits = [(u32, u32); LANES];
+
 impl Tracer {
-    fn intersect(&self, scene: &Scene, rays: &Rays8, active: u8) -> Hits8 {
+    /// The lanes' closest hits; a hit on a shape that is not a mesh has `prim` [`OTHER`] and
+    /// its shape and primitive in `others`.
+    fn intersect(&self, scene: &Scene, rays: &Rays8, active: u8, others: &mut OtherHits) -> Hits8 {
+        // The lanes to trace through the scene's BVH: a packet's tied ones, or all.
         let (mut h, lanes, first) = match self {
             Tracer::Packets { bvh, ties: None } => return bvh.intersect(rays, active),
             Tracer::Packets { bvh, ties: Some(first) } => {
@@ -198,7 +218,16 @@ impl Tracer {
         for l in (0..LANES).filter(|l| lanes & (1 << l) != 0) {
             let hit = scene.accel.intersect(&lane_ray(rays, l));
             h.t[l] = hit.map_or(rays.t_max[l], |hit| hit.t);
-            h.prim[l] = hit.map_or(u32::MAX, |hit| first[hit.shape as usize] + hit.prim);
+            h.prim[l] = match hit {
+                None => u32::MAX,
+                Some(hit) => match first[hit.shape as usize] {
+                    NOT_MESH => {
+                        others[l] = (hit.shape, hit.prim);
+                        OTHER
+                    }
+                    f => f + hit.prim,
+                },
+            };
             h.b1[l] = hit.map_or(0.0, |hit| hit.b1);
             h.b2[l] = hit.map_or(0.0, |hit| hit.b2);
         }
@@ -219,11 +248,13 @@ fn first_triangles(scene: &Scene) -> Vec<u32> {
     let mut first = Vec::with_capacity(scene.shapes.len());
     let mut n = 0u32;
     for s in &scene.shapes {
-        first.push(n);
-        n += match &*s.geometry {
-            Geometry::Mesh(m) => m.triangle_count() as u32,
-            Geometry::Sphere(_) | Geometry::SdfGrid(_) => 0,
-        };
+        match &*s.geometry {
+            Geometry::Mesh(m) => {
+                first.push(n);
+                n += m.triangle_count() as u32;
+            }
+            Geometry::Sphere(_) | Geometry::SdfGrid(_) => first.push(NOT_MESH),
+        }
     }
     first
 }
@@ -296,8 +327,9 @@ impl SimdKernel {
                 lights.push(None);
                 continue;
             };
-            // A textured emitter is sampled through its own `sample_li`, as the other lights.
-            if !matches!(a.radiance, Texture::Constant(_)) {
+            // A textured emitter, or one of a shape that is not a mesh (a sphere's samples the
+            // cone it subtends), is sampled through its own `sample_li`, as the other lights.
+            if !matches!(a.radiance, Texture::Constant(_)) || !matches!(&*a.geometry, Geometry::Mesh(_)) {
                 lights.push(None);
                 continue;
             }
@@ -327,11 +359,13 @@ impl SimdKernel {
         // shared edges and faces hidden inside opaque objects, and the walk skips the check.
         let large = triangles > PACKET_MAX_TRIANGLES;
         let crossing = scene.materials.iter().any(may_cross);
+        // The packet BVH holds triangles only: other shapes are met through the scene's BVH.
+        let meshes_only = scene.shapes.iter().all(|s| matches!(&*s.geometry, Geometry::Mesh(_)));
+        let single_rays = large || !meshes_only;
         let mut shapes = Vec::with_capacity(scene.shapes.len());
         let mut tris = Vec::new();
         let mut verts = Vec::new();
         for (si, s) in scene.shapes.iter().enumerate() {
-            let Geometry::Mesh(m) = &*s.geometry else { return None };
             let mat = scene.materials.get(s.material as usize)?;
             let lambert = match mat {
                 Material::TwoSided { front, back } => diffuse_albedo(front).zip(diffuse_albedo(back).map(Some)),
@@ -356,6 +390,8 @@ impl SimdKernel {
                 None => None,
             };
             shapes.push(ShapeData { scalar_bsdf, front, back, textured, light });
+            // Other shapes' hits come as the scene's surface records (`other_hit`).
+            let Geometry::Mesh(m) = &*s.geometry else { continue };
             for t in 0..m.triangle_count() {
                 let p = m.vertices(t);
                 verts.push(p);
@@ -367,7 +403,7 @@ impl SimdKernel {
             }
         }
         let tracer =
-            if large { single_tracer(scene) } else { Tracer::Packets { bvh: PacketBvh::build(&verts), ties: crossing.then(|| first_triangles(scene)) } };
+            if single_rays { single_tracer(scene) } else { Tracer::Packets { bvh: PacketBvh::build(&verts), ties: crossing.then(|| first_triangles(scene)) } };
         Some(SimdKernel { tracer, tris, shapes, lights, avx512: avx512() })
     }
 
@@ -509,6 +545,7 @@ impl SimdKernel {
         let mut st = Paths::new(sampler);
         let mut rays = Rays8::default();
         let mut shadow = Rays8::default();
+        let mut others: OtherHits = [(0, 0); LANES];
         let mut next = 0usize;
         let mut active = 0u8;
         // Reused every step: lanes outside this step's mask hold stale values nobody reads.
@@ -530,7 +567,7 @@ impl SimdKernel {
             if active == 0 {
                 break;
             }
-            let hits = self.tracer.intersect(scene, &rays, active);
+            let hits = self.tracer.intersect(scene, &rays, active, &mut others);
             // Every active lane's numbers for this vertex, where the sampler draws them for
             // all lanes at once (a lane that ends before it needs them restarts its sampler
             // with its next camera sample).
@@ -542,7 +579,8 @@ impl SimdKernel {
                     continue;
                 }
                 let d = Vec3::new(rays.d[0][l], rays.d[1][l], rays.d[2][l]);
-                if self.gather(scene, settings, events, &mut st, &draws, l, hits.prim[l], hits.b1[l], hits.b2[l], d, &mut v) {
+                let other = if hits.prim[l] == OTHER { Some(other_hit(scene, &rays, &hits, &others, l)) } else { None };
+                if self.gather(scene, settings, events, &mut st, &draws, l, hits.prim[l], hits.b1[l], hits.b2[l], d, other.as_ref(), &mut v) {
                     go |= 1 << l;
                 } else {
                     ends |= 1 << l;
@@ -597,7 +635,9 @@ impl SimdKernel {
     /// The per-lane part of one vertex (as `shade`): emission found, the depth test, the
     /// random numbers, the light and its triangle chosen, and at a material other than a
     /// Lambertian one its scalar BSDF's value toward the light sample and its own sample; the
-    /// arithmetic is left in `v` for `shade8`. False when the path ends here.
+    /// arithmetic is left in `v` for `shade8`. The hit: triangle `prim` of the kernel's at
+    /// (b1, b2), or where `prim` is [`OTHER`], the scene's record `other` of a shape that is
+    /// not a mesh. False when the path ends here.
     #[allow(clippy::too_many_arguments)]
     #[inline(always)]
     fn gather<S: LaneSampler>(
@@ -612,25 +652,32 @@ impl SimdKernel {
         b1: f32,
         b2: f32,
         d: Vec3,
+        other: Option<&SurfaceInteraction>,
         v: &mut Soa,
     ) -> bool {
         st.depth[l] += 1;
         let depth = st.depth[l];
         v.emitted[l] = false;
-        let Some(tri) = self.tris.get(prim as usize) else {
-            self.escaped(scene, settings, st, l, d, v);
-            return false;
-        };
-        let sh = &self.shapes[tri.shape as usize];
-        v.shape[l] = tri.shape;
-        let p = tri.p[0] * (1.0 - b1 - b2) + tri.p[1] * b1 + tri.p[2] * b2;
-        let (ng, frame) = match tri.shading {
-            Shading::Flat(ng, frame) => (ng, frame),
-            Shading::Smooth(s) => {
-                let (ng, ns) = s.normals_at(b1, b2);
-                (ng, Frame::from_normal_tangent(ns, s.dpdu))
+        let (hit, shape, p, ng, frame) = match (self.tris.get(prim as usize), other) {
+            (Some(tri), _) => {
+                let p = tri.p[0] * (1.0 - b1 - b2) + tri.p[1] * b1 + tri.p[2] * b2;
+                let (ng, frame) = match tri.shading {
+                    Shading::Flat(ng, frame) => (ng, frame),
+                    Shading::Smooth(s) => {
+                        let (ng, ns) = s.normals_at(b1, b2);
+                        (ng, Frame::from_normal_tangent(ns, s.dpdu))
+                    }
+                };
+                (Hit::Tri(tri), tri.shape, p, ng, frame)
+            }
+            (None, Some(si)) => (Hit::Other(si), si.shape, si.p, si.ng, si.shading),
+            (None, None) => {
+                self.escaped(scene, settings, st, l, d, v);
+                return false;
             }
         };
+        let sh = &self.shapes[shape as usize];
+        v.shape[l] = shape;
         let wo_w = -d;
         if let Some((li, le)) = sh.light {
             let hide = depth == 1 && settings.hide_emitters;
@@ -642,7 +689,7 @@ impl SimdKernel {
                         le
                     }
                 }
-                None => area_of(scene, li).map_or(Rgb::BLACK, |a| a.l(ng, self.uv(scene, tri, b1, b2), wo_w)),
+                None => area_of(scene, li).map_or(Rgb::BLACK, |a| a.l(ng, self.hit_uv(scene, &hit, b1, b2), wo_w)),
             };
             if !le.is_black() && !hide {
                 let w = if st.prev_specular[l] {
@@ -709,10 +756,10 @@ impl SimdKernel {
         v.scalar_bsdf[l] = sh.scalar_bsdf;
         if !sh.scalar_bsdf {
             // The hit's texture point, as `Scene::interaction` gives it (`SurfaceInteraction::tex_point`).
-            let tp = if sh.textured {
-                TexPoint { uv: self.uv(scene, tri, b1, b2), prim: tri.local, bary: Vec2::new(b1, b2), p, n: ng }
-            } else {
-                TexPoint::default()
+            let tp = match hit {
+                _ if !sh.textured => TexPoint::default(),
+                Hit::Tri(tri) => TexPoint { uv: self.uv(scene, tri, b1, b2), prim: tri.local, bary: Vec2::new(b1, b2), p, n: ng },
+                Hit::Other(si) => si.tex_point(),
             };
             let (front, back) = (sh.front.at(tp), sh.back.as_ref().map_or(Rgb::BLACK, |b| b.at(tp)));
             putc(&mut v.front, front);
@@ -725,19 +772,25 @@ impl SimdKernel {
             }
         }
         if sh.scalar_bsdf {
-            let si = SurfaceInteraction {
-                p,
-                t: 0.0,
-                ng,
-                shading: frame,
-                uv: self.uv(scene, tri, b1, b2),
-                shape: tri.shape,
-                prim: tri.local,
-                bary: Vec2::new(b1, b2),
-                wo: wo_w,
-                time: 0.0,
-            };
-            self.scalar_scatter(scene, events, st, l, v, &si, [u_light, u_l2.x, u_l2.y, uc, u.x, u.y]);
+            let u6 = [u_light, u_l2.x, u_l2.y, uc, u.x, u.y];
+            match hit {
+                Hit::Tri(tri) => {
+                    let si = SurfaceInteraction {
+                        p,
+                        t: 0.0,
+                        ng,
+                        shading: frame,
+                        uv: self.uv(scene, tri, b1, b2),
+                        shape: tri.shape,
+                        prim: tri.local,
+                        bary: Vec2::new(b1, b2),
+                        wo: wo_w,
+                        time: 0.0,
+                    };
+                    self.scalar_scatter(scene, events, st, l, v, &si, u6);
+                }
+                Hit::Other(si) => self.scalar_scatter(scene, events, st, l, v, si, u6),
+            }
         } else {
             self.light_sample(scene, l, v, p, u_light, u_l2);
         }
@@ -796,6 +849,15 @@ impl SimdKernel {
                 v.nee_ok[l] = true;
             }
             _ => {}
+        }
+    }
+
+    /// The uv of a hit: on a triangle at barycentrics (b1, b2), or the scene's record's.
+    #[inline(always)]
+    fn hit_uv(&self, scene: &Scene, hit: &Hit, b1: f32, b2: f32) -> Vec2 {
+        match hit {
+            Hit::Tri(tri) => self.uv(scene, tri, b1, b2),
+            Hit::Other(si) => si.uv,
         }
     }
 
@@ -891,6 +953,22 @@ impl SimdKernel {
         v.shape[l] = ESCAPED;
         put_rgb(&mut v.emit, l, beta * le * w);
     }
+}
+
+/// Where a lane's ray hit: a triangle of the kernel's, or a shape that is not a mesh (the
+/// scene's surface record of the hit, as the scalar tracer's `Scene::intersect` makes it).
+enum Hit<'a> {
+    Tri(&'a Tri),
+    Other(&'a SurfaceInteraction),
+}
+
+/// Lane `l`'s hit on a shape that is not a mesh, as the scalar tracer's `Scene::intersect`
+/// records it (the same ray: the same point, normal and uv). Out of line: mesh scenes never
+/// call it.
+#[inline(never)]
+fn other_hit(scene: &Scene, rays: &Rays8, hits: &Hits8, others: &OtherHits, l: usize) -> SurfaceInteraction {
+    let (shape, prim) = others[l];
+    scene.interaction(&crate::accel::PrimHit { t: hits.t[l], shape, prim, b1: hits.b1[l], b2: hits.b2[l] }, &lane_ray(rays, l))
 }
 
 /// `Soa::shape` of a lane whose ray left the scene.
@@ -1100,6 +1178,14 @@ impl<'a> LaneEvents<'a> {
     }
 }
 
+/// The lanes whose flag is set, as a bit mask: each flag is one byte, 0 or 1, and one
+/// multiplication moves byte `l`'s bit to bit `l` of the top byte (no carries: the bits differ).
+#[inline(always)]
+fn lane_bits(flags: &[bool; LANES]) -> u8 {
+    let bytes = u64::from_le_bytes(flags.map(u8::from));
+    (bytes.wrapping_mul(0x0102_0408_1020_4080) >> 56) as u8
+}
+
 /// The lanes whose vertex took a scalar BSDF, with the event classes of their light sample
 /// and of the reflection their path takes (elsewhere the shape's diffuse reflection).
 struct Reflection {
@@ -1220,10 +1306,10 @@ impl<'a> LaneLayers<'a> {
         if self.events.view.is_none() {
             return;
         }
-        let emitted = (0..LANES).fold(0u8, |m, l| m | (v.emitted[l] as u8) << l) & active;
+        let emitted = lane_bits(&v.emitted) & active;
         // A scalar BSDF's events are the lane's own (`SimdKernel::scalar_scatter`); a null
         // interaction (a mask let the path through) is no event, so its state stays.
-        let mut own = Reflection { lanes: (0..LANES).fold(0u8, |m, l| m | (v.scalar_bsdf[l] as u8) << l) & active, nee: [0; LANES], step: [0; LANES] };
+        let mut own = Reflection { lanes: lane_bits(&v.scalar_bsdf) & active, nee: [0; LANES], step: [0; LANES] };
         let mut steps = goes_on & active;
         let mut lanes = own.lanes;
         while lanes != 0 {
@@ -1584,6 +1670,15 @@ fn avx512() -> bool {
 mod tests {
     use super::*;
     use crate::sampling::Pcg32;
+
+    /// Every combination of eight lane flags gives its bit mask.
+    #[test]
+    fn lane_bits_are_the_flags() {
+        for m in 0..=255u8 {
+            let flags: [bool; LANES] = std::array::from_fn(|l| m & (1 << l) != 0);
+            assert_eq!(lane_bits(&flags), m);
+        }
+    }
 
     /// The lanes' gathered automaton lookups are the scalar ones, lane for lane, on random
     /// states, shapes (some escaped), lights and lane masks.

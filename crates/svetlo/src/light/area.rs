@@ -186,7 +186,13 @@ impl AreaLight {
             return None;
         }
         let wi = d / dist;
-        let (n, uv, _) = s.surface(p);
+        // A constant radiance needs no uv (its two inverse trigonometric functions).
+        let (n, uv) = if self.radiance.is_constant() {
+            (s.normal(p), Vec2::ZERO)
+        } else {
+            let (n, uv, _) = s.surface(p);
+            (n, uv)
+        };
         if n.dot(-wi) <= 0.0 {
             return None; // an inward-facing sphere seen from outside emits nothing toward us
         }

@@ -231,7 +231,7 @@ impl Scene {
     }
 
     /// The surface record of a primitive hit by `ray` (in the space the primitive is stored in).
-    fn interaction(&self, hit: &PrimHit, ray: &Ray) -> SurfaceInteraction {
+    pub(crate) fn interaction(&self, hit: &PrimHit, ray: &Ray) -> SurfaceInteraction {
         let shape = &self.shapes[hit.shape as usize];
         let p_ray = ray.at(hit.t);
         let (p, ng, ns, uv, dpdu) = match &*shape.geometry {
