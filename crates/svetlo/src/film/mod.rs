@@ -10,6 +10,7 @@ pub mod raw;
 
 pub use self::image::Image;
 pub use filter::Filter;
+use filter::FilterWeights;
 
 use crate::spectrum::Rgb;
 use glam::Vec2;
@@ -46,6 +47,7 @@ pub struct FilmTile {
     pub x1: u32,
     pub y1: u32,
     filter: Filter,
+    weights: FilterWeights,
     pixels: Vec<Pixel>,
     /// The AOV layers' filter-weighted sums (sharing the beauty's weights), pixel by pixel:
     /// channel c of pixel k's layer i at `(k * n_layers + i) * 3 + c`, so that a sample's
@@ -59,7 +61,18 @@ pub struct FilmTile {
 
 impl FilmTile {
     pub fn new(x0: u32, y0: u32, x1: u32, y1: u32, filter: Filter) -> Self {
-        FilmTile { x0, y0, x1, y1, filter, pixels: vec![Pixel::default(); ((x1 - x0) * (y1 - y0)) as usize], layers: Vec::new(), n_layers: 0, blank: true }
+        FilmTile {
+            x0,
+            y0,
+            x1,
+            y1,
+            filter,
+            weights: FilterWeights::new(filter),
+            pixels: vec![Pixel::default(); ((x1 - x0) * (y1 - y0)) as usize],
+            layers: Vec::new(),
+            n_layers: 0,
+            blank: true,
+        }
     }
 
     /// Back to black, keeping the memory (layers already allocated stay so, as zeros).
@@ -195,10 +208,10 @@ impl FilmTile {
         // A sample reaching a third of the layers or more adds the whole row (a vector loop),
         // fewer add theirs one by one; the sums are the same either way.
         let dense = 3 * nr >= self.n_layers;
-        for y in fp.ymin..=fp.ymax {
-            let wy = fp.wy(&self.filter, y);
-            for x in fp.xmin..=fp.xmax {
-                let wgt = wy * fp.wx(&self.filter, x);
+        for y in fp.ymin..fp.ymax + 1 {
+            let wy = fp.wy(&self.weights, y);
+            for x in fp.xmin..fp.xmax + 1 {
+                let wgt = wy * fp.wx(&self.weights, x);
                 if wgt == 0.0 {
                     continue;
                 }
@@ -281,13 +294,13 @@ impl FilmTile {
     #[inline(never)]
     fn add_filtered(&mut self, fp: &Footprint, l: Rgb) {
         let w = self.x1 - self.x0;
-        for y in fp.ymin..=fp.ymax {
-            let fy = fp.wy(&self.filter, y);
+        for y in fp.ymin..fp.ymax + 1 {
+            let fy = fp.wy(&self.weights, y);
             if fy == 0.0 {
                 continue;
             }
-            for x in fp.xmin..=fp.xmax {
-                let wgt = fy * fp.wx(&self.filter, x);
+            for x in fp.xmin..fp.xmax + 1 {
+                let wgt = fy * fp.wx(&self.weights, x);
                 if wgt == 0.0 {
                     continue;
                 }
@@ -325,10 +338,10 @@ impl FilmTile {
         };
         if fp.cached {
             for (i, f) in fp.fx[..nx].iter_mut().enumerate() {
-                *f = self.filter.eval((xmin + i as i64) as f32 + 0.5 - p.x);
+                *f = self.weights.eval((xmin + i as i64) as f32 + 0.5 - p.x);
             }
             for (j, f) in fp.fy[..ny].iter_mut().enumerate() {
-                *f = self.filter.eval((ymin + j as i64) as f32 + 0.5 - p.y);
+                *f = self.weights.eval((ymin + j as i64) as f32 + 0.5 - p.y);
             }
         }
         Some(fp)
@@ -352,7 +365,7 @@ impl Footprint {
     /// Widest cached range (pixels per axis); wider filters evaluate each weight in place.
     const SPAN: usize = 16;
     #[inline(always)]
-    fn wx(&self, filter: &Filter, x: i64) -> f32 {
+    fn wx(&self, filter: &FilterWeights, x: i64) -> f32 {
         if self.cached {
             self.fx[(x - self.xmin) as usize]
         } else {
@@ -360,7 +373,7 @@ impl Footprint {
         }
     }
     #[inline(always)]
-    fn wy(&self, filter: &Filter, y: i64) -> f32 {
+    fn wy(&self, filter: &FilterWeights, y: i64) -> f32 {
         if self.cached {
             self.fy[(y - self.ymin) as usize]
         } else {
