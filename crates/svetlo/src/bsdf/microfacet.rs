@@ -258,18 +258,20 @@ fn beckmann_slope_x_11(cos_t: f64, u1: f64) -> f64 {
 /// Newton steps from `guess`, kept inside a shrinking bracket (bisection when Newton
 /// leaves it), so that it always converges.
 fn invert_slope_cdf(tan_t: f64, u: f64, x_max: f64, guess: f64) -> f64 {
-    let cdf = |x: f64| 0.5 * erfc(-x) + tan_t * (-x * x).exp() / (2.0 * SQRT_PI);
-    let target = u.clamp(1e-12, 1.0 - 1e-12) * cdf(x_max);
+    // The CDF at x, given exp(-x²) (which the derivative shares).
+    let cdf = |x: f64, e: f64| 0.5 * erfc(-x) + tan_t * e / (2.0 * SQRT_PI);
+    let target = u.clamp(1e-12, 1.0 - 1e-12) * cdf(x_max, (-x_max * x_max).exp());
     let (mut lo, mut hi) = (-8.0f64, x_max);
     let mut x = if guess.is_finite() { guess.clamp(lo, hi) } else { 0.0f64.clamp(lo, hi) };
     for _ in 0..64 {
-        let g = cdf(x) - target;
+        let e = (-x * x).exp();
+        let g = cdf(x, e) - target;
         if g > 0.0 {
             hi = x;
         } else {
             lo = x;
         }
-        let dg = (-x * x).exp() / SQRT_PI * (1.0 - x * tan_t);
+        let dg = e / SQRT_PI * (1.0 - x * tan_t);
         let mut nx = if dg > 0.0 { x - g / dg } else { f64::NAN };
         if !(nx > lo && nx < hi) {
             nx = 0.5 * (lo + hi);
