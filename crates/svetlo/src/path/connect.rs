@@ -151,7 +151,7 @@ pub fn connect(
 /// light subpath's end to the lens is clear.
 #[derive(Clone, Copy, Debug)]
 pub struct CameraConnection {
-    /// Unweighted contribution (finite, not black).
+    /// Unweighted contribution (not black; possibly not finite).
     pub l: Rgb,
     pub raster: Vec2,
     pub p_lens: glam::Vec3,
@@ -164,6 +164,8 @@ pub struct CameraConnection {
 /// Strategy (s, 1) without its visibility test, so that light tracing can test the shadow
 /// rays of several connections at once; `connect` is this and the test. Uses two sampler
 /// dimensions (the lens) whenever `s` is in range.
+// Inlined: BDPT's `connect` otherwise pays a call and the record's copy per t = 1 strategy.
+#[inline(always)]
 pub fn camera_connection(scene: &Scene, cfg: &PathConfig, light: &[Vertex], s: usize, sampler: &mut dyn Sampler) -> Option<CameraConnection> {
     if s == 0 || s > light.len() || !cfg.allows(s + 1) || (s == 1 && cfg.hide_emitters) {
         return None;
@@ -189,7 +191,8 @@ pub fn camera_connection(scene: &Scene, cfg: &PathConfig, light: &[Vertex], s: u
         qs.f_dir(w, TransportMode::Importance)
     };
     let l = qs.beta * f * beta_cam * qs.abs_cos_dir(w);
-    if l.is_black() || !l.is_finite() {
+    // Non-finite values are left to the callers' own checks (`connect`'s, the splat's).
+    if l.is_black() {
         return None;
     }
     let shadow = scene.shadow_ray(qs.p, qs.ng, cs.p_lens, glam::Vec3::ZERO, qs.time);
