@@ -382,7 +382,7 @@ fn packet_shadow_rays_match_single_rays() {
     }
     let (lo, hi) = corners.iter().fold((Vec3::splat(f32::MAX), Vec3::splat(f32::MIN)), |(lo, hi), p| (lo.min(*p), hi.max(*p)));
     let mut rng = Pcg32::new(7, 3);
-    let mut point = |rng: &mut Pcg32| lo + (hi - lo) * Vec3::new(rng.next_f32(), rng.next_f32(), rng.next_f32());
+    let point = |rng: &mut Pcg32| lo + (hi - lo) * Vec3::new(rng.next_f32(), rng.next_f32(), rng.next_f32());
     let (mut random_flips, mut tie_flips, mut n) = (0usize, 0usize, 0usize);
     for round in 0..40_000 {
         let to_corner = round % 2 == 1;
