@@ -2,8 +2,9 @@
 //! connections of one light subpath to the camera all end at the lens, so their walks
 //! share most nodes, and one packet walk costs less than their single-ray walks.
 //!
-//! A packet's answer for a lane is the single-ray test's: the same watertight triangle
-//! test over the same triangles and (0, t_max), only through another tree.
+//! A lane's answer should be the single ray's: the packet walk's watertight triangle test
+//! is the scalar one operation for operation, over the same triangles and (0, t_max), only
+//! through another tree (tests/bidir.rs compares them, at triangle edges too).
 
 use crate::accel::packet::{PacketBvh, Rays8, LANES};
 use crate::geometry::{Geometry, Ray};
