@@ -355,6 +355,61 @@ fn splatting_renders_do_not_depend_on_thread_count() {
     }
 }
 
+/// Light tracing tests its camera connections' shadow rays as packets (`path::ShadowPackets`):
+/// the same watertight triangle test over the same triangles, so every answer should be the
+/// single ray's. Rays from random points toward random points, and toward the scene's
+/// triangle corners and edge midpoints (the ties where the two trees' box tests and the
+/// triangle tests could part). Random rays must agree exactly; at the tie targets a flipped
+/// answer moves one splat, so more than 1 in 10 000 flipped would shift pixel means by more
+/// than this file's Z-tests can see at their spp: it must stay below that.
+#[test]
+fn packet_shadow_rays_match_single_rays() {
+    use svetlo::path::ShadowPackets;
+    use svetlo::sampling::Pcg32;
+    let scene = project_scene("cornell-box.xml", 16, 16);
+    let Some(packets) = ShadowPackets::new(&scene) else {
+        println!("no eight-wide SIMD here: nothing to compare");
+        return;
+    };
+    let mut corners = Vec::new();
+    for s in &scene.shapes {
+        if let Geometry::Mesh(m) = &*s.geometry {
+            for t in 0..m.triangle_count() {
+                let [a, b, c] = m.vertices(t);
+                corners.extend([a, b, c, (a + b) * 0.5, (b + c) * 0.5, (c + a) * 0.5]);
+            }
+        }
+    }
+    let (lo, hi) = corners.iter().fold((Vec3::splat(f32::MAX), Vec3::splat(f32::MIN)), |(lo, hi), p| (lo.min(*p), hi.max(*p)));
+    let mut rng = Pcg32::new(7, 3);
+    let point = |rng: &mut Pcg32| lo + (hi - lo) * Vec3::new(rng.next_f32(), rng.next_f32(), rng.next_f32());
+    let (mut random_flips, mut tie_flips, mut n) = (0usize, 0usize, 0usize);
+    for round in 0..40_000 {
+        let to_corner = round % 2 == 1;
+        let rays: Vec<_> = (0..8)
+            .filter_map(|_| {
+                let o = point(&mut rng);
+                let q = if to_corner { corners[(rng.next_u32() as usize) % corners.len()] } else { point(&mut rng) };
+                scene.shadow_ray(o, Vec3::ZERO, q, Vec3::ZERO, 0.0)
+            })
+            .collect();
+        let mask = packets.occluded(&rays);
+        for (i, r) in rays.iter().enumerate() {
+            if (mask >> i & 1 == 1) != scene.occluded_ray(r) {
+                if to_corner {
+                    tie_flips += 1;
+                } else {
+                    random_flips += 1;
+                }
+            }
+        }
+        n += rays.len();
+    }
+    println!("{n} rays: {random_flips} random and {tie_flips} tie answers differ");
+    assert_eq!(random_flips, 0, "packet shadow rays disagree with single rays");
+    assert!(tie_flips * 10_000 <= n / 2, "{tie_flips} of {} rays at edges and corners disagree", n / 2);
+}
+
 #[test]
 fn orthographic_camera_is_a_clear_error() {
     let mut scene = glossy_scene(8, 8);

@@ -98,22 +98,28 @@ pub trait SplatEstimator: Sync {
     /// each camera sample and calls [`Self::sample`]; kernels that trace many paths at once
     /// take the whole tile.
     fn render_tile(&self, t: TileJob, sampler: &mut dyn Sampler, scratch: &mut Self::Scratch, splats: &mut Vec<Splat>) {
-        let [x0, y0, x1, y1] = t.rect;
-        let cam = t.scene.camera.ray_generator();
-        let aovs = t.settings.aovs();
-        let mut out = SampleOut { splats, layers: Default::default() };
-        for y in y0..y1 {
-            for x in x0..x1 {
-                for s in t.s0..t.s0 + t.n {
-                    let (raster, ray) = super::camera_sample(&cam, sampler, x, y, s);
-                    let l = self.sample(t.scene, t.settings, &ray, raster, sampler, scratch, &mut out);
-                    if aovs.is_empty() {
-                        t.tile.add_sample(raster, l);
-                    } else {
-                        let beauty = if aovs.restricts_beauty() { out.layers.beauty } else { l };
-                        t.tile.add_sample_touched(raster, beauty, &out.layers.aov[..aovs.aov_count()], out.layers.touched);
-                        out.layers.clear();
-                    }
+        render_tile_by_sample(self, t, sampler, scratch, splats);
+    }
+}
+
+/// [`SplatEstimator::render_tile`]'s default: each camera sample drawn and given to
+/// [`SplatEstimator::sample`] (for estimators that batch only in some renders).
+pub fn render_tile_by_sample<E: SplatEstimator + ?Sized>(est: &E, t: TileJob, sampler: &mut dyn Sampler, scratch: &mut E::Scratch, splats: &mut Vec<Splat>) {
+    let [x0, y0, x1, y1] = t.rect;
+    let cam = t.scene.camera.ray_generator();
+    let aovs = t.settings.aovs();
+    let mut out = SampleOut { splats, layers: Default::default() };
+    for y in y0..y1 {
+        for x in x0..x1 {
+            for s in t.s0..t.s0 + t.n {
+                let (raster, ray) = super::camera_sample(&cam, sampler, x, y, s);
+                let l = est.sample(t.scene, t.settings, &ray, raster, sampler, scratch, &mut out);
+                if aovs.is_empty() {
+                    t.tile.add_sample(raster, l);
+                } else {
+                    let beauty = if aovs.restricts_beauty() { out.layers.beauty } else { l };
+                    t.tile.add_sample_touched(raster, beauty, &out.layers.aov[..aovs.aov_count()], out.layers.touched);
+                    out.layers.clear();
                 }
             }
         }

@@ -12,6 +12,7 @@
 use super::vertex::geometry_term;
 use super::{mis_weight, PathConfig, Vertex, VertexKind};
 use crate::bsdf::TransportMode;
+use crate::geometry::Ray;
 use crate::sampling::Sampler;
 use crate::scene::Scene;
 use crate::spectrum::Rgb;
@@ -70,38 +71,18 @@ pub fn connect(
         }
         pt.beta * pt.le(scene, &camera[t - 2])
     } else if t == 1 {
-        let u = sampler.next_2d();
-        let qs = &light[s - 1];
-        if !cfg.camera_connectible || !qs.connectible(scene) || (s == 1 && !qs.is_area_light(scene)) {
+        let c = camera_connection(scene, cfg, light, s, sampler)?;
+        if c.shadow.is_some_and(|ray| scene.occluded_ray(&ray)) {
             return None;
         }
-        let cs = cfg.lens.as_ref()?.sample_wi(qs.p, u)?;
-        if cs.pdf <= 0.0 || cs.we <= 0.0 {
-            return None;
-        }
-        let beta_cam = Rgb::splat(cs.we / cs.pdf);
-        // The direction toward the lens once for emission or BSDF and the cosine (what
-        // `le`, `f` and `abs_cos_to` of a camera vertex there would each compute).
-        let (w, d2) = qs.direction_to_point(cs.p_lens);
-        let f = if d2 == 0.0 {
-            Rgb::BLACK
-        } else if s == 1 {
-            qs.le_dir(scene, w)
-        } else {
-            qs.f_dir(w, TransportMode::Importance)
-        };
-        let l = qs.beta * f * beta_cam * qs.abs_cos_dir(w);
-        if l.is_black() || scene.occluded_at(qs.p, qs.ng, cs.p_lens, qs.time) {
-            return None;
-        }
-        raster = Some(cs.raster);
-        sampled_p = cs.p_lens;
+        raster = Some(c.raster);
+        sampled_p = c.p_lens;
         if weighted {
-            let mut cam = Vertex::camera(cs.p_lens, cs.raster, beta_cam);
-            cam.time = qs.time;
+            let mut cam = Vertex::camera(c.p_lens, c.raster, c.beta_cam);
+            cam.time = light[s - 1].time;
             sampled = Some(cam);
         }
-        l
+        c.l
     } else if s == 1 {
         let u_light = sampler.next_1d();
         let u = sampler.next_2d();
@@ -164,4 +145,56 @@ pub fn connect(
     }
     let weight = if weighted { mis_weight(scene, cfg, light, camera, sampled.as_ref(), s, t) } else { 1.0 };
     Some(Connection { l, weight, raster, sampled_p, sampled_light })
+}
+
+/// Strategy t = 1 before its shadow ray: what lands on the film if the segment from the
+/// light subpath's end to the lens is clear.
+#[derive(Clone, Copy, Debug)]
+pub struct CameraConnection {
+    /// Unweighted contribution (not black; possibly not finite).
+    pub l: Rgb,
+    pub raster: Vec2,
+    pub p_lens: glam::Vec3,
+    /// The camera vertex's throughput (importance over its density).
+    pub beta_cam: Rgb,
+    /// The segment to test (None: it has no length and nothing can block it).
+    pub shadow: Option<Ray>,
+}
+
+/// Strategy (s, 1) without its visibility test, so that light tracing can test the shadow
+/// rays of several connections at once; `connect` is this and the test. Uses two sampler
+/// dimensions (the lens) whenever `s` is in range.
+// Inlined: BDPT's `connect` otherwise pays a call and the record's copy per t = 1 strategy.
+#[inline(always)]
+pub fn camera_connection(scene: &Scene, cfg: &PathConfig, light: &[Vertex], s: usize, sampler: &mut dyn Sampler) -> Option<CameraConnection> {
+    if s == 0 || s > light.len() || !cfg.allows(s + 1) || (s == 1 && cfg.hide_emitters) {
+        return None;
+    }
+    let u = sampler.next_2d();
+    let qs = &light[s - 1];
+    if !cfg.camera_connectible || !qs.connectible(scene) || (s == 1 && !qs.is_area_light(scene)) {
+        return None;
+    }
+    let cs = cfg.lens.as_ref()?.sample_wi(qs.p, u)?;
+    if cs.pdf <= 0.0 || cs.we <= 0.0 {
+        return None;
+    }
+    let beta_cam = Rgb::splat(cs.we / cs.pdf);
+    // The direction toward the lens once for emission or BSDF and the cosine (what
+    // `le`, `f` and `abs_cos_to` of a camera vertex there would each compute).
+    let (w, d2) = qs.direction_to_point(cs.p_lens);
+    let f = if d2 == 0.0 {
+        Rgb::BLACK
+    } else if s == 1 {
+        qs.le_dir(scene, w)
+    } else {
+        qs.f_dir(w, TransportMode::Importance)
+    };
+    let l = qs.beta * f * beta_cam * qs.abs_cos_dir(w);
+    // Non-finite values are left to the callers' own checks (`connect`'s, the splat's).
+    if l.is_black() {
+        return None;
+    }
+    let shadow = scene.shadow_ray(qs.p, qs.ng, cs.p_lens, glam::Vec3::ZERO, qs.time);
+    Some(CameraConnection { l, raster: cs.raster, p_lens: cs.p_lens, beta_cam, shadow })
 }

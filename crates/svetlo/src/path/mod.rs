@@ -36,11 +36,13 @@
 
 mod connect;
 mod mis;
+mod shadow;
 mod vertex;
 mod walk;
 
-pub use connect::{connect, Connection};
+pub use connect::{camera_connection, connect, CameraConnection, Connection};
 pub use mis::mis_weight;
+pub use shadow::ShadowPackets;
 pub use vertex::{Event, EventKind, Vertex, VertexKind};
 pub use walk::{camera_subpath, light_subpath, random_walk};
 

@@ -326,17 +326,29 @@ impl Scene {
     /// its rounding over the cosine, more than the margin, and inside an emitting sphere about
     /// one light sample in 70 000 was lost.
     pub fn occluded_between(&self, p0: Vec3, n0: Vec3, p1: Vec3, n1: Vec3, time: f32) -> bool {
+        self.shadow_ray(p0, n0, p1, n1, time).is_some_and(|ray| self.blocked(&ray))
+    }
+
+    /// The ray [`Self::occluded_between`] tests (None: the offset ends coincide and nothing
+    /// can block), for callers that test several at once.
+    pub fn shadow_ray(&self, p0: Vec3, n0: Vec3, p1: Vec3, n1: Vec3, time: f32) -> Option<Ray> {
         let d = p1 - p0;
         let o = crate::geometry::ray::offset_ray_origin(p0, n0, d);
         let q = crate::geometry::ray::offset_ray_origin(p1, n1, -d);
         let d = q - o;
         let dist = d.length();
         if dist == 0.0 {
-            return false;
+            return None;
         }
         let mut ray = Ray::with_max(o, d / dist, dist * (1.0 - crate::geometry::ray::SHADOW_EPSILON));
         ray.time = time;
-        self.blocked(&ray)
+        Some(ray)
+    }
+
+    /// Whether anything is in the way along `ray` up to its `t_max` (a ray of
+    /// [`Self::shadow_ray`]).
+    pub fn occluded_ray(&self, ray: &Ray) -> bool {
+        self.blocked(ray)
     }
 
     /// Is anything in the way from `p0` (normal `n0`) toward direction `w`, to infinity, at time 0?
