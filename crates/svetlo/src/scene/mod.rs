@@ -286,8 +286,9 @@ impl Scene {
         }
     }
 
-    /// Is anything in the way along `ray` (static or, at the ray's time, moving)?
-    fn blocked(&self, ray: &Ray) -> bool {
+    /// Is anything in the way along `ray` up to its `t_max` (static or, at the ray's time,
+    /// moving)? The test of every `occluded_*`, and of a ray of [`Self::shadow_ray`].
+    pub fn occluded_ray(&self, ray: &Ray) -> bool {
         if self.moving.is_empty() && self.settings.ray_epsilon <= 0.0 {
             // Static scenes, as in `intersect`: no cut ray to copy, no moving shapes to try.
             if ray.t_max <= 0.0 {
@@ -326,7 +327,7 @@ impl Scene {
     /// its rounding over the cosine, more than the margin, and inside an emitting sphere about
     /// one light sample in 70 000 was lost.
     pub fn occluded_between(&self, p0: Vec3, n0: Vec3, p1: Vec3, n1: Vec3, time: f32) -> bool {
-        self.shadow_ray(p0, n0, p1, n1, time).is_some_and(|ray| self.blocked(&ray))
+        self.shadow_ray(p0, n0, p1, n1, time).is_some_and(|ray| self.occluded_ray(&ray))
     }
 
     /// The ray [`Self::occluded_between`] tests (None: the offset ends coincide and nothing
@@ -345,12 +346,6 @@ impl Scene {
         Some(ray)
     }
 
-    /// Whether anything is in the way along `ray` up to its `t_max` (a ray of
-    /// [`Self::shadow_ray`]).
-    pub fn occluded_ray(&self, ray: &Ray) -> bool {
-        self.blocked(ray)
-    }
-
     /// Is anything in the way from `p0` (normal `n0`) toward direction `w`, to infinity, at time 0?
     pub fn occluded_dir(&self, p0: Vec3, n0: Vec3, w: Vec3) -> bool {
         self.occluded_dir_at(p0, n0, w, 0.0)
@@ -361,7 +356,7 @@ impl Scene {
         let o = crate::geometry::ray::offset_ray_origin(p0, n0, w);
         let mut ray = Ray::new(o, w);
         ray.time = time;
-        self.blocked(&ray)
+        self.occluded_ray(&ray)
     }
 
     /// The BSDF at a hit: its material's, textures looked up at the point, with the
