@@ -21,12 +21,14 @@
 //! Cost: the scrambles are worked in reversed-bit order, where the Laine–Karras hash
 //! (constants by N. Vegdahl, 2021) has the nested property; Sobol's second dimension in
 //! reversed order is a subset transform of the index's bit positions, five shift-and-xor
-//! steps, and van der Corput in reversed order is the index itself.
+//! steps, and van der Corput in reversed order is the index itself. A slot's seeds are one
+//! 32-bit mix each of a counter started at the pixel's key, so the eight-wide kernel works
+//! eight lanes' seeds as vector code too.
 //!
 //! Every value is a pure function of (seed, pixel, sample index, slot): the image does not
 //! depend on the thread count, the tile order or how the samples are split into passes.
 
-use super::rng::{hash_seed, mix64};
+use super::rng::hash_seed;
 use super::Sampler;
 use glam::Vec2;
 
@@ -69,31 +71,59 @@ fn to_unit(x: u32) -> f32 {
     (x >> 8) as f32 * (1.0 / (1u32 << 24) as f32)
 }
 
-/// Odd multiplier that spreads slot numbers before the seed hash.
-const SLOT_STEP: u64 = 0x9e37_79b9_7f4a_7c15;
+/// Odd multiplier (2^32 / golden ratio) that spreads slot numbers before the seed hash.
+const SLOT_STEP: u32 = 0x9e37_79b9;
+
+/// A 32-bit mix with full avalanche (Wellons' "lowbias32"): two multiplications, so that
+/// eight lanes' seeds are a few AVX2 instructions (a 64-bit mix per seed was half of
+/// Sobol's cost in the eight-wide kernel).
+#[inline(always)]
+fn mix32(mut x: u32) -> u32 {
+    x ^= x >> 16;
+    x = x.wrapping_mul(0x7feb_352d);
+    x ^= x >> 15;
+    x = x.wrapping_mul(0x846c_a68b);
+    x ^ (x >> 16)
+}
+
+/// Seed `j` of slot `slot` of the pixel with key `key` (j: 0 the index shuffle, 1 and 2 the
+/// scrambles of the first and second coordinate): one mix of a Weyl sequence started at
+/// the key. Two pixels share seeds only where their 32-bit keys are equal (about one pair
+/// in a 256x256 film), which only makes those two pixels' noise alike.
+#[inline(always)]
+fn slot_seed(key: u32, slot: u32, j: u32) -> u32 {
+    mix32(key.wrapping_add(slot.wrapping_mul(4).wrapping_add(j).wrapping_mul(SLOT_STEP)))
+}
 
 #[derive(Clone, Debug)]
 pub struct SobolSampler {
     seed: u64,
     spp: u32,
-    /// Hash of (seed, pixel) and the pixel it was computed for.
-    pixel_key: u64,
+    /// Hash of (seed, pixel), folded to 32 bits, and the pixel it was computed for.
+    key: u32,
     pixel: (u32, u32),
     /// The sample index, bit-reversed (the input of the index shuffle).
     index_reversed: u32,
-    slot: u64,
+    /// Slots opened so far in this pixel sample.
+    slot: u32,
+}
+
+/// A pixel's key: its 64-bit hash folded to 32 bits.
+fn pixel_key(seed: u64, x: u32, y: u32) -> u32 {
+    let k = hash_seed(&[seed, x as u64, y as u64]);
+    (k ^ (k >> 32)) as u32
 }
 
 impl SobolSampler {
     pub fn new(spp: u32, seed: u64) -> Self {
-        SobolSampler { seed, spp, pixel_key: hash_seed(&[seed, 0, 0]), pixel: (0, 0), index_reversed: 0, slot: 0 }
+        SobolSampler { seed, spp, key: pixel_key(seed, 0, 0), pixel: (0, 0), index_reversed: 0, slot: 0 }
     }
 
-    /// The next slot's seeds (shuffle, first coordinate).
+    /// Opens the next slot: its number.
     #[inline(always)]
-    fn slot_seeds(&mut self) -> u64 {
-        self.slot += 1;
-        mix64(self.pixel_key ^ self.slot.wrapping_mul(SLOT_STEP))
+    fn open_slot(&mut self) -> u32 {
+        self.slot = self.slot.wrapping_add(1);
+        self.slot
     }
 
     /// The slot's shuffled sample index.
@@ -110,37 +140,31 @@ pub(crate) const VERTEX_SLOTS: [bool; 5] = [false, true, false, true, false];
 impl SobolSampler {
     /// The draws of [`VERTEX_SLOTS`] for eight samplers at once (those of `lanes`), in
     /// order (1-D slots one value, 2-D slots two): the same values as each sampler's
-    /// `next_1d`/`next_2d` calls, with each lane's slot seeds hashed in 64 bits one by one
-    /// and the 32-bit scrambles of all eight lanes worked side by side (vector code where
-    /// the caller is compiled for AVX2).
+    /// `next_1d`/`next_2d` calls. Seeds and scrambles of all eight lanes are worked side by
+    /// side (vector code where the caller is compiled for AVX2); lanes outside `lanes` get
+    /// values nobody reads and their samplers do not move.
     #[inline(always)]
     pub(crate) fn vertex_draws8(s: &mut [SobolSampler; 8], lanes: u8) -> [[f32; 8]; 7] {
-        const N: usize = VERTEX_SLOTS.len();
-        let mut shuffle = [[0u32; 8]; N];
-        let mut sx = [[0u32; 8]; N];
-        let mut sy = [[0u32; 8]; N];
-        let mut idx = [0u32; 8];
-        for l in (0..8).filter(|l| lanes & (1 << l) != 0) {
-            let sl = &mut s[l];
-            idx[l] = sl.index_reversed;
-            for (k, &two) in VERTEX_SLOTS.iter().enumerate() {
-                let h = sl.slot_seeds();
-                shuffle[k][l] = h as u32;
-                sx[k][l] = (h >> 32) as u32;
-                if two {
-                    sy[k][l] = mix64(h) as u32;
-                }
-            }
-        }
+        let idx: [u32; 8] = std::array::from_fn(|l| s[l].index_reversed);
+        let key: [u32; 8] = std::array::from_fn(|l| s[l].key);
+        let slot0: [u32; 8] = std::array::from_fn(|l| s[l].slot);
         let mut out = [[0.0f32; 8]; 7];
         let mut o = 0;
         for (k, &two) in VERTEX_SLOTS.iter().enumerate() {
-            let i: [u32; 8] = std::array::from_fn(|l| lk_hash(idx[l], shuffle[k][l]).reverse_bits());
-            out[o] = std::array::from_fn(|l| to_unit(lk_hash(i[l], sx[k][l]).reverse_bits()));
+            let seed = |j: u32| -> [u32; 8] { std::array::from_fn(|l| slot_seed(key[l], slot0[l].wrapping_add(k as u32 + 1), j)) };
+            let (shuffle, sx) = (seed(0), seed(1));
+            let i: [u32; 8] = std::array::from_fn(|l| lk_hash(idx[l], shuffle[l]).reverse_bits());
+            out[o] = std::array::from_fn(|l| to_unit(lk_hash(i[l], sx[l]).reverse_bits()));
             o += 1;
             if two {
-                out[o] = std::array::from_fn(|l| to_unit(lk_hash(sobol1_reversed(i[l]), sy[k][l]).reverse_bits()));
+                let sy = seed(2);
+                out[o] = std::array::from_fn(|l| to_unit(lk_hash(sobol1_reversed(i[l]), sy[l]).reverse_bits()));
                 o += 1;
+            }
+        }
+        for (l, sl) in s.iter_mut().enumerate() {
+            if lanes & (1 << l) != 0 {
+                sl.slot = sl.slot.wrapping_add(VERTEX_SLOTS.len() as u32);
             }
         }
         out
@@ -151,25 +175,24 @@ impl Sampler for SobolSampler {
     fn start_pixel_sample(&mut self, x: u32, y: u32, index: u32) {
         if (x, y) != self.pixel {
             self.pixel = (x, y);
-            self.pixel_key = hash_seed(&[self.seed, x as u64, y as u64]);
+            self.key = pixel_key(self.seed, x, y);
         }
         self.index_reversed = index.reverse_bits();
         self.slot = 0;
     }
     #[inline]
     fn next_1d(&mut self) -> f32 {
-        let h = self.slot_seeds();
-        let i = self.shuffled(h as u32);
+        let slot = self.open_slot();
+        let i = self.shuffled(slot_seed(self.key, slot, 0));
         // Van der Corput of `i` in reversed order is `i`: scramble it, reverse once.
-        to_unit(lk_hash(i, (h >> 32) as u32).reverse_bits())
+        to_unit(lk_hash(i, slot_seed(self.key, slot, 1)).reverse_bits())
     }
     #[inline]
     fn next_2d(&mut self) -> Vec2 {
-        let h = self.slot_seeds();
-        let i = self.shuffled(h as u32);
-        let sy = mix64(h) as u32;
-        let x = lk_hash(i, (h >> 32) as u32).reverse_bits();
-        let y = lk_hash(sobol1_reversed(i), sy).reverse_bits();
+        let slot = self.open_slot();
+        let i = self.shuffled(slot_seed(self.key, slot, 0));
+        let x = lk_hash(i, slot_seed(self.key, slot, 1)).reverse_bits();
+        let y = lk_hash(sobol1_reversed(i), slot_seed(self.key, slot, 2)).reverse_bits();
         Vec2::new(to_unit(x), to_unit(y))
     }
     fn samples_per_pixel(&self) -> u32 {

@@ -142,8 +142,13 @@ impl From<f32> for Texture {
     }
 }
 
+#[inline]
 fn wrap(i: i64, n: usize, mode: WrapMode) -> usize {
     let n = n as i64;
+    // Inside the image every mode is the identity: no division for most lookups.
+    if (0..n).contains(&i) {
+        return i as usize;
+    }
     match mode {
         WrapMode::Repeat => i.rem_euclid(n) as usize,
         WrapMode::Clamp => i.clamp(0, n - 1) as usize,
@@ -194,8 +199,10 @@ impl Texture {
                         let (x0, y0) = (x.floor(), y.floor());
                         let (fx, fy) = (x - x0, y - y0);
                         let (x0, y0) = (x0 as i64, y0 as i64);
-                        let t = |dx: i64, dy: i64| image.texel(wrap(x0 + dx, image.width, *wm), wrap(y0 + dy, image.height, *wm));
-                        (t(0, 0) * (1.0 - fx) + t(1, 0) * fx) * (1.0 - fy) + (t(0, 1) * (1.0 - fx) + t(1, 1) * fx) * fy
+                        let (xa, xb) = (wrap(x0, image.width, *wm), wrap(x0 + 1, image.width, *wm));
+                        let (ya, yb) = (wrap(y0, image.height, *wm), wrap(y0 + 1, image.height, *wm));
+                        let t = |x: usize, y: usize| image.texel(x, y);
+                        (t(xa, ya) * (1.0 - fx) + t(xb, ya) * fx) * (1.0 - fy) + (t(xa, yb) * (1.0 - fx) + t(xb, yb) * fx) * fy
                     }
                 }
             }
