@@ -22,7 +22,7 @@ pub struct Accel {
     meshes: Vec<(u32, u32)>,
     /// Index into `meshes` of each triangle id (empty when there is at most one mesh): a
     /// hit's shape without a search.
-    tri_mesh: Vec<u32>,
+    tri_mesh: PagedSlice<u32>,
     sph_nodes: PagedSlice<Node>,
     spheres: PagedSlice<Sphere>,
     /// Shape index of each sphere of `spheres`.
@@ -136,6 +136,8 @@ impl Accel {
         let prefetch = bytes > PREFETCH_MIN_BYTES;
         let (tri_nodes, tris, sph_nodes, spheres, sdf_nodes) =
             (PagedSlice::new(tri_nodes), PagedSlice::new(tris), PagedSlice::new(sph_nodes), PagedSlice::new(spheres), PagedSlice::new(sdf_nodes));
+        // Read once per closest hit, at a random place: on huge pages too.
+        let tri_mesh = PagedSlice::new(tri_mesh);
         Accel { tri_nodes, tris, meshes, tri_mesh, sph_nodes, spheres, sph_shapes, sdf_nodes, grids, voxels, bounds, prefetch, avx: has_avx() }
     }
 
