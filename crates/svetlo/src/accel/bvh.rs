@@ -3,6 +3,7 @@
 //! the occupied voxels of SDF grids. A ray walks all three; the nearest hit wins.
 
 use super::build::{build_wide, LeafParams};
+use super::pages::PagedSlice;
 use super::tri4::{intersect_half, TriRay};
 #[cfg(target_arch = "x86_64")]
 use super::tri8::TriRay8;
@@ -15,18 +16,18 @@ use glam::Vec3;
 
 #[derive(Clone)]
 pub struct Accel {
-    tri_nodes: Vec<Node>,
-    tris: Vec<Tri8>,
+    tri_nodes: PagedSlice<Node>,
+    tris: PagedSlice<Tri8>,
     /// (first triangle id, shape) per mesh, by first id: triangle ids number all meshes' triangles in turn.
     meshes: Vec<(u32, u32)>,
     /// Index into `meshes` of each triangle id (empty when there is at most one mesh): a
     /// hit's shape without a search.
-    tri_mesh: Vec<u32>,
-    sph_nodes: Vec<Node>,
-    spheres: Vec<Sphere>,
+    tri_mesh: PagedSlice<u32>,
+    sph_nodes: PagedSlice<Node>,
+    spheres: PagedSlice<Sphere>,
     /// Shape index of each sphere of `spheres`.
     sph_shapes: Vec<u32>,
-    sdf_nodes: Vec<Node>,
+    sdf_nodes: PagedSlice<Node>,
     /// The SDF grids (their samples shared with the scene's) and the shape of each.
     grids: Vec<(SdfGrid, u32)>,
     /// (grid, voxel) of each voxel primitive, in leaf order.
@@ -133,6 +134,10 @@ impl Accel {
             + std::mem::size_of_val(&spheres[..])
             + std::mem::size_of_val(&sdf_nodes[..]);
         let prefetch = bytes > PREFETCH_MIN_BYTES;
+        let (tri_nodes, tris, sph_nodes, spheres, sdf_nodes) =
+            (PagedSlice::new(tri_nodes), PagedSlice::new(tris), PagedSlice::new(sph_nodes), PagedSlice::new(spheres), PagedSlice::new(sdf_nodes));
+        // Read once per closest hit, at a random place: on huge pages too.
+        let tri_mesh = PagedSlice::new(tri_mesh);
         Accel { tri_nodes, tris, meshes, tri_mesh, sph_nodes, spheres, sph_shapes, sdf_nodes, grids, voxels, bounds, prefetch, avx: has_avx() }
     }
 

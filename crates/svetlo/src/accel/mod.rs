@@ -5,6 +5,7 @@ mod build;
 mod bvh;
 mod kdtree;
 pub mod packet;
+mod pages;
 mod tri4;
 mod tri8;
 mod wide;
