@@ -42,9 +42,10 @@ mod walk;
 
 pub use connect::{camera_connection, connect, CameraConnection, Connection};
 pub use mis::mis_weight;
-pub use shadow::ShadowPackets;
+pub use shadow::{ClosestHits, ShadowPackets};
 pub use vertex::{Event, EventKind, Vertex, VertexKind};
 pub use walk::{camera_subpath, light_subpath, random_walk};
+pub(crate) use walk::{light_walk, LightWalk};
 
 use crate::scene::Scene;
 
