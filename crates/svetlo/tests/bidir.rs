@@ -486,6 +486,29 @@ fn light_tracing_lockstep_is_single_ray_tracing() {
     }
 }
 
+/// BDPT's t = 1 strategies tested as packets of shadow rays give the single-ray image bit
+/// for bit, under either sampler, with and without glass.
+#[test]
+fn bdpt_packet_shadow_rays_are_single_rays() {
+    use svetlo::sampling::SamplerKind;
+    let mut glassy = project_scene("cornell-box.xml", 20, 16);
+    glassy.materials[0] = Material::Dielectric {
+        eta: 1.5,
+        specular_reflectance: Texture::Constant(Rgb::WHITE),
+        specular_transmittance: Texture::Constant(Rgb::WHITE),
+        roughness: None,
+    };
+    for (name, scene) in [("cornell box", project_scene("cornell-box.xml", 20, 16)), ("with glass", glassy)] {
+        for sampler in [SamplerKind::Independent, SamplerKind::Sobol] {
+            let set = RenderSettings { sampler, threads: 2, ..settings(4, 6) };
+            let render = |packets| Bdpt.render_traced(&scene, &set, &Progress::new(), packets).expect("render").image();
+            let single = render(false);
+            assert!(single.mean().max_component() > 0.0);
+            assert_eq!(render(true).data, single.data, "{name}, {sampler:?}: packets differ");
+        }
+    }
+}
+
 #[test]
 fn orthographic_camera_is_a_clear_error() {
     let mut scene = glossy_scene(8, 8);

@@ -7,14 +7,14 @@
 //! Estimator measure: area at every vertex. One light path per pixel sample, so with
 //! W·H·spp paths the splats are divided by spp (see `camera/importance.rs`).
 
-use super::splat::{render_splatting, render_tile_by_sample, SampleOut, Splat, SplatEstimator, TileJob};
+use super::splat::{render_splatting, render_tile_by_sample, SampleOut, ShadowedSplats, Splat, SplatEstimator, TileJob};
 use super::{Integrator, Progress, RenderSettings};
 use crate::accel::packet::LANES;
 use crate::error::{Error, Result};
 use crate::film::Film;
 use crate::geometry::Ray;
 use crate::lpe::LightTracker;
-use crate::path::{camera_connection, connect, light_subpath, light_walk, CameraConnection, LightWalk, PathConfig, ShadowPackets, Vertex};
+use crate::path::{camera_connection, connect, light_subpath, light_walk, LightWalk, PathConfig, ShadowPackets, Vertex};
 use crate::sampling::Sampler;
 use crate::scene::Scene;
 use crate::spectrum::Rgb;
@@ -43,48 +43,6 @@ struct Estimator {
     /// Shadow rays of one subpath's connections as packets (None: one at a time).
     packets: Option<ShadowPackets>,
     tracing: Tracing,
-}
-
-/// Camera connections waiting for their shadow rays, in the order they were made: the
-/// rays of consecutive light paths go as one packet, and the splats leave in that order, so
-/// the splat lists are those of testing each ray alone.
-struct Pending {
-    splats: [(Rgb, Vec2); LANES],
-    rays: [Ray; LANES],
-    n: usize,
-}
-
-impl Pending {
-    /// A segment of no length cannot be blocked: a ray of no length, which no packet tests.
-    const CLEAR: Ray = Ray { o: glam::Vec3::ZERO, d: glam::Vec3::Z, t_max: 0.0, time: 0.0 };
-
-    fn new() -> Pending {
-        Pending { splats: [(Rgb::BLACK, Vec2::ZERO); LANES], rays: [Self::CLEAR; LANES], n: 0 }
-    }
-
-    fn push(&mut self, packets: &ShadowPackets, c: CameraConnection, out: &mut SampleOut) {
-        self.push_parts(packets, c.l, c.raster, c.shadow.unwrap_or(Self::CLEAR), out);
-    }
-
-    /// A connection's splat `l` at `raster`, kept unless `shadow` is blocked.
-    fn push_parts(&mut self, packets: &ShadowPackets, l: Rgb, raster: Vec2, shadow: Ray, out: &mut SampleOut) {
-        self.splats[self.n] = (l, raster);
-        self.rays[self.n] = shadow;
-        self.n += 1;
-        if self.n == LANES {
-            self.flush(packets, out);
-        }
-    }
-
-    fn flush(&mut self, packets: &ShadowPackets, out: &mut SampleOut) {
-        let blocked = packets.occluded(&self.rays[..self.n]);
-        for (i, &(l, r)) in self.splats[..self.n].iter().enumerate() {
-            if blocked & (1 << i) == 0 {
-                out.splat(r, l);
-            }
-        }
-        self.n = 0;
-    }
 }
 
 impl SplatEstimator for Estimator {
@@ -146,7 +104,7 @@ impl SplatEstimator for Estimator {
         let [x0, y0, x1, y1] = t.rect;
         let cam = t.scene.camera.ray_generator();
         let mut out = SampleOut { splats, layers: Default::default() };
-        let mut pending = Pending::new();
+        let mut pending = ShadowedSplats::new();
         for y in y0..y1 {
             for x in x0..x1 {
                 for s in t.s0..t.s0 + t.n {
@@ -154,7 +112,7 @@ impl SplatEstimator for Estimator {
                     light_subpath(t.scene, &self.cfg, ray.time, sampler, path);
                     for s in 1..=path.len() {
                         if let Some(c) = camera_connection(t.scene, &self.cfg, path, s, sampler) {
-                            pending.push(packets, c, &mut out);
+                            pending.push(packets, c.l, c.raster, c.shadow.unwrap_or(ShadowedSplats::CLEAR), &mut out);
                         }
                     }
                     t.tile.add_sample(raster, Rgb::BLACK);
@@ -178,13 +136,13 @@ impl Estimator {
         let scene = t.scene;
         let cam = scene.camera.ray_generator();
         let mut out = SampleOut { splats, layers: Default::default() };
-        let mut pending = Pending::new();
+        let mut pending = ShadowedSplats::new();
         let mut reorder = Reorder::default();
         let mut samplers: [Box<dyn Sampler>; LANES] = std::array::from_fn(|_| sampler.clone_box());
         let mut walks: [Option<LightWalk>; LANES] = std::array::from_fn(|_| None);
         // Each lane's sample (its index in the tile's order).
         let mut seq = [0usize; LANES];
-        let mut rays = [Pending::CLEAR; LANES];
+        let mut rays = [ShadowedSplats::CLEAR; LANES];
         let mut samples = (y0..y1).flat_map(|y| (x0..x1).flat_map(move |x| (s0..s0 + n).map(move |s| (x, y, s)))).enumerate();
         let mut active = 0u8;
         let mut more = true;
@@ -239,7 +197,7 @@ impl Estimator {
         }
         for s in 1..=path.len() {
             if let Some(c) = camera_connection(scene, &self.cfg, path, s, sampler) {
-                slot.conns.push((c.l, c.raster, c.shadow.unwrap_or(Pending::CLEAR)));
+                slot.conns.push((c.l, c.raster, c.shadow.unwrap_or(ShadowedSplats::CLEAR)));
             }
         }
         slot.done = true;
@@ -275,11 +233,11 @@ impl Reorder {
     }
 
     /// The leading finished samples' connections, in order, to the shadow-ray packets.
-    fn release(&mut self, packets: &ShadowPackets, pending: &mut Pending, out: &mut SampleOut) {
+    fn release(&mut self, packets: &ShadowPackets, pending: &mut ShadowedSplats, out: &mut SampleOut) {
         while self.slots.front().is_some_and(|s| s.done) {
             let Some(mut s) = self.slots.pop_front() else { break };
             for &(l, raster, ray) in &s.conns {
-                pending.push_parts(packets, l, raster, ray, out);
+                pending.push(packets, l, raster, ray, out);
             }
             s.conns.clear();
             s.done = false;

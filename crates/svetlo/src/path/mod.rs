@@ -40,7 +40,7 @@ mod shadow;
 mod vertex;
 mod walk;
 
-pub use connect::{camera_connection, connect, CameraConnection, Connection};
+pub use connect::{camera_connection, connect, weighted_camera_connection, CameraConnection, Connection};
 pub use mis::mis_weight;
 pub use shadow::{ClosestHits, ShadowPackets};
 pub use vertex::{Event, EventKind, Vertex, VertexKind};
