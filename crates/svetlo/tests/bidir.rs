@@ -410,6 +410,105 @@ fn packet_shadow_rays_match_single_rays() {
     assert!(tie_flips * 10_000 <= n / 2, "{tie_flips} of {} rays at edges and corners disagree", n / 2);
 }
 
+/// Closest hits through the packet tree (`ShadowPackets::closest`, the light tracer's
+/// lockstep walks) are `Scene::intersect`'s bit for bit: random rays, and rays aimed at the
+/// triangles' corners and edge midpoints, where two triangles tie (the floor's diagonal)
+/// and each tree keeps the one it tests last unless tied lanes are traced again.
+#[test]
+fn packet_closest_hits_match_single_rays() {
+    use svetlo::path::ShadowPackets;
+    use svetlo::sampling::Pcg32;
+    let scene = project_scene("cornell-box.xml", 16, 16);
+    let Some(packets) = ShadowPackets::new(&scene) else {
+        println!("no eight-wide SIMD here: nothing to compare");
+        return;
+    };
+    assert!(packets.exact_closest(), "an opaque scene");
+    let mut corners = Vec::new();
+    for s in &scene.shapes {
+        if let Geometry::Mesh(m) = &*s.geometry {
+            for t in 0..m.triangle_count() {
+                let [a, b, c] = m.vertices(t);
+                corners.extend([a, b, c, (a + b) * 0.5, (b + c) * 0.5, (c + a) * 0.5]);
+            }
+        }
+    }
+    let (lo, hi) = corners.iter().fold((Vec3::splat(f32::MAX), Vec3::splat(f32::MIN)), |(lo, hi), p| (lo.min(*p), hi.max(*p)));
+    let mut rng = Pcg32::new(11, 5);
+    let point = |rng: &mut Pcg32| lo + (hi - lo) * Vec3::new(rng.next_f32(), rng.next_f32(), rng.next_f32());
+    let key = |si: &Option<svetlo::geometry::SurfaceInteraction>| {
+        si.as_ref().map(|h| (h.t.to_bits(), h.shape, h.prim, h.bary.x.to_bits(), h.bary.y.to_bits(), h.p.to_array().map(f32::to_bits)))
+    };
+    let (mut differ, mut hits, mut n) = (0usize, 0usize, 0usize);
+    for round in 0..20_000 {
+        let rays: [svetlo::geometry::Ray; 8] = std::array::from_fn(|_| {
+            let o = point(&mut rng);
+            let q = if round % 2 == 1 { corners[(rng.next_u32() as usize) % corners.len()] } else { point(&mut rng) };
+            svetlo::geometry::Ray::new(o, (q - o).normalize())
+        });
+        let active = (rng.next_u32() & 0xff) as u8 | 1;
+        let h = packets.closest(&rays, active);
+        for (l, r) in rays.iter().enumerate().filter(|(l, _)| active >> l & 1 == 1) {
+            let single = scene.intersect(r);
+            hits += single.is_some() as usize;
+            differ += (key(&packets.interaction(&scene, &h, l, r)) != key(&single)) as usize;
+            n += 1;
+        }
+    }
+    println!("{n} rays ({hits} hits): {differ} differ");
+    assert!(hits > n / 2);
+    assert_eq!(differ, 0, "packet closest hits disagree with single rays");
+}
+
+/// The light tracer's lockstep walks (eight light paths, their rays as packets) and its
+/// packet shadow rays give the single-ray image bit for bit, under either sampler; in a
+/// scene with glass (where packets' closest hits are not exact) too.
+#[test]
+fn light_tracing_lockstep_is_single_ray_tracing() {
+    use svetlo::integrator::light::{LightTracer, Tracing};
+    use svetlo::sampling::SamplerKind;
+    let mut glassy = project_scene("cornell-box.xml", 24, 20);
+    glassy.materials[0] = Material::Dielectric {
+        eta: 1.5,
+        specular_reflectance: Texture::Constant(Rgb::WHITE),
+        specular_transmittance: Texture::Constant(Rgb::WHITE),
+        roughness: None,
+    };
+    for (name, scene) in [("cornell box", project_scene("cornell-box.xml", 24, 20)), ("with glass", glassy)] {
+        for sampler in [SamplerKind::Independent, SamplerKind::Sobol] {
+            let set = RenderSettings { sampler, threads: 2, ..settings(5, 6) };
+            let render = |tr| LightTracer.render_traced(&scene, &set, &Progress::new(), tr).expect("render").image();
+            let single = render(Tracing::Single);
+            assert!(single.mean().max_component() > 0.0);
+            assert_eq!(render(Tracing::Lockstep).data, single.data, "{name}, {sampler:?}: lockstep differs");
+            assert_eq!(render(Tracing::PacketShadows).data, single.data, "{name}, {sampler:?}: packet shadows differ");
+        }
+    }
+}
+
+/// BDPT's t = 1 strategies tested as packets of shadow rays give the single-ray image bit
+/// for bit, under either sampler, with and without glass.
+#[test]
+fn bdpt_packet_shadow_rays_are_single_rays() {
+    use svetlo::sampling::SamplerKind;
+    let mut glassy = project_scene("cornell-box.xml", 20, 16);
+    glassy.materials[0] = Material::Dielectric {
+        eta: 1.5,
+        specular_reflectance: Texture::Constant(Rgb::WHITE),
+        specular_transmittance: Texture::Constant(Rgb::WHITE),
+        roughness: None,
+    };
+    for (name, scene) in [("cornell box", project_scene("cornell-box.xml", 20, 16)), ("with glass", glassy)] {
+        for sampler in [SamplerKind::Independent, SamplerKind::Sobol] {
+            let set = RenderSettings { sampler, threads: 2, ..settings(4, 6) };
+            let render = |packets| Bdpt.render_traced(&scene, &set, &Progress::new(), packets).expect("render").image();
+            let single = render(false);
+            assert!(single.mean().max_component() > 0.0);
+            assert_eq!(render(true).data, single.data, "{name}, {sampler:?}: packets differ");
+        }
+    }
+}
+
 #[test]
 fn orthographic_camera_is_a_clear_error() {
     let mut scene = glossy_scene(8, 8);

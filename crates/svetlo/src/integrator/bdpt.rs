@@ -10,13 +10,13 @@
 //! when the render's filter is the box).
 
 use super::light::require_connectible_camera;
-use super::splat::{render_splatting, SampleOut, SplatEstimator};
+use super::splat::{render_splatting, render_tile_by_sample, SampleOut, ShadowedSplats, Splat, SplatEstimator, TileJob};
 use super::{Integrator, Progress, RenderSettings};
 use crate::error::Result;
 use crate::film::{Film, Image};
 use crate::geometry::Ray;
 use crate::lpe::{AovSet, Event, LayerMask, LightTracker, ProductView, Tracker};
-use crate::path::{camera_subpath, connect, light_subpath, Connection, PathConfig, Vertex};
+use crate::path::{camera_subpath, connect, light_subpath, weighted_camera_connection, Connection, PathConfig, ShadowPackets, Vertex};
 use crate::sampling::Sampler;
 use crate::scene::Scene;
 use crate::spectrum::Rgb;
@@ -46,6 +46,8 @@ struct Estimator {
     cfg: PathConfig,
     /// Strategy index by (s, t) for the per-strategy images: index[s][t].
     index: Vec<Vec<Option<u32>>>,
+    /// The shadow rays of t = 1 strategies as packets (None: one at a time).
+    packets: Option<ShadowPackets>,
 }
 
 impl Estimator {
@@ -81,6 +83,48 @@ impl SplatEstimator for Estimator {
             }
             true
         })
+    }
+
+    /// Without AOVs or strategy images, where packets apply: `sample`'s samples in its order,
+    /// with the t = 1 strategies' shadow rays tested eight at a time across samples
+    /// (`ShadowedSplats` keeps the splat list that of testing each alone).
+    fn render_tile(&self, t: TileJob, sampler: &mut dyn Sampler, sc: &mut Scratch, splats: &mut Vec<Splat>) {
+        let Some(packets) = self.packets.as_ref().filter(|_| t.settings.aovs().is_empty() && self.index.is_empty()) else {
+            return render_tile_by_sample(self, t, sampler, sc, splats);
+        };
+        let [x0, y0, x1, y1] = t.rect;
+        let (scene, cfg) = (t.scene, &self.cfg);
+        let cam = scene.camera.ray_generator();
+        let mut out = SampleOut { splats, layers: Default::default() };
+        let mut pending = ShadowedSplats::new();
+        for y in y0..y1 {
+            for x in x0..x1 {
+                for i in t.s0..t.s0 + t.n {
+                    let (raster, ray) = super::camera_sample(&cam, sampler, x, y, i);
+                    // `sample_bdpt` with no AOVs and every strategy counted.
+                    camera_subpath(scene, cfg, &ray, raster, sampler, &mut sc.camera);
+                    light_subpath(scene, cfg, ray.time, sampler, &mut sc.light);
+                    let mut l = Rgb::BLACK;
+                    for tc in 1..=sc.camera.len() {
+                        for s in 0..=sc.light.len() {
+                            if s + tc < 2 || !cfg.allows(s + tc) {
+                                continue;
+                            }
+                            if tc == 1 {
+                                if let Some((v, r, shadow)) = weighted_camera_connection(scene, cfg, &sc.light, &sc.camera, s, sampler) {
+                                    pending.push(packets, v, r, shadow.unwrap_or(ShadowedSplats::CLEAR), &mut out);
+                                }
+                            } else if let Some(c) = connect(scene, cfg, &sc.light, &sc.camera, s, tc, sampler, true) {
+                                // t >= 2: the camera subpath's own pixel.
+                                l += c.l * c.weight;
+                            }
+                        }
+                    }
+                    t.tile.add_sample(raster, l);
+                }
+            }
+        }
+        pending.flush(packets, &mut out);
     }
 }
 
@@ -383,7 +427,7 @@ impl Bdpt {
                 list.push((s, n - s));
             }
         }
-        let est = Estimator { cfg, index };
+        let est = Estimator { cfg, index, packets: None };
         let r = render_splatting(scene, settings, progress, &est, 2 * list.len())?;
         let (w, h) = (r.film.width as usize, r.film.height as usize);
         let mut channels = r.channels.into_iter();
@@ -402,13 +446,22 @@ impl Bdpt {
 pub(crate) fn test_estimator(scene: &Scene, settings: &RenderSettings) -> impl SplatEstimator {
     let mut index = vec![vec![None; 3]; 3];
     index[1][2] = Some(0);
-    Estimator { cfg: PathConfig::new(scene, settings.max_depth, settings.rr_depth, settings.hide_emitters), index }
+    Estimator { cfg: PathConfig::new(scene, settings.max_depth, settings.rr_depth, settings.hide_emitters), index, packets: None }
+}
+
+impl Bdpt {
+    /// The render with the t = 1 shadow rays as packets where the scene allows them
+    /// (`packets`), or each alone: the same image, bit for bit.
+    pub fn render_traced(&self, scene: &Scene, settings: &RenderSettings, progress: &Progress, packets: bool) -> Result<Film> {
+        require_connectible_camera(scene, "bdpt")?;
+        let cfg = PathConfig::new(scene, settings.max_depth, settings.rr_depth, settings.hide_emitters);
+        let est = Estimator { cfg, index: Vec::new(), packets: if packets { ShadowPackets::new(scene) } else { None } };
+        Ok(render_splatting(scene, settings, progress, &est, 0)?.film)
+    }
 }
 
 impl Integrator for Bdpt {
     fn render(&self, scene: &Scene, settings: &RenderSettings, progress: &Progress) -> Result<Film> {
-        require_connectible_camera(scene, "bdpt")?;
-        let est = Estimator { cfg: PathConfig::new(scene, settings.max_depth, settings.rr_depth, settings.hide_emitters), index: Vec::new() };
-        Ok(render_splatting(scene, settings, progress, &est, 0)?.film)
+        self.render_traced(scene, settings, progress, true)
     }
 }

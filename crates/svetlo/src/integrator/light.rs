@@ -7,14 +7,14 @@
 //! Estimator measure: area at every vertex. One light path per pixel sample, so with
 //! W·H·spp paths the splats are divided by spp (see `camera/importance.rs`).
 
-use super::splat::{render_splatting, render_tile_by_sample, SampleOut, Splat, SplatEstimator, TileJob};
+use super::splat::{render_splatting, render_tile_by_sample, SampleOut, ShadowedSplats, Splat, SplatEstimator, TileJob};
 use super::{Integrator, Progress, RenderSettings};
 use crate::accel::packet::LANES;
 use crate::error::{Error, Result};
 use crate::film::Film;
 use crate::geometry::Ray;
 use crate::lpe::LightTracker;
-use crate::path::{camera_connection, connect, light_subpath, CameraConnection, PathConfig, ShadowPackets, Vertex};
+use crate::path::{camera_connection, connect, light_subpath, light_walk, LightWalk, PathConfig, ShadowPackets, Vertex};
 use crate::sampling::Sampler;
 use crate::scene::Scene;
 use crate::spectrum::Rgb;
@@ -23,53 +23,33 @@ use glam::Vec2;
 #[derive(Clone, Copy, Debug, Default)]
 pub struct LightTracer;
 
+/// How the light tracer traces its rays where the scene allows packets (`ShadowPackets`);
+/// every way gives the same image, bit for bit (tests compare them).
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub enum Tracing {
+    /// Eight light paths walk in lockstep, their rays traced as packets, and the shadow rays
+    /// of their camera connections tested as packets (in scenes where packets' closest hits
+    /// are exact, `ShadowPackets::exact_closest`; elsewhere as `PacketShadows`).
+    #[default]
+    Lockstep,
+    /// One path at a time, the shadow rays of consecutive connections as packets.
+    PacketShadows,
+    /// Every ray alone through the scene's BVH.
+    Single,
+}
+
 struct Estimator {
     cfg: PathConfig,
     /// Shadow rays of one subpath's connections as packets (None: one at a time).
     packets: Option<ShadowPackets>,
-}
-
-/// Camera connections waiting for their shadow rays, in the order they were made: the
-/// rays of consecutive light paths go as one packet, and the splats leave in that order, so
-/// the splat lists are those of testing each ray alone.
-struct Pending {
-    splats: [(Rgb, Vec2); LANES],
-    rays: [Ray; LANES],
-    n: usize,
-}
-
-impl Pending {
-    /// A segment of no length cannot be blocked: a ray of no length, which no packet tests.
-    const CLEAR: Ray = Ray { o: glam::Vec3::ZERO, d: glam::Vec3::Z, t_max: 0.0, time: 0.0 };
-
-    fn new() -> Pending {
-        Pending { splats: [(Rgb::BLACK, Vec2::ZERO); LANES], rays: [Self::CLEAR; LANES], n: 0 }
-    }
-
-    fn push(&mut self, packets: &ShadowPackets, c: CameraConnection, out: &mut SampleOut) {
-        self.splats[self.n] = (c.l, c.raster);
-        self.rays[self.n] = c.shadow.unwrap_or(Self::CLEAR);
-        self.n += 1;
-        if self.n == LANES {
-            self.flush(packets, out);
-        }
-    }
-
-    fn flush(&mut self, packets: &ShadowPackets, out: &mut SampleOut) {
-        let blocked = packets.occluded(&self.rays[..self.n]);
-        for (i, &(l, r)) in self.splats[..self.n].iter().enumerate() {
-            if blocked & (1 << i) == 0 {
-                out.splat(r, l);
-            }
-        }
-        self.n = 0;
-    }
+    tracing: Tracing,
 }
 
 impl SplatEstimator for Estimator {
-    type Scratch = Vec<Vertex>;
-    fn scratch(&self) -> Vec<Vertex> {
-        Vec::with_capacity(16)
+    /// One subpath per lane (`sample` uses the first).
+    type Scratch = Vec<Vec<Vertex>>;
+    fn scratch(&self) -> Vec<Vec<Vertex>> {
+        (0..LANES).map(|_| Vec::with_capacity(16)).collect()
     }
     fn sample(
         &self,
@@ -78,9 +58,10 @@ impl SplatEstimator for Estimator {
         ray: &Ray,
         _raster: Vec2,
         sampler: &mut dyn Sampler,
-        path: &mut Vec<Vertex>,
+        paths: &mut Vec<Vec<Vertex>>,
         out: &mut SampleOut,
     ) -> Rgb {
+        let path = &mut paths[0];
         light_subpath(scene, &self.cfg, ray.time, sampler, path);
         // With AOVs: the reverse automata's states over the vertices before the connected one.
         let aovs = settings.aovs();
@@ -112,14 +93,18 @@ impl SplatEstimator for Estimator {
     }
     /// With packets (and no AOVs): the samples of `sample`, in its order, with the shadow
     /// rays of the connections to the camera tested eight at a time across light paths.
-    fn render_tile(&self, t: TileJob, sampler: &mut dyn Sampler, path: &mut Vec<Vertex>, splats: &mut Vec<Splat>) {
-        let Some(packets) = self.packets.as_ref().filter(|_| t.settings.aovs().is_empty()) else {
-            return render_tile_by_sample(self, t, sampler, path, splats);
+    fn render_tile(&self, t: TileJob, sampler: &mut dyn Sampler, paths: &mut Vec<Vec<Vertex>>, splats: &mut Vec<Splat>) {
+        let Some(packets) = self.packets.as_ref().filter(|_| t.settings.aovs().is_empty() && self.tracing != Tracing::Single) else {
+            return render_tile_by_sample(self, t, sampler, paths, splats);
         };
+        if self.tracing == Tracing::Lockstep && packets.exact_closest() {
+            return self.render_tile_lockstep(t, packets, sampler, paths, splats);
+        }
+        let path = &mut paths[0];
         let [x0, y0, x1, y1] = t.rect;
         let cam = t.scene.camera.ray_generator();
         let mut out = SampleOut { splats, layers: Default::default() };
-        let mut pending = Pending::new();
+        let mut pending = ShadowedSplats::new();
         for y in y0..y1 {
             for x in x0..x1 {
                 for s in t.s0..t.s0 + t.n {
@@ -127,7 +112,7 @@ impl SplatEstimator for Estimator {
                     light_subpath(t.scene, &self.cfg, ray.time, sampler, path);
                     for s in 1..=path.len() {
                         if let Some(c) = camera_connection(t.scene, &self.cfg, path, s, sampler) {
-                            pending.push(packets, c, &mut out);
+                            pending.push(packets, c.l, c.raster, c.shadow.unwrap_or(ShadowedSplats::CLEAR), &mut out);
                         }
                     }
                     t.tile.add_sample(raster, Rgb::BLACK);
@@ -135,6 +120,130 @@ impl SplatEstimator for Estimator {
             }
         }
         pending.flush(packets, &mut out);
+    }
+}
+
+impl Estimator {
+    /// `render_tile` with the light subpaths of eight pixel samples walked in lockstep: each
+    /// lane draws from its own sampler in `sample`'s order, the lanes' rays go as one packet
+    /// (tied lanes again alone: `ShadowPackets::closest`), and a lane whose walk is over makes
+    /// its camera connections and takes the tile's next sample, so that the packets stay
+    /// full. The connections wait in sample order (`Reorder`) until every earlier sample's
+    /// are made, so the splat list is `sample`'s.
+    fn render_tile_lockstep(&self, t: TileJob, packets: &ShadowPackets, sampler: &mut dyn Sampler, paths: &mut [Vec<Vertex>], splats: &mut Vec<Splat>) {
+        let [x0, y0, x1, y1] = t.rect;
+        let (s0, n) = (t.s0, t.n);
+        let scene = t.scene;
+        let cam = scene.camera.ray_generator();
+        let mut out = SampleOut { splats, layers: Default::default() };
+        let mut pending = ShadowedSplats::new();
+        let mut reorder = Reorder::default();
+        let mut samplers: [Box<dyn Sampler>; LANES] = std::array::from_fn(|_| sampler.clone_box());
+        let mut walks: [Option<LightWalk>; LANES] = std::array::from_fn(|_| None);
+        // Each lane's sample (its index in the tile's order).
+        let mut seq = [0usize; LANES];
+        let mut rays = [ShadowedSplats::CLEAR; LANES];
+        let mut samples = (y0..y1).flat_map(|y| (x0..x1).flat_map(move |x| (s0..s0 + n).map(move |s| (x, y, s)))).enumerate();
+        let mut active = 0u8;
+        let mut more = true;
+        loop {
+            // Idle lanes take the next samples; a walk that ends at once is finished here.
+            for l in 0..LANES {
+                while more && active & (1 << l) == 0 {
+                    let Some((i, (x, y, s))) = samples.next() else {
+                        more = false;
+                        break;
+                    };
+                    let sampler = samplers[l].as_mut();
+                    let (raster, ray) = super::camera_sample(&cam, sampler, x, y, s);
+                    t.tile.add_sample(raster, Rgb::BLACK);
+                    seq[l] = reorder.open(i);
+                    walks[l] = light_walk(scene, &self.cfg, ray.time, sampler, &mut paths[l]);
+                    match &walks[l] {
+                        Some(w) if w.walk.goes_on(&paths[l]) => {
+                            rays[l] = *w.walk.ray();
+                            active |= 1 << l;
+                        }
+                        _ => self.finish_lane(scene, walks[l].as_ref(), &mut paths[l], sampler, reorder.slot(seq[l])),
+                    }
+                }
+            }
+            reorder.release(packets, &mut pending, &mut out);
+            if active == 0 {
+                break;
+            }
+            let hits = packets.closest(&rays, active);
+            for l in 0..LANES {
+                if active & (1 << l) == 0 {
+                    continue;
+                }
+                let Some(w) = walks[l].as_mut() else { continue };
+                let hit = packets.interaction(scene, &hits, l, &rays[l]);
+                if w.walk.step(scene, hit, samplers[l].as_mut(), &mut paths[l]) {
+                    rays[l] = *w.walk.ray();
+                } else {
+                    active &= !(1 << l);
+                    self.finish_lane(scene, walks[l].as_ref(), &mut paths[l], samplers[l].as_mut(), reorder.slot(seq[l]));
+                }
+            }
+        }
+        pending.flush(packets, &mut out);
+    }
+
+    /// A lane's path after its walk: its camera connections into `slot` (splat and shadow ray).
+    fn finish_lane(&self, scene: &Scene, walk: Option<&LightWalk>, path: &mut [Vertex], sampler: &mut dyn Sampler, slot: &mut Slot) {
+        if let Some(w) = walk {
+            w.finish(path);
+        }
+        for s in 1..=path.len() {
+            if let Some(c) = camera_connection(scene, &self.cfg, path, s, sampler) {
+                slot.conns.push((c.l, c.raster, c.shadow.unwrap_or(ShadowedSplats::CLEAR)));
+            }
+        }
+        slot.done = true;
+    }
+}
+
+/// The camera connections of one pixel sample: (contribution, raster, shadow ray).
+#[derive(Default)]
+struct Slot {
+    conns: Vec<(Rgb, Vec2, Ray)>,
+    done: bool,
+}
+
+/// Connections of the samples in flight, released in sample order: a slot per sample from
+/// the oldest unreleased one on (`base`), emptied slots reused.
+#[derive(Default)]
+struct Reorder {
+    slots: std::collections::VecDeque<Slot>,
+    base: usize,
+    spare: Vec<Slot>,
+}
+
+impl Reorder {
+    /// A slot for sample `i` (samples open in order); returns the key of [`Self::slot`].
+    fn open(&mut self, i: usize) -> usize {
+        debug_assert_eq!(i, self.base + self.slots.len());
+        self.slots.push_back(self.spare.pop().unwrap_or_default());
+        i
+    }
+
+    fn slot(&mut self, i: usize) -> &mut Slot {
+        &mut self.slots[i - self.base]
+    }
+
+    /// The leading finished samples' connections, in order, to the shadow-ray packets.
+    fn release(&mut self, packets: &ShadowPackets, pending: &mut ShadowedSplats, out: &mut SampleOut) {
+        while self.slots.front().is_some_and(|s| s.done) {
+            let Some(mut s) = self.slots.pop_front() else { break };
+            for &(l, raster, ray) in &s.conns {
+                pending.push(packets, l, raster, ray, out);
+            }
+            s.conns.clear();
+            s.done = false;
+            self.spare.push(s);
+            self.base += 1;
+        }
     }
 }
 
@@ -148,10 +257,18 @@ pub(crate) fn require_connectible_camera(scene: &Scene, method: &str) -> Result<
     Ok(())
 }
 
+impl LightTracer {
+    /// The render with its rays traced as `tracing` says (the image is the same).
+    pub fn render_traced(&self, scene: &Scene, settings: &RenderSettings, progress: &Progress, tracing: Tracing) -> Result<Film> {
+        require_connectible_camera(scene, "light")?;
+        let cfg = PathConfig::new(scene, settings.max_depth, settings.rr_depth, settings.hide_emitters);
+        let est = Estimator { cfg, packets: ShadowPackets::new(scene), tracing };
+        Ok(render_splatting(scene, settings, progress, &est, 0)?.film)
+    }
+}
+
 impl Integrator for LightTracer {
     fn render(&self, scene: &Scene, settings: &RenderSettings, progress: &Progress) -> Result<Film> {
-        require_connectible_camera(scene, "light")?;
-        let est = Estimator { cfg: PathConfig::new(scene, settings.max_depth, settings.rr_depth, settings.hide_emitters), packets: ShadowPackets::new(scene) };
-        Ok(render_splatting(scene, settings, progress, &est, 0)?.film)
+        self.render_traced(scene, settings, progress, Tracing::default())
     }
 }

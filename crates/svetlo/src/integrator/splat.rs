@@ -9,9 +9,11 @@
 
 use super::passes::{self, next_pass_spp, pass_plan};
 use super::{Progress, RenderSettings};
+use crate::accel::packet::LANES;
 use crate::error::{Error, Result};
 use crate::film::{Film, FilmTile, Filter};
 use crate::geometry::Ray;
+use crate::path::ShadowPackets;
 use crate::sampling::{sampler::make_sampler, Sampler};
 use crate::scene::Scene;
 use crate::spectrum::Rgb;
@@ -68,6 +70,47 @@ impl SampleOut<'_> {
         if !value.is_black() && value.is_finite() {
             self.splats.push(Splat { raster, channel, value, layers });
         }
+    }
+}
+
+/// Splats waiting for their shadow rays, in the order they were made: the rays of
+/// consecutive connections (to the camera, from one light path or several) go as one packet
+/// (`path::ShadowPackets`), and the splats leave in that order, so the splat list is that
+/// of testing each ray alone.
+pub(crate) struct ShadowedSplats {
+    splats: [(Rgb, Vec2); LANES],
+    rays: [Ray; LANES],
+    n: usize,
+}
+
+impl ShadowedSplats {
+    /// A segment of no length cannot be blocked: a ray of no length, which no packet tests.
+    pub const CLEAR: Ray = Ray { o: glam::Vec3::ZERO, d: glam::Vec3::Z, t_max: 0.0, time: 0.0 };
+
+    pub fn new() -> ShadowedSplats {
+        ShadowedSplats { splats: [(Rgb::BLACK, Vec2::ZERO); LANES], rays: [Self::CLEAR; LANES], n: 0 }
+    }
+
+    /// Splat `l` at `raster` unless `shadow` is blocked.
+    #[inline]
+    pub fn push(&mut self, packets: &ShadowPackets, l: Rgb, raster: Vec2, shadow: Ray, out: &mut SampleOut) {
+        self.splats[self.n] = (l, raster);
+        self.rays[self.n] = shadow;
+        self.n += 1;
+        if self.n == LANES {
+            self.flush(packets, out);
+        }
+    }
+
+    /// Test the waiting rays and splat the clear ones (at the end of a tile).
+    pub fn flush(&mut self, packets: &ShadowPackets, out: &mut SampleOut) {
+        let blocked = packets.occluded(&self.rays[..self.n]);
+        for (i, &(l, r)) in self.splats[..self.n].iter().enumerate() {
+            if blocked & (1 << i) == 0 {
+                out.splat(r, l);
+            }
+        }
+        self.n = 0;
     }
 }
 

@@ -198,3 +198,26 @@ pub fn camera_connection(scene: &Scene, cfg: &PathConfig, light: &[Vertex], s: u
     let shadow = scene.shadow_ray(qs.p, qs.ng, cs.p_lens, glam::Vec3::ZERO, qs.time);
     Some(CameraConnection { l, raster: cs.raster, p_lens: cs.p_lens, beta_cam, shadow })
 }
+
+/// Strategy (s, 1) of [`connect`] with its MIS weight, without the visibility test: the
+/// weighted contribution, where it lands, and the segment that must be clear for it (None:
+/// nothing can block it). `connect(.., s, 1, .., true)` is this, then the test; the same
+/// sampler dimensions either way (BDPT tests these shadow rays as packets).
+#[inline]
+pub fn weighted_camera_connection(
+    scene: &Scene,
+    cfg: &PathConfig,
+    light: &[Vertex],
+    camera: &[Vertex],
+    s: usize,
+    sampler: &mut dyn Sampler,
+) -> Option<(Rgb, Vec2, Option<Ray>)> {
+    let c = camera_connection(scene, cfg, light, s, sampler)?;
+    if c.l.is_black() || !c.l.is_finite() {
+        return None;
+    }
+    let mut cam = Vertex::camera(c.p_lens, c.raster, c.beta_cam);
+    cam.time = light[s - 1].time;
+    let weight = mis_weight(scene, cfg, light, camera, Some(&cam), s, 1);
+    Some((c.l * weight, c.raster, c.shadow))
+}

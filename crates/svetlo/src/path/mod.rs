@@ -40,11 +40,12 @@ mod shadow;
 mod vertex;
 mod walk;
 
-pub use connect::{camera_connection, connect, CameraConnection, Connection};
+pub use connect::{camera_connection, connect, weighted_camera_connection, CameraConnection, Connection};
 pub use mis::mis_weight;
-pub use shadow::ShadowPackets;
+pub use shadow::{ClosestHits, ShadowPackets};
 pub use vertex::{Event, EventKind, Vertex, VertexKind};
 pub use walk::{camera_subpath, light_subpath, random_walk};
+pub(crate) use walk::{light_walk, LightWalk};
 
 use crate::scene::Scene;
 

@@ -7,7 +7,7 @@
 use super::vertex::{infinite_light_density, shading_correction};
 use super::{Event, PathConfig, Vertex};
 use crate::bsdf::{LobeFlags, TransportMode};
-use crate::geometry::Ray;
+use crate::geometry::{Ray, SurfaceInteraction};
 use crate::sampling::Sampler;
 use crate::scene::Scene;
 use crate::spectrum::Rgb;
@@ -41,21 +41,52 @@ pub fn camera_subpath(scene: &Scene, cfg: &PathConfig, ray: &Ray, raster: Vec2, 
 /// `Light::sample_le`, then the walk. Replaces the contents of `path` (empty if the scene
 /// has no light or max_depth leaves no room).
 pub fn light_subpath(scene: &Scene, cfg: &PathConfig, time: f32, sampler: &mut dyn Sampler, path: &mut Vec<Vertex>) {
+    let Some(mut lw) = light_walk(scene, cfg, time, sampler, path) else { return };
+    if lw.walk.goes_on(path) {
+        while lw.walk.step(scene, scene.intersect(lw.walk.ray()), sampler, path) {}
+    }
+    lw.finish(path);
+}
+
+/// A light subpath between its emitter vertex and its end: the walk, and what its first
+/// hit's density needs once the walk is done (see [`light_walk`]).
+pub(crate) struct LightWalk {
+    pub walk: Walk,
+    /// From an infinite light: the direction and the entry disk's positional density.
+    infinite: Option<(Vec3, f32)>,
+}
+
+impl LightWalk {
+    /// After the walk: from infinity the first hit's density is the entry disk's, projected
+    /// on the surface.
+    #[inline]
+    pub fn finish(&self, path: &mut [Vertex]) {
+        if let (Some((d, pdf_pos)), true) = (self.infinite, path.len() > 1) {
+            let cos = if path[1].on_surface() { path[1].ng.dot(d).abs() } else { 1.0 };
+            path[1].pdf_fwd = pdf_pos * cos;
+        }
+    }
+}
+
+/// [`light_subpath`] up to its walk: the emitter vertex pushed into `path` (cleared first)
+/// and the walk to run from it (None: the path ends there, or is empty), so that walks of
+/// several paths can trace their rays together. Same sampler dimensions as `light_subpath`.
+pub(crate) fn light_walk(scene: &Scene, cfg: &PathConfig, time: f32, sampler: &mut dyn Sampler, path: &mut Vec<Vertex>) -> Option<LightWalk> {
     path.clear();
     let u_light = sampler.next_1d();
     let u_pos = sampler.next_2d();
     let u_dir = sampler.next_2d();
     if cfg.max_light_vertices == 0 || scene.lights.is_empty() {
-        return;
+        return None;
     }
     let (li, pmf, _) = scene.light_distribution.sample_discrete(u_light);
     if pmf <= 0.0 {
-        return;
+        return None;
     }
     let light = &scene.lights[li];
-    let Some(es) = light.sample_le(u_pos, u_dir, time, &scene.bounds) else { return };
+    let es = light.sample_le(u_pos, u_dir, time, &scene.bounds)?;
     if es.pdf_pos <= 0.0 || es.pdf_dir <= 0.0 || es.le.is_black() {
-        return;
+        return None;
     }
     let d = es.ray.d;
     let infinite = light.is_infinite();
@@ -69,12 +100,8 @@ pub fn light_subpath(scene: &Scene, cfg: &PathConfig, time: f32, sampler: &mut d
         v.time = time;
     }
     let beta = es.le * (es.n.dot(d).abs() / (pmf * es.pdf_pos * es.pdf_dir));
-    random_walk(scene, es.ray, sampler, beta, es.pdf_dir, cfg.max_light_vertices, cfg.rr_depth, TransportMode::Importance, path);
-    // From infinity the first hit's density is the entry disk's, projected on the surface.
-    if infinite && path.len() > 1 {
-        let cos = if path[1].on_surface() { path[1].ng.dot(d).abs() } else { 1.0 };
-        path[1].pdf_fwd = es.pdf_pos * cos;
-    }
+    let walk = Walk::new(es.ray, beta, es.pdf_dir, cfg.max_light_vertices, cfg.rr_depth, TransportMode::Importance);
+    Some(LightWalk { walk, infinite: infinite.then_some((d, es.pdf_pos)) })
 }
 
 /// Extend `path` (whose last vertex is where `ray` starts) by tracing `ray` and sampling
@@ -83,35 +110,77 @@ pub fn light_subpath(scene: &Scene, cfg: &PathConfig, time: f32, sampler: &mut d
 #[allow(clippy::too_many_arguments)]
 pub fn random_walk(
     scene: &Scene,
-    mut ray: Ray,
+    ray: Ray,
     sampler: &mut dyn Sampler,
-    mut beta: Rgb,
+    beta: Rgb,
     pdf_dir: f32,
     max_vertices: usize,
     rr_depth: i32,
     mode: TransportMode,
     path: &mut Vec<Vertex>,
 ) {
-    let mut pdf_fwd = pdf_dir;
-    // Throughput of the scattering alone (what Russian roulette looks at), and the radiance
-    // scaling of refraction it undoes.
-    let mut scatter = Rgb::WHITE;
-    let mut eta_scale = 1.0f32;
-    while path.len() < max_vertices {
-        let Some(si) = scene.intersect(&ray) else {
+    let mut w = Walk::new(ray, beta, pdf_dir, max_vertices, rr_depth, mode);
+    if w.goes_on(path) {
+        while w.step(scene, scene.intersect(w.ray()), sampler, path) {}
+    }
+}
+
+/// A random walk between two of its rays: [`random_walk`] with the tracing left to the
+/// caller, so that the rays of several walks can be traced as one packet. Each walk draws
+/// from its own sampler in `random_walk`'s order, whatever the others do.
+pub(crate) struct Walk {
+    /// The ray to trace next.
+    ray: Ray,
+    beta: Rgb,
+    /// Solid-angle density of `ray`'s direction (0 after a specular choice).
+    pdf_fwd: f32,
+    /// Throughput of the scattering alone (what Russian roulette looks at), and the
+    /// radiance scaling of refraction it undoes.
+    scatter: Rgb,
+    eta_scale: f32,
+    max_vertices: usize,
+    rr_depth: i32,
+    mode: TransportMode,
+}
+
+impl Walk {
+    #[inline]
+    pub fn new(ray: Ray, beta: Rgb, pdf_dir: f32, max_vertices: usize, rr_depth: i32, mode: TransportMode) -> Walk {
+        Walk { ray, beta, pdf_fwd: pdf_dir, scatter: Rgb::WHITE, eta_scale: 1.0, max_vertices, rr_depth, mode }
+    }
+
+    /// The ray to trace next.
+    #[inline]
+    pub fn ray(&self) -> &Ray {
+        &self.ray
+    }
+
+    /// Whether `path` has room for the vertex the next ray finds (before the first step).
+    #[inline]
+    pub fn goes_on(&self, path: &[Vertex]) -> bool {
+        path.len() < self.max_vertices
+    }
+
+    /// One bounce: the vertex `hit` (what `ray()` met; None: it escaped) appended to `path`,
+    /// and the next direction sampled there. Returns whether the walk goes on, with `ray()`
+    /// the next ray to trace.
+    #[inline(always)]
+    pub fn step(&mut self, scene: &Scene, hit: Option<SurfaceInteraction>, sampler: &mut dyn Sampler, path: &mut Vec<Vertex>) -> bool {
+        let mode = self.mode;
+        let Some(si) = hit else {
             if mode == TransportMode::Radiance && !scene.environment_lights.is_empty() {
                 let prev = path.last().expect("a walk starts from a vertex");
-                let v = Vertex::light_infinite(None, prev.p + ray.d, ray.d, beta, pdf_fwd);
+                let v = Vertex::light_infinite(None, prev.p + self.ray.d, self.ray.d, self.beta, self.pdf_fwd);
                 path.push(v);
             }
-            break;
+            return false;
         };
-        let mut v = Vertex::surface(scene, &si, beta);
+        let mut v = Vertex::surface(scene, &si, self.beta);
         let prev = path.last().expect("a walk starts from a vertex");
-        v.pdf_fwd = prev.convert_density(pdf_fwd, &v);
+        v.pdf_fwd = prev.convert_density(self.pdf_fwd, &v);
         path.push(v);
-        if path.len() >= max_vertices {
-            break;
+        if path.len() >= self.max_vertices {
+            return false;
         }
         let segments = (path.len() - 1) as i32;
         let uc = sampler.next_1d();
@@ -120,43 +189,41 @@ pub fn random_walk(
         let v = path.last().expect("just pushed");
         let bsdf = v.bsdf.as_ref().expect("surface vertices have a BSDF");
         let wo = v.shading.to_local(v.wo);
-        let Some(bs) = bsdf.sample(wo, uc, u, mode) else { break };
+        let Some(bs) = bsdf.sample(wo, uc, u, mode) else { return false };
         if bs.pdf <= 0.0 || bs.f.is_black() {
-            break;
+            return false;
         }
         let wi_world = v.shading.to_world(bs.wi);
         let w = bs.weight() * shading_correction(v.ng, v.shading.n, v.wo, wi_world, mode);
         let mut pdf_rev = bsdf.pdf(bs.wi, wo, flip(mode));
         let mut next = Ray::new(crate::geometry::ray::offset_ray_origin(v.p, v.ng, wi_world), wi_world);
-        next.time = ray.time;
-        ray = next;
-        beta *= w;
-        scatter *= w;
+        next.time = self.ray.time;
+        self.ray = next;
+        self.beta *= w;
+        self.scatter *= w;
         if mode == TransportMode::Radiance && bs.lobe.contains(LobeFlags::TRANSMISSION) {
-            eta_scale *= bs.eta * bs.eta;
+            self.eta_scale *= bs.eta * bs.eta;
         }
-        pdf_fwd = bs.pdf;
+        self.pdf_fwd = bs.pdf;
         let v = path.last_mut().expect("just pushed");
         v.event = Event::from_lobe(bs.lobe);
         if bs.lobe.is_specular() {
             v.delta = true;
-            pdf_fwd = 0.0;
+            self.pdf_fwd = 0.0;
             pdf_rev = 0.0;
         }
         let n = path.len();
         let rev = path[n - 1].convert_density(pdf_rev, &path[n - 2]);
         path[n - 2].pdf_rev = rev;
-        if segments >= rr_depth {
-            let q = (scatter * eta_scale).max_component().min(0.95);
+        if segments >= self.rr_depth {
+            let q = (self.scatter * self.eta_scale).max_component().min(0.95);
             if u_rr >= q {
-                break;
+                return false;
             }
-            beta /= q;
-            scatter /= q;
+            self.beta /= q;
+            self.scatter /= q;
         }
-        if beta.is_black() {
-            break;
-        }
+        !self.beta.is_black() && path.len() < self.max_vertices
     }
 }
 
