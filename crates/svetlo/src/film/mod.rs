@@ -362,8 +362,10 @@ struct Footprint {
 }
 
 impl Footprint {
-    /// Widest cached range (pixels per axis); wider filters evaluate each weight in place.
-    const SPAN: usize = 16;
+    /// Widest cached range (pixels per axis; the default Gaussian's is 5, the tent's 3);
+    /// wider filters evaluate each weight in place (the same weights). Small enough that
+    /// returning a footprint is a few register moves rather than a `memcpy` per sample.
+    const SPAN: usize = 8;
     #[inline(always)]
     fn wx(&self, filter: &FilterWeights, x: i64) -> f32 {
         if self.cached {
