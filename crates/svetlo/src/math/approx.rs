@@ -20,8 +20,7 @@ pub fn exp(x: f32) -> f32 {
     // Cody-Waite reduction with ln 2 split in two: r in [-ln2/2, ln2/2] almost exactly.
     let r = (x - n * 0.693_145_751_953_125) - n * 1.428_606_765_330_187e-6;
     // Taylor to degree 7: truncation below 5e-9 on that interval.
-    let p = 1.0
-        + r * (1.0 + r * (0.5 + r * (1.0 / 6.0 + r * (1.0 / 24.0 + r * (1.0 / 120.0 + r * (1.0 / 720.0 + r * (1.0 / 5040.0)))))));
+    let p = 1.0 + r * (1.0 + r * (0.5 + r * (1.0 / 6.0 + r * (1.0 / 24.0 + r * (1.0 / 120.0 + r * (1.0 / 720.0 + r * (1.0 / 5040.0)))))));
     // n in [-126, 127]: 2^n is a normal float.
     p * f32::from_bits(((n as i32 + 127) as u32) << 23)
 }
@@ -78,6 +77,34 @@ pub fn erfinv(x: f32) -> f32 {
         p
     };
     p * x
+}
+
+/// atan2(y, x) in [-π, π], absolute error below 3e-7 (0 where x = y = 0). The ratio of the
+/// smaller to the larger magnitude is reduced below tan(π/8) (by atan t = π/4 +
+/// atan((t - 1)/(t + 1)) above it), where a degree-9 odd polynomial fitted for this module
+/// has relative error 2e-9; one division in all.
+#[inline]
+pub fn atan2(y: f32, x: f32) -> f32 {
+    let (ax, ay) = (x.abs(), y.abs());
+    let (hi, lo) = (ax.max(ay), ax.min(ay));
+    if !(hi > 0.0) {
+        return 0.0;
+    }
+    let big = lo > 0.414_213_57 * hi;
+    let r = if big { (lo - hi) / (lo + hi) } else { lo / hi };
+    let z = r * r;
+    let p = -0.333_333_18 + z * (0.199_986_69 + z * (-0.142_474_49 + z * (0.106_237_66 - 0.061_561_62 * z)));
+    let mut a = r + r * z * p;
+    if big {
+        a += std::f32::consts::FRAC_PI_4;
+    }
+    if ay > ax {
+        a = std::f32::consts::FRAC_PI_2 - a;
+    }
+    if x < 0.0 {
+        a = std::f32::consts::PI - a;
+    }
+    a.copysign(y)
 }
 
 /// acos x for x in [0, 1], absolute error below 7e-5 (Abramowitz and Stegun 4.4.45): for
@@ -148,6 +175,23 @@ mod tests {
         assert!(worst < 2e-7, "erfinv: erf(erfinv(x)) - x up to {worst:e}");
         assert_eq!(erfinv(0.0), 0.0);
         assert_eq!(erfinv(0.3), -erfinv(-0.3));
+    }
+
+    #[test]
+    fn atan2_absolute_error() {
+        let mut worst = 0.0f64;
+        for i in 0..200_000 {
+            let t = -3.2 + 6.4 * i as f64 / 200_000.0;
+            for r in [1.0f64, 1e-3, 37.0] {
+                let (y, x) = ((r * t.sin()) as f32, (r * t.cos()) as f32);
+                worst = worst.max((atan2(y, x) as f64 - (y as f64).atan2(x as f64)).abs());
+            }
+        }
+        assert!(worst < 3e-7, "atan2: {worst:e}");
+        assert_eq!(atan2(0.0, 0.0), 0.0);
+        assert_eq!(atan2(0.0, 1.0), 0.0);
+        assert!((atan2(0.0, -1.0) - std::f32::consts::PI).abs() < 1e-7);
+        assert!((atan2(-1.0, 0.0) + std::f32::consts::FRAC_PI_2).abs() < 1e-7);
     }
 
     #[test]
