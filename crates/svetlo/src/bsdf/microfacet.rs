@@ -3,10 +3,11 @@
 //!
 //! Shadowing-masking is Smith's *separable* form G = G1(wo) G1(wi), as Mitsuba 3 uses, with
 //! the exact Smith G1 of each distribution (Mitsuba approximates Beckmann's G1 by a
-//! rational fit within 0.35 %; the exact form keeps the visible-normal pdf consistent with
-//! its sampler). Sampling draws visible normals: Heitz 2018 for GGX, and for Beckmann the
-//! slope-space method of Heitz and d'Eon 2014 with a safeguarded Newton inversion of the
-//! slope CDF (as Jakob's improved routine does, but bracketed so that it always converges).
+//! rational fit within 0.35 %; the closed form, here evaluated in f32 to within 4e-7, keeps
+//! the visible-normal pdf consistent with its sampler). Sampling draws visible normals:
+//! Heitz 2018 for GGX, and for Beckmann the slope-space method of Heitz and d'Eon 2014 with
+//! a safeguarded f32 Newton inversion of the slope CDF from Jakob's (2014) initial guess
+//! (bracketed so that it always converges; see `SlopeX`).
 
 use super::material::MicrofacetKind;
 use crate::math::{approx, PI};
