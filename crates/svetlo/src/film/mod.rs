@@ -290,22 +290,25 @@ impl FilmTile {
         }
     }
 
-    /// The filter's share of a sample for every pixel of the tile within its radius.
+    /// The filter's share of a sample for every pixel of the tile within its radius: row by
+    /// row, each row's pixels as one slice (no per-pixel index arithmetic or bounds check).
     #[inline(never)]
     fn add_filtered(&mut self, fp: &Footprint, l: Rgb) {
-        let w = self.x1 - self.x0;
+        let w = (self.x1 - self.x0) as usize;
+        // The footprint lies inside the tile (`footprint` clamps it): these do not wrap.
+        let (c0, nx) = ((fp.xmin - self.x0 as i64) as usize, (fp.xmax - fp.xmin + 1) as usize);
         for y in fp.ymin..fp.ymax + 1 {
             let fy = fp.wy(&self.weights, y);
             if fy == 0.0 {
                 continue;
             }
-            for x in fp.xmin..fp.xmax + 1 {
+            let start = (y - self.y0 as i64) as usize * w + c0;
+            let Some(row) = self.pixels.get_mut(start..start + nx) else { continue };
+            for (x, px) in (fp.xmin..).zip(row.iter_mut()) {
                 let wgt = fy * fp.wx(&self.weights, x);
                 if wgt == 0.0 {
                     continue;
                 }
-                let idx = ((y as u32 - self.y0) * w + (x as u32 - self.x0)) as usize;
-                let px = &mut self.pixels[idx];
                 px.sum += l * wgt;
                 px.weight += wgt as f64;
             }
@@ -362,8 +365,10 @@ struct Footprint {
 }
 
 impl Footprint {
-    /// Widest cached range (pixels per axis); wider filters evaluate each weight in place.
-    const SPAN: usize = 16;
+    /// Widest cached range (pixels per axis; the default Gaussian's is 5, the tent's 3);
+    /// wider filters evaluate each weight in place (the same weights). Small enough that
+    /// returning a footprint is a few register moves rather than a `memcpy` per sample.
+    const SPAN: usize = 8;
     #[inline(always)]
     fn wx(&self, filter: &FilterWeights, x: i64) -> f32 {
         if self.cached {

@@ -56,26 +56,41 @@ pub(crate) fn constant_normal(m: &crate::geometry::TriangleMesh, t: usize) -> Op
 struct SphereCone {
     /// Unit vector from the sphere's center toward the reference point.
     axis: Vec3,
-    sin2_max: f32,
+    /// sin θ_max = radius / distance, and the reciprocals of it and of its square.
+    inv_sin_max: f32,
+    inv_sin2_max: f32,
     /// 1 - cos θ_max, computed without cancellation for small cones.
     one_minus_cos_max: f32,
 }
 
 impl SphereCone {
     /// None when `p_ref` is inside the sphere (or on it): area sampling is used there.
+    #[inline]
     fn new(s: &Sphere, p_ref: Vec3) -> Option<Self> {
         let dc = p_ref - s.center;
         let dist2 = dc.length_squared();
         let r2 = s.radius * s.radius;
+        let one_minus_cos_max = Self::one_minus_cos_max(dist2, r2)?;
+        let dist = dist2.sqrt();
+        let inv_sin_max = dist / s.radius;
+        Some(SphereCone { axis: dc * (1.0 / dist), inv_sin_max, inv_sin2_max: inv_sin_max * inv_sin_max, one_minus_cos_max })
+    }
+
+    /// 1 - cos θ_max at squared distance `dist2` from a sphere of squared radius `r2`; None
+    /// inside (or on) the sphere. [`Self::new`] and [`AreaLight::pdf_li`] share it, so
+    /// their densities agree to the bit.
+    #[inline]
+    fn one_minus_cos_max(dist2: f32, r2: f32) -> Option<f32> {
         if dist2 <= r2 * (1.0 + 1e-5) {
             return None;
         }
         let sin2_max = r2 / dist2;
-        let cos_max = safe_sqrt(1.0 - sin2_max);
-        Some(SphereCone { axis: dc / dist2.sqrt(), sin2_max, one_minus_cos_max: sin2_max / (1.0 + cos_max) })
+        Some(sin2_max / (1.0 + safe_sqrt(1.0 - sin2_max)))
     }
-    fn pdf(&self) -> f32 {
-        1.0 / (2.0 * PI * self.one_minus_cos_max)
+
+    #[inline]
+    fn pdf_of(one_minus_cos_max: f32) -> f32 {
+        1.0 / (2.0 * PI * one_minus_cos_max)
     }
 }
 
@@ -173,12 +188,11 @@ impl AreaLight {
         let sin2_t = one_minus_cos * (2.0 - one_minus_cos);
         // Angle α at the center between the axis and the hit point:
         // cos α = sin²θ / sin θ_max + cos θ sqrt(1 - sin²θ / sin²θ_max).
-        let sin_max = cone.sin2_max.sqrt();
-        let cos_a = (sin2_t / sin_max + cos_t * safe_sqrt(1.0 - sin2_t / cone.sin2_max)).min(1.0);
+        let cos_a = (sin2_t * cone.inv_sin_max + cos_t * safe_sqrt(1.0 - sin2_t * cone.inv_sin2_max)).min(1.0);
         let sin_a = safe_sqrt(1.0 - cos_a * cos_a);
-        let phi = 2.0 * PI * u.x;
+        let (sin_phi, cos_phi) = warp::sin_cos_2pi(u.x);
         let frame = Frame::from_normal(cone.axis);
-        let n_out = frame.to_world(Vec3::new(sin_a * phi.cos(), sin_a * phi.sin(), cos_a));
+        let n_out = frame.to_world(Vec3::new(sin_a * cos_phi, sin_a * sin_phi, cos_a));
         let p = s.center + n_out * s.radius;
         let d = p - p_ref;
         let dist = d.length();
@@ -186,9 +200,10 @@ impl AreaLight {
             return None;
         }
         let wi = d / dist;
-        // A constant radiance needs no uv (its two inverse trigonometric functions).
+        // A constant radiance needs no uv (its two inverse trigonometric functions), and the
+        // normal is the unit vector the point was made from.
         let (n, uv) = if self.radiance.is_constant() {
-            (s.normal(p), Vec2::ZERO)
+            (if s.flip_normals { -n_out } else { n_out }, Vec2::ZERO)
         } else {
             let (n, uv, _) = s.surface(p);
             (n, uv)
@@ -196,14 +211,14 @@ impl AreaLight {
         if n.dot(-wi) <= 0.0 {
             return None; // an inward-facing sphere seen from outside emits nothing toward us
         }
-        Some(LightSample { wi, li: self.radiance.eval(uv), pdf: cone.pdf(), p, n, infinite: false })
+        Some(LightSample { wi, li: self.radiance.eval(uv), pdf: SphereCone::pdf_of(cone.one_minus_cos_max), p, n, infinite: false })
     }
 
     /// Solid-angle density of `sample_li` choosing the point `p` (normal `n`) from `p_ref`.
     pub fn pdf_li(&self, p_ref: Vec3, p: Vec3, n: Vec3) -> f32 {
         if let Geometry::Sphere(s) = &*self.geometry {
-            if let Some(cone) = SphereCone::new(s, p_ref) {
-                return cone.pdf();
+            if let Some(omc) = SphereCone::one_minus_cos_max((p_ref - s.center).length_squared(), s.radius * s.radius) {
+                return SphereCone::pdf_of(omc);
             }
         }
         if self.area <= 0.0 {

@@ -1,5 +1,6 @@
 //! Vector math (glam, f32), orthonormal frames and sample warps.
 
+pub mod approx;
 pub mod frame;
 pub mod warp;
 

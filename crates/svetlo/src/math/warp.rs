@@ -31,6 +31,24 @@ pub fn sin_cos_quarter(x: f32) -> (f32, f32) {
     (s, c)
 }
 
+/// (sin 2πu, cos 2πu) for u in [0, 1] (other u work too, less accurately far from it):
+/// the quadrant from 4u rounded, then [`sin_cos_quarter`] of the rest; within 2e-7 of the
+/// exact values, with no libm call.
+#[inline]
+pub fn sin_cos_2pi(u: f32) -> (f32, f32) {
+    // 1.5 · 2²³ rounds 4u to the nearest integer (SSE2 has no rounding instruction).
+    const ROUND: f32 = 12_582_912.0;
+    let a = 4.0 * u;
+    let k = (a + ROUND) - ROUND;
+    let (s, c) = sin_cos_quarter((a - k) * (PI / 2.0));
+    match (k as i32) & 3 {
+        0 => (s, c),
+        1 => (c, -s),
+        2 => (-s, -c),
+        _ => (-c, s),
+    }
+}
+
 pub fn square_to_uniform_disk_concentric_pdf(p: Vec2) -> f32 {
     if p.length_squared() <= 1.0 {
         INV_PI
@@ -172,6 +190,16 @@ mod tests {
             let (se, ce) = (x as f64).sin_cos();
             assert!((s as f64 - se).abs() <= 1.2e-7 * se.abs().max(1e-30) + 1e-12, "sin({x}) = {s} vs {se}");
             assert!((c as f64 - ce).abs() <= 1.2e-7, "cos({x}) = {c} vs {ce}");
+        }
+    }
+
+    #[test]
+    fn sin_cos_2pi_is_accurate() {
+        for i in 0..=100_000 {
+            let u = i as f32 / 100_000.0;
+            let (s, c) = sin_cos_2pi(u);
+            let (se, ce) = (2.0 * std::f64::consts::PI * u as f64).sin_cos();
+            assert!((s as f64 - se).abs() < 2e-7 && (c as f64 - ce).abs() < 2e-7, "u {u}: ({s}, {c}) vs ({se}, {ce})");
         }
     }
 
