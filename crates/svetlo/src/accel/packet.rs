@@ -1171,6 +1171,115 @@ mod tests {
         }
     }
 
+    /// The nearest of `spheres` along a ray as the scene BVH's leaf loop finds it, spheres
+    /// taken in order with t_max shrinking: (index, t).
+    fn spheres_in_order(spheres: &[Sphere], o: Vec3, d: Vec3, t_max: f32, order: &[usize]) -> Option<(usize, f32)> {
+        let mut best = None;
+        let mut tm = t_max;
+        for &k in order {
+            if let Some(t) = spheres[k].intersect(o, d, tm) {
+                tm = t;
+                best = Some((k, t));
+            }
+        }
+        best
+    }
+
+    /// `PacketSpheres` (AVX2 and lane by lane) against `Sphere::intersect` taken in order, in
+    /// either order: overlapping spheres, rays from inside, from their surfaces, and t_max
+    /// cutting through them. Every lane not flagged unsure has the sequential walk's sphere and
+    /// distance bit for bit whatever the order; occlusion likewise; few lanes are unsure.
+    #[test]
+    fn packet_spheres_match_sequential_tests() {
+        let mut rng = Pcg32::new(23, 9);
+        let mut spheres: Vec<Sphere> = (0..12)
+            .map(|i| {
+                let c = Vec3::new(rng.next_f32(), rng.next_f32(), rng.next_f32()) * 4.0 - Vec3::splat(2.0);
+                Sphere { center: c + Vec3::new(3.0, -7.0, 1.5), radius: 0.05 + rng.next_f32() * (if i % 3 == 0 { 2.0 } else { 0.5 }), flip_normals: i % 2 == 0 }
+            })
+            .collect();
+        // Two equal spheres at one place: every hit on them is a tie in distance.
+        spheres.push(spheres[4]);
+        let forward: Vec<usize> = (0..spheres.len()).collect();
+        let backward: Vec<usize> = forward.iter().rev().copied().collect();
+        let mut packed = PacketSpheres::new(&spheres);
+        let (mut lanes, mut unsure_n, mut hits) = (0usize, 0usize, 0usize);
+        for simd in [true, false] {
+            if simd && Isa::cpu() == Isa::Portable {
+                continue;
+            }
+            packed.simd = simd;
+            for p in 0..4000 {
+                let mut r = Rays8::default();
+                let active = if p % 5 == 0 { (rng.next_u32() & 0xff) as u8 } else { 0xff };
+                for l in 0..LANES {
+                    let d = (Vec3::new(rng.next_f32(), rng.next_f32(), rng.next_f32()) * 2.0 - Vec3::ONE).normalize_or(Vec3::X) * (0.5 + rng.next_f32());
+                    let o = match l % 3 {
+                        // On a sphere's surface (as a path leaves it), or inside one.
+                        0 => {
+                            let s = spheres[(rng.next_u32() as usize) % spheres.len()];
+                            s.center + d.normalize() * s.radius * if l == 3 { 0.5 } else { 1.0 }
+                        }
+                        _ => Vec3::new(rng.next_f32(), rng.next_f32(), rng.next_f32()) * 10.0 - Vec3::splat(5.0) + Vec3::new(3.0, -7.0, 1.5),
+                    };
+                    let aim = spheres[(rng.next_u32() as usize) % spheres.len()].center;
+                    let d = if l % 2 == 1 { (aim - o).normalize_or(Vec3::Y) } else { d };
+                    set_lane(&mut r, l, o, d, if rng.next_f32() < 0.3 { rng.next_f32() * 6.0 } else { f32::INFINITY });
+                }
+                let mut t = r.t_max;
+                let (ids, unsure) = packed.nearest(&r, active, &mut t);
+                let (blocked, occ_unsure) = packed.occluded(&r, active);
+                for l in 0..LANES {
+                    let o = Vec3::new(r.o[0][l], r.o[1][l], r.o[2][l]);
+                    let d = Vec3::new(r.d[0][l], r.d[1][l], r.d[2][l]);
+                    if active & (1 << l) == 0 {
+                        assert_eq!((ids[l], t[l], blocked & (1 << l), unsure & (1 << l)), (u32::MAX, r.t_max[l], 0, 0));
+                        continue;
+                    }
+                    lanes += 1;
+                    let want = [&forward, &backward].map(|order| spheres_in_order(&spheres, o, d, r.t_max[l], order));
+                    assert_eq!(blocked & (1 << l) != 0, want[0].is_some(), "simd {simd}: occlusion of lane {l}");
+                    hits += want[0].is_some() as usize;
+                    if occ_unsure & (1 << l) != 0 {
+                        assert!(blocked & (1 << l) != 0, "an unsure occlusion is a hit");
+                    }
+                    if unsure & (1 << l) != 0 {
+                        unsure_n += 1;
+                        continue;
+                    }
+                    for w in want {
+                        match w {
+                            None => assert_eq!((ids[l], t[l]), (u32::MAX, r.t_max[l]), "simd {simd}: lane {l}: false hit"),
+                            // The twin spheres are one surface: either index is the hit.
+                            Some((k, th)) => {
+                                let same = ids[l] as usize == k || (spheres[ids[l] as usize].center == spheres[k].center && spheres[ids[l] as usize].radius == spheres[k].radius);
+                                assert!(same && t[l].to_bits() == th.to_bits(), "simd {simd}: lane {l}: sphere {} at {} for {k} at {th}", ids[l], t[l]);
+                            }
+                        }
+                    }
+                }
+            }
+        }
+        println!("{lanes} lanes, {hits} meet a sphere, {unsure_n} unsure");
+        assert!(hits > lanes / 3, "rays meet spheres");
+        assert!(unsure_n < lanes / 10, "{unsure_n} of {lanes} lanes unsure");
+    }
+
+    /// The twin spheres' hits are ties (unsure: the scene BVH's order picks one).
+    #[test]
+    fn equal_spheres_are_unsure() {
+        let s = Sphere { center: Vec3::new(0.5, 0.25, 4.0), radius: 0.75, flip_normals: false };
+        let packed = PacketSpheres::new(&[s, Sphere { flip_normals: true, ..s }]);
+        let mut r = Rays8::default();
+        for l in 0..LANES {
+            set_lane(&mut r, l, Vec3::new(l as f32 * 0.01, 0.0, 0.0), Vec3::new(0.1, 0.05, 1.0), f32::INFINITY);
+        }
+        let mut t = r.t_max;
+        let (ids, unsure) = packed.nearest(&r, 0xff, &mut t);
+        assert!(ids.iter().all(|&i| i != u32::MAX), "every lane meets them: {ids:?}");
+        assert_eq!(unsure, 0xff);
+    }
+
     #[test]
     fn rays_along_box_faces() {
         // Two staircases of unit squares: rays that start on the planes of the leaves' boxes
