@@ -736,8 +736,15 @@ pub struct PacketSpheres {
     r: Vec<f64>,
     rr: Vec<f64>,
     margin: Vec<f64>,
+    /// Radius squared in f32, widened by `CULL_TOL` (the f32 cull of `test_avx2`).
+    rr_cull: Vec<f32>,
     simd: bool,
 }
+
+/// Relative slack of the f32 cull that skips a sphere on the lanes whose ray passes surely
+/// wide of it: its rounding is below 2e-6 of |o - c|^2 |d|^2, so a ray culled with this
+/// slack has the f64 test's discriminant negative (a miss) by a wide margin.
+const CULL_TOL: f32 = 1e-5;
 
 /// Per lane, the nearest sphere a packet met (index into the spheres, `u32::MAX`: none).
 pub type SphereIds = [u32; LANES];
@@ -748,6 +755,7 @@ impl PacketSpheres {
         PacketSpheres {
             rr: r.iter().map(|r| r * r).collect(),
             margin: spheres.iter().map(|s| SPHERE_BOX_TOL * (s.center.abs().max_element() + s.radius.abs()) as f64).collect(),
+            rr_cull: spheres.iter().map(|s| s.radius * s.radius * (1.0 + 10.0 * CULL_TOL)).collect(),
             r,
             spheres: spheres.to_vec(),
             simd: Isa::detect() > Isa::Portable,
@@ -867,6 +875,11 @@ impl PacketSpheres {
             let m = _mm256_set1_epi64x(((active >> (4 * h)) & 0xf) as i64);
             _mm256_castsi256_pd(_mm256_cmpeq_epi64(_mm256_and_si256(m, lane_bits), lane_bits))
         });
+        // The cull's operands: eight lanes of f32.
+        let o8 = [0, 1, 2].map(|ax| _mm256_loadu_ps(r.o[ax].as_ptr()));
+        let d8 = [0, 1, 2].map(|ax| _mm256_loadu_ps(r.d[ax].as_ptr()));
+        let dot8 = |a: [__m256; 3], b: [__m256; 3]| _mm256_add_ps(_mm256_add_ps(_mm256_mul_ps(a[0], b[0]), _mm256_mul_ps(a[1], b[1])), _mm256_mul_ps(a[2], b[2]));
+        let a8 = dot8(d8, d8);
         let mut best = [_mm256_set1_pd(f64::INFINITY); 2];
         let mut best_id = [_mm256_set1_pd(f64::from_bits(u32::MAX as u64)); 2];
         let mut near = [zero; 2];
@@ -878,7 +891,18 @@ impl PacketSpheres {
             let (rk, rr) = (_mm256_set1_pd(self.r[k]), _mm256_set1_pd(self.rr[k]));
             let tol = _mm256_sub_pd(rk, _mm256_set1_pd(self.margin[k]));
             let id = _mm256_set1_pd(f64::from_bits(k as u64));
+            // Cull: the lanes whose ray passes farther from the center than the radius, by a
+            // margin above the rounding (|(o - c) x d|^2 > |d|^2 (r^2 + tol |o - c|^2)).
+            let oc8 = [0, 1, 2].map(|ax| _mm256_sub_ps(o8[ax], _mm256_set1_ps(s.center[ax])));
+            let cross = |i: usize, j: usize| _mm256_sub_ps(_mm256_mul_ps(oc8[i], d8[j]), _mm256_mul_ps(oc8[j], d8[i]));
+            let cr = [cross(1, 2), cross(2, 0), cross(0, 1)];
+            let bound = _mm256_mul_ps(a8, _mm256_add_ps(_mm256_set1_ps(self.rr_cull[k]), _mm256_mul_ps(_mm256_set1_ps(CULL_TOL), dot8(oc8, oc8))));
+            let near_lanes = _mm256_movemask_ps(_mm256_cmp_ps::<_CMP_LE_OQ>(dot8(cr, cr), bound)) as u8;
+            let lanes = near_lanes & (_mm256_movemask_pd(live[0]) as u8 | (_mm256_movemask_pd(live[1]) as u8) << 4);
             for h in 0..2 {
+                if (lanes >> (4 * h)) & 0xf == 0 {
+                    continue;
+                }
                 let oc = [0, 1, 2].map(|ax| _mm256_cvtps_pd(_mm_sub_ps(o[h][ax], c[ax])));
                 let b = dot(oc, d[h]);
                 let ba = _mm256_div_pd(b, a[h]);
@@ -1222,8 +1246,20 @@ mod tests {
                         }
                         _ => Vec3::new(rng.next_f32(), rng.next_f32(), rng.next_f32()) * 10.0 - Vec3::splat(5.0) + Vec3::new(3.0, -7.0, 1.5),
                     };
-                    let aim = spheres[(rng.next_u32() as usize) % spheres.len()].center;
-                    let d = if l % 2 == 1 { (aim - o).normalize_or(Vec3::Y) } else { d };
+                    let s = spheres[(rng.next_u32() as usize) % spheres.len()];
+                    let d = match l {
+                        // Grazing: toward a point at the radius (give or take 1e-5) from the
+                        // center, across the line of sight (the f32 cull must keep it).
+                        5 | 7 => {
+                            let u = (s.center - o).cross(d).normalize_or(Vec3::Z);
+                            // The line through o and c + k r u passes at r from c.
+                            let (oc, r) = ((s.center - o).length(), s.radius);
+                            let k = if oc > r * 1.01 { oc / (oc * oc - r * r).sqrt() } else { 1.0 };
+                            s.center + u * r * k * (1.0 + (rng.next_f32() - 0.5) * 2e-5) - o
+                        }
+                        _ if l % 2 == 1 => (s.center - o).normalize_or(Vec3::Y),
+                        _ => d,
+                    };
                     set_lane(&mut r, l, o, d, if rng.next_f32() < 0.3 { rng.next_f32() * 6.0 } else { f32::INFINITY });
                 }
                 let mut t = r.t_max;
