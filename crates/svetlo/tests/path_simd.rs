@@ -808,12 +808,20 @@ fn sphere_box_scene(dir: &Path, size: u32, extra_spheres: usize) -> Scene {
     std::fs::create_dir_all(dir).unwrap();
     let base = std::fs::read_to_string(repo_scene("cornell-box.xml")).unwrap();
     let sphere = |id: &str, c: [f32; 3], r: f32, inner: &str| {
-        format!(r#"<shape type="sphere" id="{id}"><point name="center" x="{}" y="{}" z="{}"/><float name="radius" value="{r}"/>{inner}</shape>"#, c[0], c[1], c[2])
+        format!(
+            r#"<shape type="sphere" id="{id}"><point name="center" x="{}" y="{}" z="{}"/><float name="radius" value="{r}"/>{inner}</shape>"#,
+            c[0], c[1], c[2]
+        )
     };
     let diffuse = |c: &str| format!(r#"<bsdf type="diffuse"><rgb name="reflectance" value="{c}"/></bsdf>"#);
     let mut xml = [
         // The short box's top is at y = 0.6, its center at (0.33, 0.37).
-        sphere("sunk-light", [0.33, 0.6, 0.37], 0.12, r#"<bsdf type="diffuse"><rgb name="reflectance" value="0"/></bsdf><emitter type="area"><rgb name="radiance" value="12, 10, 6"/></emitter>"#),
+        sphere(
+            "sunk-light",
+            [0.33, 0.6, 0.37],
+            0.12,
+            r#"<bsdf type="diffuse"><rgb name="reflectance" value="0"/></bsdf><emitter type="area"><rgb name="radiance" value="12, 10, 6"/></emitter>"#,
+        ),
         sphere("in-wall", [0.5, 1.3, -1.0], 0.3, &diffuse("0.2, 0.5, 0.8")),
         // The tall box's corner region: its faces lie within 0.3 * sqrt(2) of (-0.335, -0.29).
         sphere("on-floor", [-0.72, 0.2, 0.25], 0.2, &diffuse("0.8, 0.6, 0.2")),
@@ -918,7 +926,11 @@ fn sphere_packet_rays_agree_with_scene_bvh() {
                 None
             };
             let want = want.map(|w| (w.shape, w.prim, w.t, w.b1, w.b2));
-            assert_eq!(got.map(|g| (g.0, g.1, g.2.to_bits(), g.3.to_bits(), g.4.to_bits())), want.map(|w| (w.0, w.1, w.2.to_bits(), w.3.to_bits(), w.4.to_bits())), "{ray:?}");
+            assert_eq!(
+                got.map(|g| (g.0, g.1, g.2.to_bits(), g.3.to_bits(), g.4.to_bits())),
+                want.map(|w| (w.0, w.1, w.2.to_bits(), w.3.to_bits(), w.4.to_bits())),
+                "{ray:?}"
+            );
         }
     }
     println!("{rays} rays, {sphere_hits} on spheres, {blocked_n} blocked, {flagged} flagged ({unsure_n} by the spheres)");

@@ -861,7 +861,8 @@ impl PacketSpheres {
         let sign = _mm256_set1_pd(-0.0);
         let abs = |x: __m256d| _mm256_andnot_pd(sign, x);
         let zero = _mm256_setzero_pd();
-        let dot = |a: [__m256d; 3], b: [__m256d; 3]| _mm256_add_pd(_mm256_add_pd(_mm256_mul_pd(a[0], b[0]), _mm256_mul_pd(a[1], b[1])), _mm256_mul_pd(a[2], b[2]));
+        let dot =
+            |a: [__m256d; 3], b: [__m256d; 3]| _mm256_add_pd(_mm256_add_pd(_mm256_mul_pd(a[0], b[0]), _mm256_mul_pd(a[1], b[1])), _mm256_mul_pd(a[2], b[2]));
         // Per half: origin (f32: the scalar test subtracts the center in f32), direction, |d|^2,
         // its largest component, t_max and the active lanes.
         let half_o = |h: usize| [0, 1, 2].map(|a| _mm_loadu_ps(r.o[a].as_ptr().add(4 * h)));
@@ -878,7 +879,8 @@ impl PacketSpheres {
         // The cull's operands: eight lanes of f32.
         let o8 = [0, 1, 2].map(|ax| _mm256_loadu_ps(r.o[ax].as_ptr()));
         let d8 = [0, 1, 2].map(|ax| _mm256_loadu_ps(r.d[ax].as_ptr()));
-        let dot8 = |a: [__m256; 3], b: [__m256; 3]| _mm256_add_ps(_mm256_add_ps(_mm256_mul_ps(a[0], b[0]), _mm256_mul_ps(a[1], b[1])), _mm256_mul_ps(a[2], b[2]));
+        let dot8 =
+            |a: [__m256; 3], b: [__m256; 3]| _mm256_add_ps(_mm256_add_ps(_mm256_mul_ps(a[0], b[0]), _mm256_mul_ps(a[1], b[1])), _mm256_mul_ps(a[2], b[2]));
         let a8 = dot8(d8, d8);
         let mut best = [_mm256_set1_pd(f64::INFINITY); 2];
         let mut best_id = [_mm256_set1_pd(f64::from_bits(u32::MAX as u64)); 2];
@@ -1288,7 +1290,8 @@ mod tests {
                             None => assert_eq!((ids[l], t[l]), (u32::MAX, r.t_max[l]), "simd {simd}: lane {l}: false hit"),
                             // The twin spheres are one surface: either index is the hit.
                             Some((k, th)) => {
-                                let same = ids[l] as usize == k || (spheres[ids[l] as usize].center == spheres[k].center && spheres[ids[l] as usize].radius == spheres[k].radius);
+                                let same = ids[l] as usize == k
+                                    || (spheres[ids[l] as usize].center == spheres[k].center && spheres[ids[l] as usize].radius == spheres[k].radius);
                                 assert!(same && t[l].to_bits() == th.to_bits(), "simd {simd}: lane {l}: sphere {} at {} for {k} at {th}", ids[l], t[l]);
                             }
                         }

@@ -1,8 +1,9 @@
 //! The path tracer of `path.rs`, eight paths at a time: the same estimator (next-event
 //! estimation and BSDF sampling combined by the power heuristic, Russian roulette, Mitsuba's
-//! `max_depth`), with the rays of eight paths traced as one packet (`accel::packet`), or, in
-//! scenes of more than 20 000 triangles or with shapes other than meshes, one by one through
-//! the scene's BVH (`Tracer`). Per vertex, `gather` does each lane's branchy part (emission
+//! `max_depth`), with the rays of eight paths traced as one packet (`accel::packet`: the
+//! triangles through the packet BVH, up to 16 analytic spheres tested on every lane), or, in
+//! scenes of more than 20 000 triangles, more spheres or SDF grids, one by one through the
+//! scene's BVH (`Tracer`). Per vertex, `gather` does each lane's branchy part (emission
 //! found, random numbers, light and triangle choice) and `shade8` the arithmetic of all
 //! eight lanes on the paths' state kept as structure of arrays (compiled to AVX2 vector
 //! code; an AVX-512VL build of the same code has 32 registers where the CPU has them).
@@ -44,9 +45,13 @@
 //! traces them again through the scene's BVH: the packet image is the scalar tracer's bit for
 //! bit, in 0.81 of the CPU time single rays took on a Cornell box with a glass box (0.60 of
 //! the scalar tracer's). Opaque scenes skip the check: their ties are shared edges and faces
-//! hidden inside closed objects. Scenes with spheres trace single rays (the packet BVH holds
-//! triangles only): Bitterli's veach-mis (three sphere lights, rough conductor plates) takes
-//! 0.9 of the scalar tracer's CPU time.
+//! hidden inside closed objects. Scenes with spheres (which traced single rays, bit for bit)
+//! keep the check, and test their spheres after the triangles on all lanes with
+//! `Sphere::intersect`'s f64 operations (`PacketSpheres`), as the scene's BVH tests them after
+//! its triangles; the lanes it cannot vouch for (two spheres at one f32 distance, a hit within
+//! rounding of a sphere's box) are traced again singly: Bitterli's veach-mis (three sphere
+//! lights, rough conductor plates) is the single-ray image bit for bit in 0.80 of its CPU time
+//! (0.85 of its instructions).
 
 use super::path::{bsdf_pdf_toward, PathTracer};
 use super::{camera_sample, render_tiles, Integrator, Progress, RenderSettings};
@@ -190,7 +195,7 @@ enum Tracer {
     /// lanes after the triangles (as the scene's BVH does), with the scene shape of each;
     /// a lane the spheres leave unsure is traced again through the scene's BVH (then `ties`
     /// is always there).
-    Packets { bvh: PacketBvh, ties: Option<Vec<u32>>, spheres: Option<(PacketSpheres, Vec<u32>)> },
+    Packets { bvh: PacketBvh, ties: Option<Vec<u32>>, spheres: Option<Box<(PacketSpheres, Vec<u32>)>> },
     /// One by one through the scene's wide BVH: in a large scene eight incoherent rays share
     /// few nodes, and a packet pays for the union of their walks; the only way to shapes
     /// other than meshes. `first`: the kernel's index of each shape's first triangle
@@ -219,7 +224,8 @@ impl Tracer {
                 let (h, tied) = bvh.intersect_ties(rays, active);
                 (h, tied, first)
             }
-            Tracer::Packets { bvh, ties: Some(first), spheres: Some((spheres, shapes)) } => {
+            Tracer::Packets { bvh, ties: Some(first), spheres: Some(sp) } => {
+                let (spheres, shapes) = &**sp;
                 let (mut h, tied) = bvh.intersect_ties(rays, active);
                 // The tied lanes go to the scene's BVH whole: no need to test their spheres.
                 let (ids, unsure) = spheres.nearest(rays, active & !tied, &mut h.t);
@@ -254,7 +260,8 @@ impl Tracer {
     fn occluded(&self, scene: &Scene, rays: &Rays8, active: u8) -> u8 {
         match self {
             Tracer::Packets { bvh, spheres: None, .. } => bvh.occluded(rays, active),
-            Tracer::Packets { bvh, spheres: Some((spheres, _)), .. } => {
+            Tracer::Packets { bvh, spheres: Some(sp), .. } => {
+                let spheres = &sp.0;
                 let blocked = bvh.occluded(rays, active);
                 let (hit, unsure) = spheres.occluded(rays, active & !blocked);
                 let again = (0..LANES).filter(|l| unsure & (1 << l) != 0 && scene.accel.occluded(&lane_ray(rays, *l))).fold(0, |m, l| m | 1 << l);
@@ -436,7 +443,7 @@ impl SimdKernel {
             // keep it with the tie check on their triangles (shared edges, which opaque
             // mesh scenes leave to the packet tree) and the spheres' unsure lanes retraced.
             let (geo, shapes): (Vec<_>, Vec<_>) = spheres.into_iter().unzip();
-            Tracer::Packets { bvh: PacketBvh::build(&verts), ties: Some(first_triangles(scene)), spheres: Some((PacketSpheres::new(&geo), shapes)) }
+            Tracer::Packets { bvh: PacketBvh::build(&verts), ties: Some(first_triangles(scene)), spheres: Some(Box::new((PacketSpheres::new(&geo), shapes))) }
         };
         Some(SimdKernel { tracer, tris, shapes, lights, avx512: avx512() })
     }
