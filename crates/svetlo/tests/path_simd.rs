@@ -182,11 +182,12 @@ fn out_of_scope_scenes_fall_back() {
     // Moving shapes: the scalar tracer's.
     let scene = load(&repo_scene("motion-blur.xml"), &[], 16);
     assert!(SimdKernel::new(&scene, &RenderSettings::from_scene(&scene)).is_none(), "motion-blur.xml should not qualify");
-    // Spheres (a mirror and a glass one; caustic.xml's glass sphere): the kernel, single rays.
+    // Spheres (a mirror and a glass one; caustic.xml's glass sphere): the kernel, packets
+    // (a few spheres are tested on every lane beside the packet tree's triangles).
     for name in ["caustic.xml", "cornell-spheres.xml"] {
         let scene = load(&repo_scene(name), &[], 16);
         let k = SimdKernel::new(&scene, &RenderSettings::from_scene(&scene)).unwrap_or_else(|| panic!("{name} should qualify"));
-        assert!(!k.uses_packets(), "{name}: spheres are met through the scene's BVH");
+        assert!(k.uses_packets(), "{name}: a few spheres go with the packets");
     }
     assert!(svetlo::methods::by_name("path:simd=maybe").is_err());
     assert!(svetlo::methods::by_name("path:fast=true").is_err());
@@ -699,7 +700,8 @@ fn glass_box_packets_match_scalar() {
     let _ = std::fs::remove_dir_all(&dir);
 }
 
-/// Spheres in the kernel: met one ray at a time through the scene's BVH, shaded from the
+/// Spheres in the kernel: met by packets (`PacketSpheres`, every sphere on every lane after
+/// the packet tree's triangles; unsure lanes through the scene's BVH), shaded from the
 /// scene's own surface record of the hit (a diffuse, a checkerboard-textured, a bump-mapped
 /// rough conductor, the mirror, the glass and a black emitting sphere), the emitting sphere
 /// sampled through its `sample_li` (the cone it subtends) and weighted by its `pdf_li`
@@ -737,7 +739,7 @@ fn spheres_match_scalar() {
         s.max_depth = 6;
         s.rr_depth = 3;
         let k = SimdKernel::new(&scene, &s).expect("a scene of spheres qualifies");
-        assert!(!k.uses_packets(), "spheres are met through the scene's BVH");
+        assert!(k.uses_packets(), "six spheres go with the packets");
         // `compare` renders through the kernel itself (both builds, single rays) against the scalar tracer.
         compare(&scene, &s, &format!("cornell-spheres with more spheres, {sampler:?}"));
         if avx2() {
@@ -796,5 +798,196 @@ fn sdf_grid_matches_scalar() {
     compare(&scene, &s, "various_shapes with an SDF grid");
     if avx2() {
         assert!(render(&scene, "path", &s).data == render(&scene, "path:simd=false", &s).data, "the kernel's image differs from the scalar tracer's");
+    }
+}
+
+/// The Cornell box with spheres cut by its triangles and by each other: a sphere light sunk
+/// into the short box's top, a sphere half in the back wall, one touching the tall box's
+/// side and the floor, two overlapping ones (a rough conductor and a diffuse one).
+fn sphere_box_scene(dir: &Path, size: u32, extra_spheres: usize) -> Scene {
+    std::fs::create_dir_all(dir).unwrap();
+    let base = std::fs::read_to_string(repo_scene("cornell-box.xml")).unwrap();
+    let sphere = |id: &str, c: [f32; 3], r: f32, inner: &str| {
+        format!(
+            r#"<shape type="sphere" id="{id}"><point name="center" x="{}" y="{}" z="{}"/><float name="radius" value="{r}"/>{inner}</shape>"#,
+            c[0], c[1], c[2]
+        )
+    };
+    let diffuse = |c: &str| format!(r#"<bsdf type="diffuse"><rgb name="reflectance" value="{c}"/></bsdf>"#);
+    let mut xml = [
+        // The short box's top is at y = 0.6, its center at (0.33, 0.37).
+        sphere(
+            "sunk-light",
+            [0.33, 0.6, 0.37],
+            0.12,
+            r#"<bsdf type="diffuse"><rgb name="reflectance" value="0"/></bsdf><emitter type="area"><rgb name="radiance" value="12, 10, 6"/></emitter>"#,
+        ),
+        sphere("in-wall", [0.5, 1.3, -1.0], 0.3, &diffuse("0.2, 0.5, 0.8")),
+        // The tall box's corner region: its faces lie within 0.3 * sqrt(2) of (-0.335, -0.29).
+        sphere("on-floor", [-0.72, 0.2, 0.25], 0.2, &diffuse("0.8, 0.6, 0.2")),
+        sphere("rough", [-0.3, 1.5, 0.3], 0.22, r#"<bsdf type="roughconductor"><string name="material" value="Au"/><float name="alpha" value="0.2"/></bsdf>"#),
+        sphere("overlap", [-0.1, 1.55, 0.45], 0.18, &diffuse("0.3, 0.8, 0.3")),
+    ]
+    .join("\n");
+    for i in 0..extra_spheres {
+        xml += &sphere(&format!("bead{i}"), [-0.9 + 0.1 * i as f32, 1.9, 0.8], 0.04, &diffuse("0.5, 0.5, 0.5"));
+    }
+    let path = dir.join(format!("sphere-box-{extra_spheres}.xml"));
+    std::fs::write(&path, base.replace("</scene>", &format!("{xml}\n</scene>"))).unwrap();
+    load(&path, &[], size)
+}
+
+/// Rays from points on the spheres and the boxes of `sphere_box_scene`, traced as the
+/// kernel does (packet tree with its tie check, then `PacketSpheres`), against the scene's
+/// BVH: every lane not flagged (tied triangle, unsure sphere) has the scene BVH's shape,
+/// primitive, distance and barycentrics bit for bit, and its occlusion; few are flagged.
+#[test]
+fn sphere_packet_rays_agree_with_scene_bvh() {
+    use glam::Vec3;
+    use svetlo::accel::packet::{PacketBvh, PacketSpheres, Rays8, LANES};
+    use svetlo::geometry::ray::offset_ray_origin;
+    use svetlo::geometry::{Geometry, Ray};
+    let dir = std::env::temp_dir().join(format!("svetlo-simd-sphere-rays-{}", std::process::id()));
+    let scene = sphere_box_scene(&dir, 16, 0);
+    let (mut tris, mut tri_shape, mut spheres, mut sphere_shape) = (Vec::new(), Vec::new(), Vec::new(), Vec::new());
+    for (i, s) in scene.shapes.iter().enumerate() {
+        match &*s.geometry {
+            Geometry::Mesh(m) => {
+                tris.extend((0..m.triangle_count()).map(|t| m.vertices(t)));
+                tri_shape.extend((0..m.triangle_count()).map(|t| (i as u32, t as u32)));
+            }
+            Geometry::Sphere(sp) => {
+                spheres.push(*sp);
+                sphere_shape.push(i as u32);
+            }
+            Geometry::SdfGrid(_) => panic!("no grids here"),
+        }
+    }
+    assert_eq!(spheres.len(), 5);
+    let bvh = PacketBvh::build(&tris);
+    let packed = PacketSpheres::new(&spheres);
+    let mut rng = svetlo::sampling::Pcg32::new(41, 3);
+    let (mut rays, mut flagged, mut sphere_hits, mut blocked_n, mut unsure_n) = (0u32, 0u32, 0u32, 0u32, 0u32);
+    for _ in 0..20_000 {
+        let mut r = Rays8::default();
+        for l in 0..LANES {
+            let dir = loop {
+                let d = Vec3::new(rng.next_f32(), rng.next_f32(), rng.next_f32()) * 2.0 - Vec3::ONE;
+                let len = d.length();
+                if len > 1e-3 && len <= 1.0 {
+                    break d / len;
+                }
+            };
+            // A point on a sphere or a triangle, the ray leaving its surface as the tracers spawn them.
+            let (p, ng) = if l % 2 == 0 {
+                let s = spheres[(rng.next_u32() as usize) % spheres.len()];
+                let n = (Vec3::new(rng.next_f32(), rng.next_f32(), rng.next_f32()) * 2.0 - Vec3::ONE).normalize_or(Vec3::Y);
+                (s.center + n * s.radius, n)
+            } else {
+                let [p0, p1, p2] = tris[(rng.next_u32() as usize) % tris.len()];
+                let (mut u, mut v) = (rng.next_f32(), rng.next_f32());
+                if u + v > 1.0 {
+                    (u, v) = (1.0 - u, 1.0 - v);
+                }
+                (p0 + (p1 - p0) * u + (p2 - p0) * v, (p1 - p0).cross(p2 - p0).normalize())
+            };
+            let o = offset_ray_origin(p, ng, dir);
+            for k in 0..3 {
+                r.o[k][l] = o[k];
+                r.d[k][l] = dir[k];
+            }
+            r.t_max[l] = if l % 3 == 0 { 0.5 + rng.next_f32() } else { f32::INFINITY };
+        }
+        let (mut h, tied) = bvh.intersect_ties(&r, 0xff);
+        let (ids, unsure) = packed.nearest(&r, !tied, &mut h.t);
+        let tri_blocked = bvh.occluded(&r, 0xff);
+        let (sph_blocked, occ_unsure) = packed.occluded(&r, !tri_blocked);
+        for l in 0..LANES {
+            rays += 1;
+            let ray = Ray::with_max(Vec3::new(r.o[0][l], r.o[1][l], r.o[2][l]), Vec3::new(r.d[0][l], r.d[1][l], r.d[2][l]), r.t_max[l]);
+            let blocked = tri_blocked & (1 << l) != 0 || sph_blocked & (1 << l) != 0;
+            blocked_n += blocked as u32;
+            if occ_unsure & (1 << l) == 0 {
+                assert_eq!(blocked, scene.accel.occluded(&ray), "occlusion of {ray:?}");
+            }
+            unsure_n += (unsure & (1 << l) != 0) as u32;
+            if (tied | unsure) & (1 << l) != 0 {
+                flagged += 1;
+                continue;
+            }
+            let want = scene.accel.intersect(&ray);
+            let got = if ids[l] != u32::MAX {
+                sphere_hits += 1;
+                Some((sphere_shape[ids[l] as usize], 0, h.t[l], 0.0, 0.0))
+            } else if h.prim[l] != u32::MAX {
+                let (shape, prim) = tri_shape[h.prim[l] as usize];
+                Some((shape, prim, h.t[l], h.b1[l], h.b2[l]))
+            } else {
+                None
+            };
+            let want = want.map(|w| (w.shape, w.prim, w.t, w.b1, w.b2));
+            assert_eq!(
+                got.map(|g| (g.0, g.1, g.2.to_bits(), g.3.to_bits(), g.4.to_bits())),
+                want.map(|w| (w.0, w.1, w.2.to_bits(), w.3.to_bits(), w.4.to_bits())),
+                "{ray:?}"
+            );
+        }
+    }
+    println!("{rays} rays, {sphere_hits} on spheres, {blocked_n} blocked, {flagged} flagged ({unsure_n} by the spheres)");
+    assert!(sphere_hits > rays / 10 && blocked_n > rays / 10, "the rays meet spheres and are blocked");
+    // Most flagged lanes are triangle ties: rays inside a box meet its bottom on the floor.
+    assert!(flagged < rays / 20 && unsure_n < rays / 200, "{flagged} of {rays} lanes flagged ({unsure_n} by the spheres)");
+    let _ = std::fs::remove_dir_all(&dir);
+}
+
+/// `sphere_box_scene` in the kernel, packets with the spheres tested on their lanes: the
+/// scalar tracer's image bit for bit with either sampler and one or three threads. With more
+/// than 16 spheres the kernel traces single rays (and is still the scalar tracer's image).
+#[test]
+fn sphere_box_packets_match_scalar() {
+    if !avx2() {
+        eprintln!("SKIPPED: no AVX2, the kernel falls back to the scalar tracer");
+        return;
+    }
+    let dir = std::env::temp_dir().join(format!("svetlo-simd-sphere-box-{}", std::process::id()));
+    for (extra, packets) in [(0, true), (12, false)] {
+        let scene = sphere_box_scene(&dir, 40, extra);
+        for sampler in [svetlo::sampling::SamplerKind::Independent, svetlo::sampling::SamplerKind::Sobol] {
+            let mut s = RenderSettings::from_scene(&scene);
+            s.sampler = sampler;
+            s.spp = if packets { 16 } else { 4 };
+            s.seed = 5;
+            s.max_depth = 5;
+            let k = SimdKernel::new(&scene, &s).expect("the scene qualifies");
+            assert_eq!(k.uses_packets(), packets, "{} spheres", 5 + extra);
+            let b = render(&scene, "path:simd=false", &s);
+            for threads in [1, 3] {
+                let a = k.render(&scene, &RenderSettings { threads, ..s.clone() }, &Progress::new()).expect("render").image();
+                let exact = a.data.iter().zip(&b.data).filter(|(x, y)| x == y).count();
+                assert!(a.data == b.data, "{sampler:?}, {threads} threads, {} spheres: {exact}/{} channels bit-identical", 5 + extra, a.data.len());
+            }
+            assert!(b.mean().max_component() > 0.0);
+        }
+    }
+    let _ = std::fs::remove_dir_all(&dir);
+}
+
+/// Bitterli's veach-mis (sphere lights over rough conductor plates), the scene the sphere
+/// packets are for: packets, and the scalar tracer's image bit for bit.
+#[test]
+fn veach_mis_packets_match_scalar() {
+    let Some(root) = shared() else { return };
+    if !avx2() {
+        return;
+    }
+    let scene = load(&root.join("bitterli/veach-mis/mitsuba3/scene.xml"), &[("resx", "64"), ("resy", "36")], 48);
+    let mut s = RenderSettings::from_scene(&scene);
+    s.spp = 8;
+    s.seed = 3;
+    let k = SimdKernel::new(&scene, &s).expect("veach-mis qualifies");
+    assert!(k.uses_packets(), "veach-mis traces packets");
+    for sampler in [svetlo::sampling::SamplerKind::Independent, svetlo::sampling::SamplerKind::Sobol] {
+        let s = RenderSettings { sampler, ..s.clone() };
+        assert!(render(&scene, "path", &s).data == render(&scene, "path:simd=false", &s).data, "{sampler:?}: veach-mis differs from the scalar tracer");
     }
 }

@@ -11,7 +11,7 @@
 //! layout is free to change.
 
 use crate::geometry::triangle::WatertightRay;
-use crate::geometry::Aabb;
+use crate::geometry::{Aabb, Sphere};
 use glam::Vec3;
 use std::mem::MaybeUninit;
 
@@ -717,6 +717,262 @@ walk_simd!(walk_avx2, "avx2,popcnt");
 #[cfg(target_arch = "x86_64")]
 walk_simd!(walk_avx512, "avx2,popcnt,avx512f,avx512vl");
 
+/// Relative distance along a ray within which a sphere's hit may lie outside what the scene
+/// BVH's box test of it admits (its f32 box and slab test round; they are accurate to a few
+/// 1e-7): `PacketSpheres` flags such lanes.
+const SPHERE_BOX_TOL: f64 = 2e-5;
+
+/// Analytic spheres against eight rays at once, for scenes of a few spheres beside their
+/// triangles: every sphere is tested on every lane (no hierarchy), with the operations of
+/// `Sphere::intersect` in f64 lanes (AVX), so that each lane's distance and decisions are
+/// the scalar test's bit for bit. The scene's BVH tests its triangles first and then its
+/// spheres up to the nearest triangle's distance, in its own order, skipping those whose box
+/// its walk does not enter; what a lane here cannot be sure it would decide the same is
+/// flagged (`unsure` masks) for the caller to trace again through the scene's BVH.
+pub struct PacketSpheres {
+    spheres: Vec<Sphere>,
+    /// Per sphere: radius and radius squared (f64, as the scalar test computes them), and
+    /// the rounding of its f32 box (`SPHERE_BOX_TOL` of its extent).
+    r: Vec<f64>,
+    rr: Vec<f64>,
+    margin: Vec<f64>,
+    /// Radius squared in f32, widened by `CULL_TOL` (the f32 cull of `test_avx2`).
+    rr_cull: Vec<f32>,
+    simd: bool,
+}
+
+/// Relative slack of the f32 cull that skips a sphere on the lanes whose ray passes surely
+/// wide of it: its rounding is below 2e-6 of |o - c|^2 |d|^2, so a ray culled with this
+/// slack has the f64 test's discriminant negative (a miss) by a wide margin.
+const CULL_TOL: f32 = 1e-5;
+
+/// Per lane, the nearest sphere a packet met (index into the spheres, `u32::MAX`: none).
+pub type SphereIds = [u32; LANES];
+
+impl PacketSpheres {
+    pub fn new(spheres: &[Sphere]) -> PacketSpheres {
+        let r: Vec<f64> = spheres.iter().map(|s| s.radius as f64).collect();
+        PacketSpheres {
+            rr: r.iter().map(|r| r * r).collect(),
+            margin: spheres.iter().map(|s| SPHERE_BOX_TOL * (s.center.abs().max_element() + s.radius.abs()) as f64).collect(),
+            rr_cull: spheres.iter().map(|s| s.radius * s.radius * (1.0 + 10.0 * CULL_TOL)).collect(),
+            r,
+            spheres: spheres.to_vec(),
+            simd: Isa::detect() > Isa::Portable,
+        }
+    }
+
+    pub fn len(&self) -> usize {
+        self.spheres.len()
+    }
+
+    pub fn is_empty(&self) -> bool {
+        self.spheres.is_empty()
+    }
+
+    /// After the triangles gave each lane its nearest distance `t` (the ray's t_max where
+    /// none was hit): the nearest sphere met in (0, t) on the lanes of `active`, as the scene's
+    /// BVH finds it; `t` is set to its distance. Returns the spheres met and the unsure lanes:
+    /// two spheres at one f32 distance (the scene BVH's order decides), or the hit within
+    /// rounding of the sphere's box (its walk might not enter it).
+    pub fn nearest(&self, r: &Rays8, active: u8, t: &mut [f32; LANES]) -> (SphereIds, u8) {
+        if active == 0 {
+            return ([u32::MAX; LANES], 0);
+        }
+        #[cfg(target_arch = "x86_64")]
+        if self.simd {
+            // SAFETY: `simd` is set only where the CPU has AVX2.
+            return unsafe { self.test_avx2::<false>(r, active, t) };
+        }
+        self.test_lanes::<false>(r, active, t)
+    }
+
+    /// The lanes of `active` whose ray meets a sphere in (0, t_max), and the unsure ones
+    /// among them (every sphere met within rounding of its box).
+    pub fn occluded(&self, r: &Rays8, active: u8) -> (u8, u8) {
+        if active == 0 {
+            return (0, 0);
+        }
+        let mut t = r.t_max;
+        #[cfg(target_arch = "x86_64")]
+        if self.simd {
+            // SAFETY: `simd` is set only where the CPU has AVX2.
+            let (ids, unsure) = unsafe { self.test_avx2::<true>(r, active, &mut t) };
+            return (lanes_of(&ids), unsure);
+        }
+        let (ids, unsure) = self.test_lanes::<true>(r, active, &mut t);
+        (lanes_of(&ids), unsure)
+    }
+
+    /// Whether a hit at `t` lies within rounding of sphere `k`'s box (`oc`: origin - center).
+    #[inline(always)]
+    fn near_box(&self, k: usize, oc: [f64; 3], d: [f64; 3], t: f64) -> bool {
+        let dmax = d[0].abs().max(d[1].abs()).max(d[2].abs());
+        let m = (0..3).map(|a| (oc[a] + t * d[a]).abs()).fold(0.0, f64::max);
+        m > self.r[k] - self.margin[k] - SPHERE_BOX_TOL * t * dmax
+    }
+
+    /// Lane by lane through `Sphere::intersect` (CPUs without AVX2, and the reference of the
+    /// tests). With `ANY`, a lane's id is that of a sphere it meets, any.
+    fn test_lanes<const ANY: bool>(&self, r: &Rays8, active: u8, t: &mut [f32; LANES]) -> (SphereIds, u8) {
+        let (mut ids, mut unsure) = ([u32::MAX; LANES], 0u8);
+        for l in (0..LANES).filter(|l| active & (1 << l) != 0) {
+            let o = Vec3::new(r.o[0][l], r.o[1][l], r.o[2][l]);
+            let d = Vec3::new(r.d[0][l], r.d[1][l], r.d[2][l]);
+            let t_max = t[l];
+            let (mut best, mut near, mut sure_any) = (f32::INFINITY, false, false);
+            for (k, s) in self.spheres.iter().enumerate() {
+                let Some(th) = s.intersect(o, d, t_max) else { continue };
+                let nb = self.near_box(k, (o - s.center).as_dvec3().to_array(), d.as_dvec3().to_array(), th as f64);
+                if ANY {
+                    ids[l] = k as u32;
+                    sure_any |= !nb;
+                } else if th < best {
+                    (best, near, ids[l]) = (th, nb, k as u32);
+                } else if th == best {
+                    near = true;
+                }
+            }
+            if ANY {
+                near = ids[l] != u32::MAX && !sure_any;
+            } else if ids[l] != u32::MAX {
+                t[l] = best;
+            }
+            unsure |= (near as u8) << l;
+        }
+        (ids, unsure)
+    }
+}
+
+fn lanes_of(ids: &SphereIds) -> u8 {
+    (0..LANES).filter(|&l| ids[l] != u32::MAX).fold(0, |m, l| m | 1 << l)
+}
+
+#[cfg(target_arch = "x86_64")]
+impl PacketSpheres {
+    /// `test_lanes` in two halves of four f64 lanes: `Sphere::intersect`'s operations in
+    /// its order (no fused multiply-adds), so the same bits.
+    ///
+    /// # Safety
+    /// The CPU must support AVX2.
+    #[target_feature(enable = "avx2")]
+    unsafe fn test_avx2<const ANY: bool>(&self, r: &Rays8, active: u8, t: &mut [f32; LANES]) -> (SphereIds, u8) {
+        use std::arch::x86_64::*;
+        let sign = _mm256_set1_pd(-0.0);
+        let abs = |x: __m256d| _mm256_andnot_pd(sign, x);
+        let zero = _mm256_setzero_pd();
+        let dot =
+            |a: [__m256d; 3], b: [__m256d; 3]| _mm256_add_pd(_mm256_add_pd(_mm256_mul_pd(a[0], b[0]), _mm256_mul_pd(a[1], b[1])), _mm256_mul_pd(a[2], b[2]));
+        // Per half: origin (f32: the scalar test subtracts the center in f32), direction, |d|^2,
+        // its largest component, t_max and the active lanes.
+        let half_o = |h: usize| [0, 1, 2].map(|a| _mm_loadu_ps(r.o[a].as_ptr().add(4 * h)));
+        let o = [half_o(0), half_o(1)];
+        let d = [0, 1].map(|h| [0, 1, 2].map(|a| _mm256_cvtps_pd(_mm_loadu_ps(r.d[a].as_ptr().add(4 * h)))));
+        let a = d.map(|d| dot(d, d));
+        let dmax = d.map(|d| _mm256_max_pd(_mm256_max_pd(abs(d[0]), abs(d[1])), abs(d[2])));
+        let t_max = [0, 1].map(|h| _mm256_cvtps_pd(_mm_loadu_ps(t.as_ptr().add(4 * h))));
+        let lane_bits = _mm256_setr_epi64x(1, 2, 4, 8);
+        let mut live = [0, 1].map(|h| {
+            let m = _mm256_set1_epi64x(((active >> (4 * h)) & 0xf) as i64);
+            _mm256_castsi256_pd(_mm256_cmpeq_epi64(_mm256_and_si256(m, lane_bits), lane_bits))
+        });
+        // The cull's operands: eight lanes of f32.
+        let o8 = [0, 1, 2].map(|ax| _mm256_loadu_ps(r.o[ax].as_ptr()));
+        let d8 = [0, 1, 2].map(|ax| _mm256_loadu_ps(r.d[ax].as_ptr()));
+        let dot8 =
+            |a: [__m256; 3], b: [__m256; 3]| _mm256_add_ps(_mm256_add_ps(_mm256_mul_ps(a[0], b[0]), _mm256_mul_ps(a[1], b[1])), _mm256_mul_ps(a[2], b[2]));
+        let a8 = dot8(d8, d8);
+        let mut best = [_mm256_set1_pd(f64::INFINITY); 2];
+        let mut best_id = [_mm256_set1_pd(f64::from_bits(u32::MAX as u64)); 2];
+        let mut near = [zero; 2];
+        // With ANY: lanes with a hit outside rounding of the box / with any hit.
+        let mut sure = [zero; 2];
+        let mut any = [zero; 2];
+        for (k, s) in self.spheres.iter().enumerate() {
+            let c = s.center.to_array().map(|x| _mm_set1_ps(x));
+            let (rk, rr) = (_mm256_set1_pd(self.r[k]), _mm256_set1_pd(self.rr[k]));
+            let tol = _mm256_sub_pd(rk, _mm256_set1_pd(self.margin[k]));
+            let id = _mm256_set1_pd(f64::from_bits(k as u64));
+            // Cull: the lanes whose ray passes farther from the center than the radius, by a
+            // margin above the rounding (|(o - c) x d|^2 > |d|^2 (r^2 + tol |o - c|^2)).
+            let oc8 = [0, 1, 2].map(|ax| _mm256_sub_ps(o8[ax], _mm256_set1_ps(s.center[ax])));
+            let cross = |i: usize, j: usize| _mm256_sub_ps(_mm256_mul_ps(oc8[i], d8[j]), _mm256_mul_ps(oc8[j], d8[i]));
+            let cr = [cross(1, 2), cross(2, 0), cross(0, 1)];
+            let bound = _mm256_mul_ps(a8, _mm256_add_ps(_mm256_set1_ps(self.rr_cull[k]), _mm256_mul_ps(_mm256_set1_ps(CULL_TOL), dot8(oc8, oc8))));
+            let near_lanes = _mm256_movemask_ps(_mm256_cmp_ps::<_CMP_LE_OQ>(dot8(cr, cr), bound)) as u8;
+            let lanes = near_lanes & (_mm256_movemask_pd(live[0]) as u8 | (_mm256_movemask_pd(live[1]) as u8) << 4);
+            for h in 0..2 {
+                if (lanes >> (4 * h)) & 0xf == 0 {
+                    continue;
+                }
+                let oc = [0, 1, 2].map(|ax| _mm256_cvtps_pd(_mm_sub_ps(o[h][ax], c[ax])));
+                let b = dot(oc, d[h]);
+                let ba = _mm256_div_pd(b, a[h]);
+                let l = [0, 1, 2].map(|ax| _mm256_sub_pd(oc[ax], _mm256_mul_pd(d[h][ax], ba)));
+                let disc = _mm256_sub_pd(rr, dot(l, l));
+                let go = _mm256_and_pd(live[h], _mm256_cmp_pd::<_CMP_GE_OQ>(disc, zero));
+                if _mm256_movemask_pd(go) == 0 {
+                    continue;
+                }
+                let cc = _mm256_sub_pd(dot(oc, oc), rr);
+                let root = _mm256_sqrt_pd(_mm256_mul_pd(a[h], disc));
+                // b.signum() (b is not NaN where the lane goes on).
+                let sgn = _mm256_or_pd(_mm256_and_pd(b, sign), _mm256_set1_pd(1.0));
+                let q = _mm256_xor_pd(_mm256_add_pd(b, _mm256_mul_pd(sgn, root)), sign);
+                let q0 = _mm256_cmp_pd::<_CMP_EQ_OQ>(q, zero);
+                let t0 = _mm256_andnot_pd(q0, _mm256_div_pd(cc, q));
+                let t1 = _mm256_andnot_pd(q0, _mm256_div_pd(q, a[h]));
+                let swap = _mm256_cmp_pd::<_CMP_GT_OQ>(t0, t1);
+                let (lo, hi) = (_mm256_blendv_pd(t0, t1, swap), _mm256_blendv_pd(t1, t0, swap));
+                let within = |x| _mm256_and_pd(_mm256_cmp_pd::<_CMP_GT_OQ>(x, zero), _mm256_cmp_pd::<_CMP_LT_OQ>(x, t_max[h]));
+                let (ok0, ok1) = (within(lo), within(hi));
+                let th = _mm256_blendv_pd(hi, lo, ok0);
+                let hit = _mm256_and_pd(go, _mm256_or_pd(ok0, ok1));
+                if _mm256_movemask_pd(hit) == 0 {
+                    continue;
+                }
+                // `near_box`.
+                let p = [0, 1, 2].map(|ax| abs(_mm256_add_pd(oc[ax], _mm256_mul_pd(th, d[h][ax]))));
+                let m = _mm256_max_pd(_mm256_max_pd(_mm256_max_pd(p[0], p[1]), p[2]), zero);
+                let lim = _mm256_sub_pd(tol, _mm256_mul_pd(_mm256_mul_pd(_mm256_set1_pd(SPHERE_BOX_TOL), th), dmax[h]));
+                let nb = _mm256_cmp_pd::<_CMP_GT_OQ>(m, lim);
+                if ANY {
+                    any[h] = _mm256_or_pd(any[h], hit);
+                    sure[h] = _mm256_or_pd(sure[h], _mm256_andnot_pd(nb, hit));
+                    best_id[h] = _mm256_blendv_pd(best_id[h], id, hit);
+                    // A lane surely blocked needs no further sphere.
+                    live[h] = _mm256_andnot_pd(sure[h], live[h]);
+                    continue;
+                }
+                // The distance as f32 decides, as the scalar walk's t_max is f32.
+                let th32 = _mm256_cvtps_pd(_mm256_cvtpd_ps(th));
+                let closer = _mm256_and_pd(hit, _mm256_cmp_pd::<_CMP_LT_OQ>(th32, best[h]));
+                let tie = _mm256_and_pd(hit, _mm256_cmp_pd::<_CMP_EQ_OQ>(th32, best[h]));
+                best[h] = _mm256_blendv_pd(best[h], th32, closer);
+                best_id[h] = _mm256_blendv_pd(best_id[h], id, closer);
+                near[h] = _mm256_or_pd(_mm256_blendv_pd(near[h], nb, closer), tie);
+            }
+        }
+        let mut ids = [u32::MAX; LANES];
+        let mut unsure = 0u8;
+        for h in 0..2 {
+            let mut id = [0u64; 4];
+            _mm256_storeu_pd(id.as_mut_ptr() as *mut f64, best_id[h]);
+            let mut bt = [0.0f64; 4];
+            _mm256_storeu_pd(bt.as_mut_ptr(), best[h]);
+            for j in 0..4 {
+                ids[4 * h + j] = id[j] as u32;
+                if !ANY && id[j] as u32 != u32::MAX {
+                    t[4 * h + j] = bt[j] as f32;
+                }
+            }
+            let flags = if ANY { _mm256_andnot_pd(sure[h], any[h]) } else { near[h] };
+            unsure |= ((_mm256_movemask_pd(flags) as u8) & 0xf) << (4 * h);
+        }
+        (ids, unsure)
+    }
+}
+
 /// Whether this CPU runs the eight-wide paths (AVX2, detected at run time).
 pub fn avx2() -> bool {
     #[cfg(target_arch = "x86_64")]
@@ -939,6 +1195,128 @@ mod tests {
             assert!(both > 500 && differ > 0, "{isa:?}: {both} rays met both faces, {differ} took the other");
             assert!(tied_lanes >= both, "{isa:?}: {tied_lanes} lanes flagged for {both} ties");
         }
+    }
+
+    /// The nearest of `spheres` along a ray as the scene BVH's leaf loop finds it, spheres
+    /// taken in order with t_max shrinking: (index, t).
+    fn spheres_in_order(spheres: &[Sphere], o: Vec3, d: Vec3, t_max: f32, order: &[usize]) -> Option<(usize, f32)> {
+        let mut best = None;
+        let mut tm = t_max;
+        for &k in order {
+            if let Some(t) = spheres[k].intersect(o, d, tm) {
+                tm = t;
+                best = Some((k, t));
+            }
+        }
+        best
+    }
+
+    /// `PacketSpheres` (AVX2 and lane by lane) against `Sphere::intersect` taken in order, in
+    /// either order: overlapping spheres, rays from inside, from their surfaces, and t_max
+    /// cutting through them. Every lane not flagged unsure has the sequential walk's sphere and
+    /// distance bit for bit whatever the order; occlusion likewise; few lanes are unsure.
+    #[test]
+    fn packet_spheres_match_sequential_tests() {
+        let mut rng = Pcg32::new(23, 9);
+        let mut spheres: Vec<Sphere> = (0..12)
+            .map(|i| {
+                let c = Vec3::new(rng.next_f32(), rng.next_f32(), rng.next_f32()) * 4.0 - Vec3::splat(2.0);
+                Sphere { center: c + Vec3::new(3.0, -7.0, 1.5), radius: 0.05 + rng.next_f32() * (if i % 3 == 0 { 2.0 } else { 0.5 }), flip_normals: i % 2 == 0 }
+            })
+            .collect();
+        // Two equal spheres at one place: every hit on them is a tie in distance.
+        spheres.push(spheres[4]);
+        let forward: Vec<usize> = (0..spheres.len()).collect();
+        let backward: Vec<usize> = forward.iter().rev().copied().collect();
+        let mut packed = PacketSpheres::new(&spheres);
+        let (mut lanes, mut unsure_n, mut hits) = (0usize, 0usize, 0usize);
+        for simd in [true, false] {
+            if simd && Isa::cpu() == Isa::Portable {
+                continue;
+            }
+            packed.simd = simd;
+            for p in 0..4000 {
+                let mut r = Rays8::default();
+                let active = if p % 5 == 0 { (rng.next_u32() & 0xff) as u8 } else { 0xff };
+                for l in 0..LANES {
+                    let d = (Vec3::new(rng.next_f32(), rng.next_f32(), rng.next_f32()) * 2.0 - Vec3::ONE).normalize_or(Vec3::X) * (0.5 + rng.next_f32());
+                    let o = match l % 3 {
+                        // On a sphere's surface (as a path leaves it), or inside one.
+                        0 => {
+                            let s = spheres[(rng.next_u32() as usize) % spheres.len()];
+                            s.center + d.normalize() * s.radius * if l == 3 { 0.5 } else { 1.0 }
+                        }
+                        _ => Vec3::new(rng.next_f32(), rng.next_f32(), rng.next_f32()) * 10.0 - Vec3::splat(5.0) + Vec3::new(3.0, -7.0, 1.5),
+                    };
+                    let s = spheres[(rng.next_u32() as usize) % spheres.len()];
+                    let d = match l {
+                        // Grazing: toward a point at the radius (give or take 1e-5) from the
+                        // center, across the line of sight (the f32 cull must keep it).
+                        5 | 7 => {
+                            let u = (s.center - o).cross(d).normalize_or(Vec3::Z);
+                            // The line through o and c + k r u passes at r from c.
+                            let (oc, r) = ((s.center - o).length(), s.radius);
+                            let k = if oc > r * 1.01 { oc / (oc * oc - r * r).sqrt() } else { 1.0 };
+                            s.center + u * r * k * (1.0 + (rng.next_f32() - 0.5) * 2e-5) - o
+                        }
+                        _ if l % 2 == 1 => (s.center - o).normalize_or(Vec3::Y),
+                        _ => d,
+                    };
+                    set_lane(&mut r, l, o, d, if rng.next_f32() < 0.3 { rng.next_f32() * 6.0 } else { f32::INFINITY });
+                }
+                let mut t = r.t_max;
+                let (ids, unsure) = packed.nearest(&r, active, &mut t);
+                let (blocked, occ_unsure) = packed.occluded(&r, active);
+                for l in 0..LANES {
+                    let o = Vec3::new(r.o[0][l], r.o[1][l], r.o[2][l]);
+                    let d = Vec3::new(r.d[0][l], r.d[1][l], r.d[2][l]);
+                    if active & (1 << l) == 0 {
+                        assert_eq!((ids[l], t[l], blocked & (1 << l), unsure & (1 << l)), (u32::MAX, r.t_max[l], 0, 0));
+                        continue;
+                    }
+                    lanes += 1;
+                    let want = [&forward, &backward].map(|order| spheres_in_order(&spheres, o, d, r.t_max[l], order));
+                    assert_eq!(blocked & (1 << l) != 0, want[0].is_some(), "simd {simd}: occlusion of lane {l}");
+                    hits += want[0].is_some() as usize;
+                    if occ_unsure & (1 << l) != 0 {
+                        assert!(blocked & (1 << l) != 0, "an unsure occlusion is a hit");
+                    }
+                    if unsure & (1 << l) != 0 {
+                        unsure_n += 1;
+                        continue;
+                    }
+                    for w in want {
+                        match w {
+                            None => assert_eq!((ids[l], t[l]), (u32::MAX, r.t_max[l]), "simd {simd}: lane {l}: false hit"),
+                            // The twin spheres are one surface: either index is the hit.
+                            Some((k, th)) => {
+                                let same = ids[l] as usize == k
+                                    || (spheres[ids[l] as usize].center == spheres[k].center && spheres[ids[l] as usize].radius == spheres[k].radius);
+                                assert!(same && t[l].to_bits() == th.to_bits(), "simd {simd}: lane {l}: sphere {} at {} for {k} at {th}", ids[l], t[l]);
+                            }
+                        }
+                    }
+                }
+            }
+        }
+        println!("{lanes} lanes, {hits} meet a sphere, {unsure_n} unsure");
+        assert!(hits > lanes / 3, "rays meet spheres");
+        assert!(unsure_n < lanes / 10, "{unsure_n} of {lanes} lanes unsure");
+    }
+
+    /// The twin spheres' hits are ties (unsure: the scene BVH's order picks one).
+    #[test]
+    fn equal_spheres_are_unsure() {
+        let s = Sphere { center: Vec3::new(0.5, 0.25, 4.0), radius: 0.75, flip_normals: false };
+        let packed = PacketSpheres::new(&[s, Sphere { flip_normals: true, ..s }]);
+        let mut r = Rays8::default();
+        for l in 0..LANES {
+            set_lane(&mut r, l, Vec3::new(l as f32 * 0.01, 0.0, 0.0), Vec3::new(0.1, 0.05, 1.0), f32::INFINITY);
+        }
+        let mut t = r.t_max;
+        let (ids, unsure) = packed.nearest(&r, 0xff, &mut t);
+        assert!(ids.iter().all(|&i| i != u32::MAX), "every lane meets them: {ids:?}");
+        assert_eq!(unsure, 0xff);
     }
 
     #[test]

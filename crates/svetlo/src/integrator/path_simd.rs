@@ -1,8 +1,9 @@
 //! The path tracer of `path.rs`, eight paths at a time: the same estimator (next-event
 //! estimation and BSDF sampling combined by the power heuristic, Russian roulette, Mitsuba's
-//! `max_depth`), with the rays of eight paths traced as one packet (`accel::packet`), or, in
-//! scenes of more than 20 000 triangles or with shapes other than meshes, one by one through
-//! the scene's BVH (`Tracer`). Per vertex, `gather` does each lane's branchy part (emission
+//! `max_depth`), with the rays of eight paths traced as one packet (`accel::packet`: the
+//! triangles through the packet BVH, up to 16 analytic spheres tested on every lane), or, in
+//! scenes of more than 20 000 triangles, more spheres or SDF grids, one by one through the
+//! scene's BVH (`Tracer`). Per vertex, `gather` does each lane's branchy part (emission
 //! found, random numbers, light and triangle choice) and `shade8` the arithmetic of all
 //! eight lanes on the paths' state kept as structure of arrays (compiled to AVX2 vector
 //! code; an AVX-512VL build of the same code has 32 registers where the CPU has them).
@@ -44,13 +45,17 @@
 //! traces them again through the scene's BVH: the packet image is the scalar tracer's bit for
 //! bit, in 0.81 of the CPU time single rays took on a Cornell box with a glass box (0.60 of
 //! the scalar tracer's). Opaque scenes skip the check: their ties are shared edges and faces
-//! hidden inside closed objects. Scenes with spheres trace single rays (the packet BVH holds
-//! triangles only): Bitterli's veach-mis (three sphere lights, rough conductor plates) takes
-//! 0.9 of the scalar tracer's CPU time.
+//! hidden inside closed objects. Scenes with spheres (which traced single rays, bit for bit)
+//! keep the check, and test their spheres after the triangles on all lanes with
+//! `Sphere::intersect`'s f64 operations (`PacketSpheres`), as the scene's BVH tests them after
+//! its triangles; the lanes it cannot vouch for (two spheres at one f32 distance, a hit within
+//! rounding of a sphere's box) are traced again singly: Bitterli's veach-mis (three sphere
+//! lights, rough conductor plates) is the single-ray image bit for bit in 0.80 of its CPU time
+//! (0.85 of its instructions).
 
 use super::path::{bsdf_pdf_toward, PathTracer};
 use super::{camera_sample, render_tiles, Integrator, Progress, RenderSettings};
-use crate::accel::packet::{Hits8, PacketBvh, Rays8, LANES};
+use crate::accel::packet::{Hits8, PacketBvh, PacketSpheres, Rays8, LANES};
 use crate::bsdf::{Bsdf, LobeFlags, Material, TransportMode};
 use crate::error::{Error, Result};
 use crate::film::{Film, FilmTile};
@@ -176,6 +181,9 @@ struct MeshLight {
 
 /// Scenes with more triangles than this trace one ray at a time (see [`Tracer`]).
 const PACKET_MAX_TRIANGLES: usize = 20_000;
+/// Scenes with more analytic spheres than this trace one ray at a time: a packet tests every
+/// sphere on every lane, where the scene's BVH walks a hierarchy of them.
+const PACKET_MAX_SPHERES: usize = 16;
 
 /// How the kernel traces its eight rays.
 enum Tracer {
@@ -183,8 +191,11 @@ enum Tracer {
     /// most of their nodes (small scenes). With `ties` (the kernel's index of each shape's
     /// first triangle), the lanes whose nearest hit ties with another triangle's are traced
     /// again through the scene's BVH, so that they take the triangle the scalar tracer takes
-    /// (see [`SimdKernel::new`]).
-    Packets { bvh: PacketBvh, ties: Option<Vec<u32>> },
+    /// (see [`SimdKernel::new`]). `spheres`: the scene's analytic spheres, tested on all
+    /// lanes after the triangles (as the scene's BVH does), with the scene shape of each;
+    /// a lane the spheres leave unsure is traced again through the scene's BVH (then `ties`
+    /// is always there).
+    Packets { bvh: PacketBvh, ties: Option<Vec<u32>>, spheres: Option<Box<(PacketSpheres, Vec<u32>)>> },
     /// One by one through the scene's wide BVH: in a large scene eight incoherent rays share
     /// few nodes, and a packet pays for the union of their walks; the only way to shapes
     /// other than meshes. `first`: the kernel's index of each shape's first triangle
@@ -208,10 +219,21 @@ impl Tracer {
     fn intersect(&self, scene: &Scene, rays: &Rays8, active: u8, others: &mut OtherHits) -> Hits8 {
         // The lanes to trace through the scene's BVH: a packet's tied ones, or all.
         let (mut h, lanes, first) = match self {
-            Tracer::Packets { bvh, ties: None } => return bvh.intersect(rays, active),
-            Tracer::Packets { bvh, ties: Some(first) } => {
+            Tracer::Packets { bvh, ties: None, .. } => return bvh.intersect(rays, active),
+            Tracer::Packets { bvh, ties: Some(first), spheres: None } => {
                 let (h, tied) = bvh.intersect_ties(rays, active);
                 (h, tied, first)
+            }
+            Tracer::Packets { bvh, ties: Some(first), spheres: Some(sp) } => {
+                let (spheres, shapes) = &**sp;
+                let (mut h, tied) = bvh.intersect_ties(rays, active);
+                // The tied lanes go to the scene's BVH whole: no need to test their spheres.
+                let (ids, unsure) = spheres.nearest(rays, active & !tied, &mut h.t);
+                for l in (0..LANES).filter(|&l| ids[l] != u32::MAX) {
+                    others[l] = (shapes[ids[l] as usize], 0);
+                    (h.prim[l], h.b1[l], h.b2[l]) = (OTHER, 0.0, 0.0);
+                }
+                (h, tied | unsure, first)
             }
             Tracer::Single { first } => (Hits8 { t: rays.t_max, prim: [u32::MAX; LANES], b1: [0.0; LANES], b2: [0.0; LANES] }, active, first),
         };
@@ -237,7 +259,14 @@ impl Tracer {
     /// Mask of the active lanes whose ray is blocked.
     fn occluded(&self, scene: &Scene, rays: &Rays8, active: u8) -> u8 {
         match self {
-            Tracer::Packets { bvh, .. } => bvh.occluded(rays, active),
+            Tracer::Packets { bvh, spheres: None, .. } => bvh.occluded(rays, active),
+            Tracer::Packets { bvh, spheres: Some(sp), .. } => {
+                let spheres = &sp.0;
+                let blocked = bvh.occluded(rays, active);
+                let (hit, unsure) = spheres.occluded(rays, active & !blocked);
+                let again = (0..LANES).filter(|l| unsure & (1 << l) != 0 && scene.accel.occluded(&lane_ray(rays, *l))).fold(0, |m, l| m | 1 << l);
+                blocked | (hit & !unsure) | again
+            }
             Tracer::Single { .. } => (0..LANES).filter(|l| active & (1 << l) != 0 && scene.accel.occluded(&lane_ray(rays, *l))).fold(0, |m, l| m | 1 << l),
         }
     }
@@ -359,9 +388,12 @@ impl SimdKernel {
         // shared edges and faces hidden inside opaque objects, and the walk skips the check.
         let large = triangles > PACKET_MAX_TRIANGLES;
         let crossing = scene.materials.iter().any(may_cross);
-        // The packet BVH holds triangles only: other shapes are met through the scene's BVH.
-        let meshes_only = scene.shapes.iter().all(|s| matches!(&*s.geometry, Geometry::Mesh(_)));
-        let single_rays = large || !meshes_only;
+        // The packet BVH holds triangles only: a few spheres are tested on all lanes beside it
+        // (`PacketSpheres`), other shapes (SDF grids) are met through the scene's BVH.
+        let spheres: Vec<(crate::geometry::Sphere, u32)> =
+            scene.shapes.iter().enumerate().filter_map(|(i, s)| if let Geometry::Sphere(sp) = &*s.geometry { Some((*sp, i as u32)) } else { None }).collect();
+        let grids = scene.shapes.iter().any(|s| matches!(&*s.geometry, Geometry::SdfGrid(_)));
+        let single_rays = large || grids || spheres.len() > PACKET_MAX_SPHERES;
         let mut shapes = Vec::with_capacity(scene.shapes.len());
         let mut tris = Vec::new();
         let mut verts = Vec::new();
@@ -402,8 +434,17 @@ impl SimdKernel {
                 tris.push(Tri { p, shading, shape: si as u32, local: t as u32 });
             }
         }
-        let tracer =
-            if single_rays { single_tracer(scene) } else { Tracer::Packets { bvh: PacketBvh::build(&verts), ties: crossing.then(|| first_triangles(scene)) } };
+        let tracer = if single_rays {
+            single_tracer(scene)
+        } else if spheres.is_empty() {
+            Tracer::Packets { bvh: PacketBvh::build(&verts), ties: crossing.then(|| first_triangles(scene)), spheres: None }
+        } else {
+            // Scenes with spheres took single rays, the scalar tracer's image bit for bit: they
+            // keep it with the tie check on their triangles (shared edges, which opaque
+            // mesh scenes leave to the packet tree) and the spheres' unsure lanes retraced.
+            let (geo, shapes): (Vec<_>, Vec<_>) = spheres.into_iter().unzip();
+            Tracer::Packets { bvh: PacketBvh::build(&verts), ties: Some(first_triangles(scene)), spheres: Some(Box::new((PacketSpheres::new(&geo), shapes))) }
+        };
         Some(SimdKernel { tracer, tris, shapes, lights, avx512: avx512() })
     }
 
