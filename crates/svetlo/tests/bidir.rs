@@ -460,6 +460,18 @@ fn packet_closest_hits_match_single_rays() {
     assert_eq!(differ, 0, "packet closest hits disagree with single rays");
 }
 
+/// The project's Cornell box, and the same box with its first material made glass.
+fn cornell_with_and_without_glass(w: u32, h: u32) -> [(&'static str, Scene); 2] {
+    let mut glassy = project_scene("cornell-box.xml", w, h);
+    glassy.materials[0] = Material::Dielectric {
+        eta: 1.5,
+        specular_reflectance: Texture::Constant(Rgb::WHITE),
+        specular_transmittance: Texture::Constant(Rgb::WHITE),
+        roughness: None,
+    };
+    [("cornell box", project_scene("cornell-box.xml", w, h)), ("with glass", glassy)]
+}
+
 /// The light tracer's lockstep walks (eight light paths, their rays as packets) and its
 /// packet shadow rays give the single-ray image bit for bit, under either sampler; in a
 /// scene with glass (where packets' closest hits are not exact) too.
@@ -467,14 +479,7 @@ fn packet_closest_hits_match_single_rays() {
 fn light_tracing_lockstep_is_single_ray_tracing() {
     use svetlo::integrator::light::{LightTracer, Tracing};
     use svetlo::sampling::SamplerKind;
-    let mut glassy = project_scene("cornell-box.xml", 24, 20);
-    glassy.materials[0] = Material::Dielectric {
-        eta: 1.5,
-        specular_reflectance: Texture::Constant(Rgb::WHITE),
-        specular_transmittance: Texture::Constant(Rgb::WHITE),
-        roughness: None,
-    };
-    for (name, scene) in [("cornell box", project_scene("cornell-box.xml", 24, 20)), ("with glass", glassy)] {
+    for (name, scene) in cornell_with_and_without_glass(24, 20) {
         for sampler in [SamplerKind::Independent, SamplerKind::Sobol] {
             let set = RenderSettings { sampler, threads: 2, ..settings(5, 6) };
             let render = |tr| LightTracer.render_traced(&scene, &set, &Progress::new(), tr).expect("render").image();
@@ -491,14 +496,7 @@ fn light_tracing_lockstep_is_single_ray_tracing() {
 #[test]
 fn bdpt_packet_shadow_rays_are_single_rays() {
     use svetlo::sampling::SamplerKind;
-    let mut glassy = project_scene("cornell-box.xml", 20, 16);
-    glassy.materials[0] = Material::Dielectric {
-        eta: 1.5,
-        specular_reflectance: Texture::Constant(Rgb::WHITE),
-        specular_transmittance: Texture::Constant(Rgb::WHITE),
-        roughness: None,
-    };
-    for (name, scene) in [("cornell box", project_scene("cornell-box.xml", 20, 16)), ("with glass", glassy)] {
+    for (name, scene) in cornell_with_and_without_glass(20, 16) {
         for sampler in [SamplerKind::Independent, SamplerKind::Sobol] {
             let set = RenderSettings { sampler, threads: 2, ..settings(4, 6) };
             let render = |packets| Bdpt.render_traced(&scene, &set, &Progress::new(), packets).expect("render").image();

@@ -168,6 +168,27 @@ fn sampling_mean(t: &Texture, uv: TexPoint) -> f32 {
 }
 
 impl Material {
+    /// Whether a path may pass through a surface of this material (transmission or a null
+    /// interaction); unknown compositions count as crossing. Packet traversals break ties
+    /// between coincident faces differently from the scene's BVH, which matters only where
+    /// paths cross surfaces (a glass box's bottom lying on the floor).
+    pub fn may_cross(&self) -> bool {
+        match self {
+            Material::Diffuse { .. }
+            | Material::Conductor { .. }
+            | Material::Plastic { .. }
+            | Material::Phong { .. }
+            | Material::BlinnPhong { .. }
+            | Material::CookTorrance { .. }
+            | Material::OrenNayar { .. }
+            | Material::Ward { .. } => false,
+            Material::TwoSided { front, back } => front.may_cross() || back.may_cross(),
+            Material::NormalMap { inner, .. } | Material::BumpMap { inner, .. } => inner.may_cross(),
+            Material::Mix { a, b, .. } | Material::Blend { a, b, .. } => a.may_cross() || b.may_cross(),
+            _ => true,
+        }
+    }
+
     /// The Mitsuba plugin name this material stands for (`svetlo info`, Python's `scene.info()`).
     pub fn kind_name(&self) -> String {
         let rough = |r: bool, smooth: &str, rough: &str| if r { rough.to_string() } else { smooth.to_string() };

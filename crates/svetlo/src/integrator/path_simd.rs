@@ -317,25 +317,6 @@ fn diffuse_albedo(m: &Material) -> Option<Albedo> {
     }
 }
 
-/// Whether a path may pass through a surface of this material (transmission or a null
-/// interaction); unknown compositions count as crossing.
-fn may_cross(m: &Material) -> bool {
-    match m {
-        Material::Diffuse { .. }
-        | Material::Conductor { .. }
-        | Material::Plastic { .. }
-        | Material::Phong { .. }
-        | Material::BlinnPhong { .. }
-        | Material::CookTorrance { .. }
-        | Material::OrenNayar { .. }
-        | Material::Ward { .. } => false,
-        Material::TwoSided { front, back } => may_cross(front) || may_cross(back),
-        Material::NormalMap { inner, .. } | Material::BumpMap { inner, .. } => may_cross(inner),
-        Material::Mix { a, b, .. } | Material::Blend { a, b, .. } => may_cross(a) || may_cross(b),
-        _ => true,
-    }
-}
-
 fn area_of(scene: &Scene, li: u32) -> Option<&AreaLight> {
     match scene.lights.get(li as usize)? {
         Light::Area(a) => Some(a),
@@ -387,7 +368,7 @@ impl SimdKernel {
         // darker. There the tied lanes take the scene BVH's hit (`Tracer`); elsewhere ties are
         // shared edges and faces hidden inside opaque objects, and the walk skips the check.
         let large = triangles > PACKET_MAX_TRIANGLES;
-        let crossing = scene.materials.iter().any(may_cross);
+        let crossing = scene.materials.iter().any(Material::may_cross);
         // The packet BVH holds triangles only: a few spheres are tested on all lanes beside it
         // (`PacketSpheres`), other shapes (SDF grids) are met through the scene's BVH.
         let spheres: Vec<(crate::geometry::Sphere, u32)> =

@@ -66,7 +66,7 @@ impl ShadowPackets {
             tris.extend((0..m.triangle_count()).map(|t| m.vertices(t)));
         }
         let bvh = PacketBvh::build(&tris);
-        let exact_closest = !scene.materials.iter().any(may_cross);
+        let exact_closest = !scene.materials.iter().any(Material::may_cross);
         bvh.simd().then_some(ShadowPackets { bvh, first, exact_closest })
     }
 
@@ -127,24 +127,5 @@ impl ShadowPackets {
         let shape = self.first.partition_point(|&f| f <= prim) - 1;
         let hit = PrimHit { t: hits.hits.t[l], shape: shape as u32, prim: prim - self.first[shape], b1: hits.hits.b1[l], b2: hits.hits.b2[l] };
         Some(scene.interaction(&hit, ray))
-    }
-}
-
-/// Whether a path may pass through a surface of this material (transmission or a null
-/// interaction); unknown compositions count as crossing (as `integrator::path_simd`'s).
-fn may_cross(m: &Material) -> bool {
-    match m {
-        Material::Diffuse { .. }
-        | Material::Conductor { .. }
-        | Material::Plastic { .. }
-        | Material::Phong { .. }
-        | Material::BlinnPhong { .. }
-        | Material::CookTorrance { .. }
-        | Material::OrenNayar { .. }
-        | Material::Ward { .. } => false,
-        Material::TwoSided { front, back } => may_cross(front) || may_cross(back),
-        Material::NormalMap { inner, .. } | Material::BumpMap { inner, .. } => may_cross(inner),
-        Material::Mix { a, b, .. } | Material::Blend { a, b, .. } => may_cross(a) || may_cross(b),
-        _ => true,
     }
 }
