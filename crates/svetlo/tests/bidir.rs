@@ -486,36 +486,6 @@ fn light_tracing_lockstep_is_single_ray_tracing() {
     }
 }
 
-/// Light tracing in lockstep inside glass boxes standing on the Cornell box's floor (Mitsuba's
-/// cbox, both boxes dielectric): the boxes' bottoms lie on the floor, where the packet walk
-/// once missed the floor a few ulps nearer than a bottom. The image is the single rays'.
-#[test]
-fn light_tracing_lockstep_in_glass_boxes_on_the_floor() {
-    use svetlo::integrator::light::{LightTracer, Tracing};
-    let Some(dir) = shared() else { return };
-    let p = dir.join("mitsuba-data/scenes/cbox/cbox-rgb.xml");
-    let mut scene = load_scene(&p, &[]).unwrap_or_else(|e| panic!("{}: {e}", p.display()));
-    scene.camera.width = 48;
-    scene.camera.height = 48;
-    let boxes = scene.shapes.len() - 2..scene.shapes.len();
-    for i in boxes {
-        let m = scene.shapes[i].material as usize;
-        scene.materials[m] = Material::Dielectric {
-            eta: 1.5,
-            specular_reflectance: Texture::Constant(Rgb::WHITE),
-            specular_transmittance: Texture::Constant(Rgb::WHITE),
-            roughness: None,
-        };
-    }
-    for sampler in [SamplerKind::Independent, SamplerKind::Sobol] {
-        let set = RenderSettings { sampler, threads: 2, ..settings(8, 8) };
-        let render = |tr| LightTracer.render_traced(&scene, &set, &Progress::new(), tr).expect("render").image();
-        let single = render(Tracing::Single);
-        assert!(single.mean().max_component() > 0.0);
-        assert_eq!(render(Tracing::Lockstep).data, single.data, "{sampler:?}: lockstep differs");
-    }
-}
-
 /// BDPT's t = 1 strategies tested as packets of shadow rays give the single-ray image bit
 /// for bit, under either sampler, with and without glass.
 #[test]

@@ -28,8 +28,8 @@ pub struct LightTracer;
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
 pub enum Tracing {
     /// Eight light paths walk in lockstep, their rays traced as packets, and the shadow rays
-    /// of their camera connections tested as packets (tied lanes retraced as single rays:
-    /// `ShadowPackets::interaction`).
+    /// of their camera connections tested as packets (in scenes where packets' closest hits
+    /// are exact, `ShadowPackets::exact_closest`; elsewhere as `PacketShadows`).
     #[default]
     Lockstep,
     /// One path at a time, the shadow rays of consecutive connections as packets.
@@ -97,7 +97,7 @@ impl SplatEstimator for Estimator {
         let Some(packets) = self.packets.as_ref().filter(|_| t.settings.aovs().is_empty() && self.tracing != Tracing::Single) else {
             return render_tile_by_sample(self, t, sampler, paths, splats);
         };
-        if self.tracing == Tracing::Lockstep {
+        if self.tracing == Tracing::Lockstep && packets.exact_closest() {
             return self.render_tile_lockstep(t, packets, sampler, paths, splats);
         }
         let path = &mut paths[0];
