@@ -37,6 +37,14 @@ const FAR_SLACK: f32 = 1.0 + 2.0 * (3.0 * f32::EPSILON * 0.5) / (1.0 - 3.0 * f32
 /// tests them in (the test accepts t_scaled <= t_max * det, a few ulps either way), so two
 /// trees can disagree there; 1e-5 is far above those few ulps.
 const TIE_TOL: f32 = 1e-5;
+/// Slack on the far distance of the closest-hit walks' box tests (and their stack pops).
+/// `FAR_SLACK` covers the slab test's rounding, not the triangle test's: that one rounds at
+/// the scale of the vertices, so a far-off triangle's t may come out a few ulps of the
+/// vertices short of its plane's true distance (the cbox floor: 2.8025064 for 2.8025122).
+/// Once a coplanar triangle has set t_max, the box of such a triangle (flat, entered at the
+/// plane's distance) must still be entered, for the nearer hit and for the tie check out to
+/// `TIE_TOL`; the occlusion walk keeps `FAR_SLACK`, as the scene BVH's.
+const HIT_SLACK: f32 = 1.0 + 2.0 * TIE_TOL;
 
 /// Two child boxes (`[child][min x, y, z, max x, y, z]`) and their codes: an inner node's
 /// index, or `LEAF_BIT | start << 3 | (count - 1)` into the triangle arrays.
@@ -416,7 +424,7 @@ impl PacketBvh {
                         tn = tn.max((near - o[a]) * inv[a]);
                         tf = tf.min((far - o[a]) * inv[a]);
                     }
-                    if tn <= tf * FAR_SLACK {
+                    if tn <= tf * if ANY { FAR_SLACK } else { HIT_SLACK } {
                         stack[sp] = node.child[k];
                         sp += 1;
                     }
@@ -452,7 +460,7 @@ impl PacketBvh {
 /// lanes that hit. Without, returns (with `TIES`) the lanes where a triangle was hit within
 /// `TIE_TOL` of the lane's nearest hit so far, accepted or not: whichever of the two comes
 /// second in the walk's order meets the other as the nearest so far (a box holding a hit
-/// that close is entered: `FAR_SLACK` is wider than the triangle test's rounding). Lanes
+/// that close is entered: `HIT_SLACK` is wider than the triangle test's rounding). Lanes
 /// that are not live carry t_max = -inf, which fails every box and stack test, so only the
 /// triangle test needs the live mask.
 #[cfg(target_arch = "x86_64")]
@@ -500,7 +508,7 @@ macro_rules! walk_simd {
                 let lane_bits = _mm256_setr_epi32(1, 2, 4, 8, 16, 32, 64, 128);
                 let mut live = _mm256_castsi256_ps(_mm256_cmpgt_epi32(_mm256_and_si256(_mm256_set1_epi32(active as i32), lane_bits), zero_i));
                 let zero = _mm256_setzero_ps();
-                let slack = _mm256_set1_ps(FAR_SLACK);
+                let slack = _mm256_set1_ps(if ANY { FAR_SLACK } else { HIT_SLACK });
                 let inf = _mm256_set1_ps(f32::INFINITY);
                 let mut t_max = _mm256_blendv_ps(_mm256_set1_ps(f32::NEG_INFINITY), ld(&h.t), live);
                 let mut hit_mask = 0u8;
@@ -1194,6 +1202,62 @@ mod tests {
             // Most rays meet the overlap; the walk's order keeps the floor there.
             assert!(both > 500 && differ > 0, "{isa:?}: {both} rays met both faces, {differ} took the other");
             assert!(tied_lanes >= both, "{isa:?}: {tied_lanes} lanes flagged for {both} ties");
+        }
+    }
+
+    /// A ray inside a glass box standing on the Cornell box floor (cbox-rgb.xml, world space:
+    /// the floor's triangle 0, then the 12 of `cbox_smallbox`) reaches the floor plane y = 0
+    /// at 2.8025122, but the triangle test, rounding at the scale of the vertices (~500), puts
+    /// the floor at 2.8025064 and the box's bottom near t_max = 2.802507. The floor's flat box
+    /// is then entered at 2.8025122: a cull within `FAR_SLACK` of t_max skipped it, and the
+    /// walk missed a hit that brute force (and the tie check) must see.
+    #[test]
+    fn coplanar_floor_far_from_origin_is_found() {
+        let v = |x: u32, y: u32, z: u32| Vec3::new(f32::from_bits(x), f32::from_bits(y), f32::from_bits(z));
+        let tris = [
+            [v(0x440a3333, 0, 0), v(0, 0, 0), v(0, 0, 0x440bcccd)],
+            [v(0x43020000, 0x43250000, 0x42820000), v(0x42a40000, 0x43250000, 0x43610000), v(0x43700000, 0x43250000, 0x43880000)],
+            [v(0x43020000, 0x43250000, 0x42820000), v(0x43700000, 0x43250000, 0x43880000), v(0x43910000, 0x43250000, 0x42e40000)],
+            [v(0x43910000, 0, 0x42e40000), v(0x43910000, 0x43250000, 0x42e40000), v(0x43700000, 0x43250000, 0x43880000)],
+            [v(0x43910000, 0, 0x42e40000), v(0x43700000, 0x43250000, 0x43880000), v(0x43700000, 0, 0x43880000)],
+            [v(0x43020000, 0, 0x42820000), v(0x43020000, 0x43250000, 0x42820000), v(0x43910000, 0x43250000, 0x42e40000)],
+            [v(0x43020000, 0, 0x42820000), v(0x43910000, 0x43250000, 0x42e40000), v(0x43910000, 0, 0x42e40000)],
+            [v(0x42a40000, 0, 0x43610000), v(0x42a40000, 0x43250000, 0x43610000), v(0x43020000, 0x43250000, 0x42820000)],
+            [v(0x42a40000, 0, 0x43610000), v(0x43020000, 0x43250000, 0x42820000), v(0x43020000, 0, 0x42820000)],
+            [v(0x43700000, 0, 0x43880000), v(0x43700000, 0x43250000, 0x43880000), v(0x42a40000, 0x43250000, 0x43610000)],
+            [v(0x43700000, 0, 0x43880000), v(0x42a40000, 0x43250000, 0x43610000), v(0x42a40000, 0, 0x43610000)],
+            [v(0x43910000, 0, 0x42e40000), v(0x43700000, 0, 0x43880000), v(0x42a40000, 0, 0x43610000)],
+            [v(0x43910000, 0, 0x42e40000), v(0x42a40000, 0, 0x43610000), v(0x43020000, 0, 0x42820000)],
+        ];
+        let o = Vec3::new(271.83633, 1.1461626, 171.39543);
+        let d = Vec3::new(0.103113756, -0.40897685, -0.9067004);
+        let want = brute(&tris, o, d, 2.802507).expect("brute force meets the floor");
+        assert_eq!((want.0, want.1), (2.8025064, 0));
+        let mut bvh = PacketBvh::build(&tris);
+        for isa in isas() {
+            bvh.isa = isa;
+            for t_max in [2.802507, f32::INFINITY] {
+                let mut r = Rays8::default();
+                for l in 0..LANES {
+                    set_lane(&mut r, l, o, d, t_max);
+                }
+                // Occlusion (`occluded`) culls as the scene BVH's shadow walk does: not checked here.
+                for active in [1u8, 0xff] {
+                    let plain = bvh.intersect(&r, active);
+                    let (h, ties) = bvh.intersect_ties(&r, active);
+                    assert_eq!((h.t, h.prim), (plain.t, plain.prim), "{isa:?}: the same hits");
+                    for l in (0..LANES).filter(|l| active & (1 << l) != 0) {
+                        // The floor (0) or a bottom triangle (11, 12) within a few ulps of it.
+                        assert!([0, 11, 12].contains(&h.prim[l]), "{isa:?}: t_max {t_max}: lane {l} took {}", h.prim[l]);
+                        assert!((h.t[l] - want.0).abs() <= 1e-6 * want.0, "{isa:?}: t_max {t_max}: lane {l} at {}", h.t[l]);
+                    }
+                    // The bottom triangle 11 is met at 2.8025074: past the short t_max, a tie
+                    // with the floor without it.
+                    if t_max.is_infinite() {
+                        assert_eq!(ties, active, "{isa:?}: the floor and the bottom tie");
+                    }
+                }
+            }
         }
     }
 
