@@ -361,16 +361,10 @@ fn splatting_renders_do_not_depend_on_thread_count() {
 /// triangle corners and edge midpoints (the ties where the two trees' box tests and the
 /// triangle tests could part). Random rays must agree exactly; at the tie targets a flipped
 /// answer moves one splat, so more than 1 in 10 000 flipped would shift pixel means by more
-/// than this file's Z-tests can see at their spp: it must stay below that.
-#[test]
-fn packet_shadow_rays_match_single_rays() {
-    use svetlo::path::ShadowPackets;
-    use svetlo::sampling::Pcg32;
-    let scene = project_scene("cornell-box.xml", 16, 16);
-    let Some(packets) = ShadowPackets::new(&scene) else {
-        println!("no eight-wide SIMD here: nothing to compare");
-        return;
-    };
+
+/// The scene's triangle corners and edge midpoints (where rays are aimed to meet edges), and
+/// their bounding box.
+fn corners_and_bounds(scene: &Scene) -> (Vec<Vec3>, Vec3, Vec3) {
     let mut corners = Vec::new();
     for s in &scene.shapes {
         if let Geometry::Mesh(m) = &*s.geometry {
@@ -381,6 +375,19 @@ fn packet_shadow_rays_match_single_rays() {
         }
     }
     let (lo, hi) = corners.iter().fold((Vec3::splat(f32::MAX), Vec3::splat(f32::MIN)), |(lo, hi), p| (lo.min(*p), hi.max(*p)));
+    (corners, lo, hi)
+}
+/// than this file's Z-tests can see at their spp: it must stay below that.
+#[test]
+fn packet_shadow_rays_match_single_rays() {
+    use svetlo::path::ShadowPackets;
+    use svetlo::sampling::Pcg32;
+    let scene = project_scene("cornell-box.xml", 16, 16);
+    let Some(packets) = ShadowPackets::new(&scene) else {
+        println!("no eight-wide SIMD here: nothing to compare");
+        return;
+    };
+    let (corners, lo, hi) = corners_and_bounds(&scene);
     let mut rng = Pcg32::new(7, 3);
     let point = |rng: &mut Pcg32| lo + (hi - lo) * Vec3::new(rng.next_f32(), rng.next_f32(), rng.next_f32());
     let (mut random_flips, mut tie_flips, mut n) = (0usize, 0usize, 0usize);
@@ -424,16 +431,7 @@ fn packet_closest_hits_match_single_rays() {
         return;
     };
     assert!(packets.exact_closest(), "an opaque scene");
-    let mut corners = Vec::new();
-    for s in &scene.shapes {
-        if let Geometry::Mesh(m) = &*s.geometry {
-            for t in 0..m.triangle_count() {
-                let [a, b, c] = m.vertices(t);
-                corners.extend([a, b, c, (a + b) * 0.5, (b + c) * 0.5, (c + a) * 0.5]);
-            }
-        }
-    }
-    let (lo, hi) = corners.iter().fold((Vec3::splat(f32::MAX), Vec3::splat(f32::MIN)), |(lo, hi), p| (lo.min(*p), hi.max(*p)));
+    let (corners, lo, hi) = corners_and_bounds(&scene);
     let mut rng = Pcg32::new(11, 5);
     let point = |rng: &mut Pcg32| lo + (hi - lo) * Vec3::new(rng.next_f32(), rng.next_f32(), rng.next_f32());
     let key = |si: &Option<svetlo::geometry::SurfaceInteraction>| {
