@@ -355,13 +355,6 @@ fn splatting_renders_do_not_depend_on_thread_count() {
     }
 }
 
-/// Light tracing tests its camera connections' shadow rays as packets (`path::ShadowPackets`):
-/// the same watertight triangle test over the same triangles, so every answer should be the
-/// single ray's. Rays from random points toward random points, and toward the scene's
-/// triangle corners and edge midpoints (the ties where the two trees' box tests and the
-/// triangle tests could part). Random rays must agree exactly; at the tie targets a flipped
-/// answer moves one splat, so more than 1 in 10 000 flipped would shift pixel means by more
-
 /// The scene's triangle corners and edge midpoints (where rays are aimed to meet edges), and
 /// their bounding box.
 fn corners_and_bounds(scene: &Scene) -> (Vec<Vec3>, Vec3, Vec3) {
@@ -377,6 +370,13 @@ fn corners_and_bounds(scene: &Scene) -> (Vec<Vec3>, Vec3, Vec3) {
     let (lo, hi) = corners.iter().fold((Vec3::splat(f32::MAX), Vec3::splat(f32::MIN)), |(lo, hi), p| (lo.min(*p), hi.max(*p)));
     (corners, lo, hi)
 }
+
+/// Light tracing tests its camera connections' shadow rays as packets (`path::ShadowPackets`):
+/// the same watertight triangle test over the same triangles, so every answer should be the
+/// single ray's. Rays from random points toward random points, and toward the scene's
+/// triangle corners and edge midpoints (the ties where the two trees' box tests and the
+/// triangle tests could part). Random rays must agree exactly; at the tie targets a flipped
+/// answer moves one splat, so more than 1 in 10 000 flipped would shift pixel means by more
 /// than this file's Z-tests can see at their spp: it must stay below that.
 #[test]
 fn packet_shadow_rays_match_single_rays() {
