@@ -40,17 +40,8 @@ pub struct Coated {
     pub n_samples: u32,
 }
 
-#[inline]
-fn mix64(mut x: u64) -> u64 {
-    x ^= x >> 30;
-    x = x.wrapping_mul(0xbf58_476d_1ce4_e5b9);
-    x ^= x >> 27;
-    x = x.wrapping_mul(0x94d0_49bb_1331_11eb);
-    x ^ (x >> 31)
-}
-
 fn hash(v: &[f32]) -> u64 {
-    v.iter().fold(0x9e37_79b9_7f4a_7c15u64, |h, x| mix64(h ^ x.to_bits() as u64).wrapping_add(0x9e37_79b9))
+    v.iter().fold(0x9e37_79b9_7f4a_7c15u64, |h, x| crate::sampling::rng::mix64(h ^ x.to_bits() as u64).wrapping_add(0x9e37_79b9))
 }
 
 fn flip_mode(m: TransportMode) -> TransportMode {
