@@ -162,6 +162,7 @@ pub fn gather(scene: &Scene, plane: &WorkPlane, spp: u32, settings: &RenderSetti
     let frame = crate::math::Frame::from_normal(n);
     let res: Vec<(f64, f64)> = (0..nu * nv)
         .into_par_iter()
+        .with_max_len(1) // a point a task: see `splat::render_chunked`
         .map(|k| {
             let (i, j) = (k / nv, k % nv);
             let p = plane.point(i, j);
@@ -236,6 +237,7 @@ pub fn radiosity(scene: &Scene, plane: &WorkPlane, opts: &RadiosityOptions, sett
     let delta: Vec<&Light> = scene.lights.iter().filter(|l| l.is_delta()).collect();
     let res: Vec<(f64, f64)> = (0..nu * nv)
         .into_par_iter()
+        .with_max_len(1) // a point a task: see `splat::render_chunked`
         .map(|k| {
             let p = plane.point(k / nv, k % nv);
             // A 2 × 2 stratification of a spread opening (one point for the others).
@@ -278,6 +280,7 @@ pub fn light_trace(scene: &Scene, plane: &WorkPlane, photons: u64, settings: &Re
     let per_batch = (photons / BATCHES as u64).max(1);
     let batches: Vec<Vec<f64>> = (0..BATCHES)
         .into_par_iter()
+        .with_max_len(1)
         .map(|b| {
             let mut grid = vec![0.0f64; nu * nv];
             let mut sampler = IndependentSampler::new(1, settings.seed ^ 0x5eed_0000);

@@ -602,7 +602,8 @@ pub fn run_blocks<T: MetropolisTarget>(
             if chains.iter().all(|c| c.as_ref().is_none_or(|c| c.left == 0)) {
                 break;
             }
-            let results: Vec<(Vec<Deposit>, ChainStats)> = pool.install(|| chains.par_iter_mut().map(|slot| advance(target, slot, round, b, &names)).collect());
+            let results: Vec<(Vec<Deposit>, ChainStats)> =
+                pool.install(|| chains.par_iter_mut().with_max_len(1).map(|slot| advance(target, slot, round, b, &names)).collect());
             for (ci, (splats, st)) in results.iter().enumerate() {
                 let c = c0 + ci;
                 let film = if timed { &mut timed_film } else { &mut films[(c / CHAINS_PER_BLOCK) - g0 as usize] };

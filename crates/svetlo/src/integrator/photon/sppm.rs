@@ -322,6 +322,7 @@ impl Sppm {
         type Pixel<'a> = (Rgb, LayerSample, Vec<Option<VisiblePoint<'a>>>);
         let vrows: Vec<Vec<Pixel>> = rows
             .into_par_iter()
+            .with_max_len(1) // a row a task: see `splat::render_chunked`
             .map(|y| {
                 let mut sampler = proto.clone_box();
                 (0..w)

@@ -104,9 +104,12 @@ pub(crate) fn trace_photons<T: Send>(
 ) -> Vec<T> {
     const CHUNK: u64 = 4096;
     let chunks = (range.end.saturating_sub(range.start)).div_ceil(CHUNK);
-    let parts: Vec<Vec<T>> = (0..chunks)
+    // usize: a u64 range is not an indexed parallel iterator (no `with_max_len`).
+    let parts: Vec<Vec<T>> = (0..chunks as usize)
         .into_par_iter()
+        .with_max_len(1) // a chunk a task: see `splat::render_chunked`
         .map(|c| {
+            let c = c as u64;
             let mut out = Vec::new();
             let mut sampler = IndependentSampler::new(1, seed);
             let mut path = Vec::new();
