@@ -254,17 +254,8 @@ impl BilinearDistribution {
         (top[0].0 * (1.0 - fx) + top[1].0 * fx) * (1.0 - fy) + (bottom[0].0 * (1.0 - fx) + bottom[1].0 * fx) * fy
     }
 
-    #[cfg(test)]
-    fn sample(&self, u: Vec2) -> Option<(Vec2, f32)> {
-        if self.integral <= 0.0 {
-            return None;
-        }
-        let g = self.sample_point(u);
-        let pdf = self.pdf(g);
-        (pdf > 0.0).then_some((g, pdf))
-    }
-
-    /// The point `sample` chooses (the integral must be positive); its density is `pdf`.
+    /// A point with density `pdf` (the integral must be positive): a row by the marginal, a
+    /// cell in it by the conditional, a point in the cell by inverting the bilinear patch.
     #[inline]
     fn sample_point(&self, u: Vec2) -> Vec2 {
         let (iy, _, uy) = self.marginal.sample_discrete(u.y);
