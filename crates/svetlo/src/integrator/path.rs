@@ -102,6 +102,24 @@ impl PixelEstimator for PathTracer {
     }
 }
 
+/// The closest hit along `ray` where only its emission can count: None where the ray
+/// escapes, `Some(None)` where it hits a shape without an area light (no surface record
+/// built: at max depth 2 that is every other hit of a BSDF-sampled ray), else the record
+/// `Scene::intersect` gives.
+#[inline]
+fn intersect_emitter(scene: &Scene, ray: &Ray) -> Option<Option<SurfaceInteraction>> {
+    if !(scene.moving.is_empty() && scene.settings.ray_epsilon <= 0.0) {
+        let hit = scene.intersect_prim(ray)?;
+        return Some(if scene.shapes[hit.shape as usize].light.is_some() { scene.intersect(ray) } else { None });
+    }
+    // A static scene: what `Scene::intersect` does, the record built only for an emitter.
+    let mut hit = scene.accel.intersect(ray)?;
+    if !scene.static_shapes.is_empty() {
+        hit.shape = scene.static_shapes[hit.shape as usize];
+    }
+    Some(scene.shapes[hit.shape as usize].light.is_some().then(|| scene.interaction(&hit, ray)))
+}
+
 /// A camera-path vertex that scattered by a non-specular BSDF sample, kept for the MIS
 /// weight of the emitter (or the environment) its sample reaches.
 struct ScatterPoint {
@@ -205,7 +223,11 @@ pub(crate) fn camera_walk<R: WalkRules + ?Sized>(
     loop {
         depth += 1;
         let hide = depth == 1 && settings.hide_emitters;
-        let Some(si) = scene.intersect(&ray) else {
+        // Where only the hit's emission can count (nothing after it fits in max_depth), a hit
+        // on a shape that does not emit adds nothing: found without its surface record.
+        let emission_only = last || !settings.depth_allows(depth + 1);
+        let hit = if emission_only { intersect_emitter(scene, &ray) } else { scene.intersect(&ray).map(Some) };
+        let Some(hit) = hit else {
             if !hide {
                 for &ei in &scene.environment_lights {
                     let light = &scene.lights[ei as usize];
@@ -220,6 +242,7 @@ pub(crate) fn camera_walk<R: WalkRules + ?Sized>(
             }
             break;
         };
+        let Some(si) = hit else { break };
         if let Some((li, area)) = scene.area_light(&si) {
             let le = area.l(si.ng, si.uv, si.wo);
             if !le.is_black() && !hide {

@@ -309,6 +309,14 @@ pub struct SimdKernel {
 }
 
 /// The reflectance of a diffuse model (a constant one clamped as `Material::bsdf` does).
+/// The albedos of a material the kernel shades itself (Lambertian, on one side or two).
+fn lambert_sides(m: &Material) -> Option<(Albedo, Option<Albedo>)> {
+    match m {
+        Material::TwoSided { front, back } => diffuse_albedo(front).zip(diffuse_albedo(back).map(Some)),
+        m => diffuse_albedo(m).map(|f| (f, None)),
+    }
+}
+
 fn diffuse_albedo(m: &Material) -> Option<Albedo> {
     match m {
         Material::Diffuse { reflectance: Texture::Constant(c) } => Some(Albedo::Constant(c.clamp(0.0, 1.0))),
@@ -329,6 +337,14 @@ impl SimdKernel {
     pub fn new(scene: &Scene, _settings: &RenderSettings) -> Option<SimdKernel> {
         // One environment at most: a lane adds what its escaped ray sees as one contribution.
         if !scene.moving.is_empty() || !scene.static_shapes.is_empty() || scene.environment_lights.len() > 1 || scene.settings.ray_epsilon > 0.0 {
+            return None;
+        }
+        // A large scene with a shape the kernel would shade by scalar code is refused below
+        // (`_ if large`): refused here before anything is unpacked, since the shapes before
+        // that one (bsdf_spheres: two spheres of 32k triangles) cost ~3 % of a 128 spp render.
+        let triangles: usize = scene.shapes.iter().map(|s| if let Geometry::Mesh(m) = &*s.geometry { m.triangle_count() } else { 0 }).sum();
+        let large = triangles > PACKET_MAX_TRIANGLES;
+        if large && scene.shapes.iter().any(|s| s.detail || scene.materials.get(s.material as usize).is_none_or(|m| lambert_sides(m).is_none())) {
             return None;
         }
         let mut lights = Vec::with_capacity(scene.lights.len());
@@ -360,14 +376,12 @@ impl SimdKernel {
         // and the kernel's set-up (unpacking every triangle) cost 5-10 %: bsdf_spheres' grid
         // (325k triangles, 8 of 12 spheres not Lambertian, depth 6) took 1.06 the scalar
         // tracer's time at 512 spp, 1.00 at 2048. Such scenes take the scalar tracer.
-        let triangles: usize = scene.shapes.iter().map(|s| if let Geometry::Mesh(m) = &*s.geometry { m.triangle_count() } else { 0 }).sum();
         // Where paths cross surfaces (dielectrics, masks), a path inside an object meets faces
         // that lie on another surface (a glass box's bottom on the floor) at the same distance:
         // a tie, which each tree breaks by its own order of tests. Packets kept the floor where
         // the scene's BVH kept the glass: a Cornell box with a glass box came out 0.2-0.3 %
         // darker. There the tied lanes take the scene BVH's hit (`Tracer`); elsewhere ties are
         // shared edges and faces hidden inside opaque objects, and the walk skips the check.
-        let large = triangles > PACKET_MAX_TRIANGLES;
         let crossing = scene.materials.iter().any(Material::may_cross);
         // The packet BVH holds triangles only: a few spheres are tested on all lanes beside it
         // (`PacketSpheres`), other shapes (SDF grids) are met through the scene's BVH.
@@ -380,10 +394,7 @@ impl SimdKernel {
         let mut verts = Vec::new();
         for (si, s) in scene.shapes.iter().enumerate() {
             let mat = scene.materials.get(s.material as usize)?;
-            let lambert = match mat {
-                Material::TwoSided { front, back } => diffuse_albedo(front).zip(diffuse_albedo(back).map(Some)),
-                m => diffuse_albedo(m).map(|f| (f, None)),
-            };
+            let lambert = lambert_sides(mat);
             // Any other material (or surface detail) by its own scalar code, lane by lane.
             let (scalar_bsdf, (front, back)) = match lambert {
                 Some(fb) if !s.detail => (false, fb),

@@ -19,7 +19,7 @@ use crate::math::{approx, safe_sqrt, INV_2PI, INV_PI, PI};
 use crate::sampling::Distribution1D;
 use crate::spectrum::Rgb;
 use crate::texture::Bitmap;
-use glam::{Mat3, Mat4, Vec2, Vec3};
+use glam::{Mat3, Mat4, Vec2, Vec3, Vec4};
 use std::sync::Arc;
 
 #[derive(Clone, Debug)]
@@ -35,14 +35,21 @@ pub struct EnvMap {
     dist: BilinearDistribution,
 }
 
-/// A vertex of the grid: its radiance and its sampling weight side by side, so that
-/// evaluating the radiance where a sample landed, or the density where a ray escaped, reads
-/// the cache lines the other one just read.
+/// A vertex of the grid: its radiance (x, y, z) and its sampling weight (w) side by side,
+/// so that evaluating the radiance where a sample landed, or the density where a ray
+/// escaped, reads the cache lines the other one just read, and one four-wide bilinear
+/// interpolation gives both (lane by lane the same operations as the scalar formulas).
 #[derive(Clone, Copy, Debug, Default)]
-#[repr(C, align(16))]
-struct Texel {
-    rgb: Rgb,
-    weight: f32,
+struct Texel(Vec4);
+
+impl Texel {
+    fn new(rgb: Rgb, weight: f32) -> Self {
+        Texel(Vec4::new(rgb.r, rgb.g, rgb.b, weight))
+    }
+    #[inline]
+    fn weight(self) -> f32 {
+        self.0.w
+    }
 }
 
 impl EnvMap {
@@ -65,7 +72,7 @@ impl EnvMap {
                 let g = &grid;
                 (0..=cols).map(move |x| {
                     let rgb = g[y * (cols + 1) + x];
-                    Texel { rgb, weight: rgb.luminance().max(0.0) * sin_t }
+                    Texel::new(rgb, rgb.luminance().max(0.0) * sin_t)
                 })
             })
             .collect();
@@ -108,30 +115,52 @@ impl EnvMap {
     /// the same direction (else 0), the direction located once: the same values as the two.
     pub fn eval_pdf(&self, w: Vec3, with_pdf: bool) -> (Rgb, f32) {
         let (g, sin_t) = self.dir_to_grid(w);
-        let le = self.eval_grid(g);
-        if !with_pdf || le.is_black() || sin_t <= 0.0 {
+        if !with_pdf {
+            return (self.eval_grid(g), 0.0);
+        }
+        let (le, pdf_uv) = self.eval_grid_pdf(g);
+        if le.is_black() || sin_t <= 0.0 {
             return (le, 0.0);
         }
-        (le, self.dist.pdf(g) / (2.0 * PI * PI * sin_t))
+        (le, pdf_uv / (2.0 * PI * PI * sin_t))
     }
 
     fn eval_grid(&self, g: Vec2) -> Rgb {
+        self.eval_grid_pdf(g).0
+    }
+
+    /// The radiance at grid point `g` and `self.dist.pdf(g)`, from one bilinear
+    /// interpolation of the cell's texels (radiance and weight together).
+    #[inline]
+    fn eval_grid_pdf(&self, g: Vec2) -> (Rgb, f32) {
         let (ix, iy, fx, fy) = locate(g, self.cols, self.rows);
-        let stride = self.cols + 1;
-        let at = |x: usize, y: usize| self.dist.texels[y * stride + x].rgb;
-        let top = at(ix, iy) * (1.0 - fx) + at(ix + 1, iy) * fx;
-        let bottom = at(ix, iy + 1) * (1.0 - fx) + at(ix + 1, iy + 1) * fx;
-        (top * (1.0 - fy) + bottom * fy) * self.scale
+        let v = self.dist.bilerp(ix, iy, fx, fy);
+        (Rgb::new(v.x, v.y, v.z) * self.scale, self.dist.density(v.w))
     }
 
     /// A direction toward the environment and its solid-angle density.
     pub fn sample(&self, u: Vec2) -> Option<(Vec3, f32)> {
-        let (g, pdf_uv) = self.dist.sample(u)?;
-        let (w, sin_t) = self.grid_to_dir(g);
-        if sin_t <= 0.0 || pdf_uv <= 0.0 {
+        self.sample_eval(u).map(|(w, pdf, _)| (w, pdf))
+    }
+
+    /// [`Self::sample`] and the radiance from the sampled direction, interpolated at the
+    /// grid point the sample chose (as Mitsuba's `envmap` does) rather than at the
+    /// direction mapped back into the grid: one locate instead of two trigonometric round
+    /// trips. The two differ only by the rounding of that round trip.
+    pub fn sample_eval(&self, u: Vec2) -> Option<(Vec3, f32, Rgb)> {
+        if self.dist.integral <= 0.0 {
             return None;
         }
-        Some((w, pdf_uv / (2.0 * PI * PI * sin_t)))
+        let g = self.dist.sample_point(u);
+        let (le, pdf_uv) = self.eval_grid_pdf(g);
+        if pdf_uv <= 0.0 {
+            return None;
+        }
+        let (w, sin_t) = self.grid_to_dir(g);
+        if sin_t <= 0.0 {
+            return None;
+        }
+        Some((w, pdf_uv / (2.0 * PI * PI * sin_t), le))
     }
 
     /// Solid-angle density of `sample` choosing `w`.
@@ -193,7 +222,7 @@ struct BilinearDistribution {
 impl BilinearDistribution {
     fn new(texels: Vec<Texel>, cols: usize, rows: usize) -> Self {
         let stride = cols + 1;
-        let f = |i: usize| texels[i].weight;
+        let f = |i: usize| texels[i].weight();
         let conditional: Vec<Distribution1D> = (0..rows)
             .map(|y| {
                 let cells: Vec<f32> =
@@ -211,36 +240,45 @@ impl BilinearDistribution {
     #[inline]
     fn corners(&self, ix: usize, iy: usize) -> [f32; 4] {
         let s = self.cols + 1;
-        let f = |i: usize| self.texels[i].weight;
+        let f = |i: usize| self.texels[i].weight();
         [f(iy * s + ix), f(iy * s + ix + 1), f((iy + 1) * s + ix), f((iy + 1) * s + ix + 1)]
     }
 
-    fn eval(&self, g: Vec2) -> f32 {
-        let (ix, iy, fx, fy) = locate(g, self.cols, self.rows);
-        let [f00, f10, f01, f11] = self.corners(ix, iy);
-        (f00 * (1.0 - fx) + f10 * fx) * (1.0 - fy) + (f01 * (1.0 - fx) + f11 * fx) * fy
+    /// The texels' bilinear interpolant in cell (ix, iy) at fraction (fx, fy): radiance in
+    /// x, y, z and the sampling function in w.
+    #[inline]
+    fn bilerp(&self, ix: usize, iy: usize, fx: f32, fy: f32) -> Vec4 {
+        let s = self.cols + 1;
+        let i = iy * s + ix;
+        let (top, bottom) = (&self.texels[i..i + 2], &self.texels[i + s..i + s + 2]);
+        (top[0].0 * (1.0 - fx) + top[1].0 * fx) * (1.0 - fy) + (bottom[0].0 * (1.0 - fx) + bottom[1].0 * fx) * fy
     }
 
-    fn sample(&self, u: Vec2) -> Option<(Vec2, f32)> {
-        if self.integral <= 0.0 {
-            return None;
-        }
+    /// A point with density `pdf` (the integral must be positive): a row by the marginal, a
+    /// cell in it by the conditional, a point in the cell by inverting the bilinear patch.
+    #[inline]
+    fn sample_point(&self, u: Vec2) -> Vec2 {
         let (iy, _, uy) = self.marginal.sample_discrete(u.y);
         let (ix, _, ux) = self.conditional[iy].sample_discrete(u.x);
         let [f00, f10, f01, f11] = self.corners(ix, iy);
         // Inside the cell: v from its marginal (linear), then u given v (linear).
         let ty = sample_linear(uy, f00 + f10, f01 + f11);
         let tx = sample_linear(ux, f00 + (f01 - f00) * ty, f10 + (f11 - f10) * ty);
-        let g = Vec2::new((ix as f32 + tx) / self.cols as f32, (iy as f32 + ty) / self.rows as f32);
-        let pdf = self.pdf(g);
-        (pdf > 0.0).then_some((g, pdf))
+        Vec2::new((ix as f32 + tx) / self.cols as f32, (iy as f32 + ty) / self.rows as f32)
     }
 
     fn pdf(&self, g: Vec2) -> f32 {
+        let (ix, iy, fx, fy) = locate(g, self.cols, self.rows);
+        self.density(self.bilerp(ix, iy, fx, fy).w)
+    }
+
+    /// The density of a point where the sampling function is `f`.
+    #[inline]
+    fn density(&self, f: f32) -> f32 {
         if self.integral <= 0.0 {
             return 0.0;
         }
-        self.eval(g) / self.integral
+        f / self.integral
     }
 }
 
@@ -263,7 +301,7 @@ mod tests {
     #[test]
     fn bilinear_pdf_integrates_to_one() {
         let f = vec![0.0, 1.0, 4.0, 2.0, 0.5, 0.0, 3.0, 1.0, 0.0, 0.0, 7.0, 1.0];
-        let d = BilinearDistribution::new(f.into_iter().map(|weight| Texel { rgb: Rgb::BLACK, weight }).collect(), 3, 2);
+        let d = BilinearDistribution::new(f.into_iter().map(|weight| Texel::new(Rgb::BLACK, weight)).collect(), 3, 2);
         let n = 600;
         let mut s = 0.0f64;
         for i in 0..n {
@@ -288,6 +326,53 @@ mod tests {
             assert_eq!(pdf.to_bits(), want.to_bits(), "{d}");
             assert_eq!(env.eval_pdf(d, false), (le, 0.0));
         }
+    }
+
+    #[test]
+    fn four_wide_bilinear_is_the_scalar_formula() {
+        // Radiance and density come from one Vec4 interpolation: lane by lane it must be the
+        // scalar bilinear formula, bit for bit (images are unchanged by packing them).
+        let (w, h) = (9usize, 6usize);
+        let data: Vec<Rgb> = (0..w * h).map(|i| Rgb::new(0.1 + (i % 7) as f32 * 0.37, (i % 3) as f32 * 1.3, 0.01 * i as f32)).collect();
+        let env = EnvMap::new(Arc::new(Bitmap::new(w, h, data)), Mat4::IDENTITY, 0.7);
+        let mut rng = crate::sampling::rng::Pcg32::new(5, 9);
+        for _ in 0..5000 {
+            let g = Vec2::new(rng.next_f32(), rng.next_f32());
+            let (ix, iy, fx, fy) = locate(g, env.cols, env.rows);
+            let s = env.cols + 1;
+            let t = |x: usize, y: usize| env.dist.texels[y * s + x].0;
+            let lerp = |a: f32, b: f32, c: f32, d: f32| (a * (1.0 - fx) + b * fx) * (1.0 - fy) + (c * (1.0 - fx) + d * fx) * fy;
+            let (a, b, c, d) = (t(ix, iy), t(ix + 1, iy), t(ix, iy + 1), t(ix + 1, iy + 1));
+            let rgb = Rgb::new(lerp(a.x, b.x, c.x, d.x), lerp(a.y, b.y, c.y, d.y), lerp(a.z, b.z, c.z, d.z)) * 0.7;
+            let pdf = lerp(a.w, b.w, c.w, d.w) / env.dist.integral;
+            let (got_rgb, got_pdf) = env.eval_grid_pdf(g);
+            assert_eq!([got_rgb.r, got_rgb.g, got_rgb.b, got_pdf].map(f32::to_bits), [rgb.r, rgb.g, rgb.b, pdf].map(f32::to_bits), "{g}");
+        }
+    }
+
+    #[test]
+    fn sample_eval_radiance_is_eval_of_its_direction() {
+        // The radiance `sample_eval` interpolates at its grid point must be the map's
+        // radiance toward the direction it returns (up to the direction's round trip), and
+        // its direction and density those of `sample`, bit for bit.
+        let (w, h) = (32usize, 17usize);
+        let data: Vec<Rgb> = (0..w * h).map(|i| Rgb::new(1.0 + (i % 7) as f32, 0.5 + (i % 3) as f32, if i % 5 == 0 { 0.0 } else { 2.0 })).collect();
+        let env = EnvMap::new(Arc::new(Bitmap::new(w, h, data)), Mat4::from_rotation_z(0.4), 1.5);
+        let mut rng = crate::sampling::rng::Pcg32::new(7, 1);
+        let mut n = 0;
+        for _ in 0..5000 {
+            let u = Vec2::new(rng.next_f32(), rng.next_f32());
+            let got = env.sample_eval(u);
+            assert_eq!(got.map(|(d, p, _)| (d, p.to_bits())), env.sample(u).map(|(d, p)| (d, p.to_bits())));
+            let Some((d, pdf, le)) = got else { continue };
+            n += 1;
+            let want = env.eval(d);
+            for (a, b) in [(le.r, want.r), (le.g, want.g), (le.b, want.b)] {
+                assert!((a - b).abs() <= 2e-3 * b.abs().max(1.0), "u {u}: {le:?} vs {want:?}");
+            }
+            assert!((pdf - env.pdf(d)).abs() <= 2e-3 * pdf, "u {u}: pdf {pdf} vs {}", env.pdf(d));
+        }
+        assert!(n > 4000, "{n} samples");
     }
 
     #[test]

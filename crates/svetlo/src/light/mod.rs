@@ -203,8 +203,8 @@ impl Light {
                 })
             }
             Light::EnvMap(env) => {
-                let (wi, pdf) = env.sample(u)?;
-                Some(LightSample { wi, li: env.eval(wi), pdf, p: point_at_infinity(bounds, p_ref, wi), n: Vec3::ZERO, infinite: true })
+                let (wi, pdf, li) = env.sample_eval(u)?;
+                Some(LightSample { wi, li, pdf, p: point_at_infinity(bounds, p_ref, wi), n: Vec3::ZERO, infinite: true })
             }
             Light::Luminaire(l) => l.sample_li(p_ref, u),
             Light::Goniometric(g) => g.sample_li(p_ref),

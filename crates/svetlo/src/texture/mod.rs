@@ -142,7 +142,27 @@ impl From<f32> for Texture {
     }
 }
 
+/// `x.floor()`, bit for bit (signed zeros and infinities included; a NaN stays a NaN), without the libm
+/// call that `floor` is on a target without SSE4.1: a bilinear lookup needed two.
 #[inline]
+fn floor_exact(x: f32) -> f32 {
+    // Below 2^23 truncation through an integer is exact; from there on every float is whole
+    // (or infinite, or NaN) and its own floor.
+    if x.abs() < 8_388_608.0 {
+        let t = (x as i32 as f32).copysign(x);
+        if t > x {
+            t - 1.0
+        } else {
+            t
+        }
+    } else {
+        x
+    }
+}
+
+/// Always inlined: its in-range test is the whole of most calls (four a bilinear lookup),
+/// and a call each cost more than the test.
+#[inline(always)]
 fn wrap(i: i64, n: usize, mode: WrapMode) -> usize {
     let n = n as i64;
     // Inside the image every mode is the identity: no division for most lookups.
@@ -179,7 +199,7 @@ impl Texture {
             Texture::Procedural(t) => t.eval(&p),
             Texture::Checkerboard { color0, color1, to_uv } => {
                 let p = to_uv.transform_point2(uv);
-                let (fx, fy) = (p.x - p.x.floor(), p.y - p.y.floor());
+                let (fx, fy) = (p.x - floor_exact(p.x), p.y - floor_exact(p.y));
                 if (fx > 0.5) == (fy > 0.5) {
                     *color0
                 } else {
@@ -193,10 +213,10 @@ impl Texture {
                 let x = p.x * image.width as f32;
                 let y = p.y * image.height as f32;
                 match filter {
-                    FilterMode::Nearest => image.texel(wrap(x.floor() as i64, image.width, *wm), wrap(y.floor() as i64, image.height, *wm)),
+                    FilterMode::Nearest => image.texel(wrap(floor_exact(x) as i64, image.width, *wm), wrap(floor_exact(y) as i64, image.height, *wm)),
                     FilterMode::Bilinear => {
                         let (x, y) = (x - 0.5, y - 0.5);
-                        let (x0, y0) = (x.floor(), y.floor());
+                        let (x0, y0) = (floor_exact(x), floor_exact(y));
                         let (fx, fy) = (x - x0, y - y0);
                         let (x0, y0) = (x0 as i64, y0 as i64);
                         let (xa, xb) = (wrap(x0, image.width, *wm), wrap(x0 + 1, image.width, *wm));
@@ -244,7 +264,7 @@ impl Texture {
         let q = to_uv.transform_point2(p.uv);
         let (w, h) = (image.width as f32, image.height as f32);
         let (x, y) = (q.x * w - 0.5, q.y * h - 0.5);
-        let (x0, y0) = (x.floor(), y.floor());
+        let (x0, y0) = (floor_exact(x), floor_exact(y));
         let (fx, fy) = (x - x0, y - y0);
         let (x0, y0) = (x0 as i64, y0 as i64);
         let t = |dx: i64, dy: i64| image.texel(wrap(x0 + dx, image.width, *wm), wrap(y0 + dy, image.height, *wm)).luminance();
@@ -272,6 +292,46 @@ impl Texture {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn floor_exact_is_floor_bit_for_bit() {
+        let mut xs = vec![
+            0.0f32,
+            -0.0,
+            0.5,
+            -0.5,
+            1.0,
+            -1.0,
+            1.5,
+            -1.5,
+            8_388_607.5,
+            -8_388_607.5,
+            8_388_608.0,
+            -8_388_609.0,
+            3e9,
+            -3e9,
+            f32::MAX,
+            f32::MIN,
+            f32::INFINITY,
+            f32::NEG_INFINITY,
+            f32::NAN,
+            1e-40,
+            -1e-40,
+        ];
+        let mut rng = crate::sampling::rng::Pcg32::new(11, 2);
+        for _ in 0..200_000 {
+            // Random bit patterns cover every exponent, subnormals and NaNs included.
+            xs.push(f32::from_bits(rng.next_u32()));
+            xs.push((rng.next_f32() - 0.5) * 4096.0);
+        }
+        for x in xs {
+            if x.is_nan() {
+                assert!(floor_exact(x).is_nan());
+            } else {
+                assert_eq!(floor_exact(x).to_bits(), x.floor().to_bits(), "{x:e}");
+            }
+        }
+    }
 
     /// Mitsuba 3.9.1's checkerboard (to_uv scale 25, color0 0.05, color1 0.3) gives `eval`
     /// 0.05 and `eval_1` 0.3 at uv (0.001, 0.001) and (0.03, 0.03), the reverse at (0.03, 0.001).
