@@ -260,7 +260,7 @@ pub(super) fn render_chunked<E: SplatEstimator>(
     // order and finished in order, at most two at a time.
     let mut open: std::collections::VecDeque<OpenPass> = std::collections::VecDeque::new();
     // The chunk rendered last and not yet merged: it belongs to `open`'s front.
-    let mut pending: Option<Vec<Option<(FilmTile, Vec<Splat>)>>> = None;
+    let mut pending: Option<ChunkResults> = None;
     let mut spp_done = 0u32;
     // Samples per pixel of the passes begun (finished or not), for timed pass sizes.
     let mut spp_begun = 0u32;
@@ -336,7 +336,7 @@ pub(super) fn render_chunked<E: SplatEstimator>(
             break;
         }
         let merging = pending.take().zip(open.front_mut());
-        let render = |(chunk, job_tiles, s0, n): (&[(u32, u32, u32, u32)], Vec<FilmTile>, u32, u32)| -> Vec<Option<(FilmTile, Vec<Splat>)>> {
+        let render = |(chunk, job_tiles, s0, n): ChunkJob| -> ChunkResults {
             chunk
                 .par_iter()
                 .zip(job_tiles)
@@ -417,6 +417,12 @@ pub(super) fn render_chunked<E: SplatEstimator>(
     Ok(SplatRender { film, channels: extra })
 }
 
+/// A chunk's tiles with their splats, in tile order; None where cancelled.
+type ChunkResults = Vec<Option<(FilmTile, Vec<Splat>)>>;
+
+/// A chunk to render: its tiles' rectangles, their film tiles, and the pass's samples.
+type ChunkJob<'a> = (&'a [(u32, u32, u32, u32)], Vec<FilmTile>, u32, u32);
+
 /// A pass begun and not yet in the sums: its film and channels take its chunks' splats and
 /// its tiles, chunk by chunk in order.
 struct OpenPass {
@@ -434,7 +440,7 @@ struct OpenPass {
 impl OpenPass {
     /// Adds one chunk's results (in tile order) to the pass; false when a tile of it was
     /// cancelled, which leaves the pass incomplete.
-    fn merge_chunk(&mut self, results: Vec<Option<(FilmTile, Vec<Splat>)>>, w: u32, h: u32) -> bool {
+    fn merge_chunk(&mut self, results: ChunkResults, w: u32, h: u32) -> bool {
         if results.iter().any(|t| t.is_none()) {
             return false;
         }
