@@ -56,6 +56,7 @@
 use super::path::{bsdf_pdf_toward, PathTracer};
 use super::{camera_sample, render_tiles, Integrator, Progress, RenderSettings};
 use crate::accel::packet::{Hits8, PacketBvh, PacketSpheres, Rays8, LANES};
+use crate::accel::PagedSlice;
 use crate::bsdf::{Bsdf, LobeFlags, Material, TransportMode};
 use crate::error::{Error, Result};
 use crate::film::{Film, FilmTile};
@@ -299,7 +300,8 @@ fn lane_ray(rays: &Rays8, l: usize) -> Ray {
 /// Everything the kernel needs of a qualifying scene.
 pub struct SimdKernel {
     tracer: Tracer,
-    tris: Vec<Tri>,
+    /// Read at a random place per hit: on huge pages when large (`PagedSlice`).
+    tris: PagedSlice<Tri>,
     shapes: Vec<ShapeData>,
     /// Per light of the scene: a mesh area light unpacked, or None for a light the lanes
     /// sample through its own `Light::sample_li` (point, spot, directional, environment).
@@ -376,9 +378,7 @@ impl SimdKernel {
         let grids = scene.shapes.iter().any(|s| matches!(&*s.geometry, Geometry::SdfGrid(_)));
         let single_rays = large || grids || spheres.len() > PACKET_MAX_SPHERES;
         let mut shapes = Vec::with_capacity(scene.shapes.len());
-        let mut tris = Vec::new();
-        let mut verts = Vec::new();
-        for (si, s) in scene.shapes.iter().enumerate() {
+        for s in &scene.shapes {
             let mat = scene.materials.get(s.material as usize)?;
             let lambert = match mat {
                 Material::TwoSided { front, back } => diffuse_albedo(front).zip(diffuse_albedo(back).map(Some)),
@@ -403,28 +403,35 @@ impl SimdKernel {
                 None => None,
             };
             shapes.push(ShapeData { scalar_bsdf, front, back, textured, light });
-            // Other shapes' hits come as the scene's surface records (`other_hit`).
-            let Geometry::Mesh(m) = &*s.geometry else { continue };
-            for t in 0..m.triangle_count() {
-                let p = m.vertices(t);
-                verts.push(p);
-                let shading = match s.flat.get(t).copied().flatten() {
-                    Some((ng, frame)) => Shading::Flat(ng, frame),
-                    None => Shading::Smooth(m.shading(t)),
-                };
-                tris.push(Tri { p, shading, shape: si as u32, local: t as u32 });
-            }
         }
+        // Other shapes' hits come as the scene's surface records (`other_hit`). Written once
+        // into their final (huge-page) place: with a million triangles this unpacking is a
+        // visible part of the render's time, its page faults as much as the writes.
+        let mesh_tris = scene.shapes.iter().enumerate().filter_map(|(si, s)| if let Geometry::Mesh(m) = &*s.geometry { Some((si, s, m)) } else { None });
+        let tris = PagedSlice::from_iter_len(
+            triangles,
+            mesh_tris.flat_map(|(si, s, m)| {
+                (0..m.triangle_count()).map(move |t| {
+                    let shading = match s.flat.get(t).copied().flatten() {
+                        Some((ng, frame)) => Shading::Flat(ng, frame),
+                        None => Shading::Smooth(m.shading(t)),
+                    };
+                    Tri { p: m.vertices(t), shading, shape: si as u32, local: t as u32 }
+                })
+            }),
+        );
+        // Only the packet tree needs the corners apart (single rays use the scene's BVH).
+        let verts = || tris.iter().map(|t| t.p).collect::<Vec<_>>();
         let tracer = if single_rays {
             single_tracer(scene)
         } else if spheres.is_empty() {
-            Tracer::Packets { bvh: PacketBvh::build(&verts), ties: crossing.then(|| first_triangles(scene)), spheres: None }
+            Tracer::Packets { bvh: PacketBvh::build(&verts()), ties: crossing.then(|| first_triangles(scene)), spheres: None }
         } else {
             // Scenes with spheres took single rays, the scalar tracer's image bit for bit: they
             // keep it with the tie check on their triangles (shared edges, which opaque
             // mesh scenes leave to the packet tree) and the spheres' unsure lanes retraced.
             let (geo, shapes): (Vec<_>, Vec<_>) = spheres.into_iter().unzip();
-            Tracer::Packets { bvh: PacketBvh::build(&verts), ties: Some(first_triangles(scene)), spheres: Some(Box::new((PacketSpheres::new(&geo), shapes))) }
+            Tracer::Packets { bvh: PacketBvh::build(&verts()), ties: Some(first_triangles(scene)), spheres: Some(Box::new((PacketSpheres::new(&geo), shapes))) }
         };
         Some(SimdKernel { tracer, tris, shapes, lights, avx512: avx512() })
     }
