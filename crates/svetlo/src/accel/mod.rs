@@ -14,8 +14,6 @@ mod wide;
 mod tests;
 
 pub use bvh::Accel;
-/// Large read-only arrays on huge pages (the path kernel's triangles, too).
-pub(crate) use pages::PagedSlice;
 pub use kdtree::{KdPoint, KdTree};
 
 /// The closest hit of a ray: which primitive, where along the ray, and where on it

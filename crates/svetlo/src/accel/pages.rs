@@ -38,7 +38,11 @@ unsafe impl<T: Copy + Sync> Sync for PagedSlice<T> {}
 
 impl<T: Copy> PagedSlice<T> {
     pub fn new(v: Vec<T>) -> PagedSlice<T> {
-        let Some(layout) = Self::huge_layout(v.len()) else {
+        let bytes = std::mem::size_of_val(&v[..]);
+        if !HUGE_PAGES_ADVISABLE || bytes < HUGE_PAGE || std::mem::align_of::<T>() > HUGE_PAGE {
+            return Self::small(v);
+        }
+        let Ok(layout) = Layout::from_size_align(bytes.next_multiple_of(HUGE_PAGE), HUGE_PAGE) else {
             return Self::small(v);
         };
         // SAFETY: the layout's size is at least one huge page, not zero.
@@ -48,44 +52,10 @@ impl<T: Copy> PagedSlice<T> {
         };
         // Before the copy below first touches the pages, so that the faults map huge ones.
         advise_huge_pages(raw, layout.size());
-        // SAFETY: the new allocation holds at least `v.len()` values, its alignment (2 MiB)
+        // SAFETY: the new allocation holds `layout.size() >= bytes` bytes, its alignment (2 MiB)
         // is a multiple of T's (checked above; both are powers of two), and it does not overlap `v`.
         unsafe { std::ptr::copy_nonoverlapping(v.as_ptr(), ptr.as_ptr(), v.len()) };
         PagedSlice { ptr, len: v.len(), owner: Owner::Huge(layout) }
-    }
-
-    /// The first `len` values of `values` (fewer if it ends sooner), written straight into
-    /// the huge-page allocation: a large array built once costs one write and a few hundred
-    /// page faults instead of a vector's faults and then a copy.
-    pub fn from_iter_len(len: usize, values: impl Iterator<Item = T>) -> PagedSlice<T> {
-        let Some(layout) = Self::huge_layout(len) else {
-            return Self::small(values.take(len).collect());
-        };
-        // SAFETY: the layout's size is at least one huge page, not zero.
-        let raw = unsafe { alloc(layout) };
-        let Some(ptr) = NonNull::new(raw as *mut T) else {
-            return Self::small(values.take(len).collect());
-        };
-        advise_huge_pages(raw, layout.size());
-        let mut n = 0;
-        for v in values.take(len) {
-            // SAFETY: n < len, and the allocation holds `len` values of T, suitably aligned
-            // (`huge_layout`). T is Copy: nothing is dropped by overwriting or by a panic of the
-            // iterator (which leaks the allocation, nothing worse).
-            unsafe { ptr.as_ptr().add(n).write(v) };
-            n += 1;
-        }
-        // Only the first n values were written: the slice covers those.
-        PagedSlice { ptr, len: n, owner: Owner::Huge(layout) }
-    }
-
-    /// The 2 MiB-aligned layout for `len` values, or None where they go in a vector.
-    fn huge_layout(len: usize) -> Option<Layout> {
-        let bytes = len.checked_mul(std::mem::size_of::<T>())?;
-        if !HUGE_PAGES_ADVISABLE || bytes < HUGE_PAGE || std::mem::align_of::<T>() > HUGE_PAGE {
-            return None;
-        }
-        Layout::from_size_align(bytes.next_multiple_of(HUGE_PAGE), HUGE_PAGE).ok()
     }
 
     fn small(mut v: Vec<T>) -> PagedSlice<T> {
@@ -166,22 +136,5 @@ mod tests {
         drop(h);
         assert_eq!(&c[..], &big[..]);
         assert!(PagedSlice::<u8>::new(Vec::new()).is_empty());
-    }
-
-    #[test]
-    fn from_iter_len_same_values() {
-        let n = 3 * HUGE_PAGE / 8 + 5;
-        let val = |i: usize| (i as u64).wrapping_mul(0x9e37_79b9_7f4a_7c15);
-        let h = PagedSlice::from_iter_len(n, (0..n).map(val));
-        assert_eq!(h.is_huge(), HUGE_PAGES_ADVISABLE);
-        assert!(h.iter().copied().eq((0..n).map(val)));
-        // A shorter iterator gives a shorter slice; a longer one is cut at `len`.
-        let short = PagedSlice::from_iter_len(n, (0..n - 7).map(val));
-        assert!(short.iter().copied().eq((0..n - 7).map(val)));
-        let long = PagedSlice::from_iter_len(n, (0..2 * n).map(val));
-        assert!(long.iter().copied().eq((0..n).map(val)));
-        let small = PagedSlice::from_iter_len(10, (0..100).map(val));
-        assert!(!small.is_huge());
-        assert!(small.iter().copied().eq((0..10).map(val)));
     }
 }
