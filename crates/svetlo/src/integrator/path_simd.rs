@@ -407,17 +407,18 @@ impl SimdKernel {
         // visible part of the render's time, its page faults as much as the writes. (On
         // huge pages it cost 0.13-0.39 s instead of 0.18-0.20 s on mesh1m: the kernel's
         // compaction for them, in the render call.)
-        let mesh_tris = scene.shapes.iter().enumerate().filter_map(|(si, s)| if let Geometry::Mesh(m) = &*s.geometry { Some((si, s, m)) } else { None });
         let mut tris = Vec::with_capacity(triangles);
-        tris.extend(mesh_tris.flat_map(|(si, s, m)| {
-            (0..m.triangle_count()).map(move |t| {
+        // Plain loops: `extend` over a `flat_map` took 70 more instructions a triangle.
+        for (si, s) in scene.shapes.iter().enumerate() {
+            let Geometry::Mesh(m) = &*s.geometry else { continue };
+            for t in 0..m.triangle_count() {
                 let shading = match s.flat.get(t).copied().flatten() {
                     Some((ng, frame)) => Shading::Flat(ng, frame),
                     None => Shading::Smooth(m.shading(t)),
                 };
-                Tri { p: m.vertices(t), shading, shape: si as u32, local: t as u32 }
-            })
-        }));
+                tris.push(Tri { p: m.vertices(t), shading, shape: si as u32, local: t as u32 });
+            }
+        }
         // Only the packet tree needs the corners apart (single rays use the scene's BVH).
         let verts = || tris.iter().map(|t| t.p).collect::<Vec<_>>();
         let tracer = if single_rays {
