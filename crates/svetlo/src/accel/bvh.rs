@@ -19,10 +19,10 @@ pub struct Accel {
     tri_nodes: PagedSlice<Node>,
     tris: PagedSlice<Tri8>,
     /// (first triangle id, shape) per mesh, by first id: triangle ids number all meshes' triangles in turn.
-    meshes: Vec<(u32, u32)>,
-    /// Index into `meshes` of each triangle id (empty when there is at most one mesh): a
-    /// hit's shape without a search.
-    tri_mesh: PagedSlice<u32>,
+    pub(super) meshes: Vec<(u32, u32)>,
+    /// Index into `meshes` of each triangle id, when there are more than [`MESH_SEARCH_MAX`]
+    /// meshes (else empty: the hit's mesh is searched for in `meshes`).
+    pub(super) tri_mesh: PagedSlice<u32>,
     sph_nodes: PagedSlice<Node>,
     spheres: PagedSlice<Sphere>,
     /// Shape index of each sphere of `spheres`.
@@ -46,6 +46,11 @@ const TRI_LEAF: LeafParams = LeafParams { group: LANES, max_leaf: 16, traversal_
 /// Hierarchies smaller than this (about an L2 cache) are not prefetched: in cache, the
 /// prefetch instructions cost more than they save.
 const PREFETCH_MIN_BYTES: usize = 1 << 20;
+/// Up to this many meshes, a hit's mesh is found by a binary search of `Accel::meshes`
+/// (in L1) rather than read from `tri_mesh`, a load at a random place of a megabytes-long
+/// array: that load was 5-6 % of the closest-hit samples on the 1M-triangle bench scene
+/// (three meshes). Past it, the search's steps would miss the caches themselves.
+pub(super) const MESH_SEARCH_MAX: usize = 64;
 const SPHERE_LEAF: LeafParams = LeafParams { group: 1, max_leaf: 4, traversal_cost: 1.0 };
 /// A voxel test (a cubic's root) costs several box tests: small leaves.
 const VOXEL_LEAF: LeafParams = LeafParams { group: 1, max_leaf: 2, traversal_cost: 0.3 };
@@ -73,7 +78,7 @@ impl Accel {
             }
         }
 
-        let tri_mesh: Vec<u32> = if meshes.len() > 1 {
+        let tri_mesh: Vec<u32> = if meshes.len() > MESH_SEARCH_MAX {
             let mut v = Vec::with_capacity(tri_v.len());
             for (k, &(first, _)) in meshes.iter().enumerate() {
                 let end = meshes.get(k + 1).map_or(tri_v.len(), |m| m.0 as usize);
@@ -216,7 +221,7 @@ impl Accel {
             }
             if let Some((b, lane, b1, b2)) = hit {
                 let id = self.tris[b].ids[lane];
-                let (first, shape) = self.meshes[self.tri_mesh.get(id as usize).map_or(0, |&k| k as usize)];
+                let (first, shape) = self.meshes[self.mesh_of(id)];
                 best = Some(PrimHit { t: t_max, shape, prim: id - first, b1, b2 });
             }
         }
@@ -233,6 +238,20 @@ impl Accel {
             best = Some(PrimHit { t: t_max, shape: self.grids[g as usize].1, prim: k, b1: 0.0, b2: 0.0 });
         }
         best
+    }
+}
+
+impl Accel {
+    /// Index into `meshes` of the mesh that holds triangle `id`.
+    #[inline(always)]
+    pub(super) fn mesh_of(&self, id: u32) -> usize {
+        if self.tri_mesh.is_empty() {
+            // The last mesh whose first id is at most `id` (the first one's is 0). A few
+            // meshes: the branch-free search of a slice in L1.
+            self.meshes.partition_point(|&(first, _)| first <= id).saturating_sub(1)
+        } else {
+            self.tri_mesh[id as usize] as usize
+        }
     }
 }
 

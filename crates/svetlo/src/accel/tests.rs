@@ -188,6 +188,44 @@ fn meshes_and_spheres_match_brute_force() {
     assert!(hits > rays.len() / 20, "{hits} hits");
 }
 
+/// A hit's mesh, searched for (up to `MESH_SEARCH_MAX` meshes) or read from the per-triangle
+/// table (past it), is the mesh that holds the triangle, with empty meshes and spheres
+/// (shapes without triangle ids) between the meshes.
+#[test]
+fn mesh_of_every_triangle_id() {
+    let max = super::bvh::MESH_SEARCH_MAX;
+    for n in [1, 2, 9, max - 1, max, max + 1, 5 * max] {
+        let mut rng = Pcg32::new(n as u64, 3);
+        let mut shapes = Vec::new();
+        // Per triangle id: (shape, index in its mesh).
+        let mut want = Vec::new();
+        for _ in 0..n {
+            if rng.next_f32() < 0.3 {
+                shapes.push(Geometry::Mesh(TriangleMesh::default()));
+            }
+            if rng.next_f32() < 0.3 {
+                shapes.push(Geometry::Sphere(Sphere { center: v3(&mut rng), radius: 0.05, flip_normals: false }));
+            }
+            let tris = 1 + (rng.next_f32() * 4.0) as usize;
+            let mut m = TriangleMesh::default();
+            for t in 0..tris {
+                let c = v3(&mut rng);
+                m.positions.extend((0..3).map(|_| c + (v3(&mut rng) - 0.5) * 0.1));
+                m.indices.push([3 * t as u32, 3 * t as u32 + 1, 3 * t as u32 + 2]);
+                want.push((shapes.len() as u32, t as u32));
+            }
+            shapes.push(Geometry::Mesh(m));
+        }
+        let refs: Vec<&Geometry> = shapes.iter().collect();
+        let accel = Accel::build(&refs);
+        assert_eq!(accel.tri_mesh.is_empty(), n <= max, "{n} meshes");
+        for (id, &w) in want.iter().enumerate() {
+            let (first, shape) = accel.meshes[accel.mesh_of(id as u32)];
+            assert_eq!((shape, id as u32 - first), w, "triangle {id} of {n} meshes");
+        }
+    }
+}
+
 /// A torus-like SDF grid (two voxel hierarchies' worth of primitives) beside a mesh and a
 /// sphere: the voxel hierarchy finds what testing every voxel finds.
 #[test]
