@@ -746,6 +746,8 @@ pub struct PacketSpheres {
     margin: Vec<f64>,
     /// Radius squared in f32, widened by `CULL_TOL` (the f32 cull of `test_avx2`).
     rr_cull: Vec<f32>,
+    /// Radius squared in f32 (the reach test of `test_avx2`).
+    rr32: Vec<f32>,
     simd: bool,
 }
 
@@ -753,6 +755,11 @@ pub struct PacketSpheres {
 /// wide of it: its rounding is below 2e-6 of |o - c|^2 |d|^2, so a ray culled with this
 /// slack has the f64 test's discriminant negative (a miss) by a wide margin.
 const CULL_TOL: f32 = 1e-5;
+
+/// Relative widening of |d|^2 t_max in the f32 reach test that skips a sphere on the lanes
+/// whose ray meets it only beyond t_max or behind the origin (`test_avx2`): far above the
+/// product's rounding. Shadow rays end 1e-4 short of the light.
+const REACH_TOL: f32 = 1e-5;
 
 /// Per lane, the nearest sphere a packet met (index into the spheres, `u32::MAX`: none).
 pub type SphereIds = [u32; LANES];
@@ -764,6 +771,7 @@ impl PacketSpheres {
             rr: r.iter().map(|r| r * r).collect(),
             margin: spheres.iter().map(|s| SPHERE_BOX_TOL * (s.center.abs().max_element() + s.radius.abs()) as f64).collect(),
             rr_cull: spheres.iter().map(|s| s.radius * s.radius * (1.0 + 10.0 * CULL_TOL)).collect(),
+            rr32: spheres.iter().map(|s| s.radius * s.radius).collect(),
             r,
             spheres: spheres.to_vec(),
             simd: Isa::detect() > Isa::Portable,
@@ -890,6 +898,10 @@ impl PacketSpheres {
         let dot8 =
             |a: [__m256; 3], b: [__m256; 3]| _mm256_add_ps(_mm256_add_ps(_mm256_mul_ps(a[0], b[0]), _mm256_mul_ps(a[1], b[1])), _mm256_mul_ps(a[2], b[2]));
         let a8 = dot8(d8, d8);
+        // |d|^2 t_max, widened by REACH_TOL (infinite where t_max is: then nothing is beyond it),
+        // for the reach test below.
+        let reach_tol = _mm256_set1_ps(1.0 + REACH_TOL);
+        let at8 = _mm256_mul_ps(_mm256_mul_ps(a8, _mm256_loadu_ps(t.as_ptr())), reach_tol);
         let mut best = [_mm256_set1_pd(f64::INFINITY); 2];
         let mut best_id = [_mm256_set1_pd(f64::from_bits(u32::MAX as u64)); 2];
         let mut near = [zero; 2];
@@ -906,9 +918,38 @@ impl PacketSpheres {
             let oc8 = [0, 1, 2].map(|ax| _mm256_sub_ps(o8[ax], _mm256_set1_ps(s.center[ax])));
             let cross = |i: usize, j: usize| _mm256_sub_ps(_mm256_mul_ps(oc8[i], d8[j]), _mm256_mul_ps(oc8[j], d8[i]));
             let cr = [cross(1, 2), cross(2, 0), cross(0, 1)];
-            let bound = _mm256_mul_ps(a8, _mm256_add_ps(_mm256_set1_ps(self.rr_cull[k]), _mm256_mul_ps(_mm256_set1_ps(CULL_TOL), dot8(oc8, oc8))));
-            let near_lanes = _mm256_movemask_ps(_mm256_cmp_ps::<_CMP_LE_OQ>(dot8(cr, cr), bound)) as u8;
-            let lanes = near_lanes & (_mm256_movemask_pd(live[0]) as u8 | (_mm256_movemask_pd(live[1]) as u8) << 4);
+            let oc2 = dot8(oc8, oc8);
+            let cr2 = dot8(cr, cr);
+            let bound = _mm256_mul_ps(a8, _mm256_add_ps(_mm256_set1_ps(self.rr_cull[k]), _mm256_mul_ps(_mm256_set1_ps(CULL_TOL), oc2)));
+            let near_lanes = _mm256_movemask_ps(_mm256_cmp_ps::<_CMP_LE_OQ>(cr2, bound)) as u8;
+            let mut lanes = near_lanes & (_mm256_movemask_pd(live[0]) as u8 | (_mm256_movemask_pd(live[1]) as u8) << 4);
+            // (Shadow rays only: the closest-hit rays it spared too few f64 tests to pay.)
+            if ANY && lanes != 0 {
+                // Out of reach: the lanes whose ray meets the sphere only past t_max (a shadow
+                // ray toward a point on it) or only behind its origin. In units of |d|^2 t the
+                // roots are -b -+ sqrt(X), X = r^2 |d|^2 - |oc x d|^2 (= |d|^2 disc). With
+                // E = |oc|^2 |d|^2 and u = 2^-24, the rounding of X is below
+                // 8u (|oc x d| sqrt(E) + |oc x d|^2 + r^2 |d|^2) + 16u^2 E (the cross product's
+                // components are off by 2u |oc||d| each), that of b below 3u sqrt(E). The bound
+                // `s` on sqrt(X) takes four times the former under the root, and 1e-6 sqrt(E) for
+                // the latter and the f64 test's rounding (below 1e-8 sqrt(E)). Where a lane is out
+                // of reach by s, the f64 test finds no root in (0, t_max): skipping it keeps
+                // every bit.
+                let ru = _mm256_set1_ps(32.0 * f32::EPSILON * 0.5);
+                let rra = _mm256_mul_ps(_mm256_set1_ps(self.rr32[k]), a8);
+                let e = _mm256_mul_ps(oc2, a8);
+                let se = _mm256_sqrt_ps(e);
+                let dx = _mm256_add_ps(
+                    _mm256_mul_ps(ru, _mm256_add_ps(_mm256_mul_ps(_mm256_sqrt_ps(cr2), se), _mm256_add_ps(cr2, rra))),
+                    _mm256_mul_ps(_mm256_mul_ps(ru, ru), e),
+                );
+                let s = _mm256_sqrt_ps(_mm256_max_ps(_mm256_add_ps(_mm256_sub_ps(rra, cr2), dx), _mm256_setzero_ps()));
+                let s = _mm256_add_ps(_mm256_mul_ps(s, _mm256_set1_ps(1.0 + 1e-6)), _mm256_mul_ps(se, _mm256_set1_ps(1e-6)));
+                let nb = _mm256_xor_ps(dot8(oc8, d8), _mm256_set1_ps(-0.0));
+                let past = _mm256_cmp_ps::<_CMP_GT_OQ>(_mm256_sub_ps(nb, s), at8);
+                let behind = _mm256_cmp_ps::<_CMP_LT_OQ>(_mm256_add_ps(nb, s), _mm256_setzero_ps());
+                lanes &= !(_mm256_movemask_ps(_mm256_or_ps(past, behind)) as u8);
+            }
             for h in 0..2 {
                 if (lanes >> (4 * h)) & 0xf == 0 {
                     continue;
@@ -1366,6 +1407,81 @@ mod tests {
         println!("{lanes} lanes, {hits} meet a sphere, {unsure_n} unsure");
         assert!(hits > lanes / 3, "rays meet spheres");
         assert!(unsure_n < lanes / 10, "{unsure_n} of {lanes} lanes unsure");
+    }
+
+    /// Shadow rays toward points on spheres (t_max short of the point by 1e-4, or within a few
+    /// ulps either side of it), rays from the surfaces and from inside, and spheres behind the
+    /// origin: the AVX2 test (whose f32 reach test skips the f64 one on lanes that meet a
+    /// sphere only past t_max or behind them) gives the lane-by-lane test's spheres,
+    /// distances and unsure lanes bit for bit, for nearest hits and occlusion.
+    #[test]
+    fn sphere_reach_test_keeps_the_bits() {
+        if Isa::cpu() == Isa::Portable {
+            return;
+        }
+        let mut rng = Pcg32::new(5, 77);
+        let spheres: Vec<Sphere> = (0..5)
+            .map(|i| {
+                let c = Vec3::new(rng.next_f32(), rng.next_f32(), rng.next_f32()) * 8.0 - Vec3::splat(4.0) + Vec3::new(0.0, 6.5, 0.0);
+                Sphere { center: c, radius: [1.0, 0.5, 0.05, 0.002, 2.0][i], flip_normals: false }
+            })
+            .collect();
+        let mut packed = PacketSpheres::new(&spheres);
+        let (mut hits, mut near_misses) = (0usize, 0usize);
+        for p in 0..20000 {
+            let mut r = Rays8::default();
+            for l in 0..LANES {
+                let s = spheres[(rng.next_u32() as usize) % spheres.len()];
+                // A point on the sphere: on the side facing the origin, or anywhere.
+                let o = match p % 4 {
+                    0 => s.center + (Vec3::new(rng.next_f32(), rng.next_f32(), rng.next_f32()) - Vec3::splat(0.5)).normalize_or(Vec3::X) * s.radius * 0.5,
+                    1 => {
+                        let t = spheres[(rng.next_u32() as usize) % spheres.len()];
+                        t.center + (Vec3::new(rng.next_f32(), rng.next_f32(), rng.next_f32()) - Vec3::splat(0.5)).normalize_or(Vec3::X) * t.radius
+                    }
+                    _ => Vec3::new(rng.next_f32() * 20.0 - 10.0, rng.next_f32() * 3.0, rng.next_f32() * 20.0 - 10.0),
+                };
+                let u = (Vec3::new(rng.next_f32(), rng.next_f32(), rng.next_f32()) - Vec3::splat(0.5)).normalize_or(Vec3::Y);
+                let u = if (o - s.center).dot(u) < 0.0 && l % 2 == 0 { -u } else { u };
+                let target = s.center + u * s.radius;
+                let (dir, dist) = ((target - o).normalize_or(Vec3::Z), (target - o).length());
+                let scale = 0.25 + 2.0 * rng.next_f32();
+                let t_max = match l % 4 {
+                    0 => dist * (1.0 - 1e-4),
+                    1 => f32::from_bits((dist.to_bits() as i32 + (rng.next_u32() % 9) as i32 - 4).max(0) as u32),
+                    2 => dist * (1.0 + 1e-4),
+                    _ => f32::INFINITY,
+                } / scale;
+                // Away from the sphere half of the time (then it is behind the origin).
+                let d = if l == 5 { -dir } else { dir } * scale;
+                set_lane(&mut r, l, o, d, t_max);
+            }
+            let active = if p % 7 == 0 { (rng.next_u32() & 0xff) as u8 } else { 0xff };
+            for any in [false, true] {
+                packed.simd = true;
+                let mut t_simd = r.t_max;
+                // SAFETY: the CPU has AVX2 (checked above).
+                let (ids_simd, un_simd) = if any {
+                    unsafe { packed.test_avx2::<true>(&r, active, &mut t_simd) }
+                } else {
+                    unsafe { packed.test_avx2::<false>(&r, active, &mut t_simd) }
+                };
+                let mut t_lanes = r.t_max;
+                let (ids_lanes, un_lanes) =
+                    if any { packed.test_lanes::<true>(&r, active, &mut t_lanes) } else { packed.test_lanes::<false>(&r, active, &mut t_lanes) };
+                if any {
+                    assert_eq!((lanes_of(&ids_simd), un_simd), (lanes_of(&ids_lanes), un_lanes), "packet {p}: occlusion");
+                } else {
+                    assert_eq!((ids_simd, un_simd), (ids_lanes, un_lanes), "packet {p}: nearest");
+                    assert_eq!(t_simd.map(f32::to_bits), t_lanes.map(f32::to_bits), "packet {p}: distances");
+                    hits += lanes_of(&ids_lanes).count_ones() as usize;
+                }
+            }
+            for l in (0..LANES).filter(|&l| l % 4 == 1 && active & (1 << l) != 0) {
+                near_misses += (r.t_max[l].is_finite()) as usize;
+            }
+        }
+        assert!(hits > 20000 && near_misses > 10000, "{hits} hits, {near_misses} rays ending at a sphere");
     }
 
     /// The twin spheres' hits are ties (unsure: the scene BVH's order picks one).
