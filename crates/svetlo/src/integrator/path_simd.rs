@@ -339,9 +339,12 @@ impl SimdKernel {
         if !scene.moving.is_empty() || !scene.static_shapes.is_empty() || scene.environment_lights.len() > 1 || scene.settings.ray_epsilon > 0.0 {
             return None;
         }
-        // A large scene with a shape the kernel would shade by scalar code is refused below
-        // (`_ if large`): refused here before anything is unpacked, since the shapes before
-        // that one (bsdf_spheres: two spheres of 32k triangles) cost ~3 % of a 128 spp render.
+        // Large scenes trace single rays; there scalar BSDFs gained nothing in the render loop
+        // and the kernel's set-up (unpacking every triangle) cost 5-10 %: bsdf_spheres' grid
+        // (325k triangles, 8 of 12 spheres not Lambertian, depth 6) took 1.06 the scalar
+        // tracer's time at 512 spp, 1.00 at 2048. Such scenes take the scalar tracer, refused
+        // here before anything is unpacked (the shapes unpacked before the first such one,
+        // bsdf_spheres' two spheres of 32k triangles, cost ~3 % of a 128 spp render).
         let triangles: usize = scene.shapes.iter().map(|s| if let Geometry::Mesh(m) = &*s.geometry { m.triangle_count() } else { 0 }).sum();
         let large = triangles > PACKET_MAX_TRIANGLES;
         if large && scene.shapes.iter().any(|s| s.detail || scene.materials.get(s.material as usize).is_none_or(|m| lambert_sides(m).is_none())) {
@@ -372,10 +375,6 @@ impl SimdKernel {
             let pdf_area = if a.area > 0.0 { 1.0 / a.area } else { 0.0 };
             lights.push(Some(MeshLight { pdf_area, tri_distribution: dist.clone(), tris, radiance: *radiance }));
         }
-        // Large scenes trace single rays; there scalar BSDFs gained nothing in the render loop
-        // and the kernel's set-up (unpacking every triangle) cost 5-10 %: bsdf_spheres' grid
-        // (325k triangles, 8 of 12 spheres not Lambertian, depth 6) took 1.06 the scalar
-        // tracer's time at 512 spp, 1.00 at 2048. Such scenes take the scalar tracer.
         // Where paths cross surfaces (dielectrics, masks), a path inside an object meets faces
         // that lie on another surface (a glass box's bottom on the floor) at the same distance:
         // a tie, which each tree breaks by its own order of tests. Packets kept the floor where
