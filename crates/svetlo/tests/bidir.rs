@@ -577,6 +577,46 @@ fn stored_densities_match_recomputed_ones() {
     assert!(checked > 1000, "too few vertices to check: {checked}");
 }
 
+/// `Vertex::pdf_pair` (both densities at a vertex toward its two neighbours, as the MIS
+/// weight asks them) is the two `pdf_with_lens` calls bit for bit: at camera, light and
+/// surface vertices, between vertices of one subpath and of the other, glossy and glass.
+#[test]
+fn pdf_pair_is_two_pdf_calls() {
+    use svetlo::bsdf::TransportMode::{Importance, Radiance};
+    use svetlo::path::{camera_subpath, light_subpath, PathConfig, Vertex};
+    use svetlo::sampling::{IndependentSampler, Sampler};
+    let mut checked = 0;
+    for scene in [glossy_scene(16, 12), glass_scene(16, 12)] {
+        let cfg = PathConfig::new(&scene, 8, 100, false);
+        let lens = cfg.lens.as_ref();
+        let mut sampler = IndependentSampler::new(1, 9);
+        let (mut cam, mut light) = (Vec::new(), Vec::new());
+        for k in 0..300u32 {
+            let (x, y) = (k % 16, (k / 16) % 12);
+            sampler.start_pixel_sample(x, y, k);
+            let raster = glam::Vec2::new(x as f32 + sampler.next_1d(), y as f32 + sampler.next_1d());
+            let ray = scene.camera.generate_ray(raster, glam::Vec2::splat(0.5), 0.0);
+            camera_subpath(&scene, &cfg, &ray, raster, &mut sampler, &mut cam);
+            light_subpath(&scene, &cfg, 0.0, &mut sampler, &mut light);
+            let all: Vec<&Vertex> = cam.iter().chain(light.iter()).collect();
+            for v in &all {
+                for (i, a) in all.iter().enumerate() {
+                    for b in &all[i + 1..] {
+                        for (to_b, to_a) in [(Importance, Radiance), (Radiance, Importance)] {
+                            let pair = v.pdf_pair(&scene, lens, a, b, to_b, to_a);
+                            let ab = v.pdf_with_lens(&scene, lens, Some(a), b, to_b);
+                            let ba = v.pdf_with_lens(&scene, lens, Some(b), a, to_a);
+                            assert_eq!((pair.0.to_bits(), pair.1.to_bits()), (ab.to_bits(), ba.to_bits()), "pdf_pair {pair:?} vs ({ab}, {ba})");
+                            checked += (ab != 0.0 && ba != 0.0) as usize;
+                        }
+                    }
+                }
+            }
+        }
+    }
+    assert!(checked > 1000, "too few non-zero pairs: {checked}");
+}
+
 // ---------------------------------------------------------------- strategies
 
 /// BDPT's weighted strategy images sum to its image; per path length, the weighted sum and

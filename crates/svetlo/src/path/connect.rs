@@ -195,8 +195,33 @@ pub fn camera_connection(scene: &Scene, cfg: &PathConfig, light: &[Vertex], s: u
     if l.is_black() {
         return None;
     }
-    let shadow = scene.shadow_ray(qs.p, qs.ng, cs.p_lens, glam::Vec3::ZERO, qs.time);
+    let shadow = shadow_ray_to_lens(scene, qs.p, qs.ng, cs.p_lens, qs.time);
     Some(CameraConnection { l, raster: cs.raster, p_lens: cs.p_lens, beta_cam, shadow })
+}
+
+/// `scene.shadow_ray(p, ng, p_lens, Vec3::ZERO, time)` bit for bit: the lens end has no
+/// normal, so its offset is `p_lens + 0` (which only turns -0.0 into 0.0) and the
+/// magnitude its size would scale is not needed (one connection per light vertex).
+#[inline]
+pub(crate) fn shadow_ray_to_lens(scene: &Scene, p: glam::Vec3, ng: glam::Vec3, p_lens: glam::Vec3, time: f32) -> Option<Ray> {
+    use crate::geometry::ray::{offset_ray_origin, SHADOW_EPSILON};
+    if !p_lens.is_finite() {
+        // (A zero normal times a non-finite magnitude is NaN there.)
+        return scene.shadow_ray(p, ng, p_lens, glam::Vec3::ZERO, time);
+    }
+    let d = p_lens - p;
+    let o = offset_ray_origin(p, ng, d);
+    // `offset_ray_origin(p_lens, 0, -d)`: a dot product with zero is ±0 (taking +0) unless
+    // `d` is not finite (NaN: taking -0).
+    let q = if (-d).dot(glam::Vec3::ZERO) >= 0.0 { p_lens + glam::Vec3::ZERO } else { p_lens - glam::Vec3::ZERO };
+    let d = q - o;
+    let dist = d.length();
+    if dist == 0.0 {
+        return None;
+    }
+    let mut ray = Ray::with_max(o, d / dist, dist * (1.0 - SHADOW_EPSILON));
+    ray.time = time;
+    Some(ray)
 }
 
 /// Strategy (s, 1) of [`connect`] with its MIS weight, without the visibility test: the
@@ -220,4 +245,57 @@ pub fn weighted_camera_connection(
     cam.time = light[s - 1].time;
     let weight = mis_weight(scene, cfg, light, camera, Some(&cam), s, 1);
     Some((c.l * weight, c.raster, c.shadow))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::bsdf::Material;
+    use crate::camera::{Camera, Projection};
+    use crate::geometry::{Geometry, Sphere};
+    use crate::light::Light;
+    use crate::sampling::Pcg32;
+    use crate::scene::SceneBuilder;
+    use crate::texture::Texture;
+    use glam::{Mat4, Vec3};
+
+    /// `shadow_ray_to_lens` is `Scene::shadow_ray` toward a point without a normal, bit for
+    /// bit: random points, signed zeros, points on the lens and non-finite ones.
+    #[test]
+    fn shadow_ray_to_lens_is_scene_shadow_ray() {
+        let mut b = SceneBuilder::new();
+        let m = b.add_material(Material::Diffuse { reflectance: Texture::Constant(Rgb::splat(0.5)) });
+        b.add_shape(Geometry::Sphere(Sphere { center: Vec3::new(0.0, 0.0, 4.0), radius: 1.0, flip_normals: false }), m, None, "ball").unwrap();
+        b.add_light(Light::Point { position: Vec3::ZERO, intensity: Rgb::splat(1.0) });
+        b.set_camera(Camera {
+            to_world: Mat4::IDENTITY,
+            projection: Projection::Perspective { fov_x_deg: 50.0, aperture_radius: 0.0, focus_distance: 1.0 },
+            width: 8,
+            height: 8,
+            near_clip: 0.01,
+            far_clip: 100.0,
+            shutter_open: 0.0,
+            shutter_close: 0.0,
+        });
+        let scene = b.build().unwrap();
+        let bits = |r: Option<Ray>| r.map(|r| (r.o.to_array().map(f32::to_bits), r.d.to_array().map(f32::to_bits), r.t_max.to_bits(), r.time.to_bits()));
+        let mut rng = Pcg32::new(7, 3);
+        let mut u = || (rng.next_f32() - 0.5) * 20.0;
+        let mut points: Vec<Vec3> = vec![Vec3::ZERO, Vec3::new(-0.0, 0.0, -0.0), Vec3::new(-0.0, -0.0, -0.0), Vec3::new(1.0, -0.0, 3.0)];
+        points.extend([Vec3::new(f32::INFINITY, 0.0, 1.0), Vec3::new(f32::NAN, 1.0, 0.0), Vec3::new(1e30, -1e30, 2.0)]);
+        points.extend((0..400).map(|_| Vec3::new(u(), u(), u())));
+        let normals = [Vec3::Z, -Vec3::X, Vec3::ZERO, Vec3::new(0.6, 0.0, -0.8)];
+        let mut some = 0;
+        for (i, &p) in points.iter().enumerate() {
+            for &p_lens in points.iter().skip(i % 5).step_by(37) {
+                for ng in normals {
+                    let want = scene.shadow_ray(p, ng, p_lens, Vec3::ZERO, 0.25);
+                    let got = shadow_ray_to_lens(&scene, p, ng, p_lens, 0.25);
+                    assert_eq!(bits(got), bits(want), "p {p} ng {ng} p_lens {p_lens}");
+                    some += got.is_some() as usize;
+                }
+            }
+        }
+        assert!(some > 1000, "{some}");
+    }
 }

@@ -46,19 +46,25 @@ pub fn mis_weight(scene: &Scene, cfg: &PathConfig, light: &[Vertex], camera: &[V
     let qs_minus = if s >= 2 { Some(&light[s - 2]) } else { None };
     let pt_minus = if t >= 2 { Some(&camera[t - 2]) } else { None };
 
-    // Reverse densities at the connection, for this strategy.
-    let pt_rev = match qs {
-        Some(q) => q.pdf_with_lens(scene, cfg.lens.as_ref(), qs_minus, pt, TransportMode::Importance),
-        None => pt_minus.map_or(0.0, |pm| pt.pdf_light_origin(scene, pm)),
+    // Reverse densities at the connection, for this strategy; the two asked at one vertex
+    // (toward either neighbour) share their directions (`Vertex::pdf_pair`).
+    let (lens, imp, rad) = (cfg.lens.as_ref(), TransportMode::Importance, TransportMode::Radiance);
+    let (pt_rev, qs_minus_rev) = match (qs, qs_minus) {
+        (Some(q), Some(qm)) => {
+            let (to_pt, to_qm) = q.pdf_pair(scene, lens, qm, pt, imp, rad);
+            (to_pt, Some(to_qm))
+        }
+        (Some(q), None) => (q.pdf_with_lens(scene, lens, None, pt, imp), None),
+        (None, _) => (pt_minus.map_or(0.0, |pm| pt.pdf_light_origin(scene, pm)), None),
     };
-    let pt_minus_rev = pt_minus.map(|pm| match qs {
-        Some(q) => pt.pdf_with_lens(scene, cfg.lens.as_ref(), Some(q), pm, TransportMode::Importance),
-        None => pt.pdf_light(scene, pm),
-    });
-    let qs_rev = qs.map(|q| pt.pdf_with_lens(scene, cfg.lens.as_ref(), pt_minus, q, TransportMode::Radiance));
-    let qs_minus_rev = match (qs, qs_minus) {
-        (Some(q), Some(qm)) => Some(q.pdf_with_lens(scene, cfg.lens.as_ref(), Some(pt), qm, TransportMode::Radiance)),
-        _ => None,
+    let (pt_minus_rev, qs_rev) = match (qs, pt_minus) {
+        (Some(q), Some(pm)) => {
+            let (to_pm, to_q) = pt.pdf_pair(scene, lens, q, pm, imp, rad);
+            (Some(to_pm), Some(to_q))
+        }
+        (Some(q), None) => (None, Some(pt.pdf_with_lens(scene, lens, None, q, rad))),
+        (None, Some(pm)) => (Some(pt.pdf_light(scene, pm)), None),
+        (None, None) => (None, None),
     };
 
     let cam = |i: usize| -> Pdfs {

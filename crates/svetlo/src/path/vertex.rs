@@ -407,6 +407,26 @@ impl Vertex {
         Self::convert_density_dir(pdf, next, wn, d2)
     }
 
+    /// `(self.pdf_with_lens(.., Some(a), b, to_b), self.pdf_with_lens(.., Some(b), a, to_a))`,
+    /// bit for bit, with the two directions and their local frames computed once for both
+    /// at a surface (the MIS weight asks both at each end of a connection).
+    #[allow(clippy::too_many_arguments)]
+    pub fn pdf_pair(&self, scene: &Scene, lens: Option<&LensConnector>, a: &Vertex, b: &Vertex, to_b: TransportMode, to_a: TransportMode) -> (f32, f32) {
+        if self.kind != VertexKind::Surface {
+            return (self.pdf_with_lens(scene, lens, Some(a), b, to_b), self.pdf_with_lens(scene, lens, Some(b), a, to_a));
+        }
+        let (wa, da2) = self.direction_to(a);
+        let (wb, db2) = self.direction_to(b);
+        let Some(bsdf) = &self.bsdf else { return (0.0, 0.0) };
+        if da2 == 0.0 || db2 == 0.0 {
+            return (0.0, 0.0);
+        }
+        let (la, lb) = (self.shading.to_local(wa), self.shading.to_local(wb));
+        let ab = Self::convert_density_dir(bsdf.pdf(la, lb, to_b), b, wb, db2);
+        let ba = Self::convert_density_dir(bsdf.pdf(lb, la, to_a), a, wa, da2);
+        (ab, ba)
+    }
+
     /// Area density at `v` of a ray leaving this light vertex toward it (emission's
     /// directional density; for lights at infinity the density of the entry disk).
     pub fn pdf_light(&self, scene: &Scene, v: &Vertex) -> f32 {
