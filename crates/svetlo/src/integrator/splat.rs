@@ -315,18 +315,12 @@ pub(super) fn render_chunked<E: SplatEstimator>(
                 p.chunks_begun += 1;
                 let first = ci * p.tiles_per_chunk;
                 let chunk = &tiles[first..(first + p.tiles_per_chunk).min(tiles.len())];
-                // Tiles folded into their sums before, cleared, for this pass; else new ones.
+                // Tiles folded into their sums before (the workers clear them), else new ones.
                 let film = &p.film;
                 let job_tiles: Vec<FilmTile> = chunk
                     .iter()
                     .enumerate()
-                    .map(|(i, &(x0, y0, x1, y1))| match tile_spare.get_mut(first + i).and_then(|s| s.pop()) {
-                        Some(mut t) => {
-                            t.clear();
-                            t
-                        }
-                        None => film.tile(x0, y0, x1, y1),
-                    })
+                    .map(|(i, &(x0, y0, x1, y1))| tile_spare.get_mut(first + i).and_then(|s| s.pop()).unwrap_or_else(|| film.tile(x0, y0, x1, y1)))
                     .collect();
                 Some((chunk, job_tiles, p.s0, p.n))
             }
@@ -335,7 +329,9 @@ pub(super) fn render_chunked<E: SplatEstimator>(
         if job.is_none() && pending.is_none() {
             break;
         }
-        let merging = pending.take().zip(open.front_mut());
+        // The pending chunk's pass, taken out for the merge (and back unless it is complete).
+        // (Not `zip`: its argument, the pop, would run with nothing pending too.)
+        let merging = pending.take().and_then(|r| open.pop_front().map(|p| (r, p)));
         let render = |(chunk, job_tiles, s0, n): ChunkJob| -> ChunkResults {
             chunk
                 .par_iter()
@@ -348,6 +344,7 @@ pub(super) fn render_chunked<E: SplatEstimator>(
                     if progress.cancelled() {
                         return None;
                     }
+                    tile.clear();
                     let mut splats = Vec::new();
                     let mut sampler = proto.clone_box();
                     let mut scratch = est.scratch();
@@ -358,40 +355,49 @@ pub(super) fn render_chunked<E: SplatEstimator>(
                 })
                 .collect()
         };
-        let (merged, rendered) = pool.install(|| rayon::join(|| merging.map(|(results, p)| p.merge_chunk(results, w, h)), || job.map(render)));
-        if merged == Some(false) {
-            cancelled = true;
-        }
-        if merged.is_some() && !cancelled {
-            // The front pass took a chunk: once it has all of them, it joins the sums.
-            if let Some(p) = open.front() {
-                if p.tiles.len() == tiles.len() {
-                    let Some(p) = open.pop_front() else { break };
-                    let OpenPass { n, mut film, extra, tiles: pass_tiles, .. } = p;
-                    if own_tiles {
-                        for ((t, s), spare) in pass_tiles.into_iter().zip(&mut tile_sums).zip(&mut tile_spare) {
-                            s.push_recycling(t, |a, b| a.add(b), spare);
+        // A complete pass joins the sums in the merging task too: its tiles' tree sums and the
+        // pass tree's film additions are no serial step between chunks either.
+        let all_tiles = tiles.len();
+        let (sums, tile_sums_ref, tile_spare_ref, spare_ref) = (&mut sum, &mut tile_sums, &mut tile_spare, &mut spare);
+        let merge = move |(results, mut p): (ChunkResults, OpenPass)| -> Merged {
+            if !p.merge_chunk(results, w, h) {
+                return Merged::Cancelled;
+            }
+            if p.tiles.len() < all_tiles {
+                return Merged::Chunk(p);
+            }
+            let OpenPass { n, mut film, extra, tiles: pass_tiles, .. } = p;
+            if own_tiles {
+                for ((t, s), spare) in pass_tiles.into_iter().zip(tile_sums_ref.iter_mut()).zip(tile_spare_ref.iter_mut()) {
+                    s.push_recycling(t, |a, b| a.add(b), spare);
+                }
+            } else {
+                for t in &pass_tiles {
+                    film.merge_tile(t);
+                }
+            }
+            film.spp_done = n;
+            sums.push_recycling((film, extra), add, spare_ref);
+            Merged::Pass(n)
+        };
+        let (merged, rendered) = pool.install(|| rayon::join(|| merging.map(merge), || job.map(render)));
+        match merged {
+            Some(Merged::Cancelled) => cancelled = true,
+            Some(Merged::Chunk(p)) => open.push_front(p),
+            Some(Merged::Pass(n)) => {
+                spp_done += n;
+                if progress.wants_pass(spp_done) {
+                    // The splats' scale so far, so that an observer sees a developed image.
+                    if let Some((mut f, _)) = sum.peek(add) {
+                        for t in tile_sums.iter().filter_map(|s| s.peek(|a, b| a.add(b))) {
+                            f.merge_tile(&t);
                         }
-                    } else {
-                        for t in &pass_tiles {
-                            film.merge_tile(t);
-                        }
-                    }
-                    spp_done += n;
-                    film.spp_done = n;
-                    sum.push_recycling((film, extra), add, &mut spare);
-                    if progress.wants_pass(spp_done) {
-                        // The splats' scale so far, so that an observer sees a developed image.
-                        if let Some((mut f, _)) = sum.peek(add) {
-                            for t in tile_sums.iter().filter_map(|s| s.peek(|a, b| a.add(b))) {
-                                f.merge_tile(&t);
-                            }
-                            f.splat_scale = spp_done as f32;
-                            progress.pass_done(&f);
-                        }
+                        f.splat_scale = spp_done as f32;
+                        progress.pass_done(&f);
                     }
                 }
             }
+            None => {}
         }
         if cancelled {
             break; // cancelled mid-pass: the incomplete passes are dropped
@@ -415,6 +421,16 @@ pub(super) fn render_chunked<E: SplatEstimator>(
         }
     }
     Ok(SplatRender { film, channels: extra })
+}
+
+/// What merging a chunk into its pass came to.
+enum Merged {
+    /// A tile of the chunk was cancelled: the pass stays incomplete.
+    Cancelled,
+    /// The pass awaits more chunks.
+    Chunk(OpenPass),
+    /// The pass (of this many samples per pixel) was complete and joined the sums.
+    Pass(u32),
 }
 
 /// A chunk's tiles with their splats, in tile order; None where cancelled.
@@ -619,10 +635,16 @@ mod tests {
         });
         let scene = b.build().unwrap();
         for filter in [crate::film::Filter::Box, crate::film::Filter::Tent { radius: 1.5 }, crate::film::Filter::Gaussian { stddev: 0.5 }] {
-            let settings = RenderSettings { spp: 3, filter, ..Default::default() };
-            let est = CountingEstimator((0..w * h).map(|_| Default::default()).collect(), w);
-            render_chunked(&scene, &settings, &Progress::new(), &est, 0, u64::MAX).unwrap();
-            assert!(est.0.iter().all(|c| c.load(Ordering::Relaxed) == 3), "{filter:?}: some pixel not sampled exactly 3 times");
+            // One chunk a pass, and several (the pipeline merges one while rendering the next,
+            // across passes too), with passes of 1 and 2 samples.
+            for (spp, chunk_samples, threads) in [(3, u64::MAX, 2), (3, 64, 3), (16, 200, 2), (16, 200, 1)] {
+                let settings = RenderSettings { spp, filter, threads, ..Default::default() };
+                let est = CountingEstimator((0..w * h).map(|_| Default::default()).collect(), w);
+                let r = render_chunked(&scene, &settings, &Progress::new(), &est, 0, chunk_samples).unwrap();
+                assert!(est.0.iter().all(|c| c.load(Ordering::Relaxed) == spp), "{filter:?}: some pixel not sampled exactly {spp} times");
+                // Each pass reached the film (a pass rendered and then dropped kept its counts).
+                assert_eq!(r.film.spp_done, spp, "{filter:?}, chunks of {chunk_samples} samples");
+            }
         }
     }
 
