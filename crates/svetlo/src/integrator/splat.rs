@@ -364,7 +364,7 @@ pub(super) fn render_chunked<E: SplatEstimator>(
                 return Merged::Cancelled;
             }
             if p.tiles.len() < all_tiles {
-                return Merged::Chunk(p);
+                return Merged::Chunk(Box::new(p));
             }
             let OpenPass { n, mut film, extra, tiles: pass_tiles, .. } = p;
             if own_tiles {
@@ -383,7 +383,7 @@ pub(super) fn render_chunked<E: SplatEstimator>(
         let (merged, rendered) = pool.install(|| rayon::join(|| merging.map(merge), || job.map(render)));
         match merged {
             Some(Merged::Cancelled) => cancelled = true,
-            Some(Merged::Chunk(p)) => open.push_front(p),
+            Some(Merged::Chunk(p)) => open.push_front(*p),
             Some(Merged::Pass(n)) => {
                 spp_done += n;
                 if progress.wants_pass(spp_done) {
@@ -428,7 +428,7 @@ enum Merged {
     /// A tile of the chunk was cancelled: the pass stays incomplete.
     Cancelled,
     /// The pass awaits more chunks.
-    Chunk(OpenPass),
+    Chunk(Box<OpenPass>),
     /// The pass (of this many samples per pixel) was complete and joined the sums.
     Pass(u32),
 }
