@@ -162,6 +162,13 @@ impl LensConnector {
 
     /// [`Camera::we`].
     pub fn we(&self, ray: &Ray) -> Option<(f32, Vec2)> {
+        self.we_and_direction(ray).map(|(we, raster, _)| (we, raster))
+    }
+
+    /// [`Self::we`] with the ray's unit camera-space direction, which [`Self::pdf_we`] needs
+    /// too (computed once: BDPT's MIS asks for camera densities per connection).
+    #[inline]
+    fn we_and_direction(&self, ray: &Ray) -> Option<(f32, Vec2, Vec3)> {
         let radius = self.radius;
         let m = self.to_camera;
         let d = m.transform_vector3(ray.d).normalize_or_zero();
@@ -175,15 +182,14 @@ impl LensConnector {
                 return None;
             }
         }
-        self.we_local(o, d)
+        self.we_local(o, d).map(|(we, raster)| (we, raster, d))
     }
 
     /// [`Camera::pdf_we`].
     pub fn pdf_we(&self, ray: &Ray) -> (f32, f32) {
-        if self.we(ray).is_none() {
+        let Some((_, _, d)) = self.we_and_direction(ray) else {
             return (0.0, 0.0);
-        }
-        let d = self.to_camera.transform_vector3(ray.d).normalize_or_zero();
+        };
         let pdf_pos = if self.radius == 0.0 { 0.0 } else { 1.0 / self.lens_area };
         (pdf_pos, 1.0 / (self.film_area * d.z * d.z * d.z))
     }
