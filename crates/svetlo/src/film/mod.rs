@@ -522,11 +522,18 @@ impl Film {
 
     /// A tile covering `[x0,x1) x [y0,y1)` of this film, to be filled and merged back.
     pub fn tile(&self, x0: u32, y0: u32, x1: u32, y1: u32) -> FilmTile {
+        Film::tile_of(self.width, self.height, self.filter, self.layer_names.len(), x0, y0, x1, y1)
+    }
+
+    /// [`Film::tile`] of a film of this size, filter and number of layers, without the film
+    /// (a render's workers make their tiles while the film is elsewhere).
+    #[allow(clippy::too_many_arguments)]
+    pub fn tile_of(width: u32, height: u32, filter: Filter, n_layers: usize, x0: u32, y0: u32, x1: u32, y1: u32) -> FilmTile {
         // Extend by the filter radius so samples near the border reach neighbours; a box
         // sample reaches only its own pixel (`add_to_owner`), so box tiles do not overlap.
-        let r = if self.filter == Filter::Box { 0 } else { self.filter.radius().ceil() as u32 };
-        let mut t = FilmTile::new(x0.saturating_sub(r), y0.saturating_sub(r), (x1 + r).min(self.width), (y1 + r).min(self.height), self.filter);
-        t.set_layers(self.layer_names.len());
+        let r = if filter == Filter::Box { 0 } else { filter.radius().ceil() as u32 };
+        let mut t = FilmTile::new(x0.saturating_sub(r), y0.saturating_sub(r), (x1 + r).min(width), (y1 + r).min(height), filter);
+        t.set_layers(n_layers);
         t
     }
 

@@ -232,8 +232,7 @@ pub(super) fn render_chunked<E: SplatEstimator>(
         (None, Some(plan)) => 0..plan.len() as u32,
         (None, None) => 0..u32::MAX,
     };
-    // A pass's film and extra channels; passes add up by the pass tree.
-    type PassSum = (Film, Vec<Vec<Rgb>>);
+    let layout = PassLayout { w, h, filter: settings.filter, names: settings.aovs().names(), channels };
     let add = |a: &mut PassSum, b: &PassSum| {
         a.0.add(&b.0);
         for (d, s) in a.1.iter_mut().zip(&b.1) {
@@ -286,20 +285,14 @@ pub(super) fn render_chunked<E: SplatEstimator>(
             };
             let stop = progress.cancelled() || settings.time_limit.is_some_and(|t| start.elapsed() >= t);
             if let (Some((s0, n)), false) = (next, stop) {
-                let (film, extra) = match spare.pop() {
-                    Some((mut f, mut e)) => {
-                        f.clear();
-                        e.iter_mut().for_each(|c| c.fill(Rgb::BLACK));
-                        (f, e)
-                    }
-                    None => (Film::with_layers(w, h, settings.filter, settings.aovs().names()), vec![vec![Rgb::BLACK; (w * h) as usize]; channels]),
-                };
+                // Cleared or made by the worker that merges the pass's first chunk.
+                let sum = spare.pop();
                 let tiles_per_chunk = ((chunk_samples / (n as u64 * (TILE * TILE) as u64)).max(1)).min(tiles.len().max(1) as u64) as usize;
                 open.push_back(OpenPass {
                     s0,
                     n,
-                    film,
-                    extra,
+                    sum,
+                    ready: false,
                     tiles: Vec::with_capacity(tiles.len()),
                     tiles_per_chunk,
                     chunks: tiles.len().div_ceil(tiles_per_chunk),
@@ -315,13 +308,9 @@ pub(super) fn render_chunked<E: SplatEstimator>(
                 p.chunks_begun += 1;
                 let first = ci * p.tiles_per_chunk;
                 let chunk = &tiles[first..(first + p.tiles_per_chunk).min(tiles.len())];
-                // Tiles folded into their sums before (the workers clear them), else new ones.
-                let film = &p.film;
-                let job_tiles: Vec<FilmTile> = chunk
-                    .iter()
-                    .enumerate()
-                    .map(|(i, &(x0, y0, x1, y1))| tile_spare.get_mut(first + i).and_then(|s| s.pop()).unwrap_or_else(|| film.tile(x0, y0, x1, y1)))
-                    .collect();
+                // Tiles folded into their sums before (the workers clear them); the workers
+                // make the others.
+                let job_tiles: Vec<Option<FilmTile>> = (first..first + chunk.len()).map(|i| tile_spare.get_mut(i).and_then(|s| s.pop())).collect();
                 Some((chunk, job_tiles, p.s0, p.n))
             }
             _ => None,
@@ -340,10 +329,13 @@ pub(super) fn render_chunked<E: SplatEstimator>(
                 // tiles / (2 threads) that are never split again unless stolen, and the last
                 // such run kept one thread busy while the others waited 10 % of each pass.
                 .with_max_len(1)
-                .map(|(&(x0, y0, x1, y1), mut tile)| {
+                .map(|(&(x0, y0, x1, y1), tile)| {
                     if progress.cancelled() {
                         return None;
                     }
+                    // Made and cleared here, not on the calling thread while the workers wait
+                    // (a few ms at each of the first passes' boundaries, before tiles recycle).
+                    let mut tile = tile.unwrap_or_else(|| Film::tile_of(w, h, layout.filter, layout.names.len(), x0, y0, x1, y1));
                     tile.clear();
                     let mut splats = Vec::new();
                     let mut sampler = proto.clone_box();
@@ -359,14 +351,16 @@ pub(super) fn render_chunked<E: SplatEstimator>(
         // pass tree's film additions are no serial step between chunks either.
         let all_tiles = tiles.len();
         let (sums, tile_sums_ref, tile_spare_ref, spare_ref) = (&mut sum, &mut tile_sums, &mut tile_spare, &mut spare);
+        let layout = &layout;
         let merge = move |(results, mut p): (ChunkResults, OpenPass)| -> Merged {
-            if !p.merge_chunk(results, w, h) {
+            if !p.merge_chunk(results, layout) {
                 return Merged::Cancelled;
             }
             if p.tiles.len() < all_tiles {
                 return Merged::Chunk(Box::new(p));
             }
-            let OpenPass { n, mut film, extra, tiles: pass_tiles, .. } = p;
+            let OpenPass { n, sum, tiles: pass_tiles, .. } = p;
+            let (mut film, extra) = sum.unwrap_or_else(|| layout.new_sum());
             if own_tiles {
                 for ((t, s), spare) in pass_tiles.into_iter().zip(tile_sums_ref.iter_mut()).zip(tile_spare_ref.iter_mut()) {
                     s.push_recycling(t, |a, b| a.add(b), spare);
@@ -404,9 +398,7 @@ pub(super) fn render_chunked<E: SplatEstimator>(
         }
         pending = rendered;
     }
-    let (mut film, mut extra) = sum
-        .finish(|a, b| add(a, &b))
-        .unwrap_or_else(|| (Film::with_layers(w, h, settings.filter, settings.aovs().names()), vec![vec![Rgb::BLACK; (w * h) as usize]; channels]));
+    let (mut film, mut extra) = sum.finish(|a, b| add(a, &b)).unwrap_or_else(|| layout.new_sum());
     for t in tile_sums.into_iter().filter_map(|s| s.finish(|a, b| a.add(&b))) {
         film.merge_tile(&t);
     }
@@ -436,16 +428,38 @@ enum Merged {
 /// A chunk's tiles with their splats, in tile order; None where cancelled.
 type ChunkResults = Vec<Option<(FilmTile, Vec<Splat>)>>;
 
-/// A chunk to render: its tiles' rectangles, their film tiles, and the pass's samples.
-type ChunkJob<'a> = (&'a [(u32, u32, u32, u32)], Vec<FilmTile>, u32, u32);
+/// A chunk to render: its tiles' rectangles, their recycled film tiles (None: to be made),
+/// and the pass's samples.
+type ChunkJob<'a> = (&'a [(u32, u32, u32, u32)], Vec<Option<FilmTile>>, u32, u32);
+
+/// A pass's film and extra channels; passes add up by the pass tree.
+type PassSum = (Film, Vec<Vec<Rgb>>);
+
+/// What a pass's film and channels look like, to make them on a worker.
+struct PassLayout<'a> {
+    w: u32,
+    h: u32,
+    filter: Filter,
+    names: &'a [String],
+    channels: usize,
+}
+
+impl PassLayout<'_> {
+    fn new_sum(&self) -> PassSum {
+        (Film::with_layers(self.w, self.h, self.filter, self.names), vec![vec![Rgb::BLACK; (self.w * self.h) as usize]; self.channels])
+    }
+}
 
 /// A pass begun and not yet in the sums: its film and channels take its chunks' splats and
 /// its tiles, chunk by chunk in order.
 struct OpenPass {
     s0: u32,
     n: u32,
-    film: Film,
-    extra: Vec<Vec<Rgb>>,
+    /// The pass's film and channels once its first chunk is merged; before, a recycled sum
+    /// still to be cleared, or None (to be made). Clearing or making it (megabytes of zeros)
+    /// is the merging worker's work, not the calling thread's while the workers wait.
+    sum: Option<PassSum>,
+    ready: bool,
     /// The tiles of the chunks merged so far, in tile order.
     tiles: Vec<FilmTile>,
     tiles_per_chunk: usize,
@@ -456,10 +470,22 @@ struct OpenPass {
 impl OpenPass {
     /// Adds one chunk's results (in tile order) to the pass; false when a tile of it was
     /// cancelled, which leaves the pass incomplete.
-    fn merge_chunk(&mut self, results: ChunkResults, w: u32, h: u32) -> bool {
+    fn merge_chunk(&mut self, results: ChunkResults, layout: &PassLayout) -> bool {
         if results.iter().any(|t| t.is_none()) {
             return false;
         }
+        if !self.ready {
+            match &mut self.sum {
+                Some((f, e)) => {
+                    f.clear();
+                    e.iter_mut().for_each(|c| c.fill(Rgb::BLACK));
+                }
+                None => self.sum = Some(layout.new_sum()),
+            }
+            self.ready = true;
+        }
+        let Some((film, extra)) = self.sum.as_mut() else { return false };
+        let (w, h) = (layout.w, layout.h);
         for (t, splats) in results.into_iter().flatten() {
             self.tiles.push(t);
             for sp in splats {
@@ -468,15 +494,15 @@ impl OpenPass {
                 };
                 let centre = Vec2::new(x as f32 + 0.5, y as f32 + 0.5);
                 match sp.channel {
-                    0 => self.film.splat(centre, sp.value),
+                    0 => film.splat(centre, sp.value),
                     NO_CHANNEL => {}
                     c => {
-                        if let Some(e) = self.extra.get_mut(c as usize - 1) {
+                        if let Some(e) = extra.get_mut(c as usize - 1) {
                             e[(y * w + x) as usize] += sp.value;
                         }
                     }
                 }
-                self.film.splat_layers(sp.layers, centre, sp.value);
+                film.splat_layers(sp.layers, centre, sp.value);
             }
         }
         true
