@@ -165,6 +165,9 @@ struct ShapeData {
     /// Light index and radiance when the shape emits.
     /// (None: a textured emitter, its radiance looked up at the hit by `AreaLight::l`).
     light: Option<(u32, Option<Rgb>)>,
+    /// A scalar BSDF that is the same at every point (no texture, no surface detail: what
+    /// `Scene::bsdf` gives at any hit), built once instead of at each hit of a lane.
+    uniform: Option<Bsdf>,
 }
 
 /// A mesh area light as `AreaLight::sample_li` samples it, unpacked: its triangles' vertices
@@ -410,7 +413,8 @@ impl SimdKernel {
                 }
                 None => None,
             };
-            shapes.push(ShapeData { scalar_bsdf, front, back, textured, light });
+            let uniform = (scalar_bsdf && !s.detail && mat.is_uniform()).then(|| mat.bsdf(TexPoint::default()));
+            shapes.push(ShapeData { scalar_bsdf, front, back, textured, light, uniform });
         }
         // Other shapes' hits come as the scene's surface records (`other_hit`). Written once
         // into a vector of the final size: with a million triangles this unpacking is a
@@ -736,7 +740,10 @@ impl SimdKernel {
                     let prev_p = Vec3::new(st.prev_p[0][l], st.prev_p[1][l], st.prev_p[2][l]);
                     let pdf_li = area_of(scene, li).map_or(0.0, |a| a.pdf_li(prev_p, p, ng));
                     let pdf_bsdf = match &st.prev_bsdf[l] {
-                        Some(pb) => bsdf_pdf_toward(&pb.bsdf, &pb.frame, pb.wo, prev_p, p).unwrap_or(st.prev_pdf[l]),
+                        Some(pb) => match pb.own.as_ref().or(self.shapes[pb.shape as usize].uniform.as_ref()) {
+                            Some(bsdf) => bsdf_pdf_toward(bsdf, &pb.frame, pb.wo, prev_p, p).unwrap_or(st.prev_pdf[l]),
+                            None => st.prev_pdf[l],
+                        },
                         None => {
                             // The diffuse BSDF's density toward the hit point, as the scalar
                             // tracer's `bsdf_pdf_toward` (the same operations).
@@ -818,7 +825,8 @@ impl SimdKernel {
                         t: 0.0,
                         ng,
                         shading: frame,
-                        uv: self.uv(scene, tri, b1, b2),
+                        // Only `Scene::bsdf` reads it: a uniform BSDF needs none.
+                        uv: if sh.uniform.is_some() { Vec2::ZERO } else { self.uv(scene, tri, b1, b2) },
                         shape: tri.shape,
                         prim: tri.local,
                         bary: Vec2::new(b1, b2),
@@ -919,7 +927,14 @@ impl SimdKernel {
     #[inline(never)]
     fn scalar_scatter<S>(&self, scene: &Scene, events: &LaneEvents, st: &mut Paths<S>, l: usize, v: &mut Soa, si: &SurfaceInteraction, u: [f32; 6]) {
         let [u_light, ul_x, ul_y, uc, ux, uy] = u;
-        let bsdf = scene.bsdf(si);
+        let own;
+        let bsdf = match &self.shapes[si.shape as usize].uniform {
+            Some(b) => b,
+            None => {
+                own = scene.bsdf(si);
+                &own
+            }
+        };
         let flags = bsdf.flags();
         let (p, frame) = (si.p, si.shading);
         let wo = frame.to_local(si.wo);
@@ -938,11 +953,11 @@ impl SimdKernel {
                 d / d.length_squared().sqrt()
             };
             let wi = frame.to_local(wi_w);
-            let f = bsdf.eval(wo, wi, TransportMode::Radiance);
+            let (f, pdf) = bsdf.eval_pdf(wo, wi, TransportMode::Radiance);
             v.nee_ok[l] = !f.is_black();
             put_rgb(&mut v.bf, l, f);
             // A delta light takes no MIS weight (nor the density).
-            v.bpdf_nee[l] = if v.delta[l] { 0.0 } else { bsdf.pdf(wo, wi, TransportMode::Radiance) };
+            v.bpdf_nee[l] = if v.delta[l] { 0.0 } else { pdf };
             if let Some(view) = events.view {
                 v.class_nee[l] = view.class(events.aovs.scatter_event(v.shape[l], flags, None, wi.z * wo.z < 0.0));
             }
@@ -966,7 +981,8 @@ impl SimdKernel {
             st.eta_scale[l] *= bs.eta * bs.eta;
         }
         if !bs.lobe.is_specular() {
-            st.prev_bsdf[l] = Some(PrevBsdf { bsdf, frame, wo });
+            let own = self.shapes[si.shape as usize].uniform.is_none().then(|| bsdf.clone());
+            st.prev_bsdf[l] = Some(PrevBsdf { own, shape: si.shape, frame, wo });
         }
     }
 
@@ -1069,7 +1085,9 @@ struct Soa {
 /// A camera-path vertex of a scalar BSDF that scattered by a non-delta lobe, kept for the
 /// MIS weight of the emitter its sample reaches (as `path.rs`'s `ScatterPoint`).
 struct PrevBsdf {
-    bsdf: Bsdf,
+    /// Its BSDF; None: the shape's uniform one (`ShapeData::uniform`), not copied.
+    own: Option<Bsdf>,
+    shape: u32,
     frame: Frame,
     /// Toward the vertex before it, local frame.
     wo: Vec3,
