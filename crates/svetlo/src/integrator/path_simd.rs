@@ -61,7 +61,7 @@ use crate::error::{Error, Result};
 use crate::film::{Film, FilmTile};
 use crate::geometry::ray::SHADOW_EPSILON;
 use crate::geometry::Ray;
-use crate::geometry::{Geometry, SurfaceInteraction, TriangleShading};
+use crate::geometry::{Geometry, Sphere, SurfaceInteraction, TriangleShading};
 use crate::light::{AreaLight, Light};
 use crate::lpe::{AovSet, ForwardView, LayerMask, MAX_LAYERS};
 use crate::math::{warp, Frame, INV_PI, PI};
@@ -307,6 +307,9 @@ pub struct SimdKernel {
     /// Per light of the scene: a mesh area light unpacked, or None for a light the lanes
     /// sample through its own `Light::sample_li` (point, spot, directional, environment).
     lights: Vec<Option<MeshLight>>,
+    /// Per light of the scene: a sphere area light of constant radiance, which the lanes
+    /// sample without `Light::sample_li`'s dispatch (`AreaLight::sample_constant_sphere`).
+    sphere_lights: Vec<Option<(Sphere, Rgb)>>,
     /// Run the AVX-512VL build of the kernel (detected at run time; tests may clear it).
     avx512: bool,
 }
@@ -446,7 +449,18 @@ impl SimdKernel {
             let (geo, shapes): (Vec<_>, Vec<_>) = spheres.into_iter().unzip();
             Tracer::Packets { bvh: PacketBvh::build(&verts()), ties: Some(first_triangles(scene)), spheres: Some(Box::new((PacketSpheres::new(&geo), shapes))) }
         };
-        Some(SimdKernel { tracer, tris, shapes, lights, avx512: avx512() })
+        let sphere_lights = scene
+            .lights
+            .iter()
+            .map(|l| match l {
+                Light::Area(a) => match (&*a.geometry, &a.radiance) {
+                    (Geometry::Sphere(s), Texture::Constant(le)) => Some((*s, *le)),
+                    _ => None,
+                },
+                _ => None,
+            })
+            .collect();
+        Some(SimdKernel { tracer, tris, shapes, lights, sphere_lights, avx512: avx512() })
     }
 
     /// Whether rays go as packets (else one by one through the scene's BVH).
@@ -864,6 +878,23 @@ impl SimdKernel {
         match self.lights.get(li) {
             // Any other light by its own sampling (`path::light_mis_to`'s first tests).
             Some(None) if pmf > 0.0 => {
+                // A sphere of constant radiance seen from outside: its cone, as `sample_li`.
+                if let Some((s, le)) = self.sphere_lights[li] {
+                    if let Some(sample) = AreaLight::sample_constant_sphere(&s, p, u_l2) {
+                        if let Some((wi, lp, n, pdf)) = sample.filter(|&(.., pdf)| pdf > 0.0 && !le.is_black()) {
+                            put(&mut v.lp, lp);
+                            put(&mut v.ln, n);
+                            put(&mut v.gwi, wi);
+                            putc(&mut v.lrad, le);
+                            v.gpdf[l] = pdf;
+                            v.infinite[l] = false;
+                            v.delta[l] = false;
+                            v.generic[l] = true;
+                            v.nee_ok[l] = true;
+                        }
+                        return;
+                    }
+                }
                 let light = &scene.lights[li];
                 if let Some(ls) = light.sample_li(p, u_l2, &scene.bounds).filter(|ls| ls.pdf > 0.0 && !ls.li.is_black()) {
                     put(&mut v.lp, ls.p);
