@@ -17,12 +17,17 @@
 //! shape; every other one (conductors, dielectrics, plastics, the classic models,
 //! principled, blends, masks, normal and bump maps) lane by lane through its scalar `Bsdf`
 //! in `gather` (`scalar_scatter`: the same calls and random numbers as `path.rs`), its
-//! results selected into `shade8`'s lanes. Scenes large enough to trace single rays take the
-//! kernel only with Lambertian materials (it gained nothing there otherwise). Lights: area
-//! lights of constant radiance on meshes (sampled by the kernel's own unpacked copy), and
-//! every other light the scalar tracer takes (textured area lights, sphere lights, point,
-//! spot, directional, one constant or bitmap environment), each lane sampling it through its
-//! own `Light::sample_li` (a sphere's: the cone it subtends), looking a textured or sphere
+//! results selected into `shade8`'s lanes. A shape whose material has no texture and no
+//! surface detail keeps its `Bsdf`, built once (`ShapeData::uniform`; its lanes neither
+//! rebuild nor copy it), and the value and density toward the light sample come from one
+//! call (`Bsdf::eval_pdf`: a rough model's half vector, D and G1 computed once). Scenes
+//! large enough to trace single rays take the kernel only with Lambertian materials (it
+//! gained nothing there otherwise). Lights: area lights of constant radiance on meshes
+//! (sampled by the kernel's own unpacked copy), and every other light the scalar tracer
+//! takes (textured area lights, sphere lights, point, spot, directional, one constant or
+//! bitmap environment), each lane sampling it through its own `Light::sample_li` (a
+//! sphere's: the cone it subtends; one of constant radiance directly by
+//! `AreaLight::sample_constant_sphere`, the same bits), looking a textured or sphere
 //! emitter's radiance and density (`AreaLight::l`, `pdf_li`) up where its path hits it and
 //! seeing the environment where its ray escapes;
 //! either sampler (Sobol's scrambles for all lanes at once: [`LaneSampler`]); AOVs and
