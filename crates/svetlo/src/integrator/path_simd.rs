@@ -761,6 +761,7 @@ impl SimdKernel {
                     let pdf_bsdf = match &st.prev_bsdf[l] {
                         Some(pb) => match pb.own.as_ref().or(self.shapes[pb.shape as usize].uniform.as_ref()) {
                             Some(bsdf) => bsdf_pdf_toward(bsdf, &pb.frame, pb.wo, prev_p, p).unwrap_or(st.prev_pdf[l]),
+                            // Never: `own` is None only on a shape with a uniform BSDF.
                             None => st.prev_pdf[l],
                         },
                         None => {
