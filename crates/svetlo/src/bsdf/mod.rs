@@ -198,6 +198,17 @@ impl BsdfModel {
     pub fn pdf(&self, wo: Vec3, wi: Vec3, mode: TransportMode) -> f32 {
         dispatch!(self, m => m.pdf(wo, wi, mode))
     }
+    /// ([`Self::eval`], [`Self::pdf`]), the same bits: the rough models compute their half
+    /// vector, D and G1 once for both.
+    #[inline]
+    pub fn eval_pdf(&self, wo: Vec3, wi: Vec3, mode: TransportMode) -> (Rgb, f32) {
+        match self {
+            BsdfModel::RoughConductor(m) => m.eval_pdf(wo, wi),
+            BsdfModel::RoughPlastic(m) => m.eval_pdf(wo, wi),
+            BsdfModel::RoughDielectric(m) => m.eval_pdf(wo, wi, mode),
+            m => (m.eval(wo, wi, mode), m.pdf(wo, wi, mode)),
+        }
+    }
     /// Hemispherical-average diffuse reflectance: what radiosity uses for this surface.
     /// Specular and glossy models (conductors, dielectrics) have none: the hybrid display
     /// pass ray-traces them. Plastic and the classic two-lobe models
@@ -292,6 +303,20 @@ impl Bsdf {
             Some(_) => self.pdf_local(pwo, pwi, mode),
             None => 0.0,
         }
+    }
+
+    /// ([`Self::eval`], [`Self::pdf`]), the same bits, sharing what the model can share
+    /// ([`BsdfModel::eval_pdf`]): next-event estimation needs both.
+    pub fn eval_pdf(&self, wo: Vec3, wi: Vec3, mode: TransportMode) -> (Rgb, f32) {
+        if self.detail.is_some() {
+            return (self.eval(wo, wi, mode), self.pdf(wo, wi, mode));
+        }
+        let (f, pdf) = match self.side(wo) {
+            Some((m, false)) => m.eval_pdf(wo, wi, mode),
+            Some((m, true)) => m.eval_pdf(flip(wo), flip(wi), mode),
+            None => return (Rgb::BLACK, 0.0),
+        };
+        (f * self.opacity, pdf * self.opacity)
     }
 
     pub fn sample(&self, wo: Vec3, uc: f32, u: Vec2, mode: TransportMode) -> Option<BsdfSample> {
@@ -460,6 +485,57 @@ mod tests {
                     let wi_r = fresnel::reflect_z(wo);
                     assert_eq!(bits(d.eval_pdf(wo, wi_r, m)), bits((d.eval(wo, wi_r, m), d.pdf(wo, wi_r, m))));
                     assert_eq!(bits(c.eval_pdf(wo, wi_r)), bits((c.eval(wo, wi_r, m), c.pdf(wo, wi_r, m))));
+                }
+            }
+        }
+    }
+
+    /// `Bsdf::eval_pdf` (what next-event estimation calls) gives the bits of `eval` and `pdf`
+    /// called apart: one- and two-sided, masked, with a normal map, on models with and
+    /// without a fused evaluation, directions on both sides and grazing.
+    #[test]
+    fn bsdf_eval_pdf_is_eval_and_pdf() {
+        let mut rng = crate::sampling::rng::Pcg32::new(5, 9);
+        let md = microfacet::Microfacet::new(MicrofacetKind::Beckmann, 0.1, 0.1);
+        let conductor = BsdfModel::RoughConductor(conductor::RoughConductor {
+            distribution: md,
+            eta: Rgb::new(0.200438, 0.924033, 1.10221),
+            k: Rgb::new(3.91295, 2.45285, 2.14219),
+            specular_reflectance: Rgb::splat(0.3),
+        });
+        let ggx = microfacet::Microfacet::new(MicrofacetKind::Ggx, 0.3, 0.05);
+        let back = BsdfModel::RoughConductor(conductor::RoughConductor {
+            distribution: ggx,
+            eta: Rgb::splat(1.5),
+            k: Rgb::splat(2.0),
+            specular_reflectance: Rgb::WHITE,
+        });
+        let plastic = BsdfModel::RoughPlastic(plastic::RoughPlastic::new(MicrofacetKind::Ggx, 0.2, Rgb::new(0.1, 0.27, 0.36), Rgb::WHITE, 1.5, true, 0.5));
+        let dielectric = BsdfModel::RoughDielectric(dielectric::RoughDielectric {
+            distribution: md,
+            eta: 1.5,
+            specular_reflectance: Rgb::WHITE,
+            specular_transmittance: Rgb::splat(0.9),
+        });
+        let diffuse = BsdfModel::Diffuse(diffuse::Diffuse { reflectance: Rgb::splat(0.5) });
+        let mut cases = vec![];
+        for front in [conductor, plastic, dielectric, diffuse] {
+            cases.push(Bsdf::new(front.clone()));
+            cases.push(Bsdf { back: Some(back.clone()), ..Bsdf::new(front.clone()) });
+            cases.push(Bsdf { back: Some(front.clone()), opacity: 0.6, ..Bsdf::new(front.clone()) });
+            cases.push(Bsdf { detail: Some(detail::Detail::new(Vec3::new(0.3, -0.2, 0.9), true)), ..Bsdf::new(front) });
+        }
+        let bits = |(f, pdf): (Rgb, f32)| (f.r.to_bits(), f.g.to_bits(), f.b.to_bits(), pdf.to_bits());
+        let dir = |rng: &mut crate::sampling::rng::Pcg32| crate::math::warp::square_to_uniform_sphere(Vec2::new(rng.next_f32(), rng.next_f32()));
+        let grazing = [Vec3::new(1.0, 0.0, 1e-4).normalize(), Vec3::new(0.0, -1.0, -1e-4).normalize(), Vec3::new(0.6, 0.8, 0.0), Vec3::Z, -Vec3::Z];
+        for b in &cases {
+            for mode in [TransportMode::Radiance, TransportMode::Importance] {
+                let mut pairs: Vec<(Vec3, Vec3)> = (0..2000).map(|_| (dir(&mut rng), dir(&mut rng))).collect();
+                pairs.extend(grazing.iter().flat_map(|&a| grazing.iter().map(move |&c| (a, c))));
+                // Mirror pairs, where the lobes peak.
+                pairs.extend((0..200).map(|_| dir(&mut rng)).map(|w| (w, fresnel::reflect_z(w))));
+                for (wo, wi) in pairs {
+                    assert_eq!(bits(b.eval_pdf(wo, wi, mode)), bits((b.eval(wo, wi, mode), b.pdf(wo, wi, mode))), "{:?} {mode:?} {wo} {wi}", b.front);
                 }
             }
         }

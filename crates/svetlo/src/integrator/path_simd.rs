@@ -17,12 +17,17 @@
 //! shape; every other one (conductors, dielectrics, plastics, the classic models,
 //! principled, blends, masks, normal and bump maps) lane by lane through its scalar `Bsdf`
 //! in `gather` (`scalar_scatter`: the same calls and random numbers as `path.rs`), its
-//! results selected into `shade8`'s lanes. Scenes large enough to trace single rays take the
-//! kernel only with Lambertian materials (it gained nothing there otherwise). Lights: area
-//! lights of constant radiance on meshes (sampled by the kernel's own unpacked copy), and
-//! every other light the scalar tracer takes (textured area lights, sphere lights, point,
-//! spot, directional, one constant or bitmap environment), each lane sampling it through its
-//! own `Light::sample_li` (a sphere's: the cone it subtends), looking a textured or sphere
+//! results selected into `shade8`'s lanes. A shape whose material has no texture and no
+//! surface detail keeps its `Bsdf`, built once (`ShapeData::uniform`; its lanes neither
+//! rebuild nor copy it), and the value and density toward the light sample come from one
+//! call (`Bsdf::eval_pdf`: a rough model's half vector, D and G1 computed once). Scenes
+//! large enough to trace single rays take the kernel only with Lambertian materials (it
+//! gained nothing there otherwise). Lights: area lights of constant radiance on meshes
+//! (sampled by the kernel's own unpacked copy), and every other light the scalar tracer
+//! takes (textured area lights, sphere lights, point, spot, directional, one constant or
+//! bitmap environment), each lane sampling it through its own `Light::sample_li` (a
+//! sphere's: the cone it subtends; one of constant radiance directly by
+//! `AreaLight::sample_constant_sphere`, the same bits), looking a textured or sphere
 //! emitter's radiance and density (`AreaLight::l`, `pdf_li`) up where its path hits it and
 //! seeing the environment where its ray escapes;
 //! either sampler (Sobol's scrambles for all lanes at once: [`LaneSampler`]); AOVs and
@@ -61,7 +66,7 @@ use crate::error::{Error, Result};
 use crate::film::{Film, FilmTile};
 use crate::geometry::ray::SHADOW_EPSILON;
 use crate::geometry::Ray;
-use crate::geometry::{Geometry, SurfaceInteraction, TriangleShading};
+use crate::geometry::{Geometry, Sphere, SurfaceInteraction, TriangleShading};
 use crate::light::{AreaLight, Light};
 use crate::lpe::{AovSet, ForwardView, LayerMask, MAX_LAYERS};
 use crate::math::{warp, Frame, INV_PI, PI};
@@ -165,6 +170,9 @@ struct ShapeData {
     /// Light index and radiance when the shape emits.
     /// (None: a textured emitter, its radiance looked up at the hit by `AreaLight::l`).
     light: Option<(u32, Option<Rgb>)>,
+    /// A scalar BSDF that is the same at every point (no texture, no surface detail: what
+    /// `Scene::bsdf` gives at any hit), built once instead of at each hit of a lane.
+    uniform: Option<Bsdf>,
 }
 
 /// A mesh area light as `AreaLight::sample_li` samples it, unpacked: its triangles' vertices
@@ -304,6 +312,9 @@ pub struct SimdKernel {
     /// Per light of the scene: a mesh area light unpacked, or None for a light the lanes
     /// sample through its own `Light::sample_li` (point, spot, directional, environment).
     lights: Vec<Option<MeshLight>>,
+    /// Per light of the scene: a sphere area light of constant radiance, which the lanes
+    /// sample without `Light::sample_li`'s dispatch (`AreaLight::sample_constant_sphere`).
+    sphere_lights: Vec<Option<(Sphere, Rgb)>>,
     /// Run the AVX-512VL build of the kernel (detected at run time; tests may clear it).
     avx512: bool,
 }
@@ -410,7 +421,8 @@ impl SimdKernel {
                 }
                 None => None,
             };
-            shapes.push(ShapeData { scalar_bsdf, front, back, textured, light });
+            let uniform = (scalar_bsdf && !s.detail && mat.is_uniform()).then(|| mat.bsdf(TexPoint::default()));
+            shapes.push(ShapeData { scalar_bsdf, front, back, textured, light, uniform });
         }
         // Other shapes' hits come as the scene's surface records (`other_hit`). Written once
         // into a vector of the final size: with a million triangles this unpacking is a
@@ -442,7 +454,18 @@ impl SimdKernel {
             let (geo, shapes): (Vec<_>, Vec<_>) = spheres.into_iter().unzip();
             Tracer::Packets { bvh: PacketBvh::build(&verts()), ties: Some(first_triangles(scene)), spheres: Some(Box::new((PacketSpheres::new(&geo), shapes))) }
         };
-        Some(SimdKernel { tracer, tris, shapes, lights, avx512: avx512() })
+        let sphere_lights = scene
+            .lights
+            .iter()
+            .map(|l| match l {
+                Light::Area(a) => match (&*a.geometry, &a.radiance) {
+                    (Geometry::Sphere(s), Texture::Constant(le)) => Some((*s, *le)),
+                    _ => None,
+                },
+                _ => None,
+            })
+            .collect();
+        Some(SimdKernel { tracer, tris, shapes, lights, sphere_lights, avx512: avx512() })
     }
 
     /// Whether rays go as packets (else one by one through the scene's BVH).
@@ -736,7 +759,11 @@ impl SimdKernel {
                     let prev_p = Vec3::new(st.prev_p[0][l], st.prev_p[1][l], st.prev_p[2][l]);
                     let pdf_li = area_of(scene, li).map_or(0.0, |a| a.pdf_li(prev_p, p, ng));
                     let pdf_bsdf = match &st.prev_bsdf[l] {
-                        Some(pb) => bsdf_pdf_toward(&pb.bsdf, &pb.frame, pb.wo, prev_p, p).unwrap_or(st.prev_pdf[l]),
+                        Some(pb) => match pb.own.as_ref().or(self.shapes[pb.shape as usize].uniform.as_ref()) {
+                            Some(bsdf) => bsdf_pdf_toward(bsdf, &pb.frame, pb.wo, prev_p, p).unwrap_or(st.prev_pdf[l]),
+                            // Never: `own` is None only on a shape with a uniform BSDF.
+                            None => st.prev_pdf[l],
+                        },
                         None => {
                             // The diffuse BSDF's density toward the hit point, as the scalar
                             // tracer's `bsdf_pdf_toward` (the same operations).
@@ -818,7 +845,8 @@ impl SimdKernel {
                         t: 0.0,
                         ng,
                         shading: frame,
-                        uv: self.uv(scene, tri, b1, b2),
+                        // Only `Scene::bsdf` reads it: a uniform BSDF needs none.
+                        uv: if sh.uniform.is_some() { Vec2::ZERO } else { self.uv(scene, tri, b1, b2) },
                         shape: tri.shape,
                         prim: tri.local,
                         bary: Vec2::new(b1, b2),
@@ -856,6 +884,23 @@ impl SimdKernel {
         match self.lights.get(li) {
             // Any other light by its own sampling (`path::light_mis_to`'s first tests).
             Some(None) if pmf > 0.0 => {
+                // A sphere of constant radiance seen from outside: its cone, as `sample_li`.
+                if let Some((s, le)) = self.sphere_lights[li] {
+                    if let Some(sample) = AreaLight::sample_constant_sphere(&s, p, u_l2) {
+                        if let Some((wi, lp, n, pdf)) = sample.filter(|&(.., pdf)| pdf > 0.0 && !le.is_black()) {
+                            put(&mut v.lp, lp);
+                            put(&mut v.ln, n);
+                            put(&mut v.gwi, wi);
+                            putc(&mut v.lrad, le);
+                            v.gpdf[l] = pdf;
+                            v.infinite[l] = false;
+                            v.delta[l] = false;
+                            v.generic[l] = true;
+                            v.nee_ok[l] = true;
+                        }
+                        return;
+                    }
+                }
                 let light = &scene.lights[li];
                 if let Some(ls) = light.sample_li(p, u_l2, &scene.bounds).filter(|ls| ls.pdf > 0.0 && !ls.li.is_black()) {
                     put(&mut v.lp, ls.p);
@@ -919,7 +964,14 @@ impl SimdKernel {
     #[inline(never)]
     fn scalar_scatter<S>(&self, scene: &Scene, events: &LaneEvents, st: &mut Paths<S>, l: usize, v: &mut Soa, si: &SurfaceInteraction, u: [f32; 6]) {
         let [u_light, ul_x, ul_y, uc, ux, uy] = u;
-        let bsdf = scene.bsdf(si);
+        let own;
+        let bsdf = match &self.shapes[si.shape as usize].uniform {
+            Some(b) => b,
+            None => {
+                own = scene.bsdf(si);
+                &own
+            }
+        };
         let flags = bsdf.flags();
         let (p, frame) = (si.p, si.shading);
         let wo = frame.to_local(si.wo);
@@ -938,11 +990,11 @@ impl SimdKernel {
                 d / d.length_squared().sqrt()
             };
             let wi = frame.to_local(wi_w);
-            let f = bsdf.eval(wo, wi, TransportMode::Radiance);
+            let (f, pdf) = bsdf.eval_pdf(wo, wi, TransportMode::Radiance);
             v.nee_ok[l] = !f.is_black();
             put_rgb(&mut v.bf, l, f);
             // A delta light takes no MIS weight (nor the density).
-            v.bpdf_nee[l] = if v.delta[l] { 0.0 } else { bsdf.pdf(wo, wi, TransportMode::Radiance) };
+            v.bpdf_nee[l] = if v.delta[l] { 0.0 } else { pdf };
             if let Some(view) = events.view {
                 v.class_nee[l] = view.class(events.aovs.scatter_event(v.shape[l], flags, None, wi.z * wo.z < 0.0));
             }
@@ -966,7 +1018,8 @@ impl SimdKernel {
             st.eta_scale[l] *= bs.eta * bs.eta;
         }
         if !bs.lobe.is_specular() {
-            st.prev_bsdf[l] = Some(PrevBsdf { bsdf, frame, wo });
+            let own = self.shapes[si.shape as usize].uniform.is_none().then(|| bsdf.clone());
+            st.prev_bsdf[l] = Some(PrevBsdf { own, shape: si.shape, frame, wo });
         }
     }
 
@@ -1069,7 +1122,9 @@ struct Soa {
 /// A camera-path vertex of a scalar BSDF that scattered by a non-delta lobe, kept for the
 /// MIS weight of the emitter its sample reaches (as `path.rs`'s `ScatterPoint`).
 struct PrevBsdf {
-    bsdf: Bsdf,
+    /// Its BSDF; None: the shape's uniform one (`ShapeData::uniform`), not copied.
+    own: Option<Bsdf>,
+    shape: u32,
     frame: Frame,
     /// Toward the vertex before it, local frame.
     wo: Vec3,

@@ -183,6 +183,25 @@ impl AreaLight {
     /// sphere, found from the angle at the sphere's center (no ray intersection, so no
     /// misses at grazing angles).
     fn sample_sphere_cone(&self, s: &Sphere, cone: &SphereCone, p_ref: Vec3, u: Vec2) -> Option<LightSample> {
+        let (p, n_out, wi) = Self::cone_point(s, cone, p_ref, u)?;
+        // A constant radiance needs no uv (its two inverse trigonometric functions), and the
+        // normal is the unit vector the point was made from.
+        let (n, uv) = if self.radiance.is_constant() {
+            (if s.flip_normals { -n_out } else { n_out }, Vec2::ZERO)
+        } else {
+            let (n, uv, _) = s.surface(p);
+            (n, uv)
+        };
+        if n.dot(-wi) <= 0.0 {
+            return None; // an inward-facing sphere seen from outside emits nothing toward us
+        }
+        Some(LightSample { wi, li: self.radiance.eval(uv), pdf: SphereCone::pdf_of(cone.one_minus_cos_max), p, n, infinite: false })
+    }
+
+    /// The cone sample's point on the sphere, its outward normal and the unit direction to it
+    /// (None where the point is the reference point).
+    #[inline(always)]
+    fn cone_point(s: &Sphere, cone: &SphereCone, p_ref: Vec3, u: Vec2) -> Option<(Vec3, Vec3, Vec3)> {
         let one_minus_cos = u.y * cone.one_minus_cos_max;
         let cos_t = 1.0 - one_minus_cos;
         let sin2_t = one_minus_cos * (2.0 - one_minus_cos);
@@ -199,19 +218,23 @@ impl AreaLight {
         if dist == 0.0 {
             return None;
         }
-        let wi = d / dist;
-        // A constant radiance needs no uv (its two inverse trigonometric functions), and the
-        // normal is the unit vector the point was made from.
-        let (n, uv) = if self.radiance.is_constant() {
-            (if s.flip_normals { -n_out } else { n_out }, Vec2::ZERO)
-        } else {
-            let (n, uv, _) = s.surface(p);
-            (n, uv)
-        };
-        if n.dot(-wi) <= 0.0 {
-            return None; // an inward-facing sphere seen from outside emits nothing toward us
-        }
-        Some(LightSample { wi, li: self.radiance.eval(uv), pdf: SphereCone::pdf_of(cone.one_minus_cos_max), p, n, infinite: false })
+        Some((p, n_out, d / dist))
+    }
+
+    /// [`Self::sample_li`] of a sphere of constant radiance `s` (the eight-wide path kernel
+    /// keeps its lights' spheres): None where `p_ref` is inside it (sampled by area there),
+    /// else the light sample's direction, point, normal and density, or None where
+    /// `sample_li` gives none. The same operations, so the same bits.
+    #[inline]
+    pub(crate) fn sample_constant_sphere(s: &Sphere, p_ref: Vec3, u: Vec2) -> Option<Option<(Vec3, Vec3, Vec3, f32)>> {
+        let cone = SphereCone::new(s, p_ref)?;
+        Some(Self::cone_point(s, &cone, p_ref, u).and_then(|(p, n_out, wi)| {
+            let n = if s.flip_normals { -n_out } else { n_out };
+            if n.dot(-wi) <= 0.0 {
+                return None;
+            }
+            Some((wi, p, n, SphereCone::pdf_of(cone.one_minus_cos_max)))
+        }))
     }
 
     /// Solid-angle density of `sample_li` choosing the point `p` (normal `n`) from `p_ref`.
@@ -261,5 +284,58 @@ impl AreaLight {
     pub fn pdf_le(&self, ray: &Ray, n: Vec3) -> (f32, f32) {
         let pdf_pos = if self.area > 0.0 { 1.0 / self.area } else { 0.0 };
         (pdf_pos, n.dot(ray.d).max(0.0) * INV_PI)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::sampling::rng::Pcg32;
+
+    /// `sample_constant_sphere` (the path kernel's sphere light sample) gives
+    /// `AreaLight::sample_li`'s bits (direction, point, normal, density, and None where it
+    /// refuses), or says the point takes area sampling: reference points outside, on and
+    /// inside spheres, near and far, inward-facing spheres, the numbers' ends and quadrant
+    /// boundaries.
+    #[test]
+    fn constant_sphere_sample_is_sample_li() {
+        let mut rng = Pcg32::new(3, 7);
+        let mut f = |lo: f32, hi: f32| lo + (hi - lo) * rng.next_f32();
+        let us = [0.0f32, 0.25, 0.5, 0.75, 1.0 - f32::EPSILON, 0.124_999_99, 1e-9];
+        let (mut cones, mut refused, mut inside) = (0, 0, 0);
+        for i in 0..40_000usize {
+            let center = Vec3::new(f(-5.0, 5.0), f(-5.0, 5.0), f(-5.0, 5.0));
+            let radius = if i % 11 == 0 { 1e-3 } else { f(0.01, 2.0) };
+            let sphere = Sphere { center, radius, flip_normals: i % 5 == 0 };
+            let dir = warp::square_to_uniform_sphere(Vec2::new(f(0.0, 1.0), f(0.0, 1.0)));
+            // Inside, on (within rounding), just outside, and far from the sphere.
+            let dist = match i % 4 {
+                0 => radius * f(0.0, 1.0),
+                1 => radius * (1.0 + f(-1e-5, 1e-5)),
+                2 => radius * (1.0 + f(0.0, 1e-3)),
+                _ => radius * f(1.0, 1e4),
+            };
+            let p_ref = center + dir * dist;
+            let u = if i % 3 == 0 { Vec2::new(us[i % us.len()], us[(i / 3) % us.len()]) } else { Vec2::new(f(0.0, 1.0), f(0.0, 1.0)) };
+            let le = Rgb::new(2.0, 1.0, 0.5);
+            let light = AreaLight::new(0, Arc::new(Geometry::Sphere(sphere)), Texture::Constant(le));
+            let Some(fast) = AreaLight::sample_constant_sphere(&sphere, p_ref, u) else {
+                assert!(SphereCone::new(&sphere, p_ref).is_none(), "{sphere:?} from {p_ref}: not sampled by its cone");
+                inside += 1;
+                continue;
+            };
+            cones += 1;
+            let scalar = light.sample_li(p_ref, u);
+            assert_eq!(fast.is_some(), scalar.is_some(), "{sphere:?} from {p_ref} u {u}");
+            let (Some((wi, p, n, pdf)), Some(s)) = (fast, scalar) else {
+                refused += 1;
+                continue;
+            };
+            let bits = |v: Vec3| v.to_array().map(f32::to_bits);
+            assert_eq!((bits(wi), bits(p), bits(n), pdf.to_bits()), (bits(s.wi), bits(s.p), bits(s.n), s.pdf.to_bits()), "{sphere:?} from {p_ref} u {u}");
+            assert_eq!(s.li, le);
+        }
+        // Every outcome was exercised.
+        assert!(cones > 20_000 && refused > 100 && inside > 5_000, "{cones} cone samples, {refused} refused, {inside} inside");
     }
 }
