@@ -488,7 +488,7 @@ mod tests {
                 assert_eq!((got.width, got.height), (256, 3));
                 let bits = |c: Rgb| c.to_array().map(f32::to_bits);
                 for (i, w) in want.iter().enumerate() {
-                    assert_eq!(bits(got.data[i]), bits(*w), "{:?} {format:?} raw {raw}: texel {i}", img.color());
+                    assert_eq!(bits(got.data()[i]), bits(*w), "{:?} {format:?} raw {raw}: texel {i}", img.color());
                     assert_eq!(bits(got.texel(i % 256, i / 256)), bits(*w), "{:?} {format:?} raw {raw}: lookup {i}", img.color());
                 }
             }
@@ -497,7 +497,7 @@ mod tests {
         let exr = encode_exr(&test_image(4, 3)).unwrap();
         let got = decode_bitmap(&exr, Path::new("t.exr"), false).unwrap();
         assert!(!got.is_8bit());
-        assert_eq!(got.data, test_image(4, 3).data);
+        assert_eq!(got.data(), test_image(4, 3).data);
     }
 
     fn tmp(name: &str) -> PathBuf {

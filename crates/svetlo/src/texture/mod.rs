@@ -9,7 +9,7 @@ pub mod procedural;
 
 use crate::spectrum::Rgb;
 use glam::{Affine2, Vec2, Vec3};
-use std::sync::Arc;
+use std::sync::{Arc, OnceLock};
 
 pub use procedural::{Mapping2D, Procedural};
 
@@ -33,10 +33,16 @@ pub enum WrapMode {
 pub struct Bitmap {
     pub width: usize,
     pub height: usize,
-    /// The texels. A bitmap made by [`Bitmap::from_8bit`] keeps them also as 8-bit codes,
-    /// which lookups read: its `data` must not be changed (make a new bitmap instead).
-    pub data: Vec<Rgb>,
-    codes: Option<Texels8>,
+    store: Store,
+}
+
+/// A bitmap's texels.
+#[derive(Clone, Debug)]
+enum Store {
+    Float(Vec<Rgb>),
+    /// 8-bit codes, which lookups read, and their `Rgb` values, decoded only when asked for
+    /// ([`Bitmap::data`]).
+    Codes(Texels8, OnceLock<Vec<Rgb>>),
 }
 
 /// The texels of an 8-bit image as its codes (RGB, padded to four bytes) and the linear value
@@ -48,39 +54,70 @@ struct Texels8 {
     table: &'static [f32; 256],
 }
 
+impl Texels8 {
+    #[inline]
+    fn rgb(&self, i: usize) -> Rgb {
+        let c = self.codes[i];
+        Rgb::new(self.table[c[0] as usize], self.table[c[1] as usize], self.table[c[2] as usize])
+    }
+}
+
 impl Bitmap {
     pub fn new(width: usize, height: usize, data: Vec<Rgb>) -> Self {
         assert_eq!(data.len(), width * height);
-        Bitmap { width, height, data, codes: None }
+        Bitmap { width, height, store: Store::Float(data) }
     }
 
     /// A bitmap of 8-bit texels (the fourth byte unused) whose channels decode as `table` says
-    /// (sRGB to linear, or Mitsuba's `raw` code / 255): `data` holds the decoded values.
+    /// (sRGB to linear, or Mitsuba's `raw` code / 255).
     pub fn from_8bit(width: usize, height: usize, codes: Vec<[u8; 4]>, table: &'static [f32; 256]) -> Self {
         assert_eq!(codes.len(), width * height);
-        let data = codes.iter().map(|c| Rgb::new(table[c[0] as usize], table[c[1] as usize], table[c[2] as usize])).collect();
-        Bitmap { width, height, data, codes: Some(Texels8 { codes: codes.into_boxed_slice(), table }) }
+        Bitmap { width, height, store: Store::Codes(Texels8 { codes: codes.into_boxed_slice(), table }, OnceLock::new()) }
     }
 
     /// Whether lookups read 8-bit codes ([`Bitmap::from_8bit`]).
     pub fn is_8bit(&self) -> bool {
-        self.codes.is_some()
+        matches!(self.store, Store::Codes(..))
+    }
+
+    /// The texels, row by row (an 8-bit bitmap's decoded on the first call, and kept).
+    pub fn data(&self) -> &[Rgb] {
+        match &self.store {
+            Store::Float(v) => v,
+            Store::Codes(t, decoded) => decoded.get_or_init(|| (0..t.codes.len()).map(|i| t.rgb(i)).collect()),
+        }
+    }
+
+    /// The texels to change in place: an 8-bit bitmap becomes a float one.
+    pub fn data_mut(&mut self) -> &mut Vec<Rgb> {
+        if let Store::Codes(..) = self.store {
+            self.store = Store::Float(self.data().to_vec());
+        }
+        match &mut self.store {
+            Store::Float(v) => v,
+            Store::Codes(..) => unreachable!("made a float store above"),
+        }
     }
 
     #[inline]
     pub fn texel(&self, x: usize, y: usize) -> Rgb {
         let i = y * self.width + x;
-        match &self.codes {
-            Some(t) => {
-                let c = t.codes[i];
-                Rgb::new(t.table[c[0] as usize], t.table[c[1] as usize], t.table[c[2] as usize])
-            }
-            None => self.data[i],
+        match &self.store {
+            Store::Float(v) => v[i],
+            Store::Codes(t, _) => t.rgb(i),
         }
     }
+    /// The texels row by row, as [`Bitmap::data`] holds them, without decoding a copy.
+    pub fn texels(&self) -> impl Iterator<Item = Rgb> + '_ {
+        (0..self.width * self.height).map(move |i| match &self.store {
+            Store::Float(v) => v[i],
+            Store::Codes(t, _) => t.rgb(i),
+        })
+    }
+
     pub fn mean(&self) -> Rgb {
-        let s: Rgb = self.data.iter().copied().sum();
-        s / self.data.len().max(1) as f32
+        let s: Rgb = self.texels().sum();
+        s / (self.width * self.height).max(1) as f32
     }
 }
 
@@ -390,7 +427,8 @@ mod tests {
             let compact = Arc::new(Bitmap::from_8bit(w, h, codes.clone(), table));
             assert!(compact.is_8bit());
             let float = Arc::new(Bitmap::new(w, h, codes.iter().map(|c| Rgb::new(table[c[0] as usize], table[c[1] as usize], table[c[2] as usize])).collect()));
-            assert_eq!(compact.data, float.data);
+            assert_eq!(compact.data(), float.data());
+            assert_eq!(compact.mean(), float.mean());
             for filter in [FilterMode::Nearest, FilterMode::Bilinear] {
                 for wrap in [WrapMode::Repeat, WrapMode::Mirror, WrapMode::Clamp] {
                     let to_uv = Affine2::from_scale_angle_translation(Vec2::new(1.7, -0.6), 0.3, Vec2::new(-0.2, 0.4));

@@ -25,7 +25,7 @@ impl<'a> Loader<'a> {
         if img.width == 0 || img.height == 0 {
             return Err(crate::Error::Image { file: path.to_path_buf(), msg: "image is empty".into() });
         }
-        if let Some(i) = img.data.iter().position(|c| !c.is_finite()) {
+        if let Some(i) = img.texels().position(|c| !c.is_finite()) {
             return Err(crate::Error::Image { file: path.to_path_buf(), msg: format!("pixel {} is not finite", i) });
         }
         let b = Arc::new(img);
@@ -51,7 +51,7 @@ impl<'a> Loader<'a> {
                     o => return Err(node.loc.err(format!("wrap_mode '{o}' is not repeat, mirror or clamp"))),
                 };
                 let image = self.bitmap(&path, raw)?;
-                if kind == SpectrumKind::Reflectance && !raw && image.data.iter().any(|c| c.max_component() > 1.0) {
+                if kind == SpectrumKind::Reflectance && !raw && image.texels().any(|c| c.max_component() > 1.0) {
                     self.warn(format!("{}: reflectance texture has values above 1", path.display()));
                 }
                 Ok(Texture::Bitmap { image, filter, wrap, to_uv })
