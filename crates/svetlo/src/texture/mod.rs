@@ -3,6 +3,12 @@
 //! weights) use the same textures, read as Mitsuba's `eval_1` reads them. pbrt-v4's
 //! procedural textures (`procedural.rs`, on Perlin noise in `noise.rs`) also read the
 //! point's position and normal.
+//!
+//! A bitmap read from an 8-bit colour file keeps its texels as the file's codes (four bytes
+//! each) and decodes a code through the same 256-entry table the loader's float path uses:
+//! lookups give the same values bit for bit while reading a quarter of the memory, which for
+//! a large texture is most of a lookup's cost (cache misses). Its `Rgb` copy is decoded only
+//! for the rare callers that ask for all texels at once ([`Bitmap::data`]).
 
 pub mod noise;
 pub mod procedural;
