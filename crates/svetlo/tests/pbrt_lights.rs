@@ -131,7 +131,7 @@ fn goniometric_frame_and_inverse_square() {
     let dir = std::env::temp_dir().join(format!("svetlo-gonio-{}", std::process::id()));
     std::fs::create_dir_all(&dir).unwrap();
     let img = Bitmap::new(3, 3, (0..9).map(|i| Rgb::splat(if i == 4 { 5.0 } else { 1.0 })).collect());
-    svetlo::io::image_io::write_exr(&dir.join("g.exr"), &svetlo::film::Image::new(3, 3, img.data.clone())).unwrap();
+    svetlo::io::image_io::write_exr(&dir.join("g.exr"), &svetlo::film::Image::new(3, 3, img.data().to_vec())).unwrap();
     let load = |xf: &str| {
         let text = world(&format!("{xf}\nLightSource \"goniometric\" \"string filename\" \"g.exr\" \"rgb I\" [ 2 1 0.5 ]"));
         let scene = load_pbrt_from_str(&text, &dir.join("g.pbrt")).unwrap_or_else(|e| panic!("{e}"));

@@ -4,6 +4,7 @@
 use crate::error::{Error, Result};
 use crate::film::Image;
 use crate::spectrum::Rgb;
+use crate::texture::Bitmap;
 use std::io::Cursor;
 use std::path::Path;
 
@@ -376,6 +377,54 @@ pub fn decode_image(bytes: &[u8], path: &Path) -> Result<Image> {
     }
 }
 
+/// Read an image as a texture: [`decode_bitmap`] of the file's bytes.
+pub fn read_bitmap(path: &Path, raw: bool) -> Result<Bitmap> {
+    decode_bitmap(&crate::limits::read_file(path)?, path, raw)
+}
+
+/// An image as a texture, decoded as [`decode_image`] does, or with `raw` (Mitsuba's option)
+/// with 8-bit codes mapped to [0, 1] as stored, not from sRGB. Eight-bit colour images keep
+/// their codes ([`Bitmap::from_8bit`]): lookups then read a quarter of the bytes, and the
+/// same values.
+pub fn decode_bitmap(bytes: &[u8], path: &Path, raw: bool) -> Result<Bitmap> {
+    let float = |img: Image| Bitmap::new(img.width, img.height, img.data);
+    if bytes.starts_with(&[0x76, 0x2f, 0x31, 0x01]) {
+        return decode_exr(bytes, path).map(float);
+    }
+    if bytes.starts_with(b"PF") || bytes.starts_with(b"Pf") {
+        return decode_pfm(bytes, path).map(float);
+    }
+    if !raw && matches!(ext(path).as_str(), "exr" | "pfm") {
+        // decode_image's error for a file whose name promises a float format.
+        return decode_image(bytes, path).map(float);
+    }
+    let img = decode_8bit(bytes, path)?;
+    let (w, h) = (img.width() as usize, img.height() as usize);
+    // Grey images stay on the float path: the crate's grey-to-float conversion rounds differently.
+    if matches!(img.color(), image::ColorType::Rgb8 | image::ColorType::Rgba8) {
+        let table = if raw { unorm8_table() } else { srgb8_to_linear_table() };
+        let codes = img.into_rgb8().pixels().map(|p| [p[0], p[1], p[2], 0]).collect();
+        return Ok(Bitmap::from_8bit(w, h, codes, table));
+    }
+    let data = img
+        .to_rgb32f()
+        .pixels()
+        .map(|p| if raw { Rgb::new(p[0], p[1], p[2]) } else { Rgb::new(Rgb::srgb_to_linear(p[0]), Rgb::srgb_to_linear(p[1]), Rgb::srgb_to_linear(p[2])) })
+        .collect();
+    Ok(Bitmap::new(w, h, data))
+}
+
+/// Each 8-bit code as the `image` crate's conversion to float gives it (code / 255): Mitsuba's
+/// `raw` textures.
+fn unorm8_table() -> &'static [f32; 256] {
+    static TABLE: std::sync::OnceLock<[f32; 256]> = std::sync::OnceLock::new();
+    TABLE.get_or_init(|| {
+        let codes = image::RgbImage::from_fn(256, 1, |x, _| image::Rgb([x as u8; 3]));
+        let floats = image::DynamicImage::ImageRgb8(codes).to_rgb32f();
+        std::array::from_fn(|i| floats.get_pixel(i as u32, 0)[0])
+    })
+}
+
 /// Linear value of each 8-bit sRGB code, exactly as the per-pixel path would give it (the
 /// `image` crate's conversion to float, then [`Rgb::srgb_to_linear`]): a texture's millions
 /// of texels then cost a lookup each instead of a `powf`.
@@ -412,6 +461,43 @@ mod tests {
                 assert_eq!(g.to_array().map(f32::to_bits), w.to_array().map(f32::to_bits), "{:?}", img.color());
             }
         }
+    }
+
+    /// Textures decode to the values `decode_image` gives (or, `raw`, the crate's code / 255),
+    /// and 8-bit colour ones keep their codes, whose lookups read those values back.
+    #[test]
+    fn bitmaps_decode_as_images_do_and_keep_eight_bit_codes() {
+        let rgb = image::RgbImage::from_fn(256, 3, |x, y| image::Rgb([x as u8, (x as u8).wrapping_mul(7), (x as u8) ^ (y as u8 * 85)]));
+        let rgb16 = image::DynamicImage::ImageRgb8(rgb.clone()).to_rgb16();
+        let cases = [
+            (image::DynamicImage::ImageRgb8(rgb.clone()), image::ImageFormat::Png, true),
+            (image::DynamicImage::ImageRgba8(image::DynamicImage::ImageRgb8(rgb.clone()).to_rgba8()), image::ImageFormat::Png, true),
+            (image::DynamicImage::ImageLuma8(image::DynamicImage::ImageRgb8(rgb.clone()).to_luma8()), image::ImageFormat::Png, false),
+            (image::DynamicImage::ImageRgb16(rgb16), image::ImageFormat::Png, false),
+            (image::DynamicImage::ImageRgb8(rgb), image::ImageFormat::Jpeg, true),
+        ];
+        for (img, format, eight_bit) in cases {
+            let mut file = Vec::new();
+            img.write_to(&mut Cursor::new(&mut file), format).unwrap();
+            let name = Path::new(if format == image::ImageFormat::Png { "t.png" } else { "t.jpg" });
+            let decoded = image::load_from_memory(&file).unwrap().to_rgb32f();
+            for raw in [false, true] {
+                let got = decode_bitmap(&file, name, raw).unwrap();
+                assert_eq!(got.is_8bit(), eight_bit, "{:?} {format:?}", img.color());
+                let want: Vec<Rgb> = if raw { decoded.pixels().map(|p| Rgb::new(p[0], p[1], p[2])).collect() } else { decode_image(&file, name).unwrap().data };
+                assert_eq!((got.width, got.height), (256, 3));
+                let bits = |c: Rgb| c.to_array().map(f32::to_bits);
+                for (i, w) in want.iter().enumerate() {
+                    assert_eq!(bits(got.data()[i]), bits(*w), "{:?} {format:?} raw {raw}: texel {i}", img.color());
+                    assert_eq!(bits(got.texel(i % 256, i / 256)), bits(*w), "{:?} {format:?} raw {raw}: lookup {i}", img.color());
+                }
+            }
+        }
+        // Float files are float bitmaps.
+        let exr = encode_exr(&test_image(4, 3)).unwrap();
+        let got = decode_bitmap(&exr, Path::new("t.exr"), false).unwrap();
+        assert!(!got.is_8bit());
+        assert_eq!(got.data(), test_image(4, 3).data);
     }
 
     fn tmp(name: &str) -> PathBuf {

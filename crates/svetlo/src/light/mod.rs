@@ -85,6 +85,8 @@ pub enum Light {
         cos_cutoff: f32,
         cos_beam: f32,
         cutoff_angle: f32,
+        /// `cutoff_angle.tan()`, which the texture's mapping divides by at every lookup.
+        tan_cutoff: f32,
         beam_width: f32,
         /// Mitsuba's projected `texture`: multiplies the intensity, mapped over the cutoff cone.
         texture: Option<crate::texture::Texture>,

@@ -44,7 +44,17 @@ impl Light {
         let axis = to_world.transform_vector3(Vec3::Z).normalize_or_zero();
         let axis = if axis == Vec3::ZERO { Vec3::Z } else { axis };
         let frame = Frame::from_normal_tangent(axis, to_world.transform_vector3(Vec3::X));
-        Light::Spot { position, frame, intensity, cos_cutoff: cutoff_angle.cos(), cos_beam: beam_width.cos(), cutoff_angle, beam_width, texture: None }
+        Light::Spot {
+            position,
+            frame,
+            intensity,
+            cos_cutoff: cutoff_angle.cos(),
+            cos_beam: beam_width.cos(),
+            cutoff_angle,
+            tan_cutoff: cutoff_angle.tan(),
+            beam_width,
+            texture: None,
+        }
     }
 
     /// The spot's profile toward world direction `w` (leaving the light); 1 for other lights.
@@ -68,9 +78,9 @@ impl Light {
                     return Rgb::BLACK;
                 }
                 let mut i = *intensity * fall;
-                if let (Some(tex), Light::Spot { cutoff_angle, .. }) = (texture, self) {
+                if let (Some(tex), Light::Spot { tan_cutoff, .. }) = (texture, self) {
                     let l = frame.to_local(w);
-                    let k = 0.5 / (l.z * cutoff_angle.tan());
+                    let k = 0.5 / (l.z * tan_cutoff);
                     i *= tex.eval(glam::Vec2::new(0.5 + l.x * k, 0.5 + l.y * k));
                 }
                 i

@@ -3,13 +3,19 @@
 //! weights) use the same textures, read as Mitsuba's `eval_1` reads them. pbrt-v4's
 //! procedural textures (`procedural.rs`, on Perlin noise in `noise.rs`) also read the
 //! point's position and normal.
+//!
+//! A bitmap read from an 8-bit colour file keeps its texels as the file's codes (four bytes
+//! each) and decodes a code through the same 256-entry table the loader's float path uses:
+//! lookups give the same values bit for bit while reading a quarter of the memory, which for
+//! a large texture is most of a lookup's cost (cache misses). Its `Rgb` copy is decoded only
+//! for the rare callers that ask for all texels at once ([`Bitmap::data`]).
 
 pub mod noise;
 pub mod procedural;
 
 use crate::spectrum::Rgb;
 use glam::{Affine2, Vec2, Vec3};
-use std::sync::Arc;
+use std::sync::{Arc, OnceLock};
 
 pub use procedural::{Mapping2D, Procedural};
 
@@ -33,21 +39,91 @@ pub enum WrapMode {
 pub struct Bitmap {
     pub width: usize,
     pub height: usize,
-    pub data: Vec<Rgb>,
+    store: Store,
+}
+
+/// A bitmap's texels.
+#[derive(Clone, Debug)]
+enum Store {
+    Float(Vec<Rgb>),
+    /// 8-bit codes, which lookups read, and their `Rgb` values, decoded only when asked for
+    /// ([`Bitmap::data`]).
+    Codes(Texels8, OnceLock<Vec<Rgb>>),
+}
+
+/// The texels of an 8-bit image as its codes (RGB, padded to four bytes) and the linear value
+/// of each code. A quarter of the `Rgb` copy's bytes: lookups into a large texture, which land
+/// anywhere in it, then miss the cache far less often, and read back the very same values.
+#[derive(Clone, Debug)]
+struct Texels8 {
+    codes: Box<[[u8; 4]]>,
+    table: &'static [f32; 256],
+}
+
+impl Texels8 {
+    #[inline]
+    fn rgb(&self, i: usize) -> Rgb {
+        let c = self.codes[i];
+        Rgb::new(self.table[c[0] as usize], self.table[c[1] as usize], self.table[c[2] as usize])
+    }
 }
 
 impl Bitmap {
     pub fn new(width: usize, height: usize, data: Vec<Rgb>) -> Self {
         assert_eq!(data.len(), width * height);
-        Bitmap { width, height, data }
+        Bitmap { width, height, store: Store::Float(data) }
     }
+
+    /// A bitmap of 8-bit texels (the fourth byte unused) whose channels decode as `table` says
+    /// (sRGB to linear, or Mitsuba's `raw` code / 255).
+    pub fn from_8bit(width: usize, height: usize, codes: Vec<[u8; 4]>, table: &'static [f32; 256]) -> Self {
+        assert_eq!(codes.len(), width * height);
+        Bitmap { width, height, store: Store::Codes(Texels8 { codes: codes.into_boxed_slice(), table }, OnceLock::new()) }
+    }
+
+    /// Whether lookups read 8-bit codes ([`Bitmap::from_8bit`]).
+    pub fn is_8bit(&self) -> bool {
+        matches!(self.store, Store::Codes(..))
+    }
+
+    /// The texels, row by row (an 8-bit bitmap's decoded on the first call, and kept).
+    pub fn data(&self) -> &[Rgb] {
+        match &self.store {
+            Store::Float(v) => v,
+            Store::Codes(t, decoded) => decoded.get_or_init(|| (0..t.codes.len()).map(|i| t.rgb(i)).collect()),
+        }
+    }
+
+    /// The texels to change in place: an 8-bit bitmap becomes a float one.
+    pub fn data_mut(&mut self) -> &mut Vec<Rgb> {
+        if let Store::Codes(..) = self.store {
+            self.store = Store::Float(self.data().to_vec());
+        }
+        match &mut self.store {
+            Store::Float(v) => v,
+            Store::Codes(..) => unreachable!("made a float store above"),
+        }
+    }
+
     #[inline]
     pub fn texel(&self, x: usize, y: usize) -> Rgb {
-        self.data[y * self.width + x]
+        let i = y * self.width + x;
+        match &self.store {
+            Store::Float(v) => v[i],
+            Store::Codes(t, _) => t.rgb(i),
+        }
     }
+    /// The texels row by row, as [`Bitmap::data`] holds them, without decoding a copy.
+    pub fn texels(&self) -> impl Iterator<Item = Rgb> + '_ {
+        (0..self.width * self.height).map(move |i| match &self.store {
+            Store::Float(v) => v[i],
+            Store::Codes(t, _) => t.rgb(i),
+        })
+    }
+
     pub fn mean(&self) -> Rgb {
-        let s: Rgb = self.data.iter().copied().sum();
-        s / self.data.len().max(1) as f32
+        let s: Rgb = self.texels().sum();
+        s / (self.width * self.height).max(1) as f32
     }
 }
 
@@ -342,6 +418,38 @@ mod tests {
             let uv = Vec2::new(uv.0, uv.1);
             assert_eq!(t.eval(uv), Rgb::splat(colour), "{uv}");
             assert!((t.eval_f32(uv) - scalar).abs() < 1e-6, "{uv}: {}", t.eval_f32(uv));
+        }
+    }
+
+    /// Lookups into a bitmap of 8-bit codes give, bit for bit, what lookups into the same
+    /// texels as `Rgb` give: every filter and wrap mode, uv inside and outside [0, 1].
+    #[test]
+    fn eight_bit_lookups_are_the_float_copys() {
+        let mut rng = crate::sampling::rng::Pcg32::new(5, 9);
+        // A table with every value distinct, so that a wrong channel or code shows.
+        let table: &'static [f32; 256] = Box::leak(Box::new(std::array::from_fn(|i| (i as f32 / 255.0).powf(2.2) + i as f32 * 1e-3)));
+        for (w, h) in [(1, 1), (2, 3), (17, 5), (64, 33)] {
+            let codes: Vec<[u8; 4]> = (0..w * h).map(|_| rng.next_u32().to_le_bytes()).collect();
+            let compact = Arc::new(Bitmap::from_8bit(w, h, codes.clone(), table));
+            assert!(compact.is_8bit());
+            let float = Arc::new(Bitmap::new(w, h, codes.iter().map(|c| Rgb::new(table[c[0] as usize], table[c[1] as usize], table[c[2] as usize])).collect()));
+            assert_eq!(compact.data(), float.data());
+            assert_eq!(compact.mean(), float.mean());
+            for filter in [FilterMode::Nearest, FilterMode::Bilinear] {
+                for wrap in [WrapMode::Repeat, WrapMode::Mirror, WrapMode::Clamp] {
+                    let to_uv = Affine2::from_scale_angle_translation(Vec2::new(1.7, -0.6), 0.3, Vec2::new(-0.2, 0.4));
+                    let a = Texture::Bitmap { image: compact.clone(), filter, wrap, to_uv };
+                    let b = Texture::Bitmap { image: float.clone(), filter, wrap, to_uv };
+                    for _ in 0..2000 {
+                        let uv = Vec2::new(rng.next_f32() * 3.0 - 1.0, rng.next_f32() * 3.0 - 1.0);
+                        let bits = |c: Rgb| c.to_array().map(f32::to_bits);
+                        assert_eq!(bits(a.eval(uv)), bits(b.eval(uv)), "{w}x{h} {filter:?} {wrap:?} {uv}");
+                        assert_eq!(a.eval_f32(uv).to_bits(), b.eval_f32(uv).to_bits());
+                        assert_eq!(a.eval_f32_grad(uv).to_array().map(f32::to_bits), b.eval_f32_grad(uv).to_array().map(f32::to_bits));
+                    }
+                    assert_eq!(a.mean(), b.mean());
+                }
+            }
         }
     }
 

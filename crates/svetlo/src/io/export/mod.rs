@@ -83,7 +83,7 @@ impl Files {
         }
         self.ensure_dir()?;
         let name = format!("image{:04}.exr", self.images.len());
-        let img = crate::film::Image::new(image.width, image.height, image.data.clone());
+        let img = crate::film::Image::new(image.width, image.height, image.data().to_vec());
         crate::io::image_io::write_exr(&self.dir.join(&name), &img)?;
         let rel = format!("{}/{name}", self.rel);
         self.images.insert(key, (image.clone(), rel.clone()));

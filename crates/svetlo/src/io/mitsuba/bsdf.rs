@@ -323,7 +323,7 @@ impl<'a> Loader<'a> {
                 // Stored as 0.5 (n + 1): a texel outside [0, 1] or one that is no direction
                 // (all channels 0.5) is not a normal map (an sRGB-decoded one, or a height map).
                 let texels: &[Rgb] = match &normals {
-                    crate::texture::Texture::Bitmap { image, .. } => &image.data,
+                    crate::texture::Texture::Bitmap { image, .. } => image.data(),
                     crate::texture::Texture::Constant(c) => std::slice::from_ref(c),
                     _ => &[],
                 };

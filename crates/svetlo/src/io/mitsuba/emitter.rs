@@ -49,6 +49,7 @@ impl<'a> Loader<'a> {
                     cos_cutoff: cutoff.cos(),
                     cos_beam: beam.cos(),
                     cutoff_angle: cutoff,
+                    tan_cutoff: cutoff.tan(),
                     beam_width: beam,
                     texture,
                 }

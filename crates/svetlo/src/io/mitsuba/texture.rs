@@ -15,34 +15,20 @@ fn to_uv(m: Mat4) -> Affine2 {
     Affine2::from_cols(Vec2::new(m.x_axis.x, m.x_axis.y), Vec2::new(m.y_axis.x, m.y_axis.y), Vec2::new(m.w_axis.x, m.w_axis.y))
 }
 
-/// Read an image without decoding sRGB (Mitsuba's `raw`): 8-bit values map to [0, 1] as stored.
-fn read_raw(path: &Path) -> Result<crate::film::Image> {
-    let bytes = crate::limits::read_file(path)?;
-    if bytes.starts_with(&[0x76, 0x2f, 0x31, 0x01]) {
-        return crate::io::image_io::decode_exr(&bytes, path);
-    }
-    if bytes.starts_with(b"PF") || bytes.starts_with(b"Pf") {
-        return crate::io::image_io::decode_pfm(&bytes, path);
-    }
-    let img = crate::io::image_io::decode_8bit(&bytes, path)?.to_rgb32f();
-    let data = img.pixels().map(|p| Rgb::new(p[0], p[1], p[2])).collect();
-    Ok(crate::film::Image::new(img.width() as usize, img.height() as usize, data))
-}
-
 impl<'a> Loader<'a> {
     pub(super) fn bitmap(&mut self, path: &Path, raw: bool) -> Result<Arc<Bitmap>> {
         let key = (path.to_path_buf(), raw);
         if let Some(b) = self.bitmaps.get(&key) {
             return Ok(b.clone());
         }
-        let img = if raw { read_raw(path)? } else { crate::io::read_image(path)? };
+        let img = crate::io::image_io::read_bitmap(path, raw)?;
         if img.width == 0 || img.height == 0 {
             return Err(crate::Error::Image { file: path.to_path_buf(), msg: "image is empty".into() });
         }
-        if let Some(i) = img.data.iter().position(|c| !c.is_finite()) {
+        if let Some(i) = img.texels().position(|c| !c.is_finite()) {
             return Err(crate::Error::Image { file: path.to_path_buf(), msg: format!("pixel {} is not finite", i) });
         }
-        let b = Arc::new(Bitmap::new(img.width, img.height, img.data));
+        let b = Arc::new(img);
         self.bitmaps.insert(key, b.clone());
         Ok(b)
     }
@@ -65,7 +51,7 @@ impl<'a> Loader<'a> {
                     o => return Err(node.loc.err(format!("wrap_mode '{o}' is not repeat, mirror or clamp"))),
                 };
                 let image = self.bitmap(&path, raw)?;
-                if kind == SpectrumKind::Reflectance && !raw && image.data.iter().any(|c| c.max_component() > 1.0) {
+                if kind == SpectrumKind::Reflectance && !raw && image.texels().any(|c| c.max_component() > 1.0) {
                     self.warn(format!("{}: reflectance texture has values above 1", path.display()));
                 }
                 Ok(Texture::Bitmap { image, filter, wrap, to_uv })

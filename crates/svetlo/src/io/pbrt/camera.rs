@@ -338,6 +338,6 @@ mod tests {
         let img = Bitmap::new(64, 64, vec![Rgb::WHITE; 64 * 64]);
         assert!((upper_irradiance(&img) - PI).abs() < 0.02);
         let ll = equal_area_to_latlong(&img);
-        assert!(ll.data.iter().all(|c| (c.r - 1.0).abs() < 1e-5));
+        assert!(ll.data().iter().all(|c| (c.r - 1.0).abs() < 1e-5));
     }
 }

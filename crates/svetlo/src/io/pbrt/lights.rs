@@ -157,7 +157,7 @@ impl Loader {
                     )));
                 }
                 // pbrt keeps one channel: the mean of R, G and B.
-                (img.data.iter().map(|c| ((c.r + c.g + c.b) / 3.0).max(0.0)).collect(), img.width)
+                (img.data().iter().map(|c| ((c.r + c.g + c.b) / 3.0).max(0.0)).collect(), img.width)
             }
         };
         let to_world = *m * Goniometric::pbrt_swap_yz();
@@ -219,7 +219,7 @@ impl Loader {
                 let image = self.bitmap(&path, false, loc)?;
                 let s = p.float("scale", 1.0)? * self.imaging_ratio;
                 let mut im = (*image).clone();
-                for c in &mut im.data {
+                for c in im.data_mut() {
                     *c *= s;
                 }
                 let to_uv = glam::Affine2::from_mat2_translation(glam::Mat2::from_diagonal(glam::Vec2::new(1.0, -1.0)), glam::Vec2::new(0.0, 1.0));
@@ -249,7 +249,7 @@ impl Loader {
             Texture::Constant(c) => Texture::Constant(c * k),
             Texture::Bitmap { image, filter, wrap, to_uv } => {
                 let mut im = (*image).clone();
-                for c in &mut im.data {
+                for c in im.data_mut() {
                     *c *= k;
                 }
                 Texture::Bitmap { image: std::sync::Arc::new(im), filter, wrap, to_uv }

@@ -359,7 +359,7 @@ impl Loader {
                 };
                 let image = if scale != 1.0 || invert {
                     let mut b = (*image).clone();
-                    for c in &mut b.data {
+                    for c in b.data_mut() {
                         *c *= scale;
                         if invert {
                             *c = c.map(|x| (1.0 - x).max(0.0));
@@ -389,7 +389,7 @@ impl Loader {
                     (Texture::Constant(a), Texture::Constant(b)) => Texture::Constant(a * b.r),
                     (Texture::Bitmap { image, filter, wrap, to_uv }, Texture::Constant(b)) => {
                         let mut im = (*image).clone();
-                        for c in &mut im.data {
+                        for c in im.data_mut() {
                             *c *= b.r;
                         }
                         Texture::Bitmap { image: std::sync::Arc::new(im), filter, wrap, to_uv }
