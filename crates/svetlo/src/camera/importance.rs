@@ -109,6 +109,15 @@ impl Camera {
     }
 }
 
+/// [`CameraSample`] without the directions: what [`LensConnector::sample_lens`] gives.
+#[derive(Clone, Copy, Debug)]
+pub struct LensSample {
+    pub we: f32,
+    pub pdf: f32,
+    pub raster: Vec2,
+    pub p_lens: Vec3,
+}
+
 /// A perspective camera's importance, densities and lens connections with its constants
 /// (inverse transform, film extent, areas) computed once: [`Camera::lens_connector`].
 /// The same arithmetic as the camera's own methods, which are made of it.
@@ -201,6 +210,15 @@ impl LensConnector {
 
     /// [`Camera::sample_wi`].
     pub fn sample_wi(&self, p_ref: Vec3, u: Vec2) -> Option<CameraSample> {
+        let LensSample { we, pdf, raster, p_lens } = self.sample_lens(p_ref, u)?;
+        let wi = (p_lens - p_ref).normalize_or_zero();
+        Some(CameraSample { we, wi, pdf, raster, p_lens, n_lens: self.n_lens })
+    }
+
+    /// [`Self::sample_wi`] without the direction toward the lens, which a connection
+    /// computes itself (light tracing's camera connections; inlined there).
+    #[inline]
+    pub fn sample_lens(&self, p_ref: Vec3, u: Vec2) -> Option<LensSample> {
         let radius = self.radius;
         let p = self.to_camera.transform_point3(p_ref);
         if p.z < self.near_clip || p.z > self.far_clip {
@@ -223,8 +241,7 @@ impl LensConnector {
         let pdf = dist2 / (d.z * self.lens_area);
         // The same transform of the same zero as the thin lens's, done once for a pinhole.
         let p_lens = if radius > 0.0 { self.to_world.transform_point3(o) } else { self.center };
-        let wi = (p_lens - p_ref).normalize_or_zero();
-        Some(CameraSample { we, wi, pdf, raster, p_lens, n_lens: self.n_lens })
+        Some(LensSample { we, pdf, raster, p_lens })
     }
 }
 

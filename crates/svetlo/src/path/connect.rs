@@ -175,7 +175,7 @@ pub fn camera_connection(scene: &Scene, cfg: &PathConfig, light: &[Vertex], s: u
     if !cfg.camera_connectible || !qs.connectible(scene) || (s == 1 && !qs.is_area_light(scene)) {
         return None;
     }
-    let cs = cfg.lens.as_ref()?.sample_wi(qs.p, u)?;
+    let cs = cfg.lens.as_ref()?.sample_lens(qs.p, u)?;
     if cs.pdf <= 0.0 || cs.we <= 0.0 {
         return None;
     }
