@@ -118,6 +118,23 @@ pub struct LensSample {
     pub p_lens: Vec3,
 }
 
+/// What [`LensConnector::sample_lens`] computes with for a pinhole
+/// ([`LensConnector::pinhole`]): there the lens sample is not used.
+#[derive(Clone, Copy, Debug)]
+pub struct Pinhole {
+    pub to_camera: Mat4,
+    pub near_clip: f32,
+    pub far_clip: f32,
+    /// Half extent of the film on the plane z = 1, and its size in pixels.
+    pub half: Vec2,
+    pub size: Vec2,
+    /// Film area times lens area (importance is 1 / (areas cos⁴θ)).
+    pub areas: f32,
+    pub lens_area: f32,
+    /// The lens center (world space), where every connection ends.
+    pub center: Vec3,
+}
+
 /// A perspective camera's importance, densities and lens connections with its constants
 /// (inverse transform, film extent, areas) computed once: [`Camera::lens_connector`].
 /// The same arithmetic as the camera's own methods, which are made of it.
@@ -201,6 +218,25 @@ impl LensConnector {
         };
         let pdf_pos = if self.radius == 0.0 { 0.0 } else { 1.0 / self.lens_area };
         (pdf_pos, 1.0 / (self.film_area * d.z * d.z * d.z))
+    }
+
+    /// The constants of [`Self::sample_lens`] for a pinhole (None for a thin lens, or a
+    /// lens center that is not finite), for connections computed several at a time.
+    pub fn pinhole(&self) -> Option<Pinhole> {
+        if self.radius > 0.0 || !self.center.is_finite() {
+            return None;
+        }
+        Some(Pinhole {
+            to_camera: self.to_camera,
+            near_clip: self.near_clip,
+            far_clip: self.far_clip,
+            half: self.half,
+            size: self.size,
+            // `we_local`'s product, left to right.
+            areas: self.film_area * self.lens_area,
+            lens_area: self.lens_area,
+            center: self.center,
+        })
     }
 
     /// The world-to-camera transform.
