@@ -374,7 +374,7 @@ mod tests {
         // The light's endpoint: on the area light (a random point and normal), or without
         // a normal now and then.
         let (a, b) = (dir(), dir());
-        let n_light = if n % 4 == 0 { Vec3::ZERO } else { b };
+        let n_light = if n.is_multiple_of(4) { Vec3::ZERO } else { b };
         let mut path =
             vec![Vertex::light_point(light, Vec3::new(4.0 * a.x, 4.0 * a.y, 4.0 + 4.0 * a.z), n_light, Rgb::new(3.0, 2.0, 1.0), Rgb::splat(1.5), 1.0)];
         let diffuse = |r: f32| BsdfModel::Diffuse(Diffuse { reflectance: Rgb::new(r, 0.7 * r, 0.2) });
