@@ -109,6 +109,32 @@ impl Camera {
     }
 }
 
+/// [`CameraSample`] without the directions: what [`LensConnector::sample_lens`] gives.
+#[derive(Clone, Copy, Debug)]
+pub struct LensSample {
+    pub we: f32,
+    pub pdf: f32,
+    pub raster: Vec2,
+    pub p_lens: Vec3,
+}
+
+/// What [`LensConnector::sample_lens`] computes with for a pinhole
+/// ([`LensConnector::pinhole`]): there the lens sample is not used.
+#[derive(Clone, Copy, Debug)]
+pub struct Pinhole {
+    pub to_camera: Mat4,
+    pub near_clip: f32,
+    pub far_clip: f32,
+    /// Half extent of the film on the plane z = 1, and its size in pixels.
+    pub half: Vec2,
+    pub size: Vec2,
+    /// Film area times lens area (importance is 1 / (areas cos⁴θ)).
+    pub areas: f32,
+    pub lens_area: f32,
+    /// The lens center (world space), where every connection ends.
+    pub center: Vec3,
+}
+
 /// A perspective camera's importance, densities and lens connections with its constants
 /// (inverse transform, film extent, areas) computed once: [`Camera::lens_connector`].
 /// The same arithmetic as the camera's own methods, which are made of it.
@@ -194,6 +220,25 @@ impl LensConnector {
         (pdf_pos, 1.0 / (self.film_area * d.z * d.z * d.z))
     }
 
+    /// The constants of [`Self::sample_lens`] for a pinhole (None for a thin lens, or a
+    /// lens center that is not finite), for connections computed several at a time.
+    pub fn pinhole(&self) -> Option<Pinhole> {
+        if self.radius > 0.0 || !self.center.is_finite() {
+            return None;
+        }
+        Some(Pinhole {
+            to_camera: self.to_camera,
+            near_clip: self.near_clip,
+            far_clip: self.far_clip,
+            half: self.half,
+            size: self.size,
+            // `we_local`'s product, left to right.
+            areas: self.film_area * self.lens_area,
+            lens_area: self.lens_area,
+            center: self.center,
+        })
+    }
+
     /// The world-to-camera transform.
     pub fn to_camera(&self) -> Mat4 {
         self.to_camera
@@ -201,6 +246,15 @@ impl LensConnector {
 
     /// [`Camera::sample_wi`].
     pub fn sample_wi(&self, p_ref: Vec3, u: Vec2) -> Option<CameraSample> {
+        let LensSample { we, pdf, raster, p_lens } = self.sample_lens(p_ref, u)?;
+        let wi = (p_lens - p_ref).normalize_or_zero();
+        Some(CameraSample { we, wi, pdf, raster, p_lens, n_lens: self.n_lens })
+    }
+
+    /// [`Self::sample_wi`] without the direction toward the lens, which a connection
+    /// computes itself (light tracing's camera connections; inlined there).
+    #[inline]
+    pub fn sample_lens(&self, p_ref: Vec3, u: Vec2) -> Option<LensSample> {
         let radius = self.radius;
         let p = self.to_camera.transform_point3(p_ref);
         if p.z < self.near_clip || p.z > self.far_clip {
@@ -223,8 +277,7 @@ impl LensConnector {
         let pdf = dist2 / (d.z * self.lens_area);
         // The same transform of the same zero as the thin lens's, done once for a pinhole.
         let p_lens = if radius > 0.0 { self.to_world.transform_point3(o) } else { self.center };
-        let wi = (p_lens - p_ref).normalize_or_zero();
-        Some(CameraSample { we, wi, pdf, raster, p_lens, n_lens: self.n_lens })
+        Some(LensSample { we, pdf, raster, p_lens })
     }
 }
 

@@ -10,7 +10,7 @@
 
 mod importance;
 
-pub use importance::{CameraSample, LensConnector};
+pub use importance::{CameraSample, LensConnector, LensSample, Pinhole};
 
 use crate::geometry::Ray;
 use crate::math::warp;

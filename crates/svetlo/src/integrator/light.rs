@@ -14,7 +14,7 @@ use crate::error::{Error, Result};
 use crate::film::Film;
 use crate::geometry::Ray;
 use crate::lpe::LightTracker;
-use crate::path::{camera_connection, connect, light_subpath, light_walk, LightWalk, PathConfig, ShadowPackets, Vertex};
+use crate::path::{camera_connection, connect, light_subpath, light_walk, CameraBatch, LightWalk, PathConfig, ShadowPackets, Vertex};
 use crate::sampling::Sampler;
 use crate::scene::Scene;
 use crate::spectrum::Rgb;
@@ -43,6 +43,8 @@ struct Estimator {
     /// Shadow rays of one subpath's connections as packets (None: one at a time).
     packets: Option<ShadowPackets>,
     tracing: Tracing,
+    /// The camera connections of a finished lockstep path eight at a time (a pinhole).
+    batch: Option<CameraBatch>,
 }
 
 impl SplatEstimator for Estimator {
@@ -195,9 +197,13 @@ impl Estimator {
         if let Some(w) = walk {
             w.finish(path);
         }
-        for s in 1..=path.len() {
-            if let Some(c) = camera_connection(scene, &self.cfg, path, s, sampler) {
-                slot.conns.push((c.l, c.raster, c.shadow.unwrap_or(ShadowedSplats::CLEAR)));
+        if let Some(batch) = &self.batch {
+            batch.connections(scene, &self.cfg, path, sampler, |l, raster, ray| slot.conns.push((l, raster, ray.unwrap_or(ShadowedSplats::CLEAR))));
+        } else {
+            for s in 1..=path.len() {
+                if let Some(c) = camera_connection(scene, &self.cfg, path, s, sampler) {
+                    slot.conns.push((c.l, c.raster, c.shadow.unwrap_or(ShadowedSplats::CLEAR)));
+                }
             }
         }
         slot.done = true;
@@ -262,7 +268,8 @@ impl LightTracer {
     pub fn render_traced(&self, scene: &Scene, settings: &RenderSettings, progress: &Progress, tracing: Tracing) -> Result<Film> {
         require_connectible_camera(scene, "light")?;
         let cfg = PathConfig::new(scene, settings.max_depth, settings.rr_depth, settings.hide_emitters);
-        let est = Estimator { cfg, packets: ShadowPackets::new(scene), tracing };
+        let batch = CameraBatch::new(&cfg);
+        let est = Estimator { cfg, packets: ShadowPackets::new(scene), tracing, batch };
         Ok(render_splatting(scene, settings, progress, &est, 0)?.film)
     }
 }

@@ -167,15 +167,33 @@ pub struct CameraConnection {
 // Inlined: BDPT's `connect` otherwise pays a call and the record's copy per t = 1 strategy.
 #[inline(always)]
 pub fn camera_connection(scene: &Scene, cfg: &PathConfig, light: &[Vertex], s: usize, sampler: &mut dyn Sampler) -> Option<CameraConnection> {
-    if s == 0 || s > light.len() || !cfg.allows(s + 1) || (s == 1 && cfg.hide_emitters) {
+    if !camera_strategy_exists(cfg, light, s) {
         return None;
     }
     let u = sampler.next_2d();
     let qs = &light[s - 1];
-    if !cfg.camera_connectible || !qs.connectible(scene) || (s == 1 && !qs.is_area_light(scene)) {
+    if !camera_connectible(scene, cfg, qs, s) {
         return None;
     }
-    let cs = cfg.lens.as_ref()?.sample_wi(qs.p, u)?;
+    camera_connection_at(scene, cfg, qs, s, u)
+}
+
+/// Whether strategy (s, 1) exists for `light` (it then draws its lens sample).
+#[inline(always)]
+pub(crate) fn camera_strategy_exists(cfg: &PathConfig, light: &[Vertex], s: usize) -> bool {
+    !(s == 0 || s > light.len() || !cfg.allows(s + 1) || (s == 1 && cfg.hide_emitters))
+}
+
+/// Whether the light subpath's vertex `qs` (its `s`-th) can be connected to the camera.
+#[inline(always)]
+pub(crate) fn camera_connectible(scene: &Scene, cfg: &PathConfig, qs: &Vertex, s: usize) -> bool {
+    !(!cfg.camera_connectible || !qs.connectible(scene) || (s == 1 && !qs.is_area_light(scene)))
+}
+
+/// [`camera_connection`] after its checks, with its lens sample `u` drawn.
+#[inline(always)]
+pub(crate) fn camera_connection_at(scene: &Scene, cfg: &PathConfig, qs: &Vertex, s: usize, u: Vec2) -> Option<CameraConnection> {
+    let cs = cfg.lens.as_ref()?.sample_lens(qs.p, u)?;
     if cs.pdf <= 0.0 || cs.we <= 0.0 {
         return None;
     }

@@ -34,12 +34,14 @@
 //! }
 //! ```
 
+mod camera_batch;
 mod connect;
 mod mis;
 mod shadow;
 mod vertex;
 mod walk;
 
+pub use camera_batch::CameraBatch;
 pub use connect::{camera_connection, connect, weighted_camera_connection, CameraConnection, Connection};
 pub use mis::mis_weight;
 pub use shadow::{ClosestHits, ShadowPackets};

@@ -1,6 +1,6 @@
 //! One vertex of a path, and the densities and throughputs between two vertices.
 
-use crate::bsdf::{Bsdf, LobeFlags, TransportMode};
+use crate::bsdf::{Bsdf, BsdfModel, LobeFlags, TransportMode};
 use crate::camera::LensConnector;
 use crate::geometry::SurfaceInteraction;
 use crate::light::Light;
@@ -137,6 +137,33 @@ pub(crate) fn shading_correction(ng: Vec3, ns: Vec3, wo: Vec3, wi: Vec3, mode: T
     } else {
         num / den
     }
+}
+
+/// `bsdf.eval(to_local(wo), to_local(wi), mode)` in the shading frame of normal `n`, bit
+/// for bit, where the BSDF is Lambertian on both sides (diffuse front, diffuse or no back,
+/// no surface detail): its value reads only the two local z components (`to_local`'s
+/// `dot(n)`), so the frame's other four dot products and the model dispatch are skipped
+/// (light tracing evaluates a BSDF per camera connection). None for other BSDFs.
+#[inline]
+pub(crate) fn lambertian_eval(bsdf: &Bsdf, n: Vec3, wo: Vec3, wi: Vec3, mode: TransportMode) -> Option<Rgb> {
+    let BsdfModel::Diffuse(front) = &bsdf.front else { return None };
+    if bsdf.detail.is_some() {
+        return None;
+    }
+    let (zo, zi) = (wo.dot(n), wi.dot(n));
+    // `Bsdf::side`: the front from above (a diffuse front does not handle its back side),
+    // the back with both directions mirrored, or black (not scaled by the opacity).
+    let z = |z: f32| Vec3::new(0.0, 0.0, z);
+    let f = if zo >= 0.0 {
+        front.eval(z(zo), z(zi), mode)
+    } else {
+        match &bsdf.back {
+            None => return Some(Rgb::BLACK),
+            Some(BsdfModel::Diffuse(back)) => back.eval(z(-zo), z(-zi), mode),
+            Some(_) => return None,
+        }
+    };
+    Some(f * bsdf.opacity)
 }
 
 impl Vertex {
@@ -314,7 +341,10 @@ impl Vertex {
     #[inline]
     pub fn f_dir(&self, wi: Vec3, mode: TransportMode) -> Rgb {
         let Some(bsdf) = &self.bsdf else { return Rgb::BLACK };
-        let f = bsdf.eval(self.shading.to_local(self.wo), self.shading.to_local(wi), mode);
+        let f = match lambertian_eval(bsdf, self.shading.n, self.wo, wi, mode) {
+            Some(f) => f,
+            None => bsdf.eval(self.shading.to_local(self.wo), self.shading.to_local(wi), mode),
+        };
         f * shading_correction(self.ng, self.shading.n, self.wo, wi, mode)
     }
 
@@ -481,4 +511,63 @@ pub(crate) fn geometry_term(scene: &Scene, a: &Vertex, b: &Vertex, w_ab: Vec3, w
         return 0.0;
     }
     g
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::bsdf::detail::Detail;
+    use crate::bsdf::diffuse::Diffuse;
+    use crate::bsdf::oren_nayar::OrenNayar;
+    use crate::math::warp::square_to_uniform_sphere;
+    use crate::sampling::Pcg32;
+
+    /// `lambertian_eval` is the BSDF's own `eval` in the local frame, bit for bit: one- and
+    /// two-sided diffuse BSDFs, masks, directions on both sides and in the tangent plane
+    /// (signed zeros); None for the BSDFs it does not cover.
+    #[test]
+    fn lambertian_eval_is_bsdf_eval() {
+        let diffuse = |r: f32| BsdfModel::Diffuse(Diffuse { reflectance: Rgb::new(r, 0.5 * r, 0.25) });
+        let mut bsdfs = Vec::new();
+        for back in [None, Some(diffuse(0.3))] {
+            for opacity in [1.0, 0.6] {
+                bsdfs.push(Bsdf { front: diffuse(0.8), back: back.clone(), opacity, detail: None });
+            }
+        }
+        let mut rng = Pcg32::new(11, 5);
+        let dir = |rng: &mut Pcg32| square_to_uniform_sphere(Vec2::new(rng.next_f32(), rng.next_f32()));
+        let bits = |c: Rgb| [c.r, c.g, c.b].map(f32::to_bits);
+        let mut lit = [0usize; 2];
+        for _ in 0..2000 {
+            let frame = Frame::from_normal(dir(&mut rng));
+            let (mut wo, mut wi) = (dir(&mut rng), dir(&mut rng));
+            // Some directions exactly in the tangent plane (a local z of ±0).
+            if rng.next_f32() < 0.1 {
+                wo = frame.s;
+            }
+            if rng.next_f32() < 0.1 {
+                wi = -frame.t;
+            }
+            for (k, b) in bsdfs.iter().enumerate() {
+                for mode in [TransportMode::Radiance, TransportMode::Importance] {
+                    let want = b.eval(frame.to_local(wo), frame.to_local(wi), mode);
+                    let got = lambertian_eval(b, frame.n, wo, wi, mode).expect("a Lambertian BSDF");
+                    assert_eq!(bits(got), bits(want), "bsdf {k} wo {wo} wi {wi}");
+                    lit[usize::from(b.back.is_some())] += usize::from(!got.is_black());
+                }
+            }
+        }
+        // Both sides scatter where there is a back.
+        assert!(lit[0] > 1000 && lit[1] > 2 * lit[0] - 400, "{lit:?}");
+        let rough = BsdfModel::OrenNayar(OrenNayar { reflectance: Rgb::splat(0.5), sigma: 0.3 });
+        let others = [
+            Bsdf { front: rough.clone(), back: None, opacity: 1.0, detail: None },
+            Bsdf { front: diffuse(0.5), back: Some(rough), opacity: 1.0, detail: None },
+            Bsdf { front: diffuse(0.5), back: None, opacity: 1.0, detail: Some(Detail::new(Vec3::new(0.1, 0.0, 1.0), true)) },
+        ];
+        // (From below, so that the second one's back is asked for.)
+        for b in &others {
+            assert!(lambertian_eval(b, Vec3::Z, -Vec3::Z, Vec3::Z, TransportMode::Radiance).is_none());
+        }
+    }
 }
