@@ -836,6 +836,54 @@ mod tile_tests {
         assert!(a.layer_image(2).data.iter().any(|c| !c.is_black()), "the other values of a sample with a NaN layer stay");
     }
 
+    /// The separable splat of `add_sample` gives every pixel's sums and weight to the bit as
+    /// the general footprint walk (`footprint` + `add_filtered`) does, for each filter
+    /// (a wide Gaussian too, past the cached span), on a tile with a border, samples in it
+    /// and near and on its edges and pixel boundaries.
+    #[test]
+    fn separable_splat_matches_the_footprint_walk() {
+        let filters = [
+            Filter::Box,
+            Filter::Tent { radius: 1.0 },
+            Filter::Tent { radius: 1.7 },
+            Filter::Gaussian { stddev: 0.5 },
+            Filter::Gaussian { stddev: 0.37 },
+            Filter::Gaussian { stddev: 1.5 },
+        ];
+        let mut rng = crate::sampling::Pcg32::new(11, 7);
+        for f in filters {
+            let film = Film::new(24, 20, f);
+            let (mut fast, mut walk) = (film.tile(8, 4, 16, 12), film.tile(8, 4, 16, 12));
+            for k in 0..4000 {
+                let mut p = Vec2::new(rng.next_f32() * 28.0 - 2.0, rng.next_f32() * 24.0 - 2.0);
+                if k % 5 == 0 {
+                    // On a pixel boundary or centre, where a weight may be exactly zero.
+                    p = Vec2::new((p.x * 2.0).floor() * 0.5, (p.y * 2.0).round() * 0.5);
+                }
+                let l = Rgb::new(rng.next_f32(), rng.next_f32() * 1e-3, rng.next_f32() * 1e3);
+                fast.add_sample(p, l);
+                walk.blank = false;
+                if !walk.add_to_owner(p, l) {
+                    if let Some(fp) = walk.footprint(p) {
+                        walk.add_filtered(&fp, l);
+                    }
+                }
+            }
+            let bits = |t: &FilmTile| -> Vec<[u64; 11]> {
+                t.pixels
+                    .iter()
+                    .map(|px| {
+                        let c = |v: Rgb| [v.r.to_bits() as u64, v.g.to_bits() as u64, v.b.to_bits() as u64];
+                        let (s, a, b) = (c(px.sum), c(px.s1), c(px.s2));
+                        [s[0], s[1], s[2], a[0], a[1], a[2], b[0], b[1], b[2], px.weight.to_bits(), px.n as u64]
+                    })
+                    .collect()
+            };
+            assert_eq!(bits(&fast), bits(&walk), "{f:?}");
+            assert!(fast.pixels.iter().filter(|px| px.weight > 0.0).count() > 32, "{f:?}: the samples reached the tile");
+        }
+    }
+
     /// Tile sums (the driver's per-tile pass tree) add exactly as films do, and a blank tile
     /// (nothing added since it was cleared) adds nothing.
     #[test]
