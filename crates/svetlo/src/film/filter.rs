@@ -74,9 +74,15 @@ impl FilterWeights {
     #[inline]
     pub(crate) fn eval(&self, x: f32) -> f32 {
         match self.filter {
-            Filter::Gaussian { .. } => ((-self.a * x * x).exp() - self.floor).max(0.0),
+            Filter::Gaussian { .. } => self.gaussian(x),
             f => f.eval(x),
         }
+    }
+
+    /// [`Self::eval`] of a Gaussian (`filter` must be one).
+    #[inline]
+    pub(crate) fn gaussian(&self, x: f32) -> f32 {
+        ((-self.a * x * x).exp() - self.floor).max(0.0)
     }
 }
 
