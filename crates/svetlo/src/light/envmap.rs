@@ -28,9 +28,11 @@ pub struct EnvMap {
     pub to_world: Mat4,
     pub scale: f32,
     to_local: Mat3,
-    /// Cells: `cols` wide (= image width), `rows` high (= image height - 1).
-    cols: usize,
-    rows: usize,
+    /// `to_world`'s rotation part, extracted once for `grid_to_dir`.
+    to_world3: Mat3,
+    /// Half a texel in u, `0.5 / cols`: precomputed, since a usize-to-float conversion and a
+    /// division per lookup were a tenth of the lookup's instructions (same value).
+    half_texel: f32,
     /// The sampling density, which holds the vertex grid (radiance and weight together).
     dist: BilinearDistribution,
 }
@@ -77,8 +79,10 @@ impl EnvMap {
             })
             .collect();
         let dist = BilinearDistribution::new(texels, cols, rows);
-        let to_local = Mat3::from_mat4(to_world).inverse();
-        EnvMap { image, to_world, scale, to_local, cols, rows, dist }
+        let to_world3 = Mat3::from_mat4(to_world);
+        let to_local = to_world3.inverse();
+        let half_texel = 0.5 / cols as f32;
+        EnvMap { image, to_world, scale, to_local, to_world3, half_texel, dist }
     }
 
     /// Grid coordinates in [0,1)² (u shifted by half a texel) of a world direction, and sin θ.
@@ -86,7 +90,7 @@ impl EnvMap {
         // The angles by `approx::atan2` (error below 3e-7 rad, a hundredth of a texel of a
         // 100k-wide map): libm's atan2 and acos were a tenth of an environment-lit render.
         let l = (self.to_local * w).normalize_or_zero();
-        let mut u = approx::atan2(l.x, -l.z) * INV_2PI - 0.5 / self.cols as f32;
+        let mut u = approx::atan2(l.x, -l.z) * INV_2PI - self.half_texel;
         // u is in [-1/2 - 1/(2 cols), 1/2]: wrapped as `u - floor(u)` would (floor is a
         // libm call without SSE4.1).
         if u < 0.0 {
@@ -100,10 +104,10 @@ impl EnvMap {
     /// World direction of grid coordinates, and sin θ.
     fn grid_to_dir(&self, g: Vec2) -> (Vec3, f32) {
         // φ = 2π (g.x + 1/(2 cols)) and θ = π g.y = 2π (g.y / 2), without libm.
-        let (sp, cp) = sin_cos_2pi(g.x + 0.5 / self.cols as f32);
+        let (sp, cp) = sin_cos_2pi(g.x + self.half_texel);
         let (st, ct) = sin_cos_2pi(0.5 * g.y);
         let l = Vec3::new(sp * st, ct, -cp * st);
-        ((Mat3::from_mat4(self.to_world) * l).normalize_or_zero(), st.max(0.0))
+        ((self.to_world3 * l).normalize_or_zero(), st.max(0.0))
     }
 
     /// Radiance arriving from direction `w` (pointing away from the scene).
@@ -133,7 +137,7 @@ impl EnvMap {
     /// interpolation of the cell's texels (radiance and weight together).
     #[inline]
     fn eval_grid_pdf(&self, g: Vec2) -> (Rgb, f32) {
-        let (ix, iy, fx, fy) = locate(g, self.cols, self.rows);
+        let (ix, iy, fx, fy) = self.dist.locate(g);
         let v = self.dist.bilerp(ix, iy, fx, fy);
         (Rgb::new(v.x, v.y, v.z) * self.scale, self.dist.density(v.w))
     }
@@ -179,16 +183,6 @@ impl EnvMap {
     }
 }
 
-/// Cell and fractional position of grid coordinates in [0,1]².
-#[inline]
-fn locate(g: Vec2, cols: usize, rows: usize) -> (usize, usize, f32, f32) {
-    let x = (g.x * cols as f32).max(0.0);
-    let y = (g.y * rows as f32).max(0.0);
-    let ix = (x as usize).min(cols - 1);
-    let iy = (y as usize).min(rows - 1);
-    (ix, iy, (x - ix as f32).min(1.0), (y - iy as f32).min(1.0))
-}
-
 /// Sample t in [0,1) with density proportional to (1 - t) a + t b (a, b >= 0).
 #[inline]
 fn sample_linear(u: f32, a: f32, b: f32) -> f32 {
@@ -209,8 +203,13 @@ fn sample_linear(u: f32, a: f32, b: f32) -> f32 {
 struct BilinearDistribution {
     /// The vertices' values (`weight`), with the radiance they came from.
     texels: Vec<Texel>,
+    /// Cells: `cols` wide (= image width), `rows` high (= image height - 1).
     cols: usize,
     rows: usize,
+    /// `cols` and `rows` as floats, converted once: a usize-to-float conversion is a branchy
+    /// sequence on x86-64 without AVX-512.
+    cols_f: f32,
+    rows_f: f32,
     /// Rows of cells by the sum of their cells' integrals.
     marginal: Distribution1D,
     /// Cells within each row by their integral (mean of the 4 corners).
@@ -234,7 +233,7 @@ impl BilinearDistribution {
         let row_integrals: Vec<f32> = conditional.iter().map(|c| c.integral).collect();
         let marginal = Distribution1D::new(&row_integrals);
         let integral = marginal.integral;
-        BilinearDistribution { texels, cols, rows, marginal, conditional, integral }
+        BilinearDistribution { texels, cols, rows, cols_f: cols as f32, rows_f: rows as f32, marginal, conditional, integral }
     }
 
     #[inline]
@@ -264,11 +263,23 @@ impl BilinearDistribution {
         // Inside the cell: v from its marginal (linear), then u given v (linear).
         let ty = sample_linear(uy, f00 + f10, f01 + f11);
         let tx = sample_linear(ux, f00 + (f01 - f00) * ty, f10 + (f11 - f10) * ty);
-        Vec2::new((ix as f32 + tx) / self.cols as f32, (iy as f32 + ty) / self.rows as f32)
+        Vec2::new((cell_f32(ix) + tx) / self.cols_f, (cell_f32(iy) + ty) / self.rows_f)
+    }
+
+    /// Cell and fractional position of grid coordinates in [0,1]².
+    #[inline]
+    fn locate(&self, g: Vec2) -> (usize, usize, f32, f32) {
+        let x = (g.x * self.cols_f).max(0.0);
+        let y = (g.y * self.rows_f).max(0.0);
+        // Through u32: x and y are in [0, size] (a NaN became 0 above), far below 2^32, so
+        // the conversions are the usize ones, each a single instruction.
+        let ix = (x as u32 as usize).min(self.cols - 1);
+        let iy = (y as u32 as usize).min(self.rows - 1);
+        (ix, iy, (x - cell_f32(ix)).min(1.0), (y - cell_f32(iy)).min(1.0))
     }
 
     fn pdf(&self, g: Vec2) -> f32 {
-        let (ix, iy, fx, fy) = locate(g, self.cols, self.rows);
+        let (ix, iy, fx, fy) = self.locate(g);
         self.density(self.bilerp(ix, iy, fx, fy).w)
     }
 
@@ -280,6 +291,13 @@ impl BilinearDistribution {
         }
         f / self.integral
     }
+}
+
+/// A cell index as a float: `i as f32` for every index of a grid (below 2^32 cells a
+/// side), converted from 32 bits, a single instruction where a usize is not.
+#[inline]
+fn cell_f32(i: usize) -> f32 {
+    i as u32 as f32
 }
 
 #[cfg(test)]
@@ -338,8 +356,8 @@ mod tests {
         let mut rng = crate::sampling::rng::Pcg32::new(5, 9);
         for _ in 0..5000 {
             let g = Vec2::new(rng.next_f32(), rng.next_f32());
-            let (ix, iy, fx, fy) = locate(g, env.cols, env.rows);
-            let s = env.cols + 1;
+            let (ix, iy, fx, fy) = env.dist.locate(g);
+            let s = env.dist.cols + 1;
             let t = |x: usize, y: usize| env.dist.texels[y * s + x].0;
             let lerp = |a: f32, b: f32, c: f32, d: f32| (a * (1.0 - fx) + b * fx) * (1.0 - fy) + (c * (1.0 - fx) + d * fx) * fy;
             let (a, b, c, d) = (t(ix, iy), t(ix + 1, iy), t(ix, iy + 1), t(ix + 1, iy + 1));
@@ -373,6 +391,65 @@ mod tests {
             assert!((pdf - env.pdf(d)).abs() <= 2e-3 * pdf, "u {u}: pdf {pdf} vs {}", env.pdf(d));
         }
         assert!(n > 4000, "{n} samples");
+    }
+
+    #[test]
+    fn grid_lookup_is_the_reference_formula() {
+        // `dir_to_grid` and `locate` use precomputed float sizes and 32-bit conversions: they
+        // must give the usize formulas' values bit for bit, on random directions, the poles,
+        // the seam (u = 0/1: directions along -z, either side of it), and grid edges.
+        let reference_locate = |g: Vec2, cols: usize, rows: usize| {
+            let x = (g.x * cols as f32).max(0.0);
+            let y = (g.y * rows as f32).max(0.0);
+            let ix = (x as usize).min(cols - 1);
+            let iy = (y as usize).min(rows - 1);
+            (ix, iy, (x - ix as f32).min(1.0), (y - iy as f32).min(1.0))
+        };
+        for (w, h, rot) in
+            [(512usize, 256usize, Mat4::IDENTITY), (7, 5, Mat4::from_rotation_y(0.9)), (1, 2, Mat4::IDENTITY), (3000, 1, Mat4::from_rotation_x(-0.2))]
+        {
+            let data: Vec<Rgb> = (0..w * h).map(|i| Rgb::new(1.0 + (i % 5) as f32, 0.5, 2.0)).collect();
+            let env = EnvMap::new(Arc::new(Bitmap::new(w, h, data)), rot, 1.0);
+            let mut rng = crate::sampling::rng::Pcg32::new(11, w as u64);
+            let mut dirs = vec![Vec3::Y, -Vec3::Y, Vec3::Z, -Vec3::Z, Vec3::X, -Vec3::X, Vec3::ZERO];
+            for e in [0.0f32, -0.0, 1e-7, -1e-7, 1e-30, -1e-30] {
+                dirs.extend([Vec3::new(e, 0.3, -1.0), Vec3::new(e, -0.7, -1.0), Vec3::new(e, 1.0, e), Vec3::new(e, -1.0, -e)]);
+            }
+            for _ in 0..20_000 {
+                dirs.push(crate::math::warp::square_to_uniform_sphere(Vec2::new(rng.next_f32(), rng.next_f32())));
+            }
+            let bits = |(ix, iy, fx, fy): (usize, usize, f32, f32)| (ix, iy, fx.to_bits(), fy.to_bits());
+            for d in dirs {
+                let l = (env.to_local * d).normalize_or_zero();
+                let mut u = approx::atan2(l.x, -l.z) * INV_2PI - 0.5 / env.dist.cols as f32;
+                if u < 0.0 {
+                    u += 1.0;
+                }
+                let sin_t = safe_sqrt(l.x * l.x + l.z * l.z);
+                let v = approx::atan2(sin_t, l.y) * INV_PI;
+                let (g, st) = env.dir_to_grid(d);
+                assert_eq!((g.x.to_bits(), g.y.to_bits(), st.to_bits()), (u.to_bits(), v.to_bits(), sin_t.to_bits()), "{d}");
+                assert_eq!(bits(env.dist.locate(g)), bits(reference_locate(g, env.dist.cols, env.dist.rows)), "{d}");
+            }
+            for g in
+                [Vec2::ZERO, Vec2::ONE, Vec2::new(1.0 - f32::EPSILON, 0.5), Vec2::new(-0.0, 1.0), Vec2::new(f32::NAN, 0.2), Vec2::new(0.999_999_9, 0.999_999_9)]
+            {
+                assert_eq!(bits(env.dist.locate(g)), bits(reference_locate(g, env.dist.cols, env.dist.rows)), "{g}");
+            }
+            // Sampled grid points: the cell's position divided by the precomputed sizes.
+            for _ in 0..5000 {
+                let u = Vec2::new(rng.next_f32(), rng.next_f32());
+                let d = &env.dist;
+                let (iy, _, uy) = d.marginal.sample_discrete(u.y);
+                let (ix, _, ux) = d.conditional[iy].sample_discrete(u.x);
+                let [f00, f10, f01, f11] = d.corners(ix, iy);
+                let ty = sample_linear(uy, f00 + f10, f01 + f11);
+                let tx = sample_linear(ux, f00 + (f01 - f00) * ty, f10 + (f11 - f10) * ty);
+                let want = Vec2::new((ix as f32 + tx) / d.cols as f32, (iy as f32 + ty) / d.rows as f32);
+                let got = d.sample_point(u);
+                assert_eq!((got.x.to_bits(), got.y.to_bits()), (want.x.to_bits(), want.y.to_bits()), "{u}");
+            }
+        }
     }
 
     #[test]

@@ -12,6 +12,9 @@ pub struct Distribution1D {
     /// For long distributions, where the search for u in [j/G, (j+1)/G) starts: the largest
     /// i with cdf[i] <= j/G (G = the length). Empty below [`GUIDE_MIN`] entries.
     guide: Vec<u32>,
+    /// `guide.len()` as a float, converted once (a usize-to-float conversion is a branchy
+    /// sequence on x86-64 without AVX-512).
+    guide_len_f: f32,
 }
 
 /// Distributions at least this long get a guide table: their searches would otherwise walk
@@ -56,7 +59,8 @@ impl Distribution1D {
             cdf[n] = 1.0;
         }
         let guide = if n >= GUIDE_MIN { guide_table(&cdf, n) } else { Vec::new() };
-        Distribution1D { func: func.to_vec(), cdf, integral, guide }
+        let guide_len_f = guide.len() as f32;
+        Distribution1D { func: func.to_vec(), cdf, integral, guide, guide_len_f }
     }
     pub fn len(&self) -> usize {
         self.func.len()
@@ -94,8 +98,9 @@ impl Distribution1D {
             return self.cdf.partition_point(|&c| c <= u).saturating_sub(1);
         }
         let g = self.guide.len();
-        // A NaN u goes to entry 0, as the binary search sends it.
-        let mut i = self.guide[((u * g as f32) as usize).min(g - 1)] as usize;
+        // A NaN u goes to entry 0, as the binary search sends it. Through u32, a single
+        // instruction: the same index, as both conversions saturate and `min` bounds it.
+        let mut i = self.guide[((u * self.guide_len_f) as u32 as usize).min(g - 1)] as usize;
         // Down past entries above u (all of them for a NaN u: nothing compares with it).
         while i > 0 && !matches!(self.cdf[i].partial_cmp(&u), Some(std::cmp::Ordering::Less | std::cmp::Ordering::Equal)) {
             i -= 1;
