@@ -1,10 +1,10 @@
 //! One vertex of a path, and the densities and throughputs between two vertices.
 
-use crate::bsdf::{Bsdf, BsdfModel, LobeFlags, TransportMode};
+use crate::bsdf::{Bsdf, BsdfModel, BsdfSample, LobeFlags, TransportMode};
 use crate::camera::LensConnector;
 use crate::geometry::SurfaceInteraction;
 use crate::light::Light;
-use crate::math::{Frame, PI};
+use crate::math::{warp, Frame, INV_PI, PI};
 use crate::scene::Scene;
 use crate::spectrum::Rgb;
 use glam::{Vec2, Vec3};
@@ -164,6 +164,61 @@ pub(crate) fn lambertian_eval(bsdf: &Bsdf, n: Vec3, wo: Vec3, wi: Vec3, mode: Tr
         }
     };
     Some(f * bsdf.opacity)
+}
+
+/// `Bsdf::pdf(a, b, mode)` of a Lambertian BSDF (as in [`lambertian_eval`]) from the local
+/// z components alone, bit for bit: the diffuse density reads nothing else. None where the
+/// back side is asked for and is not diffuse.
+#[inline]
+fn lambertian_pdf(bsdf: &Bsdf, za: f32, zb: f32) -> Option<f32> {
+    let cos_pdf = |za: f32, zb: f32| if za <= 0.0 || zb <= 0.0 { 0.0 } else { warp::square_to_cosine_hemisphere_pdf(Vec3::new(0.0, 0.0, zb)) };
+    if za >= 0.0 {
+        return Some(cos_pdf(za, zb) * bsdf.opacity);
+    }
+    match &bsdf.back {
+        None => Some(0.0),
+        Some(BsdfModel::Diffuse(_)) => Some(cos_pdf(-za, -zb) * bsdf.opacity),
+        Some(_) => None,
+    }
+}
+
+/// `bsdf.sample(to_local(wo), uc, u, mode)` in `frame` and the reverse density
+/// `bsdf.pdf(s.wi, to_local(wo), ..)`, bit for bit and with the same draws, for a Lambertian
+/// BSDF (as in [`lambertian_eval`]; a mask's pass-through excepted): only the local z of
+/// `wo` is read, and no model dispatch. The walk samples one per light-path vertex.
+/// None: not such a BSDF (use the generic route); Some(None): the sample fails.
+#[inline]
+pub(crate) fn lambertian_sample(bsdf: &Bsdf, frame: &Frame, wo: Vec3, uc: f32, u: Vec2) -> Option<Option<(BsdfSample, f32)>> {
+    let BsdfModel::Diffuse(front) = &bsdf.front else { return None };
+    if bsdf.detail.is_some() || (bsdf.opacity < 1.0 && uc >= bsdf.opacity) {
+        return None;
+    }
+    let zo = wo.dot(frame.n);
+    // `Bsdf::side`, then `Diffuse::sample` on that side with wo mirrored to +z.
+    let (model, flipped) = if zo >= 0.0 {
+        (front, false)
+    } else {
+        match &bsdf.back {
+            None => return Some(None),
+            Some(BsdfModel::Diffuse(back)) => (back, true),
+            Some(_) => return None,
+        }
+    };
+    let zm = if flipped { -zo } else { zo };
+    if zm <= 0.0 {
+        return Some(None);
+    }
+    let mut wi = warp::square_to_cosine_hemisphere(u);
+    let pdf = warp::square_to_cosine_hemisphere_pdf(wi);
+    if pdf <= 0.0 {
+        return Some(None);
+    }
+    if flipped {
+        wi.z = -wi.z;
+    }
+    let pdf_rev = lambertian_pdf(bsdf, wi.z, zo)?;
+    let s = BsdfSample { wi, f: model.reflectance * INV_PI * bsdf.opacity, pdf: pdf * bsdf.opacity, lobe: LobeFlags::DIFFUSE_REFLECTION, eta: 1.0 };
+    Some(Some((s, pdf_rev)))
 }
 
 impl Vertex {
@@ -568,6 +623,75 @@ mod tests {
         // (From below, so that the second one's back is asked for.)
         for b in &others {
             assert!(lambertian_eval(b, Vec3::Z, -Vec3::Z, Vec3::Z, TransportMode::Radiance).is_none());
+        }
+    }
+
+    /// `lambertian_sample` is the BSDF's own `sample` in the local frame and its reverse
+    /// `pdf`, bit for bit (the walk's generic route), with the same draws: one- and two-sided
+    /// diffuse BSDFs, masks, both sides, tangent directions; Some(None) where `sample` fails;
+    /// None for a mask's pass-through and for the BSDFs it does not cover.
+    #[test]
+    fn lambertian_sample_is_bsdf_sample() {
+        let diffuse = |r: f32| BsdfModel::Diffuse(Diffuse { reflectance: Rgb::new(r, 0.5 * r, 0.25) });
+        let mut bsdfs = Vec::new();
+        for back in [None, Some(diffuse(0.3))] {
+            for opacity in [1.0, 0.6] {
+                bsdfs.push(Bsdf { front: diffuse(0.8), back: back.clone(), opacity, detail: None });
+            }
+        }
+        let mut rng = Pcg32::new(7, 3);
+        let dir = |rng: &mut Pcg32| square_to_uniform_sphere(Vec2::new(rng.next_f32(), rng.next_f32()));
+        let bits = |c: Rgb| [c.r, c.g, c.b].map(f32::to_bits);
+        let vbits = |v: Vec3| v.to_array().map(f32::to_bits);
+        let flip = |m| if m == TransportMode::Radiance { TransportMode::Importance } else { TransportMode::Radiance };
+        let mut seen = [0usize; 3];
+        for _ in 0..3000 {
+            let frame = Frame::from_normal(dir(&mut rng));
+            let mut wo = dir(&mut rng);
+            if rng.next_f32() < 0.1 {
+                wo = frame.t;
+            }
+            let uc = rng.next_f32();
+            let u = match rng.next_u32() % 8 {
+                0 => Vec2::ZERO,
+                1 => Vec2::new(0.5, 0.5),
+                _ => Vec2::new(rng.next_f32(), rng.next_f32()),
+            };
+            for (k, b) in bsdfs.iter().enumerate() {
+                for mode in [TransportMode::Radiance, TransportMode::Importance] {
+                    let wl = frame.to_local(wo);
+                    let want = b.sample(wl, uc, u, mode);
+                    let Some(got) = lambertian_sample(b, &frame, wo, uc, u) else {
+                        // Only a mask's pass-through goes the generic way.
+                        assert!(b.opacity < 1.0 && uc >= b.opacity, "bsdf {k}");
+                        seen[2] += 1;
+                        continue;
+                    };
+                    match (got, want) {
+                        (None, None) => seen[0] += 1,
+                        (Some((g, rev)), Some(w)) => {
+                            assert_eq!(vbits(g.wi), vbits(w.wi), "bsdf {k} wo {wo} u {u}");
+                            assert_eq!(bits(g.f), bits(w.f));
+                            assert_eq!((g.pdf.to_bits(), g.lobe, g.eta.to_bits()), (w.pdf.to_bits(), w.lobe, w.eta.to_bits()));
+                            assert_eq!(rev.to_bits(), b.pdf(w.wi, wl, flip(mode)).to_bits(), "bsdf {k} wo {wo} u {u}");
+                            seen[1] += 1;
+                        }
+                        (g, w) => panic!("bsdf {k} wo {wo}: {:?} vs {:?}", g.map(|s| s.0.wi), w.map(|s| s.wi)),
+                    }
+                }
+            }
+        }
+        // Samples on both sides, failures (the back of one-sided BSDFs), pass-throughs.
+        assert!(seen.iter().all(|&n| n > 1000), "{seen:?}");
+        let rough = BsdfModel::OrenNayar(OrenNayar { reflectance: Rgb::splat(0.5), sigma: 0.3 });
+        let others = [
+            Bsdf { front: rough.clone(), back: None, opacity: 1.0, detail: None },
+            Bsdf { front: diffuse(0.5), back: Some(rough), opacity: 1.0, detail: None },
+            Bsdf { front: diffuse(0.5), back: None, opacity: 1.0, detail: Some(Detail::new(Vec3::new(0.1, 0.0, 1.0), true)) },
+        ];
+        let frame = Frame::from_normal(Vec3::Z);
+        for b in &others {
+            assert!(lambertian_sample(b, &frame, -Vec3::Z, 0.5, Vec2::splat(0.3)).is_none());
         }
     }
 }

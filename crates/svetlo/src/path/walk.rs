@@ -4,7 +4,7 @@
 //! Sampler dimensions, in order: light subpath: light choice (1), origin (2), direction (2);
 //! then per bounce: lobe (1), direction (2), Russian roulette (1).
 
-use super::vertex::{infinite_light_density, shading_correction};
+use super::vertex::{infinite_light_density, lambertian_sample, shading_correction};
 use super::{Event, PathConfig, Vertex};
 use crate::bsdf::{LobeFlags, TransportMode};
 use crate::geometry::{Ray, SurfaceInteraction};
@@ -188,14 +188,22 @@ impl Walk {
         let u_rr = sampler.next_1d();
         let v = path.last().expect("just pushed");
         let bsdf = v.bsdf.as_ref().expect("surface vertices have a BSDF");
-        let wo = v.shading.to_local(v.wo);
-        let Some(bs) = bsdf.sample(wo, uc, u, mode) else { return false };
+        let (bs, mut pdf_rev) = match lambertian_sample(bsdf, &v.shading, v.wo, uc, u) {
+            Some(Some(s)) => s,
+            Some(None) => return false,
+            None => {
+                let wo = v.shading.to_local(v.wo);
+                let Some(bs) = bsdf.sample(wo, uc, u, mode) else { return false };
+                // (Unused when the check below ends the walk.)
+                let pdf_rev = bsdf.pdf(bs.wi, wo, flip(mode));
+                (bs, pdf_rev)
+            }
+        };
         if bs.pdf <= 0.0 || bs.f.is_black() {
             return false;
         }
         let wi_world = v.shading.to_world(bs.wi);
         let w = bs.weight() * shading_correction(v.ng, v.shading.n, v.wo, wi_world, mode);
-        let mut pdf_rev = bsdf.pdf(bs.wi, wo, flip(mode));
         let mut next = Ray::new(crate::geometry::ray::offset_ray_origin(v.p, v.ng, wi_world), wi_world);
         next.time = self.ray.time;
         self.ray = next;
