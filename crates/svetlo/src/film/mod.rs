@@ -261,14 +261,7 @@ impl FilmTile {
     /// sums in the same order as those two, so the same bits.
     #[inline]
     fn add_separable(&mut self, p: Vec2, l: Rgb, eval: impl Fn(f32) -> f32) {
-        let r = self.filter.radius();
-        let xmin = (-floor_i(-(p.x - 0.5 - r))).max(self.x0 as i64);
-        let xmax = floor_i(p.x - 0.5 + r).min(self.x1 as i64 - 1);
-        let ymin = (-floor_i(-(p.y - 0.5 - r))).max(self.y0 as i64);
-        let ymax = floor_i(p.y - 0.5 + r).min(self.y1 as i64 - 1);
-        if xmax < xmin || ymax < ymin {
-            return;
-        }
+        let Some((xmin, xmax, ymin, ymax)) = self.footprint_range(p) else { return };
         let nx = (xmax - xmin + 1) as usize;
         if nx > Footprint::SPAN || ymax - ymin + 1 > Footprint::SPAN as i64 {
             // A wide filter: the general walk (weights evaluated in place).
@@ -374,19 +367,24 @@ impl FilmTile {
         }
     }
 
-    /// The pixels of this tile within the filter's radius of `p` (None: none), with the
-    /// filter's separable weights evaluated once per sample for the beauty and every layer
-    /// (a Gaussian's cost two `exp` each).
+    /// The first and last column and row of this tile within the filter's radius of `p`
+    /// (None: none).
     #[inline]
-    fn footprint(&self, p: Vec2) -> Option<Footprint> {
+    fn footprint_range(&self, p: Vec2) -> Option<(i64, i64, i64, i64)> {
         let r = self.filter.radius();
         let xmin = (-floor_i(-(p.x - 0.5 - r))).max(self.x0 as i64);
         let xmax = floor_i(p.x - 0.5 + r).min(self.x1 as i64 - 1);
         let ymin = (-floor_i(-(p.y - 0.5 - r))).max(self.y0 as i64);
         let ymax = floor_i(p.y - 0.5 + r).min(self.y1 as i64 - 1);
-        if xmax < xmin || ymax < ymin {
-            return None;
-        }
+        (xmin <= xmax && ymin <= ymax).then_some((xmin, xmax, ymin, ymax))
+    }
+
+    /// The pixels of this tile within the filter's radius of `p` (None: none), with the
+    /// filter's separable weights evaluated once per sample for the beauty and every layer
+    /// (a Gaussian's cost two `exp` each).
+    #[inline]
+    fn footprint(&self, p: Vec2) -> Option<Footprint> {
+        let (xmin, xmax, ymin, ymax) = self.footprint_range(p)?;
         let (nx, ny) = ((xmax - xmin + 1) as usize, (ymax - ymin + 1) as usize);
         let mut fp = Footprint {
             xmin,

@@ -577,18 +577,27 @@ mod tests {
     use crate::math::warp::square_to_uniform_sphere;
     use crate::sampling::Pcg32;
 
-    /// `lambertian_eval` is the BSDF's own `eval` in the local frame, bit for bit: one- and
-    /// two-sided diffuse BSDFs, masks, directions on both sides and in the tangent plane
-    /// (signed zeros); None for the BSDFs it does not cover.
-    #[test]
-    fn lambertian_eval_is_bsdf_eval() {
-        let diffuse = |r: f32| BsdfModel::Diffuse(Diffuse { reflectance: Rgb::new(r, 0.5 * r, 0.25) });
+    fn diffuse(r: f32) -> BsdfModel {
+        BsdfModel::Diffuse(Diffuse { reflectance: Rgb::new(r, 0.5 * r, 0.25) })
+    }
+
+    /// The BSDFs the Lambertian shortcuts cover: one- and two-sided diffuse, opaque and masked.
+    fn lambertian_bsdfs() -> Vec<Bsdf> {
         let mut bsdfs = Vec::new();
         for back in [None, Some(diffuse(0.3))] {
             for opacity in [1.0, 0.6] {
                 bsdfs.push(Bsdf { front: diffuse(0.8), back: back.clone(), opacity, detail: None });
             }
         }
+        bsdfs
+    }
+
+    /// `lambertian_eval` is the BSDF's own `eval` in the local frame, bit for bit: one- and
+    /// two-sided diffuse BSDFs, masks, directions on both sides and in the tangent plane
+    /// (signed zeros); None for the BSDFs it does not cover.
+    #[test]
+    fn lambertian_eval_is_bsdf_eval() {
+        let bsdfs = lambertian_bsdfs();
         let mut rng = Pcg32::new(11, 5);
         let dir = |rng: &mut Pcg32| square_to_uniform_sphere(Vec2::new(rng.next_f32(), rng.next_f32()));
         let bits = |c: Rgb| [c.r, c.g, c.b].map(f32::to_bits);
@@ -632,13 +641,7 @@ mod tests {
     /// None for a mask's pass-through and for the BSDFs it does not cover.
     #[test]
     fn lambertian_sample_is_bsdf_sample() {
-        let diffuse = |r: f32| BsdfModel::Diffuse(Diffuse { reflectance: Rgb::new(r, 0.5 * r, 0.25) });
-        let mut bsdfs = Vec::new();
-        for back in [None, Some(diffuse(0.3))] {
-            for opacity in [1.0, 0.6] {
-                bsdfs.push(Bsdf { front: diffuse(0.8), back: back.clone(), opacity, detail: None });
-            }
-        }
+        let bsdfs = lambertian_bsdfs();
         let mut rng = Pcg32::new(7, 3);
         let dir = |rng: &mut Pcg32| square_to_uniform_sphere(Vec2::new(rng.next_f32(), rng.next_f32()));
         let bits = |c: Rgb| [c.r, c.g, c.b].map(f32::to_bits);
