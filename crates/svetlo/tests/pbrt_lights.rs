@@ -639,3 +639,27 @@ fn convert_procedural_textures() {
     }
     let _ = std::fs::remove_dir_all(&dir);
 }
+
+/// 8-bit imagemaps keep their codes (as Mitsuba's bitmaps do) with the values pbrt gives
+/// them: sRGB-decoded by default, code / 255 exactly with `"string encoding" "linear"` (the
+/// loader once decoded sRGB and encoded it again, a few ulps off).
+#[test]
+fn eight_bit_imagemaps_keep_their_codes() {
+    let dir = std::env::temp_dir().join(format!("svetlo-imagemap8-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    let codes = [10u8, 128, 255, 0, 64, 201];
+    image::RgbImage::from_raw(2, 1, codes.to_vec()).unwrap().save(dir.join("c.png")).unwrap();
+    for (encoding, decode) in [("", Rgb::srgb_to_linear as fn(f32) -> f32), ("\"string encoding\" \"linear\"", |x| x)] {
+        let text = world(&format!(
+            "Texture \"t\" \"spectrum\" \"imagemap\" \"string filename\" \"c.png\" {encoding}\nMaterial \"diffuse\" \"texture reflectance\" \"t\"\nShape \"sphere\""
+        ));
+        let tex = reflectance(&load_pbrt_from_str(&text, &dir.join("m.pbrt")).unwrap());
+        let Texture::Bitmap { image, .. } = &tex else { panic!("not a bitmap texture: {encoding}") };
+        assert!(image.is_8bit(), "{encoding}: an 8-bit PNG keeps its codes");
+        for (x, c) in codes.chunks(3).enumerate() {
+            let want = Rgb::new(decode(c[0] as f32 / 255.0), decode(c[1] as f32 / 255.0), decode(c[2] as f32 / 255.0));
+            assert_eq!(image.texel(x, 0), want, "{encoding}: texel {x}");
+        }
+    }
+    let _ = std::fs::remove_dir_all(&dir);
+}
