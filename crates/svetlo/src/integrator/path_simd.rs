@@ -964,14 +964,10 @@ impl SimdKernel {
     #[inline(never)]
     fn scalar_scatter<S>(&self, scene: &Scene, events: &LaneEvents, st: &mut Paths<S>, l: usize, v: &mut Soa, si: &SurfaceInteraction, u: [f32; 6]) {
         let [u_light, ul_x, ul_y, uc, ux, uy] = u;
-        let own;
-        let bsdf = match &self.shapes[si.shape as usize].uniform {
-            Some(b) => b,
-            None => {
-                own = scene.bsdf(si);
-                &own
-            }
-        };
+        // The shape's uniform BSDF, or this hit's own (moved into `prev_bsdf` at the end).
+        let uniform = self.shapes[si.shape as usize].uniform.as_ref();
+        let own = uniform.is_none().then(|| scene.bsdf(si));
+        let Some(bsdf) = own.as_ref().or(uniform) else { unreachable!("a shape without a uniform BSDF builds its own") };
         let flags = bsdf.flags();
         let (p, frame) = (si.p, si.shading);
         let wo = frame.to_local(si.wo);
@@ -1018,7 +1014,6 @@ impl SimdKernel {
             st.eta_scale[l] *= bs.eta * bs.eta;
         }
         if !bs.lobe.is_specular() {
-            let own = self.shapes[si.shape as usize].uniform.is_none().then(|| bsdf.clone());
             st.prev_bsdf[l] = Some(PrevBsdf { own, shape: si.shape, frame, wo });
         }
     }

@@ -181,13 +181,13 @@ pub fn camera_connection(scene: &Scene, cfg: &PathConfig, light: &[Vertex], s: u
 /// Whether strategy (s, 1) exists for `light` (it then draws its lens sample).
 #[inline(always)]
 pub(crate) fn camera_strategy_exists(cfg: &PathConfig, light: &[Vertex], s: usize) -> bool {
-    !(s == 0 || s > light.len() || !cfg.allows(s + 1) || (s == 1 && cfg.hide_emitters))
+    s >= 1 && s <= light.len() && cfg.allows(s + 1) && !(s == 1 && cfg.hide_emitters)
 }
 
 /// Whether the light subpath's vertex `qs` (its `s`-th) can be connected to the camera.
 #[inline(always)]
 pub(crate) fn camera_connectible(scene: &Scene, cfg: &PathConfig, qs: &Vertex, s: usize) -> bool {
-    !(!cfg.camera_connectible || !qs.connectible(scene) || (s == 1 && !qs.is_area_light(scene)))
+    cfg.camera_connectible && qs.connectible(scene) && (s != 1 || qs.is_area_light(scene))
 }
 
 /// [`camera_connection`] after its checks, with its lens sample `u` drawn.
