@@ -14,7 +14,7 @@ use crate::error::{Error, Result};
 use crate::film::Film;
 use crate::geometry::Ray;
 use crate::lpe::LightTracker;
-use crate::path::{camera_connection, connect, light_subpath, light_walk, CameraBatch, LightWalk, PathConfig, ShadowPackets, Vertex};
+use crate::path::{camera_connection, connect, light_subpath, light_walk, BatchScratch, CameraBatch, LightWalk, PathConfig, ShadowPackets, Vertex};
 use crate::sampling::Sampler;
 use crate::scene::Scene;
 use crate::spectrum::Rgb;
@@ -140,6 +140,7 @@ impl Estimator {
         let mut out = SampleOut { splats, layers: Default::default() };
         let mut pending = ShadowedSplats::new();
         let mut reorder = Reorder::default();
+        let mut scratch = BatchScratch::default();
         let mut samplers: [Box<dyn Sampler>; LANES] = std::array::from_fn(|_| sampler.clone_box());
         let mut walks: [Option<LightWalk>; LANES] = std::array::from_fn(|_| None);
         // Each lane's sample (its index in the tile's order).
@@ -166,7 +167,7 @@ impl Estimator {
                             rays[l] = *w.walk.ray();
                             active |= 1 << l;
                         }
-                        _ => self.finish_lane(scene, walks[l].as_ref(), &mut paths[l], sampler, reorder.slot(seq[l])),
+                        _ => self.finish_lane(scene, walks[l].as_ref(), &mut paths[l], sampler, &mut scratch, reorder.slot(seq[l])),
                     }
                 }
             }
@@ -185,7 +186,7 @@ impl Estimator {
                     rays[l] = *w.walk.ray();
                 } else {
                     active &= !(1 << l);
-                    self.finish_lane(scene, walks[l].as_ref(), &mut paths[l], samplers[l].as_mut(), reorder.slot(seq[l]));
+                    self.finish_lane(scene, walks[l].as_ref(), &mut paths[l], samplers[l].as_mut(), &mut scratch, reorder.slot(seq[l]));
                 }
             }
         }
@@ -193,12 +194,20 @@ impl Estimator {
     }
 
     /// A lane's path after its walk: its camera connections into `slot` (splat and shadow ray).
-    fn finish_lane(&self, scene: &Scene, walk: Option<&LightWalk>, path: &mut [Vertex], sampler: &mut dyn Sampler, slot: &mut Slot) {
+    fn finish_lane(
+        &self,
+        scene: &Scene,
+        walk: Option<&LightWalk>,
+        path: &mut [Vertex],
+        sampler: &mut dyn Sampler,
+        scratch: &mut BatchScratch,
+        slot: &mut Slot,
+    ) {
         if let Some(w) = walk {
             w.finish(path);
         }
         if let Some(batch) = &self.batch {
-            batch.connections(scene, &self.cfg, path, sampler, |l, raster, ray| slot.conns.push((l, raster, ray.unwrap_or(ShadowedSplats::CLEAR))));
+            batch.connections(scene, &self.cfg, path, sampler, scratch, |l, raster, ray| slot.conns.push((l, raster, ray.unwrap_or(ShadowedSplats::CLEAR))));
         } else {
             for s in 1..=path.len() {
                 if let Some(c) = camera_connection(scene, &self.cfg, path, s, sampler) {
