@@ -25,10 +25,14 @@ pub struct AreaLight {
     /// Triangle selection by area (meshes only).
     pub tri_distribution: Option<Distribution1D>,
     pub area: f32,
-    /// Per triangle, the geometric normal on the side the shading normals face, when it is
-    /// the same over the whole triangle (all vertex normals on one side): light sampling then
-    /// needs no interpolation. `None` falls back to `TriangleMesh::surface` at the point.
-    tri_normals: Vec<Option<Vec3>>,
+    /// 1 / area (0 without area): the density of every point sample.
+    inv_area: f32,
+    /// Per triangle, the frame of the geometric normal on the side the shading normals face,
+    /// when that normal is the same over the whole triangle (all vertex normals on one side):
+    /// light sampling then needs no interpolation, and emission sampling no frame of its own
+    /// (`Frame::from_normal` of that normal, so the same bits). `None` falls back to
+    /// `TriangleMesh::surface` at the point.
+    tri_frames: Vec<Option<Frame>>,
     /// Per triangle, its first vertex and two edges (p0, p1 - p0, p2 - p0): sampling a point
     /// reads one record instead of three indexed positions.
     tri_edges: Vec<[Vec3; 3]>,
@@ -96,24 +100,25 @@ impl SphereCone {
 
 impl AreaLight {
     pub fn new(shape: u32, geometry: Arc<Geometry>, radiance: Texture) -> Self {
-        let (tri_distribution, area, tri_normals, tri_edges) = match &*geometry {
+        let (tri_distribution, area, tri_frames, tri_edges) = match &*geometry {
             Geometry::Mesh(m) => {
                 let areas: Vec<f32> = (0..m.triangle_count()).map(|t| m.triangle_area(t)).collect();
                 let area = areas.iter().sum();
-                let normals = (0..m.triangle_count()).map(|t| constant_normal(m, t)).collect();
+                let frames = (0..m.triangle_count()).map(|t| constant_normal(m, t).map(Frame::from_normal)).collect();
                 let edges = (0..m.triangle_count())
                     .map(|t| {
                         let [p0, p1, p2] = m.vertices(t);
                         [p0, p1 - p0, p2 - p0]
                     })
                     .collect();
-                (Some(Distribution1D::new(&areas)), area, normals, edges)
+                (Some(Distribution1D::new(&areas)), area, frames, edges)
             }
             Geometry::Sphere(s) => (None, s.area(), Vec::new(), Vec::new()),
             // Refused as emitters by the scene builder; no area to sample.
             Geometry::SdfGrid(_) => (None, 0.0, Vec::new(), Vec::new()),
         };
-        AreaLight { shape, geometry, radiance, tri_distribution, area, tri_normals, tri_edges }
+        let inv_area = if area > 0.0 { 1.0 / area } else { 0.0 };
+        AreaLight { shape, geometry, radiance, tri_distribution, area, inv_area, tri_frames, tri_edges }
     }
 
     /// Radiance leaving point with normal `n` and uv toward direction `w`.
@@ -129,19 +134,26 @@ impl AreaLight {
     /// Uniform point on the surface by area: (point, geometric normal, uv, pdf_area).
     /// Returns a zero pdf for a shape without area.
     pub fn sample_point(&self, u: Vec2) -> (Vec3, Vec3, Vec2, f32) {
-        let pdf = if self.area > 0.0 { 1.0 / self.area } else { 0.0 };
+        let (p, n, _, uv, pdf) = self.sample_point_framed(u);
+        (p, n, uv, pdf)
+    }
+
+    /// [`Self::sample_point`], with the normal's frame where the triangle has one precomputed.
+    #[inline(always)]
+    fn sample_point_framed(&self, u: Vec2) -> (Vec3, Vec3, Option<&Frame>, Vec2, f32) {
+        let pdf = self.inv_area;
         match (&*self.geometry, &self.tri_distribution) {
             (Geometry::Mesh(m), Some(dist)) if !dist.is_empty() => {
                 let (t, _, ur) = dist.sample_discrete(u.x);
                 let b = warp::square_to_uniform_triangle(Vec2::new(ur, u.y));
-                let Some([p0, e1, e2]) = self.tri_edges.get(t) else { return (Vec3::ZERO, Vec3::Z, Vec2::ZERO, 0.0) };
+                let Some([p0, e1, e2]) = self.tri_edges.get(t) else { return (Vec3::ZERO, Vec3::Z, None, Vec2::ZERO, 0.0) };
                 let p = *p0 + *e1 * b.x + *e2 * b.y;
-                match self.tri_normals.get(t) {
+                match self.tri_frames.get(t) {
                     // A constant texture needs no uv.
-                    Some(Some(ng)) if self.radiance.is_constant() => (p, *ng, Vec2::ZERO, pdf),
+                    Some(Some(frame)) if self.radiance.is_constant() => (p, frame.n, Some(frame), Vec2::ZERO, pdf),
                     _ => {
                         let (ng, _ns, uv, _) = m.surface(t, b.x, b.y);
-                        (p, ng, uv, pdf)
+                        (p, ng, None, uv, pdf)
                     }
                 }
             }
@@ -149,9 +161,9 @@ impl AreaLight {
                 let d = warp::square_to_uniform_sphere(u);
                 let p = s.center + d * s.radius;
                 let (n, uv, _) = s.surface(p);
-                (p, n, uv, pdf)
+                (p, n, None, uv, pdf)
             }
-            _ => (Vec3::ZERO, Vec3::Z, Vec2::ZERO, 0.0),
+            _ => (Vec3::ZERO, Vec3::Z, None, Vec2::ZERO, 0.0),
         }
     }
 
@@ -264,7 +276,7 @@ impl AreaLight {
     /// A ray leaving the light: origin uniform by area, direction cosine-weighted about the
     /// geometric normal (proportional to the emitted radiance's projected solid angle).
     pub fn sample_le(&self, u_pos: Vec2, u_dir: Vec2, time: f32) -> Option<EmissionSample> {
-        let (p, n, uv, pdf_pos) = self.sample_point(u_pos);
+        let (p, n, frame, uv, pdf_pos) = self.sample_point_framed(u_pos);
         if pdf_pos <= 0.0 {
             return None;
         }
@@ -273,7 +285,10 @@ impl AreaLight {
         if pdf_dir <= 0.0 {
             return None;
         }
-        let d = Frame::from_normal(n).to_world(local);
+        let d = match frame {
+            Some(f) => f.to_world(local),
+            None => Frame::from_normal(n).to_world(local),
+        };
         let mut ray = Ray::new(crate::geometry::ray::offset_ray_origin(p, n, d), d);
         ray.time = time;
         Some(EmissionSample { ray, le: self.radiance.eval(uv), pdf_pos, pdf_dir, n })
@@ -282,8 +297,7 @@ impl AreaLight {
     /// Densities of `sample_le` for a ray leaving the light at `ray.o` with normal `n`:
     /// (per unit area, per unit solid angle).
     pub fn pdf_le(&self, ray: &Ray, n: Vec3) -> (f32, f32) {
-        let pdf_pos = if self.area > 0.0 { 1.0 / self.area } else { 0.0 };
-        (pdf_pos, n.dot(ray.d).max(0.0) * INV_PI)
+        (self.inv_area, n.dot(ray.d).max(0.0) * INV_PI)
     }
 }
 
@@ -291,6 +305,38 @@ impl AreaLight {
 mod tests {
     use super::*;
     use crate::sampling::rng::Pcg32;
+
+    /// Emission samples of a mesh light leave along `Frame::from_normal` of the sampled
+    /// point's normal, bit for bit, whether that frame is precomputed (flat triangles, vertex
+    /// normals on either side) or built at the point (normals across the triangle's plane),
+    /// with the density 1 / area.
+    #[test]
+    fn mesh_emission_frames_are_the_normals_frames() {
+        use crate::geometry::TriangleMesh;
+        let mut rng = Pcg32::new(5, 11);
+        let positions = vec![Vec3::new(0.0, 0.0, 0.0), Vec3::new(2.0, 0.1, 0.0), Vec3::new(0.3, 1.7, 0.2), Vec3::new(-1.0, 0.5, 0.9)];
+        let indices = vec![[0, 1, 2], [0, 2, 3]];
+        let up = Vec3::new(0.1, -0.2, 1.0).normalize();
+        let normals = [Vec::new(), vec![-up; 4], vec![up, up, up, -up]];
+        let mut framed = 0;
+        for normals in normals {
+            let mesh = TriangleMesh { positions: positions.clone(), normals, uvs: Vec::new(), indices: indices.clone() };
+            let light = AreaLight::new(0, Arc::new(Geometry::Mesh(mesh)), Texture::Constant(Rgb::splat(1.0)));
+            framed += light.tri_frames.iter().flatten().count();
+            for _ in 0..2000 {
+                let (u_pos, u_dir) = (Vec2::new(rng.next_f32(), rng.next_f32()), Vec2::new(rng.next_f32(), rng.next_f32()));
+                let es = light.sample_le(u_pos, u_dir, 0.0).expect("a sample");
+                let (p, n, _, pdf) = light.sample_point(u_pos);
+                let d = Frame::from_normal(n).to_world(warp::square_to_cosine_hemisphere(u_dir));
+                let bits = |v: Vec3| v.to_array().map(f32::to_bits);
+                assert_eq!((bits(es.ray.d), bits(es.n)), (bits(d), bits(n)));
+                assert_eq!(bits(es.ray.o), bits(crate::geometry::ray::offset_ray_origin(p, n, d)));
+                assert_eq!((es.pdf_pos.to_bits(), pdf.to_bits()), ((1.0 / light.area).to_bits(), (1.0 / light.area).to_bits()));
+            }
+        }
+        // Flat triangles, both with their normal and flipped; the mixed one builds its frame.
+        assert_eq!(framed, 5);
+    }
 
     /// `sample_constant_sphere` (the path kernel's sphere light sample) gives
     /// `AreaLight::sample_li`'s bits (direction, point, normal, density, and None where it
