@@ -337,8 +337,15 @@ impl Accel {
                 // SAFETY: `live` is a subset of `active`, whose lanes were all written above.
                 let lane = unsafe { lanes[l].assume_init_mut() };
                 let mut leaf = |code, t_max: &mut f32| self.tri_leaf::<ANY, TriRay8>(code, t_max, &lane.tray, &lane.w, &mut lane.hit);
-                if !lane.walk.step::<ANY, true>(&mut stacks[l], nodes, &lane.bray, &mut lane.t_max, true, true, &prefetch_leaf, &mut leaf) {
-                    live &= !(1 << l);
+                // A lane keeps the turn while its next entry was asked for steps ago (likely in cache).
+                loop {
+                    if !lane.walk.step::<ANY, true>(&mut stacks[l], nodes, &lane.bray, &mut lane.t_max, true, true, &prefetch_leaf, &mut leaf) {
+                        live &= !(1 << l);
+                        break;
+                    }
+                    if lane.walk.fresh() {
+                        break;
+                    }
                 }
             }
         }

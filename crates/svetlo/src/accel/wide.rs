@@ -242,19 +242,28 @@ pub struct Walk {
     /// The entry (child code) the next step visits.
     cur: u32,
     found: bool,
+    /// `cur` was asked for by the last step (a child just chosen or pushed): its lines are
+    /// likely still on their way, where an entry pushed steps ago is likely in cache.
+    fresh: bool,
 }
 
 impl Walk {
     /// A walk from the root of a non-empty tree.
     #[inline(always)]
     pub fn new() -> Walk {
-        Walk { sp: 0, cur: 0, found: false }
+        Walk { sp: 0, cur: 0, found: false, fresh: true }
     }
 
     /// An empty stack for a walk (uninitialized: no work).
     #[inline(always)]
     pub const fn stack() -> WalkStack {
         [const { MaybeUninit::uninit() }; MAX_STACK]
+    }
+
+    /// Whether the next entry was asked for by the last step (see `fresh`).
+    #[inline(always)]
+    pub fn fresh(&self) -> bool {
+        self.fresh
     }
 
     /// Whether a leaf hit (with `ANY`, the walk ended there).
@@ -282,6 +291,8 @@ impl Walk {
     ) -> bool {
         let cur = self.cur;
         let mut sp = self.sp;
+        // Whether the entry popped below was pushed by this step.
+        let mut pushed_now = false;
         if cur & LEAF_BIT == 0 {
             let node = &nodes[cur as usize];
             let (tn, mut mask) = ray.test_dispatch::<AVX>(node, *t_max);
@@ -292,6 +303,7 @@ impl Walk {
                 mask &= mask - 1;
                 if mask == 0 {
                     self.cur = c[first];
+                    self.fresh = true;
                     prefetch_child(interleaved, nodes, c[first], prefetch_leaf);
                     return true;
                 }
@@ -304,10 +316,12 @@ impl Walk {
                     stack[sp].write((c[far], tn[far]));
                     self.sp = sp + 1;
                     self.cur = c[near];
+                    self.fresh = true;
                     prefetch_child(interleaved, nodes, c[near], prefetch_leaf);
                     return true;
                 }
                 // Three or more children: push all, sort the new entries so that the nearest is on top.
+                pushed_now = true;
                 let base = sp;
                 stack[sp].write((c[first], tn[first]));
                 stack[sp + 1].write((c[second], tn[second]));
@@ -352,6 +366,7 @@ impl Walk {
             if ANY || t <= *t_max * FAR_SLACK {
                 self.cur = n;
                 self.sp = sp;
+                self.fresh = pushed_now;
                 return true;
             }
         }
