@@ -8,12 +8,11 @@ use super::tri4::{intersect_half, TriRay};
 #[cfg(target_arch = "x86_64")]
 use super::tri8::TriRay8;
 use super::tri8::{Hit, Tri8, LANES, NO_TRI};
-use super::wide::{leaf_code, leaf_range, prefetch, traverse, BoxRay, Node, Walk, WalkStack};
+use super::wide::{leaf_code, leaf_range, prefetch, traverse, BoxRay, Node};
 use super::PrimHit;
 use crate::geometry::triangle::WatertightRay;
 use crate::geometry::{Aabb, Geometry, Ray, SdfGrid, Sphere};
 use glam::Vec3;
-use std::mem::MaybeUninit;
 
 #[derive(Clone)]
 pub struct Accel {
@@ -305,6 +304,8 @@ impl Accel {
     #[cfg(target_arch = "x86_64")]
     #[target_feature(enable = "avx")]
     unsafe fn trace_lanes_avx<const ANY: bool>(&self, rays: &[Ray; RAY_LANES], active: u8) -> [Option<PrimHit>; RAY_LANES] {
+        use super::wide::{Walk, WalkStack};
+        use std::mem::MaybeUninit;
         struct Lane {
             bray: BoxRay,
             tray: TriRay8,
