@@ -2,7 +2,7 @@
 //! Writes the mesh, the rays and svetlo's hits to `--out` (bench/out by default) so
 //! that bench/raycast/embree_compare.py can run Embree on exactly the same input.
 //!
-//! cargo run --release --example raycast_bench -- [--out DIR] [--repeat N] [--threads 1,2] [--subdiv N] [--no-write] [--sets coherent,incoherent,segments] [--serve]
+//! cargo run --release --example raycast_bench -- [--out DIR] [--repeat N] [--threads 1,2] [--subdiv N] [--no-write] [--sets coherent,incoherent,segments] [--lanes] [--serve]
 //!
 //! Prints one JSON object per line: the build, then one per (ray set, query, threads).
 //! With `--serve`, prints `ready` after the build and then answers lines
@@ -13,7 +13,7 @@
 use std::io::Write;
 use std::sync::atomic::{AtomicUsize, Ordering};
 use std::time::Instant;
-use svetlo::accel::Accel;
+use svetlo::accel::{Accel, RAY_LANES};
 use svetlo::geometry::{Geometry, Ray, TriangleMesh};
 use svetlo::math::Vec3;
 use svetlo::sampling::rng::Pcg32;
@@ -26,12 +26,14 @@ struct Args {
     write: bool,
     /// Only these ray sets (all when empty).
     sets: Vec<String>,
+    /// Cast eight rays at a time (`Accel::intersect_lanes`, `occluded_lanes`), as the path kernel does.
+    lanes: bool,
     /// Answer `SET QUERY THREADS` lines from stdin, one cast each (lets a driver interleave runs).
     serve: bool,
 }
 
 fn parse_args() -> Args {
-    let mut a = Args { out: "bench/out".into(), repeat: 3, threads: vec![1, 2], subdiv: 289, write: true, sets: Vec::new(), serve: false };
+    let mut a = Args { out: "bench/out".into(), repeat: 3, threads: vec![1, 2], subdiv: 289, write: true, sets: Vec::new(), serve: false, lanes: false };
     let mut it = std::env::args().skip(1);
     while let Some(k) = it.next() {
         let mut val = || it.next().unwrap_or_else(|| panic!("{k} needs a value"));
@@ -42,6 +44,7 @@ fn parse_args() -> Args {
             "--subdiv" => a.subdiv = val().parse().expect("--subdiv N"),
             "--no-write" => a.write = false,
             "--serve" => a.serve = true,
+            "--lanes" => a.lanes = true,
             "--sets" => a.sets = val().split(',').map(str::to_string).collect(),
             _ => panic!("unknown argument {k}"),
         }
@@ -183,7 +186,7 @@ fn thread_cpu_ns() -> u64 {
 
 /// Casts all rays on `threads` threads (dynamic chunks); returns (wall seconds,
 /// CPU seconds summed over the threads, number of hits).
-fn cast(accel: &Accel, rays: &[Ray], threads: usize, occlusion: bool) -> (f64, f64, usize) {
+fn cast(accel: &Accel, rays: &[Ray], threads: usize, occlusion: bool, lanes: bool) -> (f64, f64, usize) {
     const CHUNK: usize = 4096;
     let next = AtomicUsize::new(0);
     let hits = AtomicUsize::new(0);
@@ -199,8 +202,22 @@ fn cast(accel: &Accel, rays: &[Ray], threads: usize, occlusion: bool) -> (f64, f
                     if start >= rays.len() {
                         break;
                     }
-                    for r in &rays[start..(start + CHUNK).min(rays.len())] {
-                        h += if occlusion { accel.occluded(r) as usize } else { accel.intersect(r).is_some() as usize };
+                    let chunk = &rays[start..(start + CHUNK).min(rays.len())];
+                    if lanes {
+                        for group in chunk.chunks(RAY_LANES) {
+                            let mut eight = [group[0]; RAY_LANES];
+                            eight[..group.len()].copy_from_slice(group);
+                            let active = ((1u32 << group.len()) - 1) as u8;
+                            h += if occlusion {
+                                accel.occluded_lanes(&eight, active).count_ones() as usize
+                            } else {
+                                accel.intersect_lanes(&eight, active).iter().flatten().count()
+                            };
+                        }
+                    } else {
+                        for r in chunk {
+                            h += if occlusion { accel.occluded(r) as usize } else { accel.intersect(r).is_some() as usize };
+                        }
                     }
                 }
                 hits.fetch_add(h, Ordering::Relaxed);
@@ -266,14 +283,14 @@ fn main() -> std::io::Result<()> {
             let [set, query, threads] = w[..] else { break };
             let rays = &sets.iter().find(|(n, _)| *n == set).unwrap_or_else(|| panic!("no ray set {set}")).1;
             let threads = threads.parse().expect("thread count");
-            report(set, rays, query == "occluded", threads, &[cast(&accel, rays, threads, query == "occluded")]);
+            report(set, rays, query == "occluded", threads, &[cast(&accel, rays, threads, query == "occluded", args.lanes)]);
         }
         return Ok(());
     }
     for (name, rays) in &sets {
         for occlusion in [false, true] {
             for &threads in &args.threads {
-                let runs: Vec<_> = (0..args.repeat).map(|_| cast(&accel, rays, threads, occlusion)).collect();
+                let runs: Vec<_> = (0..args.repeat).map(|_| cast(&accel, rays, threads, occlusion, args.lanes)).collect();
                 report(name, rays, occlusion, threads, &runs);
             }
         }

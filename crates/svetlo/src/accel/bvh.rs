@@ -192,52 +192,176 @@ impl Accel {
     fn trace_with<const ANY: bool, const AVX: bool, K: TriKernel>(&self, ray: &Ray, tray: &K, w: &WatertightRay) -> Option<PrimHit> {
         let bray = BoxRay::new(ray.o, ray.d);
         let mut t_max = ray.t_max;
-        let mut best: Option<PrimHit> = None;
-        if !self.tri_nodes.is_empty() {
-            let mut hit: Option<(usize, usize, f32, f32)> = None;
-            let prefetch_leaf = |code| {
-                // The first block only (a constant length, so no loop): further blocks are often not reached.
-                prefetch(self.tris.as_ptr().wrapping_add(leaf_range(code).0), std::mem::size_of::<Tri8>());
-            };
-            let any_hit = traverse::<ANY, AVX>(&self.tri_nodes, &bray, &mut t_max, self.prefetch, prefetch_leaf, |code, t_max| {
-                let (start, count) = leaf_range(code);
-                let mut found = false;
-                let blocks = &self.tris[start..start + count];
-                if ANY {
-                    // Any hit ends the walk: no nearest lane, no barycentrics.
-                    return blocks.iter().any(|block| tray.occludes(block, w, *t_max));
+        let mut hit = None;
+        let prefetch_leaf = |code| self.prefetch_tris(code);
+        let any_hit = traverse::<ANY, AVX>(&self.tri_nodes, &bray, &mut t_max, self.prefetch, prefetch_leaf, |code, t_max| {
+            self.tri_leaf::<ANY, K>(code, t_max, tray, w, &mut hit)
+        });
+        if ANY && any_hit {
+            return Some(PrimHit { t: t_max, shape: 0, prim: 0, b1: 0.0, b2: 0.0 });
+        }
+        self.trace_others::<ANY, AVX>(ray, &bray, t_max, hit)
+    }
+
+    /// Asks for a leaf's first triangle block: the first only (a constant length, so no
+    /// loop), as further blocks are often not reached.
+    #[inline(always)]
+    fn prefetch_tris(&self, code: u32) {
+        prefetch(self.tris.as_ptr().wrapping_add(leaf_range(code).0), std::mem::size_of::<Tri8>());
+    }
+
+    /// Tests the ray against the triangle blocks of leaf `code`. Closest hit: records the
+    /// nearest one in `hit` (block, lane, b1, b2) and lowers `t_max` to it. With `ANY`,
+    /// whether any block is hit. Returns whether the leaf held a hit.
+    #[inline(always)]
+    fn tri_leaf<const ANY: bool, K: TriKernel>(&self, code: u32, t_max: &mut f32, tray: &K, w: &WatertightRay, hit: &mut Option<TriHit>) -> bool {
+        let (start, count) = leaf_range(code);
+        let blocks = &self.tris[start..start + count];
+        if ANY {
+            // Any hit ends the walk: no nearest lane, no barycentrics. A loop, not `any`: in
+            // the interleaved walk `any` stayed out of line, and its AVX intrinsics with it.
+            for block in blocks {
+                if tray.occludes(block, w, *t_max) {
+                    return true;
                 }
-                for (i, block) in blocks.iter().enumerate() {
-                    if let Some((lane, t, b1, b2)) = tray.test(block, w, *t_max) {
-                        *t_max = t;
-                        hit = Some((start + i, lane, b1, b2));
-                        found = true;
-                    }
-                }
-                found
-            });
-            if ANY && any_hit {
-                return Some(PrimHit { t: t_max, shape: 0, prim: 0, b1: 0.0, b2: 0.0 });
             }
-            if let Some((b, lane, b1, b2)) = hit {
-                let id = self.tris[b].ids[lane];
-                let (first, shape) = self.meshes[self.mesh_of(id)];
-                best = Some(PrimHit { t: t_max, shape, prim: id - first, b1, b2 });
+            return false;
+        }
+        let mut found = false;
+        for (i, block) in blocks.iter().enumerate() {
+            if let Some((lane, t, b1, b2)) = tray.test(block, w, *t_max) {
+                *t_max = t;
+                *hit = Some((start + i, lane, b1, b2));
+                found = true;
             }
         }
-        if let Some(i) = nearest_prim::<ANY, AVX, _>(&self.sph_nodes, &bray, &mut t_max, self.prefetch, &self.spheres, |s, t| s.intersect(ray.o, ray.d, t)) {
+        found
+    }
+
+    /// The rest of a trace once the triangles are walked (`t_max` lowered to their nearest
+    /// hit `tri`, if any): the spheres' and the SDF grids' hierarchies, the nearest hit.
+    /// With `ANY` (no triangle hit), `Some` at the first hit.
+    #[inline(always)]
+    fn trace_others<const ANY: bool, const AVX: bool>(&self, ray: &Ray, bray: &BoxRay, mut t_max: f32, tri: Option<TriHit>) -> Option<PrimHit> {
+        let mut best = tri.map(|(b, lane, b1, b2)| {
+            let id = self.tris[b].ids[lane];
+            let (first, shape) = self.meshes[self.mesh_of(id)];
+            PrimHit { t: t_max, shape, prim: id - first, b1, b2 }
+        });
+        if let Some(i) = nearest_prim::<ANY, AVX, _>(&self.sph_nodes, bray, &mut t_max, self.prefetch, &self.spheres, |s, t| s.intersect(ray.o, ray.d, t)) {
             if ANY {
                 return Some(PrimHit { t: t_max, shape: 0, prim: 0, b1: 0.0, b2: 0.0 });
             }
             best = Some(PrimHit { t: t_max, shape: self.sph_shapes[i], prim: 0, b1: 0.0, b2: 0.0 });
         }
         let voxel = |&(g, k): &(u32, u32), t| self.grids[g as usize].0.intersect_voxel(k as usize, ray.o, ray.d, t);
-        if let Some(i) = nearest_prim::<ANY, AVX, _>(&self.sdf_nodes, &bray, &mut t_max, self.prefetch, &self.voxels, voxel) {
+        if let Some(i) = nearest_prim::<ANY, AVX, _>(&self.sdf_nodes, bray, &mut t_max, self.prefetch, &self.voxels, voxel) {
             let (g, k) = self.voxels[i];
             // prim: the voxel's number in its grid (`SdfGrid::normals_at`).
             best = Some(PrimHit { t: t_max, shape: self.grids[g as usize].1, prim: k, b1: 0.0, b2: 0.0 });
         }
         best
+    }
+}
+
+/// The rays of [`Accel::intersect_lanes`] and [`Accel::occluded_lanes`].
+pub const RAY_LANES: usize = 8;
+
+/// A triangle hit found by the walk: (block, lane, b1, b2).
+type TriHit = (usize, usize, f32, f32);
+
+impl Accel {
+    /// The closest hit of each ray `rays[l]` whose bit `l` is set in `active` (`None` for
+    /// the others): what [`Accel::intersect`] gives each, bit for bit. In a hierarchy larger
+    /// than the caches, the rays' walks of the triangles take turns node by node, each
+    /// prefetching its next node or leaf, so that the rays wait on memory together rather
+    /// than one after the other.
+    pub fn intersect_lanes(&self, rays: &[Ray; RAY_LANES], active: u8) -> [Option<PrimHit>; RAY_LANES] {
+        #[cfg(target_arch = "x86_64")]
+        if self.avx && self.prefetch && !self.tri_nodes.is_empty() {
+            // SAFETY: `avx` is set only when the CPU reports AVX.
+            return unsafe { self.trace_lanes_avx::<false>(rays, active) };
+        }
+        std::array::from_fn(|l| if active & (1 << l) != 0 { self.intersect(&rays[l]) } else { None })
+    }
+
+    /// The mask of the rays of `active` (as in [`Accel::intersect_lanes`]) that something blocks.
+    pub fn occluded_lanes(&self, rays: &[Ray; RAY_LANES], active: u8) -> u8 {
+        #[cfg(target_arch = "x86_64")]
+        if self.avx && self.prefetch && !self.tri_nodes.is_empty() {
+            // SAFETY: `avx` is set only when the CPU reports AVX.
+            let hits = unsafe { self.trace_lanes_avx::<true>(rays, active) };
+            return (0..RAY_LANES).filter(|&l| hits[l].is_some()).fold(0, |m, l| m | 1 << l);
+        }
+        (0..RAY_LANES).filter(|&l| active & (1 << l) != 0 && self.occluded(&rays[l])).fold(0, |m, l| m | 1 << l)
+    }
+
+    /// `trace` of each active lane, the triangle walks interleaved (see `intersect_lanes`):
+    /// each lane takes the steps its own walk would, so its hit is the same.
+    ///
+    /// # Safety
+    /// The CPU must support AVX.
+    #[cfg(target_arch = "x86_64")]
+    #[target_feature(enable = "avx")]
+    unsafe fn trace_lanes_avx<const ANY: bool>(&self, rays: &[Ray; RAY_LANES], active: u8) -> [Option<PrimHit>; RAY_LANES] {
+        use super::wide::{Walk, WalkStack};
+        use std::mem::MaybeUninit;
+        struct Lane {
+            bray: BoxRay,
+            tray: TriRay8,
+            w: WatertightRay,
+            t_max: f32,
+            hit: Option<TriHit>,
+            walk: Walk,
+        }
+        let mut stacks: [WalkStack; RAY_LANES] = [const { Walk::stack() }; RAY_LANES];
+        // Set up in place, active lanes only (an array built whole was copied, 2.5 KB a call).
+        let mut lanes: [MaybeUninit<Lane>; RAY_LANES] = [const { MaybeUninit::uninit() }; RAY_LANES];
+        let mut set_up = active;
+        while set_up != 0 {
+            let l = set_up.trailing_zeros() as usize & (RAY_LANES - 1);
+            set_up &= set_up - 1;
+            let r = &rays[l];
+            let w = WatertightRay::new(r.o, r.d);
+            // SAFETY: this function runs only on CPUs with AVX.
+            let tray = unsafe { TriRay8::new(&w) };
+            lanes[l].write(Lane { bray: BoxRay::new(r.o, r.d), tray, w, t_max: r.t_max, hit: None, walk: Walk::new() });
+        }
+        let nodes = &self.tri_nodes[..];
+        let prefetch_leaf = |code| self.prefetch_tris(code);
+        let mut live = active;
+        while live != 0 {
+            let mut turn = live;
+            while turn != 0 {
+                let l = turn.trailing_zeros() as usize & (RAY_LANES - 1);
+                turn &= turn - 1;
+                // SAFETY: `live` is a subset of `active`, whose lanes were all written above.
+                let lane = unsafe { lanes[l].assume_init_mut() };
+                let mut leaf = |code, t_max: &mut f32| self.tri_leaf::<ANY, TriRay8>(code, t_max, &lane.tray, &lane.w, &mut lane.hit);
+                // A lane keeps the turn while its next entry was asked for steps ago (likely in cache).
+                loop {
+                    if !lane.walk.step::<ANY, true>(&mut stacks[l], nodes, &lane.bray, &mut lane.t_max, true, true, &prefetch_leaf, &mut leaf) {
+                        live &= !(1 << l);
+                        break;
+                    }
+                    if lane.walk.fresh() {
+                        break;
+                    }
+                }
+            }
+        }
+        std::array::from_fn(|l| {
+            if active & (1 << l) == 0 {
+                return None;
+            }
+            // SAFETY: lane l is active, so it was written above.
+            let lane = unsafe { lanes[l].assume_init_ref() };
+            if ANY && lane.walk.found() {
+                Some(PrimHit { t: lane.t_max, shape: 0, prim: 0, b1: 0.0, b2: 0.0 })
+            } else {
+                self.trace_others::<ANY, true>(&rays[l], &lane.bray, lane.t_max, lane.hit)
+            }
+        })
     }
 }
 

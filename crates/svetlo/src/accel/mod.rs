@@ -13,7 +13,7 @@ mod wide;
 #[cfg(test)]
 mod tests;
 
-pub use bvh::Accel;
+pub use bvh::{Accel, RAY_LANES};
 pub use kdtree::{KdPoint, KdTree};
 
 /// The closest hit of a ray: which primitive, where along the ray, and where on it

@@ -1,7 +1,7 @@
 //! The accelerator against brute force: same closest hit (t bit for bit, same
 //! primitive unless two primitives tie on t), same occlusion answer.
 
-use super::{Accel, PrimHit};
+use super::{Accel, PrimHit, RAY_LANES};
 use crate::geometry::triangle::WatertightRay;
 use crate::geometry::{Geometry, Ray, SdfGrid, SdfNormals, Sphere, TriangleMesh};
 use crate::sampling::rng::Pcg32;
@@ -156,12 +156,41 @@ fn run(shapes: &[Geometry], rays: &[Ray]) -> usize {
         check(shapes, &accel, r);
         hits += accel.intersect(r).is_some() as usize;
     }
+    let prefetch = accel.prefetch;
+    for interleaved in [true, false] {
+        accel.prefetch = interleaved;
+        check_lanes(&accel, rays);
+    }
     accel.avx = false;
-    accel.prefetch = !accel.prefetch;
+    accel.prefetch = !prefetch;
     for r in rays {
         check(shapes, &accel, r);
     }
+    check_lanes(&accel, rays);
     hits
+}
+
+/// The eight-ray queries give each active ray what the one-ray queries give it, bit for bit,
+/// and nothing to the others: whole groups, single lanes and scattered masks. With AVX and
+/// `prefetch`, the walks are the interleaved ones.
+fn check_lanes(accel: &Accel, rays: &[Ray]) {
+    let bits = |h: Option<PrimHit>| h.map(|h| (h.t.to_bits(), h.shape, h.prim, h.b1.to_bits(), h.b2.to_bits()));
+    for (k, group) in rays.chunks(RAY_LANES).enumerate() {
+        let mut eight = [group[0]; RAY_LANES];
+        eight[..group.len()].copy_from_slice(group);
+        let all = ((1u32 << group.len()) - 1) as u8;
+        let active = all & [0xff, 0x01, 0x80, 0xa5, 0x5a, 0x3c][k % 6];
+        let hits = accel.intersect_lanes(&eight, active);
+        let blocked = accel.occluded_lanes(&eight, active);
+        for l in 0..RAY_LANES {
+            if active & (1 << l) != 0 {
+                assert_eq!(bits(hits[l]), bits(accel.intersect(&eight[l])), "lane {l} of group {k}");
+                assert_eq!(blocked & (1 << l) != 0, accel.occluded(&eight[l]), "occlusion of lane {l} of group {k}");
+            } else {
+                assert!(hits[l].is_none() && blocked & (1 << l) == 0, "inactive lane {l} of group {k}");
+            }
+        }
+    }
 }
 
 #[test]

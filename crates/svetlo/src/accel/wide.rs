@@ -223,11 +223,76 @@ pub fn traverse<const ANY: bool, const AVX: bool>(
     if nodes.is_empty() {
         return false;
     }
-    let mut stack: [MaybeUninit<(u32, f32)>; MAX_STACK] = [const { MaybeUninit::uninit() }; MAX_STACK];
-    let mut sp = 0usize;
-    let mut found = false;
-    let mut cur = 0u32;
-    loop {
+    let mut stack = Walk::stack();
+    let mut walk = Walk::new();
+    while walk.step::<ANY, AVX>(&mut stack, nodes, ray, t_max, prefetch, false, &prefetch_leaf, &mut leaf) {}
+    walk.found()
+}
+
+/// A walk's stack: (child code, entry distance) of the children still to visit.
+pub type WalkStack = [MaybeUninit<(u32, f32)>; MAX_STACK];
+
+/// Where one ray's walk of a tree stands, one visit at a time: several rays' walks can
+/// then take turns, so that one ray's wait on memory overlaps another's work. The stack
+/// lives apart (see [`Walk::stack`]): it is large, and a walk is moved about.
+#[derive(Clone, Copy, Debug)]
+pub struct Walk {
+    /// Entries on the stack.
+    sp: usize,
+    /// The entry (child code) the next step visits.
+    cur: u32,
+    found: bool,
+    /// `cur` was asked for by the last step (a child just chosen or pushed): its lines are
+    /// likely still on their way, where an entry pushed steps ago is likely in cache.
+    fresh: bool,
+}
+
+impl Walk {
+    /// A walk from the root of a non-empty tree.
+    #[inline(always)]
+    pub fn new() -> Walk {
+        Walk { sp: 0, cur: 0, found: false, fresh: true }
+    }
+
+    /// An empty stack for a walk (uninitialized: no work).
+    #[inline(always)]
+    pub const fn stack() -> WalkStack {
+        [const { MaybeUninit::uninit() }; MAX_STACK]
+    }
+
+    /// Whether the next entry was asked for by the last step (see `fresh`).
+    #[inline(always)]
+    pub fn fresh(&self) -> bool {
+        self.fresh
+    }
+
+    /// Whether a leaf hit (with `ANY`, the walk ended there).
+    #[inline(always)]
+    pub fn found(&self) -> bool {
+        self.found
+    }
+
+    /// Visits the current entry (as [`traverse`] does) and moves to the next one. Returns
+    /// whether the walk goes on; `stack` must be the one this walk started with. With
+    /// `interleaved` (other walks step before this one's next step), a next entry that was
+    /// not pushed (and so not prefetched) is prefetched too: its lines arrive meanwhile.
+    #[inline(always)]
+    #[allow(clippy::too_many_arguments)]
+    pub fn step<const ANY: bool, const AVX: bool>(
+        &mut self,
+        stack: &mut WalkStack,
+        nodes: &[Node],
+        ray: &BoxRay,
+        t_max: &mut f32,
+        prefetch: bool,
+        interleaved: bool,
+        prefetch_leaf: &impl Fn(u32),
+        leaf: &mut impl FnMut(u32, &mut f32) -> bool,
+    ) -> bool {
+        let cur = self.cur;
+        let mut sp = self.sp;
+        // Whether the entry popped below was pushed by this step.
+        let mut pushed_now = false;
         if cur & LEAF_BIT == 0 {
             let node = &nodes[cur as usize];
             let (tn, mut mask) = ray.test_dispatch::<AVX>(node, *t_max);
@@ -237,31 +302,36 @@ pub fn traverse<const ANY: bool, const AVX: bool>(
                 let first = mask.trailing_zeros() as usize & (WIDTH - 1);
                 mask &= mask - 1;
                 if mask == 0 {
-                    cur = c[first];
-                    continue;
+                    self.cur = c[first];
+                    self.fresh = true;
+                    prefetch_child(interleaved, nodes, c[first], prefetch_leaf);
+                    return true;
                 }
                 let second = mask.trailing_zeros() as usize & (WIDTH - 1);
                 mask &= mask - 1;
                 if mask == 0 {
                     // Occlusion needs no order: any hit ends the walk.
                     let (near, far) = if ANY || tn[first] <= tn[second] { (first, second) } else { (second, first) };
-                    prefetch_child(prefetch, nodes, c[far], &prefetch_leaf);
+                    prefetch_child(prefetch, nodes, c[far], prefetch_leaf);
                     stack[sp].write((c[far], tn[far]));
-                    sp += 1;
-                    cur = c[near];
-                    continue;
+                    self.sp = sp + 1;
+                    self.cur = c[near];
+                    self.fresh = true;
+                    prefetch_child(interleaved, nodes, c[near], prefetch_leaf);
+                    return true;
                 }
                 // Three or more children: push all, sort the new entries so that the nearest is on top.
+                pushed_now = true;
                 let base = sp;
                 stack[sp].write((c[first], tn[first]));
                 stack[sp + 1].write((c[second], tn[second]));
                 sp += 2;
-                prefetch_child(prefetch, nodes, c[first], &prefetch_leaf);
-                prefetch_child(prefetch, nodes, c[second], &prefetch_leaf);
+                prefetch_child(prefetch, nodes, c[first], prefetch_leaf);
+                prefetch_child(prefetch, nodes, c[second], prefetch_leaf);
                 while mask != 0 {
                     let k = mask.trailing_zeros() as usize & (WIDTH - 1);
                     mask &= mask - 1;
-                    prefetch_child(prefetch, nodes, c[k], &prefetch_leaf);
+                    prefetch_child(prefetch, nodes, c[k], prefetch_leaf);
                     stack[sp].write((c[k], tn[k]));
                     sp += 1;
                 }
@@ -278,23 +348,26 @@ pub fn traverse<const ANY: bool, const AVX: bool>(
                 }
             }
         } else if cur != EMPTY_CHILD && leaf(cur, t_max) {
-            found = true;
+            self.found = true;
             if ANY {
-                return true;
+                return false;
             }
         }
         // Pop the next entry that may still hold a nearer hit.
         loop {
             if sp == 0 {
-                return found;
+                self.sp = 0;
+                return false;
             }
             sp -= 1;
             // SAFETY: every entry below sp was written by a push.
             let (n, t) = unsafe { stack[sp].assume_init() };
             // With ANY, t_max stays put until the walk ends, so every pushed entry qualifies.
             if ANY || t <= *t_max * FAR_SLACK {
-                cur = n;
-                break;
+                self.cur = n;
+                self.sp = sp;
+                self.fresh = pushed_now;
+                return true;
             }
         }
     }

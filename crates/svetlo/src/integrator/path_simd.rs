@@ -245,8 +245,12 @@ impl Tracer {
             }
             Tracer::Single { first } => (Hits8 { t: rays.t_max, prim: [u32::MAX; LANES], b1: [0.0; LANES], b2: [0.0; LANES] }, active, first),
         };
+        if lanes == 0 {
+            return h;
+        }
+        let lane_hits = scene.accel.intersect_lanes(&lane_rays(rays), lanes);
         for l in (0..LANES).filter(|l| lanes & (1 << l) != 0) {
-            let hit = scene.accel.intersect(&lane_ray(rays, l));
+            let hit = lane_hits[l];
             h.t[l] = hit.map_or(rays.t_max[l], |hit| hit.t);
             h.prim[l] = match hit {
                 None => u32::MAX,
@@ -272,10 +276,10 @@ impl Tracer {
                 let spheres = &sp.0;
                 let blocked = bvh.occluded(rays, active);
                 let (hit, unsure) = spheres.occluded(rays, active & !blocked);
-                let again = (0..LANES).filter(|l| unsure & (1 << l) != 0 && scene.accel.occluded(&lane_ray(rays, *l))).fold(0, |m, l| m | 1 << l);
+                let again = if unsure != 0 { scene.accel.occluded_lanes(&lane_rays(rays), unsure) } else { 0 };
                 blocked | (hit & !unsure) | again
             }
-            Tracer::Single { .. } => (0..LANES).filter(|l| active & (1 << l) != 0 && scene.accel.occluded(&lane_ray(rays, *l))).fold(0, |m, l| m | 1 << l),
+            Tracer::Single { .. } => scene.accel.occluded_lanes(&lane_rays(rays), active),
         }
     }
 }
@@ -302,6 +306,11 @@ fn single_tracer(scene: &Scene) -> Tracer {
 
 fn lane_ray(rays: &Rays8, l: usize) -> Ray {
     Ray::with_max(Vec3::new(rays.o[0][l], rays.o[1][l], rays.o[2][l]), Vec3::new(rays.d[0][l], rays.d[1][l], rays.d[2][l]), rays.t_max[l])
+}
+
+/// All eight lanes' rays, for the scene BVH's eight-ray queries (which walk them interleaved).
+fn lane_rays(rays: &Rays8) -> [Ray; LANES] {
+    std::array::from_fn(|l| lane_ray(rays, l))
 }
 
 /// Everything the kernel needs of a qualifying scene.
