@@ -116,7 +116,10 @@ impl Microfacet {
     /// D(m) G1(v, m) max(0, v.m).
     pub fn sample_visible(&self, v: Vec3, u: Vec2) -> Vec3 {
         let s = VisibleSampler::new(self, v);
-        s.combine(s.part_x(u.x), s.part_y(u.y))
+        // u.y's part first: it does not wait on u.x's (Beckmann's Newton iteration, whose
+        // branches the CPU mispredicts), so it runs beside it.
+        let y = s.part_y(u.y);
+        s.combine(s.part_x(u.x), y)
     }
 }
 

@@ -174,6 +174,8 @@ struct ShapeData {
     /// A scalar BSDF that is the same at every point (no texture, no surface detail: what
     /// `Scene::bsdf` gives at any hit), built once instead of at each hit of a lane.
     uniform: Option<Bsdf>,
+    /// Its lobes (looked up once: they cost two model dispatches a hit).
+    uniform_flags: LobeFlags,
 }
 
 /// A mesh area light as `AreaLight::sample_li` samples it, unpacked: its triangles' vertices
@@ -423,7 +425,8 @@ impl SimdKernel {
                 None => None,
             };
             let uniform = (scalar_bsdf && !s.detail && mat.is_uniform()).then(|| mat.bsdf(TexPoint::default()));
-            shapes.push(ShapeData { scalar_bsdf, front, back, textured, light, uniform });
+            let uniform_flags = uniform.as_ref().map_or(LobeFlags::NONE, Bsdf::flags);
+            shapes.push(ShapeData { scalar_bsdf, front, back, textured, light, uniform, uniform_flags });
         }
         // Other shapes' hits come as the scene's surface records (`other_hit`). Written once
         // into a vector of the final size: with a million triangles this unpacking is a
@@ -695,9 +698,7 @@ impl SimdKernel {
                 (raster, l, aov, touched)
             }));
         } else {
-            for &(raster, l) in &results {
-                tile.add_sample(raster, l);
-            }
+            tile.add_samples(&results);
         }
     }
 
@@ -1015,10 +1016,9 @@ impl SimdKernel {
     #[inline(never)]
     fn scalar_light_sample(&self, scene: &Scene, l: usize, v: &mut Soa, si: &SurfaceInteraction, u: [f32; 6]) {
         let [u_light, ul_x, ul_y, ..] = u;
-        let uniform = self.shapes[si.shape as usize].uniform.as_ref();
-        let own = uniform.is_none().then(|| scene.bsdf(si));
-        let Some(bsdf) = own.as_ref().or(uniform) else { unreachable!("a shape without a uniform BSDF builds its own") };
-        let flags = bsdf.flags();
+        let sh = &self.shapes[si.shape as usize];
+        let own = sh.uniform.is_none().then(|| scene.bsdf(si));
+        let flags = own.as_ref().map_or(sh.uniform_flags, Bsdf::flags);
         if flags.has_non_specular() {
             self.light_sample(scene, l, v, si.p, u_light, Vec2::new(ul_x, ul_y));
         } else {
