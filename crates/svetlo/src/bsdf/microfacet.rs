@@ -73,10 +73,17 @@ impl Microfacet {
     /// Smith's masking of microfacet `m` seen from `v` (zero if `v` sees its back).
     #[inline]
     pub fn g1(&self, v: Vec3, m: Vec3) -> f32 {
+        Self::g1_given(v, m, || self.lambda(v))
+    }
+
+    /// [`Self::g1`] with Λ(v) from `lambda` (a caller's, computed once for several `m`), asked
+    /// only where `v` sees the front of `m`: the same value.
+    #[inline]
+    pub(crate) fn g1_given(v: Vec3, m: Vec3, lambda: impl FnOnce() -> f32) -> f32 {
         if v.dot(m) * v.z <= 0.0 {
             return 0.0;
         }
-        1.0 / (1.0 + self.lambda(v))
+        1.0 / (1.0 + lambda())
     }
 
     /// Separable shadowing-masking G1(wo) G1(wi).

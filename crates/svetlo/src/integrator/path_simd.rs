@@ -1045,16 +1045,19 @@ impl SimdKernel {
         let (p, frame) = (si.p, si.shading);
         let wo = frame.to_local(si.wo);
         let lane = |a: &[[f32; LANES]; 3]| Vec3::new(a[0][l], a[1][l], a[2][l]);
-        if v.nee_ok[l] {
-            // The light's direction as `shade8` finds it (a mesh light's as `AreaLight::sample_li`).
+        // The light's direction as `shade8` finds it (a mesh light's as `AreaLight::sample_li`).
+        let wi = v.nee_ok[l].then(|| {
             let wi_w = if v.generic[l] {
                 lane(&v.gwi)
             } else {
                 let d = lane(&v.lp) - p;
                 d / d.length_squared().sqrt()
             };
-            let wi = frame.to_local(wi_w);
-            let (f, pdf) = bsdf.eval_pdf(wo, wi, TransportMode::Radiance);
+            frame.to_local(wi_w)
+        });
+        // The value and density toward it, and the BSDF's own sample, from one call.
+        let (nee, bs) = bsdf.eval_pdf_and_sample(wo, wi, uc, Vec2::new(ux, uy), TransportMode::Radiance);
+        if let (Some(wi), Some((f, pdf))) = (wi, nee) {
             v.nee_ok[l] = !f.is_black();
             put_rgb(&mut v.bf, l, f);
             // A delta light takes no MIS weight (nor the density).
@@ -1063,7 +1066,7 @@ impl SimdKernel {
                 v.class_nee[l] = view.class(events.aovs.scatter_event(v.shape[l], flags, None, wi.z * wo.z < 0.0));
             }
         }
-        let bs = bsdf.sample(wo, uc, Vec2::new(ux, uy), TransportMode::Radiance).filter(|bs| bs.pdf > 0.0 && !bs.f.is_black());
+        let bs = bs.filter(|bs| bs.pdf > 0.0 && !bs.f.is_black());
         v.bmoved[l] = bs.is_some();
         st.prev_bsdf[l] = None;
         let Some(bs) = bs else { return };
