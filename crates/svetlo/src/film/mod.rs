@@ -260,7 +260,7 @@ impl FilmTile {
     /// default) weighs without its division (`x / 1` is `x`, NaN and all).
     pub fn add_samples(&mut self, samples: &[(Vec2, Rgb)]) {
         match self.filter {
-            Filter::Tent { radius } if radius == 1.0 => {
+            Filter::Tent { radius: 1.0 } => {
                 for &(p, l) in samples {
                     self.add_one(p, l, |x| (1.0 - x.abs()).max(0.0));
                 }

@@ -16,11 +16,13 @@
 //! evaluated per lane where the path hits) are shaded as eight-lane arithmetic, on any
 //! shape; every other one (conductors, dielectrics, plastics, the classic models,
 //! principled, blends, masks, normal and bump maps) lane by lane through its scalar `Bsdf`
-//! in `gather` (`scalar_scatter`: the same calls and random numbers as `path.rs`), its
-//! results selected into `shade8`'s lanes. A shape whose material has no texture and no
-//! surface detail keeps its `Bsdf`, built once (`ShapeData::uniform`; its lanes neither
-//! rebuild nor copy it), and the value and density toward the light sample come from one
-//! call (`Bsdf::eval_pdf`: a rough model's half vector, D and G1 computed once). Scenes
+//! (`scalar_light_sample` in `gather`, `scalar_scatter` once every lane's sphere-light
+//! sample is in: the same calls and random numbers as `path.rs`), its results selected into
+//! `shade8`'s lanes. A shape whose material has no texture and no surface detail keeps its
+//! `Bsdf`, built once (`ShapeData::uniform`; its lanes neither rebuild nor copy it), and
+//! the value and density toward the light sample come with the BSDF's own sample from one
+//! call (`Bsdf::eval_pdf_and_sample`: a rough model's half vector, D and G1 computed once;
+//! a rough conductor's Λ(wo) once for both). Scenes
 //! large enough to trace single rays take the kernel only with Lambertian materials (it
 //! gained nothing there otherwise). Lights: area lights of constant radiance on meshes
 //! (sampled by the kernel's own unpacked copy), and every other light the scalar tracer
