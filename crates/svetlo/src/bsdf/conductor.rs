@@ -74,6 +74,12 @@ impl RoughConductor {
         self.distribution.pdf_visible(wo, m) / (4.0 * wm)
     }
     pub fn sample(&self, wo: Vec3, _uc: f32, u: Vec2, _mode: TransportMode) -> Option<BsdfSample> {
+        self.sample_given(wo, u, || self.distribution.lambda(wo))
+    }
+
+    /// [`Self::sample`] with Λ(wo) from `lambda_o`: the same sample.
+    #[inline]
+    fn sample_given(&self, wo: Vec3, u: Vec2, lambda_o: impl FnOnce() -> f32) -> Option<BsdfSample> {
         if wo.z <= 0.0 {
             return None;
         }
@@ -82,23 +88,38 @@ impl RoughConductor {
         if wi.z <= 0.0 {
             return None;
         }
-        let (f, pdf) = self.eval_pdf(wo, wi);
+        let (f, pdf) = self.eval_pdf_given(wo, wi, lambda_o);
         if !super::positive_finite(pdf) {
             return None;
         }
         Some(BsdfSample { wi, f, pdf, lobe: LobeFlags::GLOSSY_REFLECTION, eta: 1.0 })
     }
 
+    /// ([`Self::eval_pdf`] toward `wi` where given, [`Self::sample`]): the same bits, with
+    /// Λ(wo), which both need, computed once (a path vertex's light sample and continuation).
+    pub(crate) fn eval_pdf_and_sample(&self, wo: Vec3, wi: Option<Vec3>, u: Vec2) -> (Option<(Rgb, f32)>, Option<BsdfSample>) {
+        let mut lambda_o = None;
+        let mut lambda = || *lambda_o.get_or_insert_with(|| self.distribution.lambda(wo));
+        let nee = wi.map(|wi| self.eval_pdf_given(wo, wi, &mut lambda));
+        (nee, self.sample_given(wo, u, lambda))
+    }
+
     /// ([`Self::eval`], [`Self::pdf`]) with the half vector, D and G1(wo) computed once: the
     /// same values as the two calls.
     pub(crate) fn eval_pdf(&self, wo: Vec3, wi: Vec3) -> (Rgb, f32) {
+        self.eval_pdf_given(wo, wi, || self.distribution.lambda(wo))
+    }
+
+    /// [`Self::eval_pdf`] with Λ(wo) from `lambda_o`.
+    #[inline]
+    fn eval_pdf_given(&self, wo: Vec3, wi: Vec3, lambda_o: impl FnOnce() -> f32) -> (Rgb, f32) {
         if wo.z <= 0.0 || wi.z <= 0.0 {
             return (Rgb::BLACK, 0.0);
         }
         let m = (wo + wi).normalize();
         let md = &self.distribution;
         let d = md.d(m);
-        let g1o = md.g1(wo, m);
+        let g1o = Microfacet::g1_given(wo, m, lambda_o);
         let wm = wi.dot(m);
         let pdf = if wm <= 0.0 { 0.0 } else { Microfacet::pdf_visible_given(wo, m, d, g1o) / (4.0 * wm) };
         if d == 0.0 {

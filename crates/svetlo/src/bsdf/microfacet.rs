@@ -73,10 +73,17 @@ impl Microfacet {
     /// Smith's masking of microfacet `m` seen from `v` (zero if `v` sees its back).
     #[inline]
     pub fn g1(&self, v: Vec3, m: Vec3) -> f32 {
+        Self::g1_given(v, m, || self.lambda(v))
+    }
+
+    /// [`Self::g1`] with Λ(v) from `lambda` (a caller's, computed once for several `m`), asked
+    /// only where `v` sees the front of `m`: the same value.
+    #[inline]
+    pub(crate) fn g1_given(v: Vec3, m: Vec3, lambda: impl FnOnce() -> f32) -> f32 {
         if v.dot(m) * v.z <= 0.0 {
             return 0.0;
         }
-        1.0 / (1.0 + self.lambda(v))
+        1.0 / (1.0 + lambda())
     }
 
     /// Separable shadowing-masking G1(wo) G1(wi).
@@ -116,7 +123,10 @@ impl Microfacet {
     /// D(m) G1(v, m) max(0, v.m).
     pub fn sample_visible(&self, v: Vec3, u: Vec2) -> Vec3 {
         let s = VisibleSampler::new(self, v);
-        s.combine(s.part_x(u.x), s.part_y(u.y))
+        // u.y's part first: it does not wait on u.x's (Beckmann's Newton iteration, whose
+        // branches the CPU mispredicts), so it runs beside it.
+        let y = s.part_y(u.y);
+        s.combine(s.part_x(u.x), y)
     }
 }
 

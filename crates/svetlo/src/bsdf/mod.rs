@@ -319,6 +319,26 @@ impl Bsdf {
         (f * self.opacity, pdf * self.opacity)
     }
 
+    /// ([`Self::eval_pdf`] toward `wi` where given, [`Self::sample`]): the same bits. A path
+    /// vertex needs both (its light sample and its continuation); a rough conductor (without
+    /// mask or surface detail) computes its masking from `wo` once for the two.
+    pub fn eval_pdf_and_sample(&self, wo: Vec3, wi: Option<Vec3>, uc: f32, u: Vec2, mode: TransportMode) -> (Option<(Rgb, f32)>, Option<BsdfSample>) {
+        if let (None, true, Some((BsdfModel::RoughConductor(c), flipped))) = (&self.detail, self.opacity >= 1.0, self.side(wo)) {
+            let side = |w: Vec3| if flipped { flip(w) } else { w };
+            let (nee, s) = c.eval_pdf_and_sample(side(wo), wi.map(side), u);
+            // As `eval_pdf` and `sample_local` finish theirs.
+            let nee = nee.map(|(f, pdf)| (f * self.opacity, pdf * self.opacity));
+            let s = s.map(|mut s| {
+                s.wi = side(s.wi);
+                s.f *= self.opacity;
+                s.pdf *= self.opacity;
+                s
+            });
+            return (nee, s);
+        }
+        (wi.map(|wi| self.eval_pdf(wo, wi, mode)), self.sample(wo, uc, u, mode))
+    }
+
     pub fn sample(&self, wo: Vec3, uc: f32, u: Vec2, mode: TransportMode) -> Option<BsdfSample> {
         let Some(d) = &self.detail else { return self.sample_local(wo, uc, u, mode) };
         let f = d.frame(wo);
@@ -490,12 +510,9 @@ mod tests {
         }
     }
 
-    /// `Bsdf::eval_pdf` (what next-event estimation calls) gives the bits of `eval` and `pdf`
-    /// called apart: one- and two-sided, masked, with a normal map, on models with and
-    /// without a fused evaluation, directions on both sides and grazing.
-    #[test]
-    fn bsdf_eval_pdf_is_eval_and_pdf() {
-        let mut rng = crate::sampling::rng::Pcg32::new(5, 9);
+    /// BSDFs one- and two-sided, masked and with a normal map, around models with and
+    /// without a fused evaluation.
+    fn wrapped_models() -> Vec<Bsdf> {
         let md = microfacet::Microfacet::new(MicrofacetKind::Beckmann, 0.1, 0.1);
         let conductor = BsdfModel::RoughConductor(conductor::RoughConductor {
             distribution: md,
@@ -525,6 +542,16 @@ mod tests {
             cases.push(Bsdf { back: Some(front.clone()), opacity: 0.6, ..Bsdf::new(front.clone()) });
             cases.push(Bsdf { detail: Some(detail::Detail::new(Vec3::new(0.3, -0.2, 0.9), true)), ..Bsdf::new(front) });
         }
+        cases
+    }
+
+    /// `Bsdf::eval_pdf` (what next-event estimation calls) gives the bits of `eval` and `pdf`
+    /// called apart: one- and two-sided, masked, with a normal map, on models with and
+    /// without a fused evaluation, directions on both sides and grazing.
+    #[test]
+    fn bsdf_eval_pdf_is_eval_and_pdf() {
+        let mut rng = crate::sampling::rng::Pcg32::new(5, 9);
+        let cases = wrapped_models();
         let bits = |(f, pdf): (Rgb, f32)| (f.r.to_bits(), f.g.to_bits(), f.b.to_bits(), pdf.to_bits());
         let dir = |rng: &mut crate::sampling::rng::Pcg32| crate::math::warp::square_to_uniform_sphere(Vec2::new(rng.next_f32(), rng.next_f32()));
         let grazing = [Vec3::new(1.0, 0.0, 1e-4).normalize(), Vec3::new(0.0, -1.0, -1e-4).normalize(), Vec3::new(0.6, 0.8, 0.0), Vec3::Z, -Vec3::Z];
@@ -539,6 +566,36 @@ mod tests {
                 }
             }
         }
+    }
+
+    /// `Bsdf::eval_pdf_and_sample` (the path kernel's call at a vertex) gives the bits of
+    /// `eval_pdf` and `sample` called apart, with and without the light's direction, for every
+    /// wrapped model (two-sided rough conductors take the shared path), both modes, directions
+    /// on both sides and grazing.
+    #[test]
+    fn eval_pdf_and_sample_is_eval_pdf_then_sample() {
+        let mut rng = crate::sampling::rng::Pcg32::new(23, 4);
+        let bits = |(f, pdf): (Rgb, f32)| (f.r.to_bits(), f.g.to_bits(), f.b.to_bits(), pdf.to_bits());
+        let sample_bits = |s: Option<BsdfSample>| s.map(|s| (s.wi.to_array().map(f32::to_bits), bits((s.f, s.pdf)), s.lobe, s.eta.to_bits()));
+        let dir = |rng: &mut crate::sampling::rng::Pcg32| crate::math::warp::square_to_uniform_sphere(Vec2::new(rng.next_f32(), rng.next_f32()));
+        let grazing = [Vec3::new(1.0, 0.0, 1e-4).normalize(), Vec3::new(0.0, -1.0, -1e-4).normalize(), Vec3::new(0.6, 0.8, 0.0), Vec3::Z, -Vec3::Z];
+        let mut sampled = 0;
+        for b in &wrapped_models() {
+            for mode in [TransportMode::Radiance, TransportMode::Importance] {
+                let mut pairs: Vec<(Vec3, Vec3)> = (0..2000).map(|_| (dir(&mut rng), dir(&mut rng))).collect();
+                pairs.extend(grazing.iter().flat_map(|&a| grazing.iter().map(move |&c| (a, c))));
+                for (k, (wo, wi)) in pairs.into_iter().enumerate() {
+                    let (uc, u) = (rng.next_f32(), Vec2::new(rng.next_f32(), rng.next_f32()));
+                    let wi = (k % 4 != 0).then_some(wi);
+                    let (nee, s) = b.eval_pdf_and_sample(wo, wi, uc, u, mode);
+                    assert_eq!(nee.map(bits), wi.map(|wi| bits(b.eval_pdf(wo, wi, mode))), "{:?} {mode:?} {wo} {wi:?}", b.front);
+                    let alone = b.sample(wo, uc, u, mode);
+                    sampled += usize::from(alone.is_some());
+                    assert_eq!(sample_bits(s), sample_bits(alone), "{:?} {mode:?} {wo} u {uc} {u}", b.front);
+                }
+            }
+        }
+        assert!(sampled > 30_000, "{sampled} samples");
     }
 
     /// `sample_delta` gives each delta lobe's own weight and its choice probability: their

@@ -255,6 +255,46 @@ impl FilmTile {
         }
     }
 
+    /// [`Self::add_sample`] for a run of samples (position, radiance), in order: the same
+    /// sums, with the filter's case chosen once for the run. A tent of radius 1 (Mitsuba's
+    /// default) weighs without its division (`x / 1` is `x`, NaN and all).
+    pub fn add_samples(&mut self, samples: &[(Vec2, Rgb)]) {
+        match self.filter {
+            Filter::Tent { radius: 1.0 } => {
+                for &(p, l) in samples {
+                    self.add_one(p, l, |x| (1.0 - x.abs()).max(0.0));
+                }
+            }
+            Filter::Tent { radius } => {
+                for &(p, l) in samples {
+                    self.add_one(p, l, move |x| Filter::Tent { radius }.eval(x));
+                }
+            }
+            Filter::Gaussian { .. } => {
+                let w = self.weights;
+                for &(p, l) in samples {
+                    self.add_one(p, l, move |x| w.gaussian(x));
+                }
+            }
+            Filter::Box => {
+                for &(p, l) in samples {
+                    self.add_sample(p, l);
+                }
+            }
+        }
+    }
+
+    /// [`Self::add_sample`] with a filter wider than the box, `eval` its 1-D weight.
+    #[inline(always)]
+    fn add_one(&mut self, p: Vec2, l: Rgb, eval: impl Fn(f32) -> f32) {
+        self.blank = false;
+        let l = if l.is_finite() { l } else { Rgb::BLACK };
+        if self.add_to_owner(p, l) {
+            return;
+        }
+        self.add_separable(p, l, eval);
+    }
+
     /// [`Self::footprint`] and [`Self::add_filtered`] in one, for the beauty alone: each
     /// axis's weights evaluated once (`eval`: the filter's 1-D weight), then each row of
     /// the footprint as one slice zipped with the x weights. The same weights, products and
@@ -837,7 +877,8 @@ mod tile_tests {
     /// The separable splat of `add_sample` gives every pixel's sums and weight to the bit as
     /// the general footprint walk (`footprint` + `add_filtered`) does, for each filter
     /// (a wide Gaussian too, past the cached span), on a tile with a border, samples in it
-    /// and near and on its edges and pixel boundaries.
+    /// and near and on its edges and pixel boundaries; and so do runs of samples
+    /// (`add_samples`, the tent of radius 1 without its division).
     #[test]
     fn separable_splat_matches_the_footprint_walk() {
         let filters = [
@@ -851,7 +892,8 @@ mod tile_tests {
         let mut rng = crate::sampling::Pcg32::new(11, 7);
         for f in filters {
             let film = Film::new(24, 20, f);
-            let (mut fast, mut walk) = (film.tile(8, 4, 16, 12), film.tile(8, 4, 16, 12));
+            let (mut fast, mut walk, mut runs) = (film.tile(8, 4, 16, 12), film.tile(8, 4, 16, 12), film.tile(8, 4, 16, 12));
+            let mut samples = Vec::new();
             for k in 0..4000 {
                 let mut p = Vec2::new(rng.next_f32() * 28.0 - 2.0, rng.next_f32() * 24.0 - 2.0);
                 if k % 5 == 0 {
@@ -860,6 +902,7 @@ mod tile_tests {
                 }
                 let l = Rgb::new(rng.next_f32(), rng.next_f32() * 1e-3, rng.next_f32() * 1e3);
                 fast.add_sample(p, l);
+                samples.push((p, l));
                 walk.blank = false;
                 if !walk.add_to_owner(p, l) {
                     if let Some(fp) = walk.footprint(p) {
@@ -878,6 +921,10 @@ mod tile_tests {
                     .collect()
             };
             assert_eq!(bits(&fast), bits(&walk), "{f:?}");
+            for run in samples.chunks(37) {
+                runs.add_samples(run);
+            }
+            assert_eq!(bits(&runs), bits(&fast), "{f:?}: runs");
             assert!(fast.pixels.iter().filter(|px| px.weight > 0.0).count() > 32, "{f:?}: the samples reached the tile");
         }
     }

@@ -16,18 +16,20 @@
 //! evaluated per lane where the path hits) are shaded as eight-lane arithmetic, on any
 //! shape; every other one (conductors, dielectrics, plastics, the classic models,
 //! principled, blends, masks, normal and bump maps) lane by lane through its scalar `Bsdf`
-//! in `gather` (`scalar_scatter`: the same calls and random numbers as `path.rs`), its
-//! results selected into `shade8`'s lanes. A shape whose material has no texture and no
-//! surface detail keeps its `Bsdf`, built once (`ShapeData::uniform`; its lanes neither
-//! rebuild nor copy it), and the value and density toward the light sample come from one
-//! call (`Bsdf::eval_pdf`: a rough model's half vector, D and G1 computed once). Scenes
+//! (`scalar_light_sample` in `gather`, `scalar_scatter` once every lane's sphere-light
+//! sample is in: the same calls and random numbers as `path.rs`), its results selected into
+//! `shade8`'s lanes. A shape whose material has no texture and no surface detail keeps its
+//! `Bsdf`, built once (`ShapeData::uniform`; its lanes neither rebuild nor copy it), and
+//! the value and density toward the light sample come with the BSDF's own sample from one
+//! call (`Bsdf::eval_pdf_and_sample`: a rough model's half vector, D and G1 computed once;
+//! a rough conductor's Λ(wo) once for both). Scenes
 //! large enough to trace single rays take the kernel only with Lambertian materials (it
 //! gained nothing there otherwise). Lights: area lights of constant radiance on meshes
 //! (sampled by the kernel's own unpacked copy), and every other light the scalar tracer
 //! takes (textured area lights, sphere lights, point, spot, directional, one constant or
 //! bitmap environment), each lane sampling it through its own `Light::sample_li` (a
-//! sphere's: the cone it subtends; one of constant radiance directly by
-//! `AreaLight::sample_constant_sphere`, the same bits), looking a textured or sphere
+//! sphere's: the cone it subtends; those of constant radiance for all lanes at once, after
+//! `gather`, by `AreaLight::sample_constant_spheres`, the same bits), looking a textured or sphere
 //! emitter's radiance and density (`AreaLight::l`, `pdf_li`) up where its path hits it and
 //! seeing the environment where its ray escapes;
 //! either sampler (Sobol's scrambles for all lanes at once: [`LaneSampler`]); AOVs and
@@ -67,6 +69,7 @@ use crate::film::{Film, FilmTile};
 use crate::geometry::ray::SHADOW_EPSILON;
 use crate::geometry::Ray;
 use crate::geometry::{Geometry, Sphere, SurfaceInteraction, TriangleShading};
+use crate::light::area::SphereLanes;
 use crate::light::{AreaLight, Light};
 use crate::lpe::{AovSet, ForwardView, LayerMask, MAX_LAYERS};
 use crate::math::{warp, Frame, INV_PI, PI};
@@ -173,6 +176,8 @@ struct ShapeData {
     /// A scalar BSDF that is the same at every point (no texture, no surface detail: what
     /// `Scene::bsdf` gives at any hit), built once instead of at each hit of a lane.
     uniform: Option<Bsdf>,
+    /// Its lobes (looked up once: they cost two model dispatches a hit).
+    uniform_flags: LobeFlags,
 }
 
 /// A mesh area light as `AreaLight::sample_li` samples it, unpacked: its triangles' vertices
@@ -322,7 +327,7 @@ pub struct SimdKernel {
     /// sample through its own `Light::sample_li` (point, spot, directional, environment).
     lights: Vec<Option<MeshLight>>,
     /// Per light of the scene: a sphere area light of constant radiance, which the lanes
-    /// sample without `Light::sample_li`'s dispatch (`AreaLight::sample_constant_sphere`).
+    /// sample without `Light::sample_li`'s dispatch, all lanes at once (`sphere_samples`).
     sphere_lights: Vec<Option<(Sphere, Rgb)>>,
     /// Run the AVX-512VL build of the kernel (detected at run time; tests may clear it).
     avx512: bool,
@@ -431,7 +436,8 @@ impl SimdKernel {
                 None => None,
             };
             let uniform = (scalar_bsdf && !s.detail && mat.is_uniform()).then(|| mat.bsdf(TexPoint::default()));
-            shapes.push(ShapeData { scalar_bsdf, front, back, textured, light, uniform });
+            let uniform_flags = uniform.as_ref().map_or(LobeFlags::NONE, Bsdf::flags);
+            shapes.push(ShapeData { scalar_bsdf, front, back, textured, light, uniform, uniform_flags });
         }
         // Other shapes' hits come as the scene's surface records (`other_hit`). Written once
         // into a vector of the final size: with a million triangles this unpacking is a
@@ -650,10 +656,17 @@ impl SimdKernel {
                 }
                 let d = Vec3::new(rays.d[0][l], rays.d[1][l], rays.d[2][l]);
                 let other = if hits.prim[l] == OTHER { Some(other_hit(scene, &rays, &hits, &others, l)) } else { None };
-                if self.gather(scene, settings, events, &mut st, &draws, l, hits.prim[l], hits.b1[l], hits.b2[l], d, other.as_ref(), &mut v) {
+                if self.gather(scene, settings, &mut st, &draws, l, hits.prim[l], hits.b1[l], hits.b2[l], d, other.as_ref(), &mut v) {
                     go |= 1 << l;
                 } else {
                     ends |= 1 << l;
+                }
+            }
+            // The sphere lights' samples of all lanes at once, then the scalar BSDFs toward them.
+            self.sphere_samples(scene, &mut v);
+            for l in 0..LANES {
+                if let Some((si, u)) = v.scatter[l].take() {
+                    self.scalar_scatter(events, &mut st, l, &mut v, &si, u);
                 }
             }
             // Writes every lane's next ray, shadow ray and state; only `go` lanes' count.
@@ -696,9 +709,7 @@ impl SimdKernel {
                 (raster, l, aov, touched)
             }));
         } else {
-            for &(raster, l) in &results {
-                tile.add_sample(raster, l);
-            }
+            tile.add_samples(&results);
         }
     }
 
@@ -714,7 +725,6 @@ impl SimdKernel {
         &self,
         scene: &Scene,
         settings: &RenderSettings,
-        events: &LaneEvents,
         st: &mut Paths<S>,
         draws: &[[f32; LANES]; 7],
         l: usize,
@@ -847,25 +857,24 @@ impl SimdKernel {
         }
         if sh.scalar_bsdf {
             let u6 = [u_light, u_l2.x, u_l2.y, uc, u.x, u.y];
-            match hit {
-                Hit::Tri(tri) => {
-                    let si = SurfaceInteraction {
-                        p,
-                        t: 0.0,
-                        ng,
-                        shading: frame,
-                        // Only `Scene::bsdf` reads it: a uniform BSDF needs none.
-                        uv: if sh.uniform.is_some() { Vec2::ZERO } else { self.uv(scene, tri, b1, b2) },
-                        shape: tri.shape,
-                        prim: tri.local,
-                        bary: Vec2::new(b1, b2),
-                        wo: wo_w,
-                        time: 0.0,
-                    };
-                    self.scalar_scatter(scene, events, st, l, v, &si, u6);
-                }
-                Hit::Other(si) => self.scalar_scatter(scene, events, st, l, v, si, u6),
-            }
+            let si = match hit {
+                Hit::Tri(tri) => SurfaceInteraction {
+                    p,
+                    t: 0.0,
+                    ng,
+                    shading: frame,
+                    // Only `Scene::bsdf` reads it: a uniform BSDF needs none.
+                    uv: if sh.uniform.is_some() { Vec2::ZERO } else { self.uv(scene, tri, b1, b2) },
+                    shape: tri.shape,
+                    prim: tri.local,
+                    bary: Vec2::new(b1, b2),
+                    wo: wo_w,
+                    time: 0.0,
+                },
+                Hit::Other(si) => *si,
+            };
+            self.scalar_light_sample(scene, l, v, &si, u6);
+            v.scatter[l] = Some((si, u6));
         } else {
             self.light_sample(scene, l, v, p, u_light, u_l2);
         }
@@ -893,35 +902,14 @@ impl SimdKernel {
         match self.lights.get(li) {
             // Any other light by its own sampling (`path::light_mis_to`'s first tests).
             Some(None) if pmf > 0.0 => {
-                // A sphere of constant radiance seen from outside: its cone, as `sample_li`.
-                if let Some((s, le)) = self.sphere_lights[li] {
-                    if let Some(sample) = AreaLight::sample_constant_sphere(&s, p, u_l2) {
-                        if let Some((wi, lp, n, pdf)) = sample.filter(|&(.., pdf)| pdf > 0.0 && !le.is_black()) {
-                            put(&mut v.lp, lp);
-                            put(&mut v.ln, n);
-                            put(&mut v.gwi, wi);
-                            putc(&mut v.lrad, le);
-                            v.gpdf[l] = pdf;
-                            v.infinite[l] = false;
-                            v.delta[l] = false;
-                            v.generic[l] = true;
-                            v.nee_ok[l] = true;
-                        }
-                        return;
-                    }
+                // A sphere of constant radiance: with the other lanes' (`sphere_samples`).
+                if self.sphere_lights[li].is_some() {
+                    v.sphere_pending |= 1 << l;
+                    v.ul2[0][l] = u_l2.x;
+                    v.ul2[1][l] = u_l2.y;
+                    return;
                 }
-                let light = &scene.lights[li];
-                if let Some(ls) = light.sample_li(p, u_l2, &scene.bounds).filter(|ls| ls.pdf > 0.0 && !ls.li.is_black()) {
-                    put(&mut v.lp, ls.p);
-                    put(&mut v.ln, ls.n);
-                    put(&mut v.gwi, ls.wi);
-                    putc(&mut v.lrad, ls.li);
-                    v.gpdf[l] = ls.pdf;
-                    v.infinite[l] = ls.infinite;
-                    v.delta[l] = light.is_delta();
-                    v.generic[l] = true;
-                    v.nee_ok[l] = true;
-                }
+                Self::generic_light_sample(scene, l, v, li, p, u_l2);
             }
             // A mesh light: its point, as `MeshLight::sample_li` up to the distance test.
             Some(Some(ml)) if pmf > 0.0 && ml.pdf_area > 0.0 && !ml.radiance.is_black() => {
@@ -944,6 +932,76 @@ impl SimdKernel {
         }
     }
 
+    /// Lane `l`'s light sample from `p` of light `li` by its own `Light::sample_li`
+    /// (`path::light_mis_to`'s first tests).
+    fn generic_light_sample(scene: &Scene, l: usize, v: &mut Soa, li: usize, p: Vec3, u_l2: Vec2) {
+        let light = &scene.lights[li];
+        if let Some(ls) = light.sample_li(p, u_l2, &scene.bounds).filter(|ls| ls.pdf > 0.0 && !ls.li.is_black()) {
+            for k in 0..3 {
+                v.lp[k][l] = ls.p[k];
+                v.ln[k][l] = ls.n[k];
+                v.gwi[k][l] = ls.wi[k];
+            }
+            put_rgb(&mut v.lrad, l, ls.li);
+            v.gpdf[l] = ls.pdf;
+            v.infinite[l] = ls.infinite;
+            v.delta[l] = light.is_delta();
+            v.generic[l] = true;
+            v.nee_ok[l] = true;
+        }
+    }
+
+    /// The light samples `light_sample` left to a sphere of constant radiance (`sphere_pending`
+    /// lanes), all lanes' at once: as `sample_li` samples the cone the sphere subtends
+    /// (`AreaLight::sample_constant_spheres`, the bits of `sample_constant_sphere`), or where
+    /// the point is inside it, by area through `sample_li`.
+    #[inline(always)]
+    fn sphere_samples(&self, scene: &Scene, v: &mut Soa) {
+        let pending = v.sphere_pending;
+        if pending == 0 {
+            return;
+        }
+        v.sphere_pending = 0;
+        // The other lanes compute on zeros, and their results are not read.
+        let mut q = SphereLanes::<LANES>::default();
+        for l in 0..LANES {
+            let Some(Some((s, _))) = self.sphere_lights.get(v.light[l] as usize).filter(|_| pending & (1 << l) != 0) else { continue };
+            for k in 0..3 {
+                q.center[k][l] = s.center[k];
+                q.p_ref[k][l] = v.p[k][l];
+            }
+            q.radius[l] = s.radius;
+            q.flip[l] = s.flip_normals;
+            q.u[0][l] = v.ul2[0][l];
+            q.u[1][l] = v.ul2[1][l];
+        }
+        let o = AreaLight::sample_constant_spheres(&q);
+        for l in 0..LANES {
+            let li = v.light[l] as usize;
+            let Some(Some((_, le))) = self.sphere_lights.get(li).filter(|_| pending & (1 << l) != 0) else { continue };
+            if o.inside[l] {
+                let p = Vec3::new(q.p_ref[0][l], q.p_ref[1][l], q.p_ref[2][l]);
+                Self::generic_light_sample(scene, l, v, li, p, Vec2::new(q.u[0][l], q.u[1][l]));
+                continue;
+            }
+            let taken = o.found[l] && o.pdf[l] > 0.0 && !le.is_black();
+            if !taken {
+                continue;
+            }
+            for k in 0..3 {
+                v.lp[k][l] = o.p[k][l];
+                v.ln[k][l] = o.n[k][l];
+                v.gwi[k][l] = o.wi[k][l];
+            }
+            put_rgb(&mut v.lrad, l, *le);
+            v.gpdf[l] = o.pdf[l];
+            v.infinite[l] = false;
+            v.delta[l] = false;
+            v.generic[l] = true;
+            v.nee_ok[l] = true;
+        }
+    }
+
     /// The uv of a hit: on a triangle at barycentrics (b1, b2), or the scene's record's.
     #[inline(always)]
     fn hit_uv(&self, scene: &Scene, hit: &Hit, b1: f32, b2: f32) -> Vec2 {
@@ -962,40 +1020,55 @@ impl SimdKernel {
         }
     }
 
-    /// Lane `l`'s vertex `si` of a material other than a Lambertian one, by its scalar BSDF
-    /// (as `Scene::bsdf` makes it for the scalar tracer's hit): the light sample unless the
-    /// BSDF has delta lobes only, the BSDF's value and density toward it (as
-    /// `path::light_mis_to`), its own sample (as `camera_walk`), and the events of both, into
-    /// `v` for `shade8`; the lane's next MIS vertex and radiance scale into `st`. `u`: the
-    /// vertex's numbers (light choice, light point, lobe, direction). Out of line: the
-    /// Lambertian lanes' `gather` stays small.
-    #[allow(clippy::too_many_arguments)]
+    /// The first part of lane `l`'s vertex `si` of a scalar BSDF: the BSDF (the shape's
+    /// uniform one, or the hit's own, as `Scene::bsdf` makes it, kept in `v.own`), its lobes,
+    /// and the light sample unless it has delta lobes only (a sphere light's comes with the
+    /// other lanes'). Out of line: the Lambertian lanes' `gather` stays small.
     #[inline(never)]
-    fn scalar_scatter<S>(&self, scene: &Scene, events: &LaneEvents, st: &mut Paths<S>, l: usize, v: &mut Soa, si: &SurfaceInteraction, u: [f32; 6]) {
-        let [u_light, ul_x, ul_y, uc, ux, uy] = u;
-        // The shape's uniform BSDF, or this hit's own (moved into `prev_bsdf` at the end).
-        let uniform = self.shapes[si.shape as usize].uniform.as_ref();
-        let own = uniform.is_none().then(|| scene.bsdf(si));
-        let Some(bsdf) = own.as_ref().or(uniform) else { unreachable!("a shape without a uniform BSDF builds its own") };
-        let flags = bsdf.flags();
-        let (p, frame) = (si.p, si.shading);
-        let wo = frame.to_local(si.wo);
-        let lane = |a: &[[f32; LANES]; 3]| Vec3::new(a[0][l], a[1][l], a[2][l]);
+    fn scalar_light_sample(&self, scene: &Scene, l: usize, v: &mut Soa, si: &SurfaceInteraction, u: [f32; 6]) {
+        let [u_light, ul_x, ul_y, ..] = u;
+        let sh = &self.shapes[si.shape as usize];
+        let own = sh.uniform.is_none().then(|| scene.bsdf(si));
+        let flags = own.as_ref().map_or(sh.uniform_flags, Bsdf::flags);
         if flags.has_non_specular() {
-            self.light_sample(scene, l, v, p, u_light, Vec2::new(ul_x, ul_y));
+            self.light_sample(scene, l, v, si.p, u_light, Vec2::new(ul_x, ul_y));
         } else {
             v.nee_ok[l] = false;
         }
-        if v.nee_ok[l] {
-            // The light's direction as `shade8` finds it (a mesh light's as `AreaLight::sample_li`).
+        v.flags[l] = flags;
+        v.own[l] = own;
+    }
+
+    /// The rest of lane `l`'s vertex `si` of a scalar BSDF (`scalar_light_sample` took the
+    /// light sample): the BSDF's value and density toward it (as `path::light_mis_to`), its
+    /// own sample (as `camera_walk`), and the events of both, into `v` for `shade8`; the
+    /// lane's next MIS vertex and radiance scale into `st`. `u`: the vertex's numbers (light
+    /// choice, light point, lobe, direction).
+    #[allow(clippy::too_many_arguments)]
+    #[inline(never)]
+    fn scalar_scatter<S>(&self, events: &LaneEvents, st: &mut Paths<S>, l: usize, v: &mut Soa, si: &SurfaceInteraction, u: [f32; 6]) {
+        let [_, _, _, uc, ux, uy] = u;
+        // The shape's uniform BSDF, or this hit's own (moved into `prev_bsdf` at the end).
+        let uniform = self.shapes[si.shape as usize].uniform.as_ref();
+        let own = v.own[l].take();
+        let Some(bsdf) = own.as_ref().or(uniform) else { unreachable!("a shape without a uniform BSDF builds its own") };
+        let flags = v.flags[l];
+        let (p, frame) = (si.p, si.shading);
+        let wo = frame.to_local(si.wo);
+        let lane = |a: &[[f32; LANES]; 3]| Vec3::new(a[0][l], a[1][l], a[2][l]);
+        // The light's direction as `shade8` finds it (a mesh light's as `AreaLight::sample_li`).
+        let wi = v.nee_ok[l].then(|| {
             let wi_w = if v.generic[l] {
                 lane(&v.gwi)
             } else {
                 let d = lane(&v.lp) - p;
                 d / d.length_squared().sqrt()
             };
-            let wi = frame.to_local(wi_w);
-            let (f, pdf) = bsdf.eval_pdf(wo, wi, TransportMode::Radiance);
+            frame.to_local(wi_w)
+        });
+        // The value and density toward it, and the BSDF's own sample, from one call.
+        let (nee, bs) = bsdf.eval_pdf_and_sample(wo, wi, uc, Vec2::new(ux, uy), TransportMode::Radiance);
+        if let (Some(wi), Some((f, pdf))) = (wi, nee) {
             v.nee_ok[l] = !f.is_black();
             put_rgb(&mut v.bf, l, f);
             // A delta light takes no MIS weight (nor the density).
@@ -1004,7 +1077,7 @@ impl SimdKernel {
                 v.class_nee[l] = view.class(events.aovs.scatter_event(v.shape[l], flags, None, wi.z * wo.z < 0.0));
             }
         }
-        let bs = bsdf.sample(wo, uc, Vec2::new(ux, uy), TransportMode::Radiance).filter(|bs| bs.pdf > 0.0 && !bs.f.is_black());
+        let bs = bs.filter(|bs| bs.pdf > 0.0 && !bs.f.is_black());
         v.bmoved[l] = bs.is_some();
         st.prev_bsdf[l] = None;
         let Some(bs) = bs else { return };
@@ -1121,6 +1194,15 @@ struct Soa {
     /// sample (None: a null interaction, no event).
     class_nee: [u32; LANES],
     class_step: [Option<u32>; LANES],
+    /// Lanes whose light is a sphere of constant radiance seen from `p` with the numbers
+    /// `ul2`: sampled all at once after `gather` (`SimdKernel::sphere_samples`).
+    sphere_pending: u8,
+    ul2: [[f32; LANES]; 2],
+    /// Lanes of a scalar BSDF: the hit and the vertex's numbers, its own BSDF (None: the
+    /// shape's uniform one) and lobes, for `scalar_scatter` once the sphere samples are in.
+    scatter: [Option<(SurfaceInteraction, [f32; 6])>; LANES],
+    own: [Option<Bsdf>; LANES],
+    flags: [LobeFlags; LANES],
 }
 
 /// A camera-path vertex of a scalar BSDF that scattered by a non-delta lobe, kept for the

@@ -56,6 +56,36 @@ pub(crate) fn constant_normal(m: &crate::geometry::TriangleMesh, t: usize) -> Op
     }
 }
 
+/// Spheres and the points they are sampled from, lane by lane (structure of arrays), for
+/// [`AreaLight::sample_constant_spheres`]; `u` the light sample's numbers.
+#[derive(Clone, Copy, Debug)]
+pub(crate) struct SphereLanes<const N: usize> {
+    pub center: [[f32; N]; 3],
+    pub radius: [f32; N],
+    pub flip: [bool; N],
+    pub p_ref: [[f32; N]; 3],
+    pub u: [[f32; N]; 2],
+}
+
+impl<const N: usize> Default for SphereLanes<N> {
+    fn default() -> Self {
+        SphereLanes { center: [[0.0; N]; 3], radius: [0.0; N], flip: [false; N], p_ref: [[0.0; N]; 3], u: [[0.0; N]; 2] }
+    }
+}
+
+/// [`AreaLight::sample_constant_spheres`]' results, lane by lane: `inside` where
+/// [`AreaLight::sample_constant_sphere`] says None (the point is sampled by area), else
+/// `found` where it gives a sample, and that sample's direction, point, normal and density.
+#[derive(Clone, Copy, Debug)]
+pub(crate) struct SphereSamples<const N: usize> {
+    pub inside: [bool; N],
+    pub found: [bool; N],
+    pub wi: [[f32; N]; 3],
+    pub p: [[f32; N]; 3],
+    pub n: [[f32; N]; 3],
+    pub pdf: [f32; N],
+}
+
 /// The cone of directions a sphere subtends from an outside point.
 struct SphereCone {
     /// Unit vector from the sphere's center toward the reference point.
@@ -233,11 +263,11 @@ impl AreaLight {
         Some((p, n_out, d / dist))
     }
 
-    /// [`Self::sample_li`] of a sphere of constant radiance `s` (the eight-wide path kernel
-    /// keeps its lights' spheres): None where `p_ref` is inside it (sampled by area there),
-    /// else the light sample's direction, point, normal and density, or None where
-    /// `sample_li` gives none. The same operations, so the same bits.
-    #[inline]
+    /// [`Self::sample_li`] of a sphere of constant radiance `s`: None where `p_ref` is inside
+    /// it (sampled by area there), else the light sample's direction, point, normal and
+    /// density, or None where `sample_li` gives none. The same operations, so the same bits:
+    /// the tests' link between `sample_li` and [`Self::sample_constant_spheres`].
+    #[cfg(test)]
     pub(crate) fn sample_constant_sphere(s: &Sphere, p_ref: Vec3, u: Vec2) -> Option<Option<(Vec3, Vec3, Vec3, f32)>> {
         let cone = SphereCone::new(s, p_ref)?;
         Some(Self::cone_point(s, &cone, p_ref, u).and_then(|(p, n_out, wi)| {
@@ -247,6 +277,56 @@ impl AreaLight {
             }
             Some((wi, p, n, SphereCone::pdf_of(cone.one_minus_cos_max)))
         }))
+    }
+
+    /// [`Self::sample_constant_sphere`] for `N` lanes at once, each with its own sphere: the
+    /// same operations lane by lane, without branches, so that the lanes run as vector lanes
+    /// (the square roots and divisions of one lane's chain wait on each other; eight lanes'
+    /// chains side by side fill the wait). The same bits.
+    #[inline(always)]
+    pub(crate) fn sample_constant_spheres<const N: usize>(q: &SphereLanes<N>) -> SphereSamples<N> {
+        let mut o = SphereSamples { inside: [false; N], found: [false; N], wi: [[0.0; N]; 3], p: [[0.0; N]; 3], n: [[0.0; N]; 3], pdf: [0.0; N] };
+        for l in 0..N {
+            let c = Vec3::new(q.center[0][l], q.center[1][l], q.center[2][l]);
+            let r = q.radius[l];
+            let p_ref = Vec3::new(q.p_ref[0][l], q.p_ref[1][l], q.p_ref[2][l]);
+            // `SphereCone::new`, computed whether or not the point is outside.
+            let dc = p_ref - c;
+            let dist2 = dc.length_squared();
+            let r2 = r * r;
+            let inside = dist2 <= r2 * (1.0 + 1e-5);
+            let sin2_max = r2 / dist2;
+            let one_minus_cos_max = sin2_max / (1.0 + safe_sqrt(1.0 - sin2_max));
+            let dist = dist2.sqrt();
+            let inv_sin_max = dist / r;
+            let axis = dc * (1.0 / dist);
+            let inv_sin2_max = inv_sin_max * inv_sin_max;
+            // `cone_point`.
+            let one_minus_cos = q.u[1][l] * one_minus_cos_max;
+            let cos_t = 1.0 - one_minus_cos;
+            let sin2_t = one_minus_cos * (2.0 - one_minus_cos);
+            let cos_a = (sin2_t * inv_sin_max + cos_t * safe_sqrt(1.0 - sin2_t * inv_sin2_max)).min(1.0);
+            let sin_a = safe_sqrt(1.0 - cos_a * cos_a);
+            let (sin_phi, cos_phi) = warp::sin_cos_2pi(q.u[0][l]);
+            let n_out = Frame::from_normal(axis).to_world(Vec3::new(sin_a * cos_phi, sin_a * sin_phi, cos_a));
+            let p = c + n_out * r;
+            let d = p - p_ref;
+            let len = d.length();
+            let wi = d / len;
+            // `sample_constant_sphere`'s tests.
+            let n = if q.flip[l] { -n_out } else { n_out };
+            o.inside[l] = inside;
+            // It refuses a facing `<= 0` only (a NaN one passes).
+            let facing = n.dot(-wi);
+            o.found[l] = !inside && len != 0.0 && (facing > 0.0 || facing.is_nan());
+            for k in 0..3 {
+                o.wi[k][l] = wi[k];
+                o.p[k][l] = p[k];
+                o.n[k][l] = n[k];
+            }
+            o.pdf[l] = SphereCone::pdf_of(one_minus_cos_max);
+        }
+        o
     }
 
     /// Solid-angle density of `sample_li` choosing the point `p` (normal `n`) from `p_ref`.
@@ -383,5 +463,83 @@ mod tests {
         }
         // Every outcome was exercised.
         assert!(cones > 20_000 && refused > 100 && inside > 5_000, "{cones} cone samples, {refused} refused, {inside} inside");
+    }
+
+    /// `sample_constant_spheres` compiled as the path kernel's AVX2 build compiles it.
+    #[cfg(target_arch = "x86_64")]
+    #[target_feature(enable = "avx2")]
+    unsafe fn spheres_avx2(q: &SphereLanes<8>) -> SphereSamples<8> {
+        AreaLight::sample_constant_spheres(q)
+    }
+
+    /// `sample_constant_spheres` (eight lanes, a sphere each; as the baseline build and as the
+    /// AVX2 one compile it) gives `sample_constant_sphere`'s outcome and bits lane by lane:
+    /// points inside, on, just outside and far from the spheres, inward-facing spheres, the
+    /// numbers' ends and quadrant boundaries.
+    #[test]
+    fn constant_spheres_are_the_single_samples() {
+        let mut rng = Pcg32::new(5, 11);
+        let mut f = |lo: f32, hi: f32| lo + (hi - lo) * rng.next_f32();
+        let us = [0.0f32, 0.25, 0.5, 0.75, 1.0 - f32::EPSILON, 0.124_999_99, 1e-9];
+        let (mut found, mut refused, mut inside) = (0, 0, 0);
+        for batch in 0..5_000usize {
+            let mut q = SphereLanes::<8>::default();
+            let mut lanes = [(Sphere { center: Vec3::ZERO, radius: 1.0, flip_normals: false }, Vec3::ZERO, Vec2::ZERO); 8];
+            for (l, lane) in lanes.iter_mut().enumerate() {
+                let i = batch * 8 + l;
+                let center = Vec3::new(f(-5.0, 5.0), f(-5.0, 5.0), f(-5.0, 5.0));
+                let radius = if i % 11 == 0 { 1e-3 } else { f(0.01, 2.0) };
+                let sphere = Sphere { center, radius, flip_normals: i % 5 == 0 };
+                let dir = warp::square_to_uniform_sphere(Vec2::new(f(0.0, 1.0), f(0.0, 1.0)));
+                let dist = match i % 4 {
+                    0 => radius * f(0.0, 1.0),
+                    1 => radius * (1.0 + f(-1e-5, 1e-5)),
+                    2 => radius * (1.0 + f(0.0, 1e-3)),
+                    _ => radius * f(1.0, 1e4),
+                };
+                let p_ref = center + dir * dist;
+                let u = if i % 3 == 0 { Vec2::new(us[i % us.len()], us[(i / 7) % us.len()]) } else { Vec2::new(f(0.0, 1.0), f(0.0, 1.0)) };
+                for k in 0..3 {
+                    q.center[k][l] = center[k];
+                    q.p_ref[k][l] = p_ref[k];
+                }
+                q.radius[l] = radius;
+                q.flip[l] = sphere.flip_normals;
+                q.u[0][l] = u.x;
+                q.u[1][l] = u.y;
+                *lane = (sphere, p_ref, u);
+            }
+            let o = AreaLight::sample_constant_spheres(&q);
+            #[cfg(target_arch = "x86_64")]
+            if crate::accel::packet::avx2() {
+                // SAFETY: the CPU has AVX2.
+                let v = unsafe { spheres_avx2(&q) };
+                let bits = |o: &SphereSamples<8>| (o.inside, o.found, [o.wi, o.p, o.n].map(|a| a.map(|r| r.map(f32::to_bits))), o.pdf.map(f32::to_bits));
+                assert_eq!(bits(&v), bits(&o), "batch {batch}: the AVX2 build differs");
+            }
+            for (l, &(sphere, p_ref, u)) in lanes.iter().enumerate() {
+                let one = AreaLight::sample_constant_sphere(&sphere, p_ref, u);
+                assert_eq!(o.inside[l], one.is_none(), "{sphere:?} from {p_ref} u {u}");
+                match one {
+                    None => inside += 1,
+                    Some(None) => {
+                        assert!(!o.found[l], "{sphere:?} from {p_ref} u {u}: found");
+                        refused += 1;
+                    }
+                    Some(Some((wi, p, n, pdf))) => {
+                        assert!(o.found[l], "{sphere:?} from {p_ref} u {u}: not found");
+                        let bits = |v: Vec3| v.to_array().map(f32::to_bits);
+                        let lane = |a: &[[f32; 8]; 3]| Vec3::new(a[0][l], a[1][l], a[2][l]);
+                        assert_eq!(
+                            (bits(lane(&o.wi)), bits(lane(&o.p)), bits(lane(&o.n)), o.pdf[l].to_bits()),
+                            (bits(wi), bits(p), bits(n), pdf.to_bits()),
+                            "{sphere:?} from {p_ref} u {u}"
+                        );
+                        found += 1;
+                    }
+                }
+            }
+        }
+        assert!(found > 15_000 && refused > 1_000 && inside > 15_000, "{found} found, {refused} refused, {inside} inside");
     }
 }

@@ -11,6 +11,7 @@ pub struct Frame {
 
 impl Frame {
     /// A frame around a unit normal (Duff et al. 2017, branchless and continuous).
+    #[inline]
     pub fn from_normal(n: Vec3) -> Self {
         let sign = 1.0f32.copysign(n.z);
         let a = -1.0 / (sign + n.z);

@@ -41,11 +41,14 @@ pub fn sin_cos_2pi(u: f32) -> (f32, f32) {
     let a = 4.0 * u;
     let k = (a + ROUND) - ROUND;
     let (s, c) = sin_cos_quarter((a - k) * (PI / 2.0));
-    match (k as i32) & 3 {
-        0 => (s, c),
-        1 => (c, -s),
-        2 => (-s, -c),
-        _ => (-c, s),
+    // Quadrant q turns (s, c) by q quarter turns: (s, c), (c, -s), (-s, -c), (-c, s). As
+    // selects, not a jump: loops over lanes (the path kernel's sphere lights) vectorise.
+    let q = k as i32;
+    let (s, c) = if q & 1 == 0 { (s, c) } else { (c, -s) };
+    if q & 2 == 0 {
+        (s, c)
+    } else {
+        (-s, -c)
     }
 }
 
