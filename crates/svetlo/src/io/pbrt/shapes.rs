@@ -300,9 +300,14 @@ pub fn loop_subdivide(m: &TriangleMesh) -> TriangleMesh {
             edges.entry((a.min(b), a.max(b))).or_default().push(c);
         }
     }
+    // Edges in sorted order, not the map's (seeded per process): a vertex's neighbours are
+    // summed in this order, so the map's order would change the new positions' last bits.
+    let mut keys: Vec<_> = edges.keys().copied().collect();
+    keys.sort_unstable();
     let mut neighbours: Vec<Vec<u32>> = vec![Vec::new(); nv];
     let mut boundary_nb: Vec<Vec<u32>> = vec![Vec::new(); nv];
-    for (&(a, b), opp) in &edges {
+    for &(a, b) in &keys {
+        let opp = &edges[&(a, b)];
         neighbours[a as usize].push(b);
         neighbours[b as usize].push(a);
         if opp.len() == 1 {
@@ -326,8 +331,6 @@ pub fn loop_subdivide(m: &TriangleMesh) -> TriangleMesh {
         out.positions.push(np);
     }
     let mut edge_vertex: HashMap<(u32, u32), u32> = HashMap::new();
-    let mut keys: Vec<_> = edges.keys().copied().collect();
-    keys.sort_unstable();
     for (a, b) in keys {
         let opp = &edges[&(a, b)];
         let (pa, pb) = (pos[a as usize], pos[b as usize]);
@@ -461,6 +464,24 @@ mod tests {
         assert!(count.values().all(|&c| c == 2));
         let rmax = s.positions.iter().map(|p| p.length()).fold(0.0f32, f32::max);
         assert!(rmax < 3f32.sqrt() * 0.9, "corners pulled in: {rmax}");
+    }
+
+    /// The same mesh subdivides to the same bits every time: the edge map's order (seeded
+    /// anew for each map) must not reach the sums over a vertex's neighbours.
+    #[test]
+    fn loop_subdivision_is_deterministic() {
+        // An octahedron: valence 4 everywhere, so each vertex sums four neighbours.
+        let p = [Vec3::X, -Vec3::X, Vec3::Y * 0.7, -Vec3::Y * 1.3, Vec3::Z * 0.9, -Vec3::Z * 1.1];
+        let m = TriangleMesh {
+            positions: p.to_vec(),
+            indices: vec![[0, 2, 4], [2, 1, 4], [1, 3, 4], [3, 0, 4], [2, 0, 5], [1, 2, 5], [3, 1, 5], [0, 3, 5]],
+            ..Default::default()
+        };
+        let bits = |m: &TriangleMesh| m.positions.iter().flat_map(|v| [v.x.to_bits(), v.y.to_bits(), v.z.to_bits()]).collect::<Vec<_>>();
+        let first = bits(&loop_subdivide(&loop_subdivide(&m)));
+        for _ in 0..32 {
+            assert_eq!(bits(&loop_subdivide(&loop_subdivide(&m))), first);
+        }
     }
 
     #[test]
