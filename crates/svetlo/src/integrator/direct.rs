@@ -82,8 +82,9 @@ struct SkySampling {
 }
 
 impl SkySampling {
-    fn new(bsdf: &crate::bsdf::Bsdf) -> SkySampling {
-        SkySampling { one_side: !bsdf.flags().intersects(LobeFlags::TRANSMISSION) && bsdf.detail.is_none() }
+    /// For `bsdf`, whose flags are `flags`.
+    fn new(bsdf: &crate::bsdf::Bsdf, flags: LobeFlags) -> SkySampling {
+        SkySampling { one_side: !flags.intersects(LobeFlags::TRANSMISSION) && bsdf.detail.is_none() }
     }
 
     /// A direction in the local shading frame and its density.
@@ -163,7 +164,7 @@ impl DirectEstimator {
         let wo = si.to_local(si.wo);
         let flags = bsdf.flags();
         let DirectIntegrator { emitter_samples, bsdf_samples } = self.cfg;
-        let sky = SkySampling::new(&bsdf);
+        let sky = SkySampling::new(&bsdf, flags);
         let (ne, nb) = (emitter_samples as f32, bsdf_samples as f32);
         if flags.has_non_specular() {
             for _ in 0..emitter_samples {
