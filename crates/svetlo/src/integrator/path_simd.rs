@@ -633,9 +633,10 @@ impl SimdKernel {
                 break;
             }
             let hits = self.tracer.intersect(scene, &rays, active, &mut others);
-            // The environment map's grid points of the escaped lanes, all eight at once.
+            // The environment map's grid points of the escaped lanes (those `gather` finds
+            // no hit for), all eight at once.
             if let Some(env) = env_map {
-                if (0..LANES).any(|l| active & (1 << l) != 0 && hits.prim[l] == u32::MAX) {
+                if (0..LANES).any(|l| active & (1 << l) != 0 && hits.prim[l] != OTHER && self.tris.get(hits.prim[l] as usize).is_none()) {
                     v.env_grid = env.dirs_to_grid(&rays.d);
                 }
             }
