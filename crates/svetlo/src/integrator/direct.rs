@@ -82,8 +82,9 @@ struct SkySampling {
 }
 
 impl SkySampling {
-    fn new(bsdf: &crate::bsdf::Bsdf) -> SkySampling {
-        SkySampling { one_side: !bsdf.flags().intersects(LobeFlags::TRANSMISSION) && bsdf.detail.is_none() }
+    /// For `bsdf`, whose flags are `flags`.
+    fn new(bsdf: &crate::bsdf::Bsdf, flags: LobeFlags) -> SkySampling {
+        SkySampling { one_side: !flags.intersects(LobeFlags::TRANSMISSION) && bsdf.detail.is_none() }
     }
 
     /// A direction in the local shading frame and its density.
@@ -163,18 +164,18 @@ impl DirectEstimator {
         let wo = si.to_local(si.wo);
         let flags = bsdf.flags();
         let DirectIntegrator { emitter_samples, bsdf_samples } = self.cfg;
-        let sky = SkySampling::new(&bsdf);
+        let sky = SkySampling::new(&bsdf, flags);
         let (ne, nb) = (emitter_samples as f32, bsdf_samples as f32);
         if flags.has_non_specular() {
             for _ in 0..emitter_samples {
                 let ul = sampler.next_1d();
                 let u = sampler.next_2d();
-                // Each light's contribution, also routed to the layers its events match.
+                // Each light's contribution, also routed to the layers its events match (out of
+                // line: without AOVs this closure is the sum alone, and inlines).
                 let mut add = |(c, li, through): (Rgb, u32, bool), l: &mut Rgb| {
                     *l += c / ne;
                     if !aovs.is_empty() && !c.is_black() {
-                        let here = aovs.scatter_event(si.shape, flags, None, through);
-                        layers.add(events.ends2(here, aovs.emitter_event(&scene.lights[li as usize])), c / ne);
+                        route_light_sample(scene, &events, layers, (si.shape, flags), (li, through), c / ne);
                     }
                 };
                 // Delta lights ignore the point sample: the same one serves them all.
@@ -250,6 +251,15 @@ impl DirectEstimator {
         }
         l
     }
+}
+
+/// Adds `c`, the contribution of a light sample of light `li` at a surface of shape `shape`
+/// with BSDF flags `flags` (arriving `through` it), to the layers its events match.
+#[inline(never)]
+fn route_light_sample(scene: &Scene, events: &Tracker, layers: &mut LayerSample, (shape, flags): (u32, LobeFlags), (li, through): (u32, bool), c: Rgb) {
+    let aovs = events.set();
+    let here = aovs.scatter_event(shape, flags, None, through);
+    layers.add(events.ends2(here, aovs.emitter_event(&scene.lights[li as usize])), c);
 }
 
 /// Next-event estimation toward a constant environment of radiance `le`, chosen with

@@ -627,6 +627,10 @@ impl SimdKernel {
         // Reused every step: lanes outside this step's mask hold stale values nobody reads.
         let mut v = Soa::default();
         let mut o = Out::default();
+        let env_map = scene.environment_lights.first().and_then(|&ei| match &scene.lights[ei as usize] {
+            Light::EnvMap(env) => Some(&**env),
+            _ => None,
+        });
         loop {
             for l in 0..LANES {
                 if active & (1 << l) != 0 || next >= jobs {
@@ -644,6 +648,13 @@ impl SimdKernel {
                 break;
             }
             let hits = self.tracer.intersect(scene, &rays, active, &mut others);
+            // The environment map's grid points of the escaped lanes (those `gather` finds
+            // no hit for), all eight at once.
+            if let Some(env) = env_map {
+                if (0..LANES).any(|l| active & (1 << l) != 0 && hits.prim[l] != OTHER && self.tris.get(hits.prim[l] as usize).is_none()) {
+                    v.env_grid = env.dirs_to_grid(&rays.d);
+                }
+            }
             // Every active lane's numbers for this vertex, where the sampler draws them for
             // all lanes at once (a lane that ends before it needs them restarts its sampler
             // with its next camera sample).
@@ -1109,8 +1120,12 @@ impl SimdKernel {
         }
         let Some(&ei) = scene.environment_lights.first() else { return };
         let light = &scene.lights[ei as usize];
-        // An environment map locates the direction once for its radiance and its density.
-        let (le, pdf_light) = light.le_pdf_escaped(d, !st.prev_specular[l]);
+        // An environment map locates the direction once for its radiance and its density
+        // (render_tile located the escaped lanes' directions together).
+        let (le, pdf_light) = match light {
+            Light::EnvMap(env) => env.eval_pdf_at(Vec2::new(v.env_grid[0][l], v.env_grid[1][l]), v.env_grid[2][l], !st.prev_specular[l]),
+            _ => light.le_pdf_escaped(d, !st.prev_specular[l]),
+        };
         if le.is_black() {
             return;
         }
@@ -1203,6 +1218,9 @@ struct Soa {
     scatter: [Option<(SurfaceInteraction, [f32; 6])>; LANES],
     own: [Option<Bsdf>; LANES],
     flags: [LobeFlags; LANES],
+    /// The rays' grid points (u, v) and sin θ in the environment map (`EnvMap::dirs_to_grid`),
+    /// set when some lane escaped.
+    env_grid: [[f32; LANES]; 3],
 }
 
 /// A camera-path vertex of a scalar BSDF that scattered by a non-delta lobe, kept for the
