@@ -154,7 +154,7 @@ impl Albedo {
     fn at(&self, tp: TexPoint) -> Rgb {
         match self {
             Albedo::Constant(c) => *c,
-            Albedo::Textured(t) => t.eval(tp).clamp(0.0, 1.0),
+            Albedo::Textured(t) => t.eval_inline(tp).clamp(0.0, 1.0),
         }
     }
 }

@@ -236,6 +236,22 @@ fn floor_exact(x: f32) -> f32 {
     }
 }
 
+/// A bilinear lookup of `image` at `uv` (mapped by `to_uv`), with `floor` the floor of the
+/// caller's choice (both give the same bits: see [`Texture::eval_inline`]).
+#[inline(always)]
+fn bilinear(image: &Bitmap, wm: WrapMode, to_uv: &Affine2, uv: Vec2, floor: impl Fn(f32) -> f32) -> Rgb {
+    let p = to_uv.transform_point2(uv);
+    // Texel centres at half-integers (see `eval_varying` for the orientation of v).
+    let (x, y) = (p.x * image.width as f32 - 0.5, p.y * image.height as f32 - 0.5);
+    let (x0, y0) = (floor(x), floor(y));
+    let (fx, fy) = (x - x0, y - y0);
+    let (x0, y0) = (x0 as i64, y0 as i64);
+    let (xa, xb) = (wrap(x0, image.width, wm), wrap(x0 + 1, image.width, wm));
+    let (ya, yb) = (wrap(y0, image.height, wm), wrap(y0 + 1, image.height, wm));
+    let t = |x: usize, y: usize| image.texel(x, y);
+    (t(xa, ya) * (1.0 - fx) + t(xb, ya) * fx) * (1.0 - fy) + (t(xa, yb) * (1.0 - fx) + t(xb, yb) * fx) * fy
+}
+
 /// Always inlined: its in-range test is the whole of most calls (four a bilinear lookup),
 /// and a call each cost more than the test.
 #[inline(always)]
@@ -290,18 +306,22 @@ impl Texture {
                 let y = p.y * image.height as f32;
                 match filter {
                     FilterMode::Nearest => image.texel(wrap(floor_exact(x) as i64, image.width, *wm), wrap(floor_exact(y) as i64, image.height, *wm)),
-                    FilterMode::Bilinear => {
-                        let (x, y) = (x - 0.5, y - 0.5);
-                        let (x0, y0) = (floor_exact(x), floor_exact(y));
-                        let (fx, fy) = (x - x0, y - y0);
-                        let (x0, y0) = (x0 as i64, y0 as i64);
-                        let (xa, xb) = (wrap(x0, image.width, *wm), wrap(x0 + 1, image.width, *wm));
-                        let (ya, yb) = (wrap(y0, image.height, *wm), wrap(y0 + 1, image.height, *wm));
-                        let t = |x: usize, y: usize| image.texel(x, y);
-                        (t(xa, ya) * (1.0 - fx) + t(xb, ya) * fx) * (1.0 - fy) + (t(xa, yb) * (1.0 - fx) + t(xb, yb) * fx) * fy
-                    }
+                    FilterMode::Bilinear => bilinear(image, *wm, to_uv, uv, floor_exact),
                 }
             }
+        }
+    }
+
+    /// `eval`, with a bilinear bitmap's lookup inlined where it is called: inside a kernel
+    /// built for AVX2 (the path kernel's) its floors are single instructions and the lookup
+    /// skips the call and the dispatch of `eval`. The same value bit for bit (`f32::floor` is
+    /// `floor_exact`); elsewhere `floor` may be a libm call, so only such kernels use it.
+    #[inline(always)]
+    pub fn eval_inline(&self, p: TexPoint) -> Rgb {
+        match self {
+            Texture::Constant(c) => *c,
+            Texture::Bitmap { image, filter: FilterMode::Bilinear, wrap: wm, to_uv } => bilinear(image, *wm, to_uv, p.uv, f32::floor),
+            _ => self.eval_varying(p),
         }
     }
     /// Scalar parameter (roughness, opacity, weights), read as Mitsuba 3's `eval_1` reads it:
@@ -450,6 +470,51 @@ mod tests {
                     assert_eq!(a.mean(), b.mean());
                 }
             }
+        }
+    }
+
+    /// `eval_inline` (the path kernel's lookup) gives `eval`'s bits: with the inlined floor of
+    /// the plain target and, where the CPU has it, of an AVX2 function (as in the kernel);
+    /// texel edges, far-off and negative uvs and a NaN included.
+    #[test]
+    fn inlined_lookups_are_evals() {
+        #[cfg(target_arch = "x86_64")]
+        #[target_feature(enable = "avx2")]
+        unsafe fn eval_inline_avx2(t: &Texture, p: TexPoint) -> Rgb {
+            t.eval_inline(p)
+        }
+        let mut rng = crate::sampling::rng::Pcg32::new(11, 3);
+        let table: &'static [f32; 256] = Box::leak(Box::new(std::array::from_fn(|i| (i as f32 / 255.0).powf(2.2) + i as f32 * 1e-3)));
+        let bits = |c: Rgb| c.to_array().map(f32::to_bits);
+        for (w, h) in [(1, 1), (3, 2), (40, 17)] {
+            let codes: Vec<[u8; 4]> = (0..w * h).map(|_| rng.next_u32().to_le_bytes()).collect();
+            let floats: Vec<Rgb> = (0..w * h).map(|_| Rgb::new(rng.next_f32(), rng.next_f32(), rng.next_f32())).collect();
+            for image in [Arc::new(Bitmap::from_8bit(w, h, codes, table)), Arc::new(Bitmap::new(w, h, floats))] {
+                for filter in [FilterMode::Nearest, FilterMode::Bilinear] {
+                    for wrap in [WrapMode::Repeat, WrapMode::Mirror, WrapMode::Clamp] {
+                        let to_uv = Affine2::from_scale_angle_translation(Vec2::new(1.3, 0.8), -0.2, Vec2::new(0.1, -0.3));
+                        let t = Texture::Bitmap { image: image.clone(), filter, wrap, to_uv };
+                        let mut uvs: Vec<Vec2> = (0..3000).map(|_| Vec2::new(rng.next_f32() * 4.0 - 2.0, rng.next_f32() * 4.0 - 2.0)).collect();
+                        // Texel centres and edges (exact floors), huge and non-finite values.
+                        uvs.extend((0..=2 * w).map(|i| Vec2::new(i as f32 * 0.5 / w as f32, 0.25)));
+                        uvs.extend([Vec2::new(-0.0, 0.0), Vec2::new(3e7, -5e9), Vec2::new(f32::NAN, 0.5), Vec2::new(0.5, f32::INFINITY)]);
+                        for uv in uvs {
+                            let p = TexPoint::from(uv);
+                            let want = bits(t.eval(p));
+                            assert_eq!(bits(t.eval_inline(p)), want, "{w}x{h} {filter:?} {wrap:?} {uv}");
+                            #[cfg(target_arch = "x86_64")]
+                            if is_x86_feature_detected!("avx2") {
+                                // SAFETY: the CPU has AVX2 (checked just above).
+                                assert_eq!(bits(unsafe { eval_inline_avx2(&t, p) }), want, "AVX2 {w}x{h} {filter:?} {wrap:?} {uv}");
+                            }
+                        }
+                    }
+                }
+            }
+        }
+        for t in [Texture::Constant(Rgb::new(0.1, 0.2, 0.3)), Texture::Checkerboard { color0: Rgb::BLACK, color1: Rgb::WHITE, to_uv: Affine2::IDENTITY }] {
+            let p = TexPoint::from(Vec2::new(0.3, 0.7));
+            assert_eq!(bits(t.eval_inline(p)), bits(t.eval(p)));
         }
     }
 
