@@ -15,7 +15,7 @@ use crate::film::Film;
 use crate::geometry::Ray;
 use crate::lpe::LightTracker;
 use crate::path::{camera_connection, connect, light_subpath, light_walk, BatchScratch, CameraBatch, LightWalk, PathConfig, ShadowPackets, Vertex};
-use crate::sampling::Sampler;
+use crate::sampling::{IndependentSampler, Sampler, SamplerKind, SobolSampler};
 use crate::scene::Scene;
 use crate::spectrum::Rgb;
 use glam::Vec2;
@@ -100,7 +100,13 @@ impl SplatEstimator for Estimator {
             return render_tile_by_sample(self, t, sampler, paths, splats);
         };
         if self.tracing == Tracing::Lockstep && packets.exact_closest() {
-            return self.render_tile_lockstep(t, packets, sampler, paths, splats);
+            // The lanes draw from the render's own sampler type (`make_sampler`'s, fresh: the
+            // same numbers as `sampler`'s), so that the walks' draws are not virtual calls.
+            let (spp, seed) = (t.settings.spp, t.settings.seed);
+            return match t.settings.sampler {
+                SamplerKind::Independent => self.render_tile_lockstep(t, packets, IndependentSampler::new(spp, seed), paths, splats),
+                SamplerKind::Sobol => self.render_tile_lockstep(t, packets, SobolSampler::new(spp, seed), paths, splats),
+            };
         }
         let path = &mut paths[0];
         let [x0, y0, x1, y1] = t.rect;
@@ -132,7 +138,7 @@ impl Estimator {
     /// its camera connections and takes the tile's next sample, so that the packets stay
     /// full. The connections wait in sample order (`Reorder`) until every earlier sample's
     /// are made, so the splat list is `sample`'s.
-    fn render_tile_lockstep(&self, t: TileJob, packets: &ShadowPackets, sampler: &mut dyn Sampler, paths: &mut [Vec<Vertex>], splats: &mut Vec<Splat>) {
+    fn render_tile_lockstep<S: Sampler + Clone>(&self, t: TileJob, packets: &ShadowPackets, sampler: S, paths: &mut [Vec<Vertex>], splats: &mut Vec<Splat>) {
         let [x0, y0, x1, y1] = t.rect;
         let (s0, n) = (t.s0, t.n);
         let scene = t.scene;
@@ -141,7 +147,7 @@ impl Estimator {
         let mut pending = ShadowedSplats::new();
         let mut reorder = Reorder::default();
         let mut scratch = BatchScratch::default();
-        let mut samplers: [Box<dyn Sampler>; LANES] = std::array::from_fn(|_| sampler.clone_box());
+        let mut samplers: [S; LANES] = std::array::from_fn(|_| sampler.clone());
         let mut walks: [Option<LightWalk>; LANES] = std::array::from_fn(|_| None);
         // Each lane's sample (its index in the tile's order).
         let mut seq = [0usize; LANES];
@@ -157,7 +163,7 @@ impl Estimator {
                         more = false;
                         break;
                     };
-                    let sampler = samplers[l].as_mut();
+                    let sampler = &mut samplers[l];
                     let (raster, ray) = super::camera_sample(&cam, sampler, x, y, s);
                     t.tile.add_sample(raster, Rgb::BLACK);
                     seq[l] = reorder.open(i);
@@ -182,11 +188,11 @@ impl Estimator {
                 }
                 let Some(w) = walks[l].as_mut() else { continue };
                 let hit = packets.interaction(scene, &hits, l, &rays[l]);
-                if w.walk.step(scene, hit, samplers[l].as_mut(), &mut paths[l]) {
+                if w.walk.step(scene, hit, &mut samplers[l], &mut paths[l]) {
                     rays[l] = *w.walk.ray();
                 } else {
                     active &= !(1 << l);
-                    self.finish_lane(scene, walks[l].as_ref(), &mut paths[l], samplers[l].as_mut(), &mut scratch, reorder.slot(seq[l]));
+                    self.finish_lane(scene, walks[l].as_ref(), &mut paths[l], &mut samplers[l], &mut scratch, reorder.slot(seq[l]));
                 }
             }
         }
@@ -194,12 +200,12 @@ impl Estimator {
     }
 
     /// A lane's path after its walk: its camera connections into `slot` (splat and shadow ray).
-    fn finish_lane(
+    fn finish_lane<S: Sampler>(
         &self,
         scene: &Scene,
         walk: Option<&LightWalk>,
         path: &mut [Vertex],
-        sampler: &mut dyn Sampler,
+        sampler: &mut S,
         scratch: &mut BatchScratch,
         slot: &mut Slot,
     ) {

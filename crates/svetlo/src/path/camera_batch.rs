@@ -40,12 +40,12 @@ impl CameraBatch {
     /// `camera_connection(scene, cfg, light, s, sampler)` for s = 1..=light.len(), in
     /// order, each that exists given to `emit` as (contribution, raster, shadow ray).
     /// `scratch` holds the lanes; one per caller serves all its paths.
-    pub fn connections(
+    pub fn connections<S: Sampler + ?Sized>(
         &self,
         scene: &Scene,
         cfg: &PathConfig,
         light: &[Vertex],
-        sampler: &mut dyn Sampler,
+        sampler: &mut S,
         scratch: &mut BatchScratch,
         mut emit: impl FnMut(Rgb, Vec2, Option<Ray>),
     ) {

@@ -166,7 +166,7 @@ pub struct CameraConnection {
 /// dimensions (the lens) whenever `s` is in range.
 // Inlined: BDPT's `connect` otherwise pays a call and the record's copy per t = 1 strategy.
 #[inline(always)]
-pub fn camera_connection(scene: &Scene, cfg: &PathConfig, light: &[Vertex], s: usize, sampler: &mut dyn Sampler) -> Option<CameraConnection> {
+pub fn camera_connection<S: Sampler + ?Sized>(scene: &Scene, cfg: &PathConfig, light: &[Vertex], s: usize, sampler: &mut S) -> Option<CameraConnection> {
     if !camera_strategy_exists(cfg, light, s) {
         return None;
     }

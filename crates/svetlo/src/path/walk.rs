@@ -25,7 +25,7 @@ fn lens_point(scene: &Scene, cfg: &PathConfig, ray: &Ray) -> Vec3 {
 /// A camera subpath for the camera ray `ray` through film position `raster`: the camera
 /// vertex, then what the walk finds (a vertex at infinity last if the ray escapes into
 /// environment light). Replaces the contents of `path`.
-pub fn camera_subpath(scene: &Scene, cfg: &PathConfig, ray: &Ray, raster: Vec2, sampler: &mut dyn Sampler, path: &mut Vec<Vertex>) {
+pub fn camera_subpath<S: Sampler + ?Sized>(scene: &Scene, cfg: &PathConfig, ray: &Ray, raster: Vec2, sampler: &mut S, path: &mut Vec<Vertex>) {
     path.clear();
     if cfg.max_camera_vertices == 0 {
         return;
@@ -40,7 +40,7 @@ pub fn camera_subpath(scene: &Scene, cfg: &PathConfig, ray: &Ray, raster: Vec2, 
 /// A light subpath: a light chosen by the scene's light selection, a ray from it by
 /// `Light::sample_le`, then the walk. Replaces the contents of `path` (empty if the scene
 /// has no light or max_depth leaves no room).
-pub fn light_subpath(scene: &Scene, cfg: &PathConfig, time: f32, sampler: &mut dyn Sampler, path: &mut Vec<Vertex>) {
+pub fn light_subpath<S: Sampler + ?Sized>(scene: &Scene, cfg: &PathConfig, time: f32, sampler: &mut S, path: &mut Vec<Vertex>) {
     let Some(mut lw) = light_walk(scene, cfg, time, sampler, path) else { return };
     if lw.walk.goes_on(path) {
         while lw.walk.step(scene, scene.intersect(lw.walk.ray()), sampler, path) {}
@@ -71,7 +71,7 @@ impl LightWalk {
 /// [`light_subpath`] up to its walk: the emitter vertex pushed into `path` (cleared first)
 /// and the walk to run from it (None: the path ends there, or is empty), so that walks of
 /// several paths can trace their rays together. Same sampler dimensions as `light_subpath`.
-pub(crate) fn light_walk(scene: &Scene, cfg: &PathConfig, time: f32, sampler: &mut dyn Sampler, path: &mut Vec<Vertex>) -> Option<LightWalk> {
+pub(crate) fn light_walk<S: Sampler + ?Sized>(scene: &Scene, cfg: &PathConfig, time: f32, sampler: &mut S, path: &mut Vec<Vertex>) -> Option<LightWalk> {
     path.clear();
     let u_light = sampler.next_1d();
     let u_pos = sampler.next_2d();
@@ -108,10 +108,10 @@ pub(crate) fn light_walk(scene: &Scene, cfg: &PathConfig, time: f32, sampler: &m
 /// BSDFs until `max_vertices`, Russian roulette, an absorbed or escaped ray. `pdf_dir` is
 /// the solid-angle density with which `ray`'s direction was chosen.
 #[allow(clippy::too_many_arguments)]
-pub fn random_walk(
+pub fn random_walk<S: Sampler + ?Sized>(
     scene: &Scene,
     ray: Ray,
-    sampler: &mut dyn Sampler,
+    sampler: &mut S,
     beta: Rgb,
     pdf_dir: f32,
     max_vertices: usize,
@@ -165,7 +165,7 @@ impl Walk {
     /// and the next direction sampled there. Returns whether the walk goes on, with `ray()`
     /// the next ray to trace.
     #[inline(always)]
-    pub fn step(&mut self, scene: &Scene, hit: Option<SurfaceInteraction>, sampler: &mut dyn Sampler, path: &mut Vec<Vertex>) -> bool {
+    pub fn step<S: Sampler + ?Sized>(&mut self, scene: &Scene, hit: Option<SurfaceInteraction>, sampler: &mut S, path: &mut Vec<Vertex>) -> bool {
         let mode = self.mode;
         let Some(si) = hit else {
             if mode == TransportMode::Radiance && !scene.environment_lights.is_empty() {
