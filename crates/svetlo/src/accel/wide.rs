@@ -120,7 +120,7 @@ impl BoxRay {
     /// The row of planes of `n` at byte offset `off` (one of `near`, `far`).
     #[inline(always)]
     fn plane(n: &Node, off: usize) -> &[Vec4; GROUPS] {
-        debug_assert!(off % PLANE_BYTES == 0 && off < 6 * PLANE_BYTES);
+        debug_assert!(off.is_multiple_of(PLANE_BYTES) && off < 6 * PLANE_BYTES);
         // SAFETY: `off` comes from `new`: a multiple of a row's size below six rows, so the
         // row lies inside `n.planes` (rows are contiguous, `planes` being an array).
         unsafe { &*((n.planes.as_ptr() as *const u8).add(off) as *const [Vec4; GROUPS]) }
