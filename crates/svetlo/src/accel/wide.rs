@@ -85,10 +85,15 @@ impl Node {
 pub struct BoxRay {
     o: [f32; 3],
     inv: [f32; 3],
-    /// Plane index (into `Node::planes`) of the near and far slab per axis.
+    /// Byte offset into `Node::planes` of the near and far slab's planes per axis: a plane
+    /// is then loaded at node + offset, with no index scaling and no bounds check (each of
+    /// which cost an instruction per plane in every node visit).
     near: [usize; 3],
     far: [usize; 3],
 }
+
+/// Bytes of one plane's row in `Node::planes` (the eight children's values).
+const PLANE_BYTES: usize = std::mem::size_of::<[Vec4; GROUPS]>();
 
 /// Slack on the far distance: 1 + 2 gamma(3) (PBRT's bound on the rounding error of
 /// the slab test), so that a box whose face a triangle touches is not missed.
@@ -107,9 +112,18 @@ impl BoxRay {
         BoxRay {
             o: o.to_array(),
             inv: inv.to_array(),
-            near: [3 * flip[0], 1 + 3 * flip[1], 2 + 3 * flip[2]],
-            far: [3 - 3 * flip[0], 4 - 3 * flip[1], 5 - 3 * flip[2]],
+            near: [3 * flip[0], 1 + 3 * flip[1], 2 + 3 * flip[2]].map(|k| k * PLANE_BYTES),
+            far: [3 - 3 * flip[0], 4 - 3 * flip[1], 5 - 3 * flip[2]].map(|k| k * PLANE_BYTES),
         }
+    }
+
+    /// The row of planes of `n` at byte offset `off` (one of `near`, `far`).
+    #[inline(always)]
+    fn plane(n: &Node, off: usize) -> &[Vec4; GROUPS] {
+        debug_assert!(off.is_multiple_of(PLANE_BYTES) && off < 6 * PLANE_BYTES);
+        // SAFETY: `off` comes from `new`: a multiple of a row's size below six rows, so the
+        // row lies inside `n.planes` (rows are contiguous, `planes` being an array).
+        unsafe { &*((n.planes.as_ptr() as *const u8).add(off) as *const [Vec4; GROUPS]) }
     }
 
     /// The slab test of `test`, all eight children in one AVX register: the same
@@ -122,8 +136,8 @@ impl BoxRay {
     #[inline(always)]
     unsafe fn test_avx(&self, n: &Node, t_max: f32) -> ([f32; WIDTH], u32) {
         use std::arch::x86_64::*;
-        // `planes[k]` is eight contiguous floats (two Vec4 groups), 32-byte aligned by the node's alignment.
-        let plane = |k: usize| _mm256_load_ps(n.planes[k].as_ptr() as *const f32);
+        // A row of `planes` is eight contiguous floats (two Vec4 groups), 32-byte aligned by the node's alignment.
+        let plane = |off: usize| _mm256_load_ps(Self::plane(n, off).as_ptr() as *const f32);
         let o = |a: usize| _mm256_set1_ps(self.o[a]);
         let inv = |a: usize| _mm256_set1_ps(self.inv[a]);
         let slab = |k: usize, a: usize| _mm256_mul_ps(_mm256_sub_ps(plane(k), o(a)), inv(a));
@@ -153,18 +167,18 @@ impl BoxRay {
     /// Entry distances of the children and the mask of those the ray meets in `[0, t_max]`.
     #[inline(always)]
     fn test(&self, n: &Node, t_max: f32) -> ([f32; WIDTH], u32) {
-        let p = &n.planes;
+        let p = |off: usize| Self::plane(n, off);
         let o = self.o.map(Vec4::splat);
         let inv = self.inv.map(Vec4::splat);
         let mut tn_all = [0.0; WIDTH];
         let mut mask = 0;
         for g in 0..GROUPS {
-            let tnx = (p[self.near[0]][g] - o[0]) * inv[0];
-            let tny = (p[self.near[1]][g] - o[1]) * inv[1];
-            let tnz = (p[self.near[2]][g] - o[2]) * inv[2];
-            let tfx = (p[self.far[0]][g] - o[0]) * inv[0];
-            let tfy = (p[self.far[1]][g] - o[1]) * inv[1];
-            let tfz = (p[self.far[2]][g] - o[2]) * inv[2];
+            let tnx = (p(self.near[0])[g] - o[0]) * inv[0];
+            let tny = (p(self.near[1])[g] - o[1]) * inv[1];
+            let tnz = (p(self.near[2])[g] - o[2]) * inv[2];
+            let tfx = (p(self.far[0])[g] - o[0]) * inv[0];
+            let tfy = (p(self.far[1])[g] - o[1]) * inv[1];
+            let tfz = (p(self.far[2])[g] - o[2]) * inv[2];
             // As in `test_avx`: a NaN slab distance is passed over (glam's max/min on SSE
             // keep the second operand then, as the portable ones keep the number).
             let tn = tnx.max(tny.max(tnz.max(Vec4::ZERO)));
