@@ -326,9 +326,35 @@ impl Bsdf {
     /// vertex needs both (its light sample and its continuation); a rough conductor (without
     /// mask or surface detail) computes its masking from `wo` once for the two.
     pub fn eval_pdf_and_sample(&self, wo: Vec3, wi: Option<Vec3>, uc: f32, u: Vec2, mode: TransportMode) -> (Option<(Rgb, f32)>, Option<BsdfSample>) {
+        self.eval_pdf_and_sample_given(wo, wi, uc, u, mode, None)
+    }
+
+    /// Where this BSDF's sample toward `wo` draws a Beckmann visible normal (a rough
+    /// conductor's, the case `eval_pdf_and_sample` takes apart): the roughness (`alpha_u`,
+    /// `alpha_v`) and the direction (`wo` on the model's side) `Microfacet::sample_visible`
+    /// draws it for, so that a caller can draw it ahead (the path kernel, eight at once).
+    #[inline]
+    pub(crate) fn beckmann_view(&self, wo: Vec3) -> Option<(f32, f32, Vec3)> {
+        let (None, true, Some((BsdfModel::RoughConductor(c), flipped))) = (&self.detail, self.opacity >= 1.0, self.side(wo)) else { return None };
+        let md = &c.distribution;
+        let wo = if flipped { flip(wo) } else { wo };
+        (md.kind == MicrofacetKind::Beckmann && wo.z > 0.0).then_some((md.alpha_u, md.alpha_v, wo))
+    }
+
+    /// [`Self::eval_pdf_and_sample`] with the visible normal from `m` where given, which must
+    /// be `Microfacet::sample_visible`'s for [`Self::beckmann_view`] and `u`: the same bits.
+    pub(crate) fn eval_pdf_and_sample_given(
+        &self,
+        wo: Vec3,
+        wi: Option<Vec3>,
+        uc: f32,
+        u: Vec2,
+        mode: TransportMode,
+        m: Option<Vec3>,
+    ) -> (Option<(Rgb, f32)>, Option<BsdfSample>) {
         if let (None, true, Some((BsdfModel::RoughConductor(c), flipped))) = (&self.detail, self.opacity >= 1.0, self.side(wo)) {
             let side = |w: Vec3| if flipped { flip(w) } else { w };
-            let (nee, s) = c.eval_pdf_and_sample(side(wo), wi.map(side), u);
+            let (nee, s) = c.eval_pdf_and_sample(side(wo), wi.map(side), u, m);
             // As `eval_pdf` and `sample_local` finish theirs.
             let nee = nee.map(|(f, pdf)| (f * self.opacity, pdf * self.opacity));
             let s = s.map(|mut s| {
