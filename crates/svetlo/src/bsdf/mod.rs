@@ -616,7 +616,8 @@ mod tests {
     /// `Bsdf::eval_pdf_and_sample` (the path kernel's call at a vertex) gives the bits of
     /// `eval_pdf` and `sample` called apart, with and without the light's direction, for every
     /// wrapped model (two-sided rough conductors take the shared path), both modes, directions
-    /// on both sides and grazing.
+    /// on both sides and grazing; and so does `eval_pdf_and_sample_given` with the Beckmann
+    /// visible normal drawn ahead for `beckmann_view` by `sample_visible_beckmann_lanes`.
     #[test]
     fn eval_pdf_and_sample_is_eval_pdf_then_sample() {
         let mut rng = crate::sampling::rng::Pcg32::new(23, 4);
@@ -624,7 +625,7 @@ mod tests {
         let sample_bits = |s: Option<BsdfSample>| s.map(|s| (s.wi.to_array().map(f32::to_bits), bits((s.f, s.pdf)), s.lobe, s.eta.to_bits()));
         let dir = |rng: &mut crate::sampling::rng::Pcg32| crate::math::warp::square_to_uniform_sphere(Vec2::new(rng.next_f32(), rng.next_f32()));
         let grazing = [Vec3::new(1.0, 0.0, 1e-4).normalize(), Vec3::new(0.0, -1.0, -1e-4).normalize(), Vec3::new(0.6, 0.8, 0.0), Vec3::Z, -Vec3::Z];
-        let mut sampled = 0;
+        let (mut sampled, mut ahead) = (0, 0);
         for b in &wrapped_models() {
             for mode in [TransportMode::Radiance, TransportMode::Importance] {
                 let mut pairs: Vec<(Vec3, Vec3)> = (0..2000).map(|_| (dir(&mut rng), dir(&mut rng))).collect();
@@ -637,10 +638,23 @@ mod tests {
                     let alone = b.sample(wo, uc, u, mode);
                     sampled += usize::from(alone.is_some());
                     assert_eq!(sample_bits(s), sample_bits(alone), "{:?} {mode:?} {wo} u {uc} {u}", b.front);
+                    // The path kernel's way: the visible normal drawn ahead, by the lanes' sampler.
+                    if let Some((au, av, w)) = b.beckmann_view(wo) {
+                        let q = microfacet::BeckmannLanes::<1> { alpha: [[au], [av]], v: [[w.x], [w.y], [w.z]], u: [[u.x], [u.y]] };
+                        let m = microfacet::sample_visible_beckmann_lanes(&q);
+                        let (nee_m, s_m) = b.eval_pdf_and_sample_given(wo, wi, uc, u, mode, Some(Vec3::new(m[0][0], m[1][0], m[2][0])));
+                        assert_eq!(
+                            (nee_m.map(bits), sample_bits(s_m)),
+                            (nee.map(bits), sample_bits(s)),
+                            "{:?} {mode:?} {wo} u {u}: normal drawn ahead",
+                            b.front
+                        );
+                        ahead += 1;
+                    }
                 }
             }
         }
-        assert!(sampled > 30_000, "{sampled} samples");
+        assert!(sampled > 30_000 && ahead > 3_000, "{sampled} samples, {ahead} with the normal drawn ahead");
     }
 
     /// `sample_delta` gives each delta lobe's own weight and its choice probability: their
