@@ -1053,8 +1053,8 @@ impl SimdKernel {
             return;
         }
         let m = sample_visible_beckmann_lanes(&q);
-        for l in 0..LANES {
-            v.beckmann_m[l] = (some & (1 << l) != 0).then(|| Vec3::new(m[0][l], m[1][l], m[2][l]));
+        for (l, out) in v.beckmann_m.iter_mut().enumerate() {
+            *out = (some & (1 << l) != 0).then(|| Vec3::new(m[0][l], m[1][l], m[2][l]));
         }
     }
 
