@@ -22,7 +22,8 @@
 //! `Bsdf`, built once (`ShapeData::uniform`; its lanes neither rebuild nor copy it), and
 //! the value and density toward the light sample come with the BSDF's own sample from one
 //! call (`Bsdf::eval_pdf_and_sample`: a rough model's half vector, D and G1 computed once;
-//! a rough conductor's Λ(wo) once for both). Scenes
+//! a rough conductor's Λ(wo) once for both; a Beckmann one's visible normal drawn for all
+//! lanes at once before, by `beckmann_samples`, the same bits). Scenes
 //! large enough to trace single rays take the kernel only with Lambertian materials (it
 //! gained nothing there otherwise). Lights: area lights of constant radiance on meshes
 //! (sampled by the kernel's own unpacked copy), and every other light the scalar tracer
