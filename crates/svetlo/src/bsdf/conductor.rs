@@ -74,16 +74,17 @@ impl RoughConductor {
         self.distribution.pdf_visible(wo, m) / (4.0 * wm)
     }
     pub fn sample(&self, wo: Vec3, _uc: f32, u: Vec2, _mode: TransportMode) -> Option<BsdfSample> {
-        self.sample_given(wo, u, || self.distribution.lambda(wo))
+        self.sample_given(wo, u, None, || self.distribution.lambda(wo))
     }
 
-    /// [`Self::sample`] with Λ(wo) from `lambda_o`: the same sample.
+    /// [`Self::sample`] with Λ(wo) from `lambda_o`, and the visible normal `sample_visible`
+    /// draws for `wo` and `u` from `m` where given: the same sample.
     #[inline]
-    fn sample_given(&self, wo: Vec3, u: Vec2, lambda_o: impl FnOnce() -> f32) -> Option<BsdfSample> {
+    fn sample_given(&self, wo: Vec3, u: Vec2, m: Option<Vec3>, lambda_o: impl FnOnce() -> f32) -> Option<BsdfSample> {
         if wo.z <= 0.0 {
             return None;
         }
-        let m = self.distribution.sample_visible(wo, u);
+        let m = m.unwrap_or_else(|| self.distribution.sample_visible(wo, u));
         let wi = reflect(wo, m);
         if wi.z <= 0.0 {
             return None;
@@ -97,11 +98,13 @@ impl RoughConductor {
 
     /// ([`Self::eval_pdf`] toward `wi` where given, [`Self::sample`]): the same bits, with
     /// Λ(wo), which both need, computed once (a path vertex's light sample and continuation).
-    pub(crate) fn eval_pdf_and_sample(&self, wo: Vec3, wi: Option<Vec3>, u: Vec2) -> (Option<(Rgb, f32)>, Option<BsdfSample>) {
+    /// `m`: the visible normal `sample_visible` draws for `wo` and `u`, where the caller has
+    /// drawn it (the path kernel, eight lanes at once).
+    pub(crate) fn eval_pdf_and_sample(&self, wo: Vec3, wi: Option<Vec3>, u: Vec2, m: Option<Vec3>) -> (Option<(Rgb, f32)>, Option<BsdfSample>) {
         let mut lambda_o = None;
         let mut lambda = || *lambda_o.get_or_insert_with(|| self.distribution.lambda(wo));
         let nee = wi.map(|wi| self.eval_pdf_given(wo, wi, &mut lambda));
-        (nee, self.sample_given(wo, u, lambda))
+        (nee, self.sample_given(wo, u, m, lambda))
     }
 
     /// ([`Self::eval`], [`Self::pdf`]) with the half vector, D and G1(wo) computed once: the

@@ -214,6 +214,91 @@ impl VisibleSampler {
 
 const INV_SQRT_PI: f32 = 0.564_189_6;
 
+/// `N` lanes' Beckmann visible-normal draws for [`sample_visible_beckmann_lanes`]: the
+/// roughness (`alpha_u`, `alpha_v`), the direction `v` and the numbers `u`, per lane.
+#[derive(Clone, Copy, Debug)]
+pub(crate) struct BeckmannLanes<const N: usize> {
+    pub alpha: [[f32; N]; 2],
+    pub v: [[f32; N]; 3],
+    pub u: [[f32; N]; 2],
+}
+
+impl<const N: usize> Default for BeckmannLanes<N> {
+    /// Normal incidence at roughness 1 and u = 1/2 (unused lanes: the Newton loop settles
+    /// them at once).
+    fn default() -> Self {
+        BeckmannLanes { alpha: [[1.0; N]; 2], v: [[0.0; N], [0.0; N], [1.0; N]], u: [[0.5; N]; 2] }
+    }
+}
+
+/// [`Microfacet::sample_visible`] of a Beckmann distribution for `N` lanes at once: the
+/// same operations lane by lane, with selects for branches, so that the lanes run as vector
+/// lanes (one lane's Newton iteration is a chain of divisions that wait on each other). The
+/// Newton loop runs while any lane goes on; a lane that the scalar loop would have left is
+/// frozen where it stopped. The same bits.
+#[inline(always)]
+pub(crate) fn sample_visible_beckmann_lanes<const N: usize>(q: &BeckmannLanes<N>) -> [[f32; N]; 3] {
+    // `VisibleSampler::new`.
+    let (mut cos_phi, mut sin_phi) = ([0.0f32; N], [0.0f32; N]);
+    let (mut tan_t, mut x_max, mut c_max, mut erf_max, mut fit) = ([0.0f32; N], [0.0f32; N], [0.0f32; N], [0.0f32; N], [0.0f32; N]);
+    for l in 0..N {
+        let vs = Vec3::new(q.alpha[0][l] * q.v[0][l], q.alpha[1][l] * q.v[1][l], q.v[2][l]).normalize();
+        let r = (vs.x * vs.x + vs.y * vs.y).sqrt();
+        cos_phi[l] = if r > 0.0 { vs.x / r } else { 1.0 };
+        sin_phi[l] = if r > 0.0 { vs.y / r } else { 0.0 };
+        let s = SlopeX::new(vs.z);
+        (tan_t[l], x_max[l], c_max[l], erf_max[l], fit[l]) = (s.tan_t, s.x_max, s.c_max, s.erf_max, s.fit);
+    }
+    // `SlopeX::sample`'s start.
+    let (mut target, mut tolerance, mut x, mut lo, mut hi) = ([0.0f32; N], [0.0f32; N], [0.0f32; N], [-8.0f32; N], x_max);
+    for l in 0..N {
+        let u = q.u[0][l].clamp(1e-7, 1.0 - 6e-8);
+        let b = erf_max[l] - (1.0 + erf_max[l]) * approx::exp(fit[l] * approx::ln(1.0 - u));
+        target[l] = u * c_max[l];
+        tolerance[l] = SLOPE_CDF_TOLERANCE * c_max[l];
+        let guess = approx::erfinv_branchless(b);
+        // `clamp` as selects (its check of the bounds' order would keep the loop scalar).
+        let g = if guess.is_finite() { guess } else { 0.0 };
+        let g = if g < lo[l] { lo[l] } else { g };
+        x[l] = if g > hi[l] { hi[l] } else { g };
+    }
+    // Its Newton loop.
+    let mut going = [true; N];
+    for _ in 0..32 {
+        for l in 0..N {
+            let xl = x[l];
+            let e = approx::exp(-xl * xl);
+            let r = approx::erfc_nonneg(if xl <= 0.0 { -xl } else { xl }, e);
+            let erfc_neg_x = if xl <= 0.0 { r } else { 2.0 - r };
+            let g = 0.5 * erfc_neg_x + 0.5 * INV_SQRT_PI * tan_t[l] * e - target[l];
+            let settled = g.abs() < tolerance[l];
+            let (nlo, nhi) = if g > 0.0 { (lo[l], xl) } else { (xl, hi[l]) };
+            let dg = INV_SQRT_PI * e * (1.0 - xl * tan_t[l]);
+            let nx = xl - g / dg;
+            let nx = if !(nx > nlo && nx < nhi) { 0.5 * (nlo + nhi) } else { nx };
+            let go = going[l] && !settled && nx != xl;
+            x[l] = if go { nx } else { xl };
+            lo[l] = if go { nlo } else { lo[l] };
+            hi[l] = if go { nhi } else { hi[l] };
+            going[l] = go;
+        }
+        if !going.iter().any(|&g| g) {
+            break;
+        }
+    }
+    // `part_y` and `combine`.
+    let mut m = [[0.0f32; N]; 3];
+    for l in 0..N {
+        let (sx, sy) = (x[l], approx::erfinv_branchless(2.0 * q.u[1][l] - 1.0));
+        let px = (cos_phi[l] * sx - sin_phi[l] * sy) * q.alpha[0][l];
+        let py = (sin_phi[l] * sx + cos_phi[l] * sy) * q.alpha[1][l];
+        let n = Vec3::new(-px, -py, 1.0).normalize();
+        let n = if n.is_finite() { n } else { Vec3::Z };
+        (m[0][l], m[1][l], m[2][l]) = (n.x, n.y, n.z);
+    }
+    m
+}
+
 /// Sampler of the x slope of the alpha = 1 Beckmann distribution's visible normals seen at
 /// incidence cosine `cos θ` (azimuth 0). That slope has density ∝ e^{-x²} (1 - x tanθ) on
 /// x < cot θ, with CDF C(x) = erfc(-x)/2 + tanθ e^{-x²} / (2√π). (The y slope is Gaussian,
@@ -241,6 +326,7 @@ pub(crate) struct SlopeX {
 const SLOPE_CDF_TOLERANCE: f32 = 3e-7;
 
 impl SlopeX {
+    #[inline]
     fn new(cos_t: f32) -> Self {
         let cos_t = cos_t.clamp(1e-6, 1.0);
         let tan_t = (1.0 - cos_t * cos_t).max(0.0).sqrt() / cos_t;
@@ -436,6 +522,65 @@ mod tests {
             let r = crate::sampling::stats::chi_square_test(&counts, &expected, 5.0);
             assert!(r.p_value > level, "{kind:?} {au} {av} {v}: chi2 {} dof {} p {:e}", r.statistic, r.dof, r.p_value);
         }
+    }
+
+    /// `sample_visible_beckmann_lanes` compiled as the path kernel's AVX2 build compiles it.
+    #[cfg(target_arch = "x86_64")]
+    #[target_feature(enable = "avx2")]
+    unsafe fn beckmann_lanes_avx2(q: &BeckmannLanes<8>) -> [[f32; 8]; 3] {
+        sample_visible_beckmann_lanes(q)
+    }
+
+    /// `sample_visible_beckmann_lanes` (eight lanes, as the baseline build and as the AVX2 one
+    /// compile it) gives `sample_visible`'s bits lane by lane: roughness from its floor to
+    /// beyond 1, anisotropic, incidence from normal to grazing (and below), the numbers' ends.
+    #[test]
+    fn beckmann_lanes_are_the_single_samples() {
+        let mut rng = crate::sampling::Pcg32::new(23, 7);
+        let mut f = |lo: f32, hi: f32| lo + (hi - lo) * rng.next_f32();
+        let alphas = [MIN_ALPHA, 1e-3, 0.01, 0.1, 0.3, 0.5, 1.0, 2.0];
+        let us = [0.0f32, 1e-9, 1e-7, 0.5, 1.0 - 6e-8, 1.0 - f32::EPSILON, 1.0];
+        let cos_ts = [1.0f32, 0.999_999, 0.5, 1e-2, 1e-4, 1e-6, 1e-8, 0.0, -0.1];
+        let mut grazing = 0;
+        for batch in 0..20_000usize {
+            let mut q = BeckmannLanes::<8>::default();
+            let mut lanes = [(Microfacet::new(MicrofacetKind::Beckmann, 1.0, 1.0), Vec3::Z, Vec2::ZERO); 8];
+            for (l, lane) in lanes.iter_mut().enumerate() {
+                let i = batch * 8 + l;
+                let (au, av) = match i % 3 {
+                    0 => (alphas[i / 3 % alphas.len()], alphas[i / 24 % alphas.len()]),
+                    1 => (f(MIN_ALPHA, 1.0), f(MIN_ALPHA, 1.0)),
+                    _ => {
+                        let a = f(0.01, 1.0);
+                        (a, a)
+                    }
+                };
+                let md = Microfacet::new(MicrofacetKind::Beckmann, au, av);
+                let cos_t = if i % 4 == 0 { cos_ts[i / 4 % cos_ts.len()] } else { f(0.0, 1.0) };
+                let phi = if i % 5 == 0 { 0.0 } else { f(0.0, 2.0 * PI) };
+                let sin_t = (1.0 - cos_t * cos_t).max(0.0).sqrt();
+                let v = Vec3::new(sin_t * phi.cos(), sin_t * phi.sin(), cos_t);
+                grazing += (cos_t < 1e-3) as usize;
+                let u = if i % 3 == 0 { Vec2::new(us[i % us.len()], us[i / 7 % us.len()]) } else { Vec2::new(f(0.0, 1.0), f(0.0, 1.0)) };
+                (q.alpha[0][l], q.alpha[1][l]) = (md.alpha_u, md.alpha_v);
+                (q.v[0][l], q.v[1][l], q.v[2][l]) = (v.x, v.y, v.z);
+                (q.u[0][l], q.u[1][l]) = (u.x, u.y);
+                *lane = (md, v, u);
+            }
+            let m = sample_visible_beckmann_lanes(&q);
+            #[cfg(target_arch = "x86_64")]
+            if crate::accel::packet::avx2() {
+                // SAFETY: the CPU has AVX2.
+                let a = unsafe { beckmann_lanes_avx2(&q) };
+                assert_eq!(a.map(|r| r.map(f32::to_bits)), m.map(|r| r.map(f32::to_bits)), "batch {batch}: the AVX2 build differs");
+            }
+            for (l, &(md, v, u)) in lanes.iter().enumerate() {
+                let one = md.sample_visible(v, u);
+                let lane = Vec3::new(m[0][l], m[1][l], m[2][l]);
+                assert_eq!(lane.to_array().map(f32::to_bits), one.to_array().map(f32::to_bits), "{md:?} v {v} u {u}: {lane} and {one}");
+            }
+        }
+        assert!(grazing > 10_000, "{grazing} grazing lanes");
     }
 
     /// Smith's Λ of Beckmann against its f64 closed form, incidence from normal to grazing.

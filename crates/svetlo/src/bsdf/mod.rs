@@ -326,9 +326,35 @@ impl Bsdf {
     /// vertex needs both (its light sample and its continuation); a rough conductor (without
     /// mask or surface detail) computes its masking from `wo` once for the two.
     pub fn eval_pdf_and_sample(&self, wo: Vec3, wi: Option<Vec3>, uc: f32, u: Vec2, mode: TransportMode) -> (Option<(Rgb, f32)>, Option<BsdfSample>) {
+        self.eval_pdf_and_sample_given(wo, wi, uc, u, mode, None)
+    }
+
+    /// Where this BSDF's sample toward `wo` draws a Beckmann visible normal (a rough
+    /// conductor's, the case `eval_pdf_and_sample` takes apart): the roughness (`alpha_u`,
+    /// `alpha_v`) and the direction (`wo` on the model's side) `Microfacet::sample_visible`
+    /// draws it for, so that a caller can draw it ahead (the path kernel, eight at once).
+    #[inline]
+    pub(crate) fn beckmann_view(&self, wo: Vec3) -> Option<(f32, f32, Vec3)> {
+        let (None, true, Some((BsdfModel::RoughConductor(c), flipped))) = (&self.detail, self.opacity >= 1.0, self.side(wo)) else { return None };
+        let md = &c.distribution;
+        let wo = if flipped { flip(wo) } else { wo };
+        (md.kind == MicrofacetKind::Beckmann && wo.z > 0.0).then_some((md.alpha_u, md.alpha_v, wo))
+    }
+
+    /// [`Self::eval_pdf_and_sample`] with the visible normal from `m` where given, which must
+    /// be `Microfacet::sample_visible`'s for [`Self::beckmann_view`] and `u`: the same bits.
+    pub(crate) fn eval_pdf_and_sample_given(
+        &self,
+        wo: Vec3,
+        wi: Option<Vec3>,
+        uc: f32,
+        u: Vec2,
+        mode: TransportMode,
+        m: Option<Vec3>,
+    ) -> (Option<(Rgb, f32)>, Option<BsdfSample>) {
         if let (None, true, Some((BsdfModel::RoughConductor(c), flipped))) = (&self.detail, self.opacity >= 1.0, self.side(wo)) {
             let side = |w: Vec3| if flipped { flip(w) } else { w };
-            let (nee, s) = c.eval_pdf_and_sample(side(wo), wi.map(side), u);
+            let (nee, s) = c.eval_pdf_and_sample(side(wo), wi.map(side), u, m);
             // As `eval_pdf` and `sample_local` finish theirs.
             let nee = nee.map(|(f, pdf)| (f * self.opacity, pdf * self.opacity));
             let s = s.map(|mut s| {
@@ -590,7 +616,8 @@ mod tests {
     /// `Bsdf::eval_pdf_and_sample` (the path kernel's call at a vertex) gives the bits of
     /// `eval_pdf` and `sample` called apart, with and without the light's direction, for every
     /// wrapped model (two-sided rough conductors take the shared path), both modes, directions
-    /// on both sides and grazing.
+    /// on both sides and grazing; and so does `eval_pdf_and_sample_given` with the Beckmann
+    /// visible normal drawn ahead for `beckmann_view` by `sample_visible_beckmann_lanes`.
     #[test]
     fn eval_pdf_and_sample_is_eval_pdf_then_sample() {
         let mut rng = crate::sampling::rng::Pcg32::new(23, 4);
@@ -598,7 +625,7 @@ mod tests {
         let sample_bits = |s: Option<BsdfSample>| s.map(|s| (s.wi.to_array().map(f32::to_bits), bits((s.f, s.pdf)), s.lobe, s.eta.to_bits()));
         let dir = |rng: &mut crate::sampling::rng::Pcg32| crate::math::warp::square_to_uniform_sphere(Vec2::new(rng.next_f32(), rng.next_f32()));
         let grazing = [Vec3::new(1.0, 0.0, 1e-4).normalize(), Vec3::new(0.0, -1.0, -1e-4).normalize(), Vec3::new(0.6, 0.8, 0.0), Vec3::Z, -Vec3::Z];
-        let mut sampled = 0;
+        let (mut sampled, mut ahead) = (0, 0);
         for b in &wrapped_models() {
             for mode in [TransportMode::Radiance, TransportMode::Importance] {
                 let mut pairs: Vec<(Vec3, Vec3)> = (0..2000).map(|_| (dir(&mut rng), dir(&mut rng))).collect();
@@ -611,10 +638,23 @@ mod tests {
                     let alone = b.sample(wo, uc, u, mode);
                     sampled += usize::from(alone.is_some());
                     assert_eq!(sample_bits(s), sample_bits(alone), "{:?} {mode:?} {wo} u {uc} {u}", b.front);
+                    // The path kernel's way: the visible normal drawn ahead, by the lanes' sampler.
+                    if let Some((au, av, w)) = b.beckmann_view(wo) {
+                        let q = microfacet::BeckmannLanes::<1> { alpha: [[au], [av]], v: [[w.x], [w.y], [w.z]], u: [[u.x], [u.y]] };
+                        let m = microfacet::sample_visible_beckmann_lanes(&q);
+                        let (nee_m, s_m) = b.eval_pdf_and_sample_given(wo, wi, uc, u, mode, Some(Vec3::new(m[0][0], m[1][0], m[2][0])));
+                        assert_eq!(
+                            (nee_m.map(bits), sample_bits(s_m)),
+                            (nee.map(bits), sample_bits(s)),
+                            "{:?} {mode:?} {wo} u {u}: normal drawn ahead",
+                            b.front
+                        );
+                        ahead += 1;
+                    }
                 }
             }
         }
-        assert!(sampled > 30_000, "{sampled} samples");
+        assert!(sampled > 30_000 && ahead > 3_000, "{sampled} samples, {ahead} with the normal drawn ahead");
     }
 
     /// `sample_delta` gives each delta lobe's own weight and its choice probability: their

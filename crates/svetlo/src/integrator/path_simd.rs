@@ -22,7 +22,8 @@
 //! `Bsdf`, built once (`ShapeData::uniform`; its lanes neither rebuild nor copy it), and
 //! the value and density toward the light sample come with the BSDF's own sample from one
 //! call (`Bsdf::eval_pdf_and_sample`: a rough model's half vector, D and G1 computed once;
-//! a rough conductor's Λ(wo) once for both). Scenes
+//! a rough conductor's Λ(wo) once for both; a Beckmann one's visible normal drawn for all
+//! lanes at once before, by `beckmann_samples`, the same bits). Scenes
 //! large enough to trace single rays take the kernel only with Lambertian materials (it
 //! gained nothing there otherwise). Lights: area lights of constant radiance on meshes
 //! (sampled by the kernel's own unpacked copy), and every other light the scalar tracer
@@ -63,6 +64,7 @@
 use super::path::{bsdf_pdf_toward, PathTracer};
 use super::{camera_sample, render_tiles, Integrator, Progress, RenderSettings};
 use crate::accel::packet::{Hits8, PacketBvh, PacketSpheres, Rays8, LANES};
+use crate::bsdf::microfacet::{sample_visible_beckmann_lanes, BeckmannLanes};
 use crate::bsdf::{Bsdf, LobeFlags, Material, TransportMode};
 use crate::error::{Error, Result};
 use crate::film::{Film, FilmTile};
@@ -675,6 +677,7 @@ impl SimdKernel {
             }
             // The sphere lights' samples of all lanes at once, then the scalar BSDFs toward them.
             self.sphere_samples(scene, &mut v);
+            self.beckmann_samples(&mut v);
             for l in 0..LANES {
                 if let Some((si, u)) = v.scatter[l].take() {
                     self.scalar_scatter(events, &mut st, l, &mut v, &si, u);
@@ -1031,6 +1034,31 @@ impl SimdKernel {
         }
     }
 
+    /// The visible normals the scalar BSDFs of Beckmann rough conductors (`Bsdf::beckmann_view`)
+    /// draw for their samples, all lanes' at once (`sample_visible_beckmann_lanes`, the bits of
+    /// `Microfacet::sample_visible`), into `v.beckmann_m` for `scalar_scatter`.
+    #[inline(always)]
+    fn beckmann_samples(&self, v: &mut Soa) {
+        let mut q = BeckmannLanes::<LANES>::default();
+        let mut some = 0u8;
+        for l in 0..LANES {
+            let Some((si, u)) = &v.scatter[l] else { continue };
+            let Some(bsdf) = v.own[l].as_ref().or(self.shapes[si.shape as usize].uniform.as_ref()) else { continue };
+            let Some((au, av, wo)) = bsdf.beckmann_view(si.shading.to_local(si.wo)) else { continue };
+            (q.alpha[0][l], q.alpha[1][l]) = (au, av);
+            (q.v[0][l], q.v[1][l], q.v[2][l]) = (wo.x, wo.y, wo.z);
+            (q.u[0][l], q.u[1][l]) = (u[4], u[5]);
+            some |= 1 << l;
+        }
+        if some == 0 {
+            return;
+        }
+        let m = sample_visible_beckmann_lanes(&q);
+        for (l, out) in v.beckmann_m.iter_mut().enumerate() {
+            *out = (some & (1 << l) != 0).then(|| Vec3::new(m[0][l], m[1][l], m[2][l]));
+        }
+    }
+
     /// The first part of lane `l`'s vertex `si` of a scalar BSDF: the BSDF (the shape's
     /// uniform one, or the hit's own, as `Scene::bsdf` makes it, kept in `v.own`), its lobes,
     /// and the light sample unless it has delta lobes only (a sphere light's comes with the
@@ -1078,7 +1106,7 @@ impl SimdKernel {
             frame.to_local(wi_w)
         });
         // The value and density toward it, and the BSDF's own sample, from one call.
-        let (nee, bs) = bsdf.eval_pdf_and_sample(wo, wi, uc, Vec2::new(ux, uy), TransportMode::Radiance);
+        let (nee, bs) = bsdf.eval_pdf_and_sample_given(wo, wi, uc, Vec2::new(ux, uy), TransportMode::Radiance, v.beckmann_m[l].take());
         if let (Some(wi), Some((f, pdf))) = (wi, nee) {
             v.nee_ok[l] = !f.is_black();
             put_rgb(&mut v.bf, l, f);
@@ -1218,6 +1246,9 @@ struct Soa {
     scatter: [Option<(SurfaceInteraction, [f32; 6])>; LANES],
     own: [Option<Bsdf>; LANES],
     flags: [LobeFlags; LANES],
+    /// Lanes of a Beckmann rough conductor: its sample's visible normal
+    /// (`SimdKernel::beckmann_samples`).
+    beckmann_m: [Option<Vec3>; LANES],
     /// The rays' grid points (u, v) and sin θ in the environment map (`EnvMap::dirs_to_grid`),
     /// set when some lane escaped.
     env_grid: [[f32; LANES]; 3],
