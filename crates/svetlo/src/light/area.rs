@@ -418,6 +418,26 @@ mod tests {
         assert_eq!(framed, 5);
     }
 
+    /// Case `i` of the sphere-sample tests, from the numbers `f(lo, hi)`: a sphere (tiny or
+    /// not, inward-facing or not), a reference point inside, on (within rounding), just
+    /// outside or far from it, and the light sample's numbers (their ends and the quadrant
+    /// boundaries, or random).
+    fn sphere_case(i: usize, f: &mut impl FnMut(f32, f32) -> f32) -> (Sphere, Vec3, Vec2) {
+        let us = [0.0f32, 0.25, 0.5, 0.75, 1.0 - f32::EPSILON, 0.124_999_99, 1e-9];
+        let center = Vec3::new(f(-5.0, 5.0), f(-5.0, 5.0), f(-5.0, 5.0));
+        let radius = if i % 11 == 0 { 1e-3 } else { f(0.01, 2.0) };
+        let sphere = Sphere { center, radius, flip_normals: i % 5 == 0 };
+        let dir = warp::square_to_uniform_sphere(Vec2::new(f(0.0, 1.0), f(0.0, 1.0)));
+        let dist = match i % 4 {
+            0 => radius * f(0.0, 1.0),
+            1 => radius * (1.0 + f(-1e-5, 1e-5)),
+            2 => radius * (1.0 + f(0.0, 1e-3)),
+            _ => radius * f(1.0, 1e4),
+        };
+        let u = if i % 3 == 0 { Vec2::new(us[i % us.len()], us[(i / 7) % us.len()]) } else { Vec2::new(f(0.0, 1.0), f(0.0, 1.0)) };
+        (sphere, center + dir * dist, u)
+    }
+
     /// `sample_constant_sphere` (the path kernel's sphere light sample) gives
     /// `AreaLight::sample_li`'s bits (direction, point, normal, density, and None where it
     /// refuses), or says the point takes area sampling: reference points outside, on and
@@ -427,22 +447,9 @@ mod tests {
     fn constant_sphere_sample_is_sample_li() {
         let mut rng = Pcg32::new(3, 7);
         let mut f = |lo: f32, hi: f32| lo + (hi - lo) * rng.next_f32();
-        let us = [0.0f32, 0.25, 0.5, 0.75, 1.0 - f32::EPSILON, 0.124_999_99, 1e-9];
         let (mut cones, mut refused, mut inside) = (0, 0, 0);
         for i in 0..40_000usize {
-            let center = Vec3::new(f(-5.0, 5.0), f(-5.0, 5.0), f(-5.0, 5.0));
-            let radius = if i % 11 == 0 { 1e-3 } else { f(0.01, 2.0) };
-            let sphere = Sphere { center, radius, flip_normals: i % 5 == 0 };
-            let dir = warp::square_to_uniform_sphere(Vec2::new(f(0.0, 1.0), f(0.0, 1.0)));
-            // Inside, on (within rounding), just outside, and far from the sphere.
-            let dist = match i % 4 {
-                0 => radius * f(0.0, 1.0),
-                1 => radius * (1.0 + f(-1e-5, 1e-5)),
-                2 => radius * (1.0 + f(0.0, 1e-3)),
-                _ => radius * f(1.0, 1e4),
-            };
-            let p_ref = center + dir * dist;
-            let u = if i % 3 == 0 { Vec2::new(us[i % us.len()], us[(i / 3) % us.len()]) } else { Vec2::new(f(0.0, 1.0), f(0.0, 1.0)) };
+            let (sphere, p_ref, u) = sphere_case(i, &mut f);
             let le = Rgb::new(2.0, 1.0, 0.5);
             let light = AreaLight::new(0, Arc::new(Geometry::Sphere(sphere)), Texture::Constant(le));
             let Some(fast) = AreaLight::sample_constant_sphere(&sphere, p_ref, u) else {
@@ -480,25 +487,13 @@ mod tests {
     fn constant_spheres_are_the_single_samples() {
         let mut rng = Pcg32::new(5, 11);
         let mut f = |lo: f32, hi: f32| lo + (hi - lo) * rng.next_f32();
-        let us = [0.0f32, 0.25, 0.5, 0.75, 1.0 - f32::EPSILON, 0.124_999_99, 1e-9];
         let (mut found, mut refused, mut inside) = (0, 0, 0);
         for batch in 0..5_000usize {
             let mut q = SphereLanes::<8>::default();
             let mut lanes = [(Sphere { center: Vec3::ZERO, radius: 1.0, flip_normals: false }, Vec3::ZERO, Vec2::ZERO); 8];
             for (l, lane) in lanes.iter_mut().enumerate() {
-                let i = batch * 8 + l;
-                let center = Vec3::new(f(-5.0, 5.0), f(-5.0, 5.0), f(-5.0, 5.0));
-                let radius = if i % 11 == 0 { 1e-3 } else { f(0.01, 2.0) };
-                let sphere = Sphere { center, radius, flip_normals: i % 5 == 0 };
-                let dir = warp::square_to_uniform_sphere(Vec2::new(f(0.0, 1.0), f(0.0, 1.0)));
-                let dist = match i % 4 {
-                    0 => radius * f(0.0, 1.0),
-                    1 => radius * (1.0 + f(-1e-5, 1e-5)),
-                    2 => radius * (1.0 + f(0.0, 1e-3)),
-                    _ => radius * f(1.0, 1e4),
-                };
-                let p_ref = center + dir * dist;
-                let u = if i % 3 == 0 { Vec2::new(us[i % us.len()], us[(i / 7) % us.len()]) } else { Vec2::new(f(0.0, 1.0), f(0.0, 1.0)) };
+                let (sphere, p_ref, u) = sphere_case(batch * 8 + l, &mut f);
+                let (center, radius) = (sphere.center, sphere.radius);
                 for k in 0..3 {
                     q.center[k][l] = center[k];
                     q.p_ref[k][l] = p_ref[k];
