@@ -425,8 +425,8 @@ mod tests {
     fn sphere_case(i: usize, f: &mut impl FnMut(f32, f32) -> f32) -> (Sphere, Vec3, Vec2) {
         let us = [0.0f32, 0.25, 0.5, 0.75, 1.0 - f32::EPSILON, 0.124_999_99, 1e-9];
         let center = Vec3::new(f(-5.0, 5.0), f(-5.0, 5.0), f(-5.0, 5.0));
-        let radius = if i % 11 == 0 { 1e-3 } else { f(0.01, 2.0) };
-        let sphere = Sphere { center, radius, flip_normals: i % 5 == 0 };
+        let radius = if i.is_multiple_of(11) { 1e-3 } else { f(0.01, 2.0) };
+        let sphere = Sphere { center, radius, flip_normals: i.is_multiple_of(5) };
         let dir = warp::square_to_uniform_sphere(Vec2::new(f(0.0, 1.0), f(0.0, 1.0)));
         let dist = match i % 4 {
             0 => radius * f(0.0, 1.0),
@@ -434,7 +434,7 @@ mod tests {
             2 => radius * (1.0 + f(0.0, 1e-3)),
             _ => radius * f(1.0, 1e4),
         };
-        let u = if i % 3 == 0 { Vec2::new(us[i % us.len()], us[(i / 7) % us.len()]) } else { Vec2::new(f(0.0, 1.0), f(0.0, 1.0)) };
+        let u = if i.is_multiple_of(3) { Vec2::new(us[i % us.len()], us[(i / 7) % us.len()]) } else { Vec2::new(f(0.0, 1.0), f(0.0, 1.0)) };
         (sphere, center + dir * dist, u)
     }
 
