@@ -234,11 +234,7 @@ impl FilmTile {
     /// over every pixel of this tile within its radius.
     #[inline]
     pub fn add_sample(&mut self, p: Vec2, l: Rgb) {
-        self.blank = false;
-        let l = if l.is_finite() { l } else { Rgb::BLACK };
-        if self.add_to_owner(p, l) {
-            return;
-        }
+        let Some(l) = self.admit(p, l) else { return };
         // One copy of the splat per filter, its weight function known at compile time (no
         // match per weight); the weights are `FilterWeights::eval`'s to the bit.
         match self.filter {
@@ -287,12 +283,19 @@ impl FilmTile {
     /// [`Self::add_sample`] with a filter wider than the box, `eval` its 1-D weight.
     #[inline(always)]
     fn add_one(&mut self, p: Vec2, l: Rgb, eval: impl Fn(f32) -> f32) {
+        if let Some(l) = self.admit(p, l) {
+            self.add_separable(p, l, eval);
+        }
+    }
+
+    /// What every sample goes through first: the tile is no longer blank, a non-finite value
+    /// counts as black, and the owning pixel takes it into its variance statistics (with the
+    /// box filter into its sum too). Returns the value still to splat, None where done.
+    #[inline(always)]
+    fn admit(&mut self, p: Vec2, l: Rgb) -> Option<Rgb> {
         self.blank = false;
         let l = if l.is_finite() { l } else { Rgb::BLACK };
-        if self.add_to_owner(p, l) {
-            return;
-        }
-        self.add_separable(p, l, eval);
+        (!self.add_to_owner(p, l)).then_some(l)
     }
 
     /// [`Self::footprint`] and [`Self::add_filtered`] in one, for the beauty alone: each
