@@ -177,11 +177,66 @@ fn same_image_for_any_thread_count() {
     }
 }
 
+/// Moving shapes (a ball flying, a box spinning and growing): each lane's rays at its camera
+/// ray's time, through the scene's own queries, so the image is the scalar tracer's bit for bit.
+#[test]
+fn motion_blur_matches_scalar() {
+    let scene = load(&repo_scene("motion-blur.xml"), &[], 40);
+    assert!(!scene.moving.is_empty(), "motion-blur.xml has moving shapes");
+    for sampler in [svetlo::sampling::SamplerKind::Independent, svetlo::sampling::SamplerKind::Sobol] {
+        let mut s = RenderSettings::from_scene(&scene);
+        s.sampler = sampler;
+        s.spp = 6;
+        s.seed = 11;
+        s.max_depth = 5;
+        let k = SimdKernel::new(&scene, &s).expect("a scene with moving shapes qualifies");
+        assert!(!k.uses_packets(), "moving shapes are met through the scene's queries");
+        compare_exact(&scene, &s, &format!("motion-blur ({sampler:?})"));
+    }
+}
+
+/// A ray epsilon (Tungsten's references): every ray through the scene's queries, which skip
+/// the epsilon; the scalar tracer's image bit for bit.
+#[test]
+fn ray_epsilon_matches_scalar() {
+    let mut scene = load(&repo_scene("cornell-box.xml"), &[], 40);
+    scene.settings.ray_epsilon = 5e-4;
+    let mut s = RenderSettings::from_scene(&scene);
+    s.spp = 6;
+    s.seed = 4;
+    compare_exact(&scene, &s, "cornell-box, ray epsilon 5e-4");
+    // The epsilon matters: without it the image differs.
+    let mut plain = scene.clone();
+    plain.settings.ray_epsilon = 0.0;
+    assert!(render(&plain, "path", &s).data != render(&scene, "path", &s).data, "the epsilon should change the image");
+}
+
+/// [`compare`] for a kernel that traces through the scene's queries: the scalar tracer's
+/// image bit for bit, whatever the thread count.
+fn compare_exact(scene: &Scene, settings: &RenderSettings, what: &str) {
+    compare(scene, settings, what);
+    if !avx2() {
+        return;
+    }
+    let a = render(scene, "path", settings);
+    let b = render(scene, "path:simd=false", settings);
+    assert!(a.data == b.data, "{what}: the kernel's image differs from the scalar tracer's");
+    let mut s = settings.clone();
+    s.threads = 3;
+    assert!(render(scene, "path", &s).data == a.data, "{what}: the kernel's image depends on the thread count");
+}
+
 #[test]
 fn out_of_scope_scenes_fall_back() {
-    // Moving shapes: the scalar tracer's.
-    let scene = load(&repo_scene("motion-blur.xml"), &[], 16);
-    assert!(SimdKernel::new(&scene, &RenderSettings::from_scene(&scene)).is_none(), "motion-blur.xml should not qualify");
+    // Two environments (a lane adds what its escaped ray sees as one): the scalar tracer's.
+    let dir = std::env::temp_dir().join(format!("svetlo-simd-scope-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    let path = dir.join("two-envs.xml");
+    let env = r#"<emitter type="constant"><rgb name="radiance" value="0.2"/></emitter>"#;
+    std::fs::write(&path, std::fs::read_to_string(repo_scene("cornell-box.xml")).unwrap().replace("</scene>", &format!("{env}{env}</scene>"))).unwrap();
+    let scene = load(&path, &[], 16);
+    assert_eq!(scene.environment_lights.len(), 2);
+    assert!(SimdKernel::new(&scene, &RenderSettings::from_scene(&scene)).is_none(), "two environments should take the scalar tracer");
     // Spheres (a mirror and a glass one; caustic.xml's glass sphere): the kernel, packets
     // (a few spheres are tested on every lane beside the packet tree's triangles).
     for name in ["caustic.xml", "cornell-spheres.xml"] {

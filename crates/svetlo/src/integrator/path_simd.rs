@@ -8,10 +8,13 @@
 //! eight lanes on the paths' state kept as structure of arrays (compiled to AVX2 vector
 //! code; an AVX-512VL build of the same code has 32 registers where the CPU has them).
 //!
-//! Scope: static scenes of triangle meshes, analytic spheres and SDF grids, with any material
-//! svetlo reads. A hit on a shape that is not a mesh comes as the scene's own surface record
-//! (`Scene::interaction`, as the scalar tracer's `Scene::intersect` makes it: `other_hit`),
-//! and is shaded from it as a triangle's hit is. (Two-sided) Lambertian materials of
+//! Scope: scenes of triangle meshes, analytic spheres and SDF grids, with any material svetlo
+//! reads, static or with moving shapes. Where shapes move (motion blur) or the scene skips a
+//! ray epsilon, every lane's ray goes one by one through the scene's own queries at its path's
+//! time (`Tracer::Scene`: the scalar tracer's hits, so its image bit for bit, in 0.65-0.75 of
+//! its CPU time on scenes/motion-blur.xml). A hit on a shape that is not a mesh comes as the
+//! scene's own surface record (`Scene::interaction`, as the scalar tracer's `Scene::intersect`
+//! makes it: `other_hit`), and is shaded from it as a triangle's hit is. (Two-sided) Lambertian materials of
 //! constant or textured reflectance (any texture: bitmaps, procedural, mesh attributes;
 //! evaluated per lane where the path hits) are shaded as eight-lane arithmetic, on any
 //! shape; every other one (conductors, dielectrics, plastics, the classic models,
@@ -216,6 +219,10 @@ enum Tracer {
     /// other than meshes. `first`: the kernel's index of each shape's first triangle
     /// ([`NOT_MESH`] for a shape of no triangles of the kernel's).
     Single { first: Vec<u32> },
+    /// One by one through the scene's own queries (`Scene::closest`, `occluded_ray`), each
+    /// lane's ray at its path's time: scenes with moving shapes (met in their pose at that
+    /// time, their hits as the scene's records) or a ray epsilon. `first` as in `Single`.
+    Scene { first: Vec<u32> },
 }
 
 /// `Tracer::Single`'s `first` of a shape that is not a mesh (sphere, SDF grid).
@@ -225,13 +232,23 @@ const NOT_MESH: u32 = u32::MAX;
 /// are then in the lane's [`OtherHits`] entry.
 const OTHER: u32 = u32::MAX - 1;
 
-/// Per lane, the (shape, primitive) of a hit on a shape that is not a mesh.
-type OtherHits = [(u32, u32); LANES];
+/// Per lane, a hit on a shape that is not a mesh: its (shape, primitive), and its surface
+/// record where the tracer made it already (a moving shape's, in the pose of the ray's time).
+struct OtherHits {
+    prim: [(u32, u32); LANES],
+    record: [Option<SurfaceInteraction>; LANES],
+}
+
+impl Default for OtherHits {
+    fn default() -> Self {
+        OtherHits { prim: [(0, 0); LANES], record: [None; LANES] }
+    }
+}
 
 impl Tracer {
-    /// The lanes' closest hits; a hit on a shape that is not a mesh has `prim` [`OTHER`] and
-    /// its shape and primitive in `others`.
-    fn intersect(&self, scene: &Scene, rays: &Rays8, active: u8, others: &mut OtherHits) -> Hits8 {
+    /// The lanes' closest hits (lane `l`'s ray at time `time[l]`); a hit on a shape that is
+    /// not a mesh has `prim` [`OTHER`] and its shape and primitive (or record) in `others`.
+    fn intersect(&self, scene: &Scene, rays: &Rays8, time: &[f32; LANES], active: u8, others: &mut OtherHits) -> Hits8 {
         // The lanes to trace through the scene's BVH: a packet's tied ones, or all.
         let (mut h, lanes, first) = match self {
             Tracer::Packets { bvh, ties: None, .. } => return bvh.intersect(rays, active),
@@ -245,12 +262,13 @@ impl Tracer {
                 // The tied lanes go to the scene's BVH whole: no need to test their spheres.
                 let (ids, unsure) = spheres.nearest(rays, active & !tied, &mut h.t);
                 for l in (0..LANES).filter(|&l| ids[l] != u32::MAX) {
-                    others[l] = (shapes[ids[l] as usize], 0);
+                    others.prim[l] = (shapes[ids[l] as usize], 0);
                     (h.prim[l], h.b1[l], h.b2[l]) = (OTHER, 0.0, 0.0);
                 }
                 (h, tied | unsure, first)
             }
             Tracer::Single { first } => (Hits8 { t: rays.t_max, prim: [u32::MAX; LANES], b1: [0.0; LANES], b2: [0.0; LANES] }, active, first),
+            Tracer::Scene { first } => return scene_hits(scene, rays, time, active, first, others),
         };
         if lanes == 0 {
             return h;
@@ -263,7 +281,7 @@ impl Tracer {
                 None => u32::MAX,
                 Some(hit) => match first[hit.shape as usize] {
                     NOT_MESH => {
-                        others[l] = (hit.shape, hit.prim);
+                        others.prim[l] = (hit.shape, hit.prim);
                         OTHER
                     }
                     f => f + hit.prim,
@@ -275,8 +293,8 @@ impl Tracer {
         h
     }
 
-    /// Mask of the active lanes whose ray is blocked.
-    fn occluded(&self, scene: &Scene, rays: &Rays8, active: u8) -> u8 {
+    /// Mask of the active lanes whose ray is blocked (lane `l`'s at time `time[l]`).
+    fn occluded(&self, scene: &Scene, rays: &Rays8, time: &[f32; LANES], active: u8) -> u8 {
         match self {
             Tracer::Packets { bvh, spheres: None, .. } => bvh.occluded(rays, active),
             Tracer::Packets { bvh, spheres: Some(sp), .. } => {
@@ -287,8 +305,31 @@ impl Tracer {
                 blocked | (hit & !unsure) | again
             }
             Tracer::Single { .. } => scene.accel.occluded_lanes(&lane_rays(rays), active),
+            Tracer::Scene { .. } => {
+                (0..LANES).filter(|&l| active & (1 << l) != 0).fold(0, |m, l| if scene.occluded_ray(&timed_ray(rays, time, l)) { m | 1 << l } else { m })
+            }
         }
     }
+}
+
+/// [`Tracer::Scene`]'s closest hits: each active lane's through `Scene::closest` at its time.
+/// A static mesh's hit names the kernel's triangle; any other comes with the scene's record.
+#[inline(never)]
+fn scene_hits(scene: &Scene, rays: &Rays8, time: &[f32; LANES], active: u8, first: &[u32], others: &mut OtherHits) -> Hits8 {
+    let mut h = Hits8 { t: rays.t_max, prim: [u32::MAX; LANES], b1: [0.0; LANES], b2: [0.0; LANES] };
+    for l in (0..LANES).filter(|l| active & (1 << l) != 0) {
+        let ray = timed_ray(rays, time, l);
+        let Some((hit, moving)) = scene.closest(&ray) else { continue };
+        (h.t[l], h.b1[l], h.b2[l]) = (hit.t, hit.b1, hit.b2);
+        h.prim[l] = match (first[hit.shape as usize], &moving) {
+            (f, None) if f != NOT_MESH => f + hit.prim,
+            _ => {
+                others.record[l] = Some(scene.closest_interaction(&hit, moving.as_ref(), &ray));
+                OTHER
+            }
+        };
+    }
+    h
 }
 
 /// The kernel's index of each shape's first triangle.
@@ -313,6 +354,10 @@ fn single_tracer(scene: &Scene) -> Tracer {
 
 fn lane_ray(rays: &Rays8, l: usize) -> Ray {
     Ray::with_max(Vec3::new(rays.o[0][l], rays.o[1][l], rays.o[2][l]), Vec3::new(rays.d[0][l], rays.d[1][l], rays.d[2][l]), rays.t_max[l])
+}
+
+fn timed_ray(rays: &Rays8, time: &[f32; LANES], l: usize) -> Ray {
+    Ray { time: time[l], ..lane_ray(rays, l) }
 }
 
 /// All eight lanes' rays, for the scene BVH's eight-ray queries (which walk them interleaved).
@@ -363,7 +408,7 @@ impl SimdKernel {
     /// The kernel's data, or None when the scene or the settings are out of its scope.
     pub fn new(scene: &Scene, _settings: &RenderSettings) -> Option<SimdKernel> {
         // One environment at most: a lane adds what its escaped ray sees as one contribution.
-        if !scene.moving.is_empty() || !scene.static_shapes.is_empty() || scene.environment_lights.len() > 1 || scene.settings.ray_epsilon > 0.0 {
+        if scene.environment_lights.len() > 1 {
             return None;
         }
         // Large scenes trace single rays; there scalar BSDFs gained nothing in the render loop
@@ -460,7 +505,9 @@ impl SimdKernel {
         }
         // Only the packet tree needs the corners apart (single rays use the scene's BVH).
         let verts = || tris.iter().map(|t| t.p).collect::<Vec<_>>();
-        let tracer = if single_rays {
+        let tracer = if !scene.moving.is_empty() || scene.settings.ray_epsilon > 0.0 {
+            Tracer::Scene { first: first_triangles(scene) }
+        } else if single_rays {
             single_tracer(scene)
         } else if spheres.is_empty() {
             Tracer::Packets { bvh: PacketBvh::build(&verts()), ties: crossing.then(|| first_triangles(scene)), spheres: None }
@@ -493,7 +540,9 @@ impl SimdKernel {
     /// Traces one ray at a time through the scene's BVH whatever the scene's size (for
     /// comparisons; `scene` must be the one the kernel was made for).
     pub fn use_single_rays(&mut self, scene: &Scene) {
-        self.tracer = single_tracer(scene);
+        if !matches!(self.tracer, Tracer::Scene { .. }) {
+            self.tracer = single_tracer(scene);
+        }
     }
 
     /// Whether the AVX-512VL build of the kernel runs.
@@ -623,7 +672,7 @@ impl SimdKernel {
         let mut st = Paths::new(sampler);
         let mut rays = Rays8::default();
         let mut shadow = Rays8::default();
-        let mut others: OtherHits = [(0, 0); LANES];
+        let mut others = OtherHits::default();
         let mut next = 0usize;
         let mut active = 0u8;
         // Reused every step: lanes outside this step's mask hold stale values nobody reads.
@@ -640,7 +689,7 @@ impl SimdKernel {
                 }
                 let (x, y, s) = job_xys(next);
                 let (raster, ray) = camera_sample(&cam, &mut st.sampler[l], x, y, s);
-                st.start(l, next, raster);
+                st.start(l, next, raster, ray.time);
                 layers.start(l, next);
                 set_ray(&mut rays, l, ray.o, ray.d, ray.t_max);
                 active |= 1 << l;
@@ -649,7 +698,7 @@ impl SimdKernel {
             if active == 0 {
                 break;
             }
-            let hits = self.tracer.intersect(scene, &rays, active, &mut others);
+            let hits = self.tracer.intersect(scene, &rays, &st.time, active, &mut others);
             // The environment map's grid points of the escaped lanes (those `gather` finds
             // no hit for), all eight at once.
             if let Some(env) = env_map {
@@ -668,7 +717,8 @@ impl SimdKernel {
                     continue;
                 }
                 let d = Vec3::new(rays.d[0][l], rays.d[1][l], rays.d[2][l]);
-                let other = if hits.prim[l] == OTHER { Some(other_hit(scene, &rays, &hits, &others, l)) } else { None };
+                let other =
+                    if hits.prim[l] == OTHER { Some(others.record[l].take().unwrap_or_else(|| other_hit(scene, &rays, &hits, &others, l))) } else { None };
                 if self.gather(scene, settings, &mut st, &draws, l, hits.prim[l], hits.b1[l], hits.b2[l], d, other.as_ref(), &mut v) {
                     go |= 1 << l;
                 } else {
@@ -702,7 +752,7 @@ impl SimdKernel {
                     ends |= 1 << l;
                 }
             }
-            let clear = smask & !self.tracer.occluded(scene, &shadow, smask);
+            let clear = smask & !self.tracer.occluded(scene, &shadow, &st.time, smask);
             if layers.on() {
                 layers.route(&v, &o, active, counted | clear, go & !ends);
             }
@@ -883,7 +933,7 @@ impl SimdKernel {
                     prim: tri.local,
                     bary: Vec2::new(b1, b2),
                     wo: wo_w,
-                    time: 0.0,
+                    time: st.time[l],
                 },
                 Hit::Other(si) => *si,
             };
@@ -1178,7 +1228,7 @@ enum Hit<'a> {
 /// call it.
 #[inline(never)]
 fn other_hit(scene: &Scene, rays: &Rays8, hits: &Hits8, others: &OtherHits, l: usize) -> SurfaceInteraction {
-    let (shape, prim) = others[l];
+    let (shape, prim) = others.prim[l];
     scene.interaction(&crate::accel::PrimHit { t: hits.t[l], shape, prim, b1: hits.b1[l], b2: hits.b2[l] }, &lane_ray(rays, l))
 }
 
@@ -1819,6 +1869,8 @@ struct Paths<S> {
     prev_bsdf: [Option<PrevBsdf>; LANES],
     /// The radiance scale of the refractions so far (for Russian roulette, as `camera_walk`).
     eta_scale: [f32; LANES],
+    /// The camera ray's time (every ray of the path sees the scene then).
+    time: [f32; LANES],
 }
 
 impl<S: Clone> Paths<S> {
@@ -1836,15 +1888,17 @@ impl<S: Clone> Paths<S> {
             prev_n: [[0.0; LANES]; 3],
             prev_bsdf: std::array::from_fn(|_| None),
             eta_scale: [1.0; LANES],
+            time: [0.0; LANES],
         }
     }
 }
 
 impl<S> Paths<S> {
-    /// Lane `l` starts camera sample `job` at `raster`.
-    fn start(&mut self, l: usize, job: usize, raster: Vec2) {
+    /// Lane `l` starts camera sample `job` at `raster`, its camera ray at `time`.
+    fn start(&mut self, l: usize, job: usize, raster: Vec2, time: f32) {
         self.job[l] = job;
         self.raster[l] = raster;
+        self.time[l] = time;
         for k in 0..3 {
             self.l[k][l] = 0.0;
             self.beta[k][l] = 1.0;

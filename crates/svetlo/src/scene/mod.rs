@@ -150,7 +150,7 @@ impl Scene {
 
     /// The closest hit; for a moving shape also the ray carried into its reference pose and
     /// the transform from that pose to the world at the ray's time.
-    fn closest(&self, ray: &Ray) -> Option<(PrimHit, Option<(Ray, Mat4)>)> {
+    pub(crate) fn closest(&self, ray: &Ray) -> Option<(PrimHit, Option<(Ray, Mat4)>)> {
         let (ray, skip) = self.past_epsilon(ray);
         let ray = &ray;
         let mut best = self.accel.intersect(ray).map(|mut h| {
@@ -216,18 +216,21 @@ impl Scene {
             return Some(self.interaction(&hit, ray));
         }
         let (hit, moving) = self.closest(ray)?;
-        match moving {
-            None => Some(self.interaction(&hit, ray)),
-            Some((local, m)) => {
-                let si = self.interaction(&hit, &local);
-                let lin = Mat3::from_mat4(m);
-                let normal = lin.inverse().transpose();
-                let ng = (normal * si.ng).normalize();
-                let ns = (normal * si.shading.n).normalize();
-                let shading = Frame::from_normal_tangent(ns, lin * si.shading.s);
-                Some(SurfaceInteraction { p: m.transform_point3(si.p), ng, shading, wo: -ray.d, ..si })
-            }
-        }
+        Some(self.closest_interaction(&hit, moving.as_ref(), ray))
+    }
+
+    /// The surface record of a hit of [`Self::closest`] along `ray`: on a moving shape, made
+    /// in its reference pose (`moving`: the ray there and the transform back) and carried to
+    /// the world at the ray's time.
+    pub(crate) fn closest_interaction(&self, hit: &PrimHit, moving: Option<&(Ray, Mat4)>, ray: &Ray) -> SurfaceInteraction {
+        let Some((local, m)) = moving else { return self.interaction(hit, ray) };
+        let si = self.interaction(hit, local);
+        let lin = Mat3::from_mat4(*m);
+        let normal = lin.inverse().transpose();
+        let ng = (normal * si.ng).normalize();
+        let ns = (normal * si.shading.n).normalize();
+        let shading = Frame::from_normal_tangent(ns, lin * si.shading.s);
+        SurfaceInteraction { p: m.transform_point3(si.p), ng, shading, wo: -ray.d, ..si }
     }
 
     /// The surface record of a primitive hit by `ray` (in the space the primitive is stored in).
