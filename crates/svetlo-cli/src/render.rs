@@ -7,7 +7,7 @@ use clap::{value_parser, Args, ValueEnum};
 use indicatif::{ProgressBar, ProgressStyle};
 use std::path::{Path, PathBuf};
 use std::process::ExitCode;
-use std::sync::atomic::{AtomicBool, Ordering};
+use std::sync::atomic::Ordering;
 use std::sync::Arc;
 use std::time::{Duration, Instant};
 use svetlo::film::{Film, Filter};
@@ -293,19 +293,14 @@ fn execute_with<T>(job: &Job, progress: &Progress, render: impl FnOnce() -> svet
 }
 
 /// Runs `work` while a second thread draws the progress bar. The bar's thread is told to end
-/// however `work` ends, a panic included: the panic then reaches the caller (and the process
-/// exits with it) instead of leaving the scope waiting for the bar forever.
+/// however `work` ends, a panic included (dropping the sender it waits on wakes it at once):
+/// the panic then reaches the caller (and the process exits with it) instead of leaving the
+/// scope waiting for the bar forever, and a short render does not wait out the bar's period.
 fn with_progress_bar<R>(progress: &Progress, start: Instant, time_limit: Option<Duration>, pixels: u64, work: impl FnOnce() -> R) -> R {
-    struct Finish<'a>(&'a AtomicBool);
-    impl Drop for Finish<'_> {
-        fn drop(&mut self) {
-            self.0.store(true, Ordering::Relaxed);
-        }
-    }
-    let finished = AtomicBool::new(false);
+    let (finish, finished) = std::sync::mpsc::channel::<()>();
     std::thread::scope(|s| {
-        s.spawn(|| drive_bar(progress, &finished, start, time_limit, pixels));
-        let _finish = Finish(&finished);
+        s.spawn(move || drive_bar(progress, finished, start, time_limit, pixels));
+        let _finish = finish;
         work()
     })
 }
@@ -328,13 +323,14 @@ fn execute_strategies(job: &Job, progress: &Progress, dir: &Path, depth: u32) ->
 
 const BAR_UNITS: u64 = 10_000;
 
-fn drive_bar(progress: &Progress, finished: &AtomicBool, start: Instant, time_limit: Option<Duration>, pixels: u64) {
+/// Redraws the bar every 50 ms until `finished`'s sender is dropped.
+fn drive_bar(progress: &Progress, finished: std::sync::mpsc::Receiver<()>, start: Instant, time_limit: Option<Duration>, pixels: u64) {
     let bar = ProgressBar::new(BAR_UNITS);
     let style = ProgressStyle::with_template("{spinner} [{elapsed_precise}] [{wide_bar}] {percent:>3}% {msg} ETA {eta}")
         .map(|s| s.progress_chars("=> "))
         .unwrap_or_else(|_| ProgressStyle::default_bar());
     bar.set_style(style);
-    while !finished.load(Ordering::Relaxed) {
+    loop {
         let elapsed = start.elapsed();
         // The render ends at whichever comes first: all samples, or the time budget.
         let mut frac = progress.fraction();
@@ -345,7 +341,10 @@ fn drive_bar(progress: &Progress, finished: &AtomicBool, start: Instant, time_li
         let done = progress.done.load(Ordering::Relaxed);
         let rate = done as f64 / elapsed.as_secs_f64().max(1e-9);
         bar.set_message(format!("{:.1} spp, {}samples/s", done as f64 / pixels.max(1) as f64, si(rate)));
-        std::thread::sleep(Duration::from_millis(50));
+        // Only a timeout goes on: the sender is dropped (never used) when the render ends.
+        if !matches!(finished.recv_timeout(Duration::from_millis(50)), Err(std::sync::mpsc::RecvTimeoutError::Timeout)) {
+            break;
+        }
     }
     bar.finish_and_clear();
 }
