@@ -9,15 +9,16 @@
 //! code; an AVX-512VL build of the same code has 32 registers where the CPU has them).
 //!
 //! Scope: scenes of triangle meshes, analytic spheres and SDF grids, with any material svetlo
-//! reads, static or with moving shapes. Where shapes move (motion blur) or the scene skips a
-//! ray epsilon, every lane's ray goes one by one through the scene's own queries at its path's
-//! time (`Tracer::Scene`: the scalar tracer's hits, so its image bit for bit, in 0.65-0.75 of
-//! its CPU time on scenes/motion-blur.xml). A hit on a shape that is not a mesh comes as the
-//! scene's own surface record (`Scene::interaction`, as the scalar tracer's `Scene::intersect`
-//! makes it: `other_hit`), and is shaded from it as a triangle's hit is. (Two-sided) Lambertian materials of
-//! constant or textured reflectance (any texture: bitmaps, procedural, mesh attributes;
-//! evaluated per lane where the path hits) are shaded as eight-lane arithmetic, on any
-//! shape; every other one (conductors, dielectrics, plastics, the classic models,
+//! reads, static or with moving shapes. Where shapes move (motion blur), the packets hold the
+//! static shapes and the moving ones are tried after them lane by lane at each path's time,
+//! as `Scene::closest` tries them after its BVH (scenes/motion-blur.xml: the scalar tracer's
+//! image bit for bit in 0.56 of its CPU time); with a ray epsilon every lane's ray goes one by
+//! one through the scene's own queries (`Tracer::Scene`). A hit on a shape that is not a mesh
+//! comes as the scene's own surface record (`Scene::interaction`, as the scalar tracer's
+//! `Scene::intersect` makes it: `other_hit`), and is shaded from it as a triangle's hit is.
+//! (Two-sided) Lambertian materials of constant or textured reflectance (any texture:
+//! bitmaps, procedural, mesh attributes; evaluated per lane where the path hits) are shaded
+//! as eight-lane arithmetic, on any shape; every other one (conductors, dielectrics, plastics, the classic models,
 //! principled, blends, masks, normal and bump maps) lane by lane through its scalar `Bsdf`
 //! (`scalar_light_sample` in `gather`, `scalar_scatter` once every lane's sphere-light
 //! sample is in: the same calls and random numbers as `path.rs`), its results selected into
@@ -220,8 +221,8 @@ enum Tracer {
     /// ([`NOT_MESH`] for a shape of no triangles of the kernel's).
     Single { first: Vec<u32> },
     /// One by one through the scene's own queries (`Scene::closest`, `occluded_ray`), each
-    /// lane's ray at its path's time: scenes with moving shapes (met in their pose at that
-    /// time, their hits as the scene's records) or a ray epsilon. `first` as in `Single`.
+    /// lane's ray at its path's time: scenes with a ray epsilon, and scenes with moving shapes
+    /// that would trace single rays. `first` as in `Single`.
     Scene { first: Vec<u32> },
 }
 
@@ -248,7 +249,27 @@ impl Default for OtherHits {
 impl Tracer {
     /// The lanes' closest hits (lane `l`'s ray at time `time[l]`); a hit on a shape that is
     /// not a mesh has `prim` [`OTHER`] and its shape and primitive (or record) in `others`.
+    /// Packets meet the static shapes; moving ones (in scenes that have them) are tried after
+    /// them lane by lane, as `Scene::closest` tries them after the scene's BVH.
     fn intersect(&self, scene: &Scene, rays: &Rays8, time: &[f32; LANES], active: u8, others: &mut OtherHits) -> Hits8 {
+        if let Tracer::Scene { first } = self {
+            return scene_hits(scene, rays, time, active, first, others);
+        }
+        let mut h = self.static_hits(scene, rays, active, others);
+        if !scene.moving.is_empty() {
+            for l in (0..LANES).filter(|l| active & (1 << l) != 0) {
+                let ray = timed_ray(rays, time, l);
+                if let Some((hit, moving)) = scene.closest_moving(&ray, h.t[l]) {
+                    (h.t[l], h.prim[l], h.b1[l], h.b2[l]) = (hit.t, OTHER, hit.b1, hit.b2);
+                    others.record[l] = Some(scene.closest_interaction(&hit, Some(&moving), &ray));
+                }
+            }
+        }
+        h
+    }
+
+    /// [`Self::intersect`] on the static shapes (every tracer but `Scene`).
+    fn static_hits(&self, scene: &Scene, rays: &Rays8, active: u8, others: &mut OtherHits) -> Hits8 {
         // The lanes to trace through the scene's BVH: a packet's tied ones, or all.
         let (mut h, lanes, first) = match self {
             Tracer::Packets { bvh, ties: None, .. } => return bvh.intersect(rays, active),
@@ -267,8 +288,9 @@ impl Tracer {
                 }
                 (h, tied | unsure, first)
             }
-            Tracer::Single { first } => (Hits8 { t: rays.t_max, prim: [u32::MAX; LANES], b1: [0.0; LANES], b2: [0.0; LANES] }, active, first),
-            Tracer::Scene { first } => return scene_hits(scene, rays, time, active, first, others),
+            Tracer::Single { first } | Tracer::Scene { first } => {
+                (Hits8 { t: rays.t_max, prim: [u32::MAX; LANES], b1: [0.0; LANES], b2: [0.0; LANES] }, active, first)
+            }
         };
         if lanes == 0 {
             return h;
@@ -279,13 +301,17 @@ impl Tracer {
             h.t[l] = hit.map_or(rays.t_max[l], |hit| hit.t);
             h.prim[l] = match hit {
                 None => u32::MAX,
-                Some(hit) => match first[hit.shape as usize] {
-                    NOT_MESH => {
-                        others.prim[l] = (hit.shape, hit.prim);
-                        OTHER
+                Some(hit) => {
+                    // The BVH's shape ids index the static shapes where some move.
+                    let shape = scene.static_shapes.get(hit.shape as usize).copied().unwrap_or(hit.shape);
+                    match first[shape as usize] {
+                        NOT_MESH => {
+                            others.prim[l] = (shape, hit.prim);
+                            OTHER
+                        }
+                        f => f + hit.prim,
                     }
-                    f => f + hit.prim,
-                },
+                }
             };
             h.b1[l] = hit.map_or(0.0, |hit| hit.b1);
             h.b2[l] = hit.map_or(0.0, |hit| hit.b2);
@@ -293,8 +319,24 @@ impl Tracer {
         h
     }
 
-    /// Mask of the active lanes whose ray is blocked (lane `l`'s at time `time[l]`).
+    /// Mask of the active lanes whose ray is blocked (lane `l`'s at time `time[l]`): by a
+    /// static shape, else (in scenes that have them) by a moving one, as `Scene::occluded_ray`.
     fn occluded(&self, scene: &Scene, rays: &Rays8, time: &[f32; LANES], active: u8) -> u8 {
+        let blocked = self.occluded_static(scene, rays, time, active);
+        if scene.moving.is_empty() || matches!(self, Tracer::Scene { .. }) {
+            return blocked;
+        }
+        (0..LANES).filter(|&l| (active & !blocked) & (1 << l) != 0 && rays.t_max[l] > 0.0).fold(blocked, |m, l| {
+            if scene.occluded_moving(&timed_ray(rays, time, l)) {
+                m | 1 << l
+            } else {
+                m
+            }
+        })
+    }
+
+    /// [`Self::occluded`] by the static shapes (by every shape with `Scene`).
+    fn occluded_static(&self, scene: &Scene, rays: &Rays8, time: &[f32; LANES], active: u8) -> u8 {
         match self {
             Tracer::Packets { bvh, spheres: None, .. } => bvh.occluded(rays, active),
             Tracer::Packets { bvh, spheres: Some(sp), .. } => {
@@ -332,17 +374,27 @@ fn scene_hits(scene: &Scene, rays: &Rays8, time: &[f32; LANES], active: u8, firs
     h
 }
 
+/// The scene's shapes in the order the kernel keeps their triangles: the static ones, then
+/// the moving ones (so that the packet tree holds the static triangles, a prefix).
+fn kernel_order(scene: &Scene) -> impl Iterator<Item = usize> + '_ {
+    let mut moves = vec![false; scene.shapes.len()];
+    for mv in &scene.moving {
+        if let Some(m) = moves.get_mut(mv.shape as usize) {
+            *m = true;
+        }
+    }
+    let (fixed, moving): (Vec<usize>, Vec<usize>) = (0..scene.shapes.len()).partition(|&i| !moves[i]);
+    fixed.into_iter().chain(moving)
+}
+
 /// The kernel's index of each shape's first triangle.
 fn first_triangles(scene: &Scene) -> Vec<u32> {
-    let mut first = Vec::with_capacity(scene.shapes.len());
+    let mut first = vec![NOT_MESH; scene.shapes.len()];
     let mut n = 0u32;
-    for s in &scene.shapes {
-        match &*s.geometry {
-            Geometry::Mesh(m) => {
-                first.push(n);
-                n += m.triangle_count() as u32;
-            }
-            Geometry::Sphere(_) | Geometry::SdfGrid(_) => first.push(NOT_MESH),
+    for si in kernel_order(scene) {
+        if let Geometry::Mesh(m) = &*scene.shapes[si].geometry {
+            first[si] = n;
+            n += m.triangle_count() as u32;
         }
     }
     first
@@ -456,8 +508,14 @@ impl SimdKernel {
         let crossing = scene.materials.iter().any(Material::may_cross);
         // The packet BVH holds triangles only: a few spheres are tested on all lanes beside it
         // (`PacketSpheres`), other shapes (SDF grids) are met through the scene's BVH.
-        let spheres: Vec<(crate::geometry::Sphere, u32)> =
-            scene.shapes.iter().enumerate().filter_map(|(i, s)| if let Geometry::Sphere(sp) = &*s.geometry { Some((*sp, i as u32)) } else { None }).collect();
+        // (Moving spheres are met with the other moving shapes, after the packets.)
+        let spheres: Vec<(crate::geometry::Sphere, u32)> = scene
+            .shapes
+            .iter()
+            .enumerate()
+            .filter(|(i, _)| !scene.moving.iter().any(|mv| mv.shape as usize == *i))
+            .filter_map(|(i, s)| if let Geometry::Sphere(sp) = &*s.geometry { Some((*sp, i as u32)) } else { None })
+            .collect();
         let grids = scene.shapes.iter().any(|s| matches!(&*s.geometry, Geometry::SdfGrid(_)));
         let single_rays = large || grids || spheres.len() > PACKET_MAX_SPHERES;
         let mut shapes = Vec::with_capacity(scene.shapes.len());
@@ -493,7 +551,13 @@ impl SimdKernel {
         // compaction for them, in the render call.)
         let mut tris = Vec::with_capacity(triangles);
         // Plain loops: `extend` over a `flat_map` took 70 more instructions a triangle.
-        for (si, s) in scene.shapes.iter().enumerate() {
+        // Static shapes' first: the packet tree holds those (`kernel_order`).
+        let mut static_triangles = None;
+        for si in kernel_order(scene) {
+            let s = &scene.shapes[si];
+            if static_triangles.is_none() && scene.moving.iter().any(|mv| mv.shape as usize == si) {
+                static_triangles = Some(tris.len());
+            }
             let Geometry::Mesh(m) = &*s.geometry else { continue };
             for t in 0..m.triangle_count() {
                 let shading = match s.flat.get(t).copied().flatten() {
@@ -504,8 +568,8 @@ impl SimdKernel {
             }
         }
         // Only the packet tree needs the corners apart (single rays use the scene's BVH).
-        let verts = || tris.iter().map(|t| t.p).collect::<Vec<_>>();
-        let tracer = if !scene.moving.is_empty() || scene.settings.ray_epsilon > 0.0 {
+        let verts = || tris[..static_triangles.unwrap_or(tris.len())].iter().map(|t| t.p).collect::<Vec<_>>();
+        let tracer = if scene.settings.ray_epsilon > 0.0 || (single_rays && !scene.moving.is_empty()) {
             Tracer::Scene { first: first_triangles(scene) }
         } else if single_rays {
             single_tracer(scene)
@@ -540,9 +604,8 @@ impl SimdKernel {
     /// Traces one ray at a time through the scene's BVH whatever the scene's size (for
     /// comparisons; `scene` must be the one the kernel was made for).
     pub fn use_single_rays(&mut self, scene: &Scene) {
-        if !matches!(self.tracer, Tracer::Scene { .. }) {
-            self.tracer = single_tracer(scene);
-        }
+        self.tracer =
+            if scene.moving.is_empty() && scene.settings.ray_epsilon <= 0.0 { single_tracer(scene) } else { Tracer::Scene { first: first_triangles(scene) } };
     }
 
     /// Whether the AVX-512VL build of the kernel runs.

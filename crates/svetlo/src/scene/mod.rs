@@ -162,18 +162,9 @@ impl Scene {
         if self.moving.is_empty() && skip == 0.0 {
             return best;
         }
-        let mut t_max = best.as_ref().map_or(ray.t_max, |(h, _)| h.t);
-        let inv_d = ray.d.recip();
-        for mv in &self.moving {
-            if mv.bounds.intersect(ray.o, inv_d, t_max).is_none() {
-                continue;
-            }
-            let (local, m) = Self::to_reference(mv, ray, t_max);
-            if let Some(mut h) = mv.accel.intersect(&local) {
-                t_max = h.t;
-                h.shape = mv.shape;
-                best = Some((h, Some((local, m))));
-            }
+        let t_max = best.as_ref().map_or(ray.t_max, |(h, _)| h.t);
+        if let Some((h, mv)) = self.closest_moving(ray, t_max) {
+            best = Some((h, Some(mv)));
         }
         if skip > 0.0 {
             // t from the caller's origin; a moving shape's local ray starts there too.
@@ -183,6 +174,33 @@ impl Scene {
             });
         }
         best
+    }
+
+    /// The nearest hit on a moving shape (in its pose at the ray's time) closer than `t_max`,
+    /// with the ray carried into the shape's reference pose and the transform back: the part
+    /// of [`Self::closest`] after the static shapes' hit (`t_max`: its distance, or the ray's).
+    pub(crate) fn closest_moving(&self, ray: &Ray, mut t_max: f32) -> Option<(PrimHit, (Ray, Mat4))> {
+        let mut best = None;
+        let inv_d = ray.d.recip();
+        for mv in &self.moving {
+            if mv.bounds.intersect(ray.o, inv_d, t_max).is_none() {
+                continue;
+            }
+            let (local, m) = Self::to_reference(mv, ray, t_max);
+            if let Some(mut h) = mv.accel.intersect(&local) {
+                t_max = h.t;
+                h.shape = mv.shape;
+                best = Some((h, (local, m)));
+            }
+        }
+        best
+    }
+
+    /// Whether a moving shape (in its pose at the ray's time) blocks `ray`: the part of
+    /// [`Self::occluded_ray`] after the static shapes.
+    pub(crate) fn occluded_moving(&self, ray: &Ray) -> bool {
+        let inv_d = ray.d.recip();
+        self.moving.iter().any(|mv| mv.bounds.intersect(ray.o, inv_d, ray.t_max).is_some() && mv.accel.occluded(&Self::to_reference(mv, ray, ray.t_max).0))
     }
 
     /// `ray` with its first `settings.ray_epsilon` cut off, and that length (t of a hit on
@@ -304,11 +322,7 @@ impl Scene {
         if ray.t_max <= 0.0 {
             return false;
         }
-        if self.accel.occluded(ray) {
-            return true;
-        }
-        let inv_d = ray.d.recip();
-        self.moving.iter().any(|mv| mv.bounds.intersect(ray.o, inv_d, ray.t_max).is_some() && mv.accel.occluded(&Self::to_reference(mv, ray, ray.t_max).0))
+        self.accel.occluded(ray) || self.occluded_moving(ray)
     }
 
     /// Is the straight segment between two points blocked at time 0 (see [`Self::occluded_at`])?
