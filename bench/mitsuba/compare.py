@@ -11,7 +11,7 @@ prints the median ratio svetlo / Mitsuba of
 and each renderer's relMSE at equal spp against the scene's reference. CPU time of one
 thread is what stays comparable on a busy machine; quote the ratios, not the seconds.
 
-    python3 bench/mitsuba/compare.py [--repeats 3] [--only NAME,...] [--variant scalar_rgb] [--spp N --res N] [--threads N]
+    python3 bench/mitsuba/compare.py [--repeats 3] [--only NAME,...] [--variant scalar_rgb] [--spp N --res N] [--threads N] [--mitsuba-avx2]
 
 `--threads N` gives both N render threads on cores 0..N-1 (CPU ratios then compare the work,
 the wall ratio the scaling). The scenes: Mitsuba's cbox-rgb (path; light against ptracer),
@@ -167,7 +167,8 @@ def mitsuba(variant, sc, out):
     code = (
         "import drjit as dr, mitsuba as mi, time;"
         f"mi.set_variant('{variant}');"
-        f"dr.set_thread_count({max(THREADS, 2)});"
+        + (AVX2_CODE if MITSUBA_AVX2 else "")
+        +         f"dr.set_thread_count({max(THREADS, 2)});"
         f"s = mi.load_file(r'{scene}', {', '.join(kw)});"
         f"integ = {integ};"
         "t0, w0 = time.process_time(), time.perf_counter();"
@@ -183,8 +184,22 @@ def mitsuba(variant, sc, out):
     return line_value(text, "cpu"), whole, line_value(text, "time")
 
 
+# `--mitsuba-avx2`: Dr.Jit's LLVM backend told to compile eight-wide AVX2 kernels (no AVX-512),
+# as it does on a CPU without AVX-512, through its C entry point `jit_llvm_set_target` (not
+# part of its Python API: a diagnostic, to tell what AVX-512 gives Mitsuba on this CPU).
+AVX2_CODE = (
+    "import ctypes, os;"
+    "_core = ctypes.CDLL(os.path.join(os.path.dirname(dr.__file__), 'libdrjit-core.so'));"
+    "_set = _core._Z19jit_llvm_set_targetPKcS0_j; _set.argtypes = [ctypes.c_char_p, ctypes.c_char_p, ctypes.c_uint32];"
+    "_set(b'znver3', b'+avx,+avx2,+fma,+f16c,+sse4.2,+popcnt,+bmi,+bmi2,+lzcnt,+movbe,-avx512f,-avx512vl,-avx512dq,-avx512bw', 8);"
+    "_width = _core._Z21jit_llvm_vector_widthv; _width.restype = ctypes.c_uint32;"
+    "assert _width() == 8, 'Dr.Jit did not take the target';"
+)
+MITSUBA_AVX2 = False
+
+
 def main():
-    global THREADS
+    global THREADS, MITSUBA_AVX2
     ap = argparse.ArgumentParser()
     ap.add_argument("--repeats", type=int, default=3)
     ap.add_argument("--only", default="", help="comma-separated scene names (prefixes)")
@@ -193,14 +208,17 @@ def main():
     ap.add_argument("--res", type=int, default=0, help="override every scene's resolution (quick runs)")
     ap.add_argument("--threads", type=int, default=1, help="render threads of each renderer (cores 0..N-1)")
     ap.add_argument("--svetlo", default=os.path.join(ROOT, "target", "release", "svetlo"))
+    ap.add_argument("--mitsuba-avx2", action="store_true", help="Mitsuba's LLVM kernels as on an AVX2-only CPU (eight-wide, no AVX-512; a diagnostic)")
     a = ap.parse_args()
     THREADS = max(1, a.threads)
+    MITSUBA_AVX2 = a.mitsuba_avx2
     scenes = [s for s in SCENES if not a.only or any(s[0].startswith(o) for o in a.only.split(","))]
     scenes = [s[:5] + (a.spp or s[5], a.res or s[6], s[7], s[8]) for s in scenes]
     if any(s[0] == "mesh 1M" for s in scenes):
         write_mesh1m()
     tmp = tempfile.mkdtemp(prefix="svetlo-bench-")
-    print(f"Mitsuba {a.variant}, {THREADS} thread(s) each, {a.repeats} alternating runs, medians")
+    lanes = ", forced to AVX2 (eight lanes)" if MITSUBA_AVX2 else ""
+    print(f"Mitsuba {a.variant}{lanes}, {THREADS} thread(s) each, {a.repeats} alternating runs, medians")
     print(f"{'scene':<22}{'spp':>5}{'render CPU ratio':>18}{'render wall ratio':>19}{'process CPU ratio':>19}{'relMSE svetlo':>15}{'relMSE Mitsuba':>16}")
     for sc in scenes:
         if not os.path.exists(sc[1]):
