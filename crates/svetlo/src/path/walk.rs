@@ -175,10 +175,9 @@ impl Walk {
             }
             return false;
         };
-        let mut v = Vertex::surface(scene, &si, self.beta);
         let prev = path.last().expect("a walk starts from a vertex");
-        v.pdf_fwd = prev.convert_density(self.pdf_fwd, &v);
-        path.push(v);
+        let pdf_fwd = prev.convert_density_to_point(self.pdf_fwd, si.p, si.ng);
+        Vertex::push_surface(path, scene, &si, self.beta, pdf_fwd);
         if path.len() >= self.max_vertices {
             return false;
         }
