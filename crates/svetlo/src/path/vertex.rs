@@ -9,6 +9,7 @@ use crate::math::{warp, Frame, INV_PI, PI};
 use crate::scene::Scene;
 use crate::spectrum::Rgb;
 use glam::{Vec2, Vec3};
+use std::mem::MaybeUninit;
 
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum VertexKind {
@@ -289,12 +290,7 @@ impl Vertex {
     /// with its BSDF is a few hundred bytes; the walk pushes one per bounce).
     #[inline]
     pub(crate) fn push_surface(path: &mut Vec<Vertex>, scene: &Scene, si: &SurfaceInteraction, beta: Rgb, pdf_fwd: f32) {
-        path.reserve(1);
-        let len = path.len();
-        Self::write_surface(&mut path.spare_capacity_mut()[0], scene, si, beta, pdf_fwd);
-        // SAFETY: `write_surface` initialised the element at `len`, within the capacity
-        // reserved above.
-        unsafe { path.set_len(len + 1) };
+        push_written(path, |dst| Self::write_surface(dst, scene, si, beta, pdf_fwd));
     }
 
     /// [`Self::surface`] into `dst`. Not inlined: a destination that nothing else can
@@ -303,7 +299,7 @@ impl Vertex {
     /// returned by `Scene::bsdf` it was copied in whole, though only its model's colour and
     /// tags are set.
     #[inline(never)]
-    fn write_surface(dst: &mut std::mem::MaybeUninit<Vertex>, scene: &Scene, si: &SurfaceInteraction, beta: Rgb, pdf_fwd: f32) {
+    fn write_surface<'a>(dst: &'a mut MaybeUninit<Vertex>, scene: &Scene, si: &SurfaceInteraction, beta: Rgb, pdf_fwd: f32) -> &'a mut Vertex {
         let light = scene.area_light(si).map(|(i, _)| i);
         let vertex = |bsdf: Bsdf| {
             let lobes = bsdf.flags();
@@ -329,7 +325,19 @@ impl Vertex {
                 dst.write(vertex(Bsdf::new(BsdfModel::Diffuse(Diffuse { reflectance }))))
             }
             _ => dst.write(vertex(scene.bsdf(si))),
-        };
+        }
+    }
+
+    /// `path.push(Vertex::light_point(..))`, written where it lands (as
+    /// [`Self::push_surface`]; a light subpath starts with one).
+    #[inline]
+    pub(crate) fn push_light_point(path: &mut Vec<Vertex>, light: u32, p: Vec3, n: Vec3, le: Rgb, beta: Rgb, pdf_fwd: f32) {
+        push_written(path, |dst| Self::write_light_point(dst, light, p, n, le, beta, pdf_fwd));
+    }
+
+    #[inline(never)]
+    fn write_light_point(dst: &mut MaybeUninit<Vertex>, light: u32, p: Vec3, n: Vec3, le: Rgb, beta: Rgb, pdf_fwd: f32) -> &mut Vertex {
+        dst.write(Self::light_point(light, p, n, le, beta, pdf_fwd))
     }
 
     #[inline]
@@ -610,6 +618,21 @@ impl Vertex {
         let (pdf_pos, _) = scene.lights[li as usize].pdf_le(&crate::geometry::Ray::new(self.p, w), self.ng, &scene.bounds);
         scene.light_pmf(li) * pdf_pos
     }
+}
+
+/// `path.push(v)` for the vertex `write` puts in the path's next slot (and hands back,
+/// which only writing it can do), so that it is built there rather than copied there.
+#[inline]
+fn push_written(path: &mut Vec<Vertex>, write: impl for<'a> FnOnce(&'a mut MaybeUninit<Vertex>) -> &'a mut Vertex) {
+    path.reserve(1);
+    let len = path.len();
+    let slot = &mut path.spare_capacity_mut()[0];
+    let at = slot.as_ptr();
+    let written: *const Vertex = write(slot);
+    debug_assert!(std::ptr::eq(written, at));
+    // SAFETY: `write` returned the element at `len` as a `&mut Vertex`, so it is
+    // initialised, and `reserve` made room for it.
+    unsafe { path.set_len(len + 1) };
 }
 
 /// Solid-angle density with which light selection and environment sampling produce light
