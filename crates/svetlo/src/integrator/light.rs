@@ -173,7 +173,10 @@ impl Estimator {
                             rays[l] = *w.walk.ray();
                             active |= 1 << l;
                         }
-                        _ => self.finish_lane(scene, walks[l].as_ref(), &mut paths[l], sampler, &mut scratch, reorder.slot(seq[l])),
+                        _ => {
+                            let conns = Conns { reorder: &mut reorder, pending: &mut pending, packets, out: &mut out };
+                            self.finish_lane(scene, walks[l].as_ref(), &mut paths[l], sampler, &mut scratch, seq[l], conns);
+                        }
                     }
                 }
             }
@@ -192,14 +195,18 @@ impl Estimator {
                     rays[l] = *w.walk.ray();
                 } else {
                     active &= !(1 << l);
-                    self.finish_lane(scene, walks[l].as_ref(), &mut paths[l], &mut samplers[l], &mut scratch, reorder.slot(seq[l]));
+                    let conns = Conns { reorder: &mut reorder, pending: &mut pending, packets, out: &mut out };
+                    self.finish_lane(scene, walks[l].as_ref(), &mut paths[l], &mut samplers[l], &mut scratch, seq[l], conns);
                 }
             }
         }
         pending.flush(packets, &mut out);
     }
 
-    /// A lane's path after its walk: its camera connections into `slot` (splat and shadow ray).
+    /// A lane's path after its walk (sample `i`): its camera connections (splat and shadow
+    /// ray) to the shadow packets if every earlier sample's are there already, else into
+    /// the sample's slot to wait.
+    #[allow(clippy::too_many_arguments)]
     fn finish_lane<S: Sampler>(
         &self,
         scene: &Scene,
@@ -207,22 +214,46 @@ impl Estimator {
         path: &mut [Vertex],
         sampler: &mut S,
         scratch: &mut BatchScratch,
-        slot: &mut Slot,
+        i: usize,
+        c: Conns,
     ) {
         if let Some(w) = walk {
             w.finish(path);
         }
+        if c.reorder.is_next(i) {
+            self.connections(scene, path, sampler, scratch, |l, raster, ray| c.pending.push(c.packets, l, raster, ray, c.out));
+            c.reorder.slot(i).done = true;
+            // The later samples that finished before this one follow, so that the next
+            // to finish may be the oldest too.
+            c.reorder.release(c.packets, c.pending, c.out);
+        } else {
+            let slot = c.reorder.slot(i);
+            self.connections(scene, path, sampler, scratch, |l, raster, ray| slot.conns.push((l, raster, ray)));
+            slot.done = true;
+        }
+    }
+
+    /// The camera connections of a finished path, in order, to `emit` (a clear ray where
+    /// there is none to test).
+    fn connections<S: Sampler>(&self, scene: &Scene, path: &[Vertex], sampler: &mut S, scratch: &mut BatchScratch, mut emit: impl FnMut(Rgb, Vec2, Ray)) {
         if let Some(batch) = &self.batch {
-            batch.connections(scene, &self.cfg, path, sampler, scratch, |l, raster, ray| slot.conns.push((l, raster, ray.unwrap_or(ShadowedSplats::CLEAR))));
+            batch.connections(scene, &self.cfg, path, sampler, scratch, |l, raster, ray| emit(l, raster, ray.unwrap_or(ShadowedSplats::CLEAR)));
         } else {
             for s in 1..=path.len() {
                 if let Some(c) = camera_connection(scene, &self.cfg, path, s, sampler) {
-                    slot.conns.push((c.l, c.raster, c.shadow.unwrap_or(ShadowedSplats::CLEAR)));
+                    emit(c.l, c.raster, c.shadow.unwrap_or(ShadowedSplats::CLEAR));
                 }
             }
         }
-        slot.done = true;
     }
+}
+
+/// Where a lockstep tile's connections go: the shadow packets, in sample order.
+struct Conns<'a, 'b> {
+    reorder: &'a mut Reorder,
+    pending: &'a mut ShadowedSplats,
+    packets: &'a ShadowPackets,
+    out: &'a mut SampleOut<'b>,
 }
 
 /// The camera connections of one pixel sample: (contribution, raster, shadow ray).
@@ -247,6 +278,11 @@ impl Reorder {
         debug_assert_eq!(i, self.base + self.slots.len());
         self.slots.push_back(self.spare.pop().unwrap_or_default());
         i
+    }
+
+    /// Whether sample `i` is the oldest unreleased one: its connections need not wait.
+    fn is_next(&self, i: usize) -> bool {
+        i == self.base
     }
 
     fn slot(&mut self, i: usize) -> &mut Slot {

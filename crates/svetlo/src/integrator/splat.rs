@@ -9,7 +9,7 @@
 
 use super::passes::{self, next_pass_spp, pass_plan};
 use super::{Progress, RenderSettings};
-use crate::accel::packet::LANES;
+use crate::accel::packet::{Rays8, LANES};
 use crate::error::{Error, Result};
 use crate::film::{Film, FilmTile, Filter};
 use crate::geometry::Ray;
@@ -79,7 +79,11 @@ impl SampleOut<'_> {
 /// of testing each ray alone.
 pub(crate) struct ShadowedSplats {
     splats: [(Rgb, Vec2); LANES],
-    rays: [Ray; LANES],
+    /// The waiting rays in the packet's lanes, stored there as they come (not copied in at
+    /// the flush); `active`: the lanes that have a ray to test. Lanes out of `active` keep
+    /// older rays, which the packet walk does not look at.
+    rays: Rays8,
+    active: u8,
     n: usize,
 }
 
@@ -88,14 +92,23 @@ impl ShadowedSplats {
     pub const CLEAR: Ray = Ray { o: glam::Vec3::ZERO, d: glam::Vec3::Z, t_max: 0.0, time: 0.0 };
 
     pub fn new() -> ShadowedSplats {
-        ShadowedSplats { splats: [(Rgb::BLACK, Vec2::ZERO); LANES], rays: [Self::CLEAR; LANES], n: 0 }
+        ShadowedSplats { splats: [(Rgb::BLACK, Vec2::ZERO); LANES], rays: Rays8::default(), active: 0, n: 0 }
     }
 
     /// Splat `l` at `raster` unless `shadow` is blocked.
     #[inline]
     pub fn push(&mut self, packets: &ShadowPackets, l: Rgb, raster: Vec2, shadow: Ray, out: &mut SampleOut) {
-        self.splats[self.n] = (l, raster);
-        self.rays[self.n] = shadow;
+        let i = self.n;
+        self.splats[i] = (l, raster);
+        // (`ShadowPackets::occluded`'s lanes: a ray of no length is clear.)
+        if shadow.t_max > 0.0 || shadow.t_max.is_nan() {
+            for k in 0..3 {
+                self.rays.o[k][i] = shadow.o[k];
+                self.rays.d[k][i] = shadow.d[k];
+            }
+            self.rays.t_max[i] = shadow.t_max;
+            self.active |= 1 << i;
+        }
         self.n += 1;
         if self.n == LANES {
             self.flush(packets, out);
@@ -104,13 +117,14 @@ impl ShadowedSplats {
 
     /// Test the waiting rays and splat the clear ones (at the end of a tile).
     pub fn flush(&mut self, packets: &ShadowPackets, out: &mut SampleOut) {
-        let blocked = packets.occluded(&self.rays[..self.n]);
+        let blocked = packets.occluded_lanes(&self.rays, self.active);
         for (i, &(l, r)) in self.splats[..self.n].iter().enumerate() {
             if blocked & (1 << i) == 0 {
                 out.splat(r, l);
             }
         }
         self.n = 0;
+        self.active = 0;
     }
 }
 

@@ -11,13 +11,16 @@ pub fn square_to_uniform_disk_concentric(u: Vec2) -> Vec2 {
         return Vec2::ZERO;
     }
     // Shirley-Chiu: the angle is a quarter of pi times the ratio of the coordinates, so only
-    // angles in [-pi/4, pi/4] need sine and cosine (the other sector swaps them).
-    if o.x.abs() > o.y.abs() {
-        let (s, c) = sin_cos_quarter((PI / 4.0) * (o.y / o.x));
-        Vec2::new(o.x * c, o.x * s)
+    // angles in [-pi/4, pi/4] need sine and cosine (the other sector swaps them). The sector
+    // picks operands rather than a branch: it is a coin flip, and mispredicted half the time.
+    let wide = o.x.abs() > o.y.abs();
+    let (num, r) = if wide { (o.y, o.x) } else { (o.x, o.y) };
+    let (s, c) = sin_cos_quarter((PI / 4.0) * (num / r));
+    let (a, b) = (r * c, r * s);
+    if wide {
+        Vec2::new(a, b)
     } else {
-        let (s, c) = sin_cos_quarter((PI / 4.0) * (o.x / o.y));
-        Vec2::new(o.y * s, o.y * c)
+        Vec2::new(b, a)
     }
 }
 
@@ -212,6 +215,35 @@ mod tests {
         assert!((integrate_sphere(square_to_uniform_hemisphere_pdf) - 1.0).abs() < 1e-2);
         assert!((integrate_sphere(square_to_cosine_hemisphere_pdf) - 1.0).abs() < 1e-3);
         assert!((integrate_sphere(|w| square_to_uniform_cone_pdf(w, 0.5)) - 1.0).abs() < 1e-2);
+    }
+
+    /// The concentric map is the two-branch Shirley-Chiu map, bit for bit (the sector
+    /// selects operands instead of branching), on both sectors, their diagonals and axes.
+    #[test]
+    fn concentric_disk_is_the_branching_map() {
+        let branching = |u: Vec2| {
+            let o = 2.0 * u - Vec2::ONE;
+            if o.x == 0.0 && o.y == 0.0 {
+                return Vec2::ZERO;
+            }
+            if o.x.abs() > o.y.abs() {
+                let (s, c) = sin_cos_quarter((PI / 4.0) * (o.y / o.x));
+                Vec2::new(o.x * c, o.x * s)
+            } else {
+                let (s, c) = sin_cos_quarter((PI / 4.0) * (o.x / o.y));
+                Vec2::new(o.y * s, o.y * c)
+            }
+        };
+        let mut rng = crate::sampling::Pcg32::new(5, 17);
+        let mut us: Vec<Vec2> = (0..20_000).map(|_| Vec2::new(rng.next_f32(), rng.next_f32())).collect();
+        let edges = [0.0, 0.25, 0.5, 0.75, 1.0 - f32::EPSILON / 2.0];
+        us.extend(edges.iter().flat_map(|&x| edges.iter().map(move |&y| Vec2::new(x, y))));
+        us.extend((0..1000).map(|i| Vec2::splat(i as f32 / 1000.0)));
+        us.extend((0..1000).map(|i| Vec2::new(i as f32 / 1000.0, 1.0 - i as f32 / 1000.0)));
+        for u in us {
+            let (got, want) = (square_to_uniform_disk_concentric(u), branching(u));
+            assert_eq!(got.to_array().map(f32::to_bits), want.to_array().map(f32::to_bits), "u {u}");
+        }
     }
 
     #[test]

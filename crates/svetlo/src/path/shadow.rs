@@ -87,7 +87,14 @@ impl ShadowPackets {
             r.t_max[i] = ray.t_max;
             active |= 1 << i;
         }
-        self.bvh.occluded(&r, active)
+        self.occluded_lanes(&r, active)
+    }
+
+    /// Mask of the lanes set in `active` whose ray is blocked (the other lanes are not
+    /// read), for callers that fill a packet's lanes themselves.
+    #[inline]
+    pub fn occluded_lanes(&self, r: &Rays8, active: u8) -> u8 {
+        self.bvh.occluded(r, active)
     }
 
     /// Whether [`Self::closest`] answers as `Scene::intersect` does, bit for bit: in scenes

@@ -1,6 +1,7 @@
 //! One vertex of a path, and the densities and throughputs between two vertices.
 
-use crate::bsdf::{Bsdf, BsdfModel, BsdfSample, LobeFlags, TransportMode};
+use crate::bsdf::diffuse::Diffuse;
+use crate::bsdf::{Bsdf, BsdfModel, BsdfSample, LobeFlags, Material, TransportMode};
 use crate::camera::LensConnector;
 use crate::geometry::SurfaceInteraction;
 use crate::light::Light;
@@ -8,6 +9,7 @@ use crate::math::{warp, Frame, INV_PI, PI};
 use crate::scene::Scene;
 use crate::spectrum::Rgb;
 use glam::{Vec2, Vec3};
+use std::mem::MaybeUninit;
 
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum VertexKind {
@@ -283,6 +285,61 @@ impl Vertex {
         }
     }
 
+    /// `path.push(Vertex { pdf_fwd, ..Vertex::surface(scene, si, beta) })`, the vertex
+    /// written where it lands: pushed by value it went through two stack copies (a vertex
+    /// with its BSDF is a few hundred bytes; the walk pushes one per bounce).
+    #[inline]
+    pub(crate) fn push_surface(path: &mut Vec<Vertex>, scene: &Scene, si: &SurfaceInteraction, beta: Rgb, pdf_fwd: f32) {
+        push_written(path, |dst| Self::write_surface(dst, scene, si, beta, pdf_fwd));
+    }
+
+    /// [`Self::surface`] into `dst`. Not inlined: a destination that nothing else can
+    /// reach is what lets the compiler build the vertex in it rather than copy it there.
+    /// A plain diffuse material's BSDF (`Scene::bsdf`'s, the same value) is built here too:
+    /// returned by `Scene::bsdf` it was copied in whole, though only its model's colour and
+    /// tags are set.
+    #[inline(never)]
+    fn write_surface<'a>(dst: &'a mut MaybeUninit<Vertex>, scene: &Scene, si: &SurfaceInteraction, beta: Rgb, pdf_fwd: f32) -> &'a mut Vertex {
+        let light = scene.area_light(si).map(|(i, _)| i);
+        let vertex = |bsdf: Bsdf| {
+            let lobes = bsdf.flags();
+            Vertex {
+                p: si.p,
+                ng: si.ng,
+                shading: si.shading,
+                uv: si.uv,
+                wo: si.wo,
+                bsdf: Some(bsdf),
+                lobes,
+                light,
+                beta,
+                pdf_fwd,
+                time: si.time,
+                shape: si.shape,
+                ..Self::blank(VertexKind::Surface)
+            }
+        };
+        match scene.material(si) {
+            Material::Diffuse { reflectance } if !scene.shapes[si.shape as usize].detail => {
+                let reflectance = reflectance.eval(si.tex_point()).clamp(0.0, 1.0);
+                dst.write(vertex(Bsdf::new(BsdfModel::Diffuse(Diffuse { reflectance }))))
+            }
+            _ => dst.write(vertex(scene.bsdf(si))),
+        }
+    }
+
+    /// `path.push(Vertex::light_point(..))`, written where it lands (as
+    /// [`Self::push_surface`]; a light subpath starts with one).
+    #[inline]
+    pub(crate) fn push_light_point(path: &mut Vec<Vertex>, light: u32, p: Vec3, n: Vec3, le: Rgb, beta: Rgb, pdf_fwd: f32) {
+        push_written(path, |dst| Self::write_light_point(dst, light, p, n, le, beta, pdf_fwd));
+    }
+
+    #[inline(never)]
+    fn write_light_point(dst: &mut MaybeUninit<Vertex>, light: u32, p: Vec3, n: Vec3, le: Rgb, beta: Rgb, pdf_fwd: f32) -> &mut Vertex {
+        dst.write(Self::light_point(light, p, n, le, beta, pdf_fwd))
+    }
+
     #[inline]
     pub fn on_surface(&self) -> bool {
         self.ng != Vec3::ZERO
@@ -361,6 +418,14 @@ impl Vertex {
         Self::convert_density_dir(pdf, next, w, d2)
     }
 
+    /// [`Self::convert_density`] to a finite vertex that is not built yet: at `p`, with
+    /// geometric normal `ng` (zero off surfaces).
+    #[inline]
+    pub(crate) fn convert_density_to_point(&self, pdf: f32, p: Vec3, ng: Vec3) -> f32 {
+        let (w, d2) = self.direction_to_point(p);
+        Self::area_density(pdf, ng, w, d2)
+    }
+
     /// [`Self::convert_density`] with the direction toward `next` and the squared distance
     /// (`direction_to(next)`) already at hand.
     #[inline]
@@ -368,12 +433,19 @@ impl Vertex {
         if next.infinite {
             return pdf;
         }
+        Self::area_density(pdf, next.ng, w, d2)
+    }
+
+    /// A solid-angle density as an area density at a finite point with normal `ng` (zero:
+    /// not on a surface, no cosine), `w` and `d2` the direction and squared distance to it.
+    #[inline]
+    fn area_density(pdf: f32, ng: Vec3, w: Vec3, d2: f32) -> f32 {
         if d2 == 0.0 {
             return 0.0;
         }
         let mut pdf = pdf / d2;
-        if next.on_surface() {
-            pdf *= next.ng.dot(w).abs();
+        if ng != Vec3::ZERO {
+            pdf *= ng.dot(w).abs();
         }
         remap_nan(pdf)
     }
@@ -546,6 +618,21 @@ impl Vertex {
         let (pdf_pos, _) = scene.lights[li as usize].pdf_le(&crate::geometry::Ray::new(self.p, w), self.ng, &scene.bounds);
         scene.light_pmf(li) * pdf_pos
     }
+}
+
+/// `path.push(v)` for the vertex `write` puts in the path's next slot (and hands back,
+/// which only writing it can do), so that it is built there rather than copied there.
+#[inline]
+fn push_written(path: &mut Vec<Vertex>, write: impl for<'a> FnOnce(&'a mut MaybeUninit<Vertex>) -> &'a mut Vertex) {
+    path.reserve(1);
+    let len = path.len();
+    let slot = &mut path.spare_capacity_mut()[0];
+    let at = slot.as_ptr();
+    let written: *const Vertex = write(slot);
+    debug_assert!(std::ptr::eq(written, at));
+    // SAFETY: `write` returned the element at `len` as a `&mut Vertex`, so it is
+    // initialised, and `reserve` made room for it.
+    unsafe { path.set_len(len + 1) };
 }
 
 /// Solid-angle density with which light selection and environment sampling produce light

@@ -94,7 +94,7 @@ pub(crate) fn light_walk<S: Sampler + ?Sized>(scene: &Scene, cfg: &PathConfig, t
         path.push(Vertex::light_infinite(Some(li as u32), es.ray.o, -d, Rgb::splat(1.0 / (pmf * es.pdf_pos)), infinite_light_density(scene, d)));
     } else {
         let n = if matches!(light, crate::light::Light::Area(_)) { es.n } else { Vec3::ZERO };
-        path.push(Vertex::light_point(li as u32, es.ray.o, n, es.le, Rgb::splat(1.0 / (pmf * es.pdf_pos)), pmf * es.pdf_pos));
+        Vertex::push_light_point(path, li as u32, es.ray.o, n, es.le, Rgb::splat(1.0 / (pmf * es.pdf_pos)), pmf * es.pdf_pos);
     }
     if let Some(v) = path.last_mut() {
         v.time = time;
@@ -175,10 +175,9 @@ impl Walk {
             }
             return false;
         };
-        let mut v = Vertex::surface(scene, &si, self.beta);
         let prev = path.last().expect("a walk starts from a vertex");
-        v.pdf_fwd = prev.convert_density(self.pdf_fwd, &v);
-        path.push(v);
+        let pdf_fwd = prev.convert_density_to_point(self.pdf_fwd, si.p, si.ng);
+        Vertex::push_surface(path, scene, &si, self.beta, pdf_fwd);
         if path.len() >= self.max_vertices {
             return false;
         }
