@@ -629,9 +629,11 @@ fn push_written(path: &mut Vec<Vertex>, write: impl for<'a> FnOnce(&'a mut Maybe
     let slot = &mut path.spare_capacity_mut()[0];
     let at = slot.as_ptr();
     let written: *const Vertex = write(slot);
-    debug_assert!(std::ptr::eq(written, at));
-    // SAFETY: `write` returned the element at `len` as a `&mut Vertex`, so it is
-    // initialised, and `reserve` made room for it.
+    // A reference to the slot as a `Vertex` exists only once the slot is written (one
+    // comparison a vertex keeps this sound whatever `write` does).
+    assert!(std::ptr::eq(written, at), "push_written: the write did not return the slot");
+    // SAFETY: `write` returned the element at `len` as a `&mut Vertex` (checked above), so it
+    // is initialised, and `reserve` made room for it.
     unsafe { path.set_len(len + 1) };
 }
 
