@@ -235,7 +235,7 @@ fn bumpy_floor(n: u32, mask: bool) -> Scene {
 
 /// Past 20 000 triangles (a floor of 24 200) the kernel still traces packets, but checks their
 /// ties, so that its image is the one of single rays, the scalar tracer's, bit for bit; past
-/// 50 000 (a floor of 51 200) it traces single rays through the scene's BVH (packets of
+/// 40 000 (a floor of 51 200) it traces single rays through the scene's BVH (packets of
 /// incoherent rays pay for the union of eight walks there). Either way not with a material
 /// other than a Lambertian one: such scenes take the scalar tracer.
 #[test]

@@ -2,7 +2,7 @@
 //! estimation and BSDF sampling combined by the power heuristic, Russian roulette, Mitsuba's
 //! `max_depth`), with the rays of eight paths traced as one packet (`accel::packet`: the
 //! triangles through the packet BVH, up to 16 analytic spheres tested on every lane), or, in
-//! scenes of more than 50 000 triangles, more spheres or SDF grids, one by one through the
+//! scenes of more than 40 000 triangles, more spheres or SDF grids, one by one through the
 //! scene's BVH (`Tracer`). Per vertex, `gather` does each lane's branchy part (emission
 //! found, random numbers, light and triangle choice) and `shade8` the arithmetic of all
 //! eight lanes on the paths' state kept as structure of arrays (compiled to AVX2 vector
@@ -201,8 +201,9 @@ const LARGE_TRIANGLES: usize = 20_000;
 /// Scenes with more triangles than this trace one ray at a time (see [`Tracer`]). Between
 /// [`LARGE_TRIANGLES`] and this, packets still won: bsdf_spheres' textured sphere (32k
 /// triangles, depth 2: a lane's eight camera rays share a pixel, its shadow and bounce rays
-/// leave a patch of the sphere) took 0.87 of the single rays' instructions.
-const PACKET_MAX_TRIANGLES: usize = 50_000;
+/// leave a patch of the sphere) took 0.86 of the single rays' instructions, that sphere on a
+/// floor at depth 6 0.95; with a second sphere (64k triangles) packets took 1.10 of them.
+const PACKET_MAX_TRIANGLES: usize = 40_000;
 /// Scenes with more analytic spheres than this trace one ray at a time: a packet tests every
 /// sphere on every lane, where the scene's BVH walks a hierarchy of them.
 const PACKET_MAX_SPHERES: usize = 16;
