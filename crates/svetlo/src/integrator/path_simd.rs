@@ -2,7 +2,7 @@
 //! estimation and BSDF sampling combined by the power heuristic, Russian roulette, Mitsuba's
 //! `max_depth`), with the rays of eight paths traced as one packet (`accel::packet`: the
 //! triangles through the packet BVH, up to 16 analytic spheres tested on every lane), or, in
-//! scenes of more than 20 000 triangles, more spheres or SDF grids, one by one through the
+//! scenes of more than 40 000 triangles, more spheres or SDF grids, one by one through the
 //! scene's BVH (`Tracer`). Per vertex, `gather` does each lane's branchy part (emission
 //! found, random numbers, light and triangle choice) and `shade8` the arithmetic of all
 //! eight lanes on the paths' state kept as structure of arrays (compiled to AVX2 vector
@@ -57,7 +57,8 @@
 //! traces them again through the scene's BVH: the packet image is the scalar tracer's bit for
 //! bit, in 0.81 of the CPU time single rays took on a Cornell box with a glass box (0.60 of
 //! the scalar tracer's). Opaque scenes skip the check: their ties are shared edges and faces
-//! hidden inside closed objects. Scenes with spheres (which traced single rays, bit for bit)
+//! hidden inside closed objects; but large ones (more than 20 000 triangles, which traced
+//! single rays before) keep it, and with it their single-ray image bit for bit. Scenes with spheres (which traced single rays, bit for bit)
 //! keep the check, and test their spheres after the triangles on all lanes with
 //! `Sphere::intersect`'s f64 operations (`PacketSpheres`), as the scene's BVH tests them after
 //! its triangles; the lanes it cannot vouch for (two spheres at one f32 distance, a hit within
@@ -198,8 +199,15 @@ struct MeshLight {
     radiance: Rgb,
 }
 
-/// Scenes with more triangles than this trace one ray at a time (see [`Tracer`]).
-const PACKET_MAX_TRIANGLES: usize = 20_000;
+/// Scenes with more triangles than this are large: they take the kernel only with Lambertian
+/// materials (see [`SimdKernel::new`]), and their packets check ties.
+const LARGE_TRIANGLES: usize = 20_000;
+/// Scenes with more triangles than this trace one ray at a time (see [`Tracer`]). Between
+/// [`LARGE_TRIANGLES`] and this, packets still won: bsdf_spheres' textured sphere (32k
+/// triangles, depth 2: a lane's eight camera rays share a pixel, its shadow and bounce rays
+/// leave a patch of the sphere) took 0.86 of the single rays' instructions, that sphere on a
+/// floor at depth 6 0.95; with a second sphere (64k triangles) packets took 1.10 of them.
+const PACKET_MAX_TRIANGLES: usize = 40_000;
 /// Scenes with more analytic spheres than this trace one ray at a time: a packet tests every
 /// sphere on every lane, where the scene's BVH walks a hierarchy of them.
 const PACKET_MAX_SPHERES: usize = 16;
@@ -207,7 +215,7 @@ const PACKET_MAX_SPHERES: usize = 16;
 /// How the kernel traces its eight rays.
 enum Tracer {
     /// As one packet through a BVH of the kernel's own: wins while the eight walks share
-    /// most of their nodes (small scenes). With `ties` (the kernel's index of each shape's
+    /// most of their nodes (scenes up to [`PACKET_MAX_TRIANGLES`]). With `ties` (the kernel's index of each shape's
     /// first triangle), the lanes whose nearest hit ties with another triangle's are traced
     /// again through the scene's BVH, so that they take the triangle the scalar tracer takes
     /// (see [`SimdKernel::new`]). `spheres`: the scene's analytic spheres, tested on all
@@ -463,14 +471,14 @@ impl SimdKernel {
         if scene.environment_lights.len() > 1 {
             return None;
         }
-        // Large scenes trace single rays; there scalar BSDFs gained nothing in the render loop
+        // Large scenes traced single rays when measured; there scalar BSDFs gained nothing in the render loop
         // and the kernel's set-up (unpacking every triangle) cost 5-10 %: bsdf_spheres' grid
         // (325k triangles, 8 of 12 spheres not Lambertian, depth 6) took 1.06 the scalar
         // tracer's time at 512 spp, 1.00 at 2048. Such scenes take the scalar tracer, refused
         // here before anything is unpacked (the shapes unpacked before the first such one,
         // bsdf_spheres' two spheres of 32k triangles, cost ~3 % of a 128 spp render).
         let triangles: usize = scene.shapes.iter().map(|s| if let Geometry::Mesh(m) = &*s.geometry { m.triangle_count() } else { 0 }).sum();
-        let large = triangles > PACKET_MAX_TRIANGLES;
+        let large = triangles > LARGE_TRIANGLES;
         if large && scene.shapes.iter().any(|s| s.detail || scene.materials.get(s.material as usize).is_none_or(|m| lambert_sides(m).is_none())) {
             return None;
         }
@@ -517,7 +525,7 @@ impl SimdKernel {
             .filter_map(|(i, s)| if let Geometry::Sphere(sp) = &*s.geometry { Some((*sp, i as u32)) } else { None })
             .collect();
         let grids = scene.shapes.iter().any(|s| matches!(&*s.geometry, Geometry::SdfGrid(_)));
-        let single_rays = large || grids || spheres.len() > PACKET_MAX_SPHERES;
+        let single_rays = triangles > PACKET_MAX_TRIANGLES || grids || spheres.len() > PACKET_MAX_SPHERES;
         let mut shapes = Vec::with_capacity(scene.shapes.len());
         for s in &scene.shapes {
             let mat = scene.materials.get(s.material as usize)?;
@@ -574,7 +582,9 @@ impl SimdKernel {
         } else if single_rays {
             single_tracer(scene)
         } else if spheres.is_empty() {
-            Tracer::Packets { bvh: PacketBvh::build(&verts()), ties: crossing.then(|| first_triangles(scene)), spheres: None }
+            // A large scene's tied lanes go to the scene's BVH too: its image stays the one of
+            // single rays (which these scenes traced before), bit for bit.
+            Tracer::Packets { bvh: PacketBvh::build(&verts()), ties: (crossing || large).then(|| first_triangles(scene)), spheres: None }
         } else {
             // Scenes with spheres took single rays, the scalar tracer's image bit for bit: they
             // keep it with the tie check on their triangles (shared edges, which opaque
