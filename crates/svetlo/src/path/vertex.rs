@@ -266,9 +266,14 @@ impl Vertex {
 
     /// A surface hit with its BSDF; `pdf_fwd` is set by the walk.
     pub fn surface(scene: &Scene, si: &SurfaceInteraction, beta: Rgb) -> Self {
-        let bsdf = scene.bsdf(si);
+        Self::at_surface(si, scene.bsdf(si), scene.area_light(si).map(|(i, _)| i), beta, 0.0)
+    }
+
+    /// The surface vertex at `si` with its BSDF and area light (of [`Self::surface`] and
+    /// [`Self::write_surface`]).
+    #[inline(always)]
+    fn at_surface(si: &SurfaceInteraction, bsdf: Bsdf, light: Option<u32>, beta: Rgb, pdf_fwd: f32) -> Self {
         let lobes = bsdf.flags();
-        let light = scene.area_light(si).map(|(i, _)| i);
         Vertex {
             p: si.p,
             ng: si.ng,
@@ -279,6 +284,7 @@ impl Vertex {
             lobes,
             light,
             beta,
+            pdf_fwd,
             time: si.time,
             shape: si.shape,
             ..Self::blank(VertexKind::Surface)
@@ -301,24 +307,7 @@ impl Vertex {
     #[inline(never)]
     fn write_surface<'a>(dst: &'a mut MaybeUninit<Vertex>, scene: &Scene, si: &SurfaceInteraction, beta: Rgb, pdf_fwd: f32) -> &'a mut Vertex {
         let light = scene.area_light(si).map(|(i, _)| i);
-        let vertex = |bsdf: Bsdf| {
-            let lobes = bsdf.flags();
-            Vertex {
-                p: si.p,
-                ng: si.ng,
-                shading: si.shading,
-                uv: si.uv,
-                wo: si.wo,
-                bsdf: Some(bsdf),
-                lobes,
-                light,
-                beta,
-                pdf_fwd,
-                time: si.time,
-                shape: si.shape,
-                ..Self::blank(VertexKind::Surface)
-            }
-        };
+        let vertex = |bsdf: Bsdf| Self::at_surface(si, bsdf, light, beta, pdf_fwd);
         match scene.material(si) {
             Material::Diffuse { reflectance } if !scene.shapes[si.shape as usize].detail => {
                 let reflectance = reflectance.eval(si.tex_point()).clamp(0.0, 1.0);
