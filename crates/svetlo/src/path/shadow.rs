@@ -184,3 +184,91 @@ impl ShadowPackets {
         })
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::bsdf::Material;
+    use crate::camera::{Camera, Projection};
+    use crate::geometry::TriangleMesh;
+    use crate::math::warp::square_to_uniform_sphere;
+    use crate::sampling::Pcg32;
+    use crate::scene::SceneBuilder;
+    use crate::spectrum::Rgb;
+    use crate::texture::Texture;
+
+    /// A bumpy n×n grid of triangles over z = `z0` (two per cell), with or without uvs and
+    /// vertex normals (`normals`: 0 none, 1 smooth, 2 equal per vertex row: flat and smooth
+    /// triangles mixed).
+    fn grid(z0: f32, n: u32, uvs: bool, normals: u32) -> TriangleMesh {
+        let (mut positions, mut ns, mut ts, mut indices) = (vec![], vec![], vec![], vec![]);
+        for j in 0..=n {
+            for i in 0..=n {
+                let (x, y) = (i as f32 / n as f32, j as f32 / n as f32);
+                positions.push(Vec3::new(x, y, z0 + 0.1 * (7.0 * x).sin() * (5.0 * y).cos()));
+                ns.push(if normals == 1 {
+                    Vec3::new(0.3 * (3.0 * x).sin(), 0.2 * y, 1.0).normalize()
+                } else {
+                    Vec3::new(0.0, 0.1 * j as f32, 1.0).normalize()
+                });
+                ts.push(Vec2::new(2.0 * x + 0.1 * y, y * y));
+            }
+        }
+        for j in 0..n {
+            for i in 0..n {
+                let k = j * (n + 1) + i;
+                indices.push([k, k + 1, k + n + 1]);
+                indices.push([k + 1, k + n + 2, k + n + 1]);
+            }
+        }
+        TriangleMesh { positions, normals: if normals == 0 { vec![] } else { ns }, uvs: if uvs { ts } else { vec![] }, indices }
+    }
+
+    /// A lane's surface record (`closest` then `interaction`) is `Scene::intersect`'s whole,
+    /// bit for bit (point, normals, shading frame, uv, indices, wo, time), on flat and smooth
+    /// triangles of meshes with and without uvs.
+    #[test]
+    fn packet_interactions_are_scene_interactions() {
+        let mut b = SceneBuilder::new();
+        let m = b.add_material(Material::Diffuse { reflectance: Texture::Constant(Rgb::splat(0.5)) });
+        for (k, (uvs, normals)) in [(false, 0), (true, 1), (false, 1), (true, 2), (true, 0)].into_iter().enumerate() {
+            b.add_shape(Geometry::Mesh(grid(0.3 * k as f32, 6, uvs, normals)), m, None, &format!("grid {k}")).unwrap();
+        }
+        b.set_camera(Camera {
+            to_world: glam::Mat4::IDENTITY,
+            projection: Projection::Perspective { fov_x_deg: 60.0, aperture_radius: 0.0, focus_distance: 1.0 },
+            width: 8,
+            height: 8,
+            near_clip: 0.01,
+            far_clip: 100.0,
+            shutter_open: 0.0,
+            shutter_close: 0.0,
+        });
+        let scene = b.build().unwrap();
+        let Some(packets) = ShadowPackets::new(&scene) else { return };
+        assert!(packets.exact_closest());
+        let mut rng = Pcg32::new(5, 17);
+        let (mut hits, mut smooth, mut n) = (0, 0, 0);
+        for round in 0..4000 {
+            let rays: [Ray; LANES] = std::array::from_fn(|_| {
+                let o = Vec3::new(rng.next_f32(), rng.next_f32(), -0.5 + 2.5 * rng.next_f32());
+                let mut r = Ray::new(o, square_to_uniform_sphere(Vec2::new(rng.next_f32(), rng.next_f32())));
+                r.time = rng.next_f32();
+                r
+            });
+            let active = (rng.next_u32() & 0xff) as u8 | (round & 1) as u8;
+            let h = packets.closest(&rays, active);
+            for (l, r) in rays.iter().enumerate().filter(|(l, _)| active >> l & 1 == 1) {
+                let want = scene.intersect(r);
+                let got = packets.interaction(&scene, &h, l, r);
+                assert_eq!(format!("{got:?}"), format!("{want:?}"), "round {round} lane {l}");
+                if let Some(si) = want {
+                    hits += 1;
+                    smooth += usize::from(scene.shapes[si.shape as usize].flat.get(si.prim as usize).copied().flatten().is_none());
+                }
+                n += 1;
+            }
+        }
+        assert!(hits > n / 4 && smooth > hits / 4 && smooth < hits * 3 / 4, "{n} rays, {hits} hits, {smooth} on smooth triangles");
+    }
+}
