@@ -19,10 +19,12 @@
 //! cbox with dielectric boxes, 64², 256 spp).
 
 use crate::accel::packet::{Hits8, PacketBvh, Rays8, LANES};
-use crate::accel::PrimHit;
 use crate::bsdf::Material;
+use crate::geometry::mesh::TriangleShading;
 use crate::geometry::{Geometry, Ray, SurfaceInteraction};
+use crate::math::Frame;
 use crate::scene::Scene;
+use glam::{Vec2, Vec3};
 
 /// Scenes with more triangles than this test shadow rays one at a time: eight rays then
 /// share few nodes (the path kernel's bound).
@@ -31,10 +33,31 @@ const MAX_TRIANGLES: usize = 20_000;
 /// A packet BVH over a scene's triangles for occlusion queries.
 pub struct ShadowPackets {
     bvh: PacketBvh,
-    /// The packet tree's index of each shape's first triangle (every shape is a mesh).
-    first: Vec<u32>,
+    /// Per triangle of the packet tree, what its hits' surface records need.
+    tris: Vec<HitTriangle>,
     /// Whether closest hits are the scene BVH's (no material lets a path cross a surface).
     exact_closest: bool,
+}
+
+/// A triangle's share of `Scene::interaction` for a mesh, gathered once (the packet tree
+/// holds few triangles): a lane's hit then reads one entry instead of the shape, the mesh's
+/// indices, positions, uvs and normals, and a smooth triangle's normal and dp/du are not
+/// computed again at every hit.
+struct HitTriangle {
+    shape: u32,
+    /// The triangle's index in its mesh.
+    prim: u32,
+    p: [Vec3; 3],
+    /// The vertices' uvs (None: the mesh has none, uv = the barycentrics).
+    uvs: Option<[Vec2; 3]>,
+    shading: HitShading,
+}
+
+enum HitShading {
+    /// The shape's `flat` entry: (geometric normal, shading frame).
+    Flat(Vec3, Frame),
+    /// `TriangleMesh::shading`, interpolated at each hit.
+    Smooth(TriangleShading),
 }
 
 /// Closest hits of up to eight rays ([`ShadowPackets::closest`]).
@@ -56,18 +79,23 @@ impl ShadowPackets {
             return None;
         }
         let mut tris = Vec::new();
-        let mut first = Vec::with_capacity(scene.shapes.len());
-        for s in &scene.shapes {
+        for (shape, s) in scene.shapes.iter().enumerate() {
             let Geometry::Mesh(m) = &*s.geometry else { return None };
             if tris.len() + m.triangle_count() > MAX_TRIANGLES {
                 return None;
             }
-            first.push(tris.len() as u32);
-            tris.extend((0..m.triangle_count()).map(|t| m.vertices(t)));
+            tris.extend((0..m.triangle_count()).map(|t| {
+                let shading = match s.flat.get(t) {
+                    Some(Some((ng, frame))) => HitShading::Flat(*ng, *frame),
+                    _ => HitShading::Smooth(m.shading(t)),
+                };
+                let uvs = (!m.uvs.is_empty()).then(|| m.indices[t].map(|i| m.uvs[i as usize]));
+                HitTriangle { shape: shape as u32, prim: t as u32, p: m.vertices(t), uvs, shading }
+            }));
         }
-        let bvh = PacketBvh::build(&tris);
+        let bvh = PacketBvh::build(&tris.iter().map(|t| t.p).collect::<Vec<_>>());
         let exact_closest = !scene.materials.iter().any(Material::may_cross);
-        bvh.simd().then_some(ShadowPackets { bvh, first, exact_closest })
+        bvh.simd().then_some(ShadowPackets { bvh, tris, exact_closest })
     }
 
     /// Mask of the rays (at most eight, as `Scene::shadow_ray` makes them) that are blocked.
@@ -125,14 +153,122 @@ impl ShadowPackets {
         if hits.tied & (1 << l) != 0 {
             return scene.intersect(ray);
         }
-        let prim = hits.hits.prim[l];
-        if prim == u32::MAX {
-            return None;
+        // A miss's prim is u32::MAX, past the table.
+        let tri = self.tris.get(hits.hits.prim[l] as usize)?;
+        let (b1, b2) = (hits.hits.b1[l], hits.hits.b2[l]);
+        // `Scene::interaction`'s mesh case, operation for operation.
+        let [p0, p1, p2] = tri.p;
+        let p = p0 * (1.0 - b1 - b2) + p1 * b1 + p2 * b2;
+        let uv = match tri.uvs {
+            None => Vec2::new(b1, b2),
+            Some([t0, t1, t2]) => t0 * (1.0 - b1 - b2) + t1 * b1 + t2 * b2,
+        };
+        let (ng, shading) = match &tri.shading {
+            HitShading::Flat(ng, frame) => (*ng, *frame),
+            HitShading::Smooth(s) => {
+                let (ng, ns) = s.normals_at(b1, b2);
+                (ng, Frame::from_normal_tangent(ns, s.dpdu))
+            }
+        };
+        Some(SurfaceInteraction {
+            p,
+            t: hits.hits.t[l],
+            ng,
+            shading,
+            uv,
+            shape: tri.shape,
+            prim: tri.prim,
+            bary: Vec2::new(b1, b2),
+            wo: -ray.d,
+            time: ray.time,
+        })
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::bsdf::Material;
+    use crate::camera::{Camera, Projection};
+    use crate::geometry::TriangleMesh;
+    use crate::math::warp::square_to_uniform_sphere;
+    use crate::sampling::Pcg32;
+    use crate::scene::SceneBuilder;
+    use crate::spectrum::Rgb;
+    use crate::texture::Texture;
+
+    /// A bumpy n×n grid of triangles over z = `z0` (two per cell), with or without uvs and
+    /// vertex normals (`normals`: 0 none, 1 smooth, 2 equal per vertex row: flat and smooth
+    /// triangles mixed).
+    fn grid(z0: f32, n: u32, uvs: bool, normals: u32) -> TriangleMesh {
+        let (mut positions, mut ns, mut ts, mut indices) = (vec![], vec![], vec![], vec![]);
+        for j in 0..=n {
+            for i in 0..=n {
+                let (x, y) = (i as f32 / n as f32, j as f32 / n as f32);
+                positions.push(Vec3::new(x, y, z0 + 0.1 * (7.0 * x).sin() * (5.0 * y).cos()));
+                ns.push(if normals == 1 {
+                    Vec3::new(0.3 * (3.0 * x).sin(), 0.2 * y, 1.0).normalize()
+                } else {
+                    Vec3::new(0.0, 0.1 * j as f32, 1.0).normalize()
+                });
+                ts.push(Vec2::new(2.0 * x + 0.1 * y, y * y));
+            }
         }
-        // The last shape whose first triangle is at or before `prim` (shapes without
-        // triangles share their successor's first index and are skipped).
-        let shape = self.first.partition_point(|&f| f <= prim) - 1;
-        let hit = PrimHit { t: hits.hits.t[l], shape: shape as u32, prim: prim - self.first[shape], b1: hits.hits.b1[l], b2: hits.hits.b2[l] };
-        Some(scene.interaction(&hit, ray))
+        for j in 0..n {
+            for i in 0..n {
+                let k = j * (n + 1) + i;
+                indices.push([k, k + 1, k + n + 1]);
+                indices.push([k + 1, k + n + 2, k + n + 1]);
+            }
+        }
+        TriangleMesh { positions, normals: if normals == 0 { vec![] } else { ns }, uvs: if uvs { ts } else { vec![] }, indices }
+    }
+
+    /// A lane's surface record (`closest` then `interaction`) is `Scene::intersect`'s whole,
+    /// bit for bit (point, normals, shading frame, uv, indices, wo, time), on flat and smooth
+    /// triangles of meshes with and without uvs.
+    #[test]
+    fn packet_interactions_are_scene_interactions() {
+        let mut b = SceneBuilder::new();
+        let m = b.add_material(Material::Diffuse { reflectance: Texture::Constant(Rgb::splat(0.5)) });
+        for (k, (uvs, normals)) in [(false, 0), (true, 1), (false, 1), (true, 2), (true, 0)].into_iter().enumerate() {
+            b.add_shape(Geometry::Mesh(grid(0.3 * k as f32, 6, uvs, normals)), m, None, &format!("grid {k}")).unwrap();
+        }
+        b.set_camera(Camera {
+            to_world: glam::Mat4::IDENTITY,
+            projection: Projection::Perspective { fov_x_deg: 60.0, aperture_radius: 0.0, focus_distance: 1.0 },
+            width: 8,
+            height: 8,
+            near_clip: 0.01,
+            far_clip: 100.0,
+            shutter_open: 0.0,
+            shutter_close: 0.0,
+        });
+        let scene = b.build().unwrap();
+        let Some(packets) = ShadowPackets::new(&scene) else { return };
+        assert!(packets.exact_closest());
+        let mut rng = Pcg32::new(5, 17);
+        let (mut hits, mut smooth, mut n) = (0, 0, 0);
+        for round in 0..4000 {
+            let rays: [Ray; LANES] = std::array::from_fn(|_| {
+                let o = Vec3::new(rng.next_f32(), rng.next_f32(), -0.5 + 2.5 * rng.next_f32());
+                let mut r = Ray::new(o, square_to_uniform_sphere(Vec2::new(rng.next_f32(), rng.next_f32())));
+                r.time = rng.next_f32();
+                r
+            });
+            let active = (rng.next_u32() & 0xff) as u8 | (round & 1) as u8;
+            let h = packets.closest(&rays, active);
+            for (l, r) in rays.iter().enumerate().filter(|(l, _)| active >> l & 1 == 1) {
+                let want = scene.intersect(r);
+                let got = packets.interaction(&scene, &h, l, r);
+                assert_eq!(format!("{got:?}"), format!("{want:?}"), "round {round} lane {l}");
+                if let Some(si) = want {
+                    hits += 1;
+                    smooth += usize::from(scene.shapes[si.shape as usize].flat.get(si.prim as usize).copied().flatten().is_none());
+                }
+                n += 1;
+            }
+        }
+        assert!(hits > n / 4 && smooth > hits / 4 && smooth < hits * 3 / 4, "{n} rays, {hits} hits, {smooth} on smooth triangles");
     }
 }
