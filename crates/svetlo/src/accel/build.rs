@@ -13,7 +13,7 @@
 
 use super::wide::{Node, EMPTY_CHILD, LEAF_BIT, WIDTH};
 use crate::geometry::Aabb;
-use glam::Vec3A;
+use glam::{Vec3A, Vec3Swizzles};
 
 #[cfg(test)]
 mod reference;
@@ -21,6 +21,8 @@ mod reference;
 const BINS: usize = 32;
 // The split search keeps a bin's occupancy in one bit of a u32.
 const _: () = assert!(BINS <= 32);
+// Bin indices are masked with BINS - 1 (see `best_split`).
+const _: () = assert!(BINS.is_power_of_two());
 /// Subtrees smaller than this are built on the current thread.
 const PARALLEL_MIN: usize = 8 * 1024;
 /// Nodes of at least this many primitives bin into two sets of bins (see `best_split`).
@@ -75,6 +77,17 @@ impl Box3 {
     fn center(self) -> Vec3A {
         0.5 * (self.min + self.max)
     }
+    /// [`Aabb::surface_area`] in the registers, by the same operations in the same order
+    /// (the same bits).
+    #[inline(always)]
+    fn surface_area(self) -> f32 {
+        if self.min.cmpgt(self.max).any() {
+            return 0.0;
+        }
+        let e = self.max - self.min;
+        let p = e * e.yzx();
+        2.0 * (p.x + p.y + p.z)
+    }
     #[inline(always)]
     fn aabb(self) -> Aabb {
         Aabb { min: self.min.into(), max: self.max.into() }
@@ -98,18 +111,26 @@ pub fn build_wide(bounds: &[Aabb], params: LeafParams, mut emit_leaf: impl FnMut
     drop(boxes);
     let mut nodes = Vec::with_capacity(bounds.len() / 2 + 1);
     // The root is always an inner node, even over a single leaf, so that traversal starts uniformly.
-    let (root_children, root_boxes) = match &root {
-        BNode::Leaf { .. } => (vec![&root], vec![root_bounds]),
+    let root_wide = match &root {
+        BNode::Leaf { .. } => WideChildren { len: 1, nodes: [&root; WIDTH], boxes: [root_bounds; WIDTH] },
         BNode::Inner { .. } => collapse(&root),
     };
     nodes.push(Node::empty());
-    fill_node(0, &root_children, &root_boxes, &order, &mut nodes, &mut emit_leaf);
+    fill_node(0, &root_wide, &order, &mut nodes, &mut emit_leaf);
     (nodes, order)
 }
 
-fn fill_node(idx: usize, children: &[&BNode], boxes: &[Aabb], order: &[u32], nodes: &mut Vec<Node>, emit_leaf: &mut impl FnMut(&[u32]) -> u32) {
+/// The children of a wide node: the first `len` of `nodes` and `boxes` (on the stack: one
+/// per wide node, no allocation).
+struct WideChildren<'a> {
+    len: usize,
+    nodes: [&'a BNode; WIDTH],
+    boxes: [Aabb; WIDTH],
+}
+
+fn fill_node(idx: usize, wide: &WideChildren, order: &[u32], nodes: &mut Vec<Node>, emit_leaf: &mut impl FnMut(&[u32]) -> u32) {
     let mut codes = [EMPTY_CHILD; WIDTH];
-    for (k, child) in children.iter().enumerate() {
+    for (k, child) in wide.nodes[..wide.len].iter().enumerate() {
         codes[k] = match child {
             BNode::Leaf { start, count } => {
                 let code = emit_leaf(&order[*start as usize..(*start + *count) as usize]);
@@ -119,35 +140,45 @@ fn fill_node(idx: usize, children: &[&BNode], boxes: &[Aabb], order: &[u32], nod
             BNode::Inner { .. } => {
                 let ci = nodes.len();
                 nodes.push(Node::empty());
-                let (gc, gb) = collapse(child);
-                fill_node(ci, &gc, &gb, order, nodes, emit_leaf);
+                fill_node(ci, &collapse(child), order, nodes, emit_leaf);
                 ci as u32
             }
         };
     }
-    nodes[idx] = Node::new(boxes, codes);
+    nodes[idx] = Node::new(&wide.boxes[..wide.len], codes);
 }
 
 /// The up-to-WIDTH children of a binary inner node in the wide tree: open the
 /// child of largest surface area until there are WIDTH (or only leaves remain).
-fn collapse(node: &BNode) -> (Vec<&BNode>, Vec<Aabb>) {
+/// On equal areas the last one opens; an opened child's place takes the last child and
+/// its two children go last (the order a vector's `swap_remove` and `push` give).
+fn collapse(node: &BNode) -> WideChildren<'_> {
     let BNode::Inner { bounds, children } = node else { unreachable!("collapse of a leaf") };
-    let mut list: Vec<(&BNode, Aabb)> = vec![(&children[0], bounds[0]), (&children[1], bounds[1])];
-    while list.len() < WIDTH {
-        let best = list
-            .iter()
-            .enumerate()
-            .filter(|(_, (n, _))| matches!(n, BNode::Inner { .. }))
-            .max_by(|a, b| a.1 .1.surface_area().total_cmp(&b.1 .1.surface_area()))
-            .map(|(i, _)| i);
-        let Some(i) = best else { break };
-        let (n, _) = list.swap_remove(i);
-        if let BNode::Inner { bounds, children } = n {
-            list.push((&children[0], bounds[0]));
-            list.push((&children[1], bounds[1]));
+    let mut w = WideChildren { len: 2, nodes: [node; WIDTH], boxes: [bounds[0]; WIDTH] };
+    w.nodes[..2].copy_from_slice(&[&children[0], &children[1]]);
+    w.boxes[..2].copy_from_slice(bounds);
+    while w.len < WIDTH {
+        let mut best: Option<(usize, f32)> = None;
+        for i in 0..w.len {
+            if matches!(w.nodes[i], BNode::Inner { .. }) {
+                let a = w.boxes[i].surface_area();
+                if best.is_none_or(|(_, b)| a.total_cmp(&b).is_ge()) {
+                    best = Some((i, a));
+                }
+            }
         }
+        let Some((i, _)) = best else { break };
+        let BNode::Inner { bounds, children } = w.nodes[i] else { unreachable!("only inner nodes open") };
+        let last = w.len - 1;
+        w.nodes[i] = w.nodes[last];
+        w.boxes[i] = w.boxes[last];
+        w.nodes[last] = &children[0];
+        w.boxes[last] = bounds[0];
+        w.nodes[last + 1] = &children[1];
+        w.boxes[last + 1] = bounds[1];
+        w.len += 1;
     }
-    list.into_iter().unzip()
+    w
 }
 
 fn groups(n: usize, group: usize) -> f32 {
@@ -195,10 +226,11 @@ fn build_rec(p: LeafParams, boxes: &mut [Box3], order: &mut [u32], first: usize,
             // Partition by bin, bounding both sides (boxes and centroids) on the way.
             let (mut lb, mut rb, mut lc, mut rc) = (Box3::EMPTY, Box3::EMPTY, Box3::EMPTY, Box3::EMPTY);
             let mut l = 0;
+            let side = SideTest::new(cb.min, scale, axis, bin);
             for k in 0..n {
                 let b = boxes[k];
                 let c = b.center();
-                if bin_indices(c, cb.min, scale)[axis] < bin {
+                if side.left(c) {
                     boxes.swap(k, l);
                     order.swap(k, l);
                     l += 1;
@@ -277,6 +309,44 @@ fn bin_indices(c: Vec3A, lo: Vec3A, scale: Vec3A) -> [usize; 3] {
     }
 }
 
+/// Whether a centroid's bin on the split axis is left of the split bin, as
+/// `bin_indices(c, lo, scale)[axis] < bin`, with the same result: on x86_64 a compare of all
+/// three indices at once and one bit of the mask, not a trip of the indices through memory.
+struct SideTest {
+    lo: Vec3A,
+    scale: Vec3A,
+    axis: usize,
+    bin: usize,
+}
+
+impl SideTest {
+    fn new(lo: Vec3A, scale: Vec3A, axis: usize, bin: usize) -> SideTest {
+        SideTest { lo, scale, axis, bin }
+    }
+
+    #[inline(always)]
+    fn left(&self, c: Vec3A) -> bool {
+        #[cfg(target_arch = "x86_64")]
+        {
+            use std::arch::x86_64::*;
+            let v = (c - self.lo) * self.scale;
+            // SAFETY: SSE2 is part of the x86_64 baseline.
+            let mask = unsafe {
+                // The clamp and truncation of `bin_indices`; the indices are in [0, BINS - 1],
+                // so a signed compare with `bin` (at most BINS) is the unsigned one.
+                let m = _mm_max_ps(_mm_min_ps(_mm_set1_ps((BINS - 1) as f32), v.into()), _mm_setzero_ps());
+                let i = _mm_cvttps_epi32(m);
+                _mm_movemask_ps(_mm_castsi128_ps(_mm_cmplt_epi32(i, _mm_set1_epi32(self.bin as i32))))
+            };
+            mask >> self.axis & 1 != 0
+        }
+        #[cfg(not(target_arch = "x86_64"))]
+        {
+            bin_indices(c, self.lo, self.scale)[self.axis] < self.bin
+        }
+    }
+}
+
 /// Best binned SAH split over the three axes: (sum of area * groups, axis, first bin of the
 /// right side). `lo` is the centroids' lower corner, `scale` bins per unit (0 on a flat axis).
 fn best_split(boxes: &[Box3], lo: Vec3A, scale: Vec3A, g: usize) -> Option<(f32, usize, usize)> {
@@ -285,8 +355,10 @@ fn best_split(boxes: &[Box3], lo: Vec3A, scale: Vec3A, g: usize) -> Option<(f32,
     let mut add = |bin_b: &mut [[Box3; BINS]; 3], b: &Box3| {
         let k = bin_indices(b.center(), lo, scale);
         for axis in 0..3 {
-            bin_b[axis][k[axis]] = bin_b[axis][k[axis]].union(*b);
-            bin_n[axis][k[axis]] += 1;
+            // The mask keeps the index (at most BINS - 1) and drops the bounds checks.
+            let i = k[axis] & (BINS - 1);
+            bin_b[axis][i] = bin_b[axis][i].union(*b);
+            bin_n[axis][i] += 1;
         }
     };
     if boxes.len() >= TWO_BIN_SETS_MIN {
@@ -336,7 +408,7 @@ fn best_split(boxes: &[Box3], lo: Vec3A, scale: Vec3A, g: usize) -> Option<(f32,
             m &= !(1 << k);
             acc = acc.union(bin_b[k]);
             cnt += bin_n[k] as usize;
-            right_cost[k] = acc.aabb().surface_area() * groups_of(cnt);
+            right_cost[k] = acc.surface_area() * groups_of(cnt);
         }
         // Split candidates: between an occupied bin `a` and the next occupied one `b`, every
         // split in a+1..=b has the same two sides, hence the same cost, and the first of equal
@@ -356,7 +428,7 @@ fn best_split(boxes: &[Box3], lo: Vec3A, scale: Vec3A, g: usize) -> Option<(f32,
             if !right_cost[b].is_finite() {
                 continue;
             }
-            let cost = acc.aabb().surface_area() * groups_of(cnt) + right_cost[b];
+            let cost = acc.surface_area() * groups_of(cnt) + right_cost[b];
             if best.is_none_or(|x| cost < x.0) {
                 best = Some((cost, axis, a + 1));
             }

@@ -94,8 +94,12 @@ impl Accel {
         let (tri_nodes, _) = build_wide(&tri_bounds, TRI_LEAF, |prims| {
             let start = tris.len();
             for chunk in prims.chunks(LANES) {
-                let lanes: Vec<([Vec3; 3], u32)> = chunk.iter().map(|&i| (tri_v[i as usize], i)).collect();
-                tris.push(Tri8::new(&lanes));
+                // On the stack: a leaf block is packed per eight triangles.
+                let mut lanes = [([Vec3::ZERO; 3], 0u32); LANES];
+                for (lane, &i) in lanes.iter_mut().zip(chunk) {
+                    *lane = (tri_v[i as usize], i);
+                }
+                tris.push(Tri8::new(&lanes[..chunk.len()]));
             }
             leaf_code(start, tris.len() - start)
         });
