@@ -1086,7 +1086,7 @@ mod tile_tests {
         let samples: Vec<(Vec2, Rgb, Vec<Rgb>, u32)> = pixel_runs(&mut rng, (8, 0, 16, 8), 6)
             .into_iter()
             .enumerate()
-            .map(|(k, (p, l))| ((p, l, vec![l * 0.5, Rgb::BLACK, Rgb::splat(k as f32)], if k % 3 == 0 { 0 } else { 0b101 })))
+            .map(|(k, (p, l))| (p, l, vec![l * 0.5, Rgb::BLACK, Rgb::splat(k as f32)], if k % 3 == 0 { 0 } else { 0b101 }))
             .collect();
         let (mut runs, mut single) = (film.tile(8, 0, 16, 8), film.tile(8, 0, 16, 8));
         runs.add_samples_touched(samples.iter().map(|(p, l, row, t)| (*p, *l, row.as_slice(), *t)));
