@@ -37,6 +37,46 @@ impl Pixel {
         self.s2 += s.s2;
         self.n += s.n;
     }
+
+    /// A sample into the variance statistics.
+    #[inline(always)]
+    fn add_stats(&mut self, l: Rgb) {
+        self.s1 += l;
+        self.s2 += l * l;
+        self.n += 1;
+    }
+
+    /// A box-filtered sample: its statistics and its whole weight.
+    #[inline(always)]
+    fn add_box(&mut self, l: Rgb) {
+        self.add_stats(l);
+        self.sum += l;
+        self.weight += 1.0;
+    }
+}
+
+/// The pixel owning a run of samples (the path kernel hands them over pixel by pixel), its
+/// values held in locals: the run's samples add to them and they are stored once when the
+/// run ends. The same additions in the same order from the pixel's stored values as adding
+/// each sample in place, so the same bits; a sample inside the square of raster positions
+/// whose floors are the run's skips the owner search.
+struct OwnerRun {
+    k: usize,
+    /// The square `[lo, hi)`, all of whose positions pixel `k` owns (NaN: no run yet).
+    lo: Vec2,
+    hi: Vec2,
+    px: Pixel,
+}
+
+impl OwnerRun {
+    fn new() -> Self {
+        OwnerRun { k: usize::MAX, lo: Vec2::NAN, hi: Vec2::NAN, px: Pixel::default() }
+    }
+
+    #[inline(always)]
+    fn holds(&self, p: Vec2) -> bool {
+        p.x >= self.lo.x && p.x < self.hi.x && p.y >= self.lo.y && p.y < self.hi.y
+    }
 }
 
 /// An image in the making, or a tile of one. Coordinates are the full film's raster.
@@ -125,7 +165,8 @@ impl FilmTile {
 
     /// [`Self::add_sample_touched`] for a run of samples (position, radiance, layers, touched
     /// mask), in order. With the box filter each takes one pixel, found once for the beauty
-    /// and its layers, without the per-sample set-up of the general path.
+    /// and its layers, without the per-sample set-up of the general path; the beauty's
+    /// values are summed as an [`OwnerRun`].
     pub fn add_samples_touched<'r>(&mut self, samples: impl Iterator<Item = (Vec2, Rgb, &'r [Rgb], u32)>) {
         if self.filter != Filter::Box || self.n_layers == 0 {
             for (p, l, aov, touched) in samples {
@@ -137,9 +178,11 @@ impl FilmTile {
         self.ensure_layers();
         let n3 = 3 * self.n_layers;
         let valid = if self.n_layers >= 32 { u32::MAX } else { (1u32 << self.n_layers) - 1 };
+        let mut run = OwnerRun::new();
         for (p, l, aov, touched) in samples {
-            let Some(k) = self.owner(p) else { continue };
-            self.add_box(k, if l.is_finite() { l } else { Rgb::BLACK });
+            let Some(px) = self.run_owner(&mut run, p) else { continue };
+            px.add_box(if l.is_finite() { l } else { Rgb::BLACK });
+            let k = run.k;
             let m = touched & valid;
             if m == 0 {
                 continue;
@@ -152,6 +195,7 @@ impl FilmTile {
                 _ => add_touched_layers(px, aov, m),
             }
         }
+        self.store_run(&run);
     }
 
     /// [`Self::add_sample_layers`] where only the layers of bit mask `touched` may be non-zero
@@ -252,39 +296,89 @@ impl FilmTile {
     }
 
     /// [`Self::add_sample`] for a run of samples (position, radiance), in order: the same
-    /// sums, with the filter's case chosen once for the run. A tent of radius 1 (Mitsuba's
-    /// default) weighs without its division (`x / 1` is `x`, NaN and all).
+    /// sums, with the filter's case chosen once for the run, and consecutive samples of one
+    /// pixel summed as an [`OwnerRun`] (all of a box pixel's values, a wider filter's
+    /// statistics). A tent of radius 1 (Mitsuba's default) weighs without its division
+    /// (`x / 1` is `x`, NaN and all).
     pub fn add_samples(&mut self, samples: &[(Vec2, Rgb)]) {
+        if samples.is_empty() {
+            return;
+        }
+        self.blank = false;
+        let mut run = OwnerRun::new();
         match self.filter {
             Filter::Tent { radius: 1.0 } => {
                 for &(p, l) in samples {
-                    self.add_one(p, l, |x| (1.0 - x.abs()).max(0.0));
+                    self.add_in_run(&mut run, p, l, |x| (1.0 - x.abs()).max(0.0));
                 }
             }
             Filter::Tent { radius } => {
                 for &(p, l) in samples {
-                    self.add_one(p, l, move |x| Filter::Tent { radius }.eval(x));
+                    self.add_in_run(&mut run, p, l, move |x| Filter::Tent { radius }.eval(x));
                 }
             }
             Filter::Gaussian { .. } => {
                 let w = self.weights;
                 for &(p, l) in samples {
-                    self.add_one(p, l, move |x| w.gaussian(x));
+                    self.add_in_run(&mut run, p, l, move |x| w.gaussian(x));
                 }
             }
             Filter::Box => {
                 for &(p, l) in samples {
-                    self.add_sample(p, l);
+                    let l = if l.is_finite() { l } else { Rgb::BLACK };
+                    if let Some(px) = self.run_owner(&mut run, p) {
+                        px.add_box(l);
+                    }
                 }
             }
         }
+        self.store_run(&run);
     }
 
-    /// [`Self::add_sample`] with a filter wider than the box, `eval` its 1-D weight.
+    /// [`Self::add_sample`] with a filter wider than the box (`eval` its 1-D weight), the
+    /// owner's statistics summed in `run`.
     #[inline(always)]
-    fn add_one(&mut self, p: Vec2, l: Rgb, eval: impl Fn(f32) -> f32) {
-        if let Some(l) = self.admit(p, l) {
-            self.add_separable(p, l, eval);
+    fn add_in_run(&mut self, run: &mut OwnerRun, p: Vec2, l: Rgb, eval: impl Fn(f32) -> f32) {
+        let l = if l.is_finite() { l } else { Rgb::BLACK };
+        if let Some(px) = self.run_owner(run, p) {
+            px.add_stats(l);
+        }
+        self.add_separable(p, l, eval);
+    }
+
+    /// The values of the pixel that owns `p`, as `run`'s: the run goes on while the owner
+    /// stays, else the previous run is stored and one starts (None: no pixel of the tile
+    /// owns `p`, and the run goes on past it).
+    #[inline(always)]
+    fn run_owner<'r>(&mut self, run: &'r mut OwnerRun, p: Vec2) -> Option<&'r mut Pixel> {
+        if !run.holds(p) {
+            let k = self.owner(p)?;
+            if k != run.k {
+                self.store_run(run);
+                run.k = k;
+                run.px = self.pixels.get(k).copied().unwrap_or_default();
+            }
+            // The floors of an owned position are a few thousand at most: exact as floats,
+            // and so is the square's far side.
+            run.lo = Vec2::new(floor_i(p.x) as f32, floor_i(p.y) as f32);
+            run.hi = run.lo + Vec2::ONE;
+        }
+        Some(&mut run.px)
+    }
+
+    /// A run's sums back into its pixel: all of them with the box filter, else the
+    /// statistics (the filtered sums went in place).
+    #[inline]
+    fn store_run(&mut self, run: &OwnerRun) {
+        let whole = self.filter == Filter::Box;
+        if let Some(px) = self.pixels.get_mut(run.k) {
+            if whole {
+                *px = run.px;
+            } else {
+                px.s1 = run.px.s1;
+                px.s2 = run.px.s2;
+                px.n = run.px.n;
+            }
         }
     }
 
@@ -348,10 +442,7 @@ impl FilmTile {
             self.add_box(k, l);
             return true;
         }
-        let px = &mut self.pixels[k];
-        px.s1 += l;
-        px.s2 += l * l;
-        px.n += 1;
+        self.pixels[k].add_stats(l);
         false
     }
 
@@ -377,11 +468,7 @@ impl FilmTile {
     #[inline]
     fn add_box(&mut self, k: usize, l: Rgb) {
         if let Some(px) = self.pixels.get_mut(k) {
-            px.s1 += l;
-            px.s2 += l * l;
-            px.n += 1;
-            px.sum += l;
-            px.weight += 1.0;
+            px.add_box(l);
         }
     }
 
@@ -913,16 +1000,7 @@ mod tile_tests {
                     }
                 }
             }
-            let bits = |t: &FilmTile| -> Vec<[u64; 11]> {
-                t.pixels
-                    .iter()
-                    .map(|px| {
-                        let c = |v: Rgb| [v.r.to_bits() as u64, v.g.to_bits() as u64, v.b.to_bits() as u64];
-                        let (s, a, b) = (c(px.sum), c(px.s1), c(px.s2));
-                        [s[0], s[1], s[2], a[0], a[1], a[2], b[0], b[1], b[2], px.weight.to_bits(), px.n as u64]
-                    })
-                    .collect()
-            };
+            let bits = tile_bits;
             assert_eq!(bits(&fast), bits(&walk), "{f:?}");
             for run in samples.chunks(37) {
                 runs.add_samples(run);
@@ -930,6 +1008,94 @@ mod tile_tests {
             assert_eq!(bits(&runs), bits(&fast), "{f:?}: runs");
             assert!(fast.pixels.iter().filter(|px| px.weight > 0.0).count() > 32, "{f:?}: the samples reached the tile");
         }
+    }
+
+    /// Every pixel's sums, statistics and weight of a tile, as bits.
+    fn tile_bits(t: &FilmTile) -> Vec<[u64; 11]> {
+        t.pixels
+            .iter()
+            .map(|px| {
+                let c = |v: Rgb| [v.r.to_bits() as u64, v.g.to_bits() as u64, v.b.to_bits() as u64];
+                let (s, a, b) = (c(px.sum), c(px.s1), c(px.s2));
+                [s[0], s[1], s[2], a[0], a[1], a[2], b[0], b[1], b[2], px.weight.to_bits(), px.n as u64]
+            })
+            .collect()
+    }
+
+    /// Samples in the path kernel's order, pixel by pixel with each pixel's samples in a row:
+    /// a tile's pixels (`[x0, x1) x [y0, y1)`) and a ring around them, a few samples on a pixel's far edge or
+    /// corner, outside the film, at a NaN position, and with non-finite radiance, some runs
+    /// broken by a sample of another pixel.
+    fn pixel_runs(rng: &mut crate::sampling::Pcg32, (x0, y0, x1, y1): (u32, u32, u32, u32), n: u32) -> Vec<(Vec2, Rgb)> {
+        let mut out = Vec::new();
+        for y in y0.saturating_sub(1)..y1 + 1 {
+            for x in x0.saturating_sub(1)..x1 + 1 {
+                for s in 0..n {
+                    let mut p = Vec2::new(x as f32 + rng.next_f32(), y as f32 + rng.next_f32());
+                    match (s + x + 3 * y) % 23 {
+                        1 => p.x = x as f32 + 1.0,
+                        2 => p = Vec2::new(x as f32 + 1.0, y as f32 + 1.0),
+                        3 => p = Vec2::new(rng.next_f32() * 40.0 - 8.0, rng.next_f32() * 40.0 - 8.0),
+                        4 => p.y = f32::NAN,
+                        5 => p = Vec2::new(x as f32, y as f32),
+                        _ => {}
+                    }
+                    let l = match (s + 7 * x + y) % 31 {
+                        1 => Rgb::new(f32::NAN, 1.0, 1.0),
+                        2 => Rgb::new(1.0, 1.0, f32::INFINITY),
+                        _ => Rgb::new(rng.next_f32(), rng.next_f32() * 1e-3, rng.next_f32() * 1e3),
+                    };
+                    out.push((p, l));
+                }
+            }
+        }
+        out
+    }
+
+    /// Runs of samples of one pixel, as the path kernel hands them over (`add_samples`,
+    /// summed per run), give every pixel's sums, statistics and weight to the bit as adding
+    /// the samples one by one; for each filter, on a tile inside the film and on one at its
+    /// corner (no border there), in batches that cut runs.
+    #[test]
+    fn owner_runs_add_like_single_samples() {
+        let filters = [Filter::Box, Filter::Tent { radius: 1.0 }, Filter::Tent { radius: 1.7 }, Filter::Gaussian { stddev: 0.5 }];
+        let mut rng = crate::sampling::Pcg32::new(17, 3);
+        for f in filters {
+            let film = Film::new(24, 20, f);
+            for rect in [(8, 4, 16, 12), (16, 12, 24, 20)] {
+                let (mut runs, mut single) = (film.tile(rect.0, rect.1, rect.2, rect.3), film.tile(rect.0, rect.1, rect.2, rect.3));
+                let samples = pixel_runs(&mut rng, (runs.x0, runs.y0, runs.x1, runs.y1), 7);
+                for batch in samples.chunks(45) {
+                    runs.add_samples(batch);
+                }
+                for &(p, l) in &samples {
+                    single.add_sample(p, l);
+                }
+                assert_eq!(tile_bits(&runs), tile_bits(&single), "{f:?} {rect:?}");
+                assert!(runs.pixels.iter().all(|px| px.n >= 2), "{f:?} {rect:?}: every pixel took its run");
+            }
+        }
+    }
+
+    /// The same for box-filtered runs with AOV layers (`add_samples_touched`).
+    #[test]
+    fn owner_runs_with_layers_add_like_single_samples() {
+        let names: Vec<String> = (0..3).map(|i| format!("l{i}")).collect();
+        let film = Film::with_layers(16, 16, Filter::Box, &names);
+        let mut rng = crate::sampling::Pcg32::new(5, 9);
+        let samples: Vec<(Vec2, Rgb, Vec<Rgb>, u32)> = pixel_runs(&mut rng, (8, 0, 16, 8), 6)
+            .into_iter()
+            .enumerate()
+            .map(|(k, (p, l))| (p, l, vec![l * 0.5, Rgb::BLACK, Rgb::splat(k as f32)], if k % 3 == 0 { 0 } else { 0b101 }))
+            .collect();
+        let (mut runs, mut single) = (film.tile(8, 0, 16, 8), film.tile(8, 0, 16, 8));
+        runs.add_samples_touched(samples.iter().map(|(p, l, row, t)| (*p, *l, row.as_slice(), *t)));
+        for (p, l, row, t) in &samples {
+            single.add_sample_touched(*p, *l, row, *t);
+        }
+        assert_eq!(tile_bits(&runs), tile_bits(&single));
+        assert_eq!(runs.layers.iter().map(|v| v.to_bits()).collect::<Vec<_>>(), single.layers.iter().map(|v| v.to_bits()).collect::<Vec<_>>());
+        assert!(runs.pixels.iter().all(|px| px.n >= 2));
     }
 
     /// Tile sums (the driver's per-tile pass tree) add exactly as films do, and a blank tile
