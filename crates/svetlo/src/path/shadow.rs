@@ -189,7 +189,7 @@ impl ShadowPackets {
 mod tests {
     use super::*;
     use crate::bsdf::Material;
-    use crate::camera::{Camera, Projection};
+    use crate::camera::Camera;
     use crate::geometry::TriangleMesh;
     use crate::math::warp::square_to_uniform_sphere;
     use crate::sampling::Pcg32;
@@ -234,16 +234,7 @@ mod tests {
         for (k, (uvs, normals)) in [(false, 0), (true, 1), (false, 1), (true, 2), (true, 0)].into_iter().enumerate() {
             b.add_shape(Geometry::Mesh(grid(0.3 * k as f32, 6, uvs, normals)), m, None, &format!("grid {k}")).unwrap();
         }
-        b.set_camera(Camera {
-            to_world: glam::Mat4::IDENTITY,
-            projection: Projection::Perspective { fov_x_deg: 60.0, aperture_radius: 0.0, focus_distance: 1.0 },
-            width: 8,
-            height: 8,
-            near_clip: 0.01,
-            far_clip: 100.0,
-            shutter_open: 0.0,
-            shutter_close: 0.0,
-        });
+        b.set_camera(Camera::pinhole(glam::Mat4::IDENTITY, 60.0, 8, 8));
         let scene = b.build().unwrap();
         let Some(packets) = ShadowPackets::new(&scene) else { return };
         assert!(packets.exact_closest());
