@@ -1077,6 +1077,28 @@ mod tile_tests {
         }
     }
 
+    /// A run begun on a box tile's far edge (which its last pixel keeps) takes the positions
+    /// after it as adding them one by one does (`owner`'s far-edge rule).
+    #[test]
+    fn a_run_on_the_far_edge_adds_like_single_samples() {
+        let film = Film::new(24, 20, Filter::Box);
+        let (x1, y1) = (16.0, 12.0);
+        let samples = [
+            (Vec2::new(x1, 5.5), Rgb::splat(1.0)),
+            (Vec2::new(x1 + 0.25, 5.5), Rgb::splat(2.0)),
+            (Vec2::new(10.5, y1), Rgb::splat(3.0)),
+            (Vec2::new(10.5, y1 + 0.5), Rgb::splat(4.0)),
+            (Vec2::new(x1, y1), Rgb::splat(5.0)),
+            (Vec2::new(x1 + 0.5, y1 + 0.5), Rgb::splat(6.0)),
+        ];
+        let (mut runs, mut single) = (film.tile(8, 4, 16, 12), film.tile(8, 4, 16, 12));
+        runs.add_samples(&samples);
+        for &(p, l) in &samples {
+            single.add_sample(p, l);
+        }
+        assert_eq!(tile_bits(&runs), tile_bits(&single));
+    }
+
     /// The same for box-filtered runs with AOV layers (`add_samples_touched`).
     #[test]
     fn owner_runs_with_layers_add_like_single_samples() {
