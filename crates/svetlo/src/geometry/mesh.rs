@@ -151,6 +151,37 @@ pub struct TriangleShading {
     pub dpdu: Vec3,
 }
 
+/// A triangle's normals as a hit on it needs them: constant (a shape's `flat` entry: geometric
+/// normal and shading frame), or interpolated per hit (as `Scene::interaction` makes them).
+/// Kept per triangle by the packet tracers, which shade their hits without the mesh.
+#[derive(Clone, Copy, Debug)]
+pub enum TriangleFrame {
+    Flat(Vec3, crate::math::Frame),
+    Smooth(TriangleShading),
+}
+
+impl TriangleFrame {
+    /// Triangle `t` of `m`, with the shape's `flat` entry for it where it has one.
+    pub fn new(flat: Option<(Vec3, crate::math::Frame)>, m: &TriangleMesh, t: usize) -> TriangleFrame {
+        match flat {
+            Some((ng, frame)) => TriangleFrame::Flat(ng, frame),
+            None => TriangleFrame::Smooth(m.shading(t)),
+        }
+    }
+
+    /// (geometric normal, shading frame) at barycentrics (b1, b2): `Scene::interaction`'s.
+    #[inline(always)]
+    pub fn at(&self, b1: f32, b2: f32) -> (Vec3, crate::math::Frame) {
+        match self {
+            TriangleFrame::Flat(ng, frame) => (*ng, *frame),
+            TriangleFrame::Smooth(s) => {
+                let (ng, ns) = s.normals_at(b1, b2);
+                (ng, crate::math::Frame::from_normal_tangent(ns, s.dpdu))
+            }
+        }
+    }
+}
+
 impl TriangleShading {
     /// (geometric normal, shading normal) at barycentrics (b1, b2), as `TriangleMesh::surface`.
     #[inline]

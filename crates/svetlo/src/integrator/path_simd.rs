@@ -73,6 +73,7 @@ use crate::bsdf::microfacet::{sample_visible_beckmann_lanes, BeckmannLanes};
 use crate::bsdf::{Bsdf, LobeFlags, Material, TransportMode};
 use crate::error::{Error, Result};
 use crate::film::{Film, FilmTile};
+use crate::geometry::mesh::TriangleFrame;
 use crate::geometry::ray::SHADOW_EPSILON;
 use crate::geometry::Ray;
 use crate::geometry::{Geometry, Sphere, SurfaceInteraction, TriangleShading};
@@ -134,18 +135,10 @@ impl Integrator for SimdPathTracer {
 #[derive(Clone, Copy, Debug)]
 struct Tri {
     p: [Vec3; 3],
-    shading: Shading,
+    shading: TriangleFrame,
     shape: u32,
     /// Its index in its mesh (for uvs and mesh-attribute textures).
     local: u32,
-}
-
-/// A triangle's normals: constant, or interpolated per hit (as `TriangleMesh::surface`).
-#[derive(Clone, Copy, Debug)]
-enum Shading {
-    /// Geometric normal and shading frame.
-    Flat(Vec3, Frame),
-    Smooth(TriangleShading),
 }
 
 /// A Lambertian reflectance: constant, or a texture evaluated where the path hits.
@@ -568,10 +561,7 @@ impl SimdKernel {
             }
             let Geometry::Mesh(m) = &*s.geometry else { continue };
             for t in 0..m.triangle_count() {
-                let shading = match s.flat.get(t).copied().flatten() {
-                    Some((ng, frame)) => Shading::Flat(ng, frame),
-                    None => Shading::Smooth(m.shading(t)),
-                };
+                let shading = TriangleFrame::new(s.flat.get(t).copied().flatten(), m, t);
                 tris.push(Tri { p: m.vertices(t), shading, shape: si as u32, local: t as u32 });
             }
         }
@@ -878,13 +868,7 @@ impl SimdKernel {
         let (hit, shape, p, ng, frame) = match (self.tris.get(prim as usize), other) {
             (Some(tri), _) => {
                 let p = tri.p[0] * (1.0 - b1 - b2) + tri.p[1] * b1 + tri.p[2] * b2;
-                let (ng, frame) = match tri.shading {
-                    Shading::Flat(ng, frame) => (ng, frame),
-                    Shading::Smooth(s) => {
-                        let (ng, ns) = s.normals_at(b1, b2);
-                        (ng, Frame::from_normal_tangent(ns, s.dpdu))
-                    }
-                };
+                let (ng, frame) = tri.shading.at(b1, b2);
                 (Hit::Tri(tri), tri.shape, p, ng, frame)
             }
             (None, Some(si)) => (Hit::Other(si), si.shape, si.p, si.ng, si.shading),

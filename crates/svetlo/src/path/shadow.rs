@@ -20,9 +20,8 @@
 
 use crate::accel::packet::{Hits8, PacketBvh, Rays8, LANES};
 use crate::bsdf::Material;
-use crate::geometry::mesh::TriangleShading;
+use crate::geometry::mesh::TriangleFrame;
 use crate::geometry::{Geometry, Ray, SurfaceInteraction};
-use crate::math::Frame;
 use crate::scene::Scene;
 use glam::{Vec2, Vec3};
 
@@ -50,14 +49,7 @@ struct HitTriangle {
     p: [Vec3; 3],
     /// The vertices' uvs (None: the mesh has none, uv = the barycentrics).
     uvs: Option<[Vec2; 3]>,
-    shading: HitShading,
-}
-
-enum HitShading {
-    /// The shape's `flat` entry: (geometric normal, shading frame).
-    Flat(Vec3, Frame),
-    /// `TriangleMesh::shading`, interpolated at each hit.
-    Smooth(TriangleShading),
+    shading: TriangleFrame,
 }
 
 /// Closest hits of up to eight rays ([`ShadowPackets::closest`]).
@@ -85,10 +77,7 @@ impl ShadowPackets {
                 return None;
             }
             tris.extend((0..m.triangle_count()).map(|t| {
-                let shading = match s.flat.get(t) {
-                    Some(Some((ng, frame))) => HitShading::Flat(*ng, *frame),
-                    _ => HitShading::Smooth(m.shading(t)),
-                };
+                let shading = TriangleFrame::new(s.flat.get(t).copied().flatten(), m, t);
                 let uvs = (!m.uvs.is_empty()).then(|| m.indices[t].map(|i| m.uvs[i as usize]));
                 HitTriangle { shape: shape as u32, prim: t as u32, p: m.vertices(t), uvs, shading }
             }));
@@ -163,13 +152,7 @@ impl ShadowPackets {
             None => Vec2::new(b1, b2),
             Some([t0, t1, t2]) => t0 * (1.0 - b1 - b2) + t1 * b1 + t2 * b2,
         };
-        let (ng, shading) = match &tri.shading {
-            HitShading::Flat(ng, frame) => (*ng, *frame),
-            HitShading::Smooth(s) => {
-                let (ng, ns) = s.normals_at(b1, b2);
-                (ng, Frame::from_normal_tangent(ns, s.dpdu))
-            }
-        };
+        let (ng, shading) = tri.shading.at(b1, b2);
         Some(SurfaceInteraction {
             p,
             t: hits.hits.t[l],
