@@ -153,25 +153,30 @@ fn prep(r: &Rays8, active: u8) -> Prep {
 /// Subtrees of at least this many triangles build their two halves in parallel.
 const PARALLEL_MIN: usize = 16 * 1024;
 
-/// The subtree over `order` (bounds `bb`; `order[0]` is at `base` in the whole order):
-/// its nodes (root first) and its code, node indices relative to the returned vector.
-fn build_par(bounds: &[Aabb], centroids: &[Vec3], order: &mut [u32], base: usize, bb: Aabb, depth: usize) -> (Vec<Node>, u32) {
+/// A subtree's triangles: the bounds of their boxes (`bb`) and of their centroids (`cb`).
+#[derive(Clone, Copy, Debug)]
+struct Extent {
+    bb: Aabb,
+    cb: Aabb,
+}
+
+/// The subtree over `order` (`order[0]` is at `base` in the whole order): its nodes (root
+/// first) and its code, node indices relative to the returned vector.
+fn build_par(bounds: &[Aabb], centroids: &[Vec3], order: &mut [u32], base: usize, ext: Extent, depth: usize) -> (Vec<Node>, u32) {
     let n = order.len();
-    let mut b = Build { bounds, centroids, nodes: Vec::new(), order, base };
+    let mut b = Build { bounds, centroids, nodes: Vec::new(), order, base, bins: Bins::default() };
     if n < PARALLEL_MIN {
-        let code = b.rec(0, n, bb, depth);
+        let code = b.rec(0, n, ext, depth);
         return (b.nodes, code);
     }
-    let Some(mid) = b.split(0, n, bb, depth) else { return (Vec::new(), leaf(base, n)) };
+    let Some((mid, [le, re])) = b.split(0, n, ext, depth) else { return (Vec::new(), leaf(base, n)) };
     let (l, r) = order.split_at_mut(mid);
-    let fold = |o: &[u32]| o.iter().fold(Aabb::EMPTY, |acc, &i| acc.union(bounds[i as usize]));
-    let (lbb, rbb) = (fold(l), fold(r));
     let ((ln, lc), (rn, rc)) =
-        rayon::join(|| build_par(bounds, centroids, l, base, lbb, depth + 1), || build_par(bounds, centroids, r, base + mid, rbb, depth + 1));
+        rayon::join(|| build_par(bounds, centroids, l, base, le, depth + 1), || build_par(bounds, centroids, r, base + mid, re, depth + 1));
     // Parent first, then the left subtree, then the right: inner codes move by their offset.
     let reloc = |code: u32, off: usize| if code & LEAF_BIT != 0 { code } else { code + off as u32 };
     let mut nodes = Vec::with_capacity(1 + ln.len() + rn.len());
-    nodes.push(Node { boxes: [box6(lbb), box6(rbb)], child: [reloc(lc, 1), reloc(rc, 1 + ln.len())] });
+    nodes.push(Node { boxes: [box6(le.bb), box6(re.bb)], child: [reloc(lc, 1), reloc(rc, 1 + ln.len())] });
     for (sub, off) in [(&ln, 1), (&rn, 1 + ln.len())] {
         nodes.extend(sub.iter().map(|nd| Node { boxes: nd.boxes, child: nd.child.map(|c| reloc(c, off)) }));
     }
@@ -189,33 +194,52 @@ struct Build<'a> {
     order: &'a mut [u32],
     /// Position of `order[0]` in the whole order (leaf codes are absolute).
     base: usize,
+    bins: Bins,
 }
 
+/// The SAH's bins per axis, kept between nodes: each node empties the bins it used (most
+/// nodes are small and use a few), not all 96.
+struct Bins {
+    bounds: [[Aabb; BINS]; 3],
+    counts: [[u32; BINS]; 3],
+}
+
+impl Default for Bins {
+    fn default() -> Self {
+        Bins { bounds: [[Aabb::EMPTY; BINS]; 3], counts: [[0; BINS]; 3] }
+    }
+}
+
+/// A binned SAH split: (sum of area * count, axis, first bin of the right side), and the
+/// two sides' box bounds (the unions of their bins).
+type BinSplit = (f32, usize, usize, [Aabb; 2]);
+
 impl Build<'_> {
-    /// Builds the subtree over `order[lo..hi]` (bounds `bb`); returns its code.
-    fn rec(&mut self, lo: usize, hi: usize, bb: Aabb, depth: usize) -> u32 {
-        let Some(mid) = self.split(lo, hi, bb, depth) else { return leaf(self.base + lo, hi - lo) };
+    /// Builds the subtree over `order[lo..hi]` (of extent `ext`); returns its code.
+    fn rec(&mut self, lo: usize, hi: usize, ext: Extent, depth: usize) -> u32 {
+        let Some((mid, sides)) = self.split(lo, hi, ext, depth) else { return leaf(self.base + lo, hi - lo) };
         let idx = self.nodes.len();
-        self.nodes.push(Node { boxes: [[0.0; 6]; 2], child: [0; 2] });
+        self.nodes.push(Node { boxes: [box6(sides[0].bb), box6(sides[1].bb)], child: [0; 2] });
         for (k, (a, b)) in [(lo, mid), (mid, hi)].into_iter().enumerate() {
-            let cbb = self.order[a..b].iter().fold(Aabb::EMPTY, |acc, &i| acc.union(self.bounds[i as usize]));
-            let code = self.rec(a, b, cbb, depth + 1);
-            self.nodes[idx].boxes[k] = box6(cbb);
+            let code = self.rec(a, b, sides[k], depth + 1);
             self.nodes[idx].child[k] = code;
         }
         idx as u32
     }
 
-    /// Where to split `order[lo..hi]` (bounds `bb`), reordering it; None for a leaf.
-    fn split(&mut self, lo: usize, hi: usize, bb: Aabb, depth: usize) -> Option<usize> {
+    /// Where to split `order[lo..hi]` (of extent `ext`), reordering it, and the two sides'
+    /// extents; None for a leaf. The sides' boxes come from the bins and their centroid
+    /// bounds from the partition pass (min and max are exact in any order: the same bounds
+    /// as folds over the sides, without two more passes over the triangles).
+    fn split(&mut self, lo: usize, hi: usize, ext: Extent, depth: usize) -> Option<(usize, [Extent; 2])> {
         let n = hi - lo;
         if n <= 1 {
             return None;
         }
-        let cb = self.order[lo..hi].iter().fold(Aabb::EMPTY, |b, &i| b.grow(self.centroids[i as usize]));
+        let (bb, cb) = (ext.bb, ext.cb);
         let split = if depth >= MAX_DEPTH { None } else { self.best_split(lo, hi, &cb) };
-        let mid = match split {
-            Some((cost, axis, bin)) => {
+        match split {
+            Some((cost, axis, bin, [lbb, rbb])) => {
                 // SAH in units of one triangle test: a node visit, then each child's
                 // triangles weighted by the chance that a ray meeting the parent meets it.
                 let split_cost = NODE_COST + cost / bb.surface_area().max(f32::MIN_POSITIVE);
@@ -224,13 +248,18 @@ impl Build<'_> {
                 }
                 let (cmin, scale) = (cb.min[axis], BINS as f32 / cb.extent()[axis]);
                 let mut l = lo;
+                let (mut lcb, mut rcb) = (Aabb::EMPTY, Aabb::EMPTY);
                 for k in lo..hi {
-                    if bin_index(self.centroids[self.order[k] as usize][axis], cmin, scale) < bin {
+                    let c = self.centroids[self.order[k] as usize];
+                    if bin_index(c[axis], cmin, scale) < bin {
                         self.order.swap(k, l);
                         l += 1;
+                        lcb = lcb.grow(c);
+                    } else {
+                        rcb = rcb.grow(c);
                     }
                 }
-                l
+                Some((l, [Extent { bb: lbb, cb: lcb }, Extent { bb: rbb, cb: rcb }]))
             }
             None => {
                 if n <= MAX_LEAF {
@@ -240,18 +269,32 @@ impl Build<'_> {
                 let axis = cb.extent().max_position();
                 let c = self.centroids;
                 self.order[lo..hi].select_nth_unstable_by(n / 2, |&a, &b| c[a as usize][axis].total_cmp(&c[b as usize][axis]));
-                lo + n / 2
+                let mid = lo + n / 2;
+                Some((mid, [self.extent(lo, mid), self.extent(mid, hi)]))
             }
-        };
-        Some(mid)
+        }
     }
 
-    /// Best binned SAH split over the three axes of `order[lo..hi]`: (sum of area * count,
-    /// axis, first bin of the right side); None when the centroids coincide.
-    fn best_split(&self, lo: usize, hi: usize, cb: &Aabb) -> Option<(f32, usize, usize)> {
+    /// The extent of `order[lo..hi]`.
+    fn extent(&self, lo: usize, hi: usize) -> Extent {
+        let o = &self.order[lo..hi];
+        Extent {
+            bb: o.iter().fold(Aabb::EMPTY, |acc, &i| acc.union(self.bounds[i as usize])),
+            cb: o.iter().fold(Aabb::EMPTY, |acc, &i| acc.grow(self.centroids[i as usize])),
+        }
+    }
+
+    /// Best binned SAH split over the three axes of `order[lo..hi]` (centroid bounds `cb`);
+    /// None when the centroids coincide. The sweeps visit only the bins that hold
+    /// triangles: every split position between two of them gives the same two sides and
+    /// cost, and the first such position (the one a sweep over all bins keeps, as it keeps
+    /// only a strictly lower cost) is the one after the left side's last bin. Small nodes,
+    /// most of the tree, fill a few of the 32 bins.
+    fn best_split(&mut self, lo: usize, hi: usize, cb: &Aabb) -> Option<BinSplit> {
         let ext = cb.extent();
-        let mut bin_b = [[Aabb::EMPTY; BINS]; 3];
-        let mut bin_n = [[0u32; BINS]; 3];
+        let Bins { bounds: bin_b, counts: bin_n } = &mut self.bins;
+        // Per axis, the bins that hold triangles (bit k: bin k).
+        let mut used = [0u32; 3];
         for &i in &self.order[lo..hi] {
             let c = self.centroids[i as usize];
             for axis in 0..3 {
@@ -259,33 +302,64 @@ impl Build<'_> {
                     let k = bin_index(c[axis], cb.min[axis], BINS as f32 / ext[axis]);
                     bin_b[axis][k] = bin_b[axis][k].union(self.bounds[i as usize]);
                     bin_n[axis][k] += 1;
+                    used[axis] |= 1 << k;
                 }
             }
         }
         let mut best: Option<(f32, usize, usize)> = None;
         for axis in (0..3).filter(|&a| ext[a] > 0.0) {
+            let (bins, counts) = (&bin_b[axis], &bin_n[axis]);
+            // The right side's area * count, from each used bin up.
             let mut right = [0.0f32; BINS];
             let (mut acc, mut cnt) = (Aabb::EMPTY, 0u32);
-            for k in (1..BINS).rev() {
-                acc = acc.union(bin_b[axis][k]);
-                cnt += bin_n[axis][k];
-                right[k] = if cnt == 0 { f32::INFINITY } else { acc.surface_area() * cnt as f32 };
+            for k in bits_down(used[axis]) {
+                acc = acc.union(bins[k]);
+                cnt += counts[k];
+                right[k] = acc.surface_area() * cnt as f32;
             }
             let (mut acc, mut cnt) = (Aabb::EMPTY, 0u32);
-            for k in 1..BINS {
-                acc = acc.union(bin_b[axis][k - 1]);
-                cnt += bin_n[axis][k - 1];
-                if cnt == 0 || !right[k].is_finite() {
+            let mut bits = used[axis];
+            while bits != 0 {
+                let k = bits.trailing_zeros() as usize;
+                bits &= bits - 1;
+                if bits == 0 {
+                    break; // the last used bin: nothing right of it
+                }
+                acc = acc.union(bins[k]);
+                cnt += counts[k];
+                let rcost = right[bits.trailing_zeros() as usize];
+                if !rcost.is_finite() {
                     continue;
                 }
-                let cost = acc.surface_area() * cnt as f32 + right[k];
+                let cost = acc.surface_area() * cnt as f32 + rcost;
                 if best.is_none_or(|b| cost < b.0) {
-                    best = Some((cost, axis, k));
+                    best = Some((cost, axis, k + 1));
                 }
             }
         }
-        best
+        let sides = best.map(|(_, axis, bin)| {
+            let side = |bits: u32| bits_down(bits).fold(Aabb::EMPTY, |acc, k| acc.union(bin_b[axis][k]));
+            let below = (1u32 << bin) - 1;
+            [side(used[axis] & below), side(used[axis] & !below)]
+        });
+        for axis in 0..3 {
+            for k in bits_down(used[axis]) {
+                (bin_b[axis][k], bin_n[axis][k]) = (Aabb::EMPTY, 0);
+            }
+        }
+        best.zip(sides).map(|((cost, axis, bin), sides)| (cost, axis, bin, sides))
     }
+}
+
+/// The set bits of `bits`, highest first.
+fn bits_down(mut bits: u32) -> impl Iterator<Item = usize> {
+    std::iter::from_fn(move || {
+        (bits != 0).then(|| {
+            let k = 31 - bits.leading_zeros() as usize;
+            bits &= !(1 << k);
+            k
+        })
+    })
 }
 
 fn bin_index(c: f32, lo: f32, scale: f32) -> usize {
@@ -298,11 +372,11 @@ impl PacketBvh {
         let bounds: Vec<Aabb> = tris.iter().map(|t| Aabb::from_points(t)).collect();
         let centroids: Vec<Vec3> = bounds.iter().map(|b| b.center()).collect();
         let mut order: Vec<u32> = (0..tris.len() as u32).collect();
-        let root_bb = bounds.iter().fold(Aabb::EMPTY, |a, b| a.union(*b));
+        let root = Extent { bb: bounds.iter().fold(Aabb::EMPTY, |a, b| a.union(*b)), cb: centroids.iter().fold(Aabb::EMPTY, |a, c| a.grow(*c)) };
         let (nodes, root) = if tris.is_empty() {
             (Vec::new(), None)
         } else {
-            let (nodes, code) = build_par(&bounds, &centroids, &mut order, 0, root_bb, 0);
+            let (nodes, code) = build_par(&bounds, &centroids, &mut order, 0, root, 0);
             (nodes, Some(code))
         };
         let mut verts: Vec<[f32; 4]> = order.iter().flat_map(|&i| tris[i as usize].map(|p| [p.x, p.y, p.z, 0.0])).collect();
@@ -1135,6 +1209,151 @@ mod tests {
                 set_lane(&mut r, l, o, d, if rng.next_f32() < 0.3 { rng.next_f32() * 2.0 } else { f32::INFINITY });
             }
             check(bvh, tris, &r, active);
+        }
+    }
+
+    /// The binned SAH build as it was before its sweeps skipped empty bins and the sides'
+    /// bounds came from the bins (a sweep over all 32 bins, folds over each side): the
+    /// reference the tree must equal node for node, as the images depend on its order.
+    fn dense_reference(tris: &[[Vec3; 3]]) -> (Vec<Node>, Option<u32>, Vec<u32>) {
+        struct Dense<'a> {
+            bounds: &'a [Aabb],
+            centroids: &'a [Vec3],
+            nodes: Vec<Node>,
+            order: Vec<u32>,
+        }
+        impl Dense<'_> {
+            fn fold(&self, lo: usize, hi: usize) -> Aabb {
+                self.order[lo..hi].iter().fold(Aabb::EMPTY, |acc, &i| acc.union(self.bounds[i as usize]))
+            }
+            fn rec(&mut self, lo: usize, hi: usize, bb: Aabb, depth: usize) -> u32 {
+                let Some(mid) = self.split(lo, hi, bb, depth) else { return leaf(lo, hi - lo) };
+                let idx = self.nodes.len();
+                self.nodes.push(Node { boxes: [[0.0; 6]; 2], child: [0; 2] });
+                for (k, (a, b)) in [(lo, mid), (mid, hi)].into_iter().enumerate() {
+                    let cbb = self.fold(a, b);
+                    let code = self.rec(a, b, cbb, depth + 1);
+                    self.nodes[idx].boxes[k] = box6(cbb);
+                    self.nodes[idx].child[k] = code;
+                }
+                idx as u32
+            }
+            fn split(&mut self, lo: usize, hi: usize, bb: Aabb, depth: usize) -> Option<usize> {
+                let n = hi - lo;
+                if n <= 1 {
+                    return None;
+                }
+                let cb = self.order[lo..hi].iter().fold(Aabb::EMPTY, |b, &i| b.grow(self.centroids[i as usize]));
+                let split = if depth >= MAX_DEPTH { None } else { self.best_split(lo, hi, &cb) };
+                Some(match split {
+                    Some((cost, axis, bin)) => {
+                        if n <= MAX_LEAF && n as f32 <= NODE_COST + cost / bb.surface_area().max(f32::MIN_POSITIVE) {
+                            return None;
+                        }
+                        let (cmin, scale) = (cb.min[axis], BINS as f32 / cb.extent()[axis]);
+                        let mut l = lo;
+                        for k in lo..hi {
+                            if bin_index(self.centroids[self.order[k] as usize][axis], cmin, scale) < bin {
+                                self.order.swap(k, l);
+                                l += 1;
+                            }
+                        }
+                        l
+                    }
+                    None if n <= MAX_LEAF => return None,
+                    None => {
+                        let axis = cb.extent().max_position();
+                        let c = self.centroids;
+                        self.order[lo..hi].select_nth_unstable_by(n / 2, |&a, &b| c[a as usize][axis].total_cmp(&c[b as usize][axis]));
+                        lo + n / 2
+                    }
+                })
+            }
+            fn best_split(&self, lo: usize, hi: usize, cb: &Aabb) -> Option<(f32, usize, usize)> {
+                let ext = cb.extent();
+                let mut bin_b = [[Aabb::EMPTY; BINS]; 3];
+                let mut bin_n = [[0u32; BINS]; 3];
+                for &i in &self.order[lo..hi] {
+                    let c = self.centroids[i as usize];
+                    for axis in (0..3).filter(|&a| ext[a] > 0.0) {
+                        let k = bin_index(c[axis], cb.min[axis], BINS as f32 / ext[axis]);
+                        bin_b[axis][k] = bin_b[axis][k].union(self.bounds[i as usize]);
+                        bin_n[axis][k] += 1;
+                    }
+                }
+                let mut best: Option<(f32, usize, usize)> = None;
+                for axis in (0..3).filter(|&a| ext[a] > 0.0) {
+                    let mut right = [0.0f32; BINS];
+                    let (mut acc, mut cnt) = (Aabb::EMPTY, 0u32);
+                    for k in (1..BINS).rev() {
+                        acc = acc.union(bin_b[axis][k]);
+                        cnt += bin_n[axis][k];
+                        right[k] = if cnt == 0 { f32::INFINITY } else { acc.surface_area() * cnt as f32 };
+                    }
+                    let (mut acc, mut cnt) = (Aabb::EMPTY, 0u32);
+                    for k in 1..BINS {
+                        acc = acc.union(bin_b[axis][k - 1]);
+                        cnt += bin_n[axis][k - 1];
+                        if cnt == 0 || !right[k].is_finite() {
+                            continue;
+                        }
+                        let cost = acc.surface_area() * cnt as f32 + right[k];
+                        if best.is_none_or(|b| cost < b.0) {
+                            best = Some((cost, axis, k));
+                        }
+                    }
+                }
+                best
+            }
+        }
+        let bounds: Vec<Aabb> = tris.iter().map(|t| Aabb::from_points(t)).collect();
+        let centroids: Vec<Vec3> = bounds.iter().map(|b| b.center()).collect();
+        let mut d = Dense { bounds: &bounds, centroids: &centroids, nodes: Vec::new(), order: (0..tris.len() as u32).collect() };
+        let root = (!tris.is_empty()).then(|| {
+            let bb = d.fold(0, tris.len());
+            d.rec(0, tris.len(), bb, 0)
+        });
+        (d.nodes, root, d.order)
+    }
+
+    /// Nodes as bits, in depth-first order from `code` (the parallel build numbers them
+    /// otherwise than the serial reference).
+    fn tree_bits(nodes: &[Node], code: u32, out: &mut Vec<u32>) {
+        out.push(code & LEAF_BIT);
+        if code & LEAF_BIT != 0 {
+            out.push(code);
+            return;
+        }
+        let nd = &nodes[code as usize];
+        out.extend(nd.boxes.iter().flatten().map(|v| v.to_bits()));
+        for c in nd.child {
+            tree_bits(nodes, c, out);
+        }
+    }
+
+    #[test]
+    fn build_equals_the_dense_sweep_reference() {
+        let mut rng = Pcg32::new(11, 5);
+        let mut meshes: Vec<Vec<[Vec3; 3]>> = [0, 1, 2, 3, 17, 300, 5000, PARALLEL_MIN + 3000].iter().map(|&n| random_mesh(&mut rng, n)).collect();
+        // A grid of quads (coincident centroids along an axis, empty bins between rows) and
+        // a stack of identical triangles (median splits).
+        let grid = (0..40 * 40).flat_map(|k| {
+            let p = |a: i32, b: i32| Vec3::new((k % 40 + a) as f32 * 0.25, (k / 40 + b) as f32 * 0.25, 1.0);
+            [[p(0, 0), p(1, 0), p(1, 1)], [p(0, 0), p(1, 1), p(0, 1)]]
+        });
+        meshes.push(grid.collect());
+        meshes.push(vec![[Vec3::ZERO, Vec3::X, Vec3::Y]; 9]);
+        for tris in &meshes {
+            let bvh = PacketBvh::build(tris);
+            let (nodes, root, order) = dense_reference(tris);
+            assert_eq!(bvh.ids, order, "{} triangles: leaf order", tris.len());
+            let (mut got, mut want) = (Vec::new(), Vec::new());
+            if let (Some(a), Some(b)) = (bvh.root, root) {
+                tree_bits(&bvh.nodes, a, &mut got);
+                tree_bits(&nodes, b, &mut want);
+            }
+            assert_eq!(bvh.root.is_some(), root.is_some());
+            assert!(got == want, "{} triangles: the trees differ", tris.len());
         }
     }
 
