@@ -2,7 +2,10 @@
 //! the scalar tracer), one thread: for comparisons of the kernel's tracers on a shared machine
 //! (run the modes alternately, or under `valgrind --tool=callgrind` for instruction counts).
 //!
-//! cargo run --release --example path_kernel_bench -- SCENE.xml packets|single|scalar [SPP] [SIZE] [OUT.exr]
+//! `repeat`: three renders of the scene through `path` in one process, each timed (the first
+//! builds the packet tree, the others take the one the scene keeps).
+//!
+//! cargo run --release --example path_kernel_bench -- SCENE.xml packets|single|scalar|repeat [SPP] [SIZE] [OUT.exr]
 
 use svetlo::integrator::path_simd::SimdKernel;
 use svetlo::integrator::{Progress, RenderSettings};
@@ -10,7 +13,7 @@ use svetlo::integrator::{Progress, RenderSettings};
 fn main() -> Result<(), Box<dyn std::error::Error>> {
     let args: Vec<String> = std::env::args().collect();
     let (Some(path), Some(mode)) = (args.get(1), args.get(2)) else {
-        return Err("usage: path_kernel_bench SCENE.xml packets|single|scalar [SPP] [SIZE] [OUT.exr]".into());
+        return Err("usage: path_kernel_bench SCENE.xml packets|single|scalar|repeat [SPP] [SIZE] [OUT.exr]".into());
     };
     let spp: u32 = args.get(3).map_or(Ok(64), |s| s.parse())?;
     let size: u32 = args.get(4).map_or(Ok(64), |s| s.parse())?;
@@ -23,6 +26,16 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     let start = std::time::Instant::now();
     let film = match mode.as_str() {
         "scalar" => svetlo::methods::by_name("path:simd=false")?.render(&scene, &s, &Progress::new())?,
+        "repeat" => {
+            let path = svetlo::methods::by_name("path")?;
+            let mut film = None;
+            for i in 0..3 {
+                let t = std::time::Instant::now();
+                film = Some(path.render(&scene, &s, &Progress::new())?);
+                println!("render {i}: {:.4} s", t.elapsed().as_secs_f64());
+            }
+            film.ok_or("no render")?
+        }
         "packets" | "single" => {
             let mut k = SimdKernel::new(&scene, &s).ok_or("the scene does not qualify for the kernel")?;
             if mode == "single" {
@@ -31,7 +44,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
             println!("packets: {}", k.uses_packets());
             k.render(&scene, &s, &Progress::new())?
         }
-        m => return Err(format!("unknown mode '{m}' (packets, single or scalar)").into()),
+        m => return Err(format!("unknown mode '{m}' (packets, single, scalar or repeat)").into()),
     };
     let img = film.image();
     println!("{mode}: {:.3} s, mean {:?}", start.elapsed().as_secs_f64(), img.mean());

@@ -1052,3 +1052,16 @@ fn veach_mis_packets_match_scalar() {
         assert!(render(&scene, "path", &s).data == render(&scene, "path:simd=false", &s).data, "{sampler:?}: veach-mis differs from the scalar tracer");
     }
 }
+
+/// The packet tree is kept with the scene (`Scene::packet_tree`): a second render, and a
+/// render of a clone, take it and give the first render's image bit for bit.
+#[test]
+fn renders_after_the_first_keep_the_image() {
+    let scene = load(&repo_scene("cornell-box.xml"), &[], 32);
+    let mut s = RenderSettings::from_scene(&scene);
+    s.spp = 4;
+    s.seed = 5;
+    let a = render(&scene, "path", &s);
+    assert!(render(&scene, "path", &s).data == a.data, "the second render differs");
+    assert!(render(&scene.clone(), "path", &s).data == a.data, "the clone's render differs");
+}

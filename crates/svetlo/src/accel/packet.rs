@@ -362,8 +362,11 @@ fn bits_down(mut bits: u32) -> impl Iterator<Item = usize> {
     })
 }
 
+/// The bin of centroid coordinate `c` (`(x as usize).min(BINS - 1)` for every x, NaN
+/// included, by the shorter conversion to i32).
+#[inline]
 fn bin_index(c: f32, lo: f32, scale: f32) -> usize {
-    (((c - lo) * scale) as usize).min(BINS - 1)
+    (((c - lo) * scale) as i32).clamp(0, BINS as i32 - 1) as usize
 }
 
 impl PacketBvh {
@@ -379,7 +382,8 @@ impl PacketBvh {
             let (nodes, code) = build_par(&bounds, &centroids, &mut order, 0, root, 0);
             (nodes, Some(code))
         };
-        let mut verts: Vec<[f32; 4]> = order.iter().flat_map(|&i| tris[i as usize].map(|p| [p.x, p.y, p.z, 0.0])).collect();
+        let mut verts: Vec<[f32; 4]> = Vec::with_capacity(3 * order.len() + 1);
+        verts.extend(order.iter().flat_map(|&i| tris[i as usize].map(|p| [p.x, p.y, p.z, 0.0])));
         verts.push([0.0; 4]);
         PacketBvh { verts, ids: order, nodes, root, isa: Isa::detect() }
     }
@@ -1328,6 +1332,14 @@ mod tests {
         out.extend(nd.boxes.iter().flatten().map(|v| v.to_bits()));
         for c in nd.child {
             tree_bits(nodes, c, out);
+        }
+    }
+
+    #[test]
+    fn bin_index_is_the_saturating_usize_conversion() {
+        let xs = [f32::NAN, f32::NEG_INFINITY, -1e30, -1.0, -0.5, -0.0, 0.0, 0.3, 1.0, 30.99, 31.0, 31.5, 32.0, 32.001, 1e9, 3e9, 1e30, f32::INFINITY];
+        for x in xs {
+            assert_eq!(bin_index(x, 0.0, 1.0), (x as usize).min(BINS - 1), "{x}");
         }
     }
 

@@ -86,6 +86,7 @@ use crate::scene::Scene;
 use crate::spectrum::Rgb;
 use crate::texture::{TexPoint, Texture};
 use glam::{Vec2, Vec3};
+use std::sync::Arc;
 
 /// `path`: the eight-wide kernel when the scene qualifies and the CPU has AVX2, else the
 /// scalar [`PathTracer`]. `path:simd=false` always runs the scalar one.
@@ -215,7 +216,7 @@ enum Tracer {
     /// lanes after the triangles (as the scene's BVH does), with the scene shape of each;
     /// a lane the spheres leave unsure is traced again through the scene's BVH (then `ties`
     /// is always there).
-    Packets { bvh: PacketBvh, ties: Option<Vec<u32>>, spheres: Option<Box<(PacketSpheres, Vec<u32>)>> },
+    Packets { bvh: Arc<PacketBvh>, ties: Option<Vec<u32>>, spheres: Option<Box<(PacketSpheres, Vec<u32>)>> },
     /// One by one through the scene's wide BVH: in a large scene eight incoherent rays share
     /// few nodes, and a packet pays for the union of their walks; the only way to shapes
     /// other than meshes. `first`: the kernel's index of each shape's first triangle
@@ -565,8 +566,17 @@ impl SimdKernel {
                 tris.push(Tri { p: m.vertices(t), shading, shape: si as u32, local: t as u32 });
             }
         }
-        // Only the packet tree needs the corners apart (single rays use the scene's BVH).
-        let verts = || tris[..static_triangles.unwrap_or(tris.len())].iter().map(|t| t.p).collect::<Vec<_>>();
+        // Only the packet tree needs the corners apart (single rays use the scene's BVH): the
+        // tree over the static meshes, the one of the scene's last render if it has the same.
+        let packet_tree = || {
+            let meshes: Vec<&Arc<Geometry>> = kernel_order(scene)
+                .take_while(|&si| !scene.moving.iter().any(|mv| mv.shape as usize == si))
+                .map(|si| &scene.shapes[si].geometry)
+                .filter(|g| matches!(&***g, Geometry::Mesh(_)))
+                .collect();
+            let verts = || tris[..static_triangles.unwrap_or(tris.len())].iter().map(|t| t.p).collect::<Vec<_>>();
+            scene.packet_tree.get_or_build(&meshes, || PacketBvh::build(&verts()))
+        };
         let tracer = if scene.settings.ray_epsilon > 0.0 || (single_rays && !scene.moving.is_empty()) {
             Tracer::Scene { first: first_triangles(scene) }
         } else if single_rays {
@@ -574,13 +584,13 @@ impl SimdKernel {
         } else if spheres.is_empty() {
             // A large scene's tied lanes go to the scene's BVH too: its image stays the one of
             // single rays (which these scenes traced before), bit for bit.
-            Tracer::Packets { bvh: PacketBvh::build(&verts()), ties: (crossing || large).then(|| first_triangles(scene)), spheres: None }
+            Tracer::Packets { bvh: packet_tree(), ties: (crossing || large).then(|| first_triangles(scene)), spheres: None }
         } else {
             // Scenes with spheres took single rays, the scalar tracer's image bit for bit: they
             // keep it with the tie check on their triangles (shared edges, which opaque
             // mesh scenes leave to the packet tree) and the spheres' unsure lanes retraced.
             let (geo, shapes): (Vec<_>, Vec<_>) = spheres.into_iter().unzip();
-            Tracer::Packets { bvh: PacketBvh::build(&verts()), ties: Some(first_triangles(scene)), spheres: Some(Box::new((PacketSpheres::new(&geo), shapes))) }
+            Tracer::Packets { bvh: packet_tree(), ties: Some(first_triangles(scene)), spheres: Some(Box::new((PacketSpheres::new(&geo), shapes))) }
         };
         let sphere_lights = scene
             .lights

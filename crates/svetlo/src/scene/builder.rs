@@ -214,6 +214,7 @@ impl SceneBuilder {
             bounds,
             settings: self.settings,
             warnings,
+            packet_tree: Default::default(),
         })
     }
 }

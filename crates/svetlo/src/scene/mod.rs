@@ -140,6 +140,8 @@ pub struct Scene {
     pub settings: SceneSettings,
     /// Everything the loader ignored or adapted, for `svetlo info` and the log.
     pub warnings: Vec<String>,
+    /// The path kernel's packet tree, kept for the next render (keyed by the meshes).
+    pub(crate) packet_tree: crate::accel::PacketTreeCache,
 }
 
 impl Scene {
