@@ -162,17 +162,16 @@ struct Extent {
 
 /// The subtree over `order` (`order[0]` is at `base` in the whole order): its nodes (root
 /// first) and its code, node indices relative to the returned vector.
-fn build_par(bounds: &[Aabb], centroids: &[Vec3], order: &mut [u32], base: usize, ext: Extent, depth: usize) -> (Vec<Node>, u32) {
+fn build_par(input: &Input, order: &mut [u32], base: usize, ext: Extent, depth: usize) -> (Vec<Node>, u32) {
     let n = order.len();
-    let mut b = Build { bounds, centroids, nodes: Vec::new(), order, base, bins: Bins::default() };
+    let mut b = Build { input, nodes: Vec::new(), order, base, bins: Bins::default() };
     if n < PARALLEL_MIN {
         let code = b.rec(0, n, ext, depth);
         return (b.nodes, code);
     }
     let Some((mid, [le, re])) = b.split(0, n, ext, depth) else { return (Vec::new(), leaf(base, n)) };
     let (l, r) = order.split_at_mut(mid);
-    let ((ln, lc), (rn, rc)) =
-        rayon::join(|| build_par(bounds, centroids, l, base, le, depth + 1), || build_par(bounds, centroids, r, base + mid, re, depth + 1));
+    let ((ln, lc), (rn, rc)) = rayon::join(|| build_par(input, l, base, le, depth + 1), || build_par(input, r, base + mid, re, depth + 1));
     // Parent first, then the left subtree, then the right: inner codes move by their offset.
     let reloc = |code: u32, off: usize| if code & LEAF_BIT != 0 { code } else { code + off as u32 };
     let mut nodes = Vec::with_capacity(1 + ln.len() + rn.len());
@@ -187,9 +186,63 @@ fn box6(b: Aabb) -> [f32; 6] {
     [b.min.x, b.min.y, b.min.z, b.max.x, b.max.y, b.max.z]
 }
 
+/// The triangles as the build sees them: boxes (also as [`BinBox`]es) and centroids.
+struct Input {
+    bounds: Vec<Aabb>,
+    boxes: Vec<BinBox>,
+    centroids: Vec<Vec3>,
+}
+
+/// A box for the binning loop, where the build spends most of its time: on x86-64 its
+/// corners in two SSE registers, a union one `minps` and one `maxps` (`Aabb::union` is six
+/// scalar minnum/maxnum with their NaN checks). The same values as `Aabb::union`: `a.min(b)`
+/// keeps `a` unless `b < a`, which is `minps(b, a)`, and no bound is NaN (vertices are
+/// finite), where the two would differ.
+#[derive(Clone, Copy, Debug)]
+struct BinBox(#[cfg(target_arch = "x86_64")] [std::arch::x86_64::__m128; 2], #[cfg(not(target_arch = "x86_64"))] Aabb);
+
+// SAFETY (each block): SSE and SSE2 are part of the x86-64 baseline.
+#[cfg(target_arch = "x86_64")]
+impl BinBox {
+    fn empty() -> BinBox {
+        use std::arch::x86_64::_mm_set1_ps;
+        unsafe { BinBox([_mm_set1_ps(f32::INFINITY), _mm_set1_ps(f32::NEG_INFINITY)]) }
+    }
+    fn of(b: Aabb) -> BinBox {
+        use std::arch::x86_64::_mm_set_ps;
+        unsafe { BinBox([_mm_set_ps(0.0, b.min.z, b.min.y, b.min.x), _mm_set_ps(0.0, b.max.z, b.max.y, b.max.x)]) }
+    }
+    #[inline(always)]
+    fn union(self, o: BinBox) -> BinBox {
+        use std::arch::x86_64::{_mm_max_ps, _mm_min_ps};
+        unsafe { BinBox([_mm_min_ps(o.0[0], self.0[0]), _mm_max_ps(o.0[1], self.0[1])]) }
+    }
+    fn aabb(self) -> Aabb {
+        use std::arch::x86_64::{_mm_cvtss_f32, _mm_shuffle_ps};
+        let v = |r| unsafe { Vec3::new(_mm_cvtss_f32(r), _mm_cvtss_f32(_mm_shuffle_ps::<0x55>(r, r)), _mm_cvtss_f32(_mm_shuffle_ps::<0xaa>(r, r))) };
+        Aabb { min: v(self.0[0]), max: v(self.0[1]) }
+    }
+}
+
+#[cfg(not(target_arch = "x86_64"))]
+impl BinBox {
+    fn empty() -> BinBox {
+        BinBox(Aabb::EMPTY)
+    }
+    fn of(b: Aabb) -> BinBox {
+        BinBox(b)
+    }
+    #[inline(always)]
+    fn union(self, o: BinBox) -> BinBox {
+        BinBox(self.0.union(o.0))
+    }
+    fn aabb(self) -> Aabb {
+        self.0
+    }
+}
+
 struct Build<'a> {
-    bounds: &'a [Aabb],
-    centroids: &'a [Vec3],
+    input: &'a Input,
     nodes: Vec<Node>,
     order: &'a mut [u32],
     /// Position of `order[0]` in the whole order (leaf codes are absolute).
@@ -200,13 +253,13 @@ struct Build<'a> {
 /// The SAH's bins per axis, kept between nodes: each node empties the bins it used (most
 /// nodes are small and use a few), not all 96.
 struct Bins {
-    bounds: [[Aabb; BINS]; 3],
+    bounds: [[BinBox; BINS]; 3],
     counts: [[u32; BINS]; 3],
 }
 
 impl Default for Bins {
     fn default() -> Self {
-        Bins { bounds: [[Aabb::EMPTY; BINS]; 3], counts: [[0; BINS]; 3] }
+        Bins { bounds: [[BinBox::empty(); BINS]; 3], counts: [[0; BINS]; 3] }
     }
 }
 
@@ -230,7 +283,8 @@ impl Build<'_> {
     /// Where to split `order[lo..hi]` (of extent `ext`), reordering it, and the two sides'
     /// extents; None for a leaf. The sides' boxes come from the bins and their centroid
     /// bounds from the partition pass (min and max are exact in any order: the same bounds
-    /// as folds over the sides, without two more passes over the triangles).
+    /// as folds over the sides, without two more passes over the triangles; only the sign
+    /// of a zero bound may differ, which no comparison sees).
     fn split(&mut self, lo: usize, hi: usize, ext: Extent, depth: usize) -> Option<(usize, [Extent; 2])> {
         let n = hi - lo;
         if n <= 1 {
@@ -250,7 +304,7 @@ impl Build<'_> {
                 let mut l = lo;
                 let (mut lcb, mut rcb) = (Aabb::EMPTY, Aabb::EMPTY);
                 for k in lo..hi {
-                    let c = self.centroids[self.order[k] as usize];
+                    let c = self.input.centroids[self.order[k] as usize];
                     if bin_index(c[axis], cmin, scale) < bin {
                         self.order.swap(k, l);
                         l += 1;
@@ -267,7 +321,7 @@ impl Build<'_> {
                 }
                 // Median along the widest centroid axis (coincident centroids, or too deep).
                 let axis = cb.extent().max_position();
-                let c = self.centroids;
+                let c = &self.input.centroids;
                 self.order[lo..hi].select_nth_unstable_by(n / 2, |&a, &b| c[a as usize][axis].total_cmp(&c[b as usize][axis]));
                 let mid = lo + n / 2;
                 Some((mid, [self.extent(lo, mid), self.extent(mid, hi)]))
@@ -277,10 +331,10 @@ impl Build<'_> {
 
     /// The extent of `order[lo..hi]`.
     fn extent(&self, lo: usize, hi: usize) -> Extent {
-        let o = &self.order[lo..hi];
+        let (o, input) = (&self.order[lo..hi], self.input);
         Extent {
-            bb: o.iter().fold(Aabb::EMPTY, |acc, &i| acc.union(self.bounds[i as usize])),
-            cb: o.iter().fold(Aabb::EMPTY, |acc, &i| acc.grow(self.centroids[i as usize])),
+            bb: o.iter().fold(Aabb::EMPTY, |acc, &i| acc.union(input.bounds[i as usize])),
+            cb: o.iter().fold(Aabb::EMPTY, |acc, &i| acc.grow(input.centroids[i as usize])),
         }
     }
 
@@ -295,12 +349,13 @@ impl Build<'_> {
         let Bins { bounds: bin_b, counts: bin_n } = &mut self.bins;
         // Per axis, the bins that hold triangles (bit k: bin k).
         let mut used = [0u32; 3];
+        let input = self.input;
         for &i in &self.order[lo..hi] {
-            let c = self.centroids[i as usize];
+            let (c, tb) = (input.centroids[i as usize], input.boxes[i as usize]);
             for axis in 0..3 {
                 if ext[axis] > 0.0 {
                     let k = bin_index(c[axis], cb.min[axis], BINS as f32 / ext[axis]);
-                    bin_b[axis][k] = bin_b[axis][k].union(self.bounds[i as usize]);
+                    bin_b[axis][k] = bin_b[axis][k].union(tb);
                     bin_n[axis][k] += 1;
                     used[axis] |= 1 << k;
                 }
@@ -313,7 +368,7 @@ impl Build<'_> {
             let mut right = [0.0f32; BINS];
             let (mut acc, mut cnt) = (Aabb::EMPTY, 0u32);
             for k in bits_down(used[axis]) {
-                acc = acc.union(bins[k]);
+                acc = acc.union(bins[k].aabb());
                 cnt += counts[k];
                 right[k] = acc.surface_area() * cnt as f32;
             }
@@ -325,7 +380,7 @@ impl Build<'_> {
                 if bits == 0 {
                     break; // the last used bin: nothing right of it
                 }
-                acc = acc.union(bins[k]);
+                acc = acc.union(bins[k].aabb());
                 cnt += counts[k];
                 let rcost = right[bits.trailing_zeros() as usize];
                 if !rcost.is_finite() {
@@ -338,13 +393,13 @@ impl Build<'_> {
             }
         }
         let sides = best.map(|(_, axis, bin)| {
-            let side = |bits: u32| bits_down(bits).fold(Aabb::EMPTY, |acc, k| acc.union(bin_b[axis][k]));
+            let side = |bits: u32| bits_down(bits).fold(Aabb::EMPTY, |acc, k| acc.union(bin_b[axis][k].aabb()));
             let below = (1u32 << bin) - 1;
             [side(used[axis] & below), side(used[axis] & !below)]
         });
         for axis in 0..3 {
             for k in bits_down(used[axis]) {
-                (bin_b[axis][k], bin_n[axis][k]) = (Aabb::EMPTY, 0);
+                (bin_b[axis][k], bin_n[axis][k]) = (BinBox::empty(), 0);
             }
         }
         best.zip(sides).map(|((cost, axis, bin), sides)| (cost, axis, bin, sides))
@@ -376,10 +431,11 @@ impl PacketBvh {
         let centroids: Vec<Vec3> = bounds.iter().map(|b| b.center()).collect();
         let mut order: Vec<u32> = (0..tris.len() as u32).collect();
         let root = Extent { bb: bounds.iter().fold(Aabb::EMPTY, |a, b| a.union(*b)), cb: centroids.iter().fold(Aabb::EMPTY, |a, c| a.grow(*c)) };
+        let input = Input { boxes: bounds.iter().map(|b| BinBox::of(*b)).collect(), bounds, centroids };
         let (nodes, root) = if tris.is_empty() {
             (Vec::new(), None)
         } else {
-            let (nodes, code) = build_par(&bounds, &centroids, &mut order, 0, root, 0);
+            let (nodes, code) = build_par(&input, &mut order, 0, root, 0);
             (nodes, Some(code))
         };
         let mut verts: Vec<[f32; 4]> = Vec::with_capacity(3 * order.len() + 1);
@@ -1321,7 +1377,9 @@ mod tests {
     }
 
     /// Nodes as bits, in depth-first order from `code` (the parallel build numbers them
-    /// otherwise than the serial reference).
+    /// otherwise than the serial reference). A zero bound counts as +0: which sign a box
+    /// keeps depends on the order of the unions (min keeps its first operand on a tie), and
+    /// a walk only compares distances computed from bounds, where -0 and +0 are one value.
     fn tree_bits(nodes: &[Node], code: u32, out: &mut Vec<u32>) {
         out.push(code & LEAF_BIT);
         if code & LEAF_BIT != 0 {
@@ -1329,7 +1387,7 @@ mod tests {
             return;
         }
         let nd = &nodes[code as usize];
-        out.extend(nd.boxes.iter().flatten().map(|v| v.to_bits()));
+        out.extend(nd.boxes.iter().flatten().map(|v| (v + 0.0).to_bits()));
         for c in nd.child {
             tree_bits(nodes, c, out);
         }
@@ -1355,6 +1413,13 @@ mod tests {
         });
         meshes.push(grid.collect());
         meshes.push(vec![[Vec3::ZERO, Vec3::X, Vec3::Y]; 9]);
+        // Corners at -0 and +0 (a union's ties: the bits the accumulated bound keeps).
+        let signed = (0..600).map(|k| {
+            let z = |j: usize| if (k * 7 + j) % 3 == 0 { -0.0 } else { 0.0 };
+            let (x, y) = ((k % 25) as f32 * 0.1, (k / 25) as f32 * 0.1);
+            [Vec3::new(x, y, z(0)), Vec3::new(z(1), y + 0.1, z(2)), Vec3::new(x + 0.1, z(3), 0.05 * (k % 4) as f32)]
+        });
+        meshes.push(signed.collect());
         for tris in &meshes {
             let bvh = PacketBvh::build(tris);
             let (nodes, root, order) = dense_reference(tris);
