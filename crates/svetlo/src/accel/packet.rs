@@ -1413,9 +1413,9 @@ mod tests {
         });
         meshes.push(grid.collect());
         meshes.push(vec![[Vec3::ZERO, Vec3::X, Vec3::Y]; 9]);
-        // Corners at -0 and +0 (a union's ties: the bits the accumulated bound keeps).
+        // Corners at -0 and +0: ties of the unions (whichever zero a box keeps, the same tree).
         let signed = (0..600).map(|k| {
-            let z = |j: usize| if (k * 7 + j) % 3 == 0 { -0.0 } else { 0.0 };
+            let z = |j: usize| if (k * 7 + j).is_multiple_of(3) { -0.0 } else { 0.0 };
             let (x, y) = ((k % 25) as f32 * 0.1, (k / 25) as f32 * 0.1);
             [Vec3::new(x, y, z(0)), Vec3::new(z(1), y + 0.1, z(2)), Vec3::new(x + 0.1, z(3), 0.05 * (k % 4) as f32)]
         });
