@@ -1876,8 +1876,8 @@ fn shade8<S>(v: &Soa, rr_depth: i32, st: &mut Paths<S>, rays: &mut Rays8, shadow
 /// scalar tracer's order per vertex (light choice, light point, BSDF lobe, BSDF direction,
 /// Russian roulette: 1, 2, 1, 2 and 1 dimensions), each lane from its own sampler.
 pub(crate) trait LaneSampler: Sampler + Clone {
-    /// Whether the kernel takes a vertex's numbers from [`Self::vertex_draws`] (worth it where
-    /// drawing is costly and vectorises) or lane by lane inside `gather` (cheap generators).
+    /// Whether the kernel takes a vertex's numbers from [`Self::vertex_draws`] (both samplers
+    /// do: their steps vectorise) or lane by lane inside `gather`.
     const BATCHED: bool = false;
     /// Rows: light choice, light point (2), lobe, direction (2), roulette; lanes of `lanes` only.
     #[inline(always)]
@@ -1896,7 +1896,15 @@ pub(crate) trait LaneSampler: Sampler + Clone {
     }
 }
 
-impl LaneSampler for IndependentSampler {}
+impl LaneSampler for IndependentSampler {
+    const BATCHED: bool = true;
+    /// The eight lanes' PCG steps side by side (`IndependentSampler::draws8`); a Lambertian
+    /// lane's lobe number is drawn and not read, as lane by lane.
+    #[inline(always)]
+    fn vertex_draws(s: &mut [Self; LANES], lanes: u8) -> [[f32; LANES]; 7] {
+        IndependentSampler::draws8::<7>(s, lanes)
+    }
+}
 
 impl LaneSampler for SobolSampler {
     const BATCHED: bool = true;
