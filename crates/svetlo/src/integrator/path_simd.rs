@@ -813,10 +813,7 @@ impl SimdKernel {
                     continue;
                 }
                 match o.nee[l] {
-                    1 => {
-                        st.add(l, o.contribution(l));
-                        counted |= 1 << l;
-                    }
+                    1 => counted |= 1 << l,
                     2 => smask |= 1 << l,
                     _ => {}
                 }
@@ -828,10 +825,16 @@ impl SimdKernel {
             if layers.on() {
                 layers.route(&v, &o, active, counted | clear, go & !ends);
             }
-            for l in 0..LANES {
-                if clear & (1 << l) != 0 {
-                    st.add(l, o.contribution(l));
+            // The light samples that count (a lane's at most: `counted` and `clear` are apart),
+            // all lanes at once as selects: lane-by-lane adds, stored a float at a time, were
+            // read back below as one wide load that waited on them (store forwarding).
+            let adds = counted | clear;
+            for k in 0..3 {
+                for l in 0..LANES {
+                    st.l[k][l] = if adds & (1 << l) != 0 { st.l[k][l] + o.c[k][l] } else { st.l[k][l] };
                 }
+            }
+            for l in 0..LANES {
                 if ends & (1 << l) != 0 {
                     let beauty = Rgb::new(st.l[0][l], st.l[1][l], st.l[2][l]);
                     results[st.job[l]] = (st.raster[l], layers.finish(l, beauty));
