@@ -651,7 +651,8 @@ macro_rules! walk_simd {
                 // Entries: a code and the entry distances of the lanes that met its box (a
                 // popped entry that no lane can still improve on is skipped).
                 // The walk goes on to the nearer child it enters and pushes the other.
-                let mut stack = [0u32; STACK];
+                // (Uninitialised: zeroing them was 1.3 % of the walks' instructions on veach-mis.)
+                let mut stack = [MaybeUninit::<u32>::uninit(); STACK];
                 let mut tns = [MaybeUninit::<__m256>::uninit(); STACK];
                 let mut sp = 0;
                 let mut code = root;
@@ -797,7 +798,7 @@ macro_rules! walk_simd {
                             // tree: here branches predict well, and beat the selects below.
                             match (m0 != 0, m1 != 0) {
                                 (true, true) => {
-                                    *stack.get_unchecked_mut(sp) = node.child[1];
+                                    stack.get_unchecked_mut(sp).write(node.child[1]);
                                     tns.get_unchecked_mut(sp).write(tn1);
                                     sp += 1;
                                     code = node.child[0];
@@ -822,7 +823,7 @@ macro_rules! walk_simd {
                             let first1 =
                                 m0 == 0 || 2 * (_mm256_movemask_ps(_mm256_cmp_ps::<_CMP_LT_OQ>(tn1, tn0)) as u32 & both).count_ones() > both.count_ones();
                             let (near, far) = if first1 { (node.child[1], node.child[0]) } else { (node.child[0], node.child[1]) };
-                            *stack.get_unchecked_mut(sp) = far;
+                            stack.get_unchecked_mut(sp).write(far);
                             tns.get_unchecked_mut(sp).write(_mm256_blendv_ps(tn1, tn0, _mm256_castsi256_ps(_mm256_set1_epi32(-(first1 as i32)))));
                             sp += (m0 != 0 && m1 != 0) as usize;
                             code = near;
@@ -836,7 +837,7 @@ macro_rules! walk_simd {
                         }
                         sp -= 1;
                         if _mm256_movemask_ps(_mm256_cmp_ps::<_CMP_LE_OQ>(tns.get_unchecked(sp).assume_init(), _mm256_mul_ps(t_max, slack))) != 0 {
-                            code = *stack.get_unchecked(sp);
+                            code = stack.get_unchecked(sp).assume_init();
                             break;
                         }
                     }

@@ -62,6 +62,9 @@ impl Pixel {
 /// whose floors are the run's skips the owner search.
 struct OwnerRun {
     k: usize,
+    /// Pixel `k`'s column and row in the tile.
+    col: usize,
+    row: usize,
     /// The square `[lo, hi)`, all of whose positions pixel `k` owns (NaN: no run yet).
     lo: Vec2,
     hi: Vec2,
@@ -70,7 +73,7 @@ struct OwnerRun {
 
 impl OwnerRun {
     fn new() -> Self {
-        OwnerRun { k: usize::MAX, lo: Vec2::NAN, hi: Vec2::NAN, px: Pixel::default() }
+        OwnerRun { k: usize::MAX, col: 0, row: 0, lo: Vec2::NAN, hi: Vec2::NAN, px: Pixel::default() }
     }
 
     #[inline(always)]
@@ -309,7 +312,7 @@ impl FilmTile {
         match self.filter {
             Filter::Tent { radius: 1.0 } => {
                 for &(p, l) in samples {
-                    self.add_in_run(&mut run, p, l, |x| (1.0 - x.abs()).max(0.0));
+                    self.add_tent1_in_run(&mut run, p, l);
                 }
             }
             Filter::Tent { radius } => {
@@ -346,6 +349,50 @@ impl FilmTile {
         self.add_separable(p, l, eval);
     }
 
+    /// [`Self::add_in_run`] for the tent of radius 1 (Mitsuba's default filter), a sample of
+    /// the run's pixel splatted on two columns and two rows: the owner's and the neighbour's
+    /// on the side of its centre that `p` lies on. The other neighbour's weight is 0 (its
+    /// centre is 1 or more away; the subtraction rounds monotonically), and a zero weight is
+    /// skipped, so these are the pixels and the weights of `add_separable`'s footprint that
+    /// count, with the same operations: the same bits, without its four floors a sample.
+    #[inline(always)]
+    fn add_tent1_in_run(&mut self, run: &mut OwnerRun, p: Vec2, l: Rgb) {
+        let tent = |x: f32| (1.0 - x.abs()).max(0.0);
+        let l = if l.is_finite() { l } else { Rgb::BLACK };
+        let owned = self.run_owner(run, p).map(|px| px.add_stats(l)).is_some();
+        // Past 2^20 a column's centre is not exact in f32: the general splat.
+        if !owned || run.lo.max_element() >= (1 << 20) as f32 {
+            self.add_separable(p, l, tent);
+            return;
+        }
+        let (w, h) = ((self.x1 - self.x0) as usize, (self.y1 - self.y0) as usize);
+        // The weights of the owner's column (centre x + 0.5, exact) and of its neighbour's on
+        // p's side, the sum of both neighbours' (one is 0: the sum is the other's, exactly).
+        // No branch on the side: it is a coin toss per sample.
+        let (x, y) = (run.lo.x, run.lo.y);
+        let wx = [tent((x + 0.5) - p.x), tent((x - 0.5) - p.x) + tent((x + 1.5) - p.x)];
+        let wy = [tent((y + 0.5) - p.y), tent((y - 0.5) - p.y) + tent((y + 1.5) - p.y)];
+        // The neighbours' column and row (wrapping to usize::MAX left of or above the tile).
+        let side = |right: bool| (2 * right as usize).wrapping_sub(1);
+        let cols = [run.col, run.col.wrapping_add(side(p.x >= x + 0.5))];
+        let rows = [run.row, run.row.wrapping_add(side(p.y >= y + 0.5))];
+        for (r, fy) in rows.into_iter().zip(wy) {
+            if r >= h || fy == 0.0 {
+                continue;
+            }
+            for (c, fx) in cols.into_iter().zip(wx) {
+                let wgt = fy * fx;
+                if c >= w || wgt == 0.0 {
+                    continue;
+                }
+                if let Some(px) = self.pixels.get_mut(r * w + c) {
+                    px.sum += l * wgt;
+                    px.weight += wgt as f64;
+                }
+            }
+        }
+    }
+
     /// The values of the pixel that owns `p`, as `run`'s: the run goes on while the owner
     /// stays, else the previous run is stored and one starts (None: no pixel of the tile
     /// owns `p`, and the run goes on past it).
@@ -356,6 +403,8 @@ impl FilmTile {
             if k != run.k {
                 self.store_run(run);
                 run.k = k;
+                let w = (self.x1 - self.x0) as usize;
+                (run.col, run.row) = (k % w, k / w);
                 run.px = self.pixels.get(k).copied().unwrap_or_default();
             }
             // The floors of an owned position are a few thousand at most: exact as floats,
@@ -1038,6 +1087,8 @@ mod tile_tests {
                         3 => p = Vec2::new(rng.next_f32() * 40.0 - 8.0, rng.next_f32() * 40.0 - 8.0),
                         4 => p.y = f32::NAN,
                         5 => p = Vec2::new(x as f32, y as f32),
+                        // On the centre, where the tent's splat turns to the other side.
+                        6 => p = Vec2::new(x as f32 + 0.5, y as f32 + 0.5),
                         _ => {}
                     }
                     let l = match (s + 7 * x + y) % 31 {
@@ -1054,15 +1105,15 @@ mod tile_tests {
 
     /// Runs of samples of one pixel, as the path kernel hands them over (`add_samples`,
     /// summed per run), give every pixel's sums, statistics and weight to the bit as adding
-    /// the samples one by one; for each filter, on a tile inside the film and on one at its
-    /// corner (no border there), in batches that cut runs.
+    /// the samples one by one; for each filter, on a tile inside the film and on ones at its
+    /// corners (no border there), in batches that cut runs.
     #[test]
     fn owner_runs_add_like_single_samples() {
         let filters = [Filter::Box, Filter::Tent { radius: 1.0 }, Filter::Tent { radius: 1.7 }, Filter::Gaussian { stddev: 0.5 }];
         let mut rng = crate::sampling::Pcg32::new(17, 3);
         for f in filters {
             let film = Film::new(24, 20, f);
-            for rect in [(8, 4, 16, 12), (16, 12, 24, 20)] {
+            for rect in [(8, 4, 16, 12), (16, 12, 24, 20), (0, 0, 8, 4)] {
                 let (mut runs, mut single) = (film.tile(rect.0, rect.1, rect.2, rect.3), film.tile(rect.0, rect.1, rect.2, rect.3));
                 let samples = pixel_runs(&mut rng, (runs.x0, runs.y0, runs.x1, runs.y1), 7);
                 for batch in samples.chunks(45) {

@@ -150,6 +150,15 @@ enum Albedo {
 }
 
 impl Albedo {
+    /// Its value where it is constant (black where textured: never asked there).
+    #[inline(always)]
+    fn constant(&self) -> Rgb {
+        match self {
+            Albedo::Constant(c) => *c,
+            Albedo::Textured(_) => Rgb::BLACK,
+        }
+    }
+
     /// As `Material::bsdf` evaluates it (clamped to [0, 1]).
     #[inline(always)]
     fn at(&self, tp: TexPoint) -> Rgb {
@@ -814,10 +823,7 @@ impl SimdKernel {
                     continue;
                 }
                 match o.nee[l] {
-                    1 => {
-                        st.add(l, o.contribution(l));
-                        counted |= 1 << l;
-                    }
+                    1 => counted |= 1 << l,
                     2 => smask |= 1 << l,
                     _ => {}
                 }
@@ -829,10 +835,16 @@ impl SimdKernel {
             if layers.on() {
                 layers.route(&v, &o, active, counted | clear, go & !ends);
             }
-            for l in 0..LANES {
-                if clear & (1 << l) != 0 {
-                    st.add(l, o.contribution(l));
+            // The light samples that count (a lane's at most: `counted` and `clear` are apart),
+            // all lanes at once as selects: lane-by-lane adds, stored a float at a time, were
+            // read back below as one wide load that waited on them (store forwarding).
+            let adds = counted | clear;
+            for k in 0..3 {
+                for l in 0..LANES {
+                    st.l[k][l] = if adds & (1 << l) != 0 { st.l[k][l] + o.c[k][l] } else { st.l[k][l] };
                 }
+            }
+            for l in 0..LANES {
                 if ends & (1 << l) != 0 {
                     let beauty = Rgb::new(st.l[0][l], st.l[1][l], st.l[2][l]);
                     results[st.job[l]] = (st.raster[l], layers.finish(l, beauty));
@@ -970,13 +982,18 @@ impl SimdKernel {
         put(&mut v.wo, wo_w);
         v.scalar_bsdf[l] = sh.scalar_bsdf;
         if !sh.scalar_bsdf {
-            // The hit's texture point, as `Scene::interaction` gives it (`SurfaceInteraction::tex_point`).
-            let tp = match hit {
-                _ if !sh.textured => TexPoint::default(),
-                Hit::Tri(tri) => TexPoint { uv: self.uv(scene, tri, b1, b2), prim: tri.local, bary: Vec2::new(b1, b2), p, n: ng },
-                Hit::Other(si) => si.tex_point(),
+            let (front, back) = if sh.textured {
+                // The hit's texture point, as `Scene::interaction` gives it (`SurfaceInteraction::tex_point`).
+                let tp = match hit {
+                    Hit::Tri(tri) => TexPoint { uv: self.uv(scene, tri, b1, b2), prim: tri.local, bary: Vec2::new(b1, b2), p, n: ng },
+                    Hit::Other(si) => si.tex_point(),
+                };
+                (sh.front.at(tp), sh.back.as_ref().map_or(Rgb::BLACK, |b| b.at(tp)))
+            } else {
+                // Constant on both sides. (No texture point made: copying one that was just
+                // stored field by field stalled on store forwarding, 1-2 % of veach-mis.)
+                (sh.front.constant(), sh.back.as_ref().map_or(Rgb::BLACK, Albedo::constant))
             };
-            let (front, back) = (sh.front.at(tp), sh.back.as_ref().map_or(Rgb::BLACK, |b| b.at(tp)));
             putc(&mut v.front, front);
             putc(&mut v.back, back);
             v.has_back[l] = sh.back.is_some();
@@ -1886,8 +1903,8 @@ fn shade8<S>(v: &Soa, rr_depth: i32, st: &mut Paths<S>, rays: &mut Rays8, shadow
 /// scalar tracer's order per vertex (light choice, light point, BSDF lobe, BSDF direction,
 /// Russian roulette: 1, 2, 1, 2 and 1 dimensions), each lane from its own sampler.
 pub(crate) trait LaneSampler: Sampler + Clone {
-    /// Whether the kernel takes a vertex's numbers from [`Self::vertex_draws`] (worth it where
-    /// drawing is costly and vectorises) or lane by lane inside `gather` (cheap generators).
+    /// Whether the kernel takes a vertex's numbers from [`Self::vertex_draws`] (both samplers
+    /// do: their steps vectorise) or lane by lane inside `gather`.
     const BATCHED: bool = false;
     /// Rows: light choice, light point (2), lobe, direction (2), roulette; lanes of `lanes` only.
     #[inline(always)]
@@ -1906,7 +1923,15 @@ pub(crate) trait LaneSampler: Sampler + Clone {
     }
 }
 
-impl LaneSampler for IndependentSampler {}
+impl LaneSampler for IndependentSampler {
+    const BATCHED: bool = true;
+    /// The eight lanes' PCG steps side by side (`IndependentSampler::draws8`); a Lambertian
+    /// lane's lobe number is drawn and not read, as lane by lane.
+    #[inline(always)]
+    fn vertex_draws(s: &mut [Self; LANES], lanes: u8) -> [[f32; LANES]; 7] {
+        IndependentSampler::draws8::<7>(s, lanes)
+    }
+}
 
 impl LaneSampler for SobolSampler {
     const BATCHED: bool = true;

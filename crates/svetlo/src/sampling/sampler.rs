@@ -42,6 +42,21 @@ impl IndependentSampler {
     pub fn new(spp: u32, seed: u64) -> Self {
         IndependentSampler { seed, spp, rng: Pcg32::new(seed, 0) }
     }
+
+    /// The next `N` one-dimensional values of eight samplers, row `i` the `i`-th of every
+    /// one (a 2-D draw is two rows: `next_2d` draws x, then y), for the lanes of `lanes`;
+    /// the others' rows hold values nobody reads and their samplers do not move.
+    #[inline(always)]
+    pub(crate) fn draws8<const N: usize>(s: &mut [IndependentSampler; 8], lanes: u8) -> [[f32; 8]; N] {
+        let mut rngs: [Pcg32; 8] = std::array::from_fn(|l| s[l].rng.clone());
+        let out = Pcg32::next_f32_lanes::<N>(&mut rngs);
+        for (l, (sl, r)) in s.iter_mut().zip(rngs).enumerate() {
+            if lanes & (1 << l) != 0 {
+                sl.rng = r;
+            }
+        }
+        out
+    }
 }
 
 impl Sampler for IndependentSampler {
@@ -73,5 +88,35 @@ pub fn make_sampler(kind: SamplerKind, spp: u32, seed: u64) -> Box<dyn Sampler> 
     match kind {
         SamplerKind::Independent => Box::new(IndependentSampler::new(spp, seed)),
         SamplerKind::Sobol => Box::new(super::sobol::SobolSampler::new(spp, seed)),
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// Eight samplers' draws side by side are each one's `next_1d`/`next_2d` values in
+    /// order, and leave each where those calls would; lanes outside the mask do not move.
+    #[test]
+    fn draws8_are_the_samplers_draws() {
+        let mut lanes: [IndependentSampler; 8] = std::array::from_fn(|_| IndependentSampler::new(64, 21));
+        for (l, s) in lanes.iter_mut().enumerate() {
+            s.start_pixel_sample(l as u32 * 7, 3 + l as u32, 5 * l as u32 + 1);
+        }
+        let mut one = lanes.clone();
+        for mask in [0xffu8, 0b1010_0110] {
+            let got = IndependentSampler::draws8::<7>(&mut lanes, mask);
+            for (l, s) in one.iter_mut().enumerate().filter(|(l, _)| mask & (1 << l) != 0) {
+                let (a, b) = (s.next_1d(), s.next_2d());
+                let (c, d, e) = (s.next_1d(), s.next_2d(), s.next_1d());
+                let want = [a, b.x, b.y, c, d.x, d.y, e];
+                for (row, w) in got.iter().zip(want) {
+                    assert_eq!(row[l].to_bits(), w.to_bits(), "lane {l}, mask {mask:#x}");
+                }
+            }
+        }
+        for (a, b) in lanes.iter_mut().zip(&mut one) {
+            assert_eq!(a.next_1d().to_bits(), b.next_1d().to_bits());
+        }
     }
 }
