@@ -301,30 +301,43 @@ impl FilmTile {
     /// statistics). A tent of radius 1 (Mitsuba's default) weighs without its division
     /// (`x / 1` is `x`, NaN and all).
     pub fn add_samples(&mut self, samples: &[(Vec2, Rgb)]) {
-        if samples.is_empty() {
+        self.add_samples_by(samples.len(), |i| samples[i]);
+    }
+
+    /// [`Self::add_samples`] of black samples at positions `ps` (light tracing's pixel
+    /// samples, whose light goes by splats): the same sums, with the value's arithmetic
+    /// known at compile time.
+    pub fn add_black_samples(&mut self, ps: &[Vec2]) {
+        self.add_samples_by(ps.len(), |i| (ps[i], Rgb::BLACK));
+    }
+
+    /// [`Self::add_samples`] of samples `at(0)`, .., `at(n - 1)`.
+    #[inline(always)]
+    fn add_samples_by(&mut self, n: usize, at: impl Fn(usize) -> (Vec2, Rgb)) {
+        if n == 0 {
             return;
         }
         self.blank = false;
         let mut run = OwnerRun::new();
         match self.filter {
             Filter::Tent { radius: 1.0 } => {
-                for &(p, l) in samples {
+                for (p, l) in (0..n).map(at) {
                     self.add_in_run(&mut run, p, l, |x| (1.0 - x.abs()).max(0.0));
                 }
             }
             Filter::Tent { radius } => {
-                for &(p, l) in samples {
+                for (p, l) in (0..n).map(at) {
                     self.add_in_run(&mut run, p, l, move |x| Filter::Tent { radius }.eval(x));
                 }
             }
             Filter::Gaussian { .. } => {
                 let w = self.weights;
-                for &(p, l) in samples {
+                for (p, l) in (0..n).map(at) {
                     self.add_in_run(&mut run, p, l, move |x| w.gaussian(x));
                 }
             }
             Filter::Box => {
-                for &(p, l) in samples {
+                for (p, l) in (0..n).map(at) {
                     let l = if l.is_finite() { l } else { Rgb::BLACK };
                     if let Some(px) = self.run_owner(&mut run, p) {
                         px.add_box(l);
