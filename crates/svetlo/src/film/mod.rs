@@ -1090,6 +1090,35 @@ mod tile_tests {
         }
     }
 
+    /// Black samples in runs (`add_black_samples`, light tracing's pixel samples) give every
+    /// pixel's sums, statistics and weight to the bit as adding `Rgb::BLACK` one by one, on
+    /// tiles that had other samples before (sums that are not zero), for each filter.
+    #[test]
+    fn black_runs_add_like_single_black_samples() {
+        let filters = [Filter::Box, Filter::Tent { radius: 1.0 }, Filter::Tent { radius: 1.7 }, Filter::Gaussian { stddev: 0.5 }];
+        let mut rng = crate::sampling::Pcg32::new(29, 7);
+        for f in filters {
+            let film = Film::new(24, 20, f);
+            for rect in [(8, 4, 16, 12), (16, 12, 24, 20)] {
+                let (mut runs, mut single) = (film.tile(rect.0, rect.1, rect.2, rect.3), film.tile(rect.0, rect.1, rect.2, rect.3));
+                let before = pixel_runs(&mut rng, (runs.x0, runs.y0, runs.x1, runs.y1), 2);
+                runs.add_samples(&before);
+                single.add_samples(&before);
+                let n_before: Vec<u32> = runs.pixels.iter().map(|px| px.n).collect();
+                let at: Vec<Vec2> = pixel_runs(&mut rng, (runs.x0, runs.y0, runs.x1, runs.y1), 5).into_iter().map(|(p, _)| p).collect();
+                for batch in at.chunks(37) {
+                    runs.add_black_samples(batch);
+                }
+                for &p in &at {
+                    single.add_sample(p, Rgb::BLACK);
+                }
+                assert_eq!(tile_bits(&runs), tile_bits(&single), "{f:?} {rect:?}");
+                let grew = runs.pixels.iter().zip(&n_before).filter(|(px, &n)| px.n >= n + 3).count();
+                assert!(2 * grew > runs.pixels.len(), "{f:?} {rect:?}: the black runs reached the tile");
+            }
+        }
+    }
+
     /// A run begun on a box tile's far edge (which its last pixel keeps) takes the positions
     /// after it as adding them one by one does (`owner`'s far-edge rule).
     #[test]
