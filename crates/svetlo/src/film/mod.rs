@@ -304,30 +304,43 @@ impl FilmTile {
     /// statistics). A tent of radius 1 (Mitsuba's default) weighs without its division
     /// (`x / 1` is `x`, NaN and all).
     pub fn add_samples(&mut self, samples: &[(Vec2, Rgb)]) {
-        if samples.is_empty() {
+        self.add_samples_by(samples.len(), |i| samples[i]);
+    }
+
+    /// [`Self::add_samples`] of black samples at positions `ps` (light tracing's pixel
+    /// samples, whose light goes by splats): the same sums, with the value's arithmetic
+    /// known at compile time.
+    pub fn add_black_samples(&mut self, ps: &[Vec2]) {
+        self.add_samples_by(ps.len(), |i| (ps[i], Rgb::BLACK));
+    }
+
+    /// [`Self::add_samples`] of samples `at(0)`, .., `at(n - 1)`.
+    #[inline(always)]
+    fn add_samples_by(&mut self, n: usize, at: impl Fn(usize) -> (Vec2, Rgb)) {
+        if n == 0 {
             return;
         }
         self.blank = false;
         let mut run = OwnerRun::new();
         match self.filter {
             Filter::Tent { radius: 1.0 } => {
-                for &(p, l) in samples {
+                for (p, l) in (0..n).map(at) {
                     self.add_tent1_in_run(&mut run, p, l);
                 }
             }
             Filter::Tent { radius } => {
-                for &(p, l) in samples {
+                for (p, l) in (0..n).map(at) {
                     self.add_in_run(&mut run, p, l, move |x| Filter::Tent { radius }.eval(x));
                 }
             }
             Filter::Gaussian { .. } => {
                 let w = self.weights;
-                for &(p, l) in samples {
+                for (p, l) in (0..n).map(at) {
                     self.add_in_run(&mut run, p, l, move |x| w.gaussian(x));
                 }
             }
             Filter::Box => {
-                for &(p, l) in samples {
+                for (p, l) in (0..n).map(at) {
                     let l = if l.is_finite() { l } else { Rgb::BLACK };
                     if let Some(px) = self.run_owner(&mut run, p) {
                         px.add_box(l);
@@ -1124,6 +1137,35 @@ mod tile_tests {
                 }
                 assert_eq!(tile_bits(&runs), tile_bits(&single), "{f:?} {rect:?}");
                 assert!(runs.pixels.iter().all(|px| px.n >= 2), "{f:?} {rect:?}: every pixel took its run");
+            }
+        }
+    }
+
+    /// Black samples in runs (`add_black_samples`, light tracing's pixel samples) give every
+    /// pixel's sums, statistics and weight to the bit as adding `Rgb::BLACK` one by one, on
+    /// tiles that had other samples before (sums that are not zero), for each filter.
+    #[test]
+    fn black_runs_add_like_single_black_samples() {
+        let filters = [Filter::Box, Filter::Tent { radius: 1.0 }, Filter::Tent { radius: 1.7 }, Filter::Gaussian { stddev: 0.5 }];
+        let mut rng = crate::sampling::Pcg32::new(29, 7);
+        for f in filters {
+            let film = Film::new(24, 20, f);
+            for rect in [(8, 4, 16, 12), (16, 12, 24, 20)] {
+                let (mut runs, mut single) = (film.tile(rect.0, rect.1, rect.2, rect.3), film.tile(rect.0, rect.1, rect.2, rect.3));
+                let before = pixel_runs(&mut rng, (runs.x0, runs.y0, runs.x1, runs.y1), 2);
+                runs.add_samples(&before);
+                single.add_samples(&before);
+                let n_before: Vec<u32> = runs.pixels.iter().map(|px| px.n).collect();
+                let at: Vec<Vec2> = pixel_runs(&mut rng, (runs.x0, runs.y0, runs.x1, runs.y1), 5).into_iter().map(|(p, _)| p).collect();
+                for batch in at.chunks(37) {
+                    runs.add_black_samples(batch);
+                }
+                for &p in &at {
+                    single.add_sample(p, Rgb::BLACK);
+                }
+                assert_eq!(tile_bits(&runs), tile_bits(&single), "{f:?} {rect:?}");
+                let grew = runs.pixels.iter().zip(&n_before).filter(|(px, &n)| px.n >= n + 3).count();
+                assert!(2 * grew > runs.pixels.len(), "{f:?} {rect:?}: the black runs reached the tile");
             }
         }
     }

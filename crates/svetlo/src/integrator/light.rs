@@ -11,7 +11,7 @@ use super::splat::{render_splatting, render_tile_by_sample, SampleOut, ShadowedS
 use super::{Integrator, Progress, RenderSettings};
 use crate::accel::packet::LANES;
 use crate::error::{Error, Result};
-use crate::film::Film;
+use crate::film::{Film, FilmTile};
 use crate::geometry::Ray;
 use crate::lpe::LightTracker;
 use crate::path::{camera_connection, connect, light_subpath, light_walk, BatchScratch, CameraBatch, LightWalk, PathConfig, ShadowPackets, Vertex};
@@ -155,6 +155,7 @@ impl Estimator {
         let mut samples = (y0..y1).flat_map(|y| (x0..x1).flat_map(move |x| (s0..s0 + n).map(move |s| (x, y, s)))).enumerate();
         let mut active = 0u8;
         let mut more = true;
+        let mut blacks = BlackSamples::default();
         loop {
             // Idle lanes take the next samples; a walk that ends at once is finished here.
             for l in 0..LANES {
@@ -165,7 +166,7 @@ impl Estimator {
                     };
                     let sampler = &mut samplers[l];
                     let (raster, ray) = super::camera_sample(&cam, sampler, x, y, s);
-                    t.tile.add_sample(raster, Rgb::BLACK);
+                    blacks.push(t.tile, raster);
                     seq[l] = reorder.open(i);
                     walks[l] = light_walk(scene, &self.cfg, ray.time, sampler, &mut paths[l]);
                     match &walks[l] {
@@ -191,7 +192,7 @@ impl Estimator {
                 }
                 let Some(w) = walks[l].as_mut() else { continue };
                 let hit = packets.interaction(scene, &hits, l, &rays[l]);
-                if w.walk.step(scene, hit, &mut samplers[l], &mut paths[l]) {
+                if w.walk.step(scene, hit.as_ref(), &mut samplers[l], &mut paths[l]) {
                     rays[l] = *w.walk.ray();
                 } else {
                     active &= !(1 << l);
@@ -200,6 +201,7 @@ impl Estimator {
                 }
             }
         }
+        blacks.flush(t.tile);
         pending.flush(packets, &mut out);
     }
 
@@ -245,6 +247,38 @@ impl Estimator {
                 }
             }
         }
+    }
+}
+
+/// The pixel samples of a lockstep tile, black (light tracing adds its light by splats),
+/// given to the film in runs (`FilmTile::add_black_samples`): the same sums as adding each
+/// alone (the tile takes nothing else meanwhile), in under a third of the instructions.
+struct BlackSamples {
+    at: [Vec2; Self::RUN],
+    n: usize,
+}
+
+impl Default for BlackSamples {
+    fn default() -> Self {
+        BlackSamples { at: [Vec2::ZERO; Self::RUN], n: 0 }
+    }
+}
+
+impl BlackSamples {
+    const RUN: usize = 64;
+
+    #[inline]
+    fn push(&mut self, tile: &mut FilmTile, raster: Vec2) {
+        self.at[self.n] = raster;
+        self.n += 1;
+        if self.n == Self::RUN {
+            self.flush(tile);
+        }
+    }
+
+    fn flush(&mut self, tile: &mut FilmTile) {
+        tile.add_black_samples(&self.at[..self.n]);
+        self.n = 0;
     }
 }
 

@@ -137,7 +137,7 @@ impl ShadowPackets {
 
     /// Lane `l`'s surface record as `scene.intersect(ray)` gives it (`ray`: the lane's ray
     /// given to [`Self::closest`]).
-    #[inline]
+    #[inline(always)]
     pub fn interaction(&self, scene: &Scene, hits: &ClosestHits, l: usize, ray: &Ray) -> Option<SurfaceInteraction> {
         if hits.tied & (1 << l) != 0 {
             return scene.intersect(ray);
