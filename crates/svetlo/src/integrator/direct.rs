@@ -11,16 +11,16 @@
 //! shadow ray per delta light.
 
 use super::path::{bsdf_pdf_toward, light_mis_to};
-use super::{render_pixels, Integrator, PixelEstimator, Progress, RenderSettings};
+use super::{camera_sample, render_tiles, Integrator, Progress, RenderSettings};
 use crate::bsdf::{LobeFlags, TransportMode};
 use crate::error::Result;
-use crate::film::Film;
+use crate::film::{Film, FilmTile};
 use crate::geometry::{Ray, SurfaceInteraction};
 use crate::light::Light;
 use crate::lpe::aov::LayerSample;
 use crate::lpe::{Event, Tracker};
 use crate::math::{warp, INV_PI};
-use crate::sampling::{power_heuristic, Distribution1D, Sampler};
+use crate::sampling::{power_heuristic, Distribution1D, IndependentSampler, Sampler, SamplerKind, SobolSampler};
 use crate::scene::Scene;
 use crate::spectrum::Rgb;
 use glam::{Vec2, Vec3};
@@ -39,7 +39,12 @@ impl Default for DirectIntegrator {
 
 impl Integrator for DirectIntegrator {
     fn render(&self, scene: &Scene, settings: &RenderSettings, progress: &Progress) -> Result<Film> {
-        render_pixels(scene, settings, progress, &DirectEstimator { cfg: *self, lights: LightPlan::new(scene) })
+        let est = DirectEstimator { cfg: *self, lights: LightPlan::new(scene) };
+        // One build of the tile loop per sampler: its draws inline (no call through `dyn`).
+        render_tiles(scene, settings, progress, true, &|tile: &mut FilmTile, rect: [u32; 4], s0: u32, n: u32| match settings.sampler {
+            SamplerKind::Independent => est.render_tile(scene, settings, tile, rect, s0, n, IndependentSampler::new(settings.spp, settings.seed)),
+            SamplerKind::Sobol => est.render_tile(scene, settings, tile, rect, s0, n, SobolSampler::new(settings.spp, settings.seed)),
+        })
     }
 }
 
@@ -124,22 +129,40 @@ struct DirectEstimator {
     lights: LightPlan,
 }
 
-impl PixelEstimator for DirectEstimator {
-    fn li(&self, scene: &Scene, ray: &Ray, sampler: &mut dyn Sampler, settings: &RenderSettings) -> Rgb {
-        self.estimate(scene, ray, sampler, settings, &mut LayerSample::default())
-    }
-    fn li_layers(&self, scene: &Scene, ray: &Ray, sampler: &mut dyn Sampler, settings: &RenderSettings, layers: &mut LayerSample) -> Rgb {
-        self.estimate(scene, ray, sampler, settings, layers)
-    }
-    fn supports_lpe(&self) -> bool {
-        true
-    }
-}
-
 impl DirectEstimator {
+    /// Samples `s0..s0 + n` of every pixel of `rect` (the tile's own pixels), pixels in rows
+    /// and samples innermost, as the pixel-sample driver takes them; each pixel's samples go
+    /// to the film as one run (the sums of adding them one by one).
+    #[allow(clippy::too_many_arguments)]
+    fn render_tile<S: Sampler>(&self, scene: &Scene, settings: &RenderSettings, tile: &mut FilmTile, rect: [u32; 4], s0: u32, n: u32, mut sampler: S) {
+        let [x0, y0, x1, y1] = rect;
+        let cam = scene.camera.ray_generator();
+        let aovs = settings.aovs();
+        let mut layers = LayerSample::default();
+        let mut run: Vec<(Vec2, Rgb)> = Vec::with_capacity(n as usize);
+        for y in y0..y1 {
+            for x in x0..x1 {
+                for s in s0..s0 + n {
+                    let (raster, ray) = camera_sample(&cam, &mut sampler, x, y, s);
+                    let l = self.estimate(scene, &ray, &mut sampler, settings, &mut layers);
+                    if aovs.is_empty() {
+                        run.push((raster, l));
+                    } else {
+                        let beauty = if aovs.restricts_beauty() { layers.beauty } else { l };
+                        tile.add_sample_touched(raster, beauty, &layers.aov[..aovs.aov_count()], layers.touched);
+                        layers.clear();
+                    }
+                }
+                tile.add_samples(&run);
+                run.clear();
+            }
+        }
+    }
+
     /// Paths `C [LB]` (emitters seen) and `C x [LB]` (one scattering at the first surface),
     /// each contribution also routed to the layers its events match.
-    fn estimate(&self, scene: &Scene, ray: &Ray, sampler: &mut dyn Sampler, settings: &RenderSettings, layers: &mut LayerSample) -> Rgb {
+    #[inline(always)]
+    fn estimate<S: Sampler>(&self, scene: &Scene, ray: &Ray, sampler: &mut S, settings: &RenderSettings, layers: &mut LayerSample) -> Rgb {
         let aovs = settings.aovs();
         let events = Tracker::camera(aovs);
         let mut l = Rgb::BLACK;
