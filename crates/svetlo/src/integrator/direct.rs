@@ -176,6 +176,11 @@ impl DirectEstimator {
             }
             return l;
         };
+        // A delta light's sample may read a large texture (a textured spot's): its texels are
+        // asked for now, to arrive while the BSDF is built and the other light is sampled.
+        for &d in &self.lights.deltas {
+            scene.lights[d as usize].prefetch_li(si.p);
+        }
         if let Some((_, area)) = scene.area_light(&si) {
             if !settings.hide_emitters {
                 let le = area.l(si.ng, si.uv, si.wo);
@@ -201,19 +206,24 @@ impl DirectEstimator {
                         route_light_sample(scene, &events, layers, (si.shape, flags), (li, through), c / ne);
                     }
                 };
-                // Delta lights ignore the point sample: the same one serves them all.
-                for &d in &self.lights.deltas {
-                    let (c, through) = light_mis_to(scene, d, 1.0, si.p, si.ng, &si.shading, wo, &bsdf, u, (ne, nb), si.time);
-                    add((c, d, through), &mut l);
-                }
-                if !self.lights.dist.is_empty() {
+                // The other light's sample is made first (the delta lights' texels, asked for
+                // above, arrive meanwhile) and added last, in the order of the sum.
+                let other = (!self.lights.dist.is_empty()).then(|| {
                     let (k, pmf, _) = self.lights.dist.sample_discrete(ul);
                     let li = self.lights.others[k];
                     let (c, through) = match &scene.lights[li as usize] {
                         Light::Constant { radiance } => sky_mis_to(scene, &si, wo, &bsdf, sky, *radiance, pmf, u, (ne, nb)),
                         _ => light_mis_to(scene, li, pmf, si.p, si.ng, &si.shading, wo, &bsdf, u, (ne, nb), si.time),
                     };
-                    add((c, li, through), &mut l);
+                    (c, li, through)
+                });
+                // Delta lights ignore the point sample: the same one serves them all.
+                for &d in &self.lights.deltas {
+                    let (c, through) = light_mis_to(scene, d, 1.0, si.p, si.ng, &si.shading, wo, &bsdf, u, (ne, nb), si.time);
+                    add((c, d, through), &mut l);
+                }
+                if let Some(o) = other {
+                    add(o, &mut l);
                 }
             }
         }
