@@ -10,16 +10,18 @@
 //! test, a textured spot under a constant sky, that choice was most of the variance) for one
 //! shadow ray per delta light.
 
-use super::path::{bsdf_pdf_toward, light_mis_to};
+use super::path::{bsdf_pdf_toward, light_sample_unshadowed, settle, Unshadowed};
 use super::{camera_sample, render_tiles, Integrator, Progress, RenderSettings};
-use crate::bsdf::{LobeFlags, TransportMode};
+use crate::accel::packet::LANES;
+use crate::bsdf::{Bsdf, BsdfSample, LobeFlags, TransportMode};
 use crate::error::Result;
 use crate::film::{Film, FilmTile};
 use crate::geometry::{Ray, SurfaceInteraction};
 use crate::light::Light;
 use crate::lpe::aov::LayerSample;
-use crate::lpe::{Event, Tracker};
+use crate::lpe::{AovSet, Event, Tracker};
 use crate::math::{warp, INV_PI};
+use crate::path::ShadowPackets;
 use crate::sampling::{power_heuristic, Distribution1D, IndependentSampler, Sampler, SamplerKind, SobolSampler};
 use crate::scene::Scene;
 use crate::spectrum::Rgb;
@@ -40,10 +42,17 @@ impl Default for DirectIntegrator {
 impl Integrator for DirectIntegrator {
     fn render(&self, scene: &Scene, settings: &RenderSettings, progress: &Progress) -> Result<Film> {
         let est = DirectEstimator { cfg: *self, lights: LightPlan::new(scene) };
+        // Eight samples at a time where packets answer as the scene's BVH does (see
+        // `render_tile_lockstep`); not with AOVs, nor several BSDF samples.
+        let packets = if settings.aovs().is_empty() && self.bsdf_samples <= 1 { ShadowPackets::new(scene).filter(ShadowPackets::exact_closest) } else { None };
+        let (est, packets) = (&est, packets.as_ref());
         // One build of the tile loop per sampler: its draws inline (no call through `dyn`).
-        render_tiles(scene, settings, progress, true, &|tile: &mut FilmTile, rect: [u32; 4], s0: u32, n: u32| match settings.sampler {
-            SamplerKind::Independent => est.render_tile(scene, settings, tile, rect, s0, n, IndependentSampler::new(settings.spp, settings.seed)),
-            SamplerKind::Sobol => est.render_tile(scene, settings, tile, rect, s0, n, SobolSampler::new(settings.spp, settings.seed)),
+        render_tiles(scene, settings, progress, true, &|tile: &mut FilmTile, rect: [u32; 4], s0: u32, n: u32| {
+            let job = (scene, settings, tile, rect, s0, n);
+            match settings.sampler {
+                SamplerKind::Independent => est.render_tile(job, packets, IndependentSampler::new(settings.spp, settings.seed)),
+                SamplerKind::Sobol => est.render_tile(job, packets, SobolSampler::new(settings.spp, settings.seed)),
+            }
         })
     }
 }
@@ -129,12 +138,39 @@ struct DirectEstimator {
     lights: LightPlan,
 }
 
+/// A tile's share of a pass: the scene, the settings, the film tile, its own pixels
+/// `[x0, y0, x1, y1)` and the samples `s0..s0 + n` of each.
+type TileJob<'a> = (&'a Scene, &'a RenderSettings, &'a mut FilmTile, [u32; 4], u32, u32);
+
+/// The ray of a lane with nothing to trace (of no length: no packet walk tests it).
+const IDLE: Ray = Ray { o: Vec3::ZERO, d: Vec3::Z, t_max: 0.0, time: 0.0 };
+
+/// A lane's camera sample once its first surface is known: what its light samples and its
+/// BSDF sample still need once the packets' answers come.
+struct LaneHit {
+    si: SurfaceInteraction,
+    bsdf: Bsdf,
+    /// Toward the camera, local shading frame.
+    wo: Vec3,
+    sky: SkySampling,
+    /// The BSDF sample, its direction in the world and its ray, where one leaves.
+    scatter: Option<(BsdfSample, Vec3, Ray)>,
+}
+
 impl DirectEstimator {
-    /// Samples `s0..s0 + n` of every pixel of `rect` (the tile's own pixels), pixels in rows
-    /// and samples innermost, as the pixel-sample driver takes them; each pixel's samples go
-    /// to the film as one run (the sums of adding them one by one).
-    #[allow(clippy::too_many_arguments)]
-    fn render_tile<S: Sampler>(&self, scene: &Scene, settings: &RenderSettings, tile: &mut FilmTile, rect: [u32; 4], s0: u32, n: u32, mut sampler: S) {
+    /// Samples `s0..s0 + n` of every pixel of the job's rectangle, pixels in rows and samples
+    /// innermost, as the pixel-sample driver takes them: eight at a time with `packets`,
+    /// else one by one.
+    fn render_tile<S: Sampler + Clone>(&self, job: TileJob, packets: Option<&ShadowPackets>, sampler: S) {
+        match packets {
+            Some(packets) => self.render_tile_lockstep(job, packets, sampler),
+            None => self.render_tile_by_sample(job, sampler),
+        }
+    }
+
+    /// [`Self::render_tile`] one sample at a time; each pixel's samples go to the film as one
+    /// run (the sums of adding them one by one).
+    fn render_tile_by_sample<S: Sampler>(&self, (scene, settings, tile, rect, s0, n): TileJob, mut sampler: S) {
         let [x0, y0, x1, y1] = rect;
         let cam = scene.camera.ray_generator();
         let aovs = settings.aovs();
@@ -157,6 +193,210 @@ impl DirectEstimator {
                 run.clear();
             }
         }
+    }
+
+    /// [`Self::render_tile`] eight samples in lockstep, each lane drawing from its own copy of
+    /// `sampler`: the camera rays go as one packet, then every light sample's shadow ray and
+    /// every BSDF ray of the eight as packets (`ShadowPackets`, whose answers and surface
+    /// records are the scene BVH's, bit for bit). Each lane's draws and arithmetic are those
+    /// of [`Self::estimate`], its terms summed in the same order: the same image. Without
+    /// AOVs, and one BSDF sample at most.
+    fn render_tile_lockstep<S: Sampler + Clone>(&self, (scene, settings, tile, rect, s0, n): TileJob, packets: &ShadowPackets, sampler: S) {
+        let [x0, y0, x1, y1] = rect;
+        let w = x1 - x0;
+        let jobs = w * (y1 - y0) * n;
+        let cam = scene.camera.ray_generator();
+        let DirectIntegrator { emitter_samples, bsdf_samples } = self.cfg;
+        let counts = (emitter_samples as f32, bsdf_samples as f32);
+        let aovs = settings.aovs();
+        let mut samplers: [S; LANES] = std::array::from_fn(|_| sampler.clone());
+        let mut results: Vec<(Vec2, Rgb)> = Vec::with_capacity(jobs as usize);
+        // The light samples of the eight lanes, each lane's in the order of its sum: (lane,
+        // sample before its shadow ray), and whether that ray is blocked.
+        let mut terms: Vec<(usize, Option<Unshadowed>)> = Vec::new();
+        let mut blocked: Vec<bool> = Vec::new();
+        let mut j = 0;
+        while j < jobs {
+            let k = (jobs - j).min(LANES as u32) as usize;
+            let mut rays = [IDLE; LANES];
+            let mut raster = [Vec2::ZERO; LANES];
+            for l in 0..k {
+                let (pix, s) = ((j + l as u32) / n, (j + l as u32) % n);
+                (raster[l], rays[l]) = camera_sample(&cam, &mut samplers[l], x0 + pix % w, y0 + pix / w, s0 + s);
+            }
+            let active = (0xffu32 >> (LANES - k)) as u8;
+            let first = packets.closest(&rays, active);
+            let mut sums = [Rgb::BLACK; LANES];
+            let mut lanes: [Option<LaneHit>; LANES] = std::array::from_fn(|_| None);
+            terms.clear();
+            for l in 0..k {
+                let (ray, sampler) = (&rays[l], &mut samplers[l]);
+                let mut sum = Rgb::BLACK;
+                let Some(si) = packets.interaction(scene, &first, l, ray) else {
+                    if !settings.hide_emitters {
+                        for &ei in &scene.environment_lights {
+                            sum += scene.lights[ei as usize].le_escaped(ray.d);
+                        }
+                    }
+                    sums[l] = sum;
+                    continue;
+                };
+                for &d in &self.lights.deltas {
+                    scene.lights[d as usize].prefetch_li(si.p);
+                }
+                if let Some((_, area)) = scene.area_light(&si) {
+                    if !settings.hide_emitters {
+                        sum += area.l(si.ng, si.uv, si.wo);
+                    }
+                }
+                sums[l] = sum;
+                let bsdf = scene.bsdf(&si);
+                let wo = si.to_local(si.wo);
+                let flags = bsdf.flags();
+                let sky = SkySampling::new(&bsdf, flags);
+                if flags.has_non_specular() {
+                    for _ in 0..emitter_samples {
+                        let ul = sampler.next_1d();
+                        let u = sampler.next_2d();
+                        let other = (!self.lights.dist.is_empty()).then(|| self.other_light_sample(scene, &si, wo, &bsdf, sky, ul, u).1);
+                        for &d in &self.lights.deltas {
+                            terms.push((l, light_sample_unshadowed(scene, d, 1.0, si.p, si.ng, &si.shading, wo, &bsdf, u, si.time)));
+                        }
+                        if let Some(o) = other {
+                            terms.push((l, o));
+                        }
+                    }
+                }
+                let mut scatter = None;
+                if bsdf_samples == 1 {
+                    let uc = sampler.next_1d();
+                    let u = sampler.next_2d();
+                    if let Some(bs) = bsdf.sample(wo, uc, u, TransportMode::Radiance).filter(|bs| bs.pdf > 0.0) {
+                        let wi = si.to_world(bs.wi);
+                        scatter = Some((bs, wi, si.spawn_ray(wi)));
+                    }
+                }
+                lanes[l] = Some(LaneHit { si, bsdf, wo, sky, scatter });
+            }
+            // The shadow rays, eight at a time (a term without one is clear).
+            blocked.clear();
+            for chunk in terms.chunks(LANES) {
+                let mut shadow = [IDLE; LANES];
+                for (r, (_, ls)) in shadow.iter_mut().zip(chunk) {
+                    if let Some(Unshadowed { shadow: Some(ray), .. }) = ls {
+                        *r = *ray;
+                    }
+                }
+                let mask = packets.occluded(&shadow[..chunk.len()]);
+                blocked.extend((0..chunk.len()).map(|i| mask >> i & 1 != 0));
+            }
+            let mut second_rays = [IDLE; LANES];
+            let mut second_active = 0u8;
+            for (l, h) in lanes.iter().enumerate() {
+                if let Some(LaneHit { scatter: Some((_, _, r)), .. }) = h {
+                    second_rays[l] = *r;
+                    second_active |= 1 << l;
+                }
+            }
+            let second = (second_active != 0).then(|| packets.closest(&second_rays, second_active));
+            // Each lane's terms in `estimate`'s order: emission (above), light samples, BSDF sample.
+            let mut t = 0;
+            for (l, h) in lanes.iter().enumerate().take(k) {
+                let Some(h) = h else { continue };
+                let mut sum = sums[l];
+                while t < terms.len() && terms[t].0 == l {
+                    let c = match &terms[t].1 {
+                        Some(ls) if !blocked[t] => ls.contribution(&h.bsdf, h.wo, counts).0,
+                        _ => Rgb::BLACK,
+                    };
+                    sum += c / counts.0;
+                    t += 1;
+                }
+                if let (Some((bs, wi, r)), Some(second)) = (&h.scatter, &second) {
+                    let hit = packets.interaction(scene, second, l, r);
+                    if let Some((c, _)) = self.bsdf_term(scene, aovs, (&h.si, &h.bsdf, h.wo, h.sky), bs, *wi, hit) {
+                        sum += c;
+                    }
+                }
+                sums[l] = sum;
+            }
+            results.extend((0..k).map(|l| (raster[l], sums[l])));
+            j += k as u32;
+        }
+        tile.add_samples(&results);
+    }
+
+    /// The light other than the delta lights that a light sample `(ul, u)` at `si` takes,
+    /// and that light's sample before its shadow ray (None: it adds nothing).
+    #[allow(clippy::too_many_arguments)]
+    #[inline]
+    fn other_light_sample(
+        &self,
+        scene: &Scene,
+        si: &SurfaceInteraction,
+        wo: Vec3,
+        bsdf: &Bsdf,
+        sky: SkySampling,
+        ul: f32,
+        u: Vec2,
+    ) -> (u32, Option<Unshadowed>) {
+        let (k, pmf, _) = self.lights.dist.sample_discrete(ul);
+        let li = self.lights.others[k];
+        let ls = match &scene.lights[li as usize] {
+            Light::Constant { radiance } => sky_unshadowed(scene, si, wo, bsdf, sky, *radiance, pmf, u),
+            _ => light_sample_unshadowed(scene, li, pmf, si.p, si.ng, &si.shading, wo, bsdf, u, si.time),
+        };
+        (li, ls)
+    }
+
+    /// The contribution of BSDF sample `bs` (direction `wi` in the world) at `si`, whose ray
+    /// met `hit` (None: it escaped), and the event its path ends with; None where it adds
+    /// nothing (a surface that does not emit, or no radiance).
+    #[inline]
+    fn bsdf_term(
+        &self,
+        scene: &Scene,
+        aovs: &AovSet,
+        (si, bsdf, wo, sky): (&SurfaceInteraction, &Bsdf, Vec3, SkySampling),
+        bs: &BsdfSample,
+        wi: Vec3,
+        hit: Option<SurfaceInteraction>,
+    ) -> Option<(Rgb, Event)> {
+        let DirectIntegrator { emitter_samples, bsdf_samples } = self.cfg;
+        let (ne, nb) = (emitter_samples as f32, bsdf_samples as f32);
+        let mut at = None;
+        let (le, pdf_light, end) = match hit {
+            Some(s2) => {
+                let (li, area) = scene.area_light(&s2)?;
+                at = Some(s2.p);
+                (area.l(s2.ng, s2.uv, s2.wo), self.lights.pmf[li as usize] * area.pdf_li(si.p, s2.p, s2.ng), aovs.light_event(Some(s2.shape)))
+            }
+            None => {
+                let mut le = Rgb::BLACK;
+                let mut pdf = 0.0;
+                for &ei in &scene.environment_lights {
+                    let light = &scene.lights[ei as usize];
+                    le += light.le_escaped(wi);
+                    let density = match light {
+                        Light::Constant { .. } => sky.pdf(wo, bs.wi),
+                        _ => light.pdf_li_escaped(wi),
+                    };
+                    pdf += self.lights.pmf[ei as usize] * density;
+                }
+                (le, pdf, Event::BACKGROUND)
+            }
+        };
+        if le.is_black() {
+            return None;
+        }
+        let w = if bs.lobe.is_specular() || emitter_samples == 0 {
+            1.0
+        } else {
+            // The density toward the emitter point, as next-event estimation weighs it.
+            let pdf_bsdf = at.and_then(|y| bsdf_pdf_toward(bsdf, &si.shading, wo, si.p, y)).unwrap_or(bs.pdf);
+            power_heuristic(nb, pdf_bsdf, ne, pdf_light)
+        };
+        Some((le * bs.weight() * (w / nb), end))
     }
 
     /// Paths `C [LB]` (emitters seen) and `C x [LB]` (one scattering at the first surface),
@@ -209,17 +449,14 @@ impl DirectEstimator {
                 // The other light's sample is made first (the delta lights' texels, asked for
                 // above, arrive meanwhile) and added last, in the order of the sum.
                 let other = (!self.lights.dist.is_empty()).then(|| {
-                    let (k, pmf, _) = self.lights.dist.sample_discrete(ul);
-                    let li = self.lights.others[k];
-                    let (c, through) = match &scene.lights[li as usize] {
-                        Light::Constant { radiance } => sky_mis_to(scene, &si, wo, &bsdf, sky, *radiance, pmf, u, (ne, nb)),
-                        _ => light_mis_to(scene, li, pmf, si.p, si.ng, &si.shading, wo, &bsdf, u, (ne, nb), si.time),
-                    };
+                    let (li, ls) = self.other_light_sample(scene, &si, wo, &bsdf, sky, ul, u);
+                    let (c, through) = settle(scene, ls, &bsdf, wo, (ne, nb));
                     (c, li, through)
                 });
                 // Delta lights ignore the point sample: the same one serves them all.
                 for &d in &self.lights.deltas {
-                    let (c, through) = light_mis_to(scene, d, 1.0, si.p, si.ng, &si.shading, wo, &bsdf, u, (ne, nb), si.time);
+                    let ls = light_sample_unshadowed(scene, d, 1.0, si.p, si.ng, &si.shading, wo, &bsdf, u, si.time);
+                    let (c, through) = settle(scene, ls, &bsdf, wo, (ne, nb));
                     add((c, d, through), &mut l);
                 }
                 if let Some(o) = other {
@@ -235,42 +472,7 @@ impl DirectEstimator {
                 continue;
             }
             let wi = si.to_world(bs.wi);
-            let r = si.spawn_ray(wi);
-            let mut hit = None;
-            let (le, pdf_light, end) = match scene.intersect(&r) {
-                Some(s2) => match scene.area_light(&s2) {
-                    Some((li, area)) => {
-                        hit = Some(s2.p);
-                        (area.l(s2.ng, s2.uv, s2.wo), self.lights.pmf[li as usize] * area.pdf_li(si.p, s2.p, s2.ng), aovs.light_event(Some(s2.shape)))
-                    }
-                    None => continue,
-                },
-                None => {
-                    let mut le = Rgb::BLACK;
-                    let mut pdf = 0.0;
-                    for &ei in &scene.environment_lights {
-                        let light = &scene.lights[ei as usize];
-                        le += light.le_escaped(wi);
-                        let density = match light {
-                            Light::Constant { .. } => sky.pdf(wo, bs.wi),
-                            _ => light.pdf_li_escaped(wi),
-                        };
-                        pdf += self.lights.pmf[ei as usize] * density;
-                    }
-                    (le, pdf, Event::BACKGROUND)
-                }
-            };
-            if le.is_black() {
-                continue;
-            }
-            let w = if bs.lobe.is_specular() || emitter_samples == 0 {
-                1.0
-            } else {
-                // The density toward the emitter point, as next-event estimation weighs it.
-                let pdf_bsdf = hit.and_then(|y| bsdf_pdf_toward(&bsdf, &si.shading, wo, si.p, y)).unwrap_or(bs.pdf);
-                power_heuristic(nb, pdf_bsdf, ne, pdf_light)
-            };
-            let c = le * bs.weight() * (w / nb);
+            let Some((c, end)) = self.bsdf_term(scene, aovs, (&si, &bsdf, wo, sky), &bs, wi, scene.intersect(&si.spawn_ray(wi))) else { continue };
             l += c;
             if !aovs.is_empty() {
                 // A null lobe (a mask let the ray through) is no vertex of the path.
@@ -296,30 +498,14 @@ fn route_light_sample(scene: &Scene, events: &Tracker, layers: &mut LayerSample,
 }
 
 /// Next-event estimation toward a constant environment of radiance `le`, chosen with
-/// probability `pmf`, by [`SkySampling`]: the contribution and whether it arrives through
-/// the surface.
+/// probability `pmf`, by [`SkySampling`], up to its shadow ray (None: it adds nothing).
 #[allow(clippy::too_many_arguments)]
-fn sky_mis_to(
-    scene: &Scene,
-    si: &SurfaceInteraction,
-    wo: Vec3,
-    bsdf: &crate::bsdf::Bsdf,
-    sky: SkySampling,
-    le: Rgb,
-    pmf: f32,
-    u: Vec2,
-    counts: (f32, f32),
-) -> (Rgb, bool) {
-    const NONE: (Rgb, bool) = (Rgb::BLACK, false);
-    let Some((wi, pdf)) = sky.sample(wo, u) else { return NONE };
+#[inline]
+fn sky_unshadowed(scene: &Scene, si: &SurfaceInteraction, wo: Vec3, bsdf: &Bsdf, sky: SkySampling, le: Rgb, pmf: f32, u: Vec2) -> Option<Unshadowed> {
+    let (wi, pdf) = sky.sample(wo, u)?;
     let f = bsdf.eval(wo, wi, TransportMode::Radiance);
     if f.is_black() || pmf <= 0.0 {
-        return NONE;
+        return None;
     }
-    if scene.occluded_dir_at(si.p, si.ng, si.to_world(wi), si.time) {
-        return NONE;
-    }
-    let pdf_light = pmf * pdf;
-    let w = power_heuristic(counts.0, pdf_light, counts.1, bsdf.pdf(wo, wi, TransportMode::Radiance));
-    (f * le * (wi.z.abs() * w / pdf_light), wi.z * wo.z < 0.0)
+    Some(Unshadowed { f, li: le, wi, pdf_light: pmf * pdf, delta: false, shadow: Some(scene.dir_ray_at(si.p, si.ng, si.to_world(wi), si.time)) })
 }
