@@ -41,10 +41,22 @@ impl Default for DirectIntegrator {
 
 impl Integrator for DirectIntegrator {
     fn render(&self, scene: &Scene, settings: &RenderSettings, progress: &Progress) -> Result<Film> {
+        self.render_with(scene, settings, progress, true)
+    }
+}
+
+impl DirectIntegrator {
+    /// The render, eight samples in lockstep where `lockstep` allows and packets can (else
+    /// one sample at a time, for comparisons): the same image either way.
+    fn render_with(&self, scene: &Scene, settings: &RenderSettings, progress: &Progress, lockstep: bool) -> Result<Film> {
         let est = DirectEstimator { cfg: *self, lights: LightPlan::new(scene) };
         // Eight samples at a time where packets answer as the scene's BVH does (see
         // `render_tile_lockstep`); not with AOVs, nor several BSDF samples.
-        let packets = if settings.aovs().is_empty() && self.bsdf_samples <= 1 { ShadowPackets::new(scene).filter(ShadowPackets::exact_closest) } else { None };
+        let packets = if lockstep && settings.aovs().is_empty() && self.bsdf_samples <= 1 {
+            ShadowPackets::new(scene).filter(ShadowPackets::exact_closest)
+        } else {
+            None
+        };
         let (est, packets) = (&est, packets.as_ref());
         // One build of the tile loop per sampler: its draws inline (no call through `dyn`).
         render_tiles(scene, settings, progress, true, &|tile: &mut FilmTile, rect: [u32; 4], s0: u32, n: u32| {
@@ -508,4 +520,77 @@ fn sky_unshadowed(scene: &Scene, si: &SurfaceInteraction, wo: Vec3, bsdf: &Bsdf,
         return None;
     }
     Some(Unshadowed { f, li: le, wi, pdf_light: pmf * pdf, delta: false, shadow: Some(scene.dir_ray_at(si.p, si.ng, si.to_world(wi), si.time)) })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::bsdf::Material;
+    use crate::camera::Camera;
+    use crate::geometry::{Geometry, TriangleMesh};
+    use crate::scene::SceneBuilder;
+    use crate::texture::{Bitmap, FilterMode, Texture, WrapMode};
+    use glam::{Affine2, Mat4, Quat};
+    use std::sync::Arc;
+
+    /// A quad of two triangles with corners `c` (counter-clockwise seen from its front).
+    fn quad(c: [Vec3; 4]) -> Geometry {
+        Geometry::Mesh(TriangleMesh { positions: c.to_vec(), normals: vec![], uvs: vec![], indices: vec![[0, 1, 2], [0, 2, 3]] })
+    }
+
+    /// A floor and a wall under a constant sky, lit by an emitting quad, a textured spot and
+    /// a point light: every kind of term of the estimator (emission seen, delta lights, the
+    /// sky's and the area light's samples, BSDF samples escaping and reaching the emitter,
+    /// blocked and clear shadow rays).
+    fn lit_room() -> Scene {
+        let mut b = SceneBuilder::new();
+        let white = b.add_material(Material::Diffuse { reflectance: Texture::Constant(Rgb::splat(0.7)) });
+        let (x, z) = (Vec3::X * 3.0, Vec3::Z * 3.0);
+        b.add_shape(quad([-x - z, -x + z, x + z, x - z].map(|p| p + Vec3::new(0.0, -1.0, 4.0))), white, None, "floor").unwrap();
+        b.add_shape(quad([Vec3::new(-1.0, -1.0, 5.0), Vec3::new(1.0, -1.0, 5.0), Vec3::new(1.0, 1.0, 5.0), Vec3::new(-1.0, 1.0, 5.0)]), white, None, "wall")
+            .unwrap();
+        let emitter = Texture::Constant(Rgb::new(4.0, 3.0, 2.0));
+        b.add_shape(
+            quad([Vec3::new(-0.5, 1.5, 3.5), Vec3::new(0.5, 1.5, 3.5), Vec3::new(0.5, 1.5, 4.5), Vec3::new(-0.5, 1.5, 4.5)]),
+            white,
+            Some(emitter),
+            "lamp",
+        )
+        .unwrap();
+        b.add_light(Light::Constant { radiance: Rgb::splat(0.2) });
+        b.add_light(Light::point(Vec3::new(1.5, 1.0, 2.0), Rgb::splat(2.0)));
+        let mut spot = Light::spot(
+            &Mat4::from_rotation_translation(Quat::from_rotation_arc(Vec3::Z, Vec3::new(0.3, -0.5, 1.0).normalize()), Vec3::new(-1.0, 1.0, 1.0)),
+            Rgb::splat(8.0),
+            30.0,
+            Some(20.0),
+        );
+        if let Light::Spot { texture, .. } = &mut spot {
+            let texels = (0..64).map(|i| Rgb::new((i % 8) as f32 / 8.0, (i / 8) as f32 / 8.0, 0.5)).collect();
+            let image = Arc::new(Bitmap::new(8, 8, texels));
+            *texture = Some(Texture::Bitmap { image, filter: FilterMode::Bilinear, wrap: WrapMode::Repeat, to_uv: Affine2::IDENTITY });
+        }
+        b.add_light(spot);
+        b.set_camera(Camera::pinhole(Mat4::IDENTITY, 70.0, 19, 13));
+        b.build().unwrap()
+    }
+
+    /// The lockstep tiles give the image of one sample at a time, bit for bit, with either
+    /// sampler, several light samples, and a tile's last packet short of eight lanes.
+    #[test]
+    fn lockstep_is_one_sample_at_a_time() {
+        let scene = lit_room();
+        if ShadowPackets::new(&scene).is_none() {
+            return; // no AVX2: one sample at a time only
+        }
+        for (sampler, spp, emitter_samples) in [(SamplerKind::Independent, 5, 1), (SamplerKind::Sobol, 4, 1), (SamplerKind::Independent, 3, 2)] {
+            let settings = RenderSettings { spp, sampler, seed: 7, threads: 1, ..Default::default() };
+            let direct = DirectIntegrator { emitter_samples, bsdf_samples: 1 };
+            let packed = direct.render_with(&scene, &settings, &Progress::new(), true).unwrap().image();
+            let single = direct.render_with(&scene, &settings, &Progress::new(), false).unwrap().image();
+            assert!(packed.mean().max_component() > 0.0);
+            let bits = |d: &[Rgb]| d.iter().flat_map(|c| [c.r, c.g, c.b].map(f32::to_bits)).collect::<Vec<_>>();
+            assert_eq!(bits(&packed.data), bits(&single.data), "{sampler:?}, {spp} spp, {emitter_samples} light samples");
+        }
+    }
 }
