@@ -157,11 +157,11 @@ type TileJob<'a> = (&'a Scene, &'a RenderSettings, &'a mut FilmTile, [u32; 4], u
 /// The ray of a lane with nothing to trace (of no length: no packet walk tests it).
 const IDLE: Ray = Ray { o: Vec3::ZERO, d: Vec3::Z, t_max: 0.0, time: 0.0 };
 
-/// A lane's camera sample once its first surface is known: what its light samples and its
-/// BSDF sample still need once the packets' answers come.
+/// A lane's camera sample once its first surface is known: what its BSDF sample still needs
+/// once the packets' answers come (the BSDF itself is made again in the rare case that needs
+/// it: kept for every lane, it cost a copy of its few hundred bytes per sample).
+#[derive(Clone, Copy)]
 struct LaneHit {
-    si: SurfaceInteraction,
-    bsdf: Bsdf,
     /// Toward the camera, local shading frame.
     wo: Vec3,
     sky: SkySampling,
@@ -223,9 +223,9 @@ impl DirectEstimator {
         let aovs = settings.aovs();
         let mut samplers: [S; LANES] = std::array::from_fn(|_| sampler.clone());
         let mut results: Vec<(Vec2, Rgb)> = Vec::with_capacity(jobs as usize);
-        // The light samples of the eight lanes, each lane's in the order of its sum: (lane,
-        // sample before its shadow ray), and whether that ray is blocked.
-        let mut terms: Vec<(usize, Option<Unshadowed>)> = Vec::new();
+        // The light samples of the eight lanes, each lane's in the order of its sum: (lane, its
+        // contribution should its shadow ray be clear, that ray), and whether it is blocked.
+        let mut terms: Vec<(usize, Rgb, Option<Ray>)> = Vec::new();
         let mut blocked: Vec<bool> = Vec::new();
         let mut j = 0;
         while j < jobs {
@@ -238,13 +238,24 @@ impl DirectEstimator {
             }
             let active = (0xffu32 >> (LANES - k)) as u8;
             let first = packets.closest(&rays, active);
+            // The first surfaces, and the texels the delta lights' samples there will read
+            // asked for: they arrive while the eight lanes are shaded.
+            let mut hits: [Option<SurfaceInteraction>; LANES] = [None; LANES];
+            for l in 0..k {
+                hits[l] = packets.interaction(scene, &first, l, &rays[l]);
+                if let Some(si) = &hits[l] {
+                    for &d in &self.lights.deltas {
+                        scene.lights[d as usize].prefetch_li(si.p);
+                    }
+                }
+            }
             let mut sums = [Rgb::BLACK; LANES];
-            let mut lanes: [Option<LaneHit>; LANES] = std::array::from_fn(|_| None);
+            let mut lanes: [Option<LaneHit>; LANES] = [None; LANES];
             terms.clear();
             for l in 0..k {
                 let (ray, sampler) = (&rays[l], &mut samplers[l]);
                 let mut sum = Rgb::BLACK;
-                let Some(si) = packets.interaction(scene, &first, l, ray) else {
+                let Some(si) = &hits[l] else {
                     if !settings.hide_emitters {
                         for &ei in &scene.environment_lights {
                             sum += scene.lights[ei as usize].le_escaped(ray.d);
@@ -253,30 +264,31 @@ impl DirectEstimator {
                     sums[l] = sum;
                     continue;
                 };
-                for &d in &self.lights.deltas {
-                    scene.lights[d as usize].prefetch_li(si.p);
-                }
-                if let Some((_, area)) = scene.area_light(&si) {
+                if let Some((_, area)) = scene.area_light(si) {
                     if !settings.hide_emitters {
                         sum += area.l(si.ng, si.uv, si.wo);
                     }
                 }
                 sums[l] = sum;
-                let bsdf = scene.bsdf(&si);
+                let bsdf = scene.bsdf(si);
                 let wo = si.to_local(si.wo);
                 let flags = bsdf.flags();
                 let sky = SkySampling::new(&bsdf, flags);
+                // A sample's contribution is made before its shadow ray is tested (the same
+                // operations: it is dropped if the ray is blocked).
+                let term = |ls: Option<Unshadowed>| match ls {
+                    Some(ls) => (l, ls.contribution(&bsdf, wo, counts).0, ls.shadow),
+                    None => (l, Rgb::BLACK, None),
+                };
                 if flags.has_non_specular() {
                     for _ in 0..emitter_samples {
                         let ul = sampler.next_1d();
                         let u = sampler.next_2d();
-                        let other = (!self.lights.dist.is_empty()).then(|| self.other_light_sample(scene, &si, wo, &bsdf, sky, ul, u).1);
+                        let other = (!self.lights.dist.is_empty()).then(|| term(self.other_light_sample(scene, si, wo, &bsdf, sky, ul, u).1));
                         for &d in &self.lights.deltas {
-                            terms.push((l, light_sample_unshadowed(scene, d, 1.0, si.p, si.ng, &si.shading, wo, &bsdf, u, si.time)));
+                            terms.push(term(light_sample_unshadowed(scene, d, 1.0, si.p, si.ng, &si.shading, wo, &bsdf, u, si.time)));
                         }
-                        if let Some(o) = other {
-                            terms.push((l, o));
-                        }
+                        terms.extend(other);
                     }
                 }
                 let mut scatter = None;
@@ -288,14 +300,14 @@ impl DirectEstimator {
                         scatter = Some((bs, wi, si.spawn_ray(wi)));
                     }
                 }
-                lanes[l] = Some(LaneHit { si, bsdf, wo, sky, scatter });
+                lanes[l] = Some(LaneHit { wo, sky, scatter });
             }
             // The shadow rays, eight at a time (a term without one is clear).
             blocked.clear();
             for chunk in terms.chunks(LANES) {
                 let mut shadow = [IDLE; LANES];
-                for (r, (_, ls)) in shadow.iter_mut().zip(chunk) {
-                    if let Some(Unshadowed { shadow: Some(ray), .. }) = ls {
+                for (r, (_, _, ray)) in shadow.iter_mut().zip(chunk) {
+                    if let Some(ray) = ray {
                         *r = *ray;
                     }
                 }
@@ -313,20 +325,17 @@ impl DirectEstimator {
             let second = (second_active != 0).then(|| packets.closest(&second_rays, second_active));
             // Each lane's terms in `estimate`'s order: emission (above), light samples, BSDF sample.
             let mut t = 0;
-            for (l, h) in lanes.iter().enumerate().take(k) {
-                let Some(h) = h else { continue };
+            for l in 0..k {
+                let (Some(h), Some(si)) = (&lanes[l], &hits[l]) else { continue };
                 let mut sum = sums[l];
                 while t < terms.len() && terms[t].0 == l {
-                    let c = match &terms[t].1 {
-                        Some(ls) if !blocked[t] => ls.contribution(&h.bsdf, h.wo, counts).0,
-                        _ => Rgb::BLACK,
-                    };
+                    let c = if blocked[t] { Rgb::BLACK } else { terms[t].1 };
                     sum += c / counts.0;
                     t += 1;
                 }
                 if let (Some((bs, wi, r)), Some(second)) = (&h.scatter, &second) {
                     let hit = packets.interaction(scene, second, l, r);
-                    if let Some((c, _)) = self.bsdf_term(scene, aovs, (&h.si, &h.bsdf, h.wo, h.sky), bs, *wi, hit) {
+                    if let Some((c, _)) = self.bsdf_term(scene, aovs, (si, None, h.wo, h.sky), bs, *wi, hit) {
                         sum += c;
                     }
                 }
@@ -363,13 +372,14 @@ impl DirectEstimator {
 
     /// The contribution of BSDF sample `bs` (direction `wi` in the world) at `si`, whose ray
     /// met `hit` (None: it escaped), and the event its path ends with; None where it adds
-    /// nothing (a surface that does not emit, or no radiance).
+    /// nothing (a surface that does not emit, or no radiance). `bsdf`: the BSDF at `si`, made
+    /// again where None and needed.
     #[inline]
     fn bsdf_term(
         &self,
         scene: &Scene,
         aovs: &AovSet,
-        (si, bsdf, wo, sky): (&SurfaceInteraction, &Bsdf, Vec3, SkySampling),
+        (si, bsdf, wo, sky): (&SurfaceInteraction, Option<&Bsdf>, Vec3, SkySampling),
         bs: &BsdfSample,
         wi: Vec3,
         hit: Option<SurfaceInteraction>,
@@ -405,7 +415,12 @@ impl DirectEstimator {
             1.0
         } else {
             // The density toward the emitter point, as next-event estimation weighs it.
-            let pdf_bsdf = at.and_then(|y| bsdf_pdf_toward(bsdf, &si.shading, wo, si.p, y)).unwrap_or(bs.pdf);
+            let pdf_bsdf = at
+                .and_then(|y| match bsdf {
+                    Some(b) => bsdf_pdf_toward(b, &si.shading, wo, si.p, y),
+                    None => bsdf_pdf_toward(&scene.bsdf(si), &si.shading, wo, si.p, y),
+                })
+                .unwrap_or(bs.pdf);
             power_heuristic(nb, pdf_bsdf, ne, pdf_light)
         };
         Some((le * bs.weight() * (w / nb), end))
@@ -484,7 +499,7 @@ impl DirectEstimator {
                 continue;
             }
             let wi = si.to_world(bs.wi);
-            let Some((c, end)) = self.bsdf_term(scene, aovs, (&si, &bsdf, wo, sky), &bs, wi, scene.intersect(&si.spawn_ray(wi))) else { continue };
+            let Some((c, end)) = self.bsdf_term(scene, aovs, (&si, Some(&bsdf), wo, sky), &bs, wi, scene.intersect(&si.spawn_ray(wi))) else { continue };
             l += c;
             if !aovs.is_empty() {
                 // A null lobe (a mask let the ray through) is no vertex of the path.
