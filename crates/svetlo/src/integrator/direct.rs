@@ -582,15 +582,33 @@ mod tests {
         b.build().unwrap()
     }
 
+    /// Mitsuba's projector test in small: a 2000-unit square lit from 1 unit above, seen
+    /// through a 170° lens (where packet shadow rays answered otherwise than the scene's BVH).
+    fn vast_floor() -> Scene {
+        let mut b = SceneBuilder::new();
+        let white = b.add_material(Material::Diffuse { reflectance: Texture::Constant(Rgb::splat(1.0)) });
+        let (x, y) = (Vec3::X * 1000.0, Vec3::Y * 1000.0);
+        b.add_shape(quad([-x - y, x - y, x + y, -x + y]), white, None, "floor").unwrap();
+        b.add_light(Light::point(Vec3::new(0.0, 0.0, 1.0), Rgb::splat(1.0)));
+        let look_down = Mat4::from_rotation_translation(Quat::from_rotation_arc(Vec3::Z, -Vec3::Z), Vec3::Z);
+        b.set_camera(Camera::pinhole(look_down, 170.0, 24, 24));
+        b.build().unwrap()
+    }
+
     /// The lockstep tiles give the image of one sample at a time, bit for bit, with either
-    /// sampler, several light samples, and a tile's last packet short of eight lanes.
+    /// sampler, several light samples, and a tile's last packet short of eight lanes; on the
+    /// vast floor too (it fails with the packets' shadow answers).
     #[test]
     fn lockstep_is_one_sample_at_a_time() {
-        let scene = lit_room();
-        if ShadowPackets::new(&scene).is_none() {
-            return; // no AVX2: one sample at a time only
-        }
-        for (sampler, spp, emitter_samples) in [(SamplerKind::Independent, 5, 1), (SamplerKind::Sobol, 4, 1), (SamplerKind::Independent, 3, 2)] {
+        for (scene, sampler, spp, emitter_samples) in [
+            (lit_room(), SamplerKind::Independent, 5, 1),
+            (lit_room(), SamplerKind::Sobol, 4, 1),
+            (lit_room(), SamplerKind::Independent, 3, 2),
+            (vast_floor(), SamplerKind::Independent, 4, 1),
+        ] {
+            if ShadowPackets::new(&scene).is_none() {
+                return; // no AVX2: one sample at a time only
+            }
             let settings = RenderSettings { spp, sampler, seed: 7, threads: 1, ..Default::default() };
             let direct = DirectIntegrator { emitter_samples, bsdf_samples: 1 };
             let packed = direct.render_with(&scene, &settings, &Progress::new(), true).unwrap().image();
