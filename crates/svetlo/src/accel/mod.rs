@@ -17,6 +17,7 @@ mod tests;
 pub use bvh::{Accel, RAY_LANES};
 pub use kdtree::{KdPoint, KdTree};
 pub use packet_cache::PacketTreeCache;
+pub(crate) use wide::prefetch;
 
 /// The closest hit of a ray: which primitive, where along the ray, and where on it
 /// (barycentrics b1, b2 for a triangle; unused for a sphere).

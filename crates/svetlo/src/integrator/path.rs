@@ -67,27 +67,74 @@ pub(crate) fn light_mis_to(
     counts: (f32, f32),
     time: f32,
 ) -> (Rgb, bool) {
-    const NONE: (Rgb, bool) = (Rgb::BLACK, false);
+    settle(scene, light_sample_unshadowed(scene, li, pmf, p, ng, frame, wo, bsdf, u, time), bsdf, wo, counts)
+}
+
+/// The contribution of light sample `ls` (None: none) once its shadow ray is tested, and
+/// whether it arrives through the surface.
+#[inline]
+pub(crate) fn settle(scene: &Scene, ls: Option<Unshadowed>, bsdf: &crate::bsdf::Bsdf, wo: Vec3, counts: (f32, f32)) -> (Rgb, bool) {
+    match ls {
+        Some(ls) if !ls.shadow.is_some_and(|r| scene.occluded_ray(&r)) => ls.contribution(bsdf, wo, counts),
+        _ => (Rgb::BLACK, false),
+    }
+}
+
+/// A light sample at a surface point before its shadow ray is tested: callers that test
+/// many rays at once (`direct`'s lockstep tiles) keep these until the answers come.
+#[derive(Clone, Copy, Debug)]
+pub(crate) struct Unshadowed {
+    /// The BSDF's value toward the light (local direction `wi`) and the radiance arriving.
+    pub f: Rgb,
+    pub li: Rgb,
+    pub wi: Vec3,
+    /// The light strategy's density (the light's choice included).
+    pub pdf_light: f32,
+    /// A delta light: no MIS weight.
+    pub delta: bool,
+    /// The segment (or the ray to infinity) that must be clear; None: nothing can block it.
+    pub shadow: Option<Ray>,
+}
+
+impl Unshadowed {
+    /// The contribution of the sample, its shadow ray clear (`counts`: samples of each
+    /// strategy), and whether it arrives through the surface.
+    #[inline]
+    pub fn contribution(&self, bsdf: &crate::bsdf::Bsdf, wo: Vec3, counts: (f32, f32)) -> (Rgb, bool) {
+        let w = if self.delta { 1.0 } else { power_heuristic(counts.0, self.pdf_light, counts.1, bsdf.pdf(wo, self.wi, TransportMode::Radiance)) };
+        (self.f * self.li * (self.wi.z.abs() * w / self.pdf_light), self.wi.z * wo.z < 0.0)
+    }
+}
+
+/// [`light_mis_to`] up to its shadow ray; None where the sample contributes nothing.
+#[allow(clippy::too_many_arguments)]
+pub(crate) fn light_sample_unshadowed(
+    scene: &Scene,
+    li: u32,
+    pmf: f32,
+    p: Vec3,
+    ng: Vec3,
+    frame: &crate::math::Frame,
+    wo: Vec3,
+    bsdf: &crate::bsdf::Bsdf,
+    u: glam::Vec2,
+    time: f32,
+) -> Option<Unshadowed> {
     if pmf <= 0.0 {
-        return NONE;
+        return None;
     }
     let light = &scene.lights[li as usize];
-    let Some(ls) = light.sample_li(p, u, &scene.bounds) else { return NONE };
+    let ls = light.sample_li(p, u, &scene.bounds)?;
     if ls.pdf <= 0.0 || ls.li.is_black() {
-        return NONE;
+        return None;
     }
     let wi = frame.to_local(ls.wi);
     let f = bsdf.eval(wo, wi, TransportMode::Radiance);
     if f.is_black() {
-        return NONE;
+        return None;
     }
-    let blocked = if ls.infinite { scene.occluded_dir_at(p, ng, ls.wi, time) } else { scene.occluded_between(p, ng, ls.p, ls.n, time) };
-    if blocked {
-        return NONE;
-    }
-    let pdf_light = pmf * ls.pdf;
-    let w = if light.is_delta() { 1.0 } else { power_heuristic(counts.0, pdf_light, counts.1, bsdf.pdf(wo, wi, TransportMode::Radiance)) };
-    (f * ls.li * (wi.z.abs() * w / pdf_light), wi.z * wo.z < 0.0)
+    let shadow = if ls.infinite { Some(scene.dir_ray_at(p, ng, ls.wi, time)) } else { scene.shadow_ray(p, ng, ls.p, ls.n, time) };
+    Some(Unshadowed { f, li: ls.li, wi, pdf_light: pmf * ls.pdf, delta: light.is_delta(), shadow })
 }
 
 impl PixelEstimator for PathTracer {

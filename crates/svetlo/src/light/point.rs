@@ -67,6 +67,18 @@ impl Light {
         }
     }
 
+    /// Asks for the texels a textured spot's [`Light::sample_li`] from `p_ref` will read, ahead
+    /// of it (a large projected texture's lookups wait on memory); a hint, for any light.
+    #[inline]
+    pub fn prefetch_li(&self, p_ref: Vec3) {
+        if let Light::Spot { position, frame, tan_cutoff, texture: Some(tex), .. } = self {
+            // `spot_intensity`'s mapping, whose uv does not depend on the direction's length.
+            let l = frame.to_local(p_ref - *position);
+            let k = 0.5 / (l.z * tan_cutoff);
+            tex.prefetch(glam::Vec2::new(0.5 + l.x * k, 0.5 + l.y * k));
+        }
+    }
+
     /// Radiant intensity of a spot light (or a luminaire) toward world direction `w` (unit): the intensity times
     /// the falloff and, as Mitsuba 3 does, a texture projected over the cone: local direction
     /// (x, y, z) maps to uv = 1/2 + (x, y) / (2 z tan(cutoff)).

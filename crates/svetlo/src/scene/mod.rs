@@ -372,10 +372,16 @@ impl Scene {
 
     /// Is anything in the way from `p0` (normal `n0`) toward direction `w`, to infinity, at `time`?
     pub fn occluded_dir_at(&self, p0: Vec3, n0: Vec3, w: Vec3, time: f32) -> bool {
+        self.occluded_ray(&self.dir_ray_at(p0, n0, w, time))
+    }
+
+    /// The ray [`Self::occluded_dir_at`] tests, for callers that test several at once.
+    #[inline]
+    pub fn dir_ray_at(&self, p0: Vec3, n0: Vec3, w: Vec3, time: f32) -> Ray {
         let o = crate::geometry::ray::offset_ray_origin(p0, n0, w);
         let mut ray = Ray::new(o, w);
         ray.time = time;
-        self.occluded_ray(&ray)
+        ray
     }
 
     /// The BSDF at a hit: its material's, textures looked up at the point, with the

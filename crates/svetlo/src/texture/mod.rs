@@ -105,6 +105,25 @@ impl Bitmap {
         }
     }
 
+    /// Asks for the cache line of texel (x, y) ahead of its lookup (a hint: one outside the
+    /// image is not asked for).
+    #[inline]
+    fn prefetch_texel(&self, x: usize, y: usize) {
+        let i = y * self.width + x;
+        match &self.store {
+            Store::Float(v) => {
+                if let Some(t) = v.get(i) {
+                    crate::accel::prefetch(t, std::mem::size_of::<Rgb>());
+                }
+            }
+            Store::Codes(t, _) => {
+                if let Some(c) = t.codes.get(i) {
+                    crate::accel::prefetch(c, 4);
+                }
+            }
+        }
+    }
+
     #[inline]
     pub fn texel(&self, x: usize, y: usize) -> Rgb {
         let i = y * self.width + x;
@@ -278,6 +297,25 @@ impl Texture {
         match self {
             Texture::Constant(c) => *c,
             _ => self.eval_varying(p.into()),
+        }
+    }
+
+    /// Asks for the texels a lookup at `uv` reads, so that a lookup made a little later finds
+    /// them in cache: a large bitmap's lookups land anywhere in it and wait on memory. A hint
+    /// only (it changes no value): a bitmap's lookups inside the image (the others are left
+    /// alone); other textures ignore it.
+    #[inline]
+    pub fn prefetch(&self, uv: Vec2) {
+        if let Texture::Bitmap { image, to_uv, .. } = self {
+            let p = to_uv.transform_point2(uv);
+            let (x, y) = (p.x * image.width as f32 - 0.5, p.y * image.height as f32 - 0.5);
+            // The bilinear lookup's two rows at its first column (the next column mostly
+            // shares the line; a nearest lookup reads one of them). NaN fails the test.
+            if x >= 0.0 && y >= 0.0 && x < image.width as f32 && y + 1.0 < image.height as f32 {
+                let (x, y) = (x as usize, y as usize);
+                image.prefetch_texel(x, y);
+                image.prefetch_texel(x, y + 1);
+            }
         }
     }
 
