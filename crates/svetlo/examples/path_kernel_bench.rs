@@ -3,9 +3,10 @@
 //! (run the modes alternately, or under `valgrind --tool=callgrind` for instruction counts).
 //!
 //! `repeat`: three renders of the scene through `path` in one process, each timed (the first
-//! builds the packet tree, the others take the one the scene keeps).
+//! unpacks the triangles and builds the packet tree, the others take what the scene keeps);
+//! `repeat-scalar` the same through the scalar tracer.
 //!
-//! cargo run --release --example path_kernel_bench -- SCENE.xml packets|single|scalar|repeat [SPP] [SIZE] [OUT.exr]
+//! cargo run --release --example path_kernel_bench -- SCENE.xml packets|single|scalar|repeat|repeat-scalar [SPP] [SIZE] [OUT.exr]
 
 use svetlo::integrator::path_simd::SimdKernel;
 use svetlo::integrator::{Progress, RenderSettings};
@@ -13,7 +14,7 @@ use svetlo::integrator::{Progress, RenderSettings};
 fn main() -> Result<(), Box<dyn std::error::Error>> {
     let args: Vec<String> = std::env::args().collect();
     let (Some(path), Some(mode)) = (args.get(1), args.get(2)) else {
-        return Err("usage: path_kernel_bench SCENE.xml packets|single|scalar|repeat [SPP] [SIZE] [OUT.exr]".into());
+        return Err("usage: path_kernel_bench SCENE.xml packets|single|scalar|repeat|repeat-scalar [SPP] [SIZE] [OUT.exr]".into());
     };
     let spp: u32 = args.get(3).map_or(Ok(64), |s| s.parse())?;
     let size: u32 = args.get(4).map_or(Ok(64), |s| s.parse())?;
@@ -26,8 +27,8 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     let start = std::time::Instant::now();
     let film = match mode.as_str() {
         "scalar" => svetlo::methods::by_name("path:simd=false")?.render(&scene, &s, &Progress::new())?,
-        "repeat" => {
-            let path = svetlo::methods::by_name("path")?;
+        "repeat" | "repeat-scalar" => {
+            let path = svetlo::methods::by_name(if mode == "repeat" { "path" } else { "path:simd=false" })?;
             let mut film = None;
             for i in 0..3 {
                 let t = std::time::Instant::now();
@@ -44,7 +45,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
             println!("packets: {}", k.uses_packets());
             k.render(&scene, &s, &Progress::new())?
         }
-        m => return Err(format!("unknown mode '{m}' (packets, single, scalar or repeat)").into()),
+        m => return Err(format!("unknown mode '{m}' (packets, single, scalar, repeat or repeat-scalar)").into()),
     };
     let img = film.image();
     println!("{mode}: {:.3} s, mean {:?}", start.elapsed().as_secs_f64(), img.mean());

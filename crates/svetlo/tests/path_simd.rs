@@ -1053,8 +1053,9 @@ fn veach_mis_packets_match_scalar() {
     }
 }
 
-/// The packet tree is kept with the scene (`Scene::packet_tree`): a second render, and a
-/// render of a clone, take it and give the first render's image bit for bit.
+/// The packet tree and the unpacked triangles are kept with the scene (`Scene::packet_tree`,
+/// `Scene::kernel_geometry`): a second render, and a render of a clone, take them and give
+/// the first render's image bit for bit.
 #[test]
 fn renders_after_the_first_keep_the_image() {
     let scene = load(&repo_scene("cornell-box.xml"), &[], 32);
@@ -1092,4 +1093,27 @@ fn vast_floor_matches_scalar() {
     s.spp = 8;
     s.seed = 3;
     compare_exact(&scene, &s, "a vast floor under a point light");
+
+/// A clone shares what the kernel keeps of the scene, but a clone given another mesh (or
+/// another material) renders as a scene built with it: the kept triangles and tree are
+/// rebuilt, the materials never kept.
+#[test]
+fn a_clone_with_another_mesh_or_material_is_not_given_the_kept_set_up() {
+    let s = RenderSettings { spp: 4, seed: 9, ..RenderSettings::from_scene(&bumpy_floor(10, false)) };
+    let (a, b) = (bumpy_floor(10, false), bumpy_floor(12, false));
+    let first = render(&a, "path", &s);
+    assert!(first.data != render(&b, "path", &s).data, "the floors should give different images");
+    // `a`'s lamp and light, `b`'s floor (and the BVH over it).
+    let mut c = a.clone();
+    c.shapes[0] = b.shapes[0].clone();
+    c.accel = b.accel.clone();
+    c.bounds = b.bounds;
+    assert!(render(&c, "path", &s).data == render(&b, "path", &s).data, "the clone with another floor took the kept one");
+    let grey = svetlo::bsdf::Material::Diffuse { reflectance: svetlo::texture::Texture::Constant(svetlo::spectrum::Rgb::splat(0.3)) };
+    let mut d = a.clone();
+    d.materials[0] = grey.clone();
+    let mut fresh = bumpy_floor(10, false);
+    fresh.materials[0] = grey;
+    assert!(render(&d, "path", &s).data == render(&fresh, "path", &s).data, "the clone with another material took the kept one");
+    assert!(render(&a, "path", &s).data == first.data, "the first scene's image changed");
 }

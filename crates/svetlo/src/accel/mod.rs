@@ -3,9 +3,9 @@
 
 mod build;
 mod bvh;
+mod geometry_cache;
 mod kdtree;
 pub mod packet;
-mod packet_cache;
 mod pages;
 mod tri4;
 mod tri8;
@@ -15,8 +15,8 @@ mod wide;
 mod tests;
 
 pub use bvh::{Accel, RAY_LANES};
+pub use geometry_cache::GeometryCache;
 pub use kdtree::{KdPoint, KdTree};
-pub use packet_cache::PacketTreeCache;
 pub(crate) use wide::prefetch;
 
 /// The closest hit of a ray: which primitive, where along the ray, and where on it

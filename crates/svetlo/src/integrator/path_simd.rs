@@ -196,10 +196,93 @@ struct MeshLight {
     /// 1 / area (0 for a light without area).
     pdf_area: f32,
     tri_distribution: Distribution1D,
-    /// First vertex and edges (p0, p1 - p0, p2 - p0) and the sampled point's normal:
-    /// constant over the triangle, or the geometric normal of `TriangleMesh::surface`.
-    tris: Vec<([Vec3; 3], std::result::Result<Vec3, TriangleShading>)>,
+    /// Its mesh's triangles (from [`KernelGeometry::light_tris`]).
+    tris: Arc<[LightTri]>,
     radiance: Rgb,
+}
+
+/// A mesh light's triangle: first vertex and edges (p0, p1 - p0, p2 - p0) and the sampled
+/// point's normal: constant over the triangle, or the geometric normal of
+/// `TriangleMesh::surface`.
+type LightTri = ([Vec3; 3], std::result::Result<Vec3, TriangleShading>);
+
+/// What the kernel unpacks from the scene's geometry alone, kept with the scene
+/// (`Scene::kernel_geometry`) for its next renders: unpacking every triangle cost ~22M
+/// instructions a render on bsdf_spheres' textured sphere (32k triangles; the render call
+/// ~850M at 128 spp).
+pub(crate) struct KernelGeometry {
+    /// Every mesh's triangles, the shapes in [`kernel_order`].
+    tris: Vec<Tri>,
+    /// How many of `tris` are the static shapes' (the packet tree holds those, a prefix).
+    static_triangles: usize,
+    /// Per light of the scene: a mesh area light's triangles, else None.
+    light_tris: Vec<Option<Arc<[LightTri]>>>,
+}
+
+/// [`KernelGeometry`]'s key tags: a static shape's index as it is, a moving shape's and a
+/// light's with these bits (no scene has 2^30 shapes or lights).
+const MOVING_TAG: u32 = 1 << 31;
+const LIGHT_TAG: u32 = 1 << 30;
+
+impl KernelGeometry {
+    /// The kept one when the scene's meshes and lights have the same geometry, else unpacked
+    /// and kept. It depends on the shapes' geometry, their order ([`kernel_order`]: which
+    /// ones move) and the lights' geometry only (the shapes' `flat` tables are the meshes'),
+    /// which the key holds.
+    fn of(scene: &Scene) -> Arc<KernelGeometry> {
+        let moving = |si: usize| scene.moving.iter().any(|mv| mv.shape as usize == si);
+        let mut key: Vec<(u32, &Arc<Geometry>)> = kernel_order(scene)
+            .filter(|&si| matches!(&*scene.shapes[si].geometry, Geometry::Mesh(_)))
+            .map(|si| (si as u32 | if moving(si) { MOVING_TAG } else { 0 }, &scene.shapes[si].geometry))
+            .collect();
+        key.extend(scene.lights.iter().enumerate().filter_map(|(li, l)| match l {
+            Light::Area(a) if matches!(&*a.geometry, Geometry::Mesh(_)) => Some((li as u32 | LIGHT_TAG, &a.geometry)),
+            _ => None,
+        }));
+        scene.kernel_geometry.get_or_build(&key, || KernelGeometry::unpack(scene))
+    }
+
+    fn unpack(scene: &Scene) -> KernelGeometry {
+        let triangles: usize = scene.shapes.iter().map(|s| if let Geometry::Mesh(m) = &*s.geometry { m.triangle_count() } else { 0 }).sum();
+        // Written once into a vector of the final size: with a million triangles this
+        // unpacking is a visible part of the render's time, its page faults as much as the
+        // writes. (On huge pages it cost 0.13-0.39 s instead of 0.18-0.20 s on mesh1m: the
+        // kernel's compaction for them, in the render call.)
+        let mut tris = Vec::with_capacity(triangles);
+        // Plain loops: `extend` over a `flat_map` took 70 more instructions a triangle.
+        // Static shapes' first: the packet tree holds those (`kernel_order`).
+        let mut static_triangles = None;
+        for si in kernel_order(scene) {
+            let s = &scene.shapes[si];
+            if static_triangles.is_none() && scene.moving.iter().any(|mv| mv.shape as usize == si) {
+                static_triangles = Some(tris.len());
+            }
+            let Geometry::Mesh(m) = &*s.geometry else { continue };
+            for t in 0..m.triangle_count() {
+                let shading = TriangleFrame::new(s.flat.get(t).copied().flatten(), m, t);
+                tris.push(Tri { p: m.vertices(t), shading, shape: si as u32, local: t as u32 });
+            }
+        }
+        let light_tris = scene
+            .lights
+            .iter()
+            .map(|l| match l {
+                Light::Area(a) => match &*a.geometry {
+                    Geometry::Mesh(m) => Some(
+                        (0..m.triangle_count())
+                            .map(|t| {
+                                let [p0, p1, p2] = m.vertices(t);
+                                ([p0, p1 - p0, p2 - p0], crate::light::area::constant_normal(m, t).ok_or_else(|| m.shading(t)))
+                            })
+                            .collect(),
+                    ),
+                    _ => None,
+                },
+                _ => None,
+            })
+            .collect();
+        KernelGeometry { static_triangles: static_triangles.unwrap_or(tris.len()), tris, light_tris }
+    }
 }
 
 /// Scenes with more triangles than this are large: they take the kernel only with Lambertian
@@ -431,7 +514,8 @@ fn lane_rays(rays: &Rays8) -> [Ray; LANES] {
 /// Everything the kernel needs of a qualifying scene.
 pub struct SimdKernel {
     tracer: Tracer,
-    tris: Vec<Tri>,
+    /// The unpacked triangles and mesh lights, shared with the scene's next renders.
+    geometry: Arc<KernelGeometry>,
     shapes: Vec<ShapeData>,
     /// Per light of the scene: a mesh area light unpacked, or None for a light the lanes
     /// sample through its own `Light::sample_li` (point, spot, directional, environment).
@@ -480,35 +564,35 @@ impl SimdKernel {
         // tracer's time at 512 spp, 1.00 at 2048. Such scenes take the scalar tracer, refused
         // here before anything is unpacked (the shapes unpacked before the first such one,
         // bsdf_spheres' two spheres of 32k triangles, cost ~3 % of a 128 spp render).
+        // With the unpacking kept for the scene's next renders the first one still pays it:
+        // on the grid under an area light (depth 2, 128 spp) the kernel's first render call
+        // took 1.21 the scalar tracer's instructions (1.05 its time), a repeat render 1.03
+        // (0.82 the time); under an environment 1.10 and 0.95 (0.98 and 0.77 the time).
         let triangles: usize = scene.shapes.iter().map(|s| if let Geometry::Mesh(m) = &*s.geometry { m.triangle_count() } else { 0 }).sum();
         let large = triangles > LARGE_TRIANGLES;
         if large && scene.shapes.iter().any(|s| s.detail || scene.materials.get(s.material as usize).is_none_or(|m| lambert_sides(m).is_none())) {
             return None;
         }
-        let mut lights = Vec::with_capacity(scene.lights.len());
+        // The mesh lights' (light, 1 / area, distribution, radiance); their triangles come
+        // with the rest of the geometry once the scene is in scope.
+        let mut mesh_lights = Vec::with_capacity(scene.lights.len());
         for l in &scene.lights {
             let Light::Area(a) = l else {
-                lights.push(None);
+                mesh_lights.push(None);
                 continue;
             };
             // A textured emitter, or one of a shape that is not a mesh (a sphere's samples the
             // cone it subtends), is sampled through its own `sample_li`, as the other lights.
             if !matches!(a.radiance, Texture::Constant(_)) || !matches!(&*a.geometry, Geometry::Mesh(_)) {
-                lights.push(None);
+                mesh_lights.push(None);
                 continue;
             }
-            let (Geometry::Mesh(m), Texture::Constant(radiance), Some(dist)) = (&*a.geometry, &a.radiance, &a.tri_distribution) else { return None };
+            let (Texture::Constant(radiance), Some(dist)) = (&a.radiance, &a.tri_distribution) else { return None };
             if dist.is_empty() {
                 return None;
             }
-            let tris = (0..m.triangle_count())
-                .map(|t| {
-                    let [p0, p1, p2] = m.vertices(t);
-                    ([p0, p1 - p0, p2 - p0], crate::light::area::constant_normal(m, t).ok_or_else(|| m.shading(t)))
-                })
-                .collect();
             let pdf_area = if a.area > 0.0 { 1.0 / a.area } else { 0.0 };
-            lights.push(Some(MeshLight { pdf_area, tri_distribution: dist.clone(), tris, radiance: *radiance }));
+            mesh_lights.push(Some((pdf_area, dist, *radiance)));
         }
         // Where paths cross surfaces (dielectrics, masks), a path inside an object meets faces
         // that lie on another surface (a glass box's bottom on the floor) at the same distance:
@@ -555,35 +639,27 @@ impl SimdKernel {
             let uniform_flags = uniform.as_ref().map_or(LobeFlags::NONE, Bsdf::flags);
             shapes.push(ShapeData { scalar_bsdf, front, back, textured, light, uniform, uniform_flags });
         }
-        // Other shapes' hits come as the scene's surface records (`other_hit`). Written once
-        // into a vector of the final size: with a million triangles this unpacking is a
-        // visible part of the render's time, its page faults as much as the writes. (On
-        // huge pages it cost 0.13-0.39 s instead of 0.18-0.20 s on mesh1m: the kernel's
-        // compaction for them, in the render call.)
-        let mut tris = Vec::with_capacity(triangles);
-        // Plain loops: `extend` over a `flat_map` took 70 more instructions a triangle.
-        // Static shapes' first: the packet tree holds those (`kernel_order`).
-        let mut static_triangles = None;
-        for si in kernel_order(scene) {
-            let s = &scene.shapes[si];
-            if static_triangles.is_none() && scene.moving.iter().any(|mv| mv.shape as usize == si) {
-                static_triangles = Some(tris.len());
-            }
-            let Geometry::Mesh(m) = &*s.geometry else { continue };
-            for t in 0..m.triangle_count() {
-                let shading = TriangleFrame::new(s.flat.get(t).copied().flatten(), m, t);
-                tris.push(Tri { p: m.vertices(t), shading, shape: si as u32, local: t as u32 });
-            }
-        }
+        // The meshes' triangles (other shapes' hits come as the scene's surface records:
+        // `other_hit`), the ones of the scene's last render if its geometry is the same.
+        let geometry = KernelGeometry::of(scene);
+        let lights = mesh_lights
+            .into_iter()
+            .zip(&geometry.light_tris)
+            .map(|(ml, tris)| {
+                let ((pdf_area, dist, radiance), tris) = ml.zip(tris.clone())?;
+                Some(MeshLight { pdf_area, tri_distribution: dist.clone(), tris, radiance })
+            })
+            .collect();
         // Only the packet tree needs the corners apart (single rays use the scene's BVH): the
         // tree over the static meshes, the one of the scene's last render if it has the same.
         let packet_tree = || {
-            let meshes: Vec<&Arc<Geometry>> = kernel_order(scene)
+            // The tree depends on the corners alone: the meshes untagged.
+            let meshes: Vec<(u32, &Arc<Geometry>)> = kernel_order(scene)
                 .take_while(|&si| !scene.moving.iter().any(|mv| mv.shape as usize == si))
-                .map(|si| &scene.shapes[si].geometry)
-                .filter(|g| matches!(&***g, Geometry::Mesh(_)))
+                .map(|si| (0, &scene.shapes[si].geometry))
+                .filter(|(_, g)| matches!(&***g, Geometry::Mesh(_)))
                 .collect();
-            let verts = || tris[..static_triangles.unwrap_or(tris.len())].iter().map(|t| t.p).collect::<Vec<_>>();
+            let verts = || geometry.tris[..geometry.static_triangles].iter().map(|t| t.p).collect::<Vec<_>>();
             scene.packet_tree.get_or_build(&meshes, || PacketBvh::build(&verts()))
         };
         let tracer = if scene.settings.ray_epsilon > 0.0 || (single_rays && !scene.moving.is_empty()) {
@@ -612,7 +688,7 @@ impl SimdKernel {
                 _ => None,
             })
             .collect();
-        Some(SimdKernel { tracer, tris, shapes, lights, sphere_lights, avx512: avx512() })
+        Some(SimdKernel { tracer, geometry, shapes, lights, sphere_lights, avx512: avx512() })
     }
 
     /// Whether rays go as packets (else one by one through the scene's BVH).
@@ -784,7 +860,7 @@ impl SimdKernel {
             // The environment map's grid points of the escaped lanes (those `gather` finds
             // no hit for), all eight at once.
             if let Some(env) = env_map {
-                if (0..LANES).any(|l| active & (1 << l) != 0 && hits.prim[l] != OTHER && self.tris.get(hits.prim[l] as usize).is_none()) {
+                if (0..LANES).any(|l| active & (1 << l) != 0 && hits.prim[l] != OTHER && self.geometry.tris.get(hits.prim[l] as usize).is_none()) {
                     v.env_grid = env.dirs_to_grid(&rays.d);
                 }
             }
@@ -887,7 +963,7 @@ impl SimdKernel {
         st.depth[l] += 1;
         let depth = st.depth[l];
         v.emitted[l] = false;
-        let (hit, shape, p, ng, frame) = match (self.tris.get(prim as usize), other) {
+        let (hit, shape, p, ng, frame) = match (self.geometry.tris.get(prim as usize), other) {
             (Some(tri), _) => {
                 let p = tri.p[0] * (1.0 - b1 - b2) + tri.p[1] * b1 + tri.p[2] * b2;
                 let (ng, frame) = tri.shading.at(b1, b2);

@@ -215,6 +215,7 @@ impl SceneBuilder {
             settings: self.settings,
             warnings,
             packet_tree: Default::default(),
+            kernel_geometry: Default::default(),
         })
     }
 }

@@ -141,7 +141,10 @@ pub struct Scene {
     /// Everything the loader ignored or adapted, for `svetlo info` and the log.
     pub warnings: Vec<String>,
     /// The path kernel's packet tree, kept for the next render (keyed by the meshes).
-    pub(crate) packet_tree: crate::accel::PacketTreeCache,
+    pub(crate) packet_tree: crate::accel::GeometryCache<crate::accel::packet::PacketBvh>,
+    /// The path kernel's unpacked triangles and mesh lights, kept for the next render (keyed
+    /// by the shapes' and lights' geometry).
+    pub(crate) kernel_geometry: crate::accel::GeometryCache<crate::integrator::path_simd::KernelGeometry>,
 }
 
 impl Scene {
