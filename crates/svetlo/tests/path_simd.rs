@@ -1093,6 +1093,7 @@ fn vast_floor_matches_scalar() {
     s.spp = 8;
     s.seed = 3;
     compare_exact(&scene, &s, "a vast floor under a point light");
+}
 
 /// A clone shares what the kernel keeps of the scene, but a clone given another mesh (or
 /// another material) renders as a scene built with it: the kept triangles and tree are
