@@ -1067,6 +1067,35 @@ fn renders_after_the_first_keep_the_image() {
     assert!(render(&scene.clone(), "path", &s).data == a.data, "the clone's render differs");
 }
 
+/// A large scene with a material other than a Lambertian one: its first render takes the
+/// scalar tracer (the kernel's set-up would cost more than it gains), its next renders the
+/// kernel, with the first render's image bit for bit, whatever the thread count; a clone
+/// shares the mark, a scene with another floor does not.
+#[test]
+fn a_large_scene_takes_the_kernel_from_its_second_render_on() {
+    // 24 200 triangles (packets that check ties) and 51 200 (single rays).
+    for n in [110u32, 160] {
+        let scene = bumpy_floor(n, true);
+        let s = RenderSettings { spp: 4, max_depth: 4, seed: 11, ..RenderSettings::from_scene(&scene) };
+        let what = format!("a masked floor of {} triangles", 2 * n * n);
+        assert!(SimdKernel::new(&scene, &s).is_none(), "{what}: the first render should take the scalar tracer");
+        let first = render(&scene, "path", &s);
+        assert!(first.mean().max_component() > 0.0, "the lamp lights the floor");
+        if !avx2() {
+            continue;
+        }
+        assert!(SimdKernel::new(&scene, &s).is_some(), "{what}: a second render should take the kernel");
+        assert!(SimdKernel::new(&scene.clone(), &s).is_some(), "{what}: a clone should take the kernel");
+        for threads in [1, 2, 3] {
+            let t = RenderSettings { threads, ..s.clone() };
+            let again = SimdKernel::new(&scene, &t).expect("the kernel").render(&scene, &t, &Progress::new()).expect("render").image();
+            assert!(again.data == first.data, "{what}, {threads} threads: not the first render's image");
+        }
+        assert!(render(&scene, "path", &s).data == first.data, "{what}: the third render differs");
+        assert!(SimdKernel::new(&bumpy_floor(n, true), &s).is_none(), "{what}: another scene's first render should take the scalar tracer");
+    }
+}
+
 /// Mitsuba's projector tests in small: a 2000-unit square (two triangles) lit by a point
 /// light 1 unit above, seen through a 170° lens. Shadow rays leave the floor with an offset
 /// below the watertight test's rounding at that scale; the packet tree (one leaf) met the

@@ -40,15 +40,20 @@ impl<T> GeometryCache<T> {
     /// while building (a build may join rayon tasks; two renders racing on a new key both
     /// build).
     pub fn get_or_build(&self, key: &[(u32, &Arc<Geometry>)], build: impl FnOnce() -> T) -> Arc<T> {
-        let same =
-            |e: &Entry<T>| e.key.len() == key.len() && e.key.iter().zip(key).all(|((ta, w), (tb, m))| ta == tb && std::ptr::eq(w.as_ptr(), Arc::as_ptr(m)));
-        if let Some(e) = self.0.lock().unwrap_or_else(|e| e.into_inner()).as_ref().filter(|e| same(e)) {
-            return e.value.clone();
+        if let Some(value) = self.get(key) {
+            return value;
         }
         let value = Arc::new(build());
         *self.0.lock().unwrap_or_else(|e| e.into_inner()) =
             Some(Entry { key: key.iter().map(|&(t, m)| (t, Arc::downgrade(m))).collect(), value: value.clone() });
         value
+    }
+
+    /// The kept value when it was built from `key`, else None (nothing is built).
+    pub fn get(&self, key: &[(u32, &Arc<Geometry>)]) -> Option<Arc<T>> {
+        let same =
+            |e: &Entry<T>| e.key.len() == key.len() && e.key.iter().zip(key).all(|((ta, w), (tb, m))| ta == tb && std::ptr::eq(w.as_ptr(), Arc::as_ptr(m)));
+        self.0.lock().unwrap_or_else(|e| e.into_inner()).as_ref().filter(|e| same(e)).map(|e| e.value.clone())
     }
 }
 
@@ -86,6 +91,18 @@ mod tests {
         // A clone of the cache (a cloned scene) shares the entry.
         let kept = get(&[(0, &a), (1, &b)]);
         assert!(Arc::ptr_eq(&kept, &cache.clone().get_or_build(&[(0, &a), (1, &b)], || panic!("rebuilt for a clone"))));
+    }
+
+    #[test]
+    fn get_answers_without_building() {
+        let cache = GeometryCache::<u32>::default();
+        let (a, b) = (mesh(0.0), mesh(1.0));
+        assert!(cache.get(&[(0, &a)]).is_none(), "an empty cache holds nothing");
+        let built = cache.get_or_build(&[(0, &a)], || 7);
+        assert!(cache.get(&[(0, &a)]).is_some_and(|v| Arc::ptr_eq(&v, &built)), "the kept value");
+        assert!(cache.get(&[(0, &b)]).is_none() && cache.get(&[(1, &a)]).is_none() && cache.get(&[(0, &a), (1, &b)]).is_none(), "another key");
+        // Asking about another key keeps the entry.
+        assert_eq!(cache.get(&[(0, &a)]).as_deref(), Some(&7));
     }
 
     #[test]

@@ -28,8 +28,9 @@
 //! call (`Bsdf::eval_pdf_and_sample`: a rough model's half vector, D and G1 computed once;
 //! a rough conductor's Λ(wo) once for both; a Beckmann one's visible normal drawn for all
 //! lanes at once before, by `beckmann_samples`, the same bits). Scenes
-//! large enough to trace single rays take the kernel only with Lambertian materials (it
-//! gained nothing there otherwise). Lights: area lights of constant radiance on meshes
+//! large enough to trace single rays take the kernel on their first render only with
+//! Lambertian materials (its set-up cost more than it gained there otherwise), on later
+//! renders with any. Lights: area lights of constant radiance on meshes
 //! (sampled by the kernel's own unpacked copy), and every other light the scalar tracer
 //! takes (textured area lights, sphere lights, point, spot, directional, one constant or
 //! bitmap environment), each lane sampling it through its own `Light::sample_li` (a
@@ -127,6 +128,9 @@ impl Integrator for SimdPathTracer {
             if let Some(k) = SimdKernel::new(scene, settings) {
                 return k.render(scene, settings, progress);
             }
+            // A large scene the kernel declines takes it on its next render (see
+            // `SimdKernel::new`).
+            scene.kernel_declined.get_or_build(&KernelGeometry::key(scene), || ());
         }
         PathTracer.render(scene, settings, progress)
     }
@@ -230,6 +234,11 @@ impl KernelGeometry {
     /// ones move) and the lights' geometry only (the shapes' `flat` tables are the meshes'),
     /// which the key holds.
     fn of(scene: &Scene) -> Arc<KernelGeometry> {
+        scene.kernel_geometry.get_or_build(&KernelGeometry::key(scene), || KernelGeometry::unpack(scene))
+    }
+
+    /// The geometry it is unpacked from, tagged (the key of `Scene::kernel_geometry`).
+    fn key(scene: &Scene) -> Vec<(u32, &Arc<Geometry>)> {
         let moving = |si: usize| scene.moving.iter().any(|mv| mv.shape as usize == si);
         let mut key: Vec<(u32, &Arc<Geometry>)> = kernel_order(scene)
             .filter(|&si| matches!(&*scene.shapes[si].geometry, Geometry::Mesh(_)))
@@ -239,7 +248,7 @@ impl KernelGeometry {
             Light::Area(a) if matches!(&*a.geometry, Geometry::Mesh(_)) => Some((li as u32 | LIGHT_TAG, &a.geometry)),
             _ => None,
         }));
-        scene.kernel_geometry.get_or_build(&key, || KernelGeometry::unpack(scene))
+        key
     }
 
     fn unpack(scene: &Scene) -> KernelGeometry {
@@ -285,8 +294,8 @@ impl KernelGeometry {
     }
 }
 
-/// Scenes with more triangles than this are large: they take the kernel only with Lambertian
-/// materials (see [`SimdKernel::new`]), and their packets check ties.
+/// Scenes with more triangles than this are large: they take the kernel on their first render
+/// only with Lambertian materials (see [`SimdKernel::new`]), and their packets check ties.
 const LARGE_TRIANGLES: usize = 20_000;
 /// Scenes with more triangles than this trace one ray at a time (see [`Tracer`]). Between
 /// [`LARGE_TRIANGLES`] and this, packets still won: bsdf_spheres' textured sphere (32k
@@ -568,10 +577,17 @@ impl SimdKernel {
         // on the grid under an area light (depth 2, 128 spp) the kernel's first render call
         // took 1.21 the scalar tracer's instructions (1.05 its time), a repeat render 1.03
         // (0.82 the time); under an environment 1.10 and 0.95 (0.98 and 0.77 the time).
+        // So the kernel takes such a scene from its second render on (a sweep, a notebook):
+        // when its set-up is kept, or a first render through the scalar tracer marked its
+        // geometry (`Scene::kernel_declined`; the second render unpacks). Single rays give
+        // the scalar tracer's image bit for bit, so the order of the renders shows in no image.
         let triangles: usize = scene.shapes.iter().map(|s| if let Geometry::Mesh(m) = &*s.geometry { m.triangle_count() } else { 0 }).sum();
         let large = triangles > LARGE_TRIANGLES;
         if large && scene.shapes.iter().any(|s| s.detail || scene.materials.get(s.material as usize).is_none_or(|m| lambert_sides(m).is_none())) {
-            return None;
+            let key = KernelGeometry::key(scene);
+            if scene.kernel_geometry.get(&key).is_none() && scene.kernel_declined.get(&key).is_none() {
+                return None;
+            }
         }
         // The mesh lights' (light, 1 / area, distribution, radiance); their triangles come
         // with the rest of the geometry once the scene is in scope.
@@ -620,7 +636,6 @@ impl SimdKernel {
             // Any other material (or surface detail) by its own scalar code, lane by lane.
             let (scalar_bsdf, (front, back)) = match lambert {
                 Some(fb) if !s.detail => (false, fb),
-                _ if large => return None,
                 _ => (true, (Albedo::Constant(Rgb::BLACK), None)),
             };
             let textured = matches!(front, Albedo::Textured(_)) || matches!(back, Some(Albedo::Textured(_)));

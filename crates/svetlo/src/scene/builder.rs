@@ -216,6 +216,7 @@ impl SceneBuilder {
             warnings,
             packet_tree: Default::default(),
             kernel_geometry: Default::default(),
+            kernel_declined: Default::default(),
         })
     }
 }
