@@ -47,27 +47,9 @@ pub(crate) fn sample_light_mis_to(
         return (Rgb::BLACK, 0, false);
     }
     let (li, pmf, _) = scene.light_distribution.sample_discrete(u_light);
-    let (c, through) = light_mis_to(scene, li as u32, pmf, p, ng, frame, wo, bsdf, u, counts, time);
+    let ls = light_sample_unshadowed(scene, li as u32, pmf, p, ng, frame, wo, bsdf, u, time);
+    let (c, through) = settle(scene, ls, bsdf, wo, counts);
     (c, li as u32, through)
-}
-
-/// Next-event estimation toward light `li`, chosen with probability `pmf` (see
-/// [`sample_light_mis_to`]): the contribution and whether it arrives through the surface.
-#[allow(clippy::too_many_arguments)]
-pub(crate) fn light_mis_to(
-    scene: &Scene,
-    li: u32,
-    pmf: f32,
-    p: Vec3,
-    ng: Vec3,
-    frame: &crate::math::Frame,
-    wo: Vec3,
-    bsdf: &crate::bsdf::Bsdf,
-    u: glam::Vec2,
-    counts: (f32, f32),
-    time: f32,
-) -> (Rgb, bool) {
-    settle(scene, light_sample_unshadowed(scene, li, pmf, p, ng, frame, wo, bsdf, u, time), bsdf, wo, counts)
 }
 
 /// The contribution of light sample `ls` (None: none) once its shadow ray is tested, and
@@ -106,7 +88,9 @@ impl Unshadowed {
     }
 }
 
-/// [`light_mis_to`] up to its shadow ray; None where the sample contributes nothing.
+/// Next-event estimation toward light `li`, chosen with probability `pmf` (see
+/// [`sample_light_mis_to`]), up to its shadow ray ([`settle`] tests it); None where the
+/// sample contributes nothing.
 #[allow(clippy::too_many_arguments)]
 pub(crate) fn light_sample_unshadowed(
     scene: &Scene,

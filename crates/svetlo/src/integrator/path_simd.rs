@@ -1120,7 +1120,7 @@ impl SimdKernel {
         true
     }
 
-    /// Lane `l`'s light sample from `p` (as `path::light_mis_to` up to the BSDF): the light
+    /// Lane `l`'s light sample from `p` (as `path::light_sample_unshadowed` up to the BSDF): the light
     /// chosen by `u_light`, its point by `u_l2`; `nee_ok` where it counts so far.
     #[inline(always)]
     fn light_sample(&self, scene: &Scene, l: usize, v: &mut Soa, p: Vec3, u_light: f32, u_l2: Vec2) {
@@ -1139,7 +1139,7 @@ impl SimdKernel {
         v.pmf[l] = pmf;
         v.light[l] = li as u32;
         match self.lights.get(li) {
-            // Any other light by its own sampling (`path::light_mis_to`'s first tests).
+            // Any other light by its own sampling (`path::light_sample_unshadowed`'s first tests).
             Some(None) if pmf > 0.0 => {
                 // A sphere of constant radiance: with the other lanes' (`sphere_samples`).
                 if self.sphere_lights[li].is_some() {
@@ -1172,7 +1172,7 @@ impl SimdKernel {
     }
 
     /// Lane `l`'s light sample from `p` of light `li` by its own `Light::sample_li`
-    /// (`path::light_mis_to`'s first tests).
+    /// (`path::light_sample_unshadowed`'s first tests).
     fn generic_light_sample(scene: &Scene, l: usize, v: &mut Soa, li: usize, p: Vec3, u_l2: Vec2) {
         let light = &scene.lights[li];
         if let Some(ls) = light.sample_li(p, u_l2, &scene.bounds).filter(|ls| ls.pdf > 0.0 && !ls.li.is_black()) {
@@ -1304,7 +1304,7 @@ impl SimdKernel {
     }
 
     /// The rest of lane `l`'s vertex `si` of a scalar BSDF (`scalar_light_sample` took the
-    /// light sample): the BSDF's value and density toward it (as `path::light_mis_to`), its
+    /// light sample): the BSDF's value and density toward it (as `path::light_sample_unshadowed`), its
     /// own sample (as `camera_walk`), and the events of both, into `v` for `shade8`; the
     /// lane's next MIS vertex and radiance scale into `st`. `u`: the vertex's numbers (light
     /// choice, light point, lobe, direction).
