@@ -11,6 +11,7 @@
 //! same boxes (min and max are exact, whatever the order of the unions; only the sign of a
 //! zero may differ, which no comparison sees).
 
+use super::pages::PagedVec;
 use super::wide::{Node, EMPTY_CHILD, LEAF_BIT, WIDTH};
 use crate::geometry::Aabb;
 use glam::{Vec3A, Vec3Swizzles};
@@ -98,18 +99,28 @@ impl Box3 {
 /// there is no primitive) and the primitive order the leaves refer to. `emit_leaf`
 /// gets each leaf's slice of that order, in depth-first order, and returns its
 /// child code (with `LEAF_BIT` set).
-pub fn build_wide(bounds: &[Aabb], params: LeafParams, mut emit_leaf: impl FnMut(&[u32]) -> u32) -> (Vec<Node>, Vec<u32>) {
-    let mut order: Vec<u32> = (0..bounds.len() as u32).collect();
-    if bounds.is_empty() {
-        return (Vec::new(), order);
+///
+/// The bounds come as an iterator (the primitives in order), so that a caller need not keep
+/// an array of them beside the build's own; the build's large arrays are [`PagedVec`]s.
+pub fn build_wide(bounds: impl ExactSizeIterator<Item = Aabb>, params: LeafParams, mut emit_leaf: impl FnMut(&[u32]) -> u32) -> (PagedVec<Node>, Vec<u32>) {
+    let n = bounds.len();
+    let mut order: Vec<u32> = (0..n as u32).collect();
+    if n == 0 {
+        return (PagedVec::with_capacity(0), order);
     }
-    let mut boxes: Vec<Box3> = bounds.iter().map(Box3::new).collect();
-    let root_box = boxes.iter().fold(Box3::EMPTY, |a, b| a.union(*b));
-    let root_centroids = boxes.iter().fold(Box3::EMPTY, |a, b| a.grow(b.center()));
+    let mut boxes = PagedVec::with_capacity(n);
+    let (mut root_box, mut root_centroids) = (Box3::EMPTY, Box3::EMPTY);
+    for b in bounds {
+        let b = Box3::new(&b);
+        boxes.push(b);
+        root_box = root_box.union(b);
+        root_centroids = root_centroids.grow(b.center());
+    }
+    assert_eq!(boxes.len(), n, "the bounds' iterator gave another length than it announced");
     let root_bounds = root_box.aabb();
     let root = build_rec(params, &mut boxes, &mut order, 0, root_bounds, root_centroids, 0);
     drop(boxes);
-    let mut nodes = Vec::with_capacity(bounds.len() / 2 + 1);
+    let mut nodes = PagedVec::with_capacity(n / 2 + 1);
     // The root is always an inner node, even over a single leaf, so that traversal starts uniformly.
     let root_wide = match &root {
         BNode::Leaf { .. } => WideChildren { len: 1, nodes: [&root; WIDTH], boxes: [root_bounds; WIDTH] },
@@ -128,7 +139,7 @@ struct WideChildren<'a> {
     boxes: [Aabb; WIDTH],
 }
 
-fn fill_node(idx: usize, wide: &WideChildren, order: &[u32], nodes: &mut Vec<Node>, emit_leaf: &mut impl FnMut(&[u32]) -> u32) {
+fn fill_node(idx: usize, wide: &WideChildren, order: &[u32], nodes: &mut PagedVec<Node>, emit_leaf: &mut impl FnMut(&[u32]) -> u32) {
     let mut codes = [EMPTY_CHILD; WIDTH];
     for (k, child) in wide.nodes[..wide.len].iter().enumerate() {
         codes[k] = match child {
@@ -448,7 +459,7 @@ mod tests {
     /// aside: unions in another order may pick the other zero).
     fn same_tree(bounds: &[Aabb], params: LeafParams) {
         let mut leaves_new = Vec::new();
-        let (nodes_new, order_new) = build_wide(bounds, params, |s| {
+        let (nodes_new, order_new) = build_wide(bounds.iter().copied(), params, |s| {
             leaves_new.push(s.to_vec());
             leaf_code_for_test(leaves_new.len())
         });

@@ -3,7 +3,7 @@
 //! the occupied voxels of SDF grids. A ray walks all three; the nearest hit wins.
 
 use super::build::{build_wide, LeafParams};
-use super::pages::PagedSlice;
+use super::pages::{PagedSlice, PagedVec};
 use super::tri4::{intersect_half, TriRay};
 #[cfg(target_arch = "x86_64")]
 use super::tri8::TriRay8;
@@ -11,7 +11,7 @@ use super::tri8::{Hit, Tri8, LANES, NO_TRI};
 use super::wide::{leaf_code, leaf_range, prefetch, traverse, BoxRay, Node};
 use super::PrimHit;
 use crate::geometry::triangle::WatertightRay;
-use crate::geometry::{Aabb, Geometry, Ray, SdfGrid, Sphere};
+use crate::geometry::{Aabb, Geometry, Ray, SdfGrid, Sphere, TriangleMesh};
 use glam::Vec3;
 
 #[derive(Clone)]
@@ -57,7 +57,11 @@ const VOXEL_LEAF: LeafParams = LeafParams { group: 1, max_leaf: 2, traversal_cos
 
 impl Accel {
     pub fn build(shapes: &[&Geometry]) -> Accel {
-        let mut tri_v: Vec<[Vec3; 3]> = Vec::new();
+        let mut tri_count = 0usize;
+        // (first triangle id, mesh) of each mesh with triangles, beside `meshes`: the build reads
+        // the triangles from the meshes (an array of them all would be tens of megabytes more to
+        // fault in and fill, for one pass of bounds and one of leaf packing).
+        let mut tri_src: Vec<(u32, &TriangleMesh)> = Vec::new();
         let mut meshes = Vec::new();
         let mut sph = Vec::new();
         let mut sph_r = Vec::new();
@@ -66,9 +70,10 @@ impl Accel {
             match g {
                 Geometry::Mesh(m) => {
                     if m.triangle_count() > 0 {
-                        meshes.push((tri_v.len() as u32, si as u32));
+                        meshes.push((tri_count as u32, si as u32));
+                        tri_src.push((tri_count as u32, m));
                     }
-                    tri_v.extend((0..m.triangle_count()).map(|t| m.vertices(t)));
+                    tri_count += m.triangle_count();
                 }
                 Geometry::Sphere(s) => {
                     sph.push(*s);
@@ -77,27 +82,40 @@ impl Accel {
                 Geometry::SdfGrid(g) => grids.push(((**g).clone(), si as u32)),
             }
         }
+        assert!(tri_count < u32::MAX as usize, "too many triangles");
 
         let tri_mesh: Vec<u32> = if meshes.len() > MESH_SEARCH_MAX {
-            let mut v = Vec::with_capacity(tri_v.len());
+            let mut v = Vec::with_capacity(tri_count);
             for (k, &(first, _)) in meshes.iter().enumerate() {
-                let end = meshes.get(k + 1).map_or(tri_v.len(), |m| m.0 as usize);
+                let end = meshes.get(k + 1).map_or(tri_count, |m| m.0 as usize);
                 v.extend(std::iter::repeat_n(k as u32, end - first as usize));
             }
             v
         } else {
             Vec::new()
         };
-        let tri_bounds: Vec<Aabb> = tri_v.iter().map(|t| Aabb::from_points(t)).collect();
-        assert!(tri_v.len() < u32::MAX as usize, "too many triangles");
-        let mut tris = Vec::with_capacity(tri_v.len() / 3);
-        let (tri_nodes, _) = build_wide(&tri_bounds, TRI_LEAF, |prims| {
+        // The vertices of triangle `id`: its mesh found by a search of the few meshes.
+        let triangle = |id: u32| {
+            let (first, m) = tri_src[tri_src.partition_point(|&(first, _)| first <= id) - 1];
+            m.vertices((id - first) as usize)
+        };
+        // The bounds in id order, the meshes walked in turn.
+        let mut src = 0;
+        let tri_bounds = (0..tri_count as u32).map(|id| {
+            while tri_src.get(src + 1).is_some_and(|&(first, _)| first <= id) {
+                src += 1;
+            }
+            let (first, m) = tri_src[src];
+            Aabb::from_points(&m.vertices((id - first) as usize))
+        });
+        let mut tris = PagedVec::with_capacity(tri_count / 3);
+        let (tri_nodes, _) = build_wide(tri_bounds, TRI_LEAF, |prims| {
             let start = tris.len();
             for chunk in prims.chunks(LANES) {
                 // On the stack: a leaf block is packed per eight triangles.
                 let mut lanes = [([Vec3::ZERO; 3], 0u32); LANES];
                 for (lane, &i) in lanes.iter_mut().zip(chunk) {
-                    *lane = (tri_v[i as usize], i);
+                    *lane = (triangle(i), i);
                 }
                 tris.push(Tri8::new(&lanes[..chunk.len()]));
             }
@@ -107,7 +125,7 @@ impl Accel {
         let sph_bounds: Vec<Aabb> = sph.iter().map(|s| s.bounds()).collect();
         let mut spheres = Vec::with_capacity(sph.len());
         let mut sph_shapes = Vec::with_capacity(sph.len());
-        let (sph_nodes, _) = build_wide(&sph_bounds, SPHERE_LEAF, |prims| {
+        let (sph_nodes, _) = build_wide(sph_bounds.iter().copied(), SPHERE_LEAF, |prims| {
             let start = spheres.len();
             for &i in prims {
                 spheres.push(sph[i as usize]);
@@ -125,7 +143,7 @@ impl Accel {
             }
         }
         let mut voxels = Vec::with_capacity(vox.len());
-        let (sdf_nodes, _) = build_wide(&vox_bounds, VOXEL_LEAF, |prims| {
+        let (sdf_nodes, _) = build_wide(vox_bounds.iter().copied(), VOXEL_LEAF, |prims| {
             let start = voxels.len();
             voxels.extend(prims.iter().map(|&i| vox[i as usize]));
             leaf_code(start, prims.len())
@@ -144,7 +162,7 @@ impl Accel {
             + std::mem::size_of_val(&sdf_nodes[..]);
         let prefetch = bytes > PREFETCH_MIN_BYTES;
         let (tri_nodes, tris, sph_nodes, spheres, sdf_nodes) =
-            (PagedSlice::new(tri_nodes), PagedSlice::new(tris), PagedSlice::new(sph_nodes), PagedSlice::new(spheres), PagedSlice::new(sdf_nodes));
+            (tri_nodes.into_slice(), tris.into_slice(), sph_nodes.into_slice(), PagedSlice::new(spheres), sdf_nodes.into_slice());
         // Read once per closest hit, at a random place: on huge pages too.
         let tri_mesh = PagedSlice::new(tri_mesh);
         Accel { tri_nodes, tris, meshes, tri_mesh, sph_nodes, spheres, sph_shapes, sdf_nodes, grids, voxels, bounds, prefetch, avx: has_avx() }
