@@ -41,7 +41,7 @@ mod shadow;
 mod vertex;
 mod walk;
 
-pub use camera_batch::{BatchScratch, CameraBatch};
+pub use camera_batch::{BatchScratch, CameraBatch, Staged};
 pub use connect::{camera_connection, connect, weighted_camera_connection, CameraConnection, Connection};
 pub use mis::mis_weight;
 pub use shadow::{ClosestHits, ShadowPackets};
