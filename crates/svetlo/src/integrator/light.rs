@@ -14,7 +14,7 @@ use crate::error::{Error, Result};
 use crate::film::{Film, FilmTile};
 use crate::geometry::Ray;
 use crate::lpe::LightTracker;
-use crate::path::{camera_connection, connect, light_subpath, light_walk, BatchScratch, CameraBatch, LightWalk, PathConfig, ShadowPackets, Staged, Vertex};
+use crate::path::{camera_connection, connect, light_subpath, light_walk, set_lane, BatchScratch, CameraBatch, LightWalk, PathConfig, ShadowPackets, Staged, Vertex};
 use crate::sampling::{IndependentSampler, Sampler, SamplerKind, SobolSampler};
 use crate::scene::Scene;
 use crate::spectrum::Rgb;
@@ -149,7 +149,9 @@ impl Estimator {
         let mut walks: [Option<LightWalk>; LANES] = std::array::from_fn(|_| None);
         // Each lane's sample (its index in the tile's order).
         let mut seq = [0usize; LANES];
-        let mut rays = [ShadowedSplats::CLEAR; LANES];
+        // The lanes' rays, each put in from its walk (a copy of the walk's `Ray` in 16-byte
+        // words read back the walk's narrower stores: a store-forwarding stall a path).
+        let mut rays = Rays8::default();
         let mut samples = (y0..y1).flat_map(|y| (x0..x1).flat_map(move |x| (s0..s0 + n).map(move |s| (x, y, s)))).enumerate();
         let mut active = 0u8;
         let mut more = true;
@@ -169,7 +171,7 @@ impl Estimator {
                     walks[l] = light_walk(scene, &self.cfg, ray.time, sampler, &mut paths[l]);
                     match &walks[l] {
                         Some(w) if w.walk.goes_on(&paths[l]) => {
-                            rays[l] = *w.walk.ray();
+                            set_lane(&mut rays, l, w.walk.ray());
                             active |= 1 << l;
                         }
                         _ => self.finish_lane(scene, packets, walks[l].as_ref(), &mut paths[l], sampler, seq[l], &mut conns, &mut out),
@@ -179,15 +181,15 @@ impl Estimator {
             if active == 0 {
                 break;
             }
-            let hits = packets.closest(&rays, active);
+            let hits = packets.closest_packet(&rays, active);
             for l in 0..LANES {
                 if active & (1 << l) == 0 {
                     continue;
                 }
                 let Some(w) = walks[l].as_mut() else { continue };
-                let hit = packets.interaction(scene, &hits, l, &rays[l]);
+                let hit = packets.interaction(scene, &hits, l, w.walk.ray());
                 if w.walk.step(scene, hit.as_ref(), &mut samplers[l], &mut paths[l]) {
-                    rays[l] = *w.walk.ray();
+                    set_lane(&mut rays, l, w.walk.ray());
                 } else {
                     active &= !(1 << l);
                     self.finish_lane(scene, packets, walks[l].as_ref(), &mut paths[l], &mut samplers[l], seq[l], &mut conns, &mut out);
@@ -285,13 +287,17 @@ struct Slot {
 /// The camera connections of the samples in flight: computed in lanes eight at a time
 /// across samples (`CameraBatch`), their shadow rays tested as the lanes' packet (those
 /// computed alone: eight at a time too), and splatted in sample order, the order of testing
-/// each alone. A slot per sample from the oldest unsplatted one on (`base`), emptied slots
-/// reused; connections whose results are to come are named by (sample, index in its slot).
+/// each alone. A slot per sample from the oldest unsplatted one on (`base`), in a ring
+/// whose emptied slots are reused where they are (slots moved through a deque were read
+/// back in words that spanned their stores: a store-forwarding stall a sample); connections
+/// whose results are to come are named by (sample, index in its slot).
 #[derive(Default)]
 struct OrderedSplats {
-    slots: std::collections::VecDeque<Slot>,
+    /// Sample `base + k`'s slot at `(head + k) % slots.len()`, for k < `open`.
+    slots: Vec<Slot>,
+    head: usize,
+    open: usize,
     base: usize,
-    spare: Vec<Slot>,
     /// The staged lanes, and whose connection each is.
     lanes: BatchScratch,
     lane_of: [(usize, usize); LANES],
@@ -304,14 +310,22 @@ struct OrderedSplats {
 impl OrderedSplats {
     /// A slot for sample `i` (samples open in order); returns the key of [`Self::slot`].
     fn open(&mut self, i: usize) -> usize {
-        debug_assert_eq!(i, self.base + self.slots.len());
-        self.slots.push_back(self.spare.pop().unwrap_or_default());
+        debug_assert_eq!(i, self.base + self.open);
+        if self.open == self.slots.len() {
+            // Full: the open slots to the front, in order, and a new one after them.
+            self.slots.rotate_left(self.head);
+            self.head = 0;
+            self.slots.push(Slot::default());
+        }
+        self.open += 1;
         i
     }
 
     #[inline]
     fn slot(&mut self, i: usize) -> &mut Slot {
-        &mut self.slots[i - self.base]
+        let k = self.head + (i - self.base);
+        let n = self.slots.len();
+        &mut self.slots[if k >= n { k - n } else { k }]
     }
 
     /// Sample `i`'s next connection is in lane `k` of `lanes`.
@@ -332,7 +346,7 @@ impl OrderedSplats {
         for k in 0..self.lanes.staged() {
             let (i, at) = self.lane_of[k];
             let splat = (self.lanes.l(k), self.lanes.raster(k), self.lanes.valid(k) && blocked & (1 << k) == 0);
-            let slot = &mut self.slots[i - self.base];
+            let slot = self.slot(i);
             slot.splats[at] = splat;
             slot.waiting -= 1;
         }
@@ -342,7 +356,7 @@ impl OrderedSplats {
     /// Sample `i`'s next connection, computed alone: its shadow ray (None or of no length:
     /// clear) waits for a packet.
     fn scalar(&mut self, packets: &ShadowPackets, i: usize, l: Rgb, raster: Vec2, shadow: Option<Ray>) {
-        let slot = &mut self.slots[i - self.base];
+        let slot = self.slot(i);
         let at = slot.splats.len();
         // (`ShadowedSplats::push`'s test: a ray of no length is clear.)
         let Some(ray) = shadow.filter(|r| r.t_max > 0.0 || r.t_max.is_nan()) else {
@@ -370,7 +384,7 @@ impl OrderedSplats {
         let blocked = packets.occluded_lanes(&self.rays, ((1u32 << n) - 1) as u8);
         for k in 0..n {
             let (i, at) = self.ray_of[k];
-            let slot = &mut self.slots[i - self.base];
+            let slot = self.slot(i);
             slot.splats[at].2 = blocked & (1 << k) == 0;
             slot.waiting -= 1;
         }
@@ -379,8 +393,11 @@ impl OrderedSplats {
 
     /// The leading samples whose connections are all made and known, splatted in order.
     fn release(&mut self, out: &mut SampleOut) {
-        while self.slots.front().is_some_and(|s| s.made && s.waiting == 0) {
-            let Some(mut s) = self.slots.pop_front() else { break };
+        while self.open > 0 {
+            let s = &mut self.slots[self.head];
+            if !s.made || s.waiting > 0 {
+                break;
+            }
             for &(l, raster, splat) in &s.splats {
                 if splat {
                     out.splat(raster, l);
@@ -388,7 +405,8 @@ impl OrderedSplats {
             }
             s.splats.clear();
             s.made = false;
-            self.spare.push(s);
+            self.head = if self.head + 1 == self.slots.len() { 0 } else { self.head + 1 };
+            self.open -= 1;
             self.base += 1;
         }
     }
@@ -402,7 +420,7 @@ impl OrderedSplats {
             self.test_rays(packets);
         }
         self.release(out);
-        debug_assert!(self.slots.is_empty());
+        debug_assert_eq!(self.open, 0);
     }
 }
 
