@@ -14,7 +14,9 @@ use crate::error::{Error, Result};
 use crate::film::{Film, FilmTile};
 use crate::geometry::Ray;
 use crate::lpe::LightTracker;
-use crate::path::{camera_connection, connect, light_subpath, light_walk, set_lane, BatchScratch, CameraBatch, LightWalk, PathConfig, ShadowPackets, Staged, Vertex};
+use crate::path::{
+    camera_connection, connect, light_subpath, light_walk, set_lane, BatchScratch, CameraBatch, LightWalk, PathConfig, ShadowPackets, Staged, Vertex,
+};
 use crate::sampling::{IndependentSampler, Sampler, SamplerKind, SobolSampler};
 use crate::scene::Scene;
 use crate::spectrum::Rgb;
