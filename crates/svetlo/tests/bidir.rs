@@ -472,12 +472,16 @@ fn cornell_with_and_without_glass(w: u32, h: u32) -> [(&'static str, Scene); 2] 
 
 /// The light tracer's lockstep walks (eight light paths, their rays as packets) and its
 /// packet shadow rays give the single-ray image bit for bit, under either sampler; in a
-/// scene with glass (where packets' closest hits are not exact) too.
+/// scene with glass (where packets' closest hits are not exact) too, and in one with a
+/// rough material (its connections computed alone among the lanes' in the lockstep tiles).
 #[test]
 fn light_tracing_lockstep_is_single_ray_tracing() {
     use svetlo::integrator::light::{LightTracer, Tracing};
     use svetlo::sampling::SamplerKind;
-    for (name, scene) in cornell_with_and_without_glass(24, 20) {
+    let mut rough = project_scene("cornell-box.xml", 24, 20);
+    rough.materials[0] = Material::OrenNayar { reflectance: Texture::Constant(Rgb::splat(0.6)), alpha: Texture::Constant(Rgb::splat(0.4)) };
+    let [plain, glassy] = cornell_with_and_without_glass(24, 20);
+    for (name, scene) in [plain, glassy, ("rough", rough)] {
         for sampler in [SamplerKind::Independent, SamplerKind::Sobol] {
             let set = RenderSettings { sampler, threads: 2, ..settings(5, 6) };
             let render = |tr| LightTracer.render_traced(&scene, &set, &Progress::new(), tr).expect("render").image();

@@ -724,7 +724,10 @@ macro_rules! walk_simd {
                                     );
                                     ties |= _mm256_movemask_ps(near) as u8 & cand & hit_mask;
                                 }
-                                if m != 0 {
+                                // The closest-hit walk divides whether or not a lane hit: with
+                                // incoherent rays `m != 0` is a coin toss, and the mispredicted
+                                // branch cost more than the division.
+                                if !ANY || m != 0 {
                                     let invd = _mm256_div_ps(one, det);
                                     t = _mm256_mul_ps(t_scaled, invd);
                                     // t > 0 (it may underflow).
@@ -760,7 +763,7 @@ macro_rules! walk_simd {
                                 b1 = ld(&b1a);
                                 b2 = ld(&b2a);
                             }
-                            if m == 0 {
+                            if ANY && m == 0 {
                                 continue;
                             }
                             let ok = _mm256_castsi256_ps(_mm256_cmpgt_epi32(_mm256_and_si256(_mm256_set1_epi32(m as i32), lane_bits), zero_i));
@@ -774,7 +777,8 @@ macro_rules! walk_simd {
                                 continue;
                             }
                             t_max = _mm256_blendv_ps(t_max, t, ok);
-                            // Barycentrics and ids live in memory: hits are rare, registers are not.
+                            // Barycentrics and ids live in memory (registers are scarce); the
+                            // closest-hit walk blends them in on every test, hit or not (no branch).
                             let keep = |dst: &mut [f32; LANES], x: __m256| _mm256_storeu_ps(dst.as_mut_ptr(), _mm256_blendv_ps(ld(dst), x, ok));
                             keep(&mut h.b1, b1);
                             keep(&mut h.b2, b2);

@@ -9,12 +9,14 @@
 
 use super::splat::{render_splatting, render_tile_by_sample, SampleOut, ShadowedSplats, Splat, SplatEstimator, TileJob};
 use super::{Integrator, Progress, RenderSettings};
-use crate::accel::packet::LANES;
+use crate::accel::packet::{Rays8, LANES};
 use crate::error::{Error, Result};
 use crate::film::{Film, FilmTile};
 use crate::geometry::Ray;
 use crate::lpe::LightTracker;
-use crate::path::{camera_connection, connect, light_subpath, light_walk, BatchScratch, CameraBatch, LightWalk, PathConfig, ShadowPackets, Vertex};
+use crate::path::{
+    camera_connection, connect, light_subpath, light_walk, set_lane, BatchScratch, CameraBatch, LightWalk, PathConfig, ShadowPackets, Staged, Vertex,
+};
 use crate::sampling::{IndependentSampler, Sampler, SamplerKind, SobolSampler};
 use crate::scene::Scene;
 use crate::spectrum::Rgb;
@@ -136,22 +138,22 @@ impl Estimator {
     /// lane draws from its own sampler in `sample`'s order, the lanes' rays go as one packet
     /// (tied lanes again alone: `ShadowPackets::closest`), and a lane whose walk is over makes
     /// its camera connections and takes the tile's next sample, so that the packets stay
-    /// full. The connections wait in sample order (`Reorder`) until every earlier sample's
-    /// are made, so the splat list is `sample`'s.
+    /// full. The connections are computed and tested eight at a time across samples and
+    /// splatted in sample order (`OrderedSplats`), so the splat list is `sample`'s.
     fn render_tile_lockstep<S: Sampler + Clone>(&self, t: TileJob, packets: &ShadowPackets, sampler: S, paths: &mut [Vec<Vertex>], splats: &mut Vec<Splat>) {
         let [x0, y0, x1, y1] = t.rect;
         let (s0, n) = (t.s0, t.n);
         let scene = t.scene;
         let cam = scene.camera.ray_generator();
         let mut out = SampleOut { splats, layers: Default::default() };
-        let mut pending = ShadowedSplats::new();
-        let mut reorder = Reorder::default();
-        let mut scratch = BatchScratch::default();
+        let mut conns = OrderedSplats::default();
         let mut samplers: [S; LANES] = std::array::from_fn(|_| sampler.clone());
         let mut walks: [Option<LightWalk>; LANES] = std::array::from_fn(|_| None);
         // Each lane's sample (its index in the tile's order).
         let mut seq = [0usize; LANES];
-        let mut rays = [ShadowedSplats::CLEAR; LANES];
+        // The lanes' rays, each put in from its walk (a copy of the walk's `Ray` in 16-byte
+        // words read back the walk's narrower stores: a store-forwarding stall a path).
+        let mut rays = Rays8::default();
         let mut samples = (y0..y1).flat_map(|y| (x0..x1).flat_map(move |x| (s0..s0 + n).map(move |s| (x, y, s)))).enumerate();
         let mut active = 0u8;
         let mut more = true;
@@ -167,86 +169,77 @@ impl Estimator {
                     let sampler = &mut samplers[l];
                     let (raster, ray) = super::camera_sample(&cam, sampler, x, y, s);
                     blacks.push(t.tile, raster);
-                    seq[l] = reorder.open(i);
+                    seq[l] = conns.open(i);
                     walks[l] = light_walk(scene, &self.cfg, ray.time, sampler, &mut paths[l]);
                     match &walks[l] {
                         Some(w) if w.walk.goes_on(&paths[l]) => {
-                            rays[l] = *w.walk.ray();
+                            set_lane(&mut rays, l, w.walk.ray());
                             active |= 1 << l;
                         }
-                        _ => {
-                            let conns = Conns { reorder: &mut reorder, pending: &mut pending, packets, out: &mut out };
-                            self.finish_lane(scene, walks[l].as_ref(), &mut paths[l], sampler, &mut scratch, seq[l], conns);
-                        }
+                        _ => self.finish_lane(scene, packets, walks[l].as_ref(), &mut paths[l], sampler, seq[l], &mut conns, &mut out),
                     }
                 }
             }
-            reorder.release(packets, &mut pending, &mut out);
             if active == 0 {
                 break;
             }
-            let hits = packets.closest(&rays, active);
+            let hits = packets.closest_packet(&rays, active);
             for l in 0..LANES {
                 if active & (1 << l) == 0 {
                     continue;
                 }
                 let Some(w) = walks[l].as_mut() else { continue };
-                let hit = packets.interaction(scene, &hits, l, &rays[l]);
+                let hit = packets.interaction(scene, &hits, l, w.walk.ray());
                 if w.walk.step(scene, hit.as_ref(), &mut samplers[l], &mut paths[l]) {
-                    rays[l] = *w.walk.ray();
+                    set_lane(&mut rays, l, w.walk.ray());
                 } else {
                     active &= !(1 << l);
-                    let conns = Conns { reorder: &mut reorder, pending: &mut pending, packets, out: &mut out };
-                    self.finish_lane(scene, walks[l].as_ref(), &mut paths[l], &mut samplers[l], &mut scratch, seq[l], conns);
+                    self.finish_lane(scene, packets, walks[l].as_ref(), &mut paths[l], &mut samplers[l], seq[l], &mut conns, &mut out);
                 }
             }
         }
         blacks.flush(t.tile);
-        pending.flush(packets, &mut out);
+        conns.finish(self.batch.as_ref(), packets, &mut out);
     }
 
-    /// A lane's path after its walk (sample `i`): its camera connections (splat and shadow
-    /// ray) to the shadow packets if every earlier sample's are there already, else into
-    /// the sample's slot to wait.
+    /// A lane's path after its walk (sample `i`): its camera connections, in order, to
+    /// `conns` (lens samples drawn as `sample` draws them).
     #[allow(clippy::too_many_arguments)]
     fn finish_lane<S: Sampler>(
         &self,
         scene: &Scene,
+        packets: &ShadowPackets,
         walk: Option<&LightWalk>,
         path: &mut [Vertex],
         sampler: &mut S,
-        scratch: &mut BatchScratch,
         i: usize,
-        c: Conns,
+        conns: &mut OrderedSplats,
+        out: &mut SampleOut,
     ) {
         if let Some(w) = walk {
             w.finish(path);
         }
-        if c.reorder.is_next(i) {
-            self.connections(scene, path, sampler, scratch, |l, raster, ray| c.pending.push(c.packets, l, raster, ray, c.out));
-            c.reorder.slot(i).done = true;
-            // The later samples that finished before this one follow, so that the next
-            // to finish may be the oldest too.
-            c.reorder.release(c.packets, c.pending, c.out);
-        } else {
-            let slot = c.reorder.slot(i);
-            self.connections(scene, path, sampler, scratch, |l, raster, ray| slot.conns.push((l, raster, ray)));
-            slot.done = true;
-        }
-    }
-
-    /// The camera connections of a finished path, in order, to `emit` (a clear ray where
-    /// there is none to test).
-    fn connections<S: Sampler>(&self, scene: &Scene, path: &[Vertex], sampler: &mut S, scratch: &mut BatchScratch, mut emit: impl FnMut(Rgb, Vec2, Ray)) {
-        if let Some(batch) = &self.batch {
-            batch.connections(scene, &self.cfg, path, sampler, scratch, |l, raster, ray| emit(l, raster, ray.unwrap_or(ShadowedSplats::CLEAR)));
-        } else {
-            for s in 1..=path.len() {
-                if let Some(c) = camera_connection(scene, &self.cfg, path, s, sampler) {
-                    emit(c.l, c.raster, c.shadow.unwrap_or(ShadowedSplats::CLEAR));
+        for s in 1..=path.len() {
+            match &self.batch {
+                Some(batch) => match batch.stage(scene, &self.cfg, path, s, sampler, &mut conns.lanes) {
+                    Staged::None | Staged::Scalar(None) => {}
+                    Staged::Scalar(Some((l, raster, ray))) => conns.scalar(packets, i, l, raster, ray),
+                    Staged::Lane(k) => {
+                        conns.lane(i, k);
+                        if conns.lanes.is_full() {
+                            conns.run_lanes(batch, packets);
+                        }
+                    }
+                },
+                None => {
+                    if let Some(c) = camera_connection(scene, &self.cfg, path, s, sampler) {
+                        conns.scalar(packets, i, c.l, c.raster, c.shadow);
+                    }
                 }
             }
         }
+        conns.slot(i).made = true;
+        conns.release(out);
     }
 }
 
@@ -282,59 +275,154 @@ impl BlackSamples {
     }
 }
 
-/// Where a lockstep tile's connections go: the shadow packets, in sample order.
-struct Conns<'a, 'b> {
-    reorder: &'a mut Reorder,
-    pending: &'a mut ShadowedSplats,
-    packets: &'a ShadowPackets,
-    out: &'a mut SampleOut<'b>,
-}
-
-/// The camera connections of one pixel sample: (contribution, raster, shadow ray).
+/// One pixel sample's camera connections: (contribution, raster, whether it is splatted),
+/// the last unknown until its lane has run and its shadow ray been tested.
 #[derive(Default)]
 struct Slot {
-    conns: Vec<(Rgb, Vec2, Ray)>,
-    done: bool,
+    splats: Vec<(Rgb, Vec2, bool)>,
+    /// Connections whose lane or shadow ray is still to run.
+    waiting: usize,
+    /// Whether all its connections are made.
+    made: bool,
 }
 
-/// Connections of the samples in flight, released in sample order: a slot per sample from
-/// the oldest unreleased one on (`base`), emptied slots reused.
+/// The camera connections of the samples in flight: computed in lanes eight at a time
+/// across samples (`CameraBatch`), their shadow rays tested as the lanes' packet (those
+/// computed alone: eight at a time too), and splatted in sample order, the order of testing
+/// each alone. A slot per sample from the oldest unsplatted one on (`base`), in a ring
+/// whose emptied slots are reused where they are (slots moved through a deque were read
+/// back in words that spanned their stores: a store-forwarding stall a sample); connections
+/// whose results are to come are named by (sample, index in its slot).
 #[derive(Default)]
-struct Reorder {
-    slots: std::collections::VecDeque<Slot>,
+struct OrderedSplats {
+    /// Sample `base + k`'s slot at `(head + k) % slots.len()`, for k < `open`.
+    slots: Vec<Slot>,
+    head: usize,
+    open: usize,
     base: usize,
-    spare: Vec<Slot>,
+    /// The staged lanes, and whose connection each is.
+    lanes: BatchScratch,
+    lane_of: [(usize, usize); LANES],
+    /// Shadow rays of connections computed alone, waiting for a packet.
+    rays: Rays8,
+    ray_of: [(usize, usize); LANES],
+    n_rays: usize,
 }
 
-impl Reorder {
+impl OrderedSplats {
     /// A slot for sample `i` (samples open in order); returns the key of [`Self::slot`].
     fn open(&mut self, i: usize) -> usize {
-        debug_assert_eq!(i, self.base + self.slots.len());
-        self.slots.push_back(self.spare.pop().unwrap_or_default());
+        debug_assert_eq!(i, self.base + self.open);
+        if self.open == self.slots.len() {
+            // Full: the open slots to the front, in order, and a new one after them.
+            self.slots.rotate_left(self.head);
+            self.head = 0;
+            self.slots.push(Slot::default());
+        }
+        self.open += 1;
         i
     }
 
-    /// Whether sample `i` is the oldest unreleased one: its connections need not wait.
-    fn is_next(&self, i: usize) -> bool {
-        i == self.base
-    }
-
+    #[inline]
     fn slot(&mut self, i: usize) -> &mut Slot {
-        &mut self.slots[i - self.base]
+        let k = self.head + (i - self.base);
+        let n = self.slots.len();
+        &mut self.slots[if k >= n { k - n } else { k }]
     }
 
-    /// The leading finished samples' connections, in order, to the shadow-ray packets.
-    fn release(&mut self, packets: &ShadowPackets, pending: &mut ShadowedSplats, out: &mut SampleOut) {
-        while self.slots.front().is_some_and(|s| s.done) {
-            let Some(mut s) = self.slots.pop_front() else { break };
-            for &(l, raster, ray) in &s.conns {
-                pending.push(packets, l, raster, ray, out);
+    /// Sample `i`'s next connection is in lane `k` of `lanes`.
+    #[inline]
+    fn lane(&mut self, i: usize, k: usize) {
+        let slot = self.slot(i);
+        let at = slot.splats.len();
+        slot.splats.push((Rgb::BLACK, Vec2::ZERO, false));
+        slot.waiting += 1;
+        self.lane_of[k] = (i, at);
+    }
+
+    /// The staged lanes' connections and their shadow rays as one packet, into their slots.
+    fn run_lanes(&mut self, batch: &CameraBatch, packets: &ShadowPackets) {
+        batch.run(&mut self.lanes);
+        let (rays, tested) = self.lanes.shadow_rays();
+        let blocked = packets.occluded_lanes(rays, tested);
+        for k in 0..self.lanes.staged() {
+            let (i, at) = self.lane_of[k];
+            let splat = (self.lanes.l(k), self.lanes.raster(k), self.lanes.valid(k) && blocked & (1 << k) == 0);
+            let slot = self.slot(i);
+            slot.splats[at] = splat;
+            slot.waiting -= 1;
+        }
+        self.lanes.clear();
+    }
+
+    /// Sample `i`'s next connection, computed alone: its shadow ray (None or of no length:
+    /// clear) waits for a packet.
+    fn scalar(&mut self, packets: &ShadowPackets, i: usize, l: Rgb, raster: Vec2, shadow: Option<Ray>) {
+        let slot = self.slot(i);
+        let at = slot.splats.len();
+        // (`ShadowedSplats::push`'s test: a ray of no length is clear.)
+        let Some(ray) = shadow.filter(|r| r.t_max > 0.0 || r.t_max.is_nan()) else {
+            slot.splats.push((l, raster, true));
+            return;
+        };
+        slot.splats.push((l, raster, false));
+        slot.waiting += 1;
+        let k = self.n_rays;
+        for j in 0..3 {
+            self.rays.o[j][k] = ray.o[j];
+            self.rays.d[j][k] = ray.d[j];
+        }
+        self.rays.t_max[k] = ray.t_max;
+        self.ray_of[k] = (i, at);
+        self.n_rays += 1;
+        if self.n_rays == LANES {
+            self.test_rays(packets);
+        }
+    }
+
+    /// The waiting shadow rays of connections computed alone, as one packet.
+    fn test_rays(&mut self, packets: &ShadowPackets) {
+        let n = self.n_rays;
+        let blocked = packets.occluded_lanes(&self.rays, ((1u32 << n) - 1) as u8);
+        for k in 0..n {
+            let (i, at) = self.ray_of[k];
+            let slot = self.slot(i);
+            slot.splats[at].2 = blocked & (1 << k) == 0;
+            slot.waiting -= 1;
+        }
+        self.n_rays = 0;
+    }
+
+    /// The leading samples whose connections are all made and known, splatted in order.
+    fn release(&mut self, out: &mut SampleOut) {
+        while self.open > 0 {
+            let s = &mut self.slots[self.head];
+            if !s.made || s.waiting > 0 {
+                break;
             }
-            s.conns.clear();
-            s.done = false;
-            self.spare.push(s);
+            for &(l, raster, splat) in &s.splats {
+                if splat {
+                    out.splat(raster, l);
+                }
+            }
+            s.splats.clear();
+            s.made = false;
+            self.head = if self.head + 1 == self.slots.len() { 0 } else { self.head + 1 };
+            self.open -= 1;
             self.base += 1;
         }
+    }
+
+    /// The tile's end: what still waits is run and tested, and every sample splatted.
+    fn finish(&mut self, batch: Option<&CameraBatch>, packets: &ShadowPackets, out: &mut SampleOut) {
+        if let Some(batch) = batch.filter(|_| self.lanes.staged() > 0) {
+            self.run_lanes(batch, packets);
+        }
+        if self.n_rays > 0 {
+            self.test_rays(packets);
+        }
+        self.release(out);
+        debug_assert_eq!(self.open, 0);
     }
 }
 

@@ -8,9 +8,12 @@
 //! divisions, square roots and comparisons give the same bits in a lane as alone); what a
 //! vertex alone decides (which side of its BSDF is seen, its constants) is done per vertex
 //! before. Other vertices (the light's own, other BSDFs, a thin lens) take the scalar path.
+//! Lanes may hold several paths' vertices (`stage` one at a time, `run` when full): the
+//! light tracer fills all eight so.
 
 use super::connect::{camera_connectible, camera_connection_at, camera_strategy_exists};
 use super::{PathConfig, Vertex, VertexKind};
+use crate::accel::packet::Rays8;
 use crate::bsdf::BsdfModel;
 use crate::camera::Pinhole;
 use crate::geometry::ray::SHADOW_EPSILON;
@@ -38,8 +41,9 @@ impl CameraBatch {
     }
 
     /// `camera_connection(scene, cfg, light, s, sampler)` for s = 1..=light.len(), in
-    /// order, each that exists given to `emit` as (contribution, raster, shadow ray).
-    /// `scratch` holds the lanes; one per caller serves all its paths.
+    /// order, each that exists given to `emit` as (contribution, raster, shadow ray): one
+    /// path's [`Self::stage`] and [`Self::run`]. `scratch` holds the lanes (none staged);
+    /// one per caller serves all its paths.
     pub fn connections<S: Sampler + ?Sized>(
         &self,
         scene: &Scene,
@@ -49,68 +53,141 @@ impl CameraBatch {
         scratch: &mut BatchScratch,
         mut emit: impl FnMut(Rgb, Vec2, Option<Ray>),
     ) {
-        let BatchScratch { lanes, out } = scratch;
-        let mut s = 1;
-        while s <= light.len() {
-            let end = (s + LANES).min(light.len() + 1);
-            // Per strategy: nothing, a scalar result, or a lane.
-            let mut slots: [Slot; LANES] = [Slot::None; LANES];
-            lanes.n = 0;
-            for (k, s) in (s..end).enumerate() {
-                if !camera_strategy_exists(cfg, light, s) {
-                    continue;
+        // The strategies staged since the last run, in order.
+        let mut staged: [Staged; LANES] = [Staged::None; LANES];
+        let mut k = 0;
+        for s in 1..=light.len() {
+            staged[k] = self.stage(scene, cfg, light, s, sampler, scratch);
+            k += 1;
+            if k == LANES || s == light.len() || scratch.is_full() {
+                if scratch.lanes.n > 0 {
+                    self.run(scratch);
                 }
-                let u = sampler.next_2d();
-                let qs = &light[s - 1];
-                if !camera_connectible(scene, cfg, qs, s) {
-                    continue;
-                }
-                slots[k] = match lanes.push(scene, qs, s) {
-                    Some(lane) => Slot::Lane(lane),
-                    None => Slot::Scalar(camera_connection_at(scene, cfg, qs, s, u).map(|c| (c.l, c.raster, c.shadow))),
-                };
-            }
-            if lanes.n > 0 {
-                self.run(lanes, out);
-            }
-            for slot in slots.iter().take(end - s) {
-                match *slot {
-                    Slot::None | Slot::Scalar(None) => {}
-                    Slot::Scalar(Some((l, raster, ray))) => emit(l, raster, ray),
-                    Slot::Lane(i) => {
-                        if out.valid & (1 << i) != 0 {
-                            emit(out.l(i), out.raster(i), out.ray(i, lanes.time[i]));
+                for st in &staged[..k] {
+                    match *st {
+                        Staged::None | Staged::Scalar(None) => {}
+                        Staged::Scalar(Some((l, raster, ray))) => emit(l, raster, ray),
+                        Staged::Lane(i) => {
+                            if scratch.valid(i) {
+                                emit(scratch.l(i), scratch.raster(i), scratch.ray(i));
+                            }
                         }
                     }
                 }
+                scratch.clear();
+                k = 0;
             }
-            s = end;
         }
     }
 
-    fn run(&self, lanes: &Lanes, out: &mut Out) {
+    /// Strategy (s, 1) of `light` as `camera_connection` begins it (its checks, its lens
+    /// sample drawn from `sampler`): none, computed here, or put in the next lane of
+    /// `scratch` for [`Self::run`] (which the caller runs before staging into a full one).
+    /// Lanes may hold the strategies of several paths: each lane is alone.
+    #[inline]
+    pub fn stage<S: Sampler + ?Sized>(
+        &self,
+        scene: &Scene,
+        cfg: &PathConfig,
+        light: &[Vertex],
+        s: usize,
+        sampler: &mut S,
+        scratch: &mut BatchScratch,
+    ) -> Staged {
+        debug_assert!(!scratch.is_full());
+        if !camera_strategy_exists(cfg, light, s) {
+            return Staged::None;
+        }
+        let u = sampler.next_2d();
+        let qs = &light[s - 1];
+        if !camera_connectible(scene, cfg, qs, s) {
+            return Staged::None;
+        }
+        match scratch.lanes.push(scene, qs, s) {
+            Some(lane) => Staged::Lane(lane),
+            None => Staged::Scalar(camera_connection_at(scene, cfg, qs, s, u).map(|c| (c.l, c.raster, c.shadow))),
+        }
+    }
+
+    /// The connections of the staged lanes (read with `BatchScratch::valid` and the rest
+    /// until [`BatchScratch::clear`]).
+    pub fn run(&self, scratch: &mut BatchScratch) {
         #[cfg(target_arch = "x86_64")]
         // SAFETY: `new` made a batch only where the CPU has AVX2 (which includes AVX).
         unsafe {
-            kernel(&self.pinhole, lanes, out)
+            kernel(&self.pinhole, &scratch.lanes, &mut scratch.out)
         };
     }
 }
 
-/// The lane buffers of [`CameraBatch::connections`], kept by the caller from path to path:
-/// clearing a fresh pair per path cost about 1 % of light tracing. Lanes at and above
-/// `Lanes::n` keep an earlier batch's numbers, which the kernel computes and masks off.
+/// Where [`CameraBatch::stage`] put a strategy.
+#[derive(Clone, Copy, Debug)]
+pub enum Staged {
+    /// No connection (the strategy does not exist, or its vertex cannot see the camera).
+    None,
+    /// Computed alone: None, or (contribution, raster, shadow ray).
+    Scalar(Option<(Rgb, Vec2, Option<Ray>)>),
+    /// In this lane of the scratch.
+    Lane(usize),
+}
+
+/// The lane buffers of [`CameraBatch::stage`] and [`CameraBatch::run`], kept by the caller
+/// from path to path: clearing a fresh pair per path cost about 1 % of light tracing. Lanes
+/// at and above `Lanes::n` keep an earlier batch's numbers, which the kernel computes and
+/// masks off.
 #[derive(Default)]
 pub struct BatchScratch {
     lanes: Lanes,
     out: Out,
 }
 
-#[derive(Clone, Copy)]
-enum Slot {
-    None,
-    Scalar(Option<(Rgb, Vec2, Option<Ray>)>),
-    Lane(usize),
+impl BatchScratch {
+    /// Whether every lane is staged (run them before staging more).
+    #[inline]
+    pub fn is_full(&self) -> bool {
+        self.lanes.n == LANES
+    }
+    /// How many lanes are staged.
+    #[inline]
+    pub fn staged(&self) -> usize {
+        self.lanes.n
+    }
+    /// Empties the lanes (after their results are read).
+    #[inline]
+    pub fn clear(&mut self) {
+        self.lanes.n = 0;
+    }
+    /// Whether lane `i`'s connection exists (after `run`).
+    #[inline]
+    pub fn valid(&self, i: usize) -> bool {
+        self.out.valid & (1 << i) != 0
+    }
+    #[inline]
+    pub fn l(&self, i: usize) -> Rgb {
+        Rgb::new(self.out.l[0][i], self.out.l[1][i], self.out.l[2][i])
+    }
+    #[inline]
+    pub fn raster(&self, i: usize) -> Vec2 {
+        Vec2::new(self.out.raster[0][i], self.out.raster[1][i])
+    }
+    /// Lane `i`'s shadow ray, None where the segment has no length.
+    pub fn ray(&self, i: usize) -> Option<Ray> {
+        if self.out.has_ray & (1 << i) == 0 {
+            return None;
+        }
+        let r = &self.out.rays;
+        let v = |a: &[[f32; LANES]; 3]| Vec3::new(a[0][i], a[1][i], a[2][i]);
+        let mut ray = Ray::with_max(v(&r.o), v(&r.d), r.t_max[i]);
+        ray.time = self.lanes.time[i];
+        Some(ray)
+    }
+    /// The lanes' shadow rays as a packet, and the mask of the lanes whose connection exists
+    /// and has a ray that can be blocked, t_max > 0 or NaN, as `ShadowedSplats` tests them
+    /// (the packet's other lanes hold anything).
+    #[inline]
+    pub fn shadow_rays(&self) -> (&Rays8, u8) {
+        (&self.out.rays, self.out.tested)
+    }
 }
 
 /// The vertices of one batch, one lane each (structure of arrays).
@@ -203,34 +280,16 @@ impl Lanes {
 }
 
 /// The lanes' connections: a mask of those that exist, their contribution, raster position
-/// and shadow ray (`has_ray`: a segment of some length).
+/// and shadow ray (`has_ray`: a segment of some length), the rays laid out as a packet.
 #[derive(Default)]
 struct Out {
     valid: u8,
     has_ray: u8,
+    /// Valid, with a ray of positive (or NaN) length.
+    tested: u8,
     l: [[f32; LANES]; 3],
     raster: [[f32; LANES]; 2],
-    o: [[f32; LANES]; 3],
-    d: [[f32; LANES]; 3],
-    t_max: [f32; LANES],
-}
-
-impl Out {
-    fn l(&self, i: usize) -> Rgb {
-        Rgb::new(self.l[0][i], self.l[1][i], self.l[2][i])
-    }
-    fn raster(&self, i: usize) -> Vec2 {
-        Vec2::new(self.raster[0][i], self.raster[1][i])
-    }
-    fn ray(&self, i: usize, time: f32) -> Option<Ray> {
-        if self.has_ray & (1 << i) == 0 {
-            return None;
-        }
-        let v = |a: &[[f32; LANES]; 3]| Vec3::new(a[0][i], a[1][i], a[2][i]);
-        let mut ray = Ray::with_max(v(&self.o), v(&self.d), self.t_max[i]);
-        ray.time = time;
-        Some(ray)
-    }
+    rays: Rays8,
 }
 
 /// `camera_connection_at` for a pinhole in every lane below `lanes.n`: `sample_lens`,
@@ -338,13 +397,17 @@ unsafe fn kernel(k: &Pinhole, v: &Lanes, out: &mut Out) {
     let dist = _mm256_sqrt_ps(dot(seg, seg));
     let has_ray = _mm256_cmp_ps::<_CMP_NEQ_UQ>(dist, zero);
     for j in 0..3 {
-        _mm256_storeu_ps(out.o[j].as_mut_ptr(), o[j]);
-        _mm256_storeu_ps(out.d[j].as_mut_ptr(), div(seg[j], dist));
+        _mm256_storeu_ps(out.rays.o[j].as_mut_ptr(), o[j]);
+        _mm256_storeu_ps(out.rays.d[j].as_mut_ptr(), div(seg[j], dist));
     }
-    _mm256_storeu_ps(out.t_max.as_mut_ptr(), mul(dist, set(1.0 - SHADOW_EPSILON)));
+    let t_max = mul(dist, set(1.0 - SHADOW_EPSILON));
+    _mm256_storeu_ps(out.rays.t_max.as_mut_ptr(), t_max);
     let lanes = (1u32 << v.n) - 1;
     out.valid = (_mm256_movemask_ps(ok) as u32 & lanes) as u8;
     out.has_ray = (_mm256_movemask_ps(has_ray) as u32 & lanes) as u8;
+    // The rays a packet tests: `ShadowedSplats::push`'s, !(t_max <= 0).
+    let tested = _mm256_and_ps(_mm256_and_ps(ok, has_ray), _mm256_cmp_ps::<_CMP_NLE_UQ>(t_max, zero));
+    out.tested = (_mm256_movemask_ps(tested) as u32 & lanes) as u8;
 }
 
 #[cfg(test)]

@@ -41,10 +41,10 @@ mod shadow;
 mod vertex;
 mod walk;
 
-pub use camera_batch::{BatchScratch, CameraBatch};
+pub use camera_batch::{BatchScratch, CameraBatch, Staged};
 pub use connect::{camera_connection, connect, weighted_camera_connection, CameraConnection, Connection};
 pub use mis::mis_weight;
-pub use shadow::{ClosestHits, ShadowPackets};
+pub use shadow::{set_lane, ClosestHits, ShadowPackets};
 pub use vertex::{Event, EventKind, Vertex, VertexKind};
 pub use walk::{camera_subpath, light_subpath, random_walk};
 pub(crate) use walk::{light_walk, LightWalk};

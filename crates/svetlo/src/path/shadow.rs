@@ -125,13 +125,16 @@ impl ShadowPackets {
     pub fn closest(&self, rays: &[Ray; LANES], active: u8) -> ClosestHits {
         let mut r = Rays8::default();
         for (i, ray) in rays.iter().enumerate() {
-            for k in 0..3 {
-                r.o[k][i] = ray.o[k];
-                r.d[k][i] = ray.d[k];
-            }
-            r.t_max[i] = ray.t_max;
+            set_lane(&mut r, i, ray);
         }
-        let (hits, tied) = self.bvh.intersect_ties(&r, active);
+        self.closest_packet(&r, active)
+    }
+
+    /// [`Self::closest`] of rays the caller put in a packet's lanes ([`set_lane`]); lane `l`'s
+    /// ray for [`Self::interaction`] is the one put in lane `l`.
+    #[inline]
+    pub fn closest_packet(&self, r: &Rays8, active: u8) -> ClosestHits {
+        let (hits, tied) = self.bvh.intersect_ties(r, active);
         ClosestHits { hits, tied }
     }
 
@@ -166,6 +169,16 @@ impl ShadowPackets {
             time: ray.time,
         })
     }
+}
+
+/// `ray` into lane `l` of `r` (its time is not a packet's).
+#[inline]
+pub fn set_lane(r: &mut Rays8, l: usize, ray: &Ray) {
+    for k in 0..3 {
+        r.o[k][l] = ray.o[k];
+        r.d[k][l] = ray.d[k];
+    }
+    r.t_max[l] = ray.t_max;
 }
 
 #[cfg(test)]

@@ -189,11 +189,16 @@ impl Walk {
         let u_rr = sampler.next_1d();
         let v = path.last().expect("just pushed");
         let bsdf = v.bsdf.as_ref().expect("surface vertices have a BSDF");
-        let (bs, mut pdf_rev) = match lambertian_sample(bsdf, &v.shading, v.wo, uc, u) {
+        // The vertex's wo is the hit's, -d of the ray traced (`Vertex::at_surface`), taken
+        // from the ray: the vertex was just stored, and its wo read back in 8-byte words that
+        // span two of its stores, a store-forwarding stall per bounce.
+        let wo = -self.ray.d;
+        debug_assert_eq!(wo.to_array().map(f32::to_bits), si.wo.to_array().map(f32::to_bits), "the hit of another ray");
+        let (bs, mut pdf_rev) = match lambertian_sample(bsdf, &v.shading, wo, uc, u) {
             Some(Some(s)) => s,
             Some(None) => return false,
             None => {
-                let wo = v.shading.to_local(v.wo);
+                let wo = v.shading.to_local(wo);
                 let Some(bs) = bsdf.sample(wo, uc, u, mode) else { return false };
                 // (Unused when the check below ends the walk.)
                 let pdf_rev = bsdf.pdf(bs.wi, wo, flip(mode));
@@ -204,7 +209,7 @@ impl Walk {
             return false;
         }
         let wi_world = v.shading.to_world(bs.wi);
-        let w = bs.weight() * shading_correction(v.ng, v.shading.n, v.wo, wi_world, mode);
+        let w = bs.weight() * shading_correction(v.ng, v.shading.n, wo, wi_world, mode);
         let mut next = Ray::new(crate::geometry::ray::offset_ray_origin(v.p, v.ng, wi_world), wi_world);
         next.time = self.ray.time;
         self.ray = next;
