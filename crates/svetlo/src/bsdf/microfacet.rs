@@ -38,7 +38,14 @@ impl Microfacet {
         let c2 = m.z * m.z;
         let e = (m.x / ax) * (m.x / ax) + (m.y / ay) * (m.y / ay);
         let r = match self.kind {
-            MicrofacetKind::Beckmann => (-e / c2).exp() / (PI * ax * ay * c2 * c2),
+            MicrofacetKind::Beckmann => {
+                // Below -104, e^x is under half the smallest subnormal: libm's expf returns 0
+                // there through its underflow path (an underflowing multiply and errno: slow,
+                // and the common case for a light sample far off a smooth conductor's lobe).
+                let x = -e / c2;
+                let ex = if x < -104.0 { 0.0 } else { x.exp() };
+                ex / (PI * ax * ay * c2 * c2)
+            }
             MicrofacetKind::Ggx => {
                 let t = e + c2;
                 1.0 / (PI * ax * ay * t * t)
