@@ -438,7 +438,7 @@ mod tests {
         for (au, av) in [(0.01, 0.01), (0.05, 0.05), (0.1, 0.1), (0.25, 0.25), (0.01, 0.3), (1e-4, 1e-4)] {
             let md = Microfacet::new(MicrofacetKind::Beckmann, au, av);
             for i in 0..20_000 {
-                let cos_t = if i < 9 { COS_THETAS[i] } else { rng.next_f32() };
+                let cos_t = COS_THETAS.get(i).copied().unwrap_or_else(|| rng.next_f32());
                 let phi = 2.0 * PI * rng.next_f32();
                 let sin_t = (1.0 - cos_t * cos_t).max(0.0).sqrt();
                 let v = Vec3::new(sin_t * phi.cos(), sin_t * phi.sin(), cos_t);
