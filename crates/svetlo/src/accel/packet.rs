@@ -1030,31 +1030,30 @@ impl PacketSpheres {
         let zero = _mm256_setzero_pd();
         let dot =
             |a: [__m256d; 3], b: [__m256d; 3]| _mm256_add_pd(_mm256_add_pd(_mm256_mul_pd(a[0], b[0]), _mm256_mul_pd(a[1], b[1])), _mm256_mul_pd(a[2], b[2]));
-        // Per half: origin (f32: the scalar test subtracts the center in f32), direction, |d|^2,
-        // its largest component, t_max and the active lanes.
-        // (Arrays spelled out, not `map`ped: `array::map` stayed a call, with the closures'
-        // AVX code out of line behind it, 2.5 % of veach-mis's instructions.)
+        // Per half, where a lane of it passes a sphere's cull (rarely: they are made there, not
+        // ahead for every call): origin (f32: the scalar test subtracts the center in f32),
+        // direction, |d|^2, its largest component, t_max and the live lanes.
+        // (Not `map`ped: `array::map` stayed a call, with the closures' AVX code out of line
+        // behind it, 2.5 % of veach-mis's instructions.)
         let half_o = |h: usize| {
             let f = |a: usize| _mm_loadu_ps(r.o[a].as_ptr().add(4 * h));
             [f(0), f(1), f(2)]
         };
-        let o = [half_o(0), half_o(1)];
         let half_d = |h: usize| {
             let f = |a: usize| _mm256_cvtps_pd(_mm_loadu_ps(r.d[a].as_ptr().add(4 * h)));
             [f(0), f(1), f(2)]
         };
-        let d = [half_d(0), half_d(1)];
-        let a = [dot(d[0], d[0]), dot(d[1], d[1])];
         let max_abs = |d: [__m256d; 3]| _mm256_max_pd(_mm256_max_pd(abs(d[0]), abs(d[1])), abs(d[2]));
-        let dmax = [max_abs(d[0]), max_abs(d[1])];
         let half_t = |h: usize| _mm256_cvtps_pd(_mm_loadu_ps(t.as_ptr().add(4 * h)));
-        let t_max = [half_t(0), half_t(1)];
         let lane_bits = _mm256_setr_epi64x(1, 2, 4, 8);
-        let half_live = |h: usize| {
-            let m = _mm256_set1_epi64x(((active >> (4 * h)) & 0xf) as i64);
+        let half_mask = |bits: u8, h: usize| {
+            let m = _mm256_set1_epi64x(((bits >> (4 * h)) & 0xf) as i64);
             _mm256_castsi256_pd(_mm256_cmpeq_epi64(_mm256_and_si256(m, lane_bits), lane_bits))
         };
-        let mut live = [half_live(0), half_live(1)];
+        // The lanes still to test (with ANY, a lane surely blocked leaves).
+        let mut live = active;
+        // Whether any lane reached the f64 test (else nothing was met).
+        let mut tested = false;
         // The cull's operands: eight lanes of f32.
         let o8 = [_mm256_loadu_ps(r.o[0].as_ptr()), _mm256_loadu_ps(r.o[1].as_ptr()), _mm256_loadu_ps(r.o[2].as_ptr())];
         let d8 = [_mm256_loadu_ps(r.d[0].as_ptr()), _mm256_loadu_ps(r.d[1].as_ptr()), _mm256_loadu_ps(r.d[2].as_ptr())];
@@ -1086,7 +1085,7 @@ impl PacketSpheres {
             let cr2 = dot8(cr, cr);
             let bound = _mm256_mul_ps(a8, _mm256_add_ps(_mm256_set1_ps(self.rr_cull[k]), _mm256_mul_ps(_mm256_set1_ps(CULL_TOL), oc2)));
             let near_lanes = _mm256_movemask_ps(_mm256_cmp_ps::<_CMP_LE_OQ>(cr2, bound)) as u8;
-            let mut lanes = near_lanes & (_mm256_movemask_pd(live[0]) as u8 | (_mm256_movemask_pd(live[1]) as u8) << 4);
+            let mut lanes = near_lanes & live;
             // (Shadow rays only: the closest-hit rays it spared too few f64 tests to pay.)
             if ANY && lanes != 0 {
                 // Out of reach: the lanes whose ray meets the sphere only past t_max (a shadow
@@ -1118,28 +1117,32 @@ impl PacketSpheres {
                 if (lanes >> (4 * h)) & 0xf == 0 {
                     continue;
                 }
-                let oc_at = |ax: usize| _mm256_cvtps_pd(_mm_sub_ps(o[h][ax], c[ax]));
+                tested = true;
+                let (o, d) = (half_o(h), half_d(h));
+                let a = dot(d, d);
+                let oc_at = |ax: usize| _mm256_cvtps_pd(_mm_sub_ps(o[ax], c[ax]));
                 let oc = [oc_at(0), oc_at(1), oc_at(2)];
-                let b = dot(oc, d[h]);
-                let ba = _mm256_div_pd(b, a[h]);
-                let l_at = |ax: usize| _mm256_sub_pd(oc[ax], _mm256_mul_pd(d[h][ax], ba));
+                let b = dot(oc, d);
+                let ba = _mm256_div_pd(b, a);
+                let l_at = |ax: usize| _mm256_sub_pd(oc[ax], _mm256_mul_pd(d[ax], ba));
                 let l = [l_at(0), l_at(1), l_at(2)];
                 let disc = _mm256_sub_pd(rr, dot(l, l));
-                let go = _mm256_and_pd(live[h], _mm256_cmp_pd::<_CMP_GE_OQ>(disc, zero));
+                let go = _mm256_and_pd(half_mask(live, h), _mm256_cmp_pd::<_CMP_GE_OQ>(disc, zero));
                 if _mm256_movemask_pd(go) == 0 {
                     continue;
                 }
                 let cc = _mm256_sub_pd(dot(oc, oc), rr);
-                let root = _mm256_sqrt_pd(_mm256_mul_pd(a[h], disc));
+                let root = _mm256_sqrt_pd(_mm256_mul_pd(a, disc));
                 // b.signum() (b is not NaN where the lane goes on).
                 let sgn = _mm256_or_pd(_mm256_and_pd(b, sign), _mm256_set1_pd(1.0));
                 let q = _mm256_xor_pd(_mm256_add_pd(b, _mm256_mul_pd(sgn, root)), sign);
                 let q0 = _mm256_cmp_pd::<_CMP_EQ_OQ>(q, zero);
                 let t0 = _mm256_andnot_pd(q0, _mm256_div_pd(cc, q));
-                let t1 = _mm256_andnot_pd(q0, _mm256_div_pd(q, a[h]));
+                let t1 = _mm256_andnot_pd(q0, _mm256_div_pd(q, a));
                 let swap = _mm256_cmp_pd::<_CMP_GT_OQ>(t0, t1);
                 let (lo, hi) = (_mm256_blendv_pd(t0, t1, swap), _mm256_blendv_pd(t1, t0, swap));
-                let within = |x| _mm256_and_pd(_mm256_cmp_pd::<_CMP_GT_OQ>(x, zero), _mm256_cmp_pd::<_CMP_LT_OQ>(x, t_max[h]));
+                let t_max = half_t(h);
+                let within = |x| _mm256_and_pd(_mm256_cmp_pd::<_CMP_GT_OQ>(x, zero), _mm256_cmp_pd::<_CMP_LT_OQ>(x, t_max));
                 let (ok0, ok1) = (within(lo), within(hi));
                 let th = _mm256_blendv_pd(hi, lo, ok0);
                 let hit = _mm256_and_pd(go, _mm256_or_pd(ok0, ok1));
@@ -1147,17 +1150,17 @@ impl PacketSpheres {
                     continue;
                 }
                 // `near_box`.
-                let p_at = |ax: usize| abs(_mm256_add_pd(oc[ax], _mm256_mul_pd(th, d[h][ax])));
+                let p_at = |ax: usize| abs(_mm256_add_pd(oc[ax], _mm256_mul_pd(th, d[ax])));
                 let p = [p_at(0), p_at(1), p_at(2)];
                 let m = _mm256_max_pd(_mm256_max_pd(_mm256_max_pd(p[0], p[1]), p[2]), zero);
-                let lim = _mm256_sub_pd(tol, _mm256_mul_pd(_mm256_mul_pd(_mm256_set1_pd(SPHERE_BOX_TOL), th), dmax[h]));
+                let lim = _mm256_sub_pd(tol, _mm256_mul_pd(_mm256_mul_pd(_mm256_set1_pd(SPHERE_BOX_TOL), th), max_abs(d)));
                 let nb = _mm256_cmp_pd::<_CMP_GT_OQ>(m, lim);
                 if ANY {
                     any[h] = _mm256_or_pd(any[h], hit);
                     sure[h] = _mm256_or_pd(sure[h], _mm256_andnot_pd(nb, hit));
                     best_id[h] = _mm256_blendv_pd(best_id[h], id, hit);
                     // A lane surely blocked needs no further sphere.
-                    live[h] = _mm256_andnot_pd(sure[h], live[h]);
+                    live &= !((_mm256_movemask_pd(sure[h]) as u8 & 0xf) << (4 * h));
                     continue;
                 }
                 // The distance as f32 decides, as the scalar walk's t_max is f32.
@@ -1171,6 +1174,9 @@ impl PacketSpheres {
         }
         let mut ids = [u32::MAX; LANES];
         let mut unsure = 0u8;
+        if !tested {
+            return (ids, unsure);
+        }
         for h in 0..2 {
             let mut id = [0u64; 4];
             _mm256_storeu_pd(id.as_mut_ptr() as *mut f64, best_id[h]);

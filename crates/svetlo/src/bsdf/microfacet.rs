@@ -38,7 +38,14 @@ impl Microfacet {
         let c2 = m.z * m.z;
         let e = (m.x / ax) * (m.x / ax) + (m.y / ay) * (m.y / ay);
         let r = match self.kind {
-            MicrofacetKind::Beckmann => (-e / c2).exp() / (PI * ax * ay * c2 * c2),
+            MicrofacetKind::Beckmann => {
+                // Below -104, e^x is under half the smallest subnormal: libm's expf returns 0
+                // there through its underflow path (an underflowing multiply and errno: slow,
+                // and the common case for a light sample far off a smooth conductor's lobe).
+                let x = -e / c2;
+                let ex = if x < -104.0 { 0.0 } else { x.exp() };
+                ex / (PI * ax * ay * c2 * c2)
+            }
             MicrofacetKind::Ggx => {
                 let t = e + c2;
                 1.0 / (PI * ax * ay * t * t)
@@ -406,6 +413,42 @@ mod tests {
 
     /// Incidence cosines from normal to 0.001 (grazing), as f32 as the sampler takes them.
     const COS_THETAS: [f32; 9] = [1.0, 0.999, 0.95, 0.8, 0.5, 0.25, 0.1, 0.02, 0.001];
+
+    /// Beckmann's D with its shortcut (libm's exp skipped below -104) is the full formula bit
+    /// for bit, on both sides of the threshold: the smooth conductors of veach-mis and others,
+    /// normal to grazing.
+    #[test]
+    fn beckmann_d_shortcut_keeps_the_bits() {
+        let d_full = |md: &Microfacet, m: Vec3| {
+            if m.z <= 0.0 {
+                return 0.0;
+            }
+            let (ax, ay) = (md.alpha_u, md.alpha_v);
+            let c2 = m.z * m.z;
+            let e = (m.x / ax) * (m.x / ax) + (m.y / ay) * (m.y / ay);
+            let r = (-e / c2).exp() / (PI * ax * ay * c2 * c2);
+            if r.is_finite() {
+                r
+            } else {
+                0.0
+            }
+        };
+        let mut rng = crate::sampling::Pcg32::new(17, 5);
+        let mut zero_d = 0;
+        for (au, av) in [(0.01, 0.01), (0.05, 0.05), (0.1, 0.1), (0.25, 0.25), (0.01, 0.3), (1e-4, 1e-4)] {
+            let md = Microfacet::new(MicrofacetKind::Beckmann, au, av);
+            for i in 0..20_000 {
+                let cos_t = COS_THETAS.get(i).copied().unwrap_or_else(|| rng.next_f32());
+                let phi = 2.0 * PI * rng.next_f32();
+                let sin_t = (1.0 - cos_t * cos_t).max(0.0).sqrt();
+                let v = Vec3::new(sin_t * phi.cos(), sin_t * phi.sin(), cos_t);
+                assert_eq!(md.d(v).to_bits(), d_full(&md, v).to_bits(), "alpha ({au}, {av}), m {v}");
+                zero_d += (md.d(v) == 0.0) as u32;
+            }
+        }
+        // The shortcut was taken, and not always.
+        assert!(zero_d > 1000 && zero_d < 110_000, "{zero_d}");
+    }
 
     /// The sampled slope's CDF value (exact, f64) is the sample's u within 1.5e-6, over a
     /// dense grid of u including the tails, at every incidence.

@@ -77,6 +77,15 @@ impl Sphere {
         }
     }
 
+    /// [`Self::surface`]'s normal and dp/du without its uv (the same operations: the same
+    /// bits).
+    #[inline]
+    pub fn normal_and_dpdu(&self, p: Vec3) -> (Vec3, Vec3) {
+        let n = ((p - self.center) / self.radius).normalize_or_zero();
+        let dpdu = Vec3::new(-n.y, n.x, 0.0) * (2.0 * PI * self.radius);
+        (if self.flip_normals { -n } else { n }, dpdu)
+    }
+
     pub fn surface(&self, p: Vec3) -> (Vec3, Vec2, Vec3) {
         let local = (p - self.center) / self.radius;
         let n = local.normalize_or_zero();
@@ -94,7 +103,8 @@ impl Sphere {
 mod tests {
     use super::*;
 
-    /// `normal` is `surface`'s normal bit for bit (a sphere light's samples take it), flipped or not.
+    /// `normal` is `surface`'s normal bit for bit (a sphere light's samples take it), flipped or
+    /// not, and `normal_and_dpdu` its normal and dp/du (the path kernel's hits that read no uv).
     #[test]
     fn normal_is_the_surface_normal() {
         let mut rng = crate::sampling::Pcg32::new(5, 1);
@@ -103,7 +113,11 @@ mod tests {
             for _ in 0..1000 {
                 let d = crate::math::warp::square_to_uniform_sphere(Vec2::new(rng.next_f32(), rng.next_f32()));
                 let p = s.center + d * s.radius;
-                assert_eq!(s.normal(p).to_array().map(f32::to_bits), s.surface(p).0.to_array().map(f32::to_bits));
+                let (n, _, dpdu) = s.surface(p);
+                assert_eq!(s.normal(p).to_array().map(f32::to_bits), n.to_array().map(f32::to_bits));
+                let (n2, dpdu2) = s.normal_and_dpdu(p);
+                assert_eq!(n2.to_array().map(f32::to_bits), n.to_array().map(f32::to_bits));
+                assert_eq!(dpdu2.to_array().map(f32::to_bits), dpdu.to_array().map(f32::to_bits));
             }
         }
     }

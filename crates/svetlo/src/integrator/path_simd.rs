@@ -192,6 +192,10 @@ struct ShapeData {
     uniform: Option<Bsdf>,
     /// Its lobes (looked up once: they cost two model dispatches a hit).
     uniform_flags: LobeFlags,
+    /// Whether its shading or emission reads the hit's uv (a texture, a textured emitter, a
+    /// BSDF built per hit); where not, a hit on a shape that is not a mesh comes without
+    /// (`other_hit`: a sphere's uv costs an atan2 and an acos).
+    reads_uv: bool,
 }
 
 /// A mesh area light as `AreaLight::sample_li` samples it, unpacked: its triangles' vertices
@@ -675,7 +679,8 @@ impl SimdKernel {
             };
             let uniform = (scalar_bsdf && !s.detail && mat.is_uniform()).then(|| mat.bsdf(TexPoint::default()));
             let uniform_flags = uniform.as_ref().map_or(LobeFlags::NONE, Bsdf::flags);
-            shapes.push(ShapeData { scalar_bsdf, front, back, textured, light, uniform, uniform_flags });
+            let reads_uv = textured || matches!(light, Some((_, None))) || (scalar_bsdf && uniform.is_none());
+            shapes.push(ShapeData { scalar_bsdf, front, back, textured, light, uniform, uniform_flags, reads_uv });
         }
         // The meshes' triangles (other shapes' hits come as the scene's surface records:
         // `other_hit`), the ones of the scene's last render if its geometry is the same.
@@ -914,8 +919,11 @@ impl SimdKernel {
                     continue;
                 }
                 let d = Vec3::new(rays.d[0][l], rays.d[1][l], rays.d[2][l]);
-                let other =
-                    if hits.prim[l] == OTHER { Some(others.record[l].take().unwrap_or_else(|| other_hit(scene, &rays, &hits, &others, l))) } else { None };
+                let other = if hits.prim[l] == OTHER {
+                    Some(others.record[l].take().unwrap_or_else(|| other_hit(scene, &self.shapes, &rays, &hits, &others, l)))
+                } else {
+                    None
+                };
                 if self.gather(scene, settings, &mut st, &draws, l, hits.prim[l], hits.b1[l], hits.b2[l], d, other.as_ref(), &mut v) {
                     go |= 1 << l;
                 } else {
@@ -1036,9 +1044,9 @@ impl SimdKernel {
                     let prev_p = Vec3::new(st.prev_p[0][l], st.prev_p[1][l], st.prev_p[2][l]);
                     let pdf_li = area_of(scene, li).map_or(0.0, |a| a.pdf_li(prev_p, p, ng));
                     let pdf_bsdf = match &st.prev_bsdf[l] {
-                        Some(pb) => match pb.own.as_ref().or(self.shapes[pb.shape as usize].uniform.as_ref()) {
+                        Some(pb) => match self.shapes[pb.shape as usize].uniform.as_ref().or(st.prev_own[l].as_ref()) {
                             Some(bsdf) => bsdf_pdf_toward(bsdf, &pb.frame, pb.wo, prev_p, p).unwrap_or(st.prev_pdf[l]),
-                            // Never: `own` is None only on a shape with a uniform BSDF.
+                            // Never: a shape without a uniform BSDF left its own in `prev_own`.
                             None => st.prev_pdf[l],
                         },
                         None => {
@@ -1316,15 +1324,22 @@ impl SimdKernel {
     fn scalar_light_sample(&self, scene: &Scene, l: usize, v: &mut Soa, si: &SurfaceInteraction, u: [f32; 6]) {
         let [u_light, ul_x, ul_y, ..] = u;
         let sh = &self.shapes[si.shape as usize];
-        let own = sh.uniform.is_none().then(|| scene.bsdf(si));
-        let flags = own.as_ref().map_or(sh.uniform_flags, Bsdf::flags);
+        // `v.own[l]` is None here (`scalar_scatter` took it) and stays so with a uniform
+        // BSDF: moving a None in and out copied the whole `Option<Bsdf>` (memcpy) each hit.
+        let flags = if sh.uniform.is_none() {
+            let own = scene.bsdf(si);
+            let flags = own.flags();
+            v.own[l] = Some(own);
+            flags
+        } else {
+            sh.uniform_flags
+        };
         if flags.has_non_specular() {
             self.light_sample(scene, l, v, si.p, u_light, Vec2::new(ul_x, ul_y));
         } else {
             v.nee_ok[l] = false;
         }
         v.flags[l] = flags;
-        v.own[l] = own;
     }
 
     /// The rest of lane `l`'s vertex `si` of a scalar BSDF (`scalar_light_sample` took the
@@ -1336,9 +1351,9 @@ impl SimdKernel {
     #[inline(never)]
     fn scalar_scatter<S>(&self, events: &LaneEvents, st: &mut Paths<S>, l: usize, v: &mut Soa, si: &SurfaceInteraction, u: [f32; 6]) {
         let [_, _, _, uc, ux, uy] = u;
-        // The shape's uniform BSDF, or this hit's own (moved into `prev_bsdf` at the end).
+        // The shape's uniform BSDF, or this hit's own (moved into `prev_own` at the end).
         let uniform = self.shapes[si.shape as usize].uniform.as_ref();
-        let own = v.own[l].take();
+        let own = if v.own[l].is_some() { v.own[l].take() } else { None };
         let Some(bsdf) = own.as_ref().or(uniform) else { unreachable!("a shape without a uniform BSDF builds its own") };
         let flags = v.flags[l];
         let (p, frame) = (si.p, si.shading);
@@ -1384,7 +1399,10 @@ impl SimdKernel {
             st.eta_scale[l] *= bs.eta * bs.eta;
         }
         if !bs.lobe.is_specular() {
-            st.prev_bsdf[l] = Some(PrevBsdf { own, shape: si.shape, frame, wo });
+            st.prev_bsdf[l] = Some(PrevBsdf { shape: si.shape, frame, wo });
+            if own.is_some() {
+                st.prev_own[l] = own;
+            }
         }
     }
 
@@ -1423,12 +1441,17 @@ enum Hit<'a> {
 }
 
 /// Lane `l`'s hit on a shape that is not a mesh, as the scalar tracer's `Scene::intersect`
-/// records it (the same ray: the same point, normal and uv). Out of line: mesh scenes never
-/// call it.
+/// records it (the same ray: the same point, normal and uv; the uv left zero where the
+/// shape's `ShapeData::reads_uv` is not set). Out of line: mesh scenes never call it.
 #[inline(never)]
-fn other_hit(scene: &Scene, rays: &Rays8, hits: &Hits8, others: &OtherHits, l: usize) -> SurfaceInteraction {
+fn other_hit(scene: &Scene, shapes: &[ShapeData], rays: &Rays8, hits: &Hits8, others: &OtherHits, l: usize) -> SurfaceInteraction {
     let (shape, prim) = others.prim[l];
-    scene.interaction(&crate::accel::PrimHit { t: hits.t[l], shape, prim, b1: hits.b1[l], b2: hits.b2[l] }, &lane_ray(rays, l))
+    let (hit, ray) = (crate::accel::PrimHit { t: hits.t[l], shape, prim, b1: hits.b1[l], b2: hits.b2[l] }, lane_ray(rays, l));
+    if shapes[shape as usize].reads_uv {
+        scene.interaction(&hit, &ray)
+    } else {
+        scene.interaction_without_uv(&hit, &ray)
+    }
 }
 
 /// `Soa::shape` of a lane whose ray left the scene.
@@ -1504,10 +1527,10 @@ struct Soa {
 }
 
 /// A camera-path vertex of a scalar BSDF that scattered by a non-delta lobe, kept for the
-/// MIS weight of the emitter its sample reaches (as `path.rs`'s `ScatterPoint`).
+/// MIS weight of the emitter its sample reaches (as `path.rs`'s `ScatterPoint`). Its BSDF:
+/// the shape's uniform one (`ShapeData::uniform`), else the one it built (`Paths::prev_own`).
+#[derive(Clone, Copy)]
 struct PrevBsdf {
-    /// Its BSDF; None: the shape's uniform one (`ShapeData::uniform`), not copied.
-    own: Option<Bsdf>,
     shape: u32,
     frame: Frame,
     /// Toward the vertex before it, local frame.
@@ -2074,6 +2097,10 @@ struct Paths<S> {
     prev_n: [[f32; LANES]; 3],
     /// The previous vertex's BSDF where it was a scalar one (None: Lambertian).
     prev_bsdf: [Option<PrevBsdf>; LANES],
+    /// The BSDF that vertex built where its shape has no uniform one (kept apart: a large
+    /// `Option<Bsdf>` inside `PrevBsdf` was copied whole, memcpy, at every scalar vertex;
+    /// stale where the shape has a uniform one, and then not read).
+    prev_own: [Option<Bsdf>; LANES],
     /// The radiance scale of the refractions so far (for Russian roulette, as `camera_walk`).
     eta_scale: [f32; LANES],
     /// The camera ray's time (every ray of the path sees the scene then).
@@ -2093,7 +2120,8 @@ impl<S: Clone> Paths<S> {
             prev_pdf: [0.0; LANES],
             prev_p: [[0.0; LANES]; 3],
             prev_n: [[0.0; LANES]; 3],
-            prev_bsdf: std::array::from_fn(|_| None),
+            prev_bsdf: [None; LANES],
+            prev_own: std::array::from_fn(|_| None),
             eta_scale: [1.0; LANES],
             time: [0.0; LANES],
         }

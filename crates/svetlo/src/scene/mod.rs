@@ -261,6 +261,17 @@ impl Scene {
 
     /// The surface record of a primitive hit by `ray` (in the space the primitive is stored in).
     pub(crate) fn interaction(&self, hit: &PrimHit, ray: &Ray) -> SurfaceInteraction {
+        self.interaction_with::<true>(hit, ray)
+    }
+
+    /// [`Self::interaction`] with the uv left zero, for a caller whose material and emission
+    /// there read none: the rest bit for bit. (A sphere's uv is an atan2 and an acos.)
+    pub(crate) fn interaction_without_uv(&self, hit: &PrimHit, ray: &Ray) -> SurfaceInteraction {
+        self.interaction_with::<false>(hit, ray)
+    }
+
+    #[inline(always)]
+    fn interaction_with<const UV: bool>(&self, hit: &PrimHit, ray: &Ray) -> SurfaceInteraction {
         let shape = &self.shapes[hit.shape as usize];
         let p_ray = ray.at(hit.t);
         let (p, ng, ns, uv, dpdu) = match &*shape.geometry {
@@ -269,7 +280,7 @@ impl Scene {
                 // Barycentric position is more accurate than o + t d far from the origin.
                 let p = p0 * (1.0 - hit.b1 - hit.b2) + p1 * hit.b1 + p2 * hit.b2;
                 if let Some(Some((ng, shading))) = shape.flat.get(hit.prim as usize) {
-                    let uv = m.uv(hit.prim as usize, hit.b1, hit.b2);
+                    let uv = if UV { m.uv(hit.prim as usize, hit.b1, hit.b2) } else { Vec2::ZERO };
                     let bary = Vec2::new(hit.b1, hit.b2);
                     return SurfaceInteraction {
                         p,
@@ -291,7 +302,12 @@ impl Scene {
                 // Reproject onto the sphere to remove the error of t.
                 let d = p_ray - s.center;
                 let p = s.center + d * (s.radius / d.length());
-                let (n, uv, dpdu) = s.surface(p);
+                let (n, uv, dpdu) = if UV {
+                    s.surface(p)
+                } else {
+                    let (n, dpdu) = s.normal_and_dpdu(p);
+                    (n, Vec2::ZERO, dpdu)
+                };
                 (p, n, n, uv, dpdu)
             }
             // As in Mitsuba: the point along the ray (not reprojected), no uvs.
@@ -306,7 +322,7 @@ impl Scene {
             t: hit.t,
             ng,
             shading: Frame::from_normal_tangent(ns, dpdu),
-            uv,
+            uv: if UV { uv } else { Vec2::ZERO },
             shape: hit.shape,
             prim: hit.prim,
             bary,
