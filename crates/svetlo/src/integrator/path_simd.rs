@@ -335,8 +335,9 @@ impl KernelGeometry {
     /// The kernel's triangle `prim` read from its mesh (None where it names none). Scenes
     /// that trace single rays need no packet tree, and their rays may hit few of the
     /// triangles: reading those costs less than unpacking all (bsdf_spheres' grid: 325k
-    /// triangles, ~300 instructions each, a sixth of a 128 spp render call).
-    #[inline(always)]
+    /// triangles, ~300 instructions each, a sixth of a 128 spp render call). Out of line: the
+    /// kernel's loop stays that of unpacked triangles.
+    #[inline(never)]
     fn read(&self, scene: &Scene, prim: u32) -> Option<Tri> {
         if !self.is_triangle(prim) {
             return None;
@@ -967,14 +968,6 @@ impl SimdKernel {
             // all lanes at once (a lane that ends before it needs them restarts its sampler
             // with its next camera sample).
             let draws = if S::BATCHED { S::vertex_draws(&mut st.sampler, active) } else { [[0.0; LANES]; 7] };
-            // Triangles not unpacked are read from the meshes, every lane's before any is
-            // shaded: their loads (an index, then the corners and normals it names) overlap.
-            let mut read = [None; LANES];
-            if !self.geometry.unpacked {
-                for (l, tri) in read.iter_mut().enumerate().filter(|(l, _)| active & (1 << l) != 0) {
-                    *tri = self.geometry.read(scene, hits.prim[l]);
-                }
-            }
             let mut ends = 0u8;
             let mut go = 0u8;
             for l in 0..LANES {
@@ -984,8 +977,7 @@ impl SimdKernel {
                 let d = Vec3::new(rays.d[0][l], rays.d[1][l], rays.d[2][l]);
                 let other =
                     if hits.prim[l] == OTHER { Some(others.record[l].take().unwrap_or_else(|| other_hit(scene, &rays, &hits, &others, l))) } else { None };
-                let tri = if self.geometry.unpacked { self.geometry.unpacked(hits.prim[l]) } else { read[l].as_ref() };
-                if self.gather(scene, settings, &mut st, &draws, l, tri, hits.b1[l], hits.b2[l], d, other.as_ref(), &mut v) {
+                if self.gather(scene, settings, &mut st, &draws, l, hits.prim[l], hits.b1[l], hits.b2[l], d, other.as_ref(), &mut v) {
                     go |= 1 << l;
                 } else {
                     ends |= 1 << l;
@@ -1049,9 +1041,9 @@ impl SimdKernel {
     /// The per-lane part of one vertex (as `shade`): emission found, the depth test, the
     /// random numbers, the light and its triangle chosen, and at a material other than a
     /// Lambertian one its scalar BSDF's value toward the light sample and its own sample; the
-    /// arithmetic is left in `v` for `shade8`. The hit: triangle `tri` of the kernel's at
-    /// (b1, b2), or the scene's record `other` of a shape that is not a mesh; neither where
-    /// the ray escaped. False when the path ends here.
+    /// arithmetic is left in `v` for `shade8`. The hit: triangle `prim` of the kernel's at
+    /// (b1, b2), or where `prim` is [`OTHER`], the scene's record `other` of a shape that is
+    /// not a mesh. False when the path ends here.
     #[allow(clippy::too_many_arguments)]
     #[inline(always)]
     fn gather<S: LaneSampler>(
@@ -1061,7 +1053,7 @@ impl SimdKernel {
         st: &mut Paths<S>,
         draws: &[[f32; LANES]; 7],
         l: usize,
-        tri: Option<&Tri>,
+        prim: u32,
         b1: f32,
         b2: f32,
         d: Vec3,
@@ -1071,6 +1063,14 @@ impl SimdKernel {
         st.depth[l] += 1;
         let depth = st.depth[l];
         v.emitted[l] = false;
+        let read;
+        let tri = match self.geometry.unpacked(prim) {
+            None if !self.geometry.unpacked => {
+                read = self.geometry.read(scene, prim);
+                read.as_ref()
+            }
+            tri => tri,
+        };
         let (hit, shape, p, ng, frame) = match (tri, other) {
             (Some(tri), _) => {
                 let p = tri.p[0] * (1.0 - b1 - b2) + tri.p[1] * b1 + tri.p[2] * b2;
