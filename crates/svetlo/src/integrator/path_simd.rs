@@ -328,7 +328,7 @@ impl KernelGeometry {
     /// The kernel's triangle `prim` where the triangles are unpacked; else None (and where it
     /// names none: a ray that escaped, or hit a shape that is not a mesh).
     #[inline(always)]
-    fn unpacked(&self, prim: u32) -> Option<&Tri> {
+    fn unpacked_triangle(&self, prim: u32) -> Option<&Tri> {
         self.tris.get(prim as usize)
     }
 
@@ -359,8 +359,9 @@ impl Tri {
     }
 }
 
-/// Scenes with more triangles than this are large: they take the kernel on their first render
-/// only with Lambertian materials (see [`SimdKernel::new`]), and their packets check ties.
+/// Scenes with more triangles than this are large: where their rays go as packets they take
+/// the kernel on their first render only with Lambertian materials (see [`SimdKernel::new`]),
+/// and their packets check ties.
 const LARGE_TRIANGLES: usize = 20_000;
 /// Scenes with more triangles than this trace one ray at a time (see [`Tracer`]). Between
 /// [`LARGE_TRIANGLES`] and this, packets still won: bsdf_spheres' textured sphere (32k
@@ -1064,7 +1065,7 @@ impl SimdKernel {
         let depth = st.depth[l];
         v.emitted[l] = false;
         let read;
-        let tri = match self.geometry.unpacked(prim) {
+        let tri = match self.geometry.unpacked_triangle(prim) {
             None if !self.geometry.unpacked => {
                 read = self.geometry.read(scene, prim);
                 read.as_ref()
