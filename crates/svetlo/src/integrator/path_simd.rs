@@ -27,10 +27,12 @@
 //! the value and density toward the light sample come with the BSDF's own sample from one
 //! call (`Bsdf::eval_pdf_and_sample`: a rough model's half vector, D and G1 computed once;
 //! a rough conductor's Λ(wo) once for both; a Beckmann one's visible normal drawn for all
-//! lanes at once before, by `beckmann_samples`, the same bits). Scenes
-//! large enough to trace single rays take the kernel on their first render only with
-//! Lambertian materials (its set-up cost more than it gained there otherwise), on later
-//! renders with any. Lights: area lights of constant radiance on meshes
+//! lanes at once before, by `beckmann_samples`, the same bits). Large scenes whose rays go
+//! as packets take the kernel on their first render only with Lambertian materials (its
+//! set-up cost more than it gained there otherwise), on later renders with any; scenes that
+//! trace single rays read the triangles their rays hit from the meshes (unpacking them all
+//! only where a render takes several camera samples a triangle) and take it on any render.
+//! Lights: area lights of constant radiance on meshes
 //! (sampled by the kernel's own unpacked copy), and every other light the scalar tracer
 //! takes (textured area lights, sphere lights, point, spot, directional, one constant or
 //! bitmap environment), each lane sampling it through its own `Light::sample_li` (a
@@ -219,8 +221,15 @@ type LightTri = ([Vec3; 3], std::result::Result<Vec3, TriangleShading>);
 /// instructions a render on bsdf_spheres' textured sphere (32k triangles; the render call
 /// ~850M at 128 spp).
 pub(crate) struct KernelGeometry {
-    /// Every mesh's triangles, the shapes in [`kernel_order`].
+    /// Every mesh's triangles, the shapes in [`kernel_order`]; empty where they are read from
+    /// the meshes at each hit instead (`unpacked` false, see [`Self::triangle`]).
     tris: Vec<Tri>,
+    /// Whether `tris` holds the triangles.
+    unpacked: bool,
+    /// How many triangles the meshes have: the kernel's indices below it name one.
+    triangles: u32,
+    /// Each mesh's first index of the kernel's and its shape, in [`kernel_order`].
+    meshes: Vec<(u32, u32)>,
     /// How many of `tris` are the static shapes' (the packet tree holds those, a prefix).
     static_triangles: usize,
     /// Per light of the scene: a mesh area light's triangles, else None.
@@ -228,9 +237,11 @@ pub(crate) struct KernelGeometry {
 }
 
 /// [`KernelGeometry`]'s key tags: a static shape's index as it is, a moving shape's and a
-/// light's with these bits (no scene has 2^30 shapes or lights).
+/// light's with these bits, and every entry's with [`ON_DEMAND_TAG`] where the triangles are
+/// not unpacked (no scene has 2^29 shapes or lights).
 const MOVING_TAG: u32 = 1 << 31;
 const LIGHT_TAG: u32 = 1 << 30;
+const ON_DEMAND_TAG: u32 = 1 << 29;
 
 /// Triangle records of at least this many bytes in all are prefetched before shading (see
 /// [`KernelGeometry::prefetch_hits`]); below it (about an L2 cache) they are likely cached.
@@ -259,9 +270,18 @@ impl KernelGeometry {
     /// The kept one when the scene's meshes and lights have the same geometry, else unpacked
     /// and kept. It depends on the shapes' geometry, their order ([`kernel_order`]: which
     /// ones move) and the lights' geometry only (the shapes' `flat` tables are the meshes'),
-    /// which the key holds.
-    fn of(scene: &Scene) -> Arc<KernelGeometry> {
-        scene.kernel_geometry.get_or_build(&KernelGeometry::key(scene), || KernelGeometry::unpack(scene))
+    /// which the key holds. `unpack`: with every triangle unpacked (the packet tree needs
+    /// them); else the triangles are read from the meshes where rays hit them, unless the
+    /// kept one has them unpacked.
+    fn of(scene: &Scene, unpack: bool) -> Arc<KernelGeometry> {
+        let mut key = KernelGeometry::key(scene);
+        if !unpack {
+            if let Some(kept) = scene.kernel_geometry.get(&key) {
+                return kept;
+            }
+            key.iter_mut().for_each(|(tag, _)| *tag |= ON_DEMAND_TAG);
+        }
+        scene.kernel_geometry.get_or_build(&key, || KernelGeometry::unpack(scene, unpack))
     }
 
     /// The geometry it is unpacked from, tagged (the key of `Scene::kernel_geometry`).
@@ -278,25 +298,31 @@ impl KernelGeometry {
         key
     }
 
-    fn unpack(scene: &Scene) -> KernelGeometry {
+    /// The mesh lights' triangles, and the meshes' too where `unpack_tris`.
+    fn unpack(scene: &Scene, unpack_tris: bool) -> KernelGeometry {
         let triangles: usize = scene.shapes.iter().map(|s| if let Geometry::Mesh(m) = &*s.geometry { m.triangle_count() } else { 0 }).sum();
         // Written once into a vector of the final size: with a million triangles this
         // unpacking is a visible part of the render's time, its page faults as much as the
         // writes. (On huge pages it cost 0.13-0.39 s instead of 0.18-0.20 s on mesh1m: the
         // kernel's compaction for them, in the render call.)
-        let mut tris = Vec::with_capacity(triangles);
+        let mut tris = Vec::with_capacity(if unpack_tris { triangles } else { 0 });
+        let mut meshes = Vec::new();
+        let mut n = 0usize;
         // Plain loops: `extend` over a `flat_map` took 70 more instructions a triangle.
         // Static shapes' first: the packet tree holds those (`kernel_order`).
         let mut static_triangles = None;
         for si in kernel_order(scene) {
             let s = &scene.shapes[si];
             if static_triangles.is_none() && scene.moving.iter().any(|mv| mv.shape as usize == si) {
-                static_triangles = Some(tris.len());
+                static_triangles = Some(n);
             }
             let Geometry::Mesh(m) = &*s.geometry else { continue };
-            for t in 0..m.triangle_count() {
-                let shading = TriangleFrame::new(s.flat.get(t).copied().flatten(), m, t);
-                tris.push(Tri { p: m.vertices(t), shading, shape: si as u32, local: t as u32 });
+            meshes.push((n as u32, si as u32));
+            n += m.triangle_count();
+            if unpack_tris {
+                for t in 0..m.triangle_count() {
+                    tris.push(Tri::of(s, m, si, t));
+                }
             }
         }
         let light_tris = scene
@@ -317,12 +343,52 @@ impl KernelGeometry {
                 _ => None,
             })
             .collect();
-        KernelGeometry { static_triangles: static_triangles.unwrap_or(tris.len()), tris, light_tris }
+        KernelGeometry { static_triangles: static_triangles.unwrap_or(n), tris, unpacked: unpack_tris, triangles: n as u32, meshes, light_tris }
+    }
+
+    /// Whether `prim` (a lane's hit) names a triangle of the kernel's.
+    #[inline(always)]
+    fn is_triangle(&self, prim: u32) -> bool {
+        prim < self.triangles
+    }
+
+    /// The kernel's triangle `prim` where the triangles are unpacked; else None (and where it
+    /// names none: a ray that escaped, or hit a shape that is not a mesh).
+    #[inline(always)]
+    fn unpacked_triangle(&self, prim: u32) -> Option<&Tri> {
+        self.tris.get(prim as usize)
+    }
+
+    /// The kernel's triangle `prim` read from its mesh (None where it names none). Scenes
+    /// that trace single rays need no packet tree, and their rays may hit few of the
+    /// triangles: reading those costs less than unpacking all (bsdf_spheres' grid: 325k
+    /// triangles, ~300 instructions each, a sixth of a 128 spp render call). Out of line: the
+    /// kernel's loop stays that of unpacked triangles.
+    #[inline(never)]
+    fn read(&self, scene: &Scene, prim: u32) -> Option<Tri> {
+        if !self.is_triangle(prim) {
+            return None;
+        }
+        // The last mesh that starts at or before `prim` (the first starts at 0).
+        let (first, si) = self.meshes[self.meshes.partition_point(|&(f, _)| f <= prim) - 1];
+        let s = &scene.shapes[si as usize];
+        let Geometry::Mesh(m) = &*s.geometry else { return None };
+        Some(Tri::of(s, m, si as usize, (prim - first) as usize))
     }
 }
 
-/// Scenes with more triangles than this are large: they take the kernel on their first render
-/// only with Lambertian materials (see [`SimdKernel::new`]), and their packets check ties.
+impl Tri {
+    /// Triangle `t` of shape `si` (`s`, of mesh `m`).
+    #[inline(always)]
+    fn of(s: &crate::scene::Shape, m: &crate::geometry::TriangleMesh, si: usize, t: usize) -> Tri {
+        let shading = TriangleFrame::new(s.flat.get(t).copied().flatten(), m, t);
+        Tri { p: m.vertices(t), shading, shape: si as u32, local: t as u32 }
+    }
+}
+
+/// Scenes with more triangles than this are large: where their rays go as packets they take
+/// the kernel on their first render only with Lambertian materials (see [`SimdKernel::new`]),
+/// and their packets check ties.
 const LARGE_TRIANGLES: usize = 20_000;
 /// Scenes with more triangles than this trace one ray at a time (see [`Tracer`]). Between
 /// [`LARGE_TRIANGLES`] and this, packets still won: bsdf_spheres' textured sphere (32k
@@ -330,6 +396,9 @@ const LARGE_TRIANGLES: usize = 20_000;
 /// leave a patch of the sphere) took 0.86 of the single rays' instructions, that sphere on a
 /// floor at depth 6 0.95; with a second sphere (64k triangles) packets took 1.10 of them.
 const PACKET_MAX_TRIANGLES: usize = 40_000;
+/// Scenes that trace single rays unpack their triangles only when their render takes more
+/// camera samples than this per triangle (see [`SimdKernel::new`]).
+const UNPACK_SAMPLES_PER_TRIANGLE: u64 = 3;
 /// Scenes with more analytic spheres than this trace one ray at a time: a packet tests every
 /// sphere on every lane, where the scene's BVH walks a hierarchy of them.
 const PACKET_MAX_SPHERES: usize = 16;
@@ -589,28 +658,51 @@ fn area_of(scene: &Scene, li: u32) -> Option<&AreaLight> {
 
 impl SimdKernel {
     /// The kernel's data, or None when the scene or the settings are out of its scope.
-    pub fn new(scene: &Scene, _settings: &RenderSettings) -> Option<SimdKernel> {
+    pub fn new(scene: &Scene, settings: &RenderSettings) -> Option<SimdKernel> {
         // One environment at most: a lane adds what its escaped ray sees as one contribution.
         if scene.environment_lights.len() > 1 {
             return None;
         }
-        // Large scenes traced single rays when measured; there scalar BSDFs gained nothing in the render loop
-        // and the kernel's set-up (unpacking every triangle) cost 5-10 %: bsdf_spheres' grid
-        // (325k triangles, 8 of 12 spheres not Lambertian, depth 6) took 1.06 the scalar
-        // tracer's time at 512 spp, 1.00 at 2048. Such scenes take the scalar tracer, refused
-        // here before anything is unpacked (the shapes unpacked before the first such one,
-        // bsdf_spheres' two spheres of 32k triangles, cost ~3 % of a 128 spp render).
-        // With the unpacking kept for the scene's next renders the first one still pays it:
-        // on the grid under an area light (depth 2, 128 spp) the kernel's first render call
-        // took 1.21 the scalar tracer's instructions (1.05 its time), a repeat render 1.03
-        // (0.82 the time); under an environment 1.10 and 0.95 (0.98 and 0.77 the time).
-        // So the kernel takes such a scene from its second render on (a sweep, a notebook):
-        // when its set-up is kept, or a first render through the scalar tracer marked its
-        // geometry (`Scene::kernel_declined`; the second render unpacks). Single rays give
-        // the scalar tracer's image bit for bit, so the order of the renders shows in no image.
         let triangles: usize = scene.shapes.iter().map(|s| if let Geometry::Mesh(m) = &*s.geometry { m.triangle_count() } else { 0 }).sum();
         let large = triangles > LARGE_TRIANGLES;
-        if large && scene.shapes.iter().any(|s| s.detail || scene.materials.get(s.material as usize).is_none_or(|m| lambert_sides(m).is_none())) {
+        // The packet BVH holds triangles only: a few spheres are tested on all lanes beside it
+        // (`PacketSpheres`), other shapes (SDF grids) are met through the scene's BVH.
+        // (Moving spheres are met with the other moving shapes, after the packets.)
+        let spheres: Vec<(crate::geometry::Sphere, u32)> = scene
+            .shapes
+            .iter()
+            .enumerate()
+            .filter(|(i, _)| !scene.moving.iter().any(|mv| mv.shape as usize == *i))
+            .filter_map(|(i, s)| if let Geometry::Sphere(sp) = &*s.geometry { Some((*sp, i as u32)) } else { None })
+            .collect();
+        let grids = scene.shapes.iter().any(|s| matches!(&*s.geometry, Geometry::SdfGrid(_)));
+        let single_rays = triangles > PACKET_MAX_TRIANGLES || grids || spheres.len() > PACKET_MAX_SPHERES;
+        // Whether rays go one by one (through the scene's BVH or its own queries): then no
+        // packet tree is built.
+        let scene_rays = single_rays || scene.settings.ray_epsilon > 0.0;
+        // Whether the triangles are unpacked: for the packet tree, and where rays may hit
+        // triangles several times over. A triangle read from its mesh where a ray hit it
+        // cost about a cache miss more than an unpacked one (its index, then its corners),
+        // ~55 ns; unpacking ~200 ns a triangle. On the 1M-triangle sphere on a floor (depth
+        // 6, 64 spp, 256², 4 camera samples a triangle) reading took 1.05 the time of
+        // unpacking; on bsdf_spheres' grid (depth 2, a quarter of the camera rays hit
+        // anything, 128 spp: 0.9 camera samples a triangle) 0.83 (environment map) and 0.94
+        // (area light), and about the same as unpacking at 1024 spp (7 a triangle).
+        let camera_samples = scene.camera.width as u64 * scene.camera.height as u64 * settings.spp as u64;
+        let unpack = !scene_rays || camera_samples > UNPACK_SAMPLES_PER_TRIANGLE * triangles as u64;
+        // A large scene whose materials are not all Lambertian and whose rays go as packets
+        // takes the kernel from its second render on: its set-up (unpacking every triangle,
+        // the packet tree) cost more than the kernel gained on scalar BSDFs in one render.
+        // (Scenes of single rays unpack nothing: bsdf_spheres' grid, 325k triangles, 8 of 12
+        // spheres not Lambertian, depth 2, 128 spp, had taken 1.21 the scalar tracer's
+        // instructions on the kernel's first render with every triangle unpacked, 1.03 on a
+        // repeat render; it now takes the kernel on its first render.) The kernel takes such a
+        // scene when its set-up is kept, or a first render through the scalar tracer marked
+        // its geometry (`Scene::kernel_declined`; the second render unpacks). The tie check
+        // keeps a large scene's packets the scalar tracer's image bit for bit, so the order
+        // of the renders shows in no image.
+        if large && !scene_rays && scene.shapes.iter().any(|s| s.detail || scene.materials.get(s.material as usize).is_none_or(|m| lambert_sides(m).is_none()))
+        {
             let key = KernelGeometry::key(scene);
             if scene.kernel_geometry.get(&key).is_none() && scene.kernel_declined.get(&key).is_none() {
                 return None;
@@ -644,18 +736,6 @@ impl SimdKernel {
         // darker. There the tied lanes take the scene BVH's hit (`Tracer`); elsewhere ties are
         // shared edges and faces hidden inside opaque objects, and the walk skips the check.
         let crossing = scene.materials.iter().any(Material::may_cross);
-        // The packet BVH holds triangles only: a few spheres are tested on all lanes beside it
-        // (`PacketSpheres`), other shapes (SDF grids) are met through the scene's BVH.
-        // (Moving spheres are met with the other moving shapes, after the packets.)
-        let spheres: Vec<(crate::geometry::Sphere, u32)> = scene
-            .shapes
-            .iter()
-            .enumerate()
-            .filter(|(i, _)| !scene.moving.iter().any(|mv| mv.shape as usize == *i))
-            .filter_map(|(i, s)| if let Geometry::Sphere(sp) = &*s.geometry { Some((*sp, i as u32)) } else { None })
-            .collect();
-        let grids = scene.shapes.iter().any(|s| matches!(&*s.geometry, Geometry::SdfGrid(_)));
-        let single_rays = triangles > PACKET_MAX_TRIANGLES || grids || spheres.len() > PACKET_MAX_SPHERES;
         let mut shapes = Vec::with_capacity(scene.shapes.len());
         for s in &scene.shapes {
             let mat = scene.materials.get(s.material as usize)?;
@@ -684,7 +764,7 @@ impl SimdKernel {
         }
         // The meshes' triangles (other shapes' hits come as the scene's surface records:
         // `other_hit`), the ones of the scene's last render if its geometry is the same.
-        let geometry = KernelGeometry::of(scene);
+        let geometry = KernelGeometry::of(scene, unpack);
         let lights = mesh_lights
             .into_iter()
             .zip(&geometry.light_tris)
@@ -744,6 +824,12 @@ impl SimdKernel {
     pub fn use_single_rays(&mut self, scene: &Scene) {
         self.tracer =
             if scene.moving.is_empty() && scene.settings.ray_epsilon <= 0.0 { single_tracer(scene) } else { Tracer::Scene { first: first_triangles(scene) } };
+    }
+
+    /// Whether the meshes' triangles are unpacked (else each hit reads its triangle from the
+    /// mesh).
+    pub fn unpacks_triangles(&self) -> bool {
+        self.geometry.unpacked
     }
 
     /// Whether the AVX-512VL build of the kernel runs.
@@ -904,7 +990,7 @@ impl SimdKernel {
             // The environment map's grid points of the escaped lanes (those `gather` finds
             // no hit for), all eight at once.
             if let Some(env) = env_map {
-                if (0..LANES).any(|l| active & (1 << l) != 0 && hits.prim[l] != OTHER && self.geometry.tris.get(hits.prim[l] as usize).is_none()) {
+                if (0..LANES).any(|l| active & (1 << l) != 0 && hits.prim[l] != OTHER && !self.geometry.is_triangle(hits.prim[l])) {
                     v.env_grid = env.dirs_to_grid(&rays.d);
                 }
             }
@@ -1010,7 +1096,15 @@ impl SimdKernel {
         st.depth[l] += 1;
         let depth = st.depth[l];
         v.emitted[l] = false;
-        let (hit, shape, p, ng, frame) = match (self.geometry.tris.get(prim as usize), other) {
+        let read;
+        let tri = match self.geometry.unpacked_triangle(prim) {
+            None if !self.geometry.unpacked => {
+                read = self.geometry.read(scene, prim);
+                read.as_ref()
+            }
+            tri => tri,
+        };
+        let (hit, shape, p, ng, frame) = match (tri, other) {
             (Some(tri), _) => {
                 let p = tri.p[0] * (1.0 - b1 - b2) + tri.p[1] * b1 + tri.p[2] * b2;
                 let (ng, frame) = tri.shading.at(b1, b2);
