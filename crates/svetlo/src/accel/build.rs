@@ -15,6 +15,7 @@ use super::pages::PagedVec;
 use super::wide::{Node, EMPTY_CHILD, LEAF_BIT, WIDTH};
 use crate::geometry::Aabb;
 use glam::{Vec3A, Vec3Swizzles};
+use std::sync::atomic::{AtomicUsize, Ordering};
 
 #[cfg(test)]
 mod reference;
@@ -46,9 +47,53 @@ pub struct LeafParams {
     pub traversal_cost: f32,
 }
 
-enum BNode {
-    Leaf { start: u32, count: u32 },
-    Inner { bounds: [Aabb; 2], children: Box<[BNode; 2]> },
+/// A node of the binary tree: a leaf (`count` primitives of the order from `start`) or, where
+/// `count` is 0, the inner node at `start` in the [`Arena`]. Eight bytes, copied freely.
+#[derive(Clone, Copy, PartialEq, Eq)]
+struct BNode {
+    start: u32,
+    count: u32,
+}
+
+impl BNode {
+    fn leaf(start: usize, count: usize) -> BNode {
+        BNode { start: start as u32, count: count as u32 }
+    }
+    fn is_leaf(self) -> bool {
+        self.count != 0
+    }
+}
+
+/// A binary inner node: its two children and their boxes (one cache line).
+#[derive(Clone, Copy)]
+struct Inner {
+    bounds: [Aabb; 2],
+    children: [BNode; 2],
+}
+
+/// The binary tree's inner nodes, in one allocation that the build's threads fill at the places
+/// they claim (one allocation per node was a tenth of the build's memory and its page faults).
+/// The places depend on the threads' timing, the tree does not.
+struct Arena {
+    /// Room for `cap` nodes, of which the first `next` are claimed.
+    ptr: *mut Inner,
+    cap: usize,
+    next: AtomicUsize,
+}
+
+// SAFETY: each place is written once, by the thread that claimed it (`push`), and read only
+// after the build's threads have joined (`into_nodes`).
+unsafe impl Sync for Arena {}
+
+impl Arena {
+    fn push(&self, node: Inner) -> BNode {
+        let i = self.next.fetch_add(1, Ordering::Relaxed);
+        // A tree over n primitives has at most n - 1 inner nodes (every leaf holds one at least).
+        assert!(i < self.cap, "more inner nodes than primitives");
+        // SAFETY: i < cap lies in the room, and no other push claims the same place.
+        unsafe { self.ptr.add(i).write(node) };
+        BNode { start: i as u32, count: 0 }
+    }
 }
 
 /// A box in SIMD registers (lanes x, y, z; w unused).
@@ -118,42 +163,43 @@ pub fn build_wide(bounds: impl ExactSizeIterator<Item = Aabb>, params: LeafParam
     }
     assert_eq!(boxes.len(), n, "the bounds' iterator gave another length than it announced");
     let root_bounds = root_box.aabb();
-    let root = build_rec(params, &mut boxes, &mut order, 0, root_bounds, root_centroids, 0);
+    let mut inner: Vec<Inner> = Vec::with_capacity(n - 1);
+    let arena = Arena { ptr: inner.as_mut_ptr(), cap: inner.capacity(), next: AtomicUsize::new(0) };
+    let root = build_rec(params, &arena, &mut boxes, &mut order, 0, root_bounds, root_centroids, 0);
+    // SAFETY: the first `next` places were written (`Arena::push`), the threads have joined.
+    unsafe { inner.set_len(arena.next.into_inner()) };
     drop(boxes);
     let mut nodes = PagedVec::with_capacity(n / 2 + 1);
     // The root is always an inner node, even over a single leaf, so that traversal starts uniformly.
-    let root_wide = match &root {
-        BNode::Leaf { .. } => WideChildren { len: 1, nodes: [&root; WIDTH], boxes: [root_bounds; WIDTH] },
-        BNode::Inner { .. } => collapse(&root),
+    let root_wide = match root.is_leaf() {
+        true => WideChildren { len: 1, nodes: [root; WIDTH], boxes: [root_bounds; WIDTH] },
+        false => collapse(&inner, root),
     };
     nodes.push(Node::empty());
-    fill_node(0, &root_wide, &order, &mut nodes, &mut emit_leaf);
+    fill_node(0, &root_wide, &inner, &order, &mut nodes, &mut emit_leaf);
     (nodes, order)
 }
 
 /// The children of a wide node: the first `len` of `nodes` and `boxes` (on the stack: one
 /// per wide node, no allocation).
-struct WideChildren<'a> {
+struct WideChildren {
     len: usize,
-    nodes: [&'a BNode; WIDTH],
+    nodes: [BNode; WIDTH],
     boxes: [Aabb; WIDTH],
 }
 
-fn fill_node(idx: usize, wide: &WideChildren, order: &[u32], nodes: &mut PagedVec<Node>, emit_leaf: &mut impl FnMut(&[u32]) -> u32) {
+fn fill_node(idx: usize, wide: &WideChildren, inner: &[Inner], order: &[u32], nodes: &mut PagedVec<Node>, emit_leaf: &mut impl FnMut(&[u32]) -> u32) {
     let mut codes = [EMPTY_CHILD; WIDTH];
-    for (k, child) in wide.nodes[..wide.len].iter().enumerate() {
-        codes[k] = match child {
-            BNode::Leaf { start, count } => {
-                let code = emit_leaf(&order[*start as usize..(*start + *count) as usize]);
-                debug_assert!(code & LEAF_BIT != 0);
-                code
-            }
-            BNode::Inner { .. } => {
-                let ci = nodes.len();
-                nodes.push(Node::empty());
-                fill_node(ci, &collapse(child), order, nodes, emit_leaf);
-                ci as u32
-            }
+    for (k, &child) in wide.nodes[..wide.len].iter().enumerate() {
+        codes[k] = if child.is_leaf() {
+            let code = emit_leaf(&order[child.start as usize..(child.start + child.count) as usize]);
+            debug_assert!(code & LEAF_BIT != 0);
+            code
+        } else {
+            let ci = nodes.len();
+            nodes.push(Node::empty());
+            fill_node(ci, &collapse(inner, child), inner, order, nodes, emit_leaf);
+            ci as u32
         };
     }
     nodes[idx] = Node::new(&wide.boxes[..wide.len], codes);
@@ -163,15 +209,16 @@ fn fill_node(idx: usize, wide: &WideChildren, order: &[u32], nodes: &mut PagedVe
 /// child of largest surface area until there are WIDTH (or only leaves remain).
 /// On equal areas the last one opens; an opened child's place takes the last child and
 /// its two children go last (the order a vector's `swap_remove` and `push` give).
-fn collapse(node: &BNode) -> WideChildren<'_> {
-    let BNode::Inner { bounds, children } = node else { unreachable!("collapse of a leaf") };
+fn collapse(inner: &[Inner], node: BNode) -> WideChildren {
+    debug_assert!(!node.is_leaf(), "collapse of a leaf");
+    let Inner { bounds, children } = inner[node.start as usize];
     let mut w = WideChildren { len: 2, nodes: [node; WIDTH], boxes: [bounds[0]; WIDTH] };
-    w.nodes[..2].copy_from_slice(&[&children[0], &children[1]]);
-    w.boxes[..2].copy_from_slice(bounds);
+    w.nodes[..2].copy_from_slice(&children);
+    w.boxes[..2].copy_from_slice(&bounds);
     while w.len < WIDTH {
         let mut best: Option<(usize, f32)> = None;
         for i in 0..w.len {
-            if matches!(w.nodes[i], BNode::Inner { .. }) {
+            if !w.nodes[i].is_leaf() {
                 let a = w.boxes[i].surface_area();
                 if best.is_none_or(|(_, b)| a.total_cmp(&b).is_ge()) {
                     best = Some((i, a));
@@ -179,13 +226,13 @@ fn collapse(node: &BNode) -> WideChildren<'_> {
             }
         }
         let Some((i, _)) = best else { break };
-        let BNode::Inner { bounds, children } = w.nodes[i] else { unreachable!("only inner nodes open") };
+        let Inner { bounds, children } = inner[w.nodes[i].start as usize];
         let last = w.len - 1;
         w.nodes[i] = w.nodes[last];
         w.boxes[i] = w.boxes[last];
-        w.nodes[last] = &children[0];
+        w.nodes[last] = children[0];
         w.boxes[last] = bounds[0];
-        w.nodes[last + 1] = &children[1];
+        w.nodes[last + 1] = children[1];
         w.boxes[last + 1] = bounds[1];
         w.len += 1;
     }
@@ -197,10 +244,12 @@ fn groups(n: usize, group: usize) -> f32 {
 }
 
 /// The subtree over `boxes` (and the primitive ids `order`, permuted alongside), which start
-/// at `first` in the whole order, bounded by `bb`, their centroids by `cb`.
-fn build_rec(p: LeafParams, boxes: &mut [Box3], order: &mut [u32], first: usize, bb: Aabb, cb: Box3, depth: usize) -> BNode {
+/// at `first` in the whole order, bounded by `bb`, their centroids by `cb`. Inner nodes go to
+/// `arena`.
+#[allow(clippy::too_many_arguments)]
+fn build_rec(p: LeafParams, arena: &Arena, boxes: &mut [Box3], order: &mut [u32], first: usize, bb: Aabb, cb: Box3, depth: usize) -> BNode {
     let n = order.len();
-    let leaf = BNode::Leaf { start: first as u32, count: n as u32 };
+    let leaf = BNode::leaf(first, n);
     if n <= 1 {
         return leaf;
     }
@@ -222,7 +271,7 @@ fn build_rec(p: LeafParams, boxes: &mut [Box3], order: &mut [u32], first: usize,
             boxes[k] = old_boxes[i as usize];
             order[k] = old_order[i as usize];
         }
-        return split_folded(p, boxes, order, first, mid, depth);
+        return split_folded(p, arena, boxes, order, first, mid, depth);
     }
     let scale = Vec3A::select(Vec3A::from(ext).cmpgt(Vec3A::ZERO), Vec3A::splat(BINS as f32) / Vec3A::from(ext), Vec3A::ZERO);
     let split = best_split(boxes, cb.min, scale, p.group);
@@ -253,7 +302,7 @@ fn build_rec(p: LeafParams, boxes: &mut [Box3], order: &mut [u32], first: usize,
                 }
             }
             if l > 0 && l < n {
-                return split_into(p, boxes, order, first, l, depth, [lb, rb], [lc, rc]);
+                return split_into(p, arena, boxes, order, first, l, depth, [lb, rb], [lc, rc]);
             }
         }
         None => {
@@ -263,7 +312,7 @@ fn build_rec(p: LeafParams, boxes: &mut [Box3], order: &mut [u32], first: usize,
             }
         }
     }
-    split_folded(p, boxes, order, first, mid, depth)
+    split_folded(p, arena, boxes, order, first, mid, depth)
 }
 
 /// Median splits made (the tests check that they reach that path).
@@ -271,26 +320,39 @@ fn build_rec(p: LeafParams, boxes: &mut [Box3], order: &mut [u32], first: usize,
 static MEDIAN_SPLITS: std::sync::atomic::AtomicUsize = std::sync::atomic::AtomicUsize::new(0);
 
 /// Splits at `mid`, bounding each side by a pass over it.
-fn split_folded(p: LeafParams, boxes: &mut [Box3], order: &mut [u32], first: usize, mid: usize, depth: usize) -> BNode {
+fn split_folded(p: LeafParams, arena: &Arena, boxes: &mut [Box3], order: &mut [u32], first: usize, mid: usize, depth: usize) -> BNode {
     let (left, right) = boxes.split_at(mid);
     let bound = |s: &[Box3]| s.iter().fold((Box3::EMPTY, Box3::EMPTY), |(b, c), x| (b.union(*x), c.grow(x.center())));
     let ((lb, lc), (rb, rc)) = (bound(left), bound(right));
-    split_into(p, boxes, order, first, mid, depth, [lb, rb], [lc, rc])
+    split_into(p, arena, boxes, order, first, mid, depth, [lb, rb], [lc, rc])
 }
 
 /// Builds the two children of a split at `mid`, given their boxes and centroid bounds.
 #[allow(clippy::too_many_arguments)]
-fn split_into(p: LeafParams, boxes: &mut [Box3], order: &mut [u32], first: usize, mid: usize, depth: usize, bounds: [Box3; 2], centroids: [Box3; 2]) -> BNode {
+fn split_into(
+    p: LeafParams,
+    arena: &Arena,
+    boxes: &mut [Box3],
+    order: &mut [u32],
+    first: usize,
+    mid: usize,
+    depth: usize,
+    bounds: [Box3; 2],
+    centroids: [Box3; 2],
+) -> BNode {
     let n = order.len();
     let (lbox, rbox) = boxes.split_at_mut(mid);
     let (lord, rord) = order.split_at_mut(mid);
     let (lb, rb) = (bounds[0].aabb(), bounds[1].aabb());
     let (a, b) = if n >= PARALLEL_MIN {
-        rayon::join(|| build_rec(p, lbox, lord, first, lb, centroids[0], depth + 1), || build_rec(p, rbox, rord, first + mid, rb, centroids[1], depth + 1))
+        rayon::join(
+            || build_rec(p, arena, lbox, lord, first, lb, centroids[0], depth + 1),
+            || build_rec(p, arena, rbox, rord, first + mid, rb, centroids[1], depth + 1),
+        )
     } else {
-        (build_rec(p, lbox, lord, first, lb, centroids[0], depth + 1), build_rec(p, rbox, rord, first + mid, rb, centroids[1], depth + 1))
+        (build_rec(p, arena, lbox, lord, first, lb, centroids[0], depth + 1), build_rec(p, arena, rbox, rord, first + mid, rb, centroids[1], depth + 1))
     };
-    BNode::Inner { bounds: [lb, rb], children: Box::new([a, b]) }
+    arena.push(Inner { bounds: [lb, rb], children: [a, b] })
 }
 
 /// `(((c - lo) * scale) as usize).min(BINS - 1)` on the three axes at once, with the same
