@@ -1405,7 +1405,7 @@ impl SimdKernel {
     /// misses overlap. The uvs go to `uv_ahead` for `gather`.
     #[inline(never)]
     fn prefetch_texels(&self, scene: &Scene, hits: &Hits8, active: u8, uv_ahead: &mut [Vec2; LANES]) {
-        for l in 0..LANES {
+        for (l, uv_out) in uv_ahead.iter_mut().enumerate() {
             if active & (1 << l) == 0 {
                 continue;
             }
@@ -1413,7 +1413,7 @@ impl SimdKernel {
             let sh = &self.shapes[tri.shape as usize];
             if sh.prefetch_texels {
                 let uv = self.uv(scene, tri, hits.b1[l], hits.b2[l]);
-                uv_ahead[l] = uv;
+                *uv_out = uv;
                 sh.front.prefetch(uv);
                 if let Some(b) = &sh.back {
                     b.prefetch(uv);
