@@ -158,6 +158,46 @@ fn textured_diffuse_matches_scalar() {
     assert!(a.mean()[1] < 0.9 * b.mean()[1], "the checkerboards darken the box: {:?} vs {:?}", a.mean(), b.mean());
 }
 
+/// Lambertian materials with bitmaps large enough that the kernel asks for their texels
+/// ahead of shading and keeps the uvs it computed for that (`prefetch_texels`; 640x480
+/// texels of random 8-bit codes, another bitmap on the back of the two-sided walls): the
+/// scalar tracer's image.
+#[test]
+fn large_bitmaps_match_scalar() {
+    use svetlo::bsdf::Material;
+    use svetlo::texture::{Bitmap, FilterMode, Texture, WrapMode};
+    let mut rng = svetlo::sampling::rng::Pcg32::new(5, 7);
+    let table: &'static [f32; 256] = Box::leak(Box::new(std::array::from_fn(|i| i as f32 / 255.0)));
+    let mut bitmap = |scale: f32| {
+        let (w, h) = (640, 480);
+        let codes: Vec<[u8; 4]> = (0..w * h).map(|_| rng.next_u32().to_le_bytes()).collect();
+        Texture::Bitmap {
+            image: std::sync::Arc::new(Bitmap::from_8bit(w, h, codes, table)),
+            filter: FilterMode::Bilinear,
+            wrap: WrapMode::Repeat,
+            to_uv: glam::Affine2::from_scale(glam::Vec2::splat(scale)),
+        }
+    };
+    let (front, back) = (bitmap(1.0), bitmap(3.0));
+    let mut scene = load(&repo_scene("cornell-box.xml"), &[], 48);
+    scene.materials = scene
+        .materials
+        .iter()
+        .map(|m| match m {
+            Material::Diffuse { reflectance: Texture::Constant(_) } => Material::Diffuse { reflectance: front.clone() },
+            Material::TwoSided { .. } => Material::TwoSided {
+                front: Box::new(Material::Diffuse { reflectance: front.clone() }),
+                back: Box::new(Material::Diffuse { reflectance: back.clone() }),
+            },
+            m => m.clone(),
+        })
+        .collect();
+    let mut s = RenderSettings::from_scene(&scene);
+    s.spp = 8;
+    s.seed = 13;
+    compare(&scene, &s, "cornell-box, large bitmaps");
+}
+
 #[test]
 fn same_image_for_any_thread_count() {
     if !avx2() {

@@ -173,7 +173,25 @@ impl Albedo {
             Albedo::Textured(t) => t.eval_inline(tp).clamp(0.0, 1.0),
         }
     }
+
+    /// Whether its lookups land anywhere in a bitmap too large to stay cached (a texel a
+    /// lookup: see [`PREFETCH_TEXELS_MIN`]).
+    fn large_bitmap(&self) -> bool {
+        matches!(self, Albedo::Textured(Texture::Bitmap { image, .. }) if image.width * image.height >= PREFETCH_TEXELS_MIN)
+    }
+
+    /// Asks for the texels a lookup at `uv` will read (a hint: changes no value).
+    #[inline(always)]
+    fn prefetch(&self, uv: Vec2) {
+        if let Albedo::Textured(t) = self {
+            t.prefetch(uv);
+        }
+    }
 }
+
+/// Bitmaps of at least this many texels (1 MiB of 8-bit ones, about an L2 cache) have the
+/// texels of the lanes' hits asked for before shading (`SimdKernel::prefetch_texels`).
+const PREFETCH_TEXELS_MIN: usize = 1 << 18;
 
 /// A shape's material and emission.
 #[derive(Clone, Debug)]
@@ -198,6 +216,8 @@ struct ShapeData {
     /// BSDF built per hit); where not, a hit on a shape that is not a mesh comes without
     /// (`other_hit`: a sphere's uv costs an atan2 and an acos).
     reads_uv: bool,
+    /// Whether a side's reflectance is a large bitmap, whose texels are asked for ahead.
+    prefetch_texels: bool,
 }
 
 /// A mesh area light as `AreaLight::sample_li` samples it, unpacked: its triangles' vertices
@@ -628,6 +648,9 @@ pub struct SimdKernel {
     /// Per light of the scene: a sphere area light of constant radiance, which the lanes
     /// sample without `Light::sample_li`'s dispatch, all lanes at once (`sphere_samples`).
     sphere_lights: Vec<Option<(Sphere, Rgb)>>,
+    /// Whether some shape's texels are asked for ahead of shading (`prefetch_texels`; with
+    /// the triangles unpacked, whose uvs it reads).
+    prefetch_texels: bool,
     /// Run the AVX-512VL build of the kernel (detected at run time; tests may clear it).
     avx512: bool,
 }
@@ -760,7 +783,8 @@ impl SimdKernel {
             let uniform = (scalar_bsdf && !s.detail && mat.is_uniform()).then(|| mat.bsdf(TexPoint::default()));
             let uniform_flags = uniform.as_ref().map_or(LobeFlags::NONE, Bsdf::flags);
             let reads_uv = textured || matches!(light, Some((_, None))) || (scalar_bsdf && uniform.is_none());
-            shapes.push(ShapeData { scalar_bsdf, front, back, textured, light, uniform, uniform_flags, reads_uv });
+            let prefetch_texels = !scalar_bsdf && (front.large_bitmap() || back.as_ref().is_some_and(Albedo::large_bitmap));
+            shapes.push(ShapeData { scalar_bsdf, front, back, textured, light, uniform, uniform_flags, reads_uv, prefetch_texels });
         }
         // The meshes' triangles (other shapes' hits come as the scene's surface records:
         // `other_hit`), the ones of the scene's last render if its geometry is the same.
@@ -811,7 +835,8 @@ impl SimdKernel {
                 _ => None,
             })
             .collect();
-        Some(SimdKernel { tracer, geometry, shapes, lights, sphere_lights, avx512: avx512() })
+        let prefetch_texels = geometry.unpacked && shapes.iter().any(|s| s.prefetch_texels);
+        Some(SimdKernel { tracer, geometry, shapes, lights, sphere_lights, prefetch_texels, avx512: avx512() })
     }
 
     /// Whether rays go as packets (else one by one through the scene's BVH).
@@ -987,6 +1012,9 @@ impl SimdKernel {
             }
             let hits = self.tracer.intersect(scene, &rays, &st.time, active, &mut others);
             self.geometry.prefetch_hits(&hits.prim, active);
+            if self.prefetch_texels {
+                self.prefetch_texels(scene, &hits, active, &mut v.uv_ahead);
+            }
             // The environment map's grid points of the escaped lanes (those `gather` finds
             // no hit for), all eight at once.
             if let Some(env) = env_map {
@@ -1202,7 +1230,11 @@ impl SimdKernel {
             let (front, back) = if sh.textured {
                 // The hit's texture point, as `Scene::interaction` gives it (`SurfaceInteraction::tex_point`).
                 let tp = match hit {
-                    Hit::Tri(tri) => TexPoint { uv: self.uv(scene, tri, b1, b2), prim: tri.local, bary: Vec2::new(b1, b2), p, n: ng },
+                    Hit::Tri(tri) => {
+                        // (With `prefetch_texels` every triangle hit is an unpacked one, whose uv it took.)
+                        let uv = if sh.prefetch_texels && self.prefetch_texels { v.uv_ahead[l] } else { self.uv(scene, tri, b1, b2) };
+                        TexPoint { uv, prim: tri.local, bary: Vec2::new(b1, b2), p, n: ng }
+                    }
                     Hit::Other(si) => si.tex_point(),
                 };
                 (sh.front.at(tp), sh.back.as_ref().map_or(Rgb::BLACK, |b| b.at(tp)))
@@ -1364,6 +1396,29 @@ impl SimdKernel {
             v.delta[l] = false;
             v.generic[l] = true;
             v.nee_ok[l] = true;
+        }
+    }
+
+    /// Asks for the texels the lanes' hits on large bitmaps will read. Such lookups land
+    /// anywhere in the image (bsdf_spheres' textured sphere: 2048x1571 texels, ~1800 a
+    /// pixel), and each lane's waited alone inside `gather`; asked for together, the
+    /// misses overlap. The uvs go to `uv_ahead` for `gather`.
+    #[inline(never)]
+    fn prefetch_texels(&self, scene: &Scene, hits: &Hits8, active: u8, uv_ahead: &mut [Vec2; LANES]) {
+        for (l, uv_out) in uv_ahead.iter_mut().enumerate() {
+            if active & (1 << l) == 0 {
+                continue;
+            }
+            let Some(tri) = self.geometry.unpacked_triangle(hits.prim[l]) else { continue };
+            let sh = &self.shapes[tri.shape as usize];
+            if sh.prefetch_texels {
+                let uv = self.uv(scene, tri, hits.b1[l], hits.b2[l]);
+                *uv_out = uv;
+                sh.front.prefetch(uv);
+                if let Some(b) = &sh.back {
+                    b.prefetch(uv);
+                }
+            }
         }
     }
 
@@ -1564,6 +1619,8 @@ struct Soa {
     front: [[f32; LANES]; 3],
     back: [[f32; LANES]; 3],
     has_back: [bool; LANES],
+    /// The hit's uv where `prefetch_texels` computed it (a shape whose `prefetch_texels` is set).
+    uv_ahead: [Vec2; LANES],
     /// The scene shape hit, the light sampled, and the emission found at the hit when
     /// `emitted` (for the paths' events).
     shape: [u32; LANES],
