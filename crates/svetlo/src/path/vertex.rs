@@ -184,6 +184,17 @@ fn lambertian_pdf(bsdf: &Bsdf, za: f32, zb: f32) -> Option<f32> {
     }
 }
 
+/// `bsdf.pdf(a, b, mode)` from the local z components `za`, `zb` alone (`to_local`'s
+/// `dot(n)`), bit for bit, for a Lambertian BSDF (as in [`lambertian_eval`]): BDPT's MIS
+/// weight asks two or four per connection. None for other BSDFs.
+#[inline]
+fn lambertian_pdf_of(bsdf: &Bsdf, za: f32, zb: f32) -> Option<f32> {
+    if !matches!(bsdf.front, BsdfModel::Diffuse(_)) || bsdf.detail.is_some() {
+        return None;
+    }
+    lambertian_pdf(bsdf, za, zb)
+}
+
 /// `bsdf.sample(to_local(wo), uc, u, mode)` in `frame` and the reverse density
 /// `bsdf.pdf(s.wi, to_local(wo), ..)`, bit for bit and with the same draws, for a Lambertian
 /// BSDF (as in [`lambertian_eval`]; a mask's pass-through excepted): only the local z of
@@ -547,7 +558,10 @@ impl Vertex {
                 if dp2 == 0.0 {
                     return 0.0;
                 }
-                bsdf.pdf(self.shading.to_local(wp), self.shading.to_local(wn), mode)
+                match lambertian_pdf_of(bsdf, wp.dot(self.shading.n), wn.dot(self.shading.n)) {
+                    Some(p) => p,
+                    None => bsdf.pdf(self.shading.to_local(wp), self.shading.to_local(wn), mode),
+                }
             }
         };
         Self::convert_density_dir(pdf, next, wn, d2)
@@ -567,10 +581,15 @@ impl Vertex {
         if da2 == 0.0 || db2 == 0.0 {
             return (0.0, 0.0);
         }
-        let (la, lb) = (self.shading.to_local(wa), self.shading.to_local(wb));
-        let ab = Self::convert_density_dir(bsdf.pdf(la, lb, to_b), b, wb, db2);
-        let ba = Self::convert_density_dir(bsdf.pdf(lb, la, to_a), a, wa, da2);
-        (ab, ba)
+        let (za, zb) = (wa.dot(self.shading.n), wb.dot(self.shading.n));
+        let (pab, pba) = match (lambertian_pdf_of(bsdf, za, zb), lambertian_pdf_of(bsdf, zb, za)) {
+            (Some(ab), Some(ba)) => (ab, ba),
+            _ => {
+                let (la, lb) = (self.shading.to_local(wa), self.shading.to_local(wb));
+                (bsdf.pdf(la, lb, to_b), bsdf.pdf(lb, la, to_a))
+            }
+        };
+        (Self::convert_density_dir(pab, b, wb, db2), Self::convert_density_dir(pba, a, wa, da2))
     }
 
     /// Area density at `v` of a ray leaving this light vertex toward it (emission's
