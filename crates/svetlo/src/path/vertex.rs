@@ -732,6 +732,46 @@ mod tests {
         }
     }
 
+    /// `lambertian_pdf_of` (the MIS weight's densities) is the BSDF's own `pdf` in the local
+    /// frame, bit for bit: one- and two-sided diffuse BSDFs, masks, both sides, tangent
+    /// directions; None for the BSDFs it does not cover.
+    #[test]
+    fn lambertian_pdf_is_bsdf_pdf() {
+        let bsdfs = lambertian_bsdfs();
+        let mut rng = Pcg32::new(13, 7);
+        let dir = |rng: &mut Pcg32| square_to_uniform_sphere(Vec2::new(rng.next_f32(), rng.next_f32()));
+        let mut positive = 0;
+        for _ in 0..2000 {
+            let frame = Frame::from_normal(dir(&mut rng));
+            let (mut wa, mut wb) = (dir(&mut rng), dir(&mut rng));
+            if rng.next_f32() < 0.1 {
+                wa = -frame.s;
+            }
+            if rng.next_f32() < 0.1 {
+                wb = frame.t;
+            }
+            for (k, b) in bsdfs.iter().enumerate() {
+                for mode in [TransportMode::Radiance, TransportMode::Importance] {
+                    let want = b.pdf(frame.to_local(wa), frame.to_local(wb), mode);
+                    let got = lambertian_pdf_of(b, wa.dot(frame.n), wb.dot(frame.n)).expect("a Lambertian BSDF");
+                    assert_eq!(got.to_bits(), want.to_bits(), "bsdf {k} wa {wa} wb {wb}");
+                    positive += usize::from(got > 0.0);
+                }
+            }
+        }
+        assert!(positive > 4000, "{positive}");
+        let rough = BsdfModel::OrenNayar(OrenNayar { reflectance: Rgb::splat(0.5), sigma: 0.3 });
+        let others = [
+            Bsdf { front: rough.clone(), back: None, opacity: 1.0, detail: None },
+            Bsdf { front: diffuse(0.5), back: Some(rough), opacity: 1.0, detail: None },
+            Bsdf { front: diffuse(0.5), back: None, opacity: 1.0, detail: Some(Detail::new(Vec3::new(0.1, 0.0, 1.0), true)) },
+        ];
+        // (From below, so that the second one's back is asked for.)
+        for b in &others {
+            assert!(lambertian_pdf_of(b, -1.0, -0.5).is_none());
+        }
+    }
+
     /// `lambertian_sample` is the BSDF's own `sample` in the local frame and its reverse
     /// `pdf`, bit for bit (the walk's generic route), with the same draws: one- and two-sided
     /// diffuse BSDFs, masks, both sides, tangent directions; Some(None) where `sample` fails;
