@@ -16,7 +16,10 @@ use crate::error::Result;
 use crate::film::{Film, Image};
 use crate::geometry::Ray;
 use crate::lpe::{AovSet, Event, LayerMask, LightTracker, ProductView, Tracker};
-use crate::path::{camera_subpath, connect, light_subpath, weighted_camera_connection, Connection, PathConfig, ShadowPackets, Vertex};
+use crate::path::{
+    camera_subpath, camera_subpath_traced, connect, light_subpath, light_subpath_traced, weighted_camera_connection, Connection, PathConfig, ShadowPackets,
+    Vertex,
+};
 use crate::sampling::Sampler;
 use crate::scene::Scene;
 use crate::spectrum::Rgb;
@@ -101,9 +104,11 @@ impl SplatEstimator for Estimator {
             for x in x0..x1 {
                 for i in t.s0..t.s0 + t.n {
                     let (raster, ray) = super::camera_sample(&cam, sampler, x, y, i);
-                    // `sample_bdpt` with no AOVs and every strategy counted.
-                    camera_subpath(scene, cfg, &ray, raster, sampler, &mut sc.camera);
-                    light_subpath(scene, cfg, ray.time, sampler, &mut sc.light);
+                    // `sample_bdpt` with no AOVs and every strategy counted, the walks' hits
+                    // made from the packet tree's triangle table.
+                    let trace = |r: &Ray| packets.intersect(scene, r);
+                    camera_subpath_traced(scene, cfg, &ray, raster, sampler, &mut sc.camera, &trace);
+                    light_subpath_traced(scene, cfg, ray.time, sampler, &mut sc.light, &trace);
                     let mut l = Rgb::BLACK;
                     for tc in 1..=sc.camera.len() {
                         for s in 0..=sc.light.len() {

@@ -15,7 +15,8 @@ use crate::film::{Film, FilmTile};
 use crate::geometry::Ray;
 use crate::lpe::LightTracker;
 use crate::path::{
-    camera_connection, connect, light_subpath, light_walk, set_lane, BatchScratch, CameraBatch, LightWalk, PathConfig, ShadowPackets, Staged, Vertex,
+    camera_connection, connect, light_subpath, light_subpath_traced, light_walk, set_lane, BatchScratch, CameraBatch, LightWalk, PathConfig, ShadowPackets,
+    Staged, Vertex,
 };
 use crate::sampling::{IndependentSampler, Sampler, SamplerKind, SobolSampler};
 use crate::scene::Scene;
@@ -119,7 +120,8 @@ impl SplatEstimator for Estimator {
             for x in x0..x1 {
                 for s in t.s0..t.s0 + t.n {
                     let (raster, ray) = super::camera_sample(&cam, sampler, x, y, s);
-                    light_subpath(t.scene, &self.cfg, ray.time, sampler, path);
+                    // The walk's hits made from the packet tree's triangle table.
+                    light_subpath_traced(t.scene, &self.cfg, ray.time, sampler, path, &|r: &Ray| packets.intersect(t.scene, r));
                     for s in 1..=path.len() {
                         if let Some(c) = camera_connection(t.scene, &self.cfg, path, s, sampler) {
                             pending.push(packets, c.l, c.raster, c.shadow.unwrap_or(ShadowedSplats::CLEAR), &mut out);

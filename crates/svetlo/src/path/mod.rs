@@ -47,7 +47,7 @@ pub use mis::mis_weight;
 pub use shadow::{set_lane, ClosestHits, ShadowPackets};
 pub use vertex::{Event, EventKind, Vertex, VertexKind};
 pub use walk::{camera_subpath, light_subpath, random_walk};
-pub(crate) use walk::{light_walk, LightWalk};
+pub(crate) use walk::{camera_subpath_traced, light_subpath_traced, light_walk, LightWalk};
 
 use crate::scene::Scene;
 

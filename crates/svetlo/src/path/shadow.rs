@@ -36,6 +36,8 @@ pub struct ShadowPackets {
     tris: Vec<HitTriangle>,
     /// Whether closest hits are the scene BVH's (no material lets a path cross a surface).
     exact_closest: bool,
+    /// Index in `tris` of each shape's first triangle.
+    first: Vec<u32>,
 }
 
 /// A triangle's share of `Scene::interaction` for a mesh, gathered once (the packet tree
@@ -71,8 +73,10 @@ impl ShadowPackets {
             return None;
         }
         let mut tris = Vec::new();
+        let mut first = Vec::with_capacity(scene.shapes.len());
         for (shape, s) in scene.shapes.iter().enumerate() {
             let Geometry::Mesh(m) = &*s.geometry else { return None };
+            first.push(tris.len() as u32);
             if tris.len() + m.triangle_count() > MAX_TRIANGLES {
                 return None;
             }
@@ -84,7 +88,7 @@ impl ShadowPackets {
         }
         let bvh = PacketBvh::build(&tris.iter().map(|t| t.p).collect::<Vec<_>>());
         let exact_closest = !scene.materials.iter().any(Material::may_cross);
-        bvh.simd().then_some(ShadowPackets { bvh, tris, exact_closest })
+        bvh.simd().then_some(ShadowPackets { bvh, tris, exact_closest, first })
     }
 
     /// Mask of the rays (at most eight, as `Scene::shadow_ray` makes them) that are blocked.
@@ -147,27 +151,32 @@ impl ShadowPackets {
         }
         // A miss's prim is u32::MAX, past the table.
         let tri = self.tris.get(hits.hits.prim[l] as usize)?;
-        let (b1, b2) = (hits.hits.b1[l], hits.hits.b2[l]);
-        // `Scene::interaction`'s mesh case, operation for operation.
-        let [p0, p1, p2] = tri.p;
+        Some(tri.interaction(hits.hits.t[l], hits.hits.b1[l], hits.hits.b2[l], ray))
+    }
+
+    /// `scene.intersect(ray)`, bit for bit: the scene BVH's hit, its surface record from
+    /// the triangle table (BDPT's walks: no walk through the mesh per hit).
+    #[inline]
+    pub fn intersect(&self, scene: &Scene, ray: &Ray) -> Option<SurfaceInteraction> {
+        let h = scene.accel.intersect(ray)?;
+        let tri = &self.tris[(self.first[h.shape as usize] + h.prim) as usize];
+        Some(tri.interaction(h.t, h.b1, h.b2, ray))
+    }
+}
+
+impl HitTriangle {
+    /// The surface record of a hit at `t` with barycentrics `b1`, `b2` along `ray`:
+    /// `Scene::interaction`'s mesh case, operation for operation.
+    #[inline(always)]
+    fn interaction(&self, t: f32, b1: f32, b2: f32, ray: &Ray) -> SurfaceInteraction {
+        let [p0, p1, p2] = self.p;
         let p = p0 * (1.0 - b1 - b2) + p1 * b1 + p2 * b2;
-        let uv = match tri.uvs {
+        let uv = match self.uvs {
             None => Vec2::new(b1, b2),
             Some([t0, t1, t2]) => t0 * (1.0 - b1 - b2) + t1 * b1 + t2 * b2,
         };
-        let (ng, shading) = tri.shading.at(b1, b2);
-        Some(SurfaceInteraction {
-            p,
-            t: hits.hits.t[l],
-            ng,
-            shading,
-            uv,
-            shape: tri.shape,
-            prim: tri.prim,
-            bary: Vec2::new(b1, b2),
-            wo: -ray.d,
-            time: ray.time,
-        })
+        let (ng, shading) = self.shading.at(b1, b2);
+        SurfaceInteraction { p, t, ng, shading, uv, shape: self.shape, prim: self.prim, bary: Vec2::new(b1, b2), wo: -ray.d, time: ray.time }
     }
 }
 
@@ -220,7 +229,7 @@ mod tests {
         TriangleMesh { positions, normals: if normals == 0 { vec![] } else { ns }, uvs: if uvs { ts } else { vec![] }, indices }
     }
 
-    /// A lane's surface record (`closest` then `interaction`) is `Scene::intersect`'s whole,
+    /// A lane's surface record (`closest` then `interaction`), and `intersect`'s, is `Scene::intersect`'s whole,
     /// bit for bit (point, normals, shading frame, uv, indices, wo, time), on flat and smooth
     /// triangles of meshes with and without uvs.
     #[test]
@@ -249,6 +258,8 @@ mod tests {
                 let want = scene.intersect(r);
                 let got = packets.interaction(&scene, &h, l, r);
                 assert_eq!(format!("{got:?}"), format!("{want:?}"), "round {round} lane {l}");
+                let single = packets.intersect(&scene, r);
+                assert_eq!(format!("{single:?}"), format!("{want:?}"), "round {round} lane {l}: intersect");
                 if let Some(si) = want {
                     hits += 1;
                     smooth += usize::from(scene.shapes[si.shape as usize].flat.get(si.prim as usize).copied().flatten().is_none());

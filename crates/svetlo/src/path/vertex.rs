@@ -184,6 +184,17 @@ fn lambertian_pdf(bsdf: &Bsdf, za: f32, zb: f32) -> Option<f32> {
     }
 }
 
+/// `bsdf.pdf(a, b, mode)` from the local z components `za`, `zb` alone (`to_local`'s
+/// `dot(n)`), bit for bit, for a Lambertian BSDF (as in [`lambertian_eval`]): BDPT's MIS
+/// weight asks two or four per connection. None for other BSDFs.
+#[inline]
+fn lambertian_pdf_of(bsdf: &Bsdf, za: f32, zb: f32) -> Option<f32> {
+    if !matches!(bsdf.front, BsdfModel::Diffuse(_)) || bsdf.detail.is_some() {
+        return None;
+    }
+    lambertian_pdf(bsdf, za, zb)
+}
+
 /// `bsdf.sample(to_local(wo), uc, u, mode)` in `frame` and the reverse density
 /// `bsdf.pdf(s.wi, to_local(wo), ..)`, bit for bit and with the same draws, for a Lambertian
 /// BSDF (as in [`lambertian_eval`]; a mask's pass-through excepted): only the local z of
@@ -547,7 +558,10 @@ impl Vertex {
                 if dp2 == 0.0 {
                     return 0.0;
                 }
-                bsdf.pdf(self.shading.to_local(wp), self.shading.to_local(wn), mode)
+                match lambertian_pdf_of(bsdf, wp.dot(self.shading.n), wn.dot(self.shading.n)) {
+                    Some(p) => p,
+                    None => bsdf.pdf(self.shading.to_local(wp), self.shading.to_local(wn), mode),
+                }
             }
         };
         Self::convert_density_dir(pdf, next, wn, d2)
@@ -567,10 +581,15 @@ impl Vertex {
         if da2 == 0.0 || db2 == 0.0 {
             return (0.0, 0.0);
         }
-        let (la, lb) = (self.shading.to_local(wa), self.shading.to_local(wb));
-        let ab = Self::convert_density_dir(bsdf.pdf(la, lb, to_b), b, wb, db2);
-        let ba = Self::convert_density_dir(bsdf.pdf(lb, la, to_a), a, wa, da2);
-        (ab, ba)
+        let (za, zb) = (wa.dot(self.shading.n), wb.dot(self.shading.n));
+        let (pab, pba) = match (lambertian_pdf_of(bsdf, za, zb), lambertian_pdf_of(bsdf, zb, za)) {
+            (Some(ab), Some(ba)) => (ab, ba),
+            _ => {
+                let (la, lb) = (self.shading.to_local(wa), self.shading.to_local(wb));
+                (bsdf.pdf(la, lb, to_b), bsdf.pdf(lb, la, to_a))
+            }
+        };
+        (Self::convert_density_dir(pab, b, wb, db2), Self::convert_density_dir(pba, a, wa, da2))
     }
 
     /// Area density at `v` of a ray leaving this light vertex toward it (emission's
@@ -710,6 +729,46 @@ mod tests {
         // (From below, so that the second one's back is asked for.)
         for b in &others {
             assert!(lambertian_eval(b, Vec3::Z, -Vec3::Z, Vec3::Z, TransportMode::Radiance).is_none());
+        }
+    }
+
+    /// `lambertian_pdf_of` (the MIS weight's densities) is the BSDF's own `pdf` in the local
+    /// frame, bit for bit: one- and two-sided diffuse BSDFs, masks, both sides, tangent
+    /// directions; None for the BSDFs it does not cover.
+    #[test]
+    fn lambertian_pdf_is_bsdf_pdf() {
+        let bsdfs = lambertian_bsdfs();
+        let mut rng = Pcg32::new(13, 7);
+        let dir = |rng: &mut Pcg32| square_to_uniform_sphere(Vec2::new(rng.next_f32(), rng.next_f32()));
+        let mut positive = 0;
+        for _ in 0..2000 {
+            let frame = Frame::from_normal(dir(&mut rng));
+            let (mut wa, mut wb) = (dir(&mut rng), dir(&mut rng));
+            if rng.next_f32() < 0.1 {
+                wa = -frame.s;
+            }
+            if rng.next_f32() < 0.1 {
+                wb = frame.t;
+            }
+            for (k, b) in bsdfs.iter().enumerate() {
+                for mode in [TransportMode::Radiance, TransportMode::Importance] {
+                    let want = b.pdf(frame.to_local(wa), frame.to_local(wb), mode);
+                    let got = lambertian_pdf_of(b, wa.dot(frame.n), wb.dot(frame.n)).expect("a Lambertian BSDF");
+                    assert_eq!(got.to_bits(), want.to_bits(), "bsdf {k} wa {wa} wb {wb}");
+                    positive += usize::from(got > 0.0);
+                }
+            }
+        }
+        assert!(positive > 4000, "{positive}");
+        let rough = BsdfModel::OrenNayar(OrenNayar { reflectance: Rgb::splat(0.5), sigma: 0.3 });
+        let others = [
+            Bsdf { front: rough.clone(), back: None, opacity: 1.0, detail: None },
+            Bsdf { front: diffuse(0.5), back: Some(rough), opacity: 1.0, detail: None },
+            Bsdf { front: diffuse(0.5), back: None, opacity: 1.0, detail: Some(Detail::new(Vec3::new(0.1, 0.0, 1.0), true)) },
+        ];
+        // (From below, so that the second one's back is asked for.)
+        for b in &others {
+            assert!(lambertian_pdf_of(b, -1.0, -0.5).is_none());
         }
     }
 

@@ -26,6 +26,19 @@ fn lens_point(scene: &Scene, cfg: &PathConfig, ray: &Ray) -> Vec3 {
 /// vertex, then what the walk finds (a vertex at infinity last if the ray escapes into
 /// environment light). Replaces the contents of `path`.
 pub fn camera_subpath<S: Sampler + ?Sized>(scene: &Scene, cfg: &PathConfig, ray: &Ray, raster: Vec2, sampler: &mut S, path: &mut Vec<Vertex>) {
+    camera_subpath_traced(scene, cfg, ray, raster, sampler, path, &|r: &Ray| scene.intersect(r));
+}
+
+/// [`camera_subpath`] with its rays traced by `trace`, which answers as `Scene::intersect`.
+pub(crate) fn camera_subpath_traced<S: Sampler + ?Sized, T: Fn(&Ray) -> Option<SurfaceInteraction>>(
+    scene: &Scene,
+    cfg: &PathConfig,
+    ray: &Ray,
+    raster: Vec2,
+    sampler: &mut S,
+    path: &mut Vec<Vertex>,
+    trace: &T,
+) {
     path.clear();
     if cfg.max_camera_vertices == 0 {
         return;
@@ -34,16 +47,31 @@ pub fn camera_subpath<S: Sampler + ?Sized>(scene: &Scene, cfg: &PathConfig, ray:
     cam.time = ray.time;
     path.push(cam);
     let (_, pdf_dir) = cfg.lens.map_or((0.0, 0.0), |l| l.pdf_we(ray));
-    random_walk(scene, *ray, sampler, Rgb::WHITE, pdf_dir, cfg.max_camera_vertices, cfg.rr_depth, TransportMode::Radiance, path);
+    let mut w = Walk::new(*ray, Rgb::WHITE, pdf_dir, cfg.max_camera_vertices, cfg.rr_depth, TransportMode::Radiance);
+    if w.goes_on(path) {
+        while w.step(scene, trace(w.ray()).as_ref(), sampler, path) {}
+    }
 }
 
 /// A light subpath: a light chosen by the scene's light selection, a ray from it by
 /// `Light::sample_le`, then the walk. Replaces the contents of `path` (empty if the scene
 /// has no light or max_depth leaves no room).
 pub fn light_subpath<S: Sampler + ?Sized>(scene: &Scene, cfg: &PathConfig, time: f32, sampler: &mut S, path: &mut Vec<Vertex>) {
+    light_subpath_traced(scene, cfg, time, sampler, path, &|r: &Ray| scene.intersect(r));
+}
+
+/// [`light_subpath`] with its rays traced by `trace`, which answers as `Scene::intersect`.
+pub(crate) fn light_subpath_traced<S: Sampler + ?Sized, T: Fn(&Ray) -> Option<SurfaceInteraction>>(
+    scene: &Scene,
+    cfg: &PathConfig,
+    time: f32,
+    sampler: &mut S,
+    path: &mut Vec<Vertex>,
+    trace: &T,
+) {
     let Some(mut lw) = light_walk(scene, cfg, time, sampler, path) else { return };
     if lw.walk.goes_on(path) {
-        while lw.walk.step(scene, scene.intersect(lw.walk.ray()).as_ref(), sampler, path) {}
+        while lw.walk.step(scene, trace(lw.walk.ray()).as_ref(), sampler, path) {}
     }
     lw.finish(path);
 }
