@@ -1053,7 +1053,7 @@ impl SimdKernel {
                 }
             }
             // Writes every lane's next ray, shadow ray and state; only `go` lanes' count.
-            shade8(&v, settings.rr_depth, &mut st, &mut rays, &mut shadow, &mut o);
+            self.shade8_on_cpu(&v, settings.rr_depth, &mut st, &mut rays, &mut shadow, &mut o);
             let (mut smask, mut counted) = (0u8, 0u8);
             for l in 0..LANES {
                 if go & (1 << l) == 0 {
@@ -1099,6 +1099,27 @@ impl SimdKernel {
         }
     }
 
+    /// [`shade8`] in its own function of this CPU's build. Inlined into the tile loop, its
+    /// loop stayed scalar code (a branch per lane at most selects: `cosine_hemisphere`'s
+    /// major axis, `offset3`'s side are coin tosses); in a function of its own it compiles to
+    /// eight-lane code with no branch. (`#[inline(never)]`: inlined back, it is scalar again.)
+    #[inline(always)]
+    fn shade8_on_cpu<S>(&self, v: &Soa, rr_depth: i32, st: &mut Paths<S>, rays: &mut Rays8, shadow: &mut Rays8, o: &mut Out) {
+        #[cfg(target_arch = "x86_64")]
+        if crate::accel::packet::avx2() {
+            // SAFETY: `avx2()` detects AVX2 at run time, and `avx512` is set only where
+            // AVX-512F and VL were.
+            return unsafe {
+                if self.avx512 {
+                    shade8_avx512(&v.num, rr_depth, &mut st.num, rays, shadow, o)
+                } else {
+                    shade8_avx2(&v.num, rr_depth, &mut st.num, rays, shadow, o)
+                }
+            };
+        }
+        shade8(&v.num, rr_depth, &mut st.num, rays, shadow, o)
+    }
+
     /// The per-lane part of one vertex (as `shade`): emission found, the depth test, the
     /// random numbers, the light and its triangle chosen, and at a material other than a
     /// Lambertian one its scalar BSDF's value toward the light sample and its own sample; the
@@ -1121,8 +1142,8 @@ impl SimdKernel {
         other: Option<&SurfaceInteraction>,
         v: &mut Soa,
     ) -> bool {
-        st.depth[l] += 1;
-        let depth = st.depth[l];
+        st.num.depth[l] += 1;
+        let depth = st.num.depth[l];
         v.emitted[l] = false;
         let read;
         let tri = match self.geometry.unpacked_triangle(prim) {
@@ -1160,33 +1181,33 @@ impl SimdKernel {
                 None => area_of(scene, li).map_or(Rgb::BLACK, |a| a.l(ng, self.hit_uv(scene, &hit, b1, b2), wo_w)),
             };
             if !le.is_black() && !hide {
-                let w = if st.prev_specular[l] {
+                let w = if st.num.prev_specular[l] {
                     1.0
                 } else {
-                    let prev_p = Vec3::new(st.prev_p[0][l], st.prev_p[1][l], st.prev_p[2][l]);
+                    let prev_p = Vec3::new(st.num.prev_p[0][l], st.num.prev_p[1][l], st.num.prev_p[2][l]);
                     let pdf_li = area_of(scene, li).map_or(0.0, |a| a.pdf_li(prev_p, p, ng));
                     let pdf_bsdf = match &st.prev_bsdf[l] {
                         Some(pb) => match self.shapes[pb.shape as usize].uniform.as_ref().or(st.prev_own[l].as_ref()) {
-                            Some(bsdf) => bsdf_pdf_toward(bsdf, &pb.frame, pb.wo, prev_p, p).unwrap_or(st.prev_pdf[l]),
+                            Some(bsdf) => bsdf_pdf_toward(bsdf, &pb.frame, pb.wo, prev_p, p).unwrap_or(st.num.prev_pdf[l]),
                             // Never: a shape without a uniform BSDF left its own in `prev_own`.
-                            None => st.prev_pdf[l],
+                            None => st.num.prev_pdf[l],
                         },
                         None => {
                             // The diffuse BSDF's density toward the hit point, as the scalar
                             // tracer's `bsdf_pdf_toward` (the same operations).
-                            let prev_n = Vec3::new(st.prev_n[0][l], st.prev_n[1][l], st.prev_n[2][l]);
+                            let prev_n = Vec3::new(st.num.prev_n[0][l], st.num.prev_n[1][l], st.num.prev_n[2][l]);
                             let dp = p - prev_p;
                             let len = dp.length();
                             if len > 0.0 && len.is_finite() {
                                 (dp / len).dot(prev_n).max(0.0) * INV_PI
                             } else {
-                                st.prev_pdf[l]
+                                st.num.prev_pdf[l]
                             }
                         }
                     };
                     power_heuristic(1.0, pdf_bsdf, 1.0, scene.light_pmf(li) * pdf_li)
                 };
-                let beta = Rgb::new(st.beta[0][l], st.beta[1][l], st.beta[2][l]);
+                let beta = Rgb::new(st.num.beta[0][l], st.num.beta[1][l], st.num.beta[2][l]);
                 st.add(l, beta * le * w);
                 v.emitted[l] = true;
                 put_rgb(&mut v.emit, l, beta * le * w);
@@ -1212,20 +1233,20 @@ impl SimdKernel {
             };
             (u_light, u_l2, uc, sampler.next_2d(), sampler.next_1d())
         };
-        v.u_rr[l] = u_rr;
+        v.num.u_rr[l] = u_rr;
         let put = |a: &mut [[f32; LANES]; 3], x: Vec3| {
             a[0][l] = x.x;
             a[1][l] = x.y;
             a[2][l] = x.z;
         };
         let putc = |a: &mut [[f32; LANES]; 3], x: Rgb| put_rgb(a, l, x);
-        put(&mut v.p, p);
-        put(&mut v.ng, ng);
-        put(&mut v.fs, frame.s);
-        put(&mut v.ft, frame.t);
-        put(&mut v.fnn, frame.n);
-        put(&mut v.wo, wo_w);
-        v.scalar_bsdf[l] = sh.scalar_bsdf;
+        put(&mut v.num.p, p);
+        put(&mut v.num.ng, ng);
+        put(&mut v.num.fs, frame.s);
+        put(&mut v.num.ft, frame.t);
+        put(&mut v.num.fnn, frame.n);
+        put(&mut v.num.wo, wo_w);
+        v.num.scalar_bsdf[l] = sh.scalar_bsdf;
         if !sh.scalar_bsdf {
             let (front, back) = if sh.textured {
                 // The hit's texture point, as `Scene::interaction` gives it (`SurfaceInteraction::tex_point`).
@@ -1243,11 +1264,11 @@ impl SimdKernel {
                 // stored field by field stalled on store forwarding, 1-2 % of veach-mis.)
                 (sh.front.constant(), sh.back.as_ref().map_or(Rgb::BLACK, Albedo::constant))
             };
-            putc(&mut v.front, front);
-            putc(&mut v.back, back);
-            v.has_back[l] = sh.back.is_some();
-            v.u[0][l] = u.x;
-            v.u[1][l] = u.y;
+            putc(&mut v.num.front, front);
+            putc(&mut v.num.back, back);
+            v.num.has_back[l] = sh.back.is_some();
+            v.num.u[0][l] = u.x;
+            v.num.u[1][l] = u.y;
             if st.prev_bsdf[l].is_some() {
                 st.prev_bsdf[l] = None;
             }
@@ -1288,13 +1309,13 @@ impl SimdKernel {
             a[2][l] = x.z;
         };
         let putc = |a: &mut [[f32; LANES]; 3], x: Rgb| put_rgb(a, l, x);
-        v.nee_ok[l] = false;
-        v.generic[l] = false;
+        v.num.nee_ok[l] = false;
+        v.num.generic[l] = false;
         if scene.lights.is_empty() {
             return;
         }
         let (li, pmf, _) = scene.light_distribution.sample_discrete(u_light);
-        v.pmf[l] = pmf;
+        v.num.pmf[l] = pmf;
         v.light[l] = li as u32;
         match self.lights.get(li) {
             // Any other light by its own sampling (`path::light_sample_unshadowed`'s first tests).
@@ -1317,13 +1338,13 @@ impl SimdKernel {
                     Ok(n) => n,
                     Err(s) => s.normals_at(b.x, b.y).0,
                 };
-                put(&mut v.lp, p0 + e1 * b.x + e2 * b.y);
-                put(&mut v.ln, n);
-                putc(&mut v.lrad, ml.radiance);
-                v.pdf_area[l] = ml.pdf_area;
-                v.infinite[l] = false;
-                v.delta[l] = false;
-                v.nee_ok[l] = true;
+                put(&mut v.num.lp, p0 + e1 * b.x + e2 * b.y);
+                put(&mut v.num.ln, n);
+                putc(&mut v.num.lrad, ml.radiance);
+                v.num.pdf_area[l] = ml.pdf_area;
+                v.num.infinite[l] = false;
+                v.num.delta[l] = false;
+                v.num.nee_ok[l] = true;
             }
             _ => {}
         }
@@ -1335,16 +1356,16 @@ impl SimdKernel {
         let light = &scene.lights[li];
         if let Some(ls) = light.sample_li(p, u_l2, &scene.bounds).filter(|ls| ls.pdf > 0.0 && !ls.li.is_black()) {
             for k in 0..3 {
-                v.lp[k][l] = ls.p[k];
-                v.ln[k][l] = ls.n[k];
-                v.gwi[k][l] = ls.wi[k];
+                v.num.lp[k][l] = ls.p[k];
+                v.num.ln[k][l] = ls.n[k];
+                v.num.gwi[k][l] = ls.wi[k];
             }
-            put_rgb(&mut v.lrad, l, ls.li);
-            v.gpdf[l] = ls.pdf;
-            v.infinite[l] = ls.infinite;
-            v.delta[l] = light.is_delta();
-            v.generic[l] = true;
-            v.nee_ok[l] = true;
+            put_rgb(&mut v.num.lrad, l, ls.li);
+            v.num.gpdf[l] = ls.pdf;
+            v.num.infinite[l] = ls.infinite;
+            v.num.delta[l] = light.is_delta();
+            v.num.generic[l] = true;
+            v.num.nee_ok[l] = true;
         }
     }
 
@@ -1365,7 +1386,7 @@ impl SimdKernel {
             let Some(Some((s, _))) = self.sphere_lights.get(v.light[l] as usize).filter(|_| pending & (1 << l) != 0) else { continue };
             for k in 0..3 {
                 q.center[k][l] = s.center[k];
-                q.p_ref[k][l] = v.p[k][l];
+                q.p_ref[k][l] = v.num.p[k][l];
             }
             q.radius[l] = s.radius;
             q.flip[l] = s.flip_normals;
@@ -1386,16 +1407,16 @@ impl SimdKernel {
                 continue;
             }
             for k in 0..3 {
-                v.lp[k][l] = o.p[k][l];
-                v.ln[k][l] = o.n[k][l];
-                v.gwi[k][l] = o.wi[k][l];
+                v.num.lp[k][l] = o.p[k][l];
+                v.num.ln[k][l] = o.n[k][l];
+                v.num.gwi[k][l] = o.wi[k][l];
             }
-            put_rgb(&mut v.lrad, l, *le);
-            v.gpdf[l] = o.pdf[l];
-            v.infinite[l] = false;
-            v.delta[l] = false;
-            v.generic[l] = true;
-            v.nee_ok[l] = true;
+            put_rgb(&mut v.num.lrad, l, *le);
+            v.num.gpdf[l] = o.pdf[l];
+            v.num.infinite[l] = false;
+            v.num.delta[l] = false;
+            v.num.generic[l] = true;
+            v.num.nee_ok[l] = true;
         }
     }
 
@@ -1486,7 +1507,7 @@ impl SimdKernel {
         if flags.has_non_specular() {
             self.light_sample(scene, l, v, si.p, u_light, Vec2::new(ul_x, ul_y));
         } else {
-            v.nee_ok[l] = false;
+            v.num.nee_ok[l] = false;
         }
         v.flags[l] = flags;
     }
@@ -1509,11 +1530,11 @@ impl SimdKernel {
         let wo = frame.to_local(si.wo);
         let lane = |a: &[[f32; LANES]; 3]| Vec3::new(a[0][l], a[1][l], a[2][l]);
         // The light's direction as `shade8` finds it (a mesh light's as `AreaLight::sample_li`).
-        let wi = v.nee_ok[l].then(|| {
-            let wi_w = if v.generic[l] {
-                lane(&v.gwi)
+        let wi = v.num.nee_ok[l].then(|| {
+            let wi_w = if v.num.generic[l] {
+                lane(&v.num.gwi)
             } else {
-                let d = lane(&v.lp) - p;
+                let d = lane(&v.num.lp) - p;
                 d / d.length_squared().sqrt()
             };
             frame.to_local(wi_w)
@@ -1521,31 +1542,31 @@ impl SimdKernel {
         // The value and density toward it, and the BSDF's own sample, from one call.
         let (nee, bs) = bsdf.eval_pdf_and_sample_given(wo, wi, uc, Vec2::new(ux, uy), TransportMode::Radiance, v.beckmann_m[l].take());
         if let (Some(wi), Some((f, pdf))) = (wi, nee) {
-            v.nee_ok[l] = !f.is_black();
-            put_rgb(&mut v.bf, l, f);
+            v.num.nee_ok[l] = !f.is_black();
+            put_rgb(&mut v.num.bf, l, f);
             // A delta light takes no MIS weight (nor the density).
-            v.bpdf_nee[l] = if v.delta[l] { 0.0 } else { pdf };
+            v.num.bpdf_nee[l] = if v.num.delta[l] { 0.0 } else { pdf };
             if let Some(view) = events.view {
                 v.class_nee[l] = view.class(events.aovs.scatter_event(v.shape[l], flags, None, wi.z * wo.z < 0.0));
             }
         }
         let bs = bs.filter(|bs| bs.pdf > 0.0 && !bs.f.is_black());
-        v.bmoved[l] = bs.is_some();
+        v.num.bmoved[l] = bs.is_some();
         st.prev_bsdf[l] = None;
         let Some(bs) = bs else { return };
         let transmission = bs.lobe.contains(LobeFlags::TRANSMISSION);
         for k in 0..3 {
-            v.bwi[k][l] = bs.wi[k];
+            v.num.bwi[k][l] = bs.wi[k];
         }
-        put_rgb(&mut v.bweight, l, bs.weight());
-        v.bpdf[l] = bs.pdf;
-        v.bspecular[l] = bs.lobe.is_specular();
+        put_rgb(&mut v.num.bweight, l, bs.weight());
+        v.num.bpdf[l] = bs.pdf;
+        v.num.bspecular[l] = bs.lobe.is_specular();
         if let Some(view) = events.view {
             // A null interaction (a mask let the path through) is no event.
             v.class_step[l] = (!bs.lobe.is_null()).then(|| view.class(events.aovs.scatter_event(v.shape[l], flags, Some(bs.lobe), transmission)));
         }
         if transmission {
-            st.eta_scale[l] *= bs.eta * bs.eta;
+            st.num.eta_scale[l] *= bs.eta * bs.eta;
         }
         if !bs.lobe.is_specular() {
             st.prev_bsdf[l] = Some(PrevBsdf { shape: si.shape, frame, wo });
@@ -1559,7 +1580,7 @@ impl SimdKernel {
     /// against the previous vertex's BSDF sample as the scalar tracer weighs it.
     #[inline(always)]
     fn escaped<S: Sampler>(&self, scene: &Scene, settings: &RenderSettings, st: &mut Paths<S>, l: usize, d: Vec3, v: &mut Soa) {
-        if st.depth[l] == 1 && settings.hide_emitters {
+        if st.num.depth[l] == 1 && settings.hide_emitters {
             return;
         }
         let Some(&ei) = scene.environment_lights.first() else { return };
@@ -1567,14 +1588,14 @@ impl SimdKernel {
         // An environment map locates the direction once for its radiance and its density
         // (render_tile located the escaped lanes' directions together).
         let (le, pdf_light) = match light {
-            Light::EnvMap(env) => env.eval_pdf_at(Vec2::new(v.env_grid[0][l], v.env_grid[1][l]), v.env_grid[2][l], !st.prev_specular[l]),
-            _ => light.le_pdf_escaped(d, !st.prev_specular[l]),
+            Light::EnvMap(env) => env.eval_pdf_at(Vec2::new(v.env_grid[0][l], v.env_grid[1][l]), v.env_grid[2][l], !st.num.prev_specular[l]),
+            _ => light.le_pdf_escaped(d, !st.num.prev_specular[l]),
         };
         if le.is_black() {
             return;
         }
-        let w = if st.prev_specular[l] { 1.0 } else { power_heuristic(1.0, st.prev_pdf[l], 1.0, scene.light_pmf(ei) * pdf_light) };
-        let beta = Rgb::new(st.beta[0][l], st.beta[1][l], st.beta[2][l]);
+        let w = if st.num.prev_specular[l] { 1.0 } else { power_heuristic(1.0, st.num.prev_pdf[l], 1.0, scene.light_pmf(ei) * pdf_light) };
+        let beta = Rgb::new(st.num.beta[0][l], st.num.beta[1][l], st.num.beta[2][l]);
         st.add(l, beta * le * w);
         v.emitted[l] = true;
         v.shape[l] = ESCAPED;
@@ -1606,9 +1627,11 @@ fn other_hit(scene: &Scene, shapes: &[ShapeData], rays: &Rays8, hits: &Hits8, ot
 /// `Soa::shape` of a lane whose ray left the scene.
 const ESCAPED: u32 = u32::MAX;
 
-/// One vertex of eight paths, structure of arrays: what `gather` collected.
-#[derive(Default)]
-struct Soa {
+/// What `shade8` reads of a vertex's lanes: plain arrays, apart from `Soa`'s `Option`s.
+/// (`shade8` takes this alone: with a pointer to a struct that also holds `Option` fields,
+/// LLVM left its loop scalar.)
+#[derive(Clone, Default)]
+struct VertexNums {
     p: [[f32; LANES]; 3],
     ng: [[f32; LANES]; 3],
     fs: [[f32; LANES]; 3],
@@ -1619,14 +1642,6 @@ struct Soa {
     front: [[f32; LANES]; 3],
     back: [[f32; LANES]; 3],
     has_back: [bool; LANES],
-    /// The hit's uv where `prefetch_texels` computed it (a shape whose `prefetch_texels` is set).
-    uv_ahead: [Vec2; LANES],
-    /// The scene shape hit, the light sampled, and the emission found at the hit when
-    /// `emitted` (for the paths' events).
-    shape: [u32; LANES],
-    light: [u32; LANES],
-    emitted: [bool; LANES],
-    emit: [[f32; LANES]; 3],
     /// The BSDF sample's square point (cosine-warped in `shade8`).
     u: [[f32; LANES]; 2],
     u_rr: [f32; LANES],
@@ -1656,6 +1671,21 @@ struct Soa {
     bweight: [[f32; LANES]; 3],
     bpdf: [f32; LANES],
     bspecular: [bool; LANES],
+}
+
+/// One vertex of eight paths, structure of arrays: what `gather` collected.
+#[derive(Default)]
+struct Soa {
+    /// What `shade8` reads.
+    num: VertexNums,
+    /// The hit's uv where `prefetch_texels` computed it (a shape whose `prefetch_texels` is set).
+    uv_ahead: [Vec2; LANES],
+    /// The scene shape hit, the light sampled, and the emission found at the hit when
+    /// `emitted` (for the paths' events).
+    shape: [u32; LANES],
+    light: [u32; LANES],
+    emitted: [bool; LANES],
+    emit: [[f32; LANES]; 3],
     /// With AOVs, at a scalar BSDF: the event classes of the light sample and of the BSDF
     /// sample (None: a null interaction, no event).
     class_nee: [u32; LANES],
@@ -1960,7 +1990,7 @@ impl<'a> LaneLayers<'a> {
         let emitted = lane_bits(&v.emitted) & active;
         // A scalar BSDF's events are the lane's own (`SimdKernel::scalar_scatter`); a null
         // interaction (a mask let the path through) is no event, so its state stays.
-        let mut own = Reflection { lanes: lane_bits(&v.scalar_bsdf) & active, nee: [0; LANES], step: [0; LANES] };
+        let mut own = Reflection { lanes: lane_bits(&v.num.scalar_bsdf) & active, nee: [0; LANES], step: [0; LANES] };
         let mut steps = goes_on & active;
         let mut lanes = own.lanes;
         while lanes != 0 {
@@ -2075,7 +2105,7 @@ fn offset3(p: [f32; 3], ng: [f32; 3], w: [f32; 3]) -> [f32; 3] {
 /// Russian roulette), branch-free per lane so that it compiles to vector code; the same
 /// operations in the same order as the scalar tracer.
 #[inline(always)]
-fn shade8<S>(v: &Soa, rr_depth: i32, st: &mut Paths<S>, rays: &mut Rays8, shadow: &mut Rays8, o: &mut Out) {
+fn shade8(v: &VertexNums, rr_depth: i32, st: &mut PathNums, rays: &mut Rays8, shadow: &mut Rays8, o: &mut Out) {
     for l in 0..LANES {
         let g = |a: &[[f32; LANES]; 3]| [a[0][l], a[1][l], a[2][l]];
         let (p, ng, fs, ft, fnn) = (g(&v.p), g(&v.ng), g(&v.fs), g(&v.ft), g(&v.fnn));
@@ -2188,6 +2218,28 @@ fn shade8<S>(v: &Soa, rr_depth: i32, st: &mut Paths<S>, rays: &mut Rays8, shadow
     }
 }
 
+/// [`shade8`] compiled for AVX2 (see [`SimdKernel::shade8_on_cpu`]).
+///
+/// # Safety
+/// The CPU must support AVX2.
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx2")]
+#[inline(never)]
+unsafe fn shade8_avx2(v: &VertexNums, rr_depth: i32, st: &mut PathNums, rays: &mut Rays8, shadow: &mut Rays8, o: &mut Out) {
+    shade8(v, rr_depth, st, rays, shadow, o)
+}
+
+/// [`shade8`] compiled for AVX-512VL (the same 256-bit code, 32 vector registers).
+///
+/// # Safety
+/// The CPU must support AVX2, AVX-512F and AVX-512VL.
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx2,avx512f,avx512vl")]
+#[inline(never)]
+unsafe fn shade8_avx512(v: &VertexNums, rr_depth: i32, st: &mut PathNums, rays: &mut Rays8, shadow: &mut Rays8, o: &mut Out) {
+    shade8(v, rr_depth, st, rays, shadow, o)
+}
+
 /// A sampler of the kernel's lanes: one vertex's numbers for all of them at once, in the
 /// scalar tracer's order per vertex (light choice, light point, BSDF lobe, BSDF direction,
 /// Russian roulette: 1, 2, 1, 2 and 1 dimensions), each lane from its own sampler.
@@ -2231,14 +2283,9 @@ impl LaneSampler for SobolSampler {
     }
 }
 
-/// The eight paths in flight: each lane's sampler and film sample, and the state that
-/// `shade8` reads and updates, as structure of arrays.
-struct Paths<S> {
-    sampler: [S; LANES],
-    job: [usize; LANES],
-    raster: [Vec2; LANES],
-    /// Radiance gathered so far.
-    l: [[f32; LANES]; 3],
+/// The lanes' numbers `shade8` reads and writes (see [`VertexNums`]).
+#[derive(Clone)]
+struct PathNums {
     beta: [[f32; LANES]; 3],
     depth: [i32; LANES],
     prev_specular: [bool; LANES],
@@ -2246,14 +2293,26 @@ struct Paths<S> {
     prev_p: [[f32; LANES]; 3],
     /// The previous vertex's shading normal on the side its sample left by.
     prev_n: [[f32; LANES]; 3],
+    /// The radiance scale of the refractions so far (for Russian roulette, as `camera_walk`).
+    eta_scale: [f32; LANES],
+}
+
+/// The eight paths in flight: each lane's sampler and film sample, and the state that
+/// `shade8` reads and updates, as structure of arrays.
+struct Paths<S> {
+    /// What `shade8` reads and writes.
+    num: PathNums,
+    sampler: [S; LANES],
+    job: [usize; LANES],
+    raster: [Vec2; LANES],
+    /// Radiance gathered so far.
+    l: [[f32; LANES]; 3],
     /// The previous vertex's BSDF where it was a scalar one (None: Lambertian).
     prev_bsdf: [Option<PrevBsdf>; LANES],
     /// The BSDF that vertex built where its shape has no uniform one (kept apart: a large
     /// `Option<Bsdf>` inside `PrevBsdf` was copied whole, memcpy, at every scalar vertex;
     /// stale where the shape has a uniform one, and then not read).
     prev_own: [Option<Bsdf>; LANES],
-    /// The radiance scale of the refractions so far (for Russian roulette, as `camera_walk`).
-    eta_scale: [f32; LANES],
     /// The camera ray's time (every ray of the path sees the scene then).
     time: [f32; LANES],
 }
@@ -2265,15 +2324,17 @@ impl<S: Clone> Paths<S> {
             job: [0; LANES],
             raster: [Vec2::ZERO; LANES],
             l: [[0.0; LANES]; 3],
-            beta: [[1.0; LANES]; 3],
-            depth: [0; LANES],
-            prev_specular: [true; LANES],
-            prev_pdf: [0.0; LANES],
-            prev_p: [[0.0; LANES]; 3],
-            prev_n: [[0.0; LANES]; 3],
+            num: PathNums {
+                beta: [[1.0; LANES]; 3],
+                depth: [0; LANES],
+                prev_specular: [true; LANES],
+                prev_pdf: [0.0; LANES],
+                prev_p: [[0.0; LANES]; 3],
+                prev_n: [[0.0; LANES]; 3],
+                eta_scale: [1.0; LANES],
+            },
             prev_bsdf: [None; LANES],
             prev_own: std::array::from_fn(|_| None),
-            eta_scale: [1.0; LANES],
             time: [0.0; LANES],
         }
     }
@@ -2287,15 +2348,15 @@ impl<S> Paths<S> {
         self.time[l] = time;
         for k in 0..3 {
             self.l[k][l] = 0.0;
-            self.beta[k][l] = 1.0;
-            self.prev_p[k][l] = 0.0;
-            self.prev_n[k][l] = 0.0;
+            self.num.beta[k][l] = 1.0;
+            self.num.prev_p[k][l] = 0.0;
+            self.num.prev_n[k][l] = 0.0;
         }
-        self.depth[l] = 0;
-        self.prev_specular[l] = true;
-        self.prev_pdf[l] = 0.0;
+        self.num.depth[l] = 0;
+        self.num.prev_specular[l] = true;
+        self.num.prev_pdf[l] = 0.0;
         // `prev_bsdf` is read only after a non-delta sample, and `gather` sets it at each vertex.
-        self.eta_scale[l] = 1.0;
+        self.num.eta_scale[l] = 1.0;
     }
 
     /// Adds `c` to lane `l`'s radiance (as `Rgb`'s `+=`).
@@ -2390,5 +2451,77 @@ mod tests {
             differ_from_start += (qa != q) as u32;
         }
         assert!(differ_from_start > 1000, "the walk steps states");
+    }
+
+    /// `shade8` in its own AVX2 and AVX-512 builds (the kernel's) gives the portable
+    /// build's outputs bit for bit, on random lanes (both sides, scalar BSDF lanes, lights
+    /// at infinity, Russian roulette, zero directions).
+    #[test]
+    fn shade8_builds_agree() {
+        #[cfg(target_arch = "x86_64")]
+        {
+            if !crate::accel::packet::avx2() {
+                eprintln!("SKIPPED: no AVX2");
+                return;
+            }
+            let mut rng = Pcg32::new(11, 5);
+            let mut f = |lo: f32, hi: f32| lo + (hi - lo) * rng.next_f32();
+            let same = |a: f32, b: f32| a.to_bits() == b.to_bits() || (a.is_nan() && b.is_nan());
+            for round in 0..500 {
+                let mut v = VertexNums::default();
+                let mut st = Paths::new(()).num;
+                let rows =
+                    |f: &mut dyn FnMut(f32, f32) -> f32, lo: f32, hi: f32| -> [[f32; LANES]; 3] { std::array::from_fn(|_| std::array::from_fn(|_| f(lo, hi))) };
+                for a in [&mut v.p, &mut v.ng, &mut v.fs, &mut v.ft, &mut v.fnn, &mut v.wo, &mut v.gwi, &mut v.lp, &mut v.ln, &mut v.bwi] {
+                    *a = rows(&mut f, -2.0, 2.0);
+                }
+                for a in [&mut v.front, &mut v.back, &mut v.lrad, &mut v.bf, &mut v.bweight, &mut st.beta] {
+                    *a = rows(&mut f, 0.0, 1.0);
+                }
+                for a in [&mut v.u_rr, &mut v.gpdf, &mut v.pmf, &mut v.pdf_area, &mut v.bpdf_nee, &mut v.bpdf, &mut st.prev_pdf, &mut st.eta_scale] {
+                    *a = std::array::from_fn(|_| f(0.0, 1.0));
+                }
+                // Some exact centres of the square (a zero direction in `cosine_hemisphere`).
+                v.u = std::array::from_fn(|_| std::array::from_fn(|_| if f(0.0, 1.0) < 0.1 { 0.5 } else { f(0.0, 1.0) }));
+                for a in [
+                    &mut v.has_back,
+                    &mut v.nee_ok,
+                    &mut v.generic,
+                    &mut v.infinite,
+                    &mut v.delta,
+                    &mut v.scalar_bsdf,
+                    &mut v.bmoved,
+                    &mut v.bspecular,
+                    &mut st.prev_specular,
+                ] {
+                    *a = std::array::from_fn(|_| f(0.0, 1.0) < 0.5);
+                }
+                st.depth = std::array::from_fn(|_| f(0.0, 6.0) as i32);
+                let run = |which: usize| {
+                    let (mut st, mut rays, mut shadow, mut o) = (st.clone(), Rays8::default(), Rays8::default(), Out::default());
+                    // SAFETY: AVX2 was detected above, AVX-512 where `avx512()` says so.
+                    match which {
+                        0 => shade8(&v, 3, &mut st, &mut rays, &mut shadow, &mut o),
+                        1 => unsafe { shade8_avx2(&v, 3, &mut st, &mut rays, &mut shadow, &mut o) },
+                        _ => unsafe { shade8_avx512(&v, 3, &mut st, &mut rays, &mut shadow, &mut o) },
+                    }
+                    (st, rays, shadow, o)
+                };
+                let want = run(0);
+                for which in if avx512() { 1..3 } else { 1..2 } {
+                    let got = run(which);
+                    let rows_of = |x: &(PathNums, Rays8, Rays8, Out)| -> Vec<[f32; LANES]> {
+                        let (st, r, s, o) = x;
+                        let mut v: Vec<[f32; LANES]> = [st.beta, st.prev_p, st.prev_n, r.o, r.d, s.o, s.d, o.c].concat();
+                        v.extend([st.prev_pdf, r.t_max, s.t_max]);
+                        v
+                    };
+                    for (a, b) in rows_of(&want).iter().zip(rows_of(&got).iter()) {
+                        assert!(a.iter().zip(b).all(|(&a, &b)| same(a, b)), "round {round}, build {which}: {a:?} against {b:?}");
+                    }
+                    assert_eq!((want.0.prev_specular, want.3.nee, want.3.cont), (got.0.prev_specular, got.3.nee, got.3.cont), "round {round}, build {which}");
+                }
+            }
+        }
     }
 }
