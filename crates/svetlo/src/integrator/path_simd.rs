@@ -2082,7 +2082,9 @@ fn shade8<S>(v: &Soa, rr_depth: i32, st: &mut Paths<S>, rays: &mut Rays8, shadow
         let wo_w = g(&v.wo);
         let wo = [dot3(wo_w, fs), dot3(wo_w, ft), dot3(wo_w, fnn)];
         let front_side = wo[2] >= 0.0;
-        let side_ok = front_side || v.has_back[l];
+        // `|`, not `||`: a load under a condition is a masked byte load, which AVX2 and
+        // AVX-512F lack, and LLVM left the whole loop scalar code.
+        let side_ok = front_side | v.has_back[l];
         let flip = if front_side { 1.0f32 } else { -1.0 };
         let refl = if front_side { g(&v.front) } else { g(&v.back) };
         let f = [refl[0] * INV_PI, refl[1] * INV_PI, refl[2] * INV_PI];
@@ -2183,7 +2185,9 @@ fn shade8<S>(v: &Soa, rr_depth: i32, st: &mut Paths<S>, rays: &mut Rays8, shadow
         }
         rays.t_max[l] = f32::INFINITY;
         st.prev_pdf[l] = if moved { bpdf } else { st.prev_pdf[l] };
-        st.prev_specular[l] = if moved { specular } else { st.prev_specular[l] };
+        // As logic, stored always: `if moved` became a store under a condition, a masked byte
+        // store (as above).
+        st.prev_specular[l] = (moved & specular) | (!moved & st.prev_specular[l]);
         o.cont[l] = cont;
     }
 }
