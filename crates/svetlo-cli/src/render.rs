@@ -450,10 +450,11 @@ pub fn render_loaded(scene: Scene, a: &RenderArgs, out: &OutputPaths, progress: 
     say!("resolution  {w}x{h}");
     let planned = if a.spp.is_none() && a.time.is_some() { "time-limited".to_string() } else { format!("of {}", job.settings.spp) };
     say!("spp         {} ({planned})", film.spp_done);
-    say!("time        {secs:.2} s");
+    // Milliseconds: renders of a tenth of a second are compared to a few percent.
+    say!("time        {secs:.3} s");
     if let Some(c) = cpu {
         // All threads' CPU time in the render call: what benchmarks on a busy machine compare.
-        say!("cpu         {c:.2} s");
+        say!("cpu         {c:.3} s");
     }
     say!("samples/s   {}", si(samples / secs.max(1e-9)));
     for p in &written {
