@@ -11,8 +11,8 @@
 //! shadow ray per delta light.
 
 use super::path::{bsdf_pdf_toward, light_sample_unshadowed, settle, Unshadowed};
-use super::{camera_sample, render_tiles, Integrator, Progress, RenderSettings};
-use crate::accel::packet::LANES;
+use super::{camera_numbers, camera_sample, render_tiles, Integrator, Progress, RenderSettings};
+use crate::accel::packet::{Rays8, LANES};
 use crate::bsdf::{Bsdf, BsdfSample, LobeFlags, TransportMode};
 use crate::error::Result;
 use crate::film::{Film, FilmTile};
@@ -218,6 +218,7 @@ impl DirectEstimator {
         let w = x1 - x0;
         let jobs = w * (y1 - y0) * n;
         let cam = scene.camera.ray_generator();
+        let pinhole = cam.is_pinhole();
         let DirectIntegrator { emitter_samples, bsdf_samples } = self.cfg;
         let counts = (emitter_samples as f32, bsdf_samples as f32);
         let aovs = settings.aovs();
@@ -232,12 +233,29 @@ impl DirectEstimator {
             let k = (jobs - j).min(LANES as u32) as usize;
             let mut rays = [IDLE; LANES];
             let mut raster = [Vec2::ZERO; LANES];
-            for l in 0..k {
-                let (pix, s) = ((j + l as u32) / n, (j + l as u32) % n);
-                (raster[l], rays[l]) = camera_sample(&cam, &mut samplers[l], x0 + pix % w, y0 + pix / w, s0 + s);
-            }
             let active = (0xffu32 >> (LANES - k)) as u8;
-            let first = packets.closest(&rays, active);
+            let first = if pinhole {
+                // The lanes' numbers, then their rays all at once (`pinhole_lanes`: the same
+                // rays, a square root and divisions each), which are the packet.
+                let (mut film, mut u_time) = ([[0.0f32; LANES]; 2], [0.0f32; LANES]);
+                for l in 0..k {
+                    let (pix, s) = ((j + l as u32) / n, (j + l as u32) % n);
+                    (raster[l], u_time[l]) = camera_numbers(&mut samplers[l], x0 + pix % w, y0 + pix / w, s0 + s);
+                    (film[0][l], film[1][l]) = (raster[l].x, raster[l].y);
+                }
+                let r = cam.pinhole_lanes(&film, &u_time);
+                let lane = |a: &[[f32; LANES]; 3], l: usize| Vec3::new(a[0][l], a[1][l], a[2][l]);
+                for (l, ray) in rays.iter_mut().enumerate().take(k) {
+                    *ray = Ray { o: lane(&r.o, l), d: lane(&r.d, l), t_max: r.t_max[l], time: r.time[l] };
+                }
+                packets.closest_packet(&Rays8 { o: r.o, d: r.d, t_max: r.t_max }, active)
+            } else {
+                for l in 0..k {
+                    let (pix, s) = ((j + l as u32) / n, (j + l as u32) % n);
+                    (raster[l], rays[l]) = camera_sample(&cam, &mut samplers[l], x0 + pix % w, y0 + pix / w, s0 + s);
+                }
+                packets.closest(&rays, active)
+            };
             // The first surfaces, and the texels the delta lights' samples there will read
             // asked for: they arrive while the eight lanes are shaded.
             let mut hits: [Option<SurfaceInteraction>; LANES] = [None; LANES];
