@@ -254,18 +254,6 @@ pub(crate) fn camera_sample<S: Sampler + ?Sized>(cam: &crate::camera::RayGenerat
     (raster, cam.generate_ray(raster, lens, time))
 }
 
-/// [`camera_sample`]'s numbers without its ray: the raster position and the time's number
-/// (the lens point drawn and left, as a pinhole leaves it), for rays made several at once
-/// (`RayGenerator::pinhole_lanes`).
-#[inline(always)]
-pub(crate) fn camera_numbers<S: Sampler + ?Sized>(sampler: &mut S, x: u32, y: u32, s: u32) -> (Vec2, f32) {
-    sampler.start_pixel_sample(x, y, s);
-    let pf = sampler.next_2d();
-    sampler.next_2d();
-    let time = sampler.next_1d();
-    (Vec2::new(x as f32 + pf.x, y as f32 + pf.y), time)
-}
-
 pub fn render_pixels(scene: &Scene, settings: &RenderSettings, progress: &Progress, est: &dyn PixelEstimator) -> Result<Film> {
     // The splatting driver with nothing to splat: one chunk of all tiles per pass.
     Ok(splat::render_chunked(scene, settings, progress, &NoSplats(est), 0, u64::MAX)?.film)
