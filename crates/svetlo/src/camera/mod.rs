@@ -156,6 +156,46 @@ impl RayGenerator<'_> {
         ray.time = cam.shutter_open + time * (cam.shutter_close - cam.shutter_open);
         ray
     }
+
+    /// Whether the camera is a pinhole ([`Self::pinhole_lanes`]).
+    #[inline]
+    pub fn is_pinhole(&self) -> bool {
+        self.pinhole
+    }
+
+    /// `generate_ray` of a pinhole for `N` lanes at once (raster positions `raster`, time
+    /// numbers `time`): each lane's operations are the single ray's, without branches, so
+    /// that the lanes run as vector lanes (a ray's square root and divisions wait on each
+    /// other). The same bits. Only for a pinhole ([`Self::is_pinhole`]).
+    #[inline(always)]
+    pub fn pinhole_lanes<const N: usize>(&self, raster: &[[f32; N]; 2], time: &[f32; N]) -> RayLanes<N> {
+        debug_assert!(self.pinhole);
+        let cam = self.cam;
+        let mut r = RayLanes { o: [[0.0; N]; 3], d: [[0.0; N]; 3], t_max: [0.0; N], time: [0.0; N] };
+        let [ax, ay, az] = self.axes;
+        for l in 0..N {
+            let c = self.half + Vec2::new(raster[0][l], raster[1][l]) * self.film_scale;
+            let v = ax * c.x + ay * c.y + az;
+            let len = v.length();
+            let (o, d) = (self.position + v * cam.near_clip, v / len);
+            for k in 0..3 {
+                r.o[k][l] = o[k];
+                r.d[k][l] = d[k];
+            }
+            r.t_max[l] = (cam.far_clip - cam.near_clip) * len;
+            r.time[l] = cam.shutter_open + time[l] * (cam.shutter_close - cam.shutter_open);
+        }
+        r
+    }
+}
+
+/// The rays of [`RayGenerator::pinhole_lanes`], one lane each: origin, direction, extent, time.
+#[derive(Clone, Copy, Debug)]
+pub struct RayLanes<const N: usize> {
+    pub o: [[f32; N]; 3],
+    pub d: [[f32; N]; 3],
+    pub t_max: [f32; N],
+    pub time: [f32; N],
 }
 
 /// Mitsuba's `fov_axis`: the horizontal field of view (degrees) of a `fov` given along
@@ -194,6 +234,46 @@ pub fn fov_x_from_axis(fov_deg: f32, axis: &str, width: u32, height: u32) -> cra
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// `pinhole_lanes` gives `generate_ray`'s rays bit for bit (a moving shutter, rasters
+    /// across and past the film).
+    #[test]
+    fn pinhole_lanes_are_generate_ray() {
+        let (origin, target) = (Vec3::new(0.5, -0.25, -1.0), Vec3::new(0.1, 0.3, 4.0));
+        let dir = (target - origin).normalize();
+        let left = Vec3::Y.cross(dir).normalize();
+        let up = dir.cross(left);
+        let cam = Camera {
+            to_world: Mat4::from_cols(left.extend(0.0), up.extend(0.0), dir.extend(0.0), origin.extend(1.0)),
+            projection: Projection::Perspective { fov_x_deg: 53.0, aperture_radius: 0.0, focus_distance: 1.0 },
+            width: 37,
+            height: 23,
+            near_clip: 0.013,
+            far_clip: 170.0,
+            shutter_open: 0.2,
+            shutter_close: 0.7,
+        };
+        let gen = cam.ray_generator();
+        assert!(gen.is_pinhole());
+        let mut rng = crate::sampling::Pcg32::new(3, 5);
+        for _ in 0..500 {
+            let mut raster = [[0.0f32; 8]; 2];
+            let mut time = [0.0f32; 8];
+            for l in 0..8 {
+                raster[0][l] = 40.0 * rng.next_f32() - 1.0;
+                raster[1][l] = 25.0 * rng.next_f32() - 1.0;
+                time[l] = rng.next_f32();
+            }
+            let r = gen.pinhole_lanes(&raster, &time);
+            for l in 0..8 {
+                let want = gen.generate_ray(Vec2::new(raster[0][l], raster[1][l]), Vec2::new(0.3, 0.6), time[l]);
+                let got =
+                    Ray { o: Vec3::new(r.o[0][l], r.o[1][l], r.o[2][l]), d: Vec3::new(r.d[0][l], r.d[1][l], r.d[2][l]), t_max: r.t_max[l], time: r.time[l] };
+                let bits = |r: &Ray| (r.o.to_array().map(f32::to_bits), r.d.to_array().map(f32::to_bits), r.t_max.to_bits(), r.time.to_bits());
+                assert_eq!(bits(&got), bits(&want), "lane {l}");
+            }
+        }
+    }
 
     #[test]
     fn fov_axis_conversions() {

@@ -11,8 +11,9 @@
 //! shadow ray per delta light.
 
 use super::path::{bsdf_pdf_toward, light_sample_unshadowed, settle, Unshadowed};
+use super::path_simd::LaneSampler;
 use super::{camera_sample, render_tiles, Integrator, Progress, RenderSettings};
-use crate::accel::packet::LANES;
+use crate::accel::packet::{Rays8, LANES};
 use crate::bsdf::{Bsdf, BsdfSample, LobeFlags, TransportMode};
 use crate::error::Result;
 use crate::film::{Film, FilmTile};
@@ -173,11 +174,31 @@ impl DirectEstimator {
     /// Samples `s0..s0 + n` of every pixel of the job's rectangle, pixels in rows and samples
     /// innermost, as the pixel-sample driver takes them: eight at a time with `packets`,
     /// else one by one.
-    fn render_tile<S: Sampler + Clone>(&self, job: TileJob, packets: Option<&ShadowPackets>, sampler: S) {
+    fn render_tile<S: LaneSampler>(&self, job: TileJob, packets: Option<&ShadowPackets>, sampler: S) {
         match packets {
-            Some(packets) => self.render_tile_lockstep(job, packets, sampler),
+            Some(packets) => self.render_tile_lockstep_on_cpu(job, packets, sampler),
             None => self.render_tile_by_sample(job, sampler),
         }
+    }
+
+    /// [`Self::render_tile_lockstep`] in its AVX2 build where the CPU has it (the lanes'
+    /// sampler steps and camera rays eight wide; the scalar code VEX-encoded, with no FMA
+    /// contraction, so the same results).
+    fn render_tile_lockstep_on_cpu<S: LaneSampler>(&self, job: TileJob, packets: &ShadowPackets, sampler: S) {
+        #[cfg(target_arch = "x86_64")]
+        if crate::accel::packet::avx2() {
+            // SAFETY: `avx2()` detects AVX2 at run time.
+            return unsafe { self.render_tile_lockstep_avx2(job, packets, sampler) };
+        }
+        self.render_tile_lockstep(job, packets, sampler)
+    }
+
+    /// # Safety
+    /// The CPU must support AVX2.
+    #[cfg(target_arch = "x86_64")]
+    #[target_feature(enable = "avx2")]
+    unsafe fn render_tile_lockstep_avx2<S: LaneSampler>(&self, job: TileJob, packets: &ShadowPackets, sampler: S) {
+        self.render_tile_lockstep(job, packets, sampler)
     }
 
     /// [`Self::render_tile`] one sample at a time; each pixel's samples go to the film as one
@@ -213,11 +234,13 @@ impl DirectEstimator {
     /// records are the scene BVH's, bit for bit). Each lane's draws and arithmetic are those
     /// of [`Self::estimate`], its terms summed in the same order: the same image. Without
     /// AOVs, and one BSDF sample at most.
-    fn render_tile_lockstep<S: Sampler + Clone>(&self, (scene, settings, tile, rect, s0, n): TileJob, packets: &ShadowPackets, sampler: S) {
+    #[inline(always)]
+    fn render_tile_lockstep<S: LaneSampler>(&self, (scene, settings, tile, rect, s0, n): TileJob, packets: &ShadowPackets, sampler: S) {
         let [x0, y0, x1, y1] = rect;
         let w = x1 - x0;
         let jobs = w * (y1 - y0) * n;
         let cam = scene.camera.ray_generator();
+        let pinhole = cam.is_pinhole();
         let DirectIntegrator { emitter_samples, bsdf_samples } = self.cfg;
         let counts = (emitter_samples as f32, bsdf_samples as f32);
         let aovs = settings.aovs();
@@ -232,12 +255,36 @@ impl DirectEstimator {
             let k = (jobs - j).min(LANES as u32) as usize;
             let mut rays = [IDLE; LANES];
             let mut raster = [Vec2::ZERO; LANES];
-            for l in 0..k {
-                let (pix, s) = ((j + l as u32) / n, (j + l as u32) % n);
-                (raster[l], rays[l]) = camera_sample(&cam, &mut samplers[l], x0 + pix % w, y0 + pix / w, s0 + s);
-            }
             let active = (0xffu32 >> (LANES - k)) as u8;
-            let first = packets.closest(&rays, active);
+            let first = if pinhole {
+                // The lanes' samplers started, their numbers drawn side by side
+                // (`LaneSampler::camera_draws`), then their rays all at once (`pinhole_lanes`:
+                // the same rays, a square root and divisions each), which are the packet.
+                let mut px = [(0, 0); LANES];
+                for (l, px) in px.iter_mut().enumerate().take(k) {
+                    let (pix, s) = ((j + l as u32) / n, (j + l as u32) % n);
+                    *px = (x0 + pix % w, y0 + pix / w);
+                    samplers[l].start_pixel_sample(px.0, px.1, s0 + s);
+                }
+                let d = S::camera_draws(&mut samplers, active);
+                let mut film = [[0.0f32; LANES]; 2];
+                for l in 0..k {
+                    raster[l] = Vec2::new(px[l].0 as f32 + d[0][l], px[l].1 as f32 + d[1][l]);
+                    (film[0][l], film[1][l]) = (raster[l].x, raster[l].y);
+                }
+                let r = cam.pinhole_lanes(&film, &d[4]);
+                let lane = |a: &[[f32; LANES]; 3], l: usize| Vec3::new(a[0][l], a[1][l], a[2][l]);
+                for (l, ray) in rays.iter_mut().enumerate().take(k) {
+                    *ray = Ray { o: lane(&r.o, l), d: lane(&r.d, l), t_max: r.t_max[l], time: r.time[l] };
+                }
+                packets.closest_packet(&Rays8 { o: r.o, d: r.d, t_max: r.t_max }, active)
+            } else {
+                for l in 0..k {
+                    let (pix, s) = ((j + l as u32) / n, (j + l as u32) % n);
+                    (raster[l], rays[l]) = camera_sample(&cam, &mut samplers[l], x0 + pix % w, y0 + pix / w, s0 + s);
+                }
+                packets.closest(&rays, active)
+            };
             // The first surfaces, and the texels the delta lights' samples there will read
             // asked for: they arrive while the eight lanes are shaded.
             let mut hits: [Option<SurfaceInteraction>; LANES] = [None; LANES];

@@ -2269,6 +2269,18 @@ pub(crate) trait LaneSampler: Sampler + Clone {
         }
         d
     }
+    /// A camera sample's numbers (`camera_sample`'s order: film point (2), lens point (2),
+    /// time) of the lanes of `lanes`, each sampler started at its pixel sample.
+    #[inline(always)]
+    fn camera_draws(s: &mut [Self; LANES], lanes: u8) -> [[f32; LANES]; 5] {
+        let mut d = [[0.0; LANES]; 5];
+        for (l, s) in s.iter_mut().enumerate().filter(|(l, _)| lanes & (1 << l) != 0) {
+            let (a, b) = (s.next_2d(), s.next_2d());
+            (d[0][l], d[1][l], d[2][l], d[3][l]) = (a.x, a.y, b.x, b.y);
+            d[4][l] = s.next_1d();
+        }
+        d
+    }
 }
 
 impl LaneSampler for IndependentSampler {
@@ -2278,6 +2290,10 @@ impl LaneSampler for IndependentSampler {
     #[inline(always)]
     fn vertex_draws(s: &mut [Self; LANES], lanes: u8) -> [[f32; LANES]; 7] {
         IndependentSampler::draws8::<7>(s, lanes)
+    }
+    #[inline(always)]
+    fn camera_draws(s: &mut [Self; LANES], lanes: u8) -> [[f32; LANES]; 5] {
+        IndependentSampler::draws8::<5>(s, lanes)
     }
 }
 
