@@ -689,6 +689,17 @@ mod tests {
         bsdfs
     }
 
+    /// BSDFs the Lambertian shortcuts must refuse: a rough diffuse one, a diffuse front with a
+    /// rough back, a diffuse one with a normal map.
+    fn not_lambertian_bsdfs() -> [Bsdf; 3] {
+        let rough = BsdfModel::OrenNayar(OrenNayar { reflectance: Rgb::splat(0.5), sigma: 0.3 });
+        [
+            Bsdf { front: rough.clone(), back: None, opacity: 1.0, detail: None },
+            Bsdf { front: diffuse(0.5), back: Some(rough), opacity: 1.0, detail: None },
+            Bsdf { front: diffuse(0.5), back: None, opacity: 1.0, detail: Some(Detail::new(Vec3::new(0.1, 0.0, 1.0), true)) },
+        ]
+    }
+
     /// `lambertian_eval` is the BSDF's own `eval` in the local frame, bit for bit: one- and
     /// two-sided diffuse BSDFs, masks, directions on both sides and in the tangent plane
     /// (signed zeros); None for the BSDFs it does not cover.
@@ -720,12 +731,7 @@ mod tests {
         }
         // Both sides scatter where there is a back.
         assert!(lit[0] > 1000 && lit[1] > 2 * lit[0] - 400, "{lit:?}");
-        let rough = BsdfModel::OrenNayar(OrenNayar { reflectance: Rgb::splat(0.5), sigma: 0.3 });
-        let others = [
-            Bsdf { front: rough.clone(), back: None, opacity: 1.0, detail: None },
-            Bsdf { front: diffuse(0.5), back: Some(rough), opacity: 1.0, detail: None },
-            Bsdf { front: diffuse(0.5), back: None, opacity: 1.0, detail: Some(Detail::new(Vec3::new(0.1, 0.0, 1.0), true)) },
-        ];
+        let others = not_lambertian_bsdfs();
         // (From below, so that the second one's back is asked for.)
         for b in &others {
             assert!(lambertian_eval(b, Vec3::Z, -Vec3::Z, Vec3::Z, TransportMode::Radiance).is_none());
@@ -760,12 +766,7 @@ mod tests {
             }
         }
         assert!(positive > 4000, "{positive}");
-        let rough = BsdfModel::OrenNayar(OrenNayar { reflectance: Rgb::splat(0.5), sigma: 0.3 });
-        let others = [
-            Bsdf { front: rough.clone(), back: None, opacity: 1.0, detail: None },
-            Bsdf { front: diffuse(0.5), back: Some(rough), opacity: 1.0, detail: None },
-            Bsdf { front: diffuse(0.5), back: None, opacity: 1.0, detail: Some(Detail::new(Vec3::new(0.1, 0.0, 1.0), true)) },
-        ];
+        let others = not_lambertian_bsdfs();
         // (From below, so that the second one's back is asked for.)
         for b in &others {
             assert!(lambertian_pdf_of(b, -1.0, -0.5).is_none());
@@ -823,12 +824,7 @@ mod tests {
         }
         // Samples on both sides, failures (the back of one-sided BSDFs), pass-throughs.
         assert!(seen.iter().all(|&n| n > 1000), "{seen:?}");
-        let rough = BsdfModel::OrenNayar(OrenNayar { reflectance: Rgb::splat(0.5), sigma: 0.3 });
-        let others = [
-            Bsdf { front: rough.clone(), back: None, opacity: 1.0, detail: None },
-            Bsdf { front: diffuse(0.5), back: Some(rough), opacity: 1.0, detail: None },
-            Bsdf { front: diffuse(0.5), back: None, opacity: 1.0, detail: Some(Detail::new(Vec3::new(0.1, 0.0, 1.0), true)) },
-        ];
+        let others = not_lambertian_bsdfs();
         let frame = Frame::from_normal(Vec3::Z);
         for b in &others {
             assert!(lambertian_sample(b, &frame, -Vec3::Z, 0.5, Vec2::splat(0.3)).is_none());
