@@ -287,12 +287,8 @@ mod tests {
     use crate::sampling::Pcg32;
 
     fn camera(aperture: f32) -> Camera {
-        // Mitsuba's lookat from (1, 2, -3) toward (0.5, 1.5, 2), up +y: columns (left, up, dir, origin).
-        let (origin, target) = (Vec3::new(1.0, 2.0, -3.0), Vec3::new(0.5, 1.5, 2.0));
-        let dir = (target - origin).normalize();
-        let left = Vec3::Y.cross(dir).normalize();
-        let up = dir.cross(left);
-        let to_world = Mat4::from_cols(left.extend(0.0), up.extend(0.0), dir.extend(0.0), origin.extend(1.0));
+        // Mitsuba's lookat from (1, 2, -3) toward (0.5, 1.5, 2), up +y.
+        let to_world = crate::io::mitsuba::look_at(Vec3::new(1.0, 2.0, -3.0), Vec3::new(0.5, 1.5, 2.0), Vec3::Y).expect("a frame");
         Camera {
             to_world,
             projection: Projection::Perspective { fov_x_deg: 50.0, aperture_radius: aperture, focus_distance: 4.0 },

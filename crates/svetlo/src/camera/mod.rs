@@ -239,12 +239,8 @@ mod tests {
     /// across and past the film).
     #[test]
     fn pinhole_lanes_are_generate_ray() {
-        let (origin, target) = (Vec3::new(0.5, -0.25, -1.0), Vec3::new(0.1, 0.3, 4.0));
-        let dir = (target - origin).normalize();
-        let left = Vec3::Y.cross(dir).normalize();
-        let up = dir.cross(left);
         let cam = Camera {
-            to_world: Mat4::from_cols(left.extend(0.0), up.extend(0.0), dir.extend(0.0), origin.extend(1.0)),
+            to_world: crate::io::mitsuba::look_at(Vec3::new(0.5, -0.25, -1.0), Vec3::new(0.1, 0.3, 4.0), Vec3::Y).expect("a frame"),
             projection: Projection::Perspective { fov_x_deg: 53.0, aperture_radius: 0.0, focus_distance: 1.0 },
             width: 37,
             height: 23,

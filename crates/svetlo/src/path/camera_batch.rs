@@ -424,19 +424,14 @@ mod tests {
     use crate::sampling::{IndependentSampler, Pcg32};
     use crate::scene::SceneBuilder;
     use crate::texture::Texture;
-    use glam::Mat4;
 
     fn scene() -> Scene {
         let mut b = SceneBuilder::new();
         let m = b.add_material(Material::Diffuse { reflectance: Texture::Constant(Rgb::splat(0.5)) });
         let glow = Some(Texture::Constant(Rgb::splat(2.0)));
         b.add_shape(Geometry::Sphere(Sphere { center: Vec3::new(0.0, 0.0, 40.0), radius: 1.0, flip_normals: false }), m, glow, "ball").unwrap();
-        let (origin, target) = (Vec3::new(0.5, -0.25, -1.0), Vec3::new(0.0, 0.3, 4.0));
-        let dir = (target - origin).normalize();
-        let left = Vec3::Y.cross(dir).normalize();
-        let up = dir.cross(left);
         b.set_camera(Camera {
-            to_world: Mat4::from_cols(left.extend(0.0), up.extend(0.0), dir.extend(0.0), origin.extend(1.0)),
+            to_world: crate::io::mitsuba::look_at(Vec3::new(0.5, -0.25, -1.0), Vec3::new(0.0, 0.3, 4.0), Vec3::Y).expect("a frame"),
             projection: Projection::Perspective { fov_x_deg: 60.0, aperture_radius: 0.0, focus_distance: 1.0 },
             width: 40,
             height: 30,
