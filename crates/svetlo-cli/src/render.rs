@@ -431,6 +431,9 @@ pub fn render_loaded(scene: Scene, a: &RenderArgs, out: &OutputPaths, progress: 
         tell!("warning: --variance counts only what each pixel's own samples add; the {} integrator's splats (light paths) are not in it", job.integrator_name);
     }
     let (w, h) = (job.scene.camera.width, job.scene.camera.height);
+    // The method's scene set-up (acceleration structures) belongs to loading: the render
+    // call's time and CPU below count the render alone.
+    job.integrator.prepare(&job.scene, &job.settings);
     let cpu0 = process_cpu_seconds();
     let (film, elapsed, strategy_files) = match &a.strategies {
         Some(dir) => execute_strategies(&job, progress, dir, a.strategy_depth)?,

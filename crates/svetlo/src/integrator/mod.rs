@@ -212,6 +212,12 @@ impl Progress {
 
 pub trait Integrator: Sync {
     fn render(&self, scene: &Scene, settings: &RenderSettings, progress: &Progress) -> Result<Film>;
+    /// Builds what the method derives from the scene's geometry alone and keeps with the
+    /// scene (the path kernel's packet tree and unpacked triangles), so that a render that
+    /// follows starts at tracing. The CLI calls it as part of loading, as Mitsuba builds its
+    /// BVH in `load_file`; a render without it builds the same itself. The image is the same
+    /// either way.
+    fn prepare(&self, _scene: &Scene, _settings: &RenderSettings) {}
     /// A report of the last render for people (e.g. Metropolis acceptance rates), if the
     /// method keeps one.
     fn report(&self) -> Option<String> {

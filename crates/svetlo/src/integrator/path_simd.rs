@@ -136,6 +136,26 @@ impl Integrator for SimdPathTracer {
         }
         PathTracer.render(scene, settings, progress)
     }
+
+    /// The kernel's set-up, made and dropped: its geometry (the packet tree, the unpacked
+    /// triangles) stays with the scene for the render. A scene the kernel declines on a first
+    /// render is left unmarked, so the render still takes the scalar tracer.
+    fn prepare(&self, scene: &Scene, settings: &RenderSettings) {
+        let lanes_route = settings.aovs().is_empty() || settings.aovs().forward_view().is_some();
+        if self.simd && lanes_route && crate::accel::packet::avx2() {
+            drop(SimdKernel::new(scene, settings));
+        }
+    }
+}
+
+/// What the packet tree is built from: the static meshes, in the kernel's order. The tree
+/// depends on the corners alone: the meshes untagged.
+fn packet_tree_key(scene: &Scene) -> Vec<(u32, &Arc<Geometry>)> {
+    kernel_order(scene)
+        .take_while(|&si| !scene.moving.iter().any(|mv| mv.shape as usize == si))
+        .map(|si| (0, &scene.shapes[si].geometry))
+        .filter(|(_, g)| matches!(&***g, Geometry::Mesh(_)))
+        .collect()
 }
 
 /// A triangle as shading sees it.
@@ -800,14 +820,8 @@ impl SimdKernel {
         // Only the packet tree needs the corners apart (single rays use the scene's BVH): the
         // tree over the static meshes, the one of the scene's last render if it has the same.
         let packet_tree = || {
-            // The tree depends on the corners alone: the meshes untagged.
-            let meshes: Vec<(u32, &Arc<Geometry>)> = kernel_order(scene)
-                .take_while(|&si| !scene.moving.iter().any(|mv| mv.shape as usize == si))
-                .map(|si| (0, &scene.shapes[si].geometry))
-                .filter(|(_, g)| matches!(&***g, Geometry::Mesh(_)))
-                .collect();
             let verts = || geometry.tris[..geometry.static_triangles].iter().map(|t| t.p).collect::<Vec<_>>();
-            scene.packet_tree.get_or_build(&meshes, || PacketBvh::build(&verts()))
+            scene.packet_tree.get_or_build(&packet_tree_key(scene), || PacketBvh::build(&verts()))
         };
         let tracer = if scene.settings.ray_epsilon > 0.0 || (single_rays && !scene.moving.is_empty()) {
             Tracer::Scene { first: first_triangles(scene) }
@@ -2422,6 +2436,33 @@ fn avx512() -> bool {
 mod tests {
     use super::*;
     use crate::sampling::Pcg32;
+
+    /// `prepare` leaves the kernel's set-up with the scene (the render then takes the kept
+    /// tree and triangles: the same allocations), and the image is the one of a scene
+    /// rendered without it.
+    #[test]
+    fn prepare_keeps_the_set_up_with_the_scene() {
+        if !crate::accel::packet::avx2() {
+            eprintln!("SKIPPED: no AVX2");
+            return;
+        }
+        let path = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../../scenes/cornell-box.xml");
+        let load = || crate::io::load_scene(&path, &[]).expect("the repository's Cornell box");
+        let (prepared, plain) = (load(), load());
+        let s = RenderSettings { spp: 2, seed: 3, ..RenderSettings::from_scene(&prepared) };
+        let tracer = crate::methods::by_name("path").expect("path");
+        assert!(prepared.packet_tree.get(&packet_tree_key(&prepared)).is_none());
+        tracer.prepare(&prepared, &s);
+        let tree = prepared.packet_tree.get(&packet_tree_key(&prepared)).expect("a packet tree kept by prepare");
+        let tris = prepared.kernel_geometry.get(&KernelGeometry::key(&prepared)).expect("triangles kept by prepare");
+        let k = SimdKernel::new(&prepared, &s).expect("the kernel");
+        let Tracer::Packets { bvh, .. } = &k.tracer else { panic!("the Cornell box traces packets") };
+        assert!(Arc::ptr_eq(bvh, &tree) && Arc::ptr_eq(&k.geometry, &tris), "the render built its set-up again");
+        let progress = crate::integrator::Progress::new();
+        let a = tracer.render(&prepared, &s, &progress).expect("render").image();
+        let b = tracer.render(&plain, &s, &progress).expect("render").image();
+        assert!(a.data == b.data, "the prepared scene's image differs");
+    }
 
     /// Every combination of eight lane flags gives its bit mask.
     #[test]
