@@ -45,7 +45,7 @@ pub(crate) fn defines(params: Option<Vec<(String, String)>>) -> PyResult<Vec<(St
 #[pyo3(signature = (path, params=None))]
 pub fn load_file(py: Python<'_>, path: PathBuf, params: Option<Vec<(String, String)>>) -> PyResult<PyScene> {
     let d = defines(params)?;
-    let scene = py.allow_threads(|| svetlo::io::load_scene_as(&path, None, &d)).map_err(to_py)?;
+    let scene = py.allow_threads(|| svetlo::io::load_scene_as(&path, None, &d).inspect(prepare)).map_err(to_py)?;
     Ok(PyScene { scene: Arc::new(scene), origin: path.display().to_string() })
 }
 
@@ -55,8 +55,17 @@ pub fn load_file(py: Python<'_>, path: PathBuf, params: Option<Vec<(String, Stri
 #[pyo3(signature = (text, origin, params=None))]
 pub fn load_string(py: Python<'_>, text: &str, origin: PathBuf, params: Option<Vec<(String, String)>>) -> PyResult<PyScene> {
     let d = defines(params)?;
-    let scene = py.allow_threads(|| svetlo::io::load_scene_from_str(text, &origin, &d)).map_err(to_py)?;
+    let scene = py.allow_threads(|| svetlo::io::load_scene_from_str(text, &origin, &d).inspect(prepare)).map_err(to_py)?;
     Ok(PyScene { scene: Arc::new(scene), origin: origin.display().to_string() })
+}
+
+/// The set-up of the scene's own integrator (its acceleration structures) made with loading,
+/// as the CLI does and Mitsuba's `load_file` builds its BVH: `render` then starts at tracing.
+/// Renders with other settings or methods build what they need themselves.
+fn prepare(scene: &Scene) {
+    if let Ok(method) = svetlo::methods::by_name(&scene.settings.integrator) {
+        method.prepare(scene, &svetlo::integrator::RenderSettings::from_scene(scene));
+    }
 }
 
 impl PyScene {
