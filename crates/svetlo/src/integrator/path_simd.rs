@@ -1334,11 +1334,21 @@ impl SimdKernel {
         match self.lights.get(li) {
             // Any other light by its own sampling (`path::light_sample_unshadowed`'s first tests).
             Some(None) if pmf > 0.0 => {
-                // A sphere of constant radiance: with the other lanes' (`sphere_samples`).
-                if self.sphere_lights[li].is_some() {
+                // A sphere of constant radiance: with the other lanes' (`sphere_samples`), its
+                // lane of their operands written here (a second pass over the lanes, looking the
+                // light up again, branched on every lane).
+                if let Some((sp, le)) = &self.sphere_lights[li] {
                     v.sphere_pending |= 1 << l;
-                    v.ul2[0][l] = u_l2.x;
-                    v.ul2[1][l] = u_l2.y;
+                    let q = &mut v.sphere_q;
+                    for k in 0..3 {
+                        q.center[k][l] = sp.center[k];
+                        q.p_ref[k][l] = p[k];
+                    }
+                    q.radius[l] = sp.radius;
+                    q.flip[l] = sp.flip_normals;
+                    q.u[0][l] = u_l2.x;
+                    q.u[1][l] = u_l2.y;
+                    v.sphere_le[l] = *le;
                     return;
                 }
                 Self::generic_light_sample(scene, l, v, li, p, u_l2);
@@ -1394,26 +1404,17 @@ impl SimdKernel {
             return;
         }
         v.sphere_pending = 0;
-        // The other lanes compute on zeros, and their results are not read.
-        let mut q = SphereLanes::<LANES>::default();
-        for l in 0..LANES {
-            let Some(Some((s, _))) = self.sphere_lights.get(v.light[l] as usize).filter(|_| pending & (1 << l) != 0) else { continue };
-            for k in 0..3 {
-                q.center[k][l] = s.center[k];
-                q.p_ref[k][l] = v.num.p[k][l];
-            }
-            q.radius[l] = s.radius;
-            q.flip[l] = s.flip_normals;
-            q.u[0][l] = v.ul2[0][l];
-            q.u[1][l] = v.ul2[1][l];
-        }
-        let o = AreaLight::sample_constant_spheres(&q);
-        for l in 0..LANES {
-            let li = v.light[l] as usize;
-            let Some(Some((_, le))) = self.sphere_lights.get(li).filter(|_| pending & (1 << l) != 0) else { continue };
+        // The other lanes compute on what earlier steps left, and their results are not read.
+        let o = AreaLight::sample_constant_spheres(&v.sphere_q);
+        let mut lanes = pending;
+        while lanes != 0 {
+            let l = lanes.trailing_zeros() as usize;
+            lanes &= lanes - 1;
+            let (li, le) = (v.light[l] as usize, v.sphere_le[l]);
             if o.inside[l] {
-                let p = Vec3::new(q.p_ref[0][l], q.p_ref[1][l], q.p_ref[2][l]);
-                Self::generic_light_sample(scene, l, v, li, p, Vec2::new(q.u[0][l], q.u[1][l]));
+                let q = &v.sphere_q;
+                let (p, u) = (Vec3::new(q.p_ref[0][l], q.p_ref[1][l], q.p_ref[2][l]), Vec2::new(q.u[0][l], q.u[1][l]));
+                Self::generic_light_sample(scene, l, v, li, p, u);
                 continue;
             }
             let taken = o.found[l] && o.pdf[l] > 0.0 && !le.is_black();
@@ -1425,7 +1426,7 @@ impl SimdKernel {
                 v.num.ln[k][l] = o.n[k][l];
                 v.num.gwi[k][l] = o.wi[k][l];
             }
-            put_rgb(&mut v.num.lrad, l, *le);
+            put_rgb(&mut v.num.lrad, l, le);
             v.num.gpdf[l] = o.pdf[l];
             v.num.infinite[l] = false;
             v.num.delta[l] = false;
@@ -1704,10 +1705,12 @@ struct Soa {
     /// sample (None: a null interaction, no event).
     class_nee: [u32; LANES],
     class_step: [Option<u32>; LANES],
-    /// Lanes whose light is a sphere of constant radiance seen from `p` with the numbers
-    /// `ul2`: sampled all at once after `gather` (`SimdKernel::sphere_samples`).
+    /// Lanes whose light is a sphere of constant radiance: the sphere, the point it is seen
+    /// from and the sample's numbers in `sphere_q`, its radiance in `sphere_le`; sampled all
+    /// at once after `gather` (`SimdKernel::sphere_samples`).
     sphere_pending: u8,
-    ul2: [[f32; LANES]; 2],
+    sphere_q: SphereLanes<LANES>,
+    sphere_le: [Rgb; LANES],
     /// Lanes of a scalar BSDF: the hit and the vertex's numbers, its own BSDF (None: the
     /// shape's uniform one) and lobes, for `scalar_scatter` once the sphere samples are in.
     scatter: [Option<(SurfaceInteraction, [f32; 6])>; LANES],
