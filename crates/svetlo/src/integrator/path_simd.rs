@@ -1024,6 +1024,17 @@ impl SimdKernel {
             if active == 0 {
                 break;
             }
+            // A large environment map's grid points of all lanes' rays (eight at once), and
+            // their texels asked for before the walk: bounce rays off a convex object escape
+            // in all directions, and each lookup in `gather` had waited on memory; now the
+            // walk hides the wait (the lanes whose rays hit something ask in vain).
+            let env_ahead = env_map.filter(|env| env.large());
+            if let Some(env) = env_ahead {
+                v.env_grid = env.dirs_to_grid(&rays.d);
+                for l in (0..LANES).filter(|l| active & (1 << l) != 0) {
+                    env.prefetch_at(Vec2::new(v.env_grid[0][l], v.env_grid[1][l]));
+                }
+            }
             let hits = self.tracer.intersect(scene, &rays, &st.time, active, &mut others);
             self.geometry.prefetch_hits(&hits.prim, active);
             if self.prefetch_texels {
@@ -1031,7 +1042,7 @@ impl SimdKernel {
             }
             // The environment map's grid points of the escaped lanes (those `gather` finds
             // no hit for), all eight at once.
-            if let Some(env) = env_map {
+            if let Some(env) = env_map.filter(|_| env_ahead.is_none()) {
                 if (0..LANES).any(|l| active & (1 << l) != 0 && hits.prim[l] != OTHER && !self.geometry.is_triangle(hits.prim[l])) {
                     v.env_grid = env.dirs_to_grid(&rays.d);
                 }

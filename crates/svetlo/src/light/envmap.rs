@@ -126,6 +126,27 @@ impl EnvMap {
         out
     }
 
+    /// Whether the grid is larger than a core's caches (a 512x256 map's is 2 MiB): then the
+    /// lookups of incoherent rays miss them, and the path kernel asks for the texels ahead
+    /// ([`Self::prefetch_at`]).
+    pub fn large(&self) -> bool {
+        self.dist.texels.len() >= PREFETCH_TEXELS_MIN
+    }
+
+    /// Asks for the texels [`Self::eval_pdf_at`] reads at grid point `g` (as
+    /// [`Self::dirs_to_grid`] gives it): a hint, which changes no value.
+    #[inline(always)]
+    pub fn prefetch_at(&self, g: Vec2) {
+        let (ix, iy, _, _) = self.dist.locate(g);
+        let i = iy * (self.dist.cols + 1) + ix;
+        let t = self.dist.texels.as_ptr();
+        // The cell's corners: two in each of two rows (one line a row, but where the first
+        // ends a line). Wrapping arithmetic: a prefetch never faults.
+        for k in [i, i + 1, i + self.dist.cols + 1, i + self.dist.cols + 2] {
+            crate::accel::prefetch(t.wrapping_add(k), 1);
+        }
+    }
+
     /// World direction of grid coordinates, and sin θ.
     fn grid_to_dir(&self, g: Vec2) -> (Vec3, f32) {
         // φ = 2π (g.x + 1/(2 cols)) and θ = π g.y = 2π (g.y / 2), without libm.
@@ -214,6 +235,9 @@ impl EnvMap {
         2.0 * PI * PI * self.dist.integral * self.scale
     }
 }
+
+/// Grids of at least this many vertices (16 bytes each: 1 MiB) are asked for ahead of lookups.
+const PREFETCH_TEXELS_MIN: usize = 1 << 16;
 
 /// Sample t in [0,1) with density proportional to (1 - t) a + t b (a, b >= 0).
 #[inline]
@@ -497,6 +521,22 @@ mod tests {
                 assert_eq!((got.x.to_bits(), got.y.to_bits()), (want.x.to_bits(), want.y.to_bits()), "{u}");
             }
         }
+    }
+
+    #[test]
+    fn prefetch_reads_nothing_out_of_the_grid() {
+        // A hint anywhere a lookup may land, and outside it (NaN, the edges): it must change
+        // no value and never touch memory (prefetches do not fault).
+        let (w, h) = (300usize, 220usize);
+        let data: Vec<Rgb> = (0..w * h).map(|i| Rgb::new((i % 7) as f32, 1.0, 2.0)).collect();
+        let env = EnvMap::new(Arc::new(Bitmap::new(w, h, data)), Mat4::IDENTITY, 1.0);
+        assert!(env.large());
+        let g = Vec2::new(0.3, 0.7);
+        let before = env.eval_pdf_at(g, 0.5, true);
+        for p in [g, Vec2::ZERO, Vec2::ONE, Vec2::splat(f32::NAN), Vec2::new(-1.0, 2.0), Vec2::splat(f32::INFINITY)] {
+            env.prefetch_at(p);
+        }
+        assert_eq!(env.eval_pdf_at(g, 0.5, true), before);
     }
 
     #[test]
