@@ -149,6 +149,26 @@ impl<T: Copy> PagedVec<T> {
         }
     }
 
+    /// The room for `capacity()` values, to be written out of order (see `set_len`).
+    pub fn as_mut_ptr(&mut self) -> *mut T {
+        self.ptr.as_ptr()
+    }
+
+    pub fn capacity(&self) -> usize {
+        self.cap
+    }
+
+    /// # Safety
+    /// `len <= capacity()`, and the first `len` values were written (through `as_mut_ptr`).
+    pub unsafe fn set_len(&mut self, len: usize) {
+        debug_assert!(len <= self.cap);
+        self.len = len;
+        if let Owner::Vec(v) = &mut self.owner {
+            // SAFETY: as the caller promised.
+            unsafe { v.set_len(len) };
+        }
+    }
+
     /// Out of line: the capacities are chosen so that this is rare.
     #[cold]
     #[inline(never)]
