@@ -140,6 +140,22 @@ impl Box3 {
     }
 }
 
+/// The split search's bins, kept by a thread from node to node: each search empties the bins it
+/// filled (a node of a few primitives fills a few of the 3 x 32), where every node filled all of
+/// them anew (6 KiB of stores and copies, on nodes of mostly a few dozen primitives).
+struct Bins {
+    boxes: [[Box3; BINS]; 3],
+    /// The second set of boxes of large nodes (see `best_split`).
+    odd: [[Box3; BINS]; 3],
+    counts: [[u32; BINS]; 3],
+}
+
+impl Bins {
+    fn new() -> Bins {
+        Bins { boxes: [[Box3::EMPTY; BINS]; 3], odd: [[Box3::EMPTY; BINS]; 3], counts: [[0; BINS]; 3] }
+    }
+}
+
 /// Builds the wide tree over `bounds`. Returns the nodes (root first; none when
 /// there is no primitive) and the primitive order the leaves refer to. `emit_leaf`
 /// gets each leaf's slice of that order, in depth-first order, and returns its
@@ -163,9 +179,10 @@ pub fn build_wide(bounds: impl ExactSizeIterator<Item = Aabb>, params: LeafParam
     }
     assert_eq!(boxes.len(), n, "the bounds' iterator gave another length than it announced");
     let root_bounds = root_box.aabb();
-    let mut inner: Vec<Inner> = Vec::with_capacity(n - 1);
+    // On huge pages where large: its 4 KiB page faults were 2 % of the build's CPU time.
+    let mut inner: PagedVec<Inner> = PagedVec::with_capacity(n - 1);
     let arena = Arena { ptr: inner.as_mut_ptr(), cap: inner.capacity(), next: AtomicUsize::new(0) };
-    let root = build_rec(params, &arena, &mut boxes, &mut order, 0, root_bounds, root_centroids, 0);
+    let root = build_rec(params, &arena, &mut Bins::new(), &mut boxes, &mut order, 0, root_bounds, root_centroids, 0);
     // SAFETY: the first `next` places were written (`Arena::push`), the threads have joined.
     unsafe { inner.set_len(arena.next.into_inner()) };
     drop(boxes);
@@ -245,9 +262,9 @@ fn groups(n: usize, group: usize) -> f32 {
 
 /// The subtree over `boxes` (and the primitive ids `order`, permuted alongside), which start
 /// at `first` in the whole order, bounded by `bb`, their centroids by `cb`. Inner nodes go to
-/// `arena`.
+/// `arena`; `bins` is the thread's (empty) scratch for the split search.
 #[allow(clippy::too_many_arguments)]
-fn build_rec(p: LeafParams, arena: &Arena, boxes: &mut [Box3], order: &mut [u32], first: usize, bb: Aabb, cb: Box3, depth: usize) -> BNode {
+fn build_rec(p: LeafParams, arena: &Arena, bins: &mut Bins, boxes: &mut [Box3], order: &mut [u32], first: usize, bb: Aabb, cb: Box3, depth: usize) -> BNode {
     let n = order.len();
     let leaf = BNode::leaf(first, n);
     if n <= 1 {
@@ -271,10 +288,10 @@ fn build_rec(p: LeafParams, arena: &Arena, boxes: &mut [Box3], order: &mut [u32]
             boxes[k] = old_boxes[i as usize];
             order[k] = old_order[i as usize];
         }
-        return split_folded(p, arena, boxes, order, first, mid, depth);
+        return split_folded(p, arena, bins, boxes, order, first, mid, depth);
     }
     let scale = Vec3A::select(Vec3A::from(ext).cmpgt(Vec3A::ZERO), Vec3A::splat(BINS as f32) / Vec3A::from(ext), Vec3A::ZERO);
-    let split = best_split(boxes, cb.min, scale, p.group);
+    let split = best_split(bins, boxes, cb.min, scale, p.group);
     let leaf_cost = groups(n, p.group);
     match split {
         Some((cost, axis, bin)) => {
@@ -302,7 +319,7 @@ fn build_rec(p: LeafParams, arena: &Arena, boxes: &mut [Box3], order: &mut [u32]
                 }
             }
             if l > 0 && l < n {
-                return split_into(p, arena, boxes, order, first, l, depth, [lb, rb], [lc, rc]);
+                return split_into(p, arena, bins, boxes, order, first, l, depth, [lb, rb], [lc, rc]);
             }
         }
         None => {
@@ -312,7 +329,7 @@ fn build_rec(p: LeafParams, arena: &Arena, boxes: &mut [Box3], order: &mut [u32]
             }
         }
     }
-    split_folded(p, arena, boxes, order, first, mid, depth)
+    split_folded(p, arena, bins, boxes, order, first, mid, depth)
 }
 
 /// Median splits made (the tests check that they reach that path).
@@ -320,11 +337,12 @@ fn build_rec(p: LeafParams, arena: &Arena, boxes: &mut [Box3], order: &mut [u32]
 static MEDIAN_SPLITS: std::sync::atomic::AtomicUsize = std::sync::atomic::AtomicUsize::new(0);
 
 /// Splits at `mid`, bounding each side by a pass over it.
-fn split_folded(p: LeafParams, arena: &Arena, boxes: &mut [Box3], order: &mut [u32], first: usize, mid: usize, depth: usize) -> BNode {
+#[allow(clippy::too_many_arguments)]
+fn split_folded(p: LeafParams, arena: &Arena, bins: &mut Bins, boxes: &mut [Box3], order: &mut [u32], first: usize, mid: usize, depth: usize) -> BNode {
     let (left, right) = boxes.split_at(mid);
     let bound = |s: &[Box3]| s.iter().fold((Box3::EMPTY, Box3::EMPTY), |(b, c), x| (b.union(*x), c.grow(x.center())));
     let ((lb, lc), (rb, rc)) = (bound(left), bound(right));
-    split_into(p, arena, boxes, order, first, mid, depth, [lb, rb], [lc, rc])
+    split_into(p, arena, bins, boxes, order, first, mid, depth, [lb, rb], [lc, rc])
 }
 
 /// Builds the two children of a split at `mid`, given their boxes and centroid bounds.
@@ -332,6 +350,7 @@ fn split_folded(p: LeafParams, arena: &Arena, boxes: &mut [Box3], order: &mut [u
 fn split_into(
     p: LeafParams,
     arena: &Arena,
+    bins: &mut Bins,
     boxes: &mut [Box3],
     order: &mut [u32],
     first: usize,
@@ -345,12 +364,14 @@ fn split_into(
     let (lord, rord) = order.split_at_mut(mid);
     let (lb, rb) = (bounds[0].aabb(), bounds[1].aabb());
     let (a, b) = if n >= PARALLEL_MIN {
+        // The right side may run on another thread: bins of its own.
         rayon::join(
-            || build_rec(p, arena, lbox, lord, first, lb, centroids[0], depth + 1),
-            || build_rec(p, arena, rbox, rord, first + mid, rb, centroids[1], depth + 1),
+            || build_rec(p, arena, bins, lbox, lord, first, lb, centroids[0], depth + 1),
+            || build_rec(p, arena, &mut Bins::new(), rbox, rord, first + mid, rb, centroids[1], depth + 1),
         )
     } else {
-        (build_rec(p, arena, lbox, lord, first, lb, centroids[0], depth + 1), build_rec(p, arena, rbox, rord, first + mid, rb, centroids[1], depth + 1))
+        let a = build_rec(p, arena, bins, lbox, lord, first, lb, centroids[0], depth + 1);
+        (a, build_rec(p, arena, bins, rbox, rord, first + mid, rb, centroids[1], depth + 1))
     };
     arena.push(Inner { bounds: [lb, rb], children: [a, b] })
 }
@@ -422,9 +443,9 @@ impl SideTest {
 
 /// Best binned SAH split over the three axes: (sum of area * groups, axis, first bin of the
 /// right side). `lo` is the centroids' lower corner, `scale` bins per unit (0 on a flat axis).
-fn best_split(boxes: &[Box3], lo: Vec3A, scale: Vec3A, g: usize) -> Option<(f32, usize, usize)> {
-    let mut bin_b = [[Box3::EMPTY; BINS]; 3];
-    let mut bin_n = [[0u32; BINS]; 3];
+/// `bins` come empty and are left empty.
+fn best_split(bins: &mut Bins, boxes: &[Box3], lo: Vec3A, scale: Vec3A, g: usize) -> Option<(f32, usize, usize)> {
+    let Bins { boxes: bin_b, odd: odd_b, counts: bin_n } = bins;
     let mut add = |bin_b: &mut [[Box3; BINS]; 3], b: &Box3| {
         let k = bin_indices(b.center(), lo, scale);
         for axis in 0..3 {
@@ -434,30 +455,39 @@ fn best_split(boxes: &[Box3], lo: Vec3A, scale: Vec3A, g: usize) -> Option<(f32,
             bin_n[axis][i] += 1;
         }
     };
-    if boxes.len() >= TWO_BIN_SETS_MIN {
+    // The occupied bins of each axis (a bin's occupancy in one bit): what is swept and emptied.
+    let occupied = |bin_n: &[[u32; BINS]; 3]| bin_n.map(|n| (0..BINS).fold(0u32, |m, k| m | u32::from(n[k] != 0) << k));
+    let occupied = if boxes.len() >= TWO_BIN_SETS_MIN {
         // Neighbours often land in the same bin: two sets of boxes (even and odd primitives)
         // halve the chains of unions through memory. Unions are exact in any order: the
         // merged boxes are one set's (a zero's sign aside).
-        let mut odd_b = [[Box3::EMPTY; BINS]; 3];
         let pairs = boxes.chunks_exact(2);
         let rest = pairs.remainder();
         for pair in pairs {
-            add(&mut bin_b, &pair[0]);
-            add(&mut odd_b, &pair[1]);
+            add(bin_b, &pair[0]);
+            add(odd_b, &pair[1]);
         }
         for b in rest {
-            add(&mut bin_b, b);
+            add(bin_b, b);
         }
-        for (set, odd) in bin_b.iter_mut().zip(&odd_b) {
-            for (b, o) in set.iter_mut().zip(odd) {
-                *b = b.union(*o);
+        // The counts are both sets': an odd bin in use is an occupied one.
+        let occupied = occupied(bin_n);
+        for ((set, odd), &occ) in bin_b.iter_mut().zip(odd_b.iter_mut()).zip(&occupied) {
+            let mut m = occ;
+            while m != 0 {
+                let k = m.trailing_zeros() as usize;
+                m &= m - 1;
+                set[k] = set[k].union(odd[k]);
+                odd[k] = Box3::EMPTY;
             }
         }
+        occupied
     } else {
         for b in boxes {
-            add(&mut bin_b, b);
+            add(bin_b, b);
         }
-    }
+        occupied(bin_n)
+    };
     // ceil(n / g) without a division where g is a power of two (leaf groups are).
     let shift = g.is_power_of_two().then(|| g.trailing_zeros());
     let groups_of = |n: usize| match shift {
@@ -470,8 +500,7 @@ fn best_split(boxes: &[Box3], lo: Vec3A, scale: Vec3A, g: usize) -> Option<(f32,
         if scale[axis] <= 0.0 {
             continue;
         }
-        let (bin_b, bin_n) = (&bin_b[axis], &bin_n[axis]);
-        let occupied = (0..BINS).fold(0u32, |m, k| m | u32::from(bin_n[k] != 0) << k);
+        let (bin_b, bin_n, occupied) = (&bin_b[axis], &bin_n[axis], occupied[axis]);
         // The cost of the bins from each occupied one up (bin 0 never starts a right side).
         let mut right_cost = [0.0f32; BINS];
         let (mut acc, mut cnt) = (Box3::EMPTY, 0usize);
@@ -505,6 +534,16 @@ fn best_split(boxes: &[Box3], lo: Vec3A, scale: Vec3A, g: usize) -> Option<(f32,
             if best.is_none_or(|x| cost < x.0) {
                 best = Some((cost, axis, a + 1));
             }
+        }
+    }
+    // Empty what was filled (a flat axis's primitives went to its bin 0).
+    for ((set, n), &occ) in bin_b.iter_mut().zip(bin_n.iter_mut()).zip(&occupied) {
+        let mut m = occ;
+        while m != 0 {
+            let k = m.trailing_zeros() as usize;
+            m &= m - 1;
+            set[k] = Box3::EMPTY;
+            n[k] = 0;
         }
     }
     best

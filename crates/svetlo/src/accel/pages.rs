@@ -149,11 +149,62 @@ impl<T: Copy> PagedVec<T> {
         }
     }
 
+    /// The room for `capacity()` values, to be written out of order (see `set_len`).
+    pub fn as_mut_ptr(&mut self) -> *mut T {
+        self.ptr.as_ptr()
+    }
+
+    pub fn capacity(&self) -> usize {
+        self.cap
+    }
+
+    /// # Safety
+    /// `len <= capacity()`, and the first `len` values were written (through `as_mut_ptr`).
+    pub unsafe fn set_len(&mut self, len: usize) {
+        debug_assert!(len <= self.cap);
+        self.len = len;
+        if let Owner::Vec(v) = &mut self.owner {
+            // SAFETY: as the caller promised.
+            unsafe { v.set_len(len) };
+        }
+    }
+
+    /// Appends `count` values, `f(i)` the i-th of them, made on rayon's threads: each thread
+    /// writes (and faults in) its own runs of the array.
+    pub fn extend_par(&mut self, count: usize, f: impl Fn(usize) -> T + Sync)
+    where
+        T: Send,
+    {
+        use rayon::prelude::*;
+        use std::mem::MaybeUninit;
+        /// Values per task: a few pages of large values, few tasks.
+        const RUN: usize = 1024;
+        let need = self.len.checked_add(count).expect("capacity overflow");
+        if need > self.cap {
+            self.grow_to(need);
+        }
+        // SAFETY: `len + count <= cap`: the spare room lies inside the allocation, unaliased
+        // (`&mut self`), and is seen as uninitialized values.
+        let spare = unsafe { std::slice::from_raw_parts_mut(self.ptr.as_ptr().add(self.len) as *mut MaybeUninit<T>, count) };
+        spare.par_chunks_mut(RUN).enumerate().for_each(|(run, slots)| {
+            for (j, slot) in slots.iter_mut().enumerate() {
+                slot.write(f(run * RUN + j));
+            }
+        });
+        // SAFETY: the first `need` values are written, `need <= cap`.
+        unsafe { self.set_len(need) };
+    }
+
     /// Out of line: the capacities are chosen so that this is rare.
     #[cold]
     #[inline(never)]
     fn grow(&mut self) {
-        let mut bigger = PagedVec::with_capacity((2 * self.cap).max(8));
+        self.grow_to((2 * self.cap).max(8));
+    }
+
+    /// Moves the values into an allocation for at least `cap` values (more than `len`).
+    fn grow_to(&mut self, cap: usize) {
+        let mut bigger = PagedVec::with_capacity(cap);
         // SAFETY: the new allocation holds more than `len` values and does not overlap ours.
         unsafe { std::ptr::copy_nonoverlapping(self.ptr.as_ptr(), bigger.ptr.as_ptr(), self.len) };
         bigger.len = self.len;
@@ -260,6 +311,14 @@ mod tests {
             let s = v.into_slice();
             assert_eq!(s.is_huge(), HUGE_PAGES_ADVISABLE);
             assert_eq!(&s[..], &expect[..]);
+        }
+        // Extended in parallel: in its room, and past it (small to huge).
+        for cap in [n, 10] {
+            let mut v = PagedVec::with_capacity(cap);
+            v.push(value(0));
+            v.extend_par(n - 1, |i| value(i + 1));
+            let expect: Vec<u64> = (0..n).map(value).collect();
+            assert_eq!(&v[..], &expect[..]);
         }
         let mut small = PagedVec::with_capacity(4);
         small.push(1u32);
