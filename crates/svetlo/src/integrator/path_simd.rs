@@ -1346,8 +1346,8 @@ impl SimdKernel {
             // Any other light by its own sampling (`path::light_sample_unshadowed`'s first tests).
             Some(None) if pmf > 0.0 => {
                 // A sphere of constant radiance: with the other lanes' (`sphere_samples`), its
-                // lane of their operands written here (a second pass over the lanes, looking the
-                // light up again, branched on every lane).
+                // operands written into their lanes here (a pass over all lanes that looked
+                // each light up again, a branch per lane, cost more than its instructions).
                 if let Some((sp, le)) = &self.sphere_lights[li] {
                     v.sphere_pending |= 1 << l;
                     let q = &mut v.sphere_q;
