@@ -175,13 +175,18 @@ impl Bins {
 /// vertices was the build's largest serial part), so that a caller need not keep an array of
 /// them beside the build's own; the build's large arrays are [`PagedVec`]s.
 pub fn build_wide(n: usize, bound: impl Fn(usize) -> Aabb + Sync, params: LeafParams, mut emit_leaf: impl FnMut(&[u32]) -> u32) -> (PagedVec<Node>, Vec<u32>) {
-    let mut order: Vec<u32> = (0..n as u32).collect();
+    use rayon::prelude::*;
+    let mut order: Vec<u32> = (0..n as u32).into_par_iter().collect();
     if n == 0 {
         return (PagedVec::with_capacity(0), order);
     }
+    // The root's bounds as the boxes are made: this pass is bound by memory, not by the cores.
     let mut boxes = PagedVec::with_capacity(n);
-    boxes.extend_par(n, |i| Box3::new(&bound(i)));
-    let (root_box, root_centroids) = bound_par(&boxes);
+    let empty = || (Box3::EMPTY, Box3::EMPTY);
+    let grow = |(b, c): (Box3, Box3), x: &Box3| (b.union(*x), c.grow(x.center()));
+    let both = |a: (Box3, Box3), b: (Box3, Box3)| (a.0.union(b.0), a.1.union(b.1));
+    // Min and max are exact in any order (a zero's sign aside).
+    let (root_box, root_centroids) = boxes.extend_par_reduce(n, |i| Box3::new(&bound(i)), empty, grow, both);
     let root_bounds = root_box.aabb();
     // On huge pages where large: its 4 KiB page faults were 2 % of the build's CPU time.
     let mut inner: PagedVec<Inner> = PagedVec::with_capacity(n - 1);
@@ -351,13 +356,6 @@ fn split_folded(p: LeafParams, arena: &Arena, bins: &mut Bins, boxes: &mut [Box3
 /// The box and the centroids' box of `boxes`.
 fn bound_seq(boxes: &[Box3]) -> (Box3, Box3) {
     boxes.iter().fold((Box3::EMPTY, Box3::EMPTY), |(b, c), x| (b.union(*x), c.grow(x.center())))
-}
-
-/// [`bound_seq`] on rayon's threads: min and max are exact in any order (a zero's sign aside).
-fn bound_par(boxes: &[Box3]) -> (Box3, Box3) {
-    use rayon::prelude::*;
-    let both = |a: (Box3, Box3), b: (Box3, Box3)| (a.0.union(b.0), a.1.union(b.1));
-    boxes.par_chunks(PARALLEL_MIN).map(bound_seq).reduce(|| (Box3::EMPTY, Box3::EMPTY), both)
 }
 
 /// Builds the two children of a split at `mid`, given their boxes and centroid bounds.
