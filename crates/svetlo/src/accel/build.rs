@@ -154,30 +154,39 @@ impl Bins {
     fn new() -> Bins {
         Bins { boxes: [[Box3::EMPTY; BINS]; 3], odd: [[Box3::EMPTY; BINS]; 3], counts: [[0; BINS]; 3] }
     }
+
+    /// Adds `o`'s boxes and counts to these (the odd sets are left as they are).
+    fn merge(&mut self, o: &Bins) {
+        for axis in 0..3 {
+            for k in 0..BINS {
+                self.boxes[axis][k] = self.boxes[axis][k].union(o.boxes[axis][k]);
+                self.counts[axis][k] += o.counts[axis][k];
+            }
+        }
+    }
 }
 
-/// Builds the wide tree over `bounds`. Returns the nodes (root first; none when
-/// there is no primitive) and the primitive order the leaves refer to. `emit_leaf`
-/// gets each leaf's slice of that order, in depth-first order, and returns its
+/// Builds the wide tree over `n` primitives, `bound(i)` the box of the i-th. Returns the nodes
+/// (root first; none when there is no primitive) and the primitive order the leaves refer to.
+/// `emit_leaf` gets each leaf's slice of that order, in depth-first order, and returns its
 /// child code (with `LEAF_BIT` set).
 ///
-/// The bounds come as an iterator (the primitives in order), so that a caller need not keep
-/// an array of them beside the build's own; the build's large arrays are [`PagedVec`]s.
-pub fn build_wide(bounds: impl ExactSizeIterator<Item = Aabb>, params: LeafParams, mut emit_leaf: impl FnMut(&[u32]) -> u32) -> (PagedVec<Node>, Vec<u32>) {
-    let n = bounds.len();
-    let mut order: Vec<u32> = (0..n as u32).collect();
+/// The boxes are asked for by index, on rayon's threads (the pass over a million triangles'
+/// vertices was the build's largest serial part), so that a caller need not keep an array of
+/// them beside the build's own; the build's large arrays are [`PagedVec`]s.
+pub fn build_wide(n: usize, bound: impl Fn(usize) -> Aabb + Sync, params: LeafParams, mut emit_leaf: impl FnMut(&[u32]) -> u32) -> (PagedVec<Node>, Vec<u32>) {
+    use rayon::prelude::*;
+    let mut order: Vec<u32> = (0..n as u32).into_par_iter().collect();
     if n == 0 {
         return (PagedVec::with_capacity(0), order);
     }
+    // The root's bounds as the boxes are made: this pass is bound by memory, not by the cores.
     let mut boxes = PagedVec::with_capacity(n);
-    let (mut root_box, mut root_centroids) = (Box3::EMPTY, Box3::EMPTY);
-    for b in bounds {
-        let b = Box3::new(&b);
-        boxes.push(b);
-        root_box = root_box.union(b);
-        root_centroids = root_centroids.grow(b.center());
-    }
-    assert_eq!(boxes.len(), n, "the bounds' iterator gave another length than it announced");
+    let empty = || (Box3::EMPTY, Box3::EMPTY);
+    let grow = |(b, c): (Box3, Box3), x: &Box3| (b.union(*x), c.grow(x.center()));
+    let both = |a: (Box3, Box3), b: (Box3, Box3)| (a.0.union(b.0), a.1.union(b.1));
+    // Min and max are exact in any order (a zero's sign aside).
+    let (root_box, root_centroids) = boxes.extend_par_reduce(n, |i| Box3::new(&bound(i)), empty, grow, both);
     let root_bounds = root_box.aabb();
     // On huge pages where large: its 4 KiB page faults were 2 % of the build's CPU time.
     let mut inner: PagedVec<Inner> = PagedVec::with_capacity(n - 1);
@@ -340,9 +349,13 @@ static MEDIAN_SPLITS: std::sync::atomic::AtomicUsize = std::sync::atomic::Atomic
 #[allow(clippy::too_many_arguments)]
 fn split_folded(p: LeafParams, arena: &Arena, bins: &mut Bins, boxes: &mut [Box3], order: &mut [u32], first: usize, mid: usize, depth: usize) -> BNode {
     let (left, right) = boxes.split_at(mid);
-    let bound = |s: &[Box3]| s.iter().fold((Box3::EMPTY, Box3::EMPTY), |(b, c), x| (b.union(*x), c.grow(x.center())));
-    let ((lb, lc), (rb, rc)) = (bound(left), bound(right));
+    let ((lb, lc), (rb, rc)) = (bound_seq(left), bound_seq(right));
     split_into(p, arena, bins, boxes, order, first, mid, depth, [lb, rb], [lc, rc])
+}
+
+/// The box and the centroids' box of `boxes`.
+fn bound_seq(boxes: &[Box3]) -> (Box3, Box3) {
+    boxes.iter().fold((Box3::EMPTY, Box3::EMPTY), |(b, c), x| (b.union(*x), c.grow(x.center())))
 }
 
 /// Builds the two children of a split at `mid`, given their boxes and centroid bounds.
@@ -445,49 +458,27 @@ impl SideTest {
 /// right side). `lo` is the centroids' lower corner, `scale` bins per unit (0 on a flat axis).
 /// `bins` come empty and are left empty.
 fn best_split(bins: &mut Bins, boxes: &[Box3], lo: Vec3A, scale: Vec3A, g: usize) -> Option<(f32, usize, usize)> {
-    let Bins { boxes: bin_b, odd: odd_b, counts: bin_n } = bins;
-    let mut add = |bin_b: &mut [[Box3; BINS]; 3], b: &Box3| {
-        let k = bin_indices(b.center(), lo, scale);
-        for axis in 0..3 {
-            // The mask keeps the index (at most BINS - 1) and drops the bounds checks.
-            let i = k[axis] & (BINS - 1);
-            bin_b[axis][i] = bin_b[axis][i].union(*b);
-            bin_n[axis][i] += 1;
+    if boxes.len() >= PARALLEL_MIN {
+        // The nodes near the root on rayon's threads, chunk by chunk: unions are exact in any
+        // order and counts add up, so the merged bins are the serial pass's (a zero's sign aside).
+        use rayon::prelude::*;
+        let fill = |chunk: &[Box3]| {
+            let mut b = Box::new(Bins::new());
+            fill_bins(&mut b, chunk, lo, scale);
+            b
+        };
+        let merged = boxes.par_chunks(PARALLEL_MIN / 2).map(fill).reduce_with(|mut a, b| {
+            a.merge(&b);
+            a
+        });
+        if let Some(m) = merged {
+            bins.merge(&m);
         }
-    };
-    // The occupied bins of each axis (a bin's occupancy in one bit): what is swept and emptied.
-    let occupied = |bin_n: &[[u32; BINS]; 3]| bin_n.map(|n| (0..BINS).fold(0u32, |m, k| m | u32::from(n[k] != 0) << k));
-    let occupied = if boxes.len() >= TWO_BIN_SETS_MIN {
-        // Neighbours often land in the same bin: two sets of boxes (even and odd primitives)
-        // halve the chains of unions through memory. Unions are exact in any order: the
-        // merged boxes are one set's (a zero's sign aside).
-        let pairs = boxes.chunks_exact(2);
-        let rest = pairs.remainder();
-        for pair in pairs {
-            add(bin_b, &pair[0]);
-            add(odd_b, &pair[1]);
-        }
-        for b in rest {
-            add(bin_b, b);
-        }
-        // The counts are both sets': an odd bin in use is an occupied one.
-        let occupied = occupied(bin_n);
-        for ((set, odd), &occ) in bin_b.iter_mut().zip(odd_b.iter_mut()).zip(&occupied) {
-            let mut m = occ;
-            while m != 0 {
-                let k = m.trailing_zeros() as usize;
-                m &= m - 1;
-                set[k] = set[k].union(odd[k]);
-                odd[k] = Box3::EMPTY;
-            }
-        }
-        occupied
     } else {
-        for b in boxes {
-            add(bin_b, b);
-        }
-        occupied(bin_n)
-    };
+        fill_bins(bins, boxes, lo, scale);
+    }
+    let occupied = occupied_bins(&bins.counts);
+    let Bins { boxes: bin_b, counts: bin_n, .. } = bins;
     // ceil(n / g) without a division where g is a power of two (leaf groups are).
     let shift = g.is_power_of_two().then(|| g.trailing_zeros());
     let groups_of = |n: usize| match shift {
@@ -549,6 +540,54 @@ fn best_split(bins: &mut Bins, boxes: &[Box3], lo: Vec3A, scale: Vec3A, g: usize
     best
 }
 
+/// Bins `boxes` into `bins` (empty bins of one set, the odd set left empty).
+fn fill_bins(bins: &mut Bins, boxes: &[Box3], lo: Vec3A, scale: Vec3A) {
+    let Bins { boxes: bin_b, odd: odd_b, counts: bin_n } = bins;
+    let mut add = |bin_b: &mut [[Box3; BINS]; 3], b: &Box3| {
+        let k = bin_indices(b.center(), lo, scale);
+        for axis in 0..3 {
+            // The mask keeps the index (at most BINS - 1) and drops the bounds checks.
+            let i = k[axis] & (BINS - 1);
+            bin_b[axis][i] = bin_b[axis][i].union(*b);
+            bin_n[axis][i] += 1;
+        }
+    };
+    if boxes.len() >= TWO_BIN_SETS_MIN {
+        // Neighbours often land in the same bin: two sets of boxes (even and odd primitives)
+        // halve the chains of unions through memory. Unions are exact in any order: the
+        // merged boxes are one set's (a zero's sign aside).
+        let pairs = boxes.chunks_exact(2);
+        let rest = pairs.remainder();
+        for pair in pairs {
+            add(bin_b, &pair[0]);
+            add(odd_b, &pair[1]);
+        }
+        for b in rest {
+            add(bin_b, b);
+        }
+        // The counts are both sets': an odd bin in use is an occupied one.
+        let occupied = occupied_bins(bin_n);
+        for ((set, odd), &occ) in bin_b.iter_mut().zip(odd_b.iter_mut()).zip(&occupied) {
+            let mut m = occ;
+            while m != 0 {
+                let k = m.trailing_zeros() as usize;
+                m &= m - 1;
+                set[k] = set[k].union(odd[k]);
+                odd[k] = Box3::EMPTY;
+            }
+        }
+    } else {
+        for b in boxes {
+            add(bin_b, b);
+        }
+    }
+}
+
+/// The occupied bins of each axis (a bin's occupancy in one bit): what is swept and emptied.
+fn occupied_bins(counts: &[[u32; BINS]; 3]) -> [u32; 3] {
+    counts.map(|n| (0..BINS).fold(0u32, |m, k| m | u32::from(n[k] != 0) << k))
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -560,10 +599,15 @@ mod tests {
     /// aside: unions in another order may pick the other zero).
     fn same_tree(bounds: &[Aabb], params: LeafParams) {
         let mut leaves_new = Vec::new();
-        let (nodes_new, order_new) = build_wide(bounds.iter().copied(), params, |s| {
-            leaves_new.push(s.to_vec());
-            leaf_code_for_test(leaves_new.len())
-        });
+        let (nodes_new, order_new) = build_wide(
+            bounds.len(),
+            |i| bounds[i],
+            params,
+            |s| {
+                leaves_new.push(s.to_vec());
+                leaf_code_for_test(leaves_new.len())
+            },
+        );
         let mut leaves_old = Vec::new();
         let (nodes_old, order_old) = reference::build_wide_reference(bounds, params, |s| {
             leaves_old.push(s.to_vec());

@@ -99,28 +99,24 @@ impl Accel {
             let (first, m) = tri_src[tri_src.partition_point(|&(first, _)| first <= id) - 1];
             m.vertices((id - first) as usize)
         };
-        // The bounds in id order, the meshes walked in turn.
-        let mut src = 0;
-        let tri_bounds = (0..tri_count as u32).map(|id| {
-            while tri_src.get(src + 1).is_some_and(|&(first, _)| first <= id) {
-                src += 1;
-            }
-            let (first, m) = tri_src[src];
-            Aabb::from_points(&m.vertices((id - first) as usize))
-        });
         // The leaves' triangles in leaf order, and each block's run of them (start, length):
         // the blocks are packed once the tree is built, on all threads (packing them leaf by
         // leaf, reading the meshes' vertices, was a tenth of a 1M-triangle build, on one thread).
         let mut leaf_tris: Vec<u32> = Vec::with_capacity(tri_count);
         let mut blocks: Vec<(u32, u32)> = Vec::with_capacity(tri_count / 3);
-        let (tri_nodes, _) = build_wide(tri_bounds, TRI_LEAF, |prims| {
-            let start = blocks.len();
-            for chunk in prims.chunks(LANES) {
-                blocks.push((leaf_tris.len() as u32, chunk.len() as u32));
-                leaf_tris.extend_from_slice(chunk);
-            }
-            leaf_code(start, blocks.len() - start)
-        });
+        let (tri_nodes, _) = build_wide(
+            tri_count,
+            |i| Aabb::from_points(&triangle(i as u32)),
+            TRI_LEAF,
+            |prims| {
+                let start = blocks.len();
+                for chunk in prims.chunks(LANES) {
+                    blocks.push((leaf_tris.len() as u32, chunk.len() as u32));
+                    leaf_tris.extend_from_slice(chunk);
+                }
+                leaf_code(start, blocks.len() - start)
+            },
+        );
         let mut tris = PagedVec::with_capacity(blocks.len());
         tris.extend_par(blocks.len(), |b| {
             let (start, len) = blocks[b];
@@ -135,14 +131,19 @@ impl Accel {
         let sph_bounds: Vec<Aabb> = sph.iter().map(|s| s.bounds()).collect();
         let mut spheres = Vec::with_capacity(sph.len());
         let mut sph_shapes = Vec::with_capacity(sph.len());
-        let (sph_nodes, _) = build_wide(sph_bounds.iter().copied(), SPHERE_LEAF, |prims| {
-            let start = spheres.len();
-            for &i in prims {
-                spheres.push(sph[i as usize]);
-                sph_shapes.push(sph_r[i as usize]);
-            }
-            leaf_code(start, prims.len())
-        });
+        let (sph_nodes, _) = build_wide(
+            sph_bounds.len(),
+            |i| sph_bounds[i],
+            SPHERE_LEAF,
+            |prims| {
+                let start = spheres.len();
+                for &i in prims {
+                    spheres.push(sph[i as usize]);
+                    sph_shapes.push(sph_r[i as usize]);
+                }
+                leaf_code(start, prims.len())
+            },
+        );
 
         let mut vox: Vec<(u32, u32)> = Vec::new();
         let mut vox_bounds = Vec::new();
@@ -153,11 +154,16 @@ impl Accel {
             }
         }
         let mut voxels = Vec::with_capacity(vox.len());
-        let (sdf_nodes, _) = build_wide(vox_bounds.iter().copied(), VOXEL_LEAF, |prims| {
-            let start = voxels.len();
-            voxels.extend(prims.iter().map(|&i| vox[i as usize]));
-            leaf_code(start, prims.len())
-        });
+        let (sdf_nodes, _) = build_wide(
+            vox_bounds.len(),
+            |i| vox_bounds[i],
+            VOXEL_LEAF,
+            |prims| {
+                let start = voxels.len();
+                voxels.extend(prims.iter().map(|&i| vox[i as usize]));
+                leaf_code(start, prims.len())
+            },
+        );
 
         let mut bounds = Aabb::EMPTY;
         for n in [&tri_nodes, &sph_nodes, &sdf_nodes] {

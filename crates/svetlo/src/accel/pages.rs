@@ -175,6 +175,23 @@ impl<T: Copy> PagedVec<T> {
     where
         T: Send,
     {
+        self.extend_par_reduce(count, f, || (), |(), _| (), |(), ()| ());
+    }
+
+    /// [`extend_par`](Self::extend_par) that also folds the values as they are made (each
+    /// run's from `identity()`), the runs' results combined by `reduce` in no fixed order: one
+    /// pass over the values where a second would read them back from memory.
+    pub fn extend_par_reduce<A: Send>(
+        &mut self,
+        count: usize,
+        f: impl Fn(usize) -> T + Sync,
+        identity: impl Fn() -> A + Sync + Send,
+        fold: impl Fn(A, &T) -> A + Sync,
+        reduce: impl Fn(A, A) -> A + Sync + Send,
+    ) -> A
+    where
+        T: Send,
+    {
         use rayon::prelude::*;
         use std::mem::MaybeUninit;
         /// Values per task: a few pages of large values, few tasks.
@@ -186,13 +203,20 @@ impl<T: Copy> PagedVec<T> {
         // SAFETY: `len + count <= cap`: the spare room lies inside the allocation, unaliased
         // (`&mut self`), and is seen as uninitialized values.
         let spare = unsafe { std::slice::from_raw_parts_mut(self.ptr.as_ptr().add(self.len) as *mut MaybeUninit<T>, count) };
-        spare.par_chunks_mut(RUN).enumerate().for_each(|(run, slots)| {
-            for (j, slot) in slots.iter_mut().enumerate() {
-                slot.write(f(run * RUN + j));
-            }
-        });
+        let acc = spare
+            .par_chunks_mut(RUN)
+            .enumerate()
+            .map(|(run, slots)| {
+                let mut acc = identity();
+                for (j, slot) in slots.iter_mut().enumerate() {
+                    acc = fold(acc, slot.write(f(run * RUN + j)));
+                }
+                acc
+            })
+            .reduce(&identity, reduce);
         // SAFETY: the first `need` values are written, `need <= cap`.
         unsafe { self.set_len(need) };
+        acc
     }
 
     /// Out of line: the capacities are chosen so that this is rare.
@@ -320,6 +344,12 @@ mod tests {
             let expect: Vec<u64> = (0..n).map(value).collect();
             assert_eq!(&v[..], &expect[..]);
         }
+        // Folded as they are made: every value once (a sum and a count, in any order).
+        let mut v = PagedVec::with_capacity(5);
+        let (sum, count) = v.extend_par_reduce(n, value, || (0u64, 0usize), |(s, c), x| (s.wrapping_add(*x), c + 1), |a, b| (a.0.wrapping_add(b.0), a.1 + b.1));
+        let expect: Vec<u64> = (0..n).map(value).collect();
+        assert_eq!(&v[..], &expect[..]);
+        assert_eq!((sum, count), (expect.iter().fold(0u64, |s, x| s.wrapping_add(*x)), n));
         let mut small = PagedVec::with_capacity(4);
         small.push(1u32);
         let s = small.into_slice();
