@@ -118,15 +118,25 @@ impl SimdPathTracer {
     }
 }
 
+impl SimdPathTracer {
+    /// Whether a render asks the eight-wide kernel first (it may still decline the scene).
+    fn tries_kernel(&self, settings: &RenderSettings) -> bool {
+        self.simd && lanes_route(settings) && crate::accel::packet::avx2()
+    }
+}
+
+/// Whether the lanes can step the AOVs' product automaton (built when the set is bound to the
+/// scene); a set too large for one takes the scalar tracer's automaton-by-automaton steps.
+fn lanes_route(settings: &RenderSettings) -> bool {
+    settings.aovs().is_empty() || settings.aovs().forward_view().is_some()
+}
+
 impl Integrator for SimdPathTracer {
     fn render(&self, scene: &Scene, settings: &RenderSettings, progress: &Progress) -> Result<Film> {
-        // The lanes step the AOVs' product automaton (built when the set is bound to the scene);
-        // a set too large for one takes the scalar tracer's automaton-by-automaton steps.
-        let lanes_route = settings.aovs().is_empty() || settings.aovs().forward_view().is_some();
-        if self.simd && !lanes_route {
+        if self.simd && !lanes_route(settings) {
             eprintln!("note: these light path expressions take the scalar path tracer (their product automaton is too large for the eight-wide kernel)");
         }
-        if self.simd && lanes_route && crate::accel::packet::avx2() {
+        if self.tries_kernel(settings) {
             if let Some(k) = SimdKernel::new(scene, settings) {
                 return k.render(scene, settings, progress);
             }
@@ -141,8 +151,7 @@ impl Integrator for SimdPathTracer {
     /// triangles) stays with the scene for the render. A scene the kernel declines on a first
     /// render is left unmarked, so the render still takes the scalar tracer.
     fn prepare(&self, scene: &Scene, settings: &RenderSettings) {
-        let lanes_route = settings.aovs().is_empty() || settings.aovs().forward_view().is_some();
-        if self.simd && lanes_route && crate::accel::packet::avx2() {
+        if self.tries_kernel(settings) {
             drop(SimdKernel::new(scene, settings));
         }
     }
