@@ -16,7 +16,7 @@ use crate::geometry::Ray;
 use crate::lpe::LightTracker;
 use crate::path::{
     camera_connection, connect, light_subpath, light_subpath_traced, light_walk, set_lane, BatchScratch, CameraBatch, LightWalk, PathConfig, ShadowPackets,
-    Staged, Vertex,
+    Staged, Vertex, WalkLanes,
 };
 use crate::sampling::{IndependentSampler, Sampler, SamplerKind, SobolSampler};
 use crate::scene::Scene;
@@ -160,6 +160,7 @@ impl Estimator {
         let mut active = 0u8;
         let mut more = true;
         let mut blacks = BlackSamples::default();
+        let mut lambert = WalkLanes::default();
         loop {
             // Idle lanes take the next samples; a walk that ends at once is finished here.
             for l in 0..LANES {
@@ -186,19 +187,44 @@ impl Estimator {
                 break;
             }
             let hits = packets.closest_packet(&rays, active);
+            // Each lane arrives at its hit and draws its vertex's numbers; Lambertian vertices
+            // scatter together (`WalkLanes`), the others alone. A lane's walk goes on (bit 1)
+            // or ends (bit 0) in `going`, its fate after the Lambertian step if gathered.
+            let mut going = 0u8;
             for l in 0..LANES {
                 if active & (1 << l) == 0 {
                     continue;
                 }
                 let Some(w) = walks[l].as_mut() else { continue };
                 let hit = packets.interaction(scene, &hits, l, w.walk.ray());
-                if w.walk.step(scene, hit.as_ref(), &mut samplers[l], &mut paths[l]) {
-                    set_lane(&mut rays, l, w.walk.ray());
+                if !w.walk.arrive(scene, hit.as_ref(), &mut paths[l]) {
+                    continue;
+                }
+                let sampler = &mut samplers[l];
+                let uc = sampler.next_1d();
+                let u = sampler.next_2d();
+                let u_rr = sampler.next_1d();
+                if !lambert.gather(l, &w.walk, &paths[l], uc, u, u_rr) && w.walk.scatter(uc, u, u_rr, &mut paths[l]) {
+                    going |= 1 << l;
+                }
+            }
+            lambert.run(&mut rays);
+            for l in 0..LANES {
+                if active & (1 << l) == 0 {
+                    continue;
+                }
+                let Some(w) = walks[l].as_mut() else { continue };
+                let goes_on = if lambert.has(l) { lambert.finish(l, &mut w.walk, &mut paths[l], &rays) } else { going & (1 << l) != 0 };
+                if goes_on {
+                    if !lambert.has(l) {
+                        set_lane(&mut rays, l, w.walk.ray());
+                    }
                 } else {
                     active &= !(1 << l);
                     self.finish_lane(scene, packets, walks[l].as_ref(), &mut paths[l], &mut samplers[l], seq[l], &mut conns, &mut out);
                 }
             }
+            lambert.clear();
         }
         blacks.flush(t.tile);
         conns.finish(self.batch.as_ref(), packets, &mut out);

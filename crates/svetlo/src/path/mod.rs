@@ -38,6 +38,7 @@ mod camera_batch;
 mod connect;
 mod mis;
 mod shadow;
+mod step8;
 mod vertex;
 mod walk;
 
@@ -45,6 +46,7 @@ pub use camera_batch::{BatchScratch, CameraBatch, Staged};
 pub use connect::{camera_connection, connect, weighted_camera_connection, CameraConnection, Connection};
 pub use mis::mis_weight;
 pub use shadow::{set_lane, ClosestHits, ShadowPackets};
+pub(crate) use step8::WalkLanes;
 pub use vertex::{Event, EventKind, Vertex, VertexKind};
 pub use walk::{camera_subpath, light_subpath, random_walk};
 pub(crate) use walk::{camera_subpath_traced, light_subpath_traced, light_walk, LightWalk};

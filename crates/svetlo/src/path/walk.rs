@@ -156,19 +156,20 @@ pub fn random_walk<S: Sampler + ?Sized>(
 /// A random walk between two of its rays: [`random_walk`] with the tracing left to the
 /// caller, so that the rays of several walks can be traced as one packet. Each walk draws
 /// from its own sampler in `random_walk`'s order, whatever the others do.
+#[derive(Clone)]
 pub(crate) struct Walk {
     /// The ray to trace next.
-    ray: Ray,
-    beta: Rgb,
+    pub(super) ray: Ray,
+    pub(super) beta: Rgb,
     /// Solid-angle density of `ray`'s direction (0 after a specular choice).
-    pdf_fwd: f32,
+    pub(super) pdf_fwd: f32,
     /// Throughput of the scattering alone (what Russian roulette looks at), and the
     /// radiance scaling of refraction it undoes.
-    scatter: Rgb,
-    eta_scale: f32,
-    max_vertices: usize,
-    rr_depth: i32,
-    mode: TransportMode,
+    pub(super) scatter: Rgb,
+    pub(super) eta_scale: f32,
+    pub(super) max_vertices: usize,
+    pub(super) rr_depth: i32,
+    pub(super) mode: TransportMode,
 }
 
 impl Walk {
@@ -196,9 +197,21 @@ impl Walk {
     /// stall per bounce (about 5 % of light tracing's CPU).
     #[inline(always)]
     pub fn step<S: Sampler + ?Sized>(&mut self, scene: &Scene, hit: Option<&SurfaceInteraction>, sampler: &mut S, path: &mut Vec<Vertex>) -> bool {
-        let mode = self.mode;
+        if !self.arrive(scene, hit, path) {
+            return false;
+        }
+        let uc = sampler.next_1d();
+        let u = sampler.next_2d();
+        let u_rr = sampler.next_1d();
+        self.scatter(uc, u, u_rr, path)
+    }
+
+    /// The first half of [`Self::step`]: the vertex `hit` appended to `path`. Returns whether
+    /// the walk samples a direction there ([`Self::scatter`], with the vertex's three draws).
+    #[inline(always)]
+    pub fn arrive(&mut self, scene: &Scene, hit: Option<&SurfaceInteraction>, path: &mut Vec<Vertex>) -> bool {
         let Some(si) = hit else {
-            if mode == TransportMode::Radiance && !scene.environment_lights.is_empty() {
+            if self.mode == TransportMode::Radiance && !scene.environment_lights.is_empty() {
                 let prev = path.last().expect("a walk starts from a vertex");
                 let v = Vertex::light_infinite(None, prev.p + self.ray.d, self.ray.d, self.beta, self.pdf_fwd);
                 path.push(v);
@@ -208,20 +221,22 @@ impl Walk {
         let prev = path.last().expect("a walk starts from a vertex");
         let pdf_fwd = prev.convert_density_to_point(self.pdf_fwd, si.p, si.ng);
         Vertex::push_surface(path, scene, si, self.beta, pdf_fwd);
-        if path.len() >= self.max_vertices {
-            return false;
-        }
+        path.len() < self.max_vertices
+    }
+
+    /// The second half of [`Self::step`]: the direction sampled at the vertex just arrived
+    /// at, with its draws `uc` (lobe), `u` (direction) and `u_rr` (Russian roulette).
+    #[inline(always)]
+    pub fn scatter(&mut self, uc: f32, u: Vec2, u_rr: f32, path: &mut [Vertex]) -> bool {
+        let mode = self.mode;
         let segments = (path.len() - 1) as i32;
-        let uc = sampler.next_1d();
-        let u = sampler.next_2d();
-        let u_rr = sampler.next_1d();
         let v = path.last().expect("just pushed");
         let bsdf = v.bsdf.as_ref().expect("surface vertices have a BSDF");
         // The vertex's wo is the hit's, -d of the ray traced (`Vertex::at_surface`), taken
         // from the ray: the vertex was just stored, and its wo read back in 8-byte words that
         // span two of its stores, a store-forwarding stall per bounce.
         let wo = -self.ray.d;
-        debug_assert_eq!(wo.to_array().map(f32::to_bits), si.wo.to_array().map(f32::to_bits), "the hit of another ray");
+        debug_assert_eq!(wo.to_array().map(f32::to_bits), v.wo.to_array().map(f32::to_bits), "the hit of another ray");
         let (bs, mut pdf_rev) = match lambertian_sample(bsdf, &v.shading, wo, uc, u) {
             Some(Some(s)) => s,
             Some(None) => return false,
