@@ -44,7 +44,8 @@ struct VertexNums {
     prev_p: [[f32; LANES]; 3],
     prev_ng: [[f32; LANES]; 3],
     prev_infinite: [bool; LANES],
-    /// The walks' state before the step.
+    /// The walks' state before the step (`pdf_dir`: the density of the ray that arrived).
+    pdf_dir: [f32; LANES],
     beta: [[f32; LANES]; 3],
     scatter: [[f32; LANES]; 3],
     eta_scale: [f32; LANES],
@@ -58,6 +59,8 @@ struct StepOut {
     sampled: [bool; LANES],
     /// The walk goes on (its next ray in the lane of the step's rays).
     cont: [bool; LANES],
+    /// The vertex's own density in area measure (`Walk::settle`'s).
+    pdf_at: [f32; LANES],
     pdf_rev: [f32; LANES],
     pdf_fwd: [f32; LANES],
     beta: [[f32; LANES]; 3],
@@ -82,9 +85,10 @@ impl Default for WalkLanes {
 }
 
 impl WalkLanes {
-    /// Lane `l`'s walk after [`Walk::arrive`] (true) with the vertex's draws, as
-    /// [`Walk::scatter`] would take them: into the lanes where the vertex is Lambertian
-    /// (true), else nothing (false: the caller scatters it alone).
+    /// Lane `l`'s walk after [`Walk::arrive_unsettled`] (Some(true)) with the vertex's
+    /// draws, as [`Walk::scatter`] would take them: into the lanes where the vertex is
+    /// Lambertian and the previous one finite (true), else nothing (false: the caller settles
+    /// and scatters it alone).
     #[inline(always)]
     pub fn gather(&mut self, l: usize, walk: &Walk, path: &[Vertex], uc: f32, u: Vec2, u_rr: f32) -> bool {
         let n = path.len();
@@ -102,6 +106,9 @@ impl WalkLanes {
             return false;
         }
         let prev = &path[n - 2];
+        if prev.infinite {
+            return false;
+        }
         let x = &mut self.v;
         let put = |a: &mut [[f32; LANES]; 3], w: Vec3| {
             a[0][l] = w.x;
@@ -126,6 +133,7 @@ impl WalkLanes {
         put(&mut x.prev_p, prev.p);
         put(&mut x.prev_ng, prev.ng);
         x.prev_infinite[l] = prev.infinite;
+        x.pdf_dir[l] = walk.pdf_fwd;
         put(&mut x.beta, rgb(walk.beta));
         put(&mut x.scatter, rgb(walk.scatter));
         x.eta_scale[l] = walk.eta_scale;
@@ -161,16 +169,17 @@ impl WalkLanes {
     }
 
     /// After [`Self::run`]: gathered lane `l`'s step into its walk and path, as
-    /// [`Walk::scatter`] leaves them; returns whether the walk goes on (with its next ray
-    /// the one `run` put in lane `l`).
+    /// [`Walk::settle`] and [`Walk::scatter`] leave them; returns whether the walk goes on
+    /// (with its next ray the one `run` put in lane `l`).
     #[inline(always)]
     pub fn finish(&self, l: usize, walk: &mut Walk, path: &mut [Vertex], rays: &Rays8) -> bool {
         debug_assert!(self.has(l));
         let o = &self.o;
+        let n = path.len();
+        path[n - 1].pdf_fwd = o.pdf_at[l];
         if !o.sampled[l] {
             return false;
         }
-        let n = path.len();
         path[n - 1].event = Event::from_lobe(LobeFlags::DIFFUSE_REFLECTION);
         path[n - 2].pdf_rev = o.pdf_rev[l];
         let mut ray = Ray::new(Vec3::new(rays.o[0][l], rays.o[1][l], rays.o[2][l]), Vec3::new(rays.d[0][l], rays.d[1][l], rays.d[2][l]));
@@ -272,8 +281,19 @@ fn step8(v: &VertexNums, o: &mut StepOut, rays: &mut Rays8) {
         let (beta, scatter) = (g(&v.beta), g(&v.scatter));
         let mut nb = [beta[0] * w[0], beta[1] * w[1], beta[2] * w[2]];
         let mut ns = [scatter[0] * w[0], scatter[1] * w[1], scatter[2] * w[2]];
-        // The reverse density per unit area at the previous vertex.
+        // The vertex's density per unit area (`Vertex::convert_density_to_point` from the
+        // previous vertex, finite here).
         let pp = g(&v.prev_p);
+        let da = [p[0] - pp[0], p[1] - pp[1], p[2] - pp[2]];
+        let d2a = dot3(da, da);
+        let lena = d2a.sqrt();
+        let wa = [da[0] / lena, da[1] / lena, da[2] / lena];
+        let ng_on = !((ng[0] == 0.0) & (ng[1] == 0.0) & (ng[2] == 0.0));
+        let at = v.pdf_dir[l] / d2a;
+        let at = if ng_on { at * dot3(ng, wa).abs() } else { at };
+        let at = if at.is_finite() { at } else { 0.0 };
+        o.pdf_at[l] = if d2a == 0.0 { 0.0 } else { at };
+        // The reverse density per unit area at the previous vertex.
         let d = [pp[0] - p[0], pp[1] - p[1], pp[2] - p[2]];
         let d2 = dot3(d, d);
         let len = d2.sqrt();
@@ -389,8 +409,9 @@ mod tests {
         (w, vec![prev, v], [f(), u[0], u[1], f()])
     }
 
-    /// Eight lanes stepped together leave each walk and path as `Walk::scatter` does, bit for
-    /// bit, and go on where it does; vertices it does not cover are refused.
+    /// Eight lanes stepped together leave each walk and path as `Walk::settle` and
+    /// `Walk::scatter` do, bit for bit, and go on where they do; vertices it does not cover
+    /// are refused.
     #[test]
     fn step8_is_the_scalar_scatter() {
         let mut rng = Pcg32::new(3, 9);
@@ -407,11 +428,13 @@ mod tests {
             lanes.run(&mut rays);
             for (l, (w, path, u)) in cases.iter().enumerate() {
                 let (mut want_w, mut want_p) = (w.clone(), path.clone());
+                want_w.settle(&mut want_p);
                 let want = want_w.scatter(u[0], Vec2::new(u[1], u[2]), u[3], &mut want_p);
                 if !gathered[l] {
-                    // Only a mask's pass-through is left to the scalar step.
+                    // Only a mask's pass-through and a vertex after one at infinity are left
+                    // to the scalar step.
                     let o = path[1].bsdf.as_ref().map_or(1.0, |b| b.opacity);
-                    assert!(o < 1.0 && u[0] >= o, "round {round} lane {l}");
+                    assert!((o < 1.0 && u[0] >= o) || path[0].infinite, "round {round} lane {l}");
                     seen[2] += 1;
                     continue;
                 }
@@ -423,7 +446,7 @@ mod tests {
                     format!("{:?}", (&want_w.ray, want_w.beta, want_w.scatter, want_w.pdf_fwd)),
                     "round {round} lane {l}"
                 );
-                let bits = |v: &Vertex| (v.pdf_rev.to_bits(), v.event, v.delta);
+                let bits = |v: &Vertex| (v.pdf_fwd.to_bits(), v.pdf_rev.to_bits(), v.event, v.delta);
                 assert_eq!((bits(&gp[0]), bits(&gp[1])), (bits(&want_p[0]), bits(&want_p[1])), "round {round} lane {l}");
                 if goes {
                     let r = &want_w.ray;
