@@ -75,6 +75,7 @@ pub(crate) struct WalkLanes {
     o: StepOut,
     /// Lanes gathered since the last run.
     lanes: u8,
+    #[cfg_attr(not(target_arch = "x86_64"), allow(dead_code))]
     avx512: bool,
 }
 
@@ -409,6 +410,31 @@ mod tests {
         (w, vec![prev, v], [f(), u[0], u[1], f()])
     }
 
+    /// The step's outputs as bits (every lane).
+    fn out_bits(o: &StepOut, rays: &Rays8) -> Vec<u32> {
+        let mut b: Vec<u32> = [o.pdf_at, o.pdf_rev, o.pdf_fwd, rays.t_max].iter().flatten().map(|x| x.to_bits()).collect();
+        for a in [&o.beta, &o.scatter, &rays.o, &rays.d] {
+            b.extend(a.iter().flatten().map(|x| x.to_bits()));
+        }
+        b.extend(o.sampled.iter().chain(&o.cont).map(|&x| u32::from(x)));
+        b
+    }
+
+    /// The plain build of the step and its AVX2 copy give what `run` gave (the AVX-512VL
+    /// copy where the CPU has it), bit for bit.
+    fn same_as_every_copy(lanes: &WalkLanes, rays: &Rays8) {
+        let want = out_bits(&lanes.o, rays);
+        let (mut o, mut r) = (StepOut::default(), Rays8::default());
+        step8(&lanes.v, &mut o, &mut r);
+        assert_eq!(out_bits(&o, &r), want, "plain");
+        #[cfg(target_arch = "x86_64")]
+        if std::arch::is_x86_feature_detected!("avx2") {
+            // SAFETY: the CPU has AVX2.
+            unsafe { step8_avx2(&lanes.v, &mut o, &mut r) };
+            assert_eq!(out_bits(&o, &r), want, "avx2");
+        }
+    }
+
     /// Eight lanes stepped together leave each walk and path as `Walk::settle` and
     /// `Walk::scatter` do, bit for bit, and go on where they do; vertices it does not cover
     /// are refused.
@@ -426,6 +452,7 @@ mod tests {
                 gathered[l] = lanes.gather(l, w, path, u[0], Vec2::new(u[1], u[2]), u[3]);
             }
             lanes.run(&mut rays);
+            same_as_every_copy(&lanes, &rays);
             for (l, (w, path, u)) in cases.iter().enumerate() {
                 let (mut want_w, mut want_p) = (w.clone(), path.clone());
                 want_w.settle(&mut want_p);
