@@ -81,7 +81,7 @@ use crate::geometry::ray::SHADOW_EPSILON;
 use crate::geometry::Ray;
 use crate::geometry::{Geometry, Sphere, SurfaceInteraction, TriangleShading};
 use crate::light::area::SphereLanes;
-use crate::light::{AreaLight, Light};
+use crate::light::{AreaLight, Light, LightSample};
 use crate::lpe::{AovSet, ForwardView, LayerMask, MAX_LAYERS};
 use crate::math::{warp, Frame, INV_PI, PI};
 use crate::sampling::{power_heuristic, Distribution1D, IndependentSampler, Sampler, SamplerKind, SobolSampler};
@@ -677,6 +677,9 @@ pub struct SimdKernel {
     /// Per light of the scene: a sphere area light of constant radiance, which the lanes
     /// sample without `Light::sample_li`'s dispatch, all lanes at once (`sphere_samples`).
     sphere_lights: Vec<Option<(Sphere, Rgb)>>,
+    /// The scene's light that is a large environment map (`EnvMap::large`), which the lanes
+    /// sample all at once (`env_samples`).
+    env_light: Option<usize>,
     /// Whether some shape's texels are asked for ahead of shading (`prefetch_texels`; with
     /// the triangles unpacked, whose uvs it reads).
     prefetch_texels: bool,
@@ -858,8 +861,9 @@ impl SimdKernel {
                 _ => None,
             })
             .collect();
+        let env_light = scene.lights.iter().position(|l| matches!(l, Light::EnvMap(env) if env.large()));
         let prefetch_texels = geometry.unpacked && shapes.iter().any(|s| s.prefetch_texels);
-        Some(SimdKernel { tracer, geometry, shapes, lights, sphere_lights, prefetch_texels, avx512: avx512() })
+        Some(SimdKernel { tracer, geometry, shapes, lights, sphere_lights, env_light, prefetch_texels, avx512: avx512() })
     }
 
     /// Whether rays go as packets (else one by one through the scene's BVH).
@@ -1078,8 +1082,10 @@ impl SimdKernel {
                     ends |= 1 << l;
                 }
             }
-            // The sphere lights' samples of all lanes at once, then the scalar BSDFs toward them.
+            // The sphere lights' and the environment map's samples of all lanes at once, then
+            // the scalar BSDFs toward them.
             self.sphere_samples(scene, &mut v);
+            self.env_samples(scene, &mut v);
             self.beckmann_samples(&mut v);
             for l in 0..LANES {
                 if let Some((si, u)) = v.scatter[l].take() {
@@ -1371,6 +1377,12 @@ impl SimdKernel {
                     v.sphere_le[l] = *le;
                     return;
                 }
+                if self.env_light == Some(li) {
+                    v.env_pending |= 1 << l;
+                    v.env_p[l] = p;
+                    v.env_u[l] = u_l2;
+                    return;
+                }
                 Self::generic_light_sample(scene, l, v, li, p, u_l2);
             }
             // A mesh light: its point, as `MeshLight::sample_li` up to the distance test.
@@ -1398,7 +1410,13 @@ impl SimdKernel {
     /// (`path::light_sample_unshadowed`'s first tests).
     fn generic_light_sample(scene: &Scene, l: usize, v: &mut Soa, li: usize, p: Vec3, u_l2: Vec2) {
         let light = &scene.lights[li];
-        if let Some(ls) = light.sample_li(p, u_l2, &scene.bounds).filter(|ls| ls.pdf > 0.0 && !ls.li.is_black()) {
+        Self::take_light_sample(l, v, light.sample_li(p, u_l2, &scene.bounds), light.is_delta());
+    }
+
+    /// Lane `l`'s light sample `ls` of a light (`delta`: of a delta light) where it counts.
+    #[inline(always)]
+    fn take_light_sample(l: usize, v: &mut Soa, ls: Option<LightSample>, delta: bool) {
+        if let Some(ls) = ls.filter(|ls| ls.pdf > 0.0 && !ls.li.is_black()) {
             for k in 0..3 {
                 v.num.lp[k][l] = ls.p[k];
                 v.num.ln[k][l] = ls.n[k];
@@ -1407,9 +1425,35 @@ impl SimdKernel {
             put_rgb(&mut v.num.lrad, l, ls.li);
             v.num.gpdf[l] = ls.pdf;
             v.num.infinite[l] = ls.infinite;
-            v.num.delta[l] = light.is_delta();
+            v.num.delta[l] = delta;
             v.num.generic[l] = true;
             v.num.nee_ok[l] = true;
+        }
+    }
+
+    /// The light samples `light_sample` left to the large environment map (`env_pending`
+    /// lanes), all lanes' at once: as `generic_light_sample` takes them, drawn stage by stage
+    /// across the lanes so that their misses in the map's tables overlap
+    /// (`EnvMap::sample_points`: 11 % of test_envmap's samples had been the map's sampling,
+    /// most of it waiting on memory).
+    #[inline(always)]
+    fn env_samples(&self, scene: &Scene, v: &mut Soa) {
+        let pending = v.env_pending;
+        let Some(li) = self.env_light.filter(|_| pending != 0) else { return };
+        v.env_pending = 0;
+        let light = &scene.lights[li];
+        let Light::EnvMap(env) = light else { return };
+        // (`sample_li` returns None before it samples a map it cannot sample.)
+        if !env.samples() {
+            return;
+        }
+        let g = env.sample_points(&v.env_u, pending as u32);
+        let mut lanes = pending;
+        while lanes != 0 {
+            let l = lanes.trailing_zeros() as usize;
+            lanes &= lanes - 1;
+            let ls = Light::sample_li_env_at(env, v.env_p[l], g[l], &scene.bounds);
+            Self::take_light_sample(l, v, ls, light.is_delta());
         }
     }
 
@@ -1731,6 +1775,11 @@ struct Soa {
     sphere_pending: u8,
     sphere_q: SphereLanes<LANES>,
     sphere_le: [Rgb; LANES],
+    /// Lanes whose light is the large environment map: the point it is seen from and the
+    /// sample's numbers, sampled all at once after `gather` (`SimdKernel::env_samples`).
+    env_pending: u8,
+    env_p: [Vec3; LANES],
+    env_u: [Vec2; LANES],
     /// Lanes of a scalar BSDF: the hit and the vertex's numbers, its own BSDF (None: the
     /// shape's uniform one) and lobes, for `scalar_scatter` once the sphere samples are in.
     scatter: [Option<(SurfaceInteraction, [f32; 6])>; LANES],

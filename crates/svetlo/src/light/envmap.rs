@@ -208,7 +208,29 @@ impl EnvMap {
         if self.dist.integral <= 0.0 {
             return None;
         }
-        let g = self.dist.sample_point(u);
+        self.sample_eval_at(self.dist.sample_point(u))
+    }
+
+    /// The grid points [`Self::sample_eval`] samples for the lanes set in `lanes` (the
+    /// others' are zero), drawn in stages across the lanes: every lane's row, then every
+    /// lane's cell, then the rest. A large map's tables miss the caches, and lane after lane
+    /// each lookup had waited alone (`Distribution1D::find`: the guide entry, then the CDF);
+    /// stage by stage the lanes' misses overlap. [`Self::sample_eval_at`] finishes each
+    /// sample. The distribution's integral must be positive (`sample_eval` returns None before
+    /// it samples otherwise: [`Self::samples`]).
+    #[inline]
+    pub fn sample_points<const N: usize>(&self, u: &[Vec2; N], lanes: u32) -> [Vec2; N] {
+        self.dist.sample_points(u, lanes)
+    }
+
+    /// Whether [`Self::sample_eval`] samples at all (else it returns None for every u).
+    pub fn samples(&self) -> bool {
+        self.dist.integral > 0.0
+    }
+
+    /// The rest of [`Self::sample_eval`] at the grid point `g` it sampled.
+    #[inline(always)]
+    pub fn sample_eval_at(&self, g: Vec2) -> Option<(Vec3, f32, Rgb)> {
         let (le, pdf_uv) = self.eval_grid_pdf(g);
         if pdf_uv <= 0.0 {
             return None;
@@ -315,6 +337,38 @@ impl BilinearDistribution {
     fn sample_point(&self, u: Vec2) -> Vec2 {
         let (iy, _, uy) = self.marginal.sample_discrete(u.y);
         let (ix, _, ux) = self.conditional[iy].sample_discrete(u.x);
+        self.point_in_cell(ix, iy, ux, uy)
+    }
+
+    /// [`Self::sample_point`] of the lanes set in `lanes` (the others' points are zero),
+    /// stage by stage (see `EnvMap::sample_points`): each stage asks for what the next
+    /// one reads.
+    #[inline(always)]
+    fn sample_points<const N: usize>(&self, u: &[Vec2; N], lanes: u32) -> [Vec2; N] {
+        let (mut iy, mut uy) = ([0usize; N], [0.0f32; N]);
+        for_lanes::<N>(lanes, |l| {
+            (iy[l], _, uy[l]) = self.marginal.sample_discrete(u[l].y);
+            self.conditional[iy[l]].prefetch_guide(u[l].x);
+        });
+        for_lanes::<N>(lanes, |l| self.conditional[iy[l]].prefetch_cdf(u[l].x));
+        let (mut ix, mut ux) = ([0usize; N], [0.0f32; N]);
+        let t = self.texels.as_ptr();
+        for_lanes::<N>(lanes, |l| {
+            (ix[l], _, ux[l]) = self.conditional[iy[l]].sample_discrete(u[l].x);
+            // The cell's corners, two in each of two rows (wrapping: a hint never faults).
+            let i = iy[l] * (self.cols + 1) + ix[l];
+            for k in [i, i + 1, i + self.cols + 1, i + self.cols + 2] {
+                crate::accel::prefetch(t.wrapping_add(k), 1);
+            }
+        });
+        let mut g = [Vec2::ZERO; N];
+        for_lanes::<N>(lanes, |l| g[l] = self.point_in_cell(ix[l], iy[l], ux[l], uy[l]));
+        g
+    }
+
+    /// The point of [`Self::sample_point`] in cell (ix, iy), from its remapped numbers.
+    #[inline(always)]
+    fn point_in_cell(&self, ix: usize, iy: usize, ux: f32, uy: f32) -> Vec2 {
         let [f00, f10, f01, f11] = self.corners(ix, iy);
         // Inside the cell: v from its marginal (linear), then u given v (linear).
         let ty = sample_linear(uy, f00 + f10, f01 + f11);
@@ -346,6 +400,17 @@ impl BilinearDistribution {
             return 0.0;
         }
         f / self.integral
+    }
+}
+
+/// `f` of each lane set in `lanes` (of `N`), in order: a walk over the mask's bits, with
+/// no test of the other lanes.
+#[inline(always)]
+fn for_lanes<const N: usize>(lanes: u32, mut f: impl FnMut(usize)) {
+    let mut m = lanes & ((1u64 << N) - 1) as u32;
+    while m != 0 {
+        f(m.trailing_zeros() as usize);
+        m &= m - 1;
     }
 }
 
@@ -447,6 +512,27 @@ mod tests {
             assert!((pdf - env.pdf(d)).abs() <= 2e-3 * pdf, "u {u}: pdf {pdf} vs {}", env.pdf(d));
         }
         assert!(n > 4000, "{n} samples");
+    }
+
+    #[test]
+    fn lanes_sample_as_one_lane_does() {
+        // Wide enough for guide tables (64 cells and more), with black columns and rows so
+        // that some searches land on empty intervals.
+        let (w, h) = (80usize, 70usize);
+        let data: Vec<Rgb> = (0..w * h)
+            .map(|i| if i % w < 3 || (i / w) % 9 == 4 { Rgb::BLACK } else { Rgb::new(1.0 + (i % 7) as f32, 0.5 + (i % 3) as f32, (i % 5) as f32) })
+            .collect();
+        let env = EnvMap::new(Arc::new(Bitmap::new(w, h, data)), Mat4::from_rotation_y(0.7), 1.5);
+        let mut rng = crate::sampling::rng::Pcg32::new(11, 2);
+        let bits = |s: Option<(Vec3, f32, Rgb)>| s.map(|(d, p, le)| (d.to_array().map(f32::to_bits), p.to_bits(), [le.r, le.g, le.b].map(f32::to_bits)));
+        for k in 0..2000 {
+            let u: [Vec2; 8] = std::array::from_fn(|_| Vec2::new(rng.next_f32(), rng.next_f32()));
+            let lanes = if k % 3 == 0 { 0xff } else { rng.next_u32() & 0xff };
+            let g = env.sample_points(&u, lanes);
+            for l in (0..8).filter(|l| lanes & (1 << l) != 0) {
+                assert_eq!(bits(env.sample_eval_at(g[l])), bits(env.sample_eval(u[l])), "lane {l} u {}", u[l]);
+            }
+        }
     }
 
     #[test]

@@ -213,6 +213,14 @@ impl Light {
         }
     }
 
+    /// [`Self::sample_li`] of environment map `env` from `p_ref`, finished at the grid point
+    /// `g` that [`EnvMap::sample_points`] drew for its u: the same sample, bit for bit.
+    #[inline(always)]
+    pub fn sample_li_env_at(env: &EnvMap, p_ref: Vec3, g: Vec2, bounds: &SceneBounds) -> Option<LightSample> {
+        let (wi, pdf, li) = env.sample_eval_at(g)?;
+        Some(LightSample { wi, li, pdf, p: point_at_infinity(bounds, p_ref, wi), n: Vec3::ZERO, infinite: true })
+    }
+
     /// Radiance arriving from an infinite light along direction `-w` (w points away from the scene).
     pub fn le_escaped(&self, w: Vec3) -> Rgb {
         match self {

@@ -120,10 +120,7 @@ impl Distribution1D {
         if self.guide.is_empty() {
             return self.cdf.partition_point(|&c| c <= u).saturating_sub(1);
         }
-        let g = self.guide.len();
-        // A NaN u goes to entry 0, as the binary search sends it. Through u32, a single
-        // instruction: the same index, as both conversions saturate and `min` bounds it.
-        let mut i = self.guide[((u * self.guide_len_f) as u32 as usize).min(g - 1)] as usize;
+        let mut i = self.guide[self.guide_index(u)] as usize;
         // Down past entries above u (all of them for a NaN u: nothing compares with it).
         while i > 0 && !matches!(self.cdf[i].partial_cmp(&u), Some(std::cmp::Ordering::Less | std::cmp::Ordering::Equal)) {
             i -= 1;
@@ -132,6 +129,33 @@ impl Distribution1D {
             i += 1;
         }
         i
+    }
+    /// The guide table's entry for u (the table must not be empty). A NaN u goes to entry
+    /// 0, as the binary search sends it. Through u32, a single instruction: the same index,
+    /// as both conversions saturate and `min` bounds it.
+    #[inline(always)]
+    fn guide_index(&self, u: f32) -> usize {
+        ((u * self.guide_len_f) as u32 as usize).min(self.guide.len() - 1)
+    }
+    /// Asks for the guide table's entry that [`Self::sample_discrete`] of u reads first (a
+    /// hint, which changes no value; nothing without a guide table).
+    #[inline(always)]
+    pub fn prefetch_guide(&self, u: f32) {
+        if !self.guide.is_empty() {
+            crate::accel::prefetch(self.guide.as_ptr().wrapping_add(self.guide_index(u)), 1);
+        }
+    }
+    /// Asks for the CDF entries where [`Self::sample_discrete`] of u starts its walk (reads
+    /// the guide table's entry: ask for it first, [`Self::prefetch_guide`]).
+    #[inline(always)]
+    pub fn prefetch_cdf(&self, u: f32) {
+        if !self.guide.is_empty() {
+            let i = self.guide[self.guide_index(u)] as usize;
+            // The walk reads cdf[i] and cdf[i + 1] at least (wrapping: a hint never faults).
+            let c = self.cdf.as_ptr().wrapping_add(i);
+            crate::accel::prefetch(c, 1);
+            crate::accel::prefetch(c.wrapping_add(1), 1);
+        }
     }
     /// Discrete sample: (index, pmf, u remapped to [0,1) within the chosen interval).
     #[inline(always)]
