@@ -2596,7 +2596,7 @@ impl<S> Paths<S> {
 
 /// Packets of eight paths a tile steps in phase: while one packet's latency chains
 /// (camera rays, sphere samples, Beckmann normals) wait, the other's work fills the wait.
-const PACKETS: usize = 2;
+const PACKETS: usize = 3;
 
 /// One packet's paths, rays and the scratch of its step.
 struct Packet<S> {
