@@ -80,7 +80,7 @@ use crate::geometry::mesh::TriangleFrame;
 use crate::geometry::ray::SHADOW_EPSILON;
 use crate::geometry::Ray;
 use crate::geometry::{Geometry, Sphere, SurfaceInteraction, TriangleShading};
-use crate::light::area::SphereLanes;
+use crate::light::area::{SphereLanes, SphereSamples};
 use crate::light::{AreaLight, EnvMap, Light};
 use crate::lpe::{AovSet, ForwardView, LayerMask, MAX_LAYERS};
 use crate::math::{warp, Frame, INV_PI, PI};
@@ -1043,8 +1043,20 @@ impl SimdKernel {
             }
             // The sphere lights' samples and the Beckmann normals of all lanes of all packets,
             // then the scalar BSDFs toward them: the packets' latency chains side by side.
-            for p in packets.iter_mut() {
-                self.sphere_samples(scene, &mut p.v);
+            // Every packet's sphere arithmetic before any packet's lane-by-lane results, whose
+            // branches wait on it (the lanes a packet has not pending compute on what earlier
+            // steps left, and their results are not read; written in place: `array::from_fn`
+            // kept its closure out of line and copied the samples, memcpy).
+            let mut spheres = [None; PACKETS];
+            for (o, p) in spheres.iter_mut().zip(packets.iter()) {
+                if p.v.sphere_pending != 0 {
+                    *o = Some(AreaLight::sample_constant_spheres(&p.v.sphere_q));
+                }
+            }
+            for (p, o) in packets.iter_mut().zip(&spheres) {
+                if let Some(o) = o {
+                    self.sphere_results(scene, &mut p.v, o);
+                }
             }
             self.beckmann_samples(packets);
             for (pk, p) in packets.iter_mut().enumerate().filter(|(_, p)| p.active != 0) {
@@ -1562,18 +1574,13 @@ impl SimdKernel {
     }
 
     /// The light samples `light_sample` left to a sphere of constant radiance (`sphere_pending`
-    /// lanes), all lanes' at once: as `sample_li` samples the cone the sphere subtends
-    /// (`AreaLight::sample_constant_spheres`, the bits of `sample_constant_sphere`), or where
-    /// the point is inside it, by area through `sample_li`.
+    /// lanes) into `v`: `o`, all lanes' at once as `sample_li` samples the cone the sphere
+    /// subtends (`AreaLight::sample_constant_spheres`, the bits of `sample_constant_sphere`),
+    /// or where the point is inside the sphere, its sample by area through `sample_li`.
     #[inline(always)]
-    fn sphere_samples(&self, scene: &Scene, v: &mut Soa) {
+    fn sphere_results(&self, scene: &Scene, v: &mut Soa, o: &SphereSamples<LANES>) {
         let pending = v.sphere_pending;
-        if pending == 0 {
-            return;
-        }
         v.sphere_pending = 0;
-        // The other lanes compute on what earlier steps left, and their results are not read.
-        let o = AreaLight::sample_constant_spheres(&v.sphere_q);
         let mut lanes = pending;
         while lanes != 0 {
             let l = lanes.trailing_zeros() as usize;
