@@ -333,7 +333,9 @@ pub(crate) struct SlopeX {
 const SLOPE_CDF_TOLERANCE: f32 = 3e-7;
 
 impl SlopeX {
-    #[inline]
+    /// (Always inlined: `sample_visible_beckmann_lanes` calls it per lane, and where LLVM kept
+    /// it out of line, that first loop ran lane by lane instead of as vector code.)
+    #[inline(always)]
     fn new(cos_t: f32) -> Self {
         let cos_t = cos_t.clamp(1e-6, 1.0);
         let tan_t = (1.0 - cos_t * cos_t).max(0.0).sqrt() / cos_t;

@@ -80,8 +80,8 @@ use crate::geometry::mesh::TriangleFrame;
 use crate::geometry::ray::SHADOW_EPSILON;
 use crate::geometry::Ray;
 use crate::geometry::{Geometry, Sphere, SurfaceInteraction, TriangleShading};
-use crate::light::area::SphereLanes;
-use crate::light::{AreaLight, Light, LightSample};
+use crate::light::area::{SphereLanes, SphereSamples};
+use crate::light::{AreaLight, EnvMap, Light, LightSample};
 use crate::lpe::{AovSet, ForwardView, LayerMask, MAX_LAYERS};
 use crate::math::{warp, Frame, INV_PI, PI};
 use crate::sampling::{power_heuristic, Distribution1D, IndependentSampler, Sampler, SamplerKind, SobolSampler};
@@ -685,6 +685,11 @@ pub struct SimdKernel {
     prefetch_texels: bool,
     /// Run the AVX-512VL build of the kernel (detected at run time; tests may clear it).
     avx512: bool,
+    /// Packets a tile steps in phase: [`PACKETS`] where Beckmann normals or sphere-light
+    /// samples (latency chains for a few lanes a step) are drawn, else one (the second
+    /// packet's longer drain at a tile's end and its bookkeeping cost 2 % more instructions
+    /// on cbox-rgb, for nothing to overlap).
+    packets: usize,
 }
 
 /// The reflectance of a diffuse model (a constant one clamped as `Material::bsdf` does).
@@ -850,7 +855,7 @@ impl SimdKernel {
             let (geo, shapes): (Vec<_>, Vec<_>) = spheres.into_iter().unzip();
             Tracer::Packets { bvh: packet_tree(), ties: Some(first_triangles(scene)), spheres: Some(Box::new((PacketSpheres::new(&geo), shapes))) }
         };
-        let sphere_lights = scene
+        let sphere_lights: Vec<_> = scene
             .lights
             .iter()
             .map(|l| match l {
@@ -863,7 +868,9 @@ impl SimdKernel {
             .collect();
         let env_light = scene.lights.iter().position(|l| matches!(l, Light::EnvMap(env) if env.large()));
         let prefetch_texels = geometry.unpacked && shapes.iter().any(|s| s.prefetch_texels);
-        Some(SimdKernel { tracer, geometry, shapes, lights, sphere_lights, env_light, prefetch_texels, avx512: avx512() })
+        let chains = sphere_lights.iter().any(Option::is_some) || shapes.iter().any(|s| s.uniform.as_ref().is_some_and(|b| b.beckmann_view(Vec3::Z).is_some()));
+        let packets = if chains { PACKETS } else { 1 };
+        Some(SimdKernel { tracer, geometry, shapes, lights, sphere_lights, env_light, prefetch_texels, avx512: avx512(), packets })
     }
 
     /// Whether rays go as packets (else one by one through the scene's BVH).
@@ -981,8 +988,10 @@ impl SimdKernel {
     }
 
     /// Samples `s0..s0 + n` of every pixel of `rect` (the tile's own pixels; the film tile
-    /// extends past them by the filter radius), eight paths in lockstep; a lane whose path
-    /// ends takes the next camera sample; each lane draws from its own copy of `sampler`.
+    /// extends past them by the filter radius), [`PACKETS`] packets of eight paths stepped in
+    /// phase; a lane whose path ends takes the next camera sample; each lane draws from its
+    /// own copy of `sampler`. (Which lane runs which sample does not change its numbers: each
+    /// path's sampler restarts at its pixel sample, and its result goes to its job's slot.)
     #[inline(always)]
     #[allow(clippy::too_many_arguments)]
     fn render_tile<S: LaneSampler>(
@@ -1008,126 +1017,59 @@ impl SimdKernel {
         let aovs = settings.aovs();
         let mut layers = LaneLayers::new(events, aovs, jobs);
         let cam = scene.camera.ray_generator();
-        let mut st = Paths::new(sampler);
-        let mut rays = Rays8::default();
-        let mut shadow = Rays8::default();
-        let mut others = OtherHits::default();
+        let mut all: [Packet<S>; PACKETS] = std::array::from_fn(|_| Packet::new(sampler.clone()));
+        let packets = &mut all[..self.packets];
         let mut next = 0usize;
-        let mut active = 0u8;
-        // Reused every step: lanes outside this step's mask hold stale values nobody reads.
-        let mut v = Soa::default();
-        let mut o = Out::default();
         let env_map = scene.environment_lights.first().and_then(|&ei| match &scene.lights[ei as usize] {
             Light::EnvMap(env) => Some(&**env),
             _ => None,
         });
         loop {
-            for l in 0..LANES {
-                if active & (1 << l) != 0 || next >= jobs {
-                    continue;
+            for (pk, p) in packets.iter_mut().enumerate() {
+                for l in 0..LANES {
+                    if p.active & (1 << l) != 0 || next >= jobs {
+                        continue;
+                    }
+                    let (x, y, s) = job_xys(next);
+                    let (raster, ray) = camera_sample(&cam, &mut p.st.sampler[l], x, y, s);
+                    p.st.start(l, next, raster, ray.time);
+                    layers.start(pk, l, next);
+                    set_ray(&mut p.rays, l, ray.o, ray.d, ray.t_max);
+                    p.active |= 1 << l;
+                    next += 1;
                 }
-                let (x, y, s) = job_xys(next);
-                let (raster, ray) = camera_sample(&cam, &mut st.sampler[l], x, y, s);
-                st.start(l, next, raster, ray.time);
-                layers.start(l, next);
-                set_ray(&mut rays, l, ray.o, ray.d, ray.t_max);
-                active |= 1 << l;
-                next += 1;
             }
-            if active == 0 {
+            if packets.iter().all(|p| p.active == 0) {
                 break;
             }
-            // A large environment map's grid points of all lanes' rays (eight at once), and
-            // their texels asked for before the walk: bounce rays off a convex object escape
-            // in all directions, and each lookup in `gather` had waited on memory; now the
-            // walk hides the wait (the lanes whose rays hit something ask in vain).
-            let env_ahead = env_map.filter(|env| env.large());
-            if let Some(env) = env_ahead {
-                v.env_grid = env.dirs_to_grid(&rays.d);
-                for l in (0..LANES).filter(|l| active & (1 << l) != 0) {
-                    env.prefetch_at(Vec2::new(v.env_grid[0][l], v.env_grid[1][l]));
+            for p in packets.iter_mut().filter(|p| p.active != 0) {
+                self.trace_and_gather_on_cpu(scene, settings, env_map, p);
+            }
+            // The sphere lights' and the environment map's samples and the Beckmann normals of
+            // all lanes of all packets, then the scalar BSDFs toward them: the packets' latency
+            // chains side by side.
+            // Every packet's sphere arithmetic before any packet's lane-by-lane results, whose
+            // branches wait on it (the lanes a packet has not pending compute on what earlier
+            // steps left, and their results are not read; written in place: `array::from_fn`
+            // kept its closure out of line and copied the samples, memcpy).
+            let mut spheres = [None; PACKETS];
+            for (o, p) in spheres.iter_mut().zip(packets.iter()) {
+                if p.v.sphere_pending != 0 {
+                    *o = Some(AreaLight::sample_constant_spheres(&p.v.sphere_q));
                 }
             }
-            let hits = self.tracer.intersect(scene, &rays, &st.time, active, &mut others);
-            self.geometry.prefetch_hits(&hits.prim, active);
-            if self.prefetch_texels {
-                self.prefetch_texels(scene, &hits, active, &mut v.uv_ahead);
-            }
-            // The environment map's grid points of the escaped lanes (those `gather` finds
-            // no hit for), all eight at once.
-            if let Some(env) = env_map.filter(|_| env_ahead.is_none()) {
-                if (0..LANES).any(|l| active & (1 << l) != 0 && hits.prim[l] != OTHER && !self.geometry.is_triangle(hits.prim[l])) {
-                    v.env_grid = env.dirs_to_grid(&rays.d);
+            for (p, o) in packets.iter_mut().zip(&spheres) {
+                if let Some(o) = o {
+                    self.sphere_results(scene, &mut p.v, o);
                 }
             }
-            // Every active lane's numbers for this vertex, where the sampler draws them for
-            // all lanes at once (a lane that ends before it needs them restarts its sampler
-            // with its next camera sample).
-            let draws = if S::BATCHED { S::vertex_draws(&mut st.sampler, active) } else { [[0.0; LANES]; 7] };
-            let mut ends = 0u8;
-            let mut go = 0u8;
-            for l in 0..LANES {
-                if active & (1 << l) == 0 {
-                    continue;
-                }
-                let d = Vec3::new(rays.d[0][l], rays.d[1][l], rays.d[2][l]);
-                let other = if hits.prim[l] == OTHER {
-                    Some(others.record[l].take().unwrap_or_else(|| other_hit(scene, &self.shapes, &rays, &hits, &others, l)))
-                } else {
-                    None
-                };
-                if self.gather(scene, settings, &mut st, &draws, l, hits.prim[l], hits.b1[l], hits.b2[l], d, other.as_ref(), &mut v) {
-                    go |= 1 << l;
-                } else {
-                    ends |= 1 << l;
-                }
+            for p in packets.iter_mut() {
+                self.env_samples(scene, &mut p.v);
             }
-            // The sphere lights' and the environment map's samples of all lanes at once, then
-            // the scalar BSDFs toward them.
-            self.sphere_samples(scene, &mut v);
-            self.env_samples(scene, &mut v);
-            self.beckmann_samples(&mut v);
-            for l in 0..LANES {
-                if let Some((si, u)) = v.scatter[l].take() {
-                    self.scalar_scatter(events, &mut st, l, &mut v, &si, u);
-                }
+            self.beckmann_samples(packets);
+            for (pk, p) in packets.iter_mut().enumerate().filter(|(_, p)| p.active != 0) {
+                self.scatter_and_shade_on_cpu(scene, settings, events, pk, p, &mut layers, &mut results);
             }
-            // Writes every lane's next ray, shadow ray and state; only `go` lanes' count.
-            self.shade8_on_cpu(&v, settings.rr_depth, &mut st, &mut rays, &mut shadow, &mut o);
-            let (mut smask, mut counted) = (0u8, 0u8);
-            for l in 0..LANES {
-                if go & (1 << l) == 0 {
-                    continue;
-                }
-                match o.nee[l] {
-                    1 => counted |= 1 << l,
-                    2 => smask |= 1 << l,
-                    _ => {}
-                }
-                if !o.cont[l] {
-                    ends |= 1 << l;
-                }
-            }
-            let clear = smask & !self.tracer.occluded(scene, &shadow, &st.time, smask);
-            if layers.on() {
-                layers.route(&v, &o, active, counted | clear, go & !ends);
-            }
-            // The light samples that count (a lane's at most: `counted` and `clear` are apart),
-            // all lanes at once as selects: lane-by-lane adds, stored a float at a time, were
-            // read back below as one wide load that waited on them (store forwarding).
-            let adds = counted | clear;
-            for k in 0..3 {
-                for l in 0..LANES {
-                    st.l[k][l] = if adds & (1 << l) != 0 { st.l[k][l] + o.c[k][l] } else { st.l[k][l] };
-                }
-            }
-            for l in 0..LANES {
-                if ends & (1 << l) != 0 {
-                    let beauty = Rgb::new(st.l[0][l], st.l[1][l], st.l[2][l]);
-                    results[st.job[l]] = (st.raster[l], layers.finish(l, beauty));
-                }
-            }
-            active &= !ends;
         }
         if events.view.is_some() {
             tile.add_samples_touched(results.iter().enumerate().map(|(j, &(raster, l))| {
@@ -1137,6 +1079,226 @@ impl SimdKernel {
         } else {
             tile.add_samples(&results);
         }
+    }
+
+    /// [`Self::trace_and_gather`] out of line in this CPU's build. (Inlined into the loop over
+    /// the packets, every field of the packet was addressed from the packet's index, the
+    /// pointers spilled, and `gather` ran 1.7x its time.)
+    #[inline(always)]
+    fn trace_and_gather_on_cpu<S: LaneSampler>(&self, scene: &Scene, settings: &RenderSettings, env_map: Option<&EnvMap>, p: &mut Packet<S>) {
+        #[cfg(target_arch = "x86_64")]
+        if crate::accel::packet::avx2() {
+            // SAFETY: `avx2()` detects AVX2 at run time, and `avx512` is set only where
+            // AVX-512F and VL were.
+            return unsafe {
+                if self.avx512 {
+                    self.trace_and_gather_avx512(scene, settings, env_map, p)
+                } else {
+                    self.trace_and_gather_avx2(scene, settings, env_map, p)
+                }
+            };
+        }
+        self.trace_and_gather(scene, settings, env_map, p)
+    }
+
+    /// # Safety
+    /// The CPU must support AVX2.
+    #[cfg(target_arch = "x86_64")]
+    #[target_feature(enable = "avx2")]
+    #[inline(never)]
+    unsafe fn trace_and_gather_avx2<S: LaneSampler>(&self, scene: &Scene, settings: &RenderSettings, env_map: Option<&EnvMap>, p: &mut Packet<S>) {
+        self.trace_and_gather(scene, settings, env_map, p)
+    }
+
+    /// # Safety
+    /// The CPU must support AVX2, AVX-512F and AVX-512VL.
+    #[cfg(target_arch = "x86_64")]
+    #[target_feature(enable = "avx2,avx512f,avx512vl")]
+    #[inline(never)]
+    unsafe fn trace_and_gather_avx512<S: LaneSampler>(&self, scene: &Scene, settings: &RenderSettings, env_map: Option<&EnvMap>, p: &mut Packet<S>) {
+        self.trace_and_gather(scene, settings, env_map, p)
+    }
+
+    /// A packet's step up to the sphere samples: its rays traced (lanes of `active`) and each
+    /// lane's `gather` into `v`; sets the lanes whose paths go on and those that end there.
+    #[inline(always)]
+    fn trace_and_gather<S: LaneSampler>(&self, scene: &Scene, settings: &RenderSettings, env_map: Option<&EnvMap>, p: &mut Packet<S>) {
+        let Packet { st, rays, others, v, active, .. } = p;
+        let (active, rays) = (*active, &*rays);
+        // A large environment map's grid points of all lanes' rays (eight at once), and
+        // their texels asked for before the walk: bounce rays off a convex object escape
+        // in all directions, and each lookup in `gather` had waited on memory; now the
+        // walk hides the wait (the lanes whose rays hit something ask in vain).
+        let env_ahead = env_map.filter(|env| env.large());
+        if let Some(env) = env_ahead {
+            v.env_grid = env.dirs_to_grid(&rays.d);
+            for l in (0..LANES).filter(|l| active & (1 << l) != 0) {
+                env.prefetch_at(Vec2::new(v.env_grid[0][l], v.env_grid[1][l]));
+            }
+        }
+        let hits = self.tracer.intersect(scene, rays, &st.time, active, others);
+        self.geometry.prefetch_hits(&hits.prim, active);
+        if self.prefetch_texels {
+            self.prefetch_texels(scene, &hits, active, &mut v.uv_ahead);
+        }
+        // The environment map's grid points of the escaped lanes (those `gather` finds
+        // no hit for), all eight at once.
+        if let Some(env) = env_map.filter(|_| env_ahead.is_none()) {
+            if (0..LANES).any(|l| active & (1 << l) != 0 && hits.prim[l] != OTHER && !self.geometry.is_triangle(hits.prim[l])) {
+                v.env_grid = env.dirs_to_grid(&rays.d);
+            }
+        }
+        // Every active lane's numbers for this vertex, where the sampler draws them for
+        // all lanes at once (a lane that ends before it needs them restarts its sampler
+        // with its next camera sample).
+        let draws = if S::BATCHED { S::vertex_draws(&mut st.sampler, active) } else { [[0.0; LANES]; 7] };
+        let (mut go, mut ends) = (0u8, 0u8);
+        for l in 0..LANES {
+            if active & (1 << l) == 0 {
+                continue;
+            }
+            let d = Vec3::new(rays.d[0][l], rays.d[1][l], rays.d[2][l]);
+            let other = if hits.prim[l] == OTHER {
+                Some(others.record[l].take().unwrap_or_else(|| other_hit(scene, &self.shapes, rays, &hits, others, l)))
+            } else {
+                None
+            };
+            if self.gather(scene, settings, st, &draws, l, hits.prim[l], hits.b1[l], hits.b2[l], d, other.as_ref(), v) {
+                go |= 1 << l;
+            } else {
+                ends |= 1 << l;
+            }
+        }
+        (p.go, p.ends) = (go, ends);
+    }
+
+    /// [`Self::scatter_and_shade`] out of line in this CPU's build (as `trace_and_gather_on_cpu`).
+    #[inline(always)]
+    #[allow(clippy::too_many_arguments)]
+    fn scatter_and_shade_on_cpu<S>(
+        &self,
+        scene: &Scene,
+        settings: &RenderSettings,
+        events: &LaneEvents,
+        pk: usize,
+        p: &mut Packet<S>,
+        layers: &mut LaneLayers,
+        results: &mut [(Vec2, Rgb)],
+    ) {
+        #[cfg(target_arch = "x86_64")]
+        if crate::accel::packet::avx2() {
+            // SAFETY: `avx2()` detects AVX2 at run time, and `avx512` is set only where
+            // AVX-512F and VL were.
+            return unsafe {
+                if self.avx512 {
+                    self.scatter_and_shade_avx512(scene, settings, events, pk, p, layers, results)
+                } else {
+                    self.scatter_and_shade_avx2(scene, settings, events, pk, p, layers, results)
+                }
+            };
+        }
+        self.scatter_and_shade(scene, settings, events, pk, p, layers, results)
+    }
+
+    /// # Safety
+    /// The CPU must support AVX2.
+    #[cfg(target_arch = "x86_64")]
+    #[target_feature(enable = "avx2")]
+    #[inline(never)]
+    #[allow(clippy::too_many_arguments)]
+    unsafe fn scatter_and_shade_avx2<S>(
+        &self,
+        scene: &Scene,
+        settings: &RenderSettings,
+        events: &LaneEvents,
+        pk: usize,
+        p: &mut Packet<S>,
+        layers: &mut LaneLayers,
+        results: &mut [(Vec2, Rgb)],
+    ) {
+        self.scatter_and_shade(scene, settings, events, pk, p, layers, results)
+    }
+
+    /// # Safety
+    /// The CPU must support AVX2, AVX-512F and AVX-512VL.
+    #[cfg(target_arch = "x86_64")]
+    #[target_feature(enable = "avx2,avx512f,avx512vl")]
+    #[inline(never)]
+    #[allow(clippy::too_many_arguments)]
+    unsafe fn scatter_and_shade_avx512<S>(
+        &self,
+        scene: &Scene,
+        settings: &RenderSettings,
+        events: &LaneEvents,
+        pk: usize,
+        p: &mut Packet<S>,
+        layers: &mut LaneLayers,
+        results: &mut [(Vec2, Rgb)],
+    ) {
+        self.scatter_and_shade(scene, settings, events, pk, p, layers, results)
+    }
+
+    /// The rest of a packet's step once its sphere samples and Beckmann normals are in: the
+    /// scalar BSDFs' scattering, `shade8`, the shadow rays, the light samples that count; the
+    /// samples that end go to their jobs' slots of `results`, and leave `active`.
+    #[inline(always)]
+    #[allow(clippy::too_many_arguments)]
+    fn scatter_and_shade<S>(
+        &self,
+        scene: &Scene,
+        settings: &RenderSettings,
+        events: &LaneEvents,
+        pk: usize,
+        p: &mut Packet<S>,
+        layers: &mut LaneLayers,
+        results: &mut [(Vec2, Rgb)],
+    ) {
+        let Packet { st, rays, shadow, v, o, active, go, ends, .. } = p;
+        let (active, go, mut ends) = (*active, *go, *ends);
+        for l in 0..LANES {
+            if let Some((si, u)) = v.scatter[l].take() {
+                self.scalar_scatter(events, st, l, v, &si, u);
+            }
+        }
+        // Writes every lane's next ray, shadow ray and state; only `go` lanes' count.
+        self.shade8_on_cpu(v, settings.rr_depth, st, rays, shadow, o);
+        let (mut smask, mut counted) = (0u8, 0u8);
+        for l in 0..LANES {
+            if go & (1 << l) == 0 {
+                continue;
+            }
+            match o.nee[l] {
+                1 => counted |= 1 << l,
+                2 => smask |= 1 << l,
+                _ => {}
+            }
+            if !o.cont[l] {
+                ends |= 1 << l;
+            }
+        }
+        let clear = smask & !self.tracer.occluded(scene, shadow, &st.time, smask);
+        if layers.on() {
+            layers.route(pk, v, o, active, counted | clear, go & !ends);
+        }
+        // The light samples that count (a lane's at most: `counted` and `clear` are apart),
+        // all lanes at once as selects: lane-by-lane adds, stored a float at a time, were
+        // read back below as one wide load that waited on them (store forwarding).
+        // (Both read whole first: read lane by lane, LLVM made the selects branches.)
+        let adds = counted | clear;
+        let (mut sum, c) = (st.l, o.c);
+        for k in 0..3 {
+            for l in 0..LANES {
+                sum[k][l] = if adds & (1 << l) != 0 { sum[k][l] + c[k][l] } else { sum[k][l] };
+            }
+        }
+        st.l = sum;
+        for l in 0..LANES {
+            if ends & (1 << l) != 0 {
+                let beauty = Rgb::new(st.l[0][l], st.l[1][l], st.l[2][l]);
+                results[st.job[l]] = (st.raster[l], layers.finish(pk, l, beauty));
+            }
+        }
+        p.active &= !ends;
     }
 
     /// [`shade8`] in its own function of this CPU's build. Inlined into the tile loop, its
@@ -1458,18 +1620,13 @@ impl SimdKernel {
     }
 
     /// The light samples `light_sample` left to a sphere of constant radiance (`sphere_pending`
-    /// lanes), all lanes' at once: as `sample_li` samples the cone the sphere subtends
-    /// (`AreaLight::sample_constant_spheres`, the bits of `sample_constant_sphere`), or where
-    /// the point is inside it, by area through `sample_li`.
+    /// lanes) into `v`: `o`, all lanes' at once as `sample_li` samples the cone the sphere
+    /// subtends (`AreaLight::sample_constant_spheres`, the bits of `sample_constant_sphere`),
+    /// or where the point is inside the sphere, its sample by area through `sample_li`.
     #[inline(always)]
-    fn sphere_samples(&self, scene: &Scene, v: &mut Soa) {
+    fn sphere_results(&self, scene: &Scene, v: &mut Soa, o: &SphereSamples<LANES>) {
         let pending = v.sphere_pending;
-        if pending == 0 {
-            return;
-        }
         v.sphere_pending = 0;
-        // The other lanes compute on what earlier steps left, and their results are not read.
-        let o = AreaLight::sample_constant_spheres(&v.sphere_q);
         let mut lanes = pending;
         while lanes != 0 {
             let l = lanes.trailing_zeros() as usize;
@@ -1541,27 +1698,45 @@ impl SimdKernel {
     }
 
     /// The visible normals the scalar BSDFs of Beckmann rough conductors (`Bsdf::beckmann_view`)
-    /// draw for their samples, all lanes' at once (`sample_visible_beckmann_lanes`, the bits of
-    /// `Microfacet::sample_visible`), into `v.beckmann_m` for `scalar_scatter`.
+    /// draw for their samples, all packets' lanes at once, eight a group
+    /// (`sample_visible_beckmann_lanes`, the bits of `Microfacet::sample_visible`), into each
+    /// packet's `v.beckmann_m` for `scalar_scatter`. (About one lane in eight holds such a
+    /// vertex a step: one group for all packets runs one Newton chain where each packet ran its own.)
     #[inline(always)]
-    fn beckmann_samples(&self, v: &mut Soa) {
+    fn beckmann_samples<S>(&self, packets: &mut [Packet<S>]) {
         let mut q = BeckmannLanes::<LANES>::default();
-        let mut some = 0u8;
-        for l in 0..LANES {
-            let Some((si, u)) = &v.scatter[l] else { continue };
-            let Some(bsdf) = v.own[l].as_ref().or(self.shapes[si.shape as usize].uniform.as_ref()) else { continue };
-            let Some((au, av, wo)) = bsdf.beckmann_view(si.shading.to_local(si.wo)) else { continue };
-            (q.alpha[0][l], q.alpha[1][l]) = (au, av);
-            (q.v[0][l], q.v[1][l], q.v[2][l]) = (wo.x, wo.y, wo.z);
-            (q.u[0][l], q.u[1][l]) = (u[4], u[5]);
-            some |= 1 << l;
+        // Each group lane's packet and lane.
+        let mut slot = [(0usize, 0usize); LANES];
+        let mut used = 0usize;
+        for pk in 0..packets.len() {
+            for l in 0..LANES {
+                let v = &packets[pk].v;
+                let Some((si, u)) = &v.scatter[l] else { continue };
+                let Some(bsdf) = v.own[l].as_ref().or(self.shapes[si.shape as usize].uniform.as_ref()) else { continue };
+                let Some((au, av, wo)) = bsdf.beckmann_view(si.shading.to_local(si.wo)) else { continue };
+                (q.alpha[0][used], q.alpha[1][used]) = (au, av);
+                (q.v[0][used], q.v[1][used], q.v[2][used]) = (wo.x, wo.y, wo.z);
+                (q.u[0][used], q.u[1][used]) = (u[4], u[5]);
+                slot[used] = (pk, l);
+                used += 1;
+                if used == LANES {
+                    Self::beckmann_group(&q, &slot[..used], packets);
+                    used = 0;
+                }
+            }
         }
-        if some == 0 {
-            return;
+        if used > 0 {
+            Self::beckmann_group(&q, &slot[..used], packets);
         }
-        let m = sample_visible_beckmann_lanes(&q);
-        for (l, out) in v.beckmann_m.iter_mut().enumerate() {
-            *out = (some & (1 << l) != 0).then(|| Vec3::new(m[0][l], m[1][l], m[2][l]));
+    }
+
+    /// One group of [`Self::beckmann_samples`]: lanes `slot` (packet, lane) of `q`. (The
+    /// group's other lanes hold earlier draws: the lanes are independent.)
+    #[inline(always)]
+    fn beckmann_group<S>(q: &BeckmannLanes<LANES>, slot: &[(usize, usize)], packets: &mut [Packet<S>]) {
+        let m = sample_visible_beckmann_lanes(q);
+        for (i, &(pk, l)) in slot.iter().enumerate() {
+            packets[pk].v.beckmann_m[l] = Some(Vec3::new(m[0][i], m[1][i], m[2][i]));
         }
     }
 
@@ -2007,9 +2182,9 @@ struct LaneLayers<'a> {
     /// The beauty's bit where the beauty is restricted (`--lpe`), else 0: then the beauty is
     /// the path's radiance and needs no row of its own.
     beauty_bit: LayerMask,
-    q: [u32; LANES],
-    /// Each lane's job: its row.
-    job: [usize; LANES],
+    /// Per packet and lane: its automaton state and its job (its row).
+    q: [[u32; LANES]; PACKETS],
+    job: [[usize; LANES]; PACKETS],
     /// Per job: its `n` layers and the restricted beauty (stride `n + 1`), and which of the
     /// layers its paths touched.
     rows: Vec<Rgb>,
@@ -2025,26 +2200,26 @@ impl<'a> LaneLayers<'a> {
             events,
             n,
             beauty_bit: if aovs.restricts_beauty() { crate::lpe::aov::BEAUTY } else { 0 },
-            q: [0; LANES],
-            job: [0; LANES],
+            q: [[0; LANES]; PACKETS],
+            job: [[0; LANES]; PACKETS],
             rows: if on { vec![Rgb::BLACK; jobs * (n + 1)] } else { Vec::new() },
             row_touched: if on { vec![0; jobs] } else { Vec::new() },
         }
     }
 
-    /// Lane `l` starts a camera sample, job `job`.
+    /// Lane `l` of packet `pk` starts a camera sample, job `job`.
     #[inline(always)]
-    fn start(&mut self, l: usize, job: usize) {
+    fn start(&mut self, pk: usize, l: usize, job: usize) {
         if let Some(view) = self.events.view {
-            self.q[l] = view.camera();
-            self.job[l] = job;
+            self.q[pk][l] = view.camera();
+            self.job[pk][l] = job;
         }
     }
 
-    /// Adds `c` to the layers of `mask` in lane `l`'s row (as `LayerSample::add`).
+    /// Adds `c` to the layers of `mask` in the row of packet `pk`'s lane `l` (as `LayerSample::add`).
     #[inline(always)]
-    fn add(&mut self, mask: LayerMask, l: usize, c: Rgb) {
-        let (job, n) = (self.job[l], self.n);
+    fn add(&mut self, mask: LayerMask, pk: usize, l: usize, c: Rgb) {
+        let (job, n) = (self.job[pk][l], self.n);
         let Some(row) = self.rows.get_mut(job * (n + 1)..(job + 1) * (n + 1)) else { return };
         if mask & self.beauty_bit != 0 {
             row[n] += c;
@@ -2069,7 +2244,7 @@ impl<'a> LaneLayers<'a> {
     /// the hit (lanes of `active` whose `v.emitted`), the light samples that count (`nee`;
     /// diffuse there, then the light), and the diffuse scattering of the paths that go on.
     #[inline(always)]
-    fn route(&mut self, v: &Soa, o: &Out, active: u8, nee: u8, goes_on: u8) {
+    fn route(&mut self, pk: usize, v: &Soa, o: &Out, active: u8, nee: u8, goes_on: u8) {
         if self.events.view.is_none() {
             return;
         }
@@ -2088,31 +2263,31 @@ impl<'a> LaneLayers<'a> {
                 None => steps &= !(1 << l),
             }
         }
-        let [emit, lit] = self.events.lookups(&mut self.q, &v.shape, &v.light, &own, [emitted, nee & active, steps]);
+        let [emit, lit] = self.events.lookups(&mut self.q[pk], &v.shape, &v.light, &own, [emitted, nee & active, steps]);
         let mut lanes = emitted | (nee & active);
         while lanes != 0 {
             let l = lanes.trailing_zeros() as usize;
             lanes &= lanes - 1;
             if emitted & (1 << l) != 0 {
-                self.add(emit[l], l, Rgb::new(v.emit[0][l], v.emit[1][l], v.emit[2][l]));
+                self.add(emit[l], pk, l, Rgb::new(v.emit[0][l], v.emit[1][l], v.emit[2][l]));
             }
             if nee & (1 << l) != 0 {
                 let c = o.contribution(l);
                 if !c.is_black() {
-                    self.add(lit[l], l, c);
+                    self.add(lit[l], pk, l, c);
                 }
             }
         }
     }
 
-    /// Lane `l`'s sample is done with radiance `beauty`: what the beauty takes (all of it,
-    /// or the paths of `--lpe`).
+    /// Packet `pk`'s lane `l`'s sample is done with radiance `beauty`: what the beauty takes
+    /// (all of it, or the paths of `--lpe`).
     #[inline(always)]
-    fn finish(&self, l: usize, beauty: Rgb) -> Rgb {
+    fn finish(&self, pk: usize, l: usize, beauty: Rgb) -> Rgb {
         if self.beauty_bit == 0 || self.events.view.is_none() {
             return beauty;
         }
-        let j = (self.job[l] + 1) * (self.n + 1) - 1;
+        let j = (self.job[pk][l] + 1) * (self.n + 1) - 1;
         self.rows.get(j).copied().unwrap_or(beauty)
     }
 
@@ -2474,6 +2649,42 @@ impl<S> Paths<S> {
         self.l[0][l] += c.r;
         self.l[1][l] += c.g;
         self.l[2][l] += c.b;
+    }
+}
+
+/// Packets of eight paths a tile steps in phase: while one packet's latency chains
+/// (camera rays, sphere samples, Beckmann normals) wait, the other's work fills the wait.
+const PACKETS: usize = 3;
+
+/// One packet's paths, rays and the scratch of its step.
+struct Packet<S> {
+    st: Paths<S>,
+    rays: Rays8,
+    shadow: Rays8,
+    others: OtherHits,
+    /// Lanes with a path; of those, the ones whose path goes on past `gather` (`go`) and
+    /// the ones that end there (`ends`).
+    active: u8,
+    go: u8,
+    ends: u8,
+    /// Reused every step: lanes outside this step's mask hold stale values nobody reads.
+    v: Soa,
+    o: Out,
+}
+
+impl<S: Clone> Packet<S> {
+    fn new(sampler: S) -> Packet<S> {
+        Packet {
+            st: Paths::new(sampler),
+            rays: Rays8::default(),
+            shadow: Rays8::default(),
+            others: OtherHits::default(),
+            active: 0,
+            go: 0,
+            ends: 0,
+            v: Soa::default(),
+            o: Out::default(),
+        }
     }
 }
 
