@@ -173,7 +173,7 @@ impl Estimator {
                     let (raster, ray) = super::camera_sample(&cam, sampler, x, y, s);
                     blacks.push(t.tile, raster);
                     seq[l] = conns.open(i);
-                    walks[l] = light_walk(scene, &self.cfg, ray.time, sampler, &mut paths[l]);
+                    light_walk(scene, &self.cfg, ray.time, sampler, &mut paths[l], &mut walks[l]);
                     match &walks[l] {
                         Some(w) if w.walk.goes_on(&paths[l]) => {
                             set_lane(&mut rays, l, w.walk.ray());
