@@ -163,7 +163,7 @@ impl Estimator {
         let mut lambert = WalkLanes::default();
         loop {
             // Idle lanes take the next samples; a walk that ends at once is finished here.
-            for l in 0..LANES {
+            for l in lanes_of(!active) {
                 while more && active & (1 << l) == 0 {
                     let Some((i, (x, y, s))) = samples.next() else {
                         more = false;
@@ -173,7 +173,7 @@ impl Estimator {
                     let (raster, ray) = super::camera_sample(&cam, sampler, x, y, s);
                     blacks.push(t.tile, raster);
                     seq[l] = conns.open(i);
-                    walks[l] = light_walk(scene, &self.cfg, ray.time, sampler, &mut paths[l]);
+                    light_walk(scene, &self.cfg, ray.time, sampler, &mut paths[l], &mut walks[l]);
                     match &walks[l] {
                         Some(w) if w.walk.goes_on(&paths[l]) => {
                             set_lane(&mut rays, l, w.walk.ray());
@@ -191,10 +191,7 @@ impl Estimator {
             // scatter together (`WalkLanes`), the others alone. A lane's walk goes on (bit 1)
             // or ends (bit 0) in `going`, its fate after the Lambertian step if gathered.
             let mut going = 0u8;
-            for l in 0..LANES {
-                if active & (1 << l) == 0 {
-                    continue;
-                }
+            for l in lanes_of(active) {
                 let Some(w) = walks[l].as_mut() else { continue };
                 let hit = packets.interaction(scene, &hits, l, w.walk.ray());
                 let path = &mut paths[l];
@@ -218,10 +215,8 @@ impl Estimator {
                 }
             }
             lambert.run(&mut rays);
-            for l in 0..LANES {
-                if active & (1 << l) == 0 {
-                    continue;
-                }
+            // (Only lane `l`'s own bit of `active` changes in the loop.)
+            for l in lanes_of(active) {
                 let Some(w) = walks[l].as_mut() else { continue };
                 let goes_on = if lambert.has(l) { lambert.finish(l, &mut w.walk, &mut paths[l], &rays) } else { going & (1 << l) != 0 };
                 if goes_on {
@@ -278,6 +273,20 @@ impl Estimator {
         conns.slot(i).made = true;
         conns.release(out);
     }
+}
+
+/// The lanes set in `mask`, lowest first (a loop over all eight that skipped the unset ones
+/// tested and branched per lane).
+#[inline]
+fn lanes_of(mask: u8) -> impl Iterator<Item = usize> {
+    let mut m = mask;
+    std::iter::from_fn(move || {
+        (m != 0).then(|| {
+            let l = m.trailing_zeros() as usize;
+            m &= m - 1;
+            l
+        })
+    })
 }
 
 /// The pixel samples of a lockstep tile, black (light tracing adds its light by splats),

@@ -321,7 +321,13 @@ impl Vertex {
         let vertex = |bsdf: Bsdf| Self::at_surface(si, bsdf, light, beta, pdf_fwd);
         match scene.material(si) {
             Material::Diffuse { reflectance } if !scene.shapes[si.shape as usize].detail => {
-                let reflectance = reflectance.eval(si.tex_point()).clamp(0.0, 1.0);
+                // A constant without the texture point: its copy read the hit record back in
+                // wider words than they were just stored with (a store-forwarding stall a hit).
+                let reflectance = match reflectance {
+                    crate::texture::Texture::Constant(c) => *c,
+                    t => t.eval(si.tex_point()),
+                }
+                .clamp(0.0, 1.0);
                 dst.write(vertex(Bsdf::new(BsdfModel::Diffuse(Diffuse { reflectance }))))
             }
             _ => dst.write(vertex(scene.bsdf(si))),

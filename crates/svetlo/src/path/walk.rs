@@ -69,7 +69,9 @@ pub(crate) fn light_subpath_traced<S: Sampler + ?Sized, T: Fn(&Ray) -> Option<Su
     path: &mut Vec<Vertex>,
     trace: &T,
 ) {
-    let Some(mut lw) = light_walk(scene, cfg, time, sampler, path) else { return };
+    let mut lw = None;
+    light_walk(scene, cfg, time, sampler, path, &mut lw);
+    let Some(mut lw) = lw else { return };
     if lw.walk.goes_on(path) {
         while lw.walk.step(scene, trace(lw.walk.ray()).as_ref(), sampler, path) {}
     }
@@ -97,24 +99,34 @@ impl LightWalk {
 }
 
 /// [`light_subpath`] up to its walk: the emitter vertex pushed into `path` (cleared first)
-/// and the walk to run from it (None: the path ends there, or is empty), so that walks of
-/// several paths can trace their rays together. Same sampler dimensions as `light_subpath`.
-pub(crate) fn light_walk<S: Sampler + ?Sized>(scene: &Scene, cfg: &PathConfig, time: f32, sampler: &mut S, path: &mut Vec<Vertex>) -> Option<LightWalk> {
+/// and the walk to run from it written to `out` (None: the path ends there, or is empty), so
+/// that walks of several paths can trace their rays together. Same sampler dimensions as
+/// `light_subpath`. (Written in place: a returned walk was copied into the caller's slot
+/// in wider words than its fields had just been stored with, a store-forwarding stall.)
+pub(crate) fn light_walk<S: Sampler + ?Sized>(
+    scene: &Scene,
+    cfg: &PathConfig,
+    time: f32,
+    sampler: &mut S,
+    path: &mut Vec<Vertex>,
+    out: &mut Option<LightWalk>,
+) {
+    *out = None;
     path.clear();
     let u_light = sampler.next_1d();
     let u_pos = sampler.next_2d();
     let u_dir = sampler.next_2d();
     if cfg.max_light_vertices == 0 || scene.lights.is_empty() {
-        return None;
+        return;
     }
     let (li, pmf, _) = scene.light_distribution.sample_discrete(u_light);
     if pmf <= 0.0 {
-        return None;
+        return;
     }
     let light = &scene.lights[li];
-    let es = light.sample_le(u_pos, u_dir, time, &scene.bounds)?;
+    let Some(es) = light.sample_le(u_pos, u_dir, time, &scene.bounds) else { return };
     if es.pdf_pos <= 0.0 || es.pdf_dir <= 0.0 || es.le.is_black() {
-        return None;
+        return;
     }
     let d = es.ray.d;
     let infinite = light.is_infinite();
@@ -129,7 +141,7 @@ pub(crate) fn light_walk<S: Sampler + ?Sized>(scene: &Scene, cfg: &PathConfig, t
     }
     let beta = es.le * (es.n.dot(d).abs() / (pmf * es.pdf_pos * es.pdf_dir));
     let walk = Walk::new(es.ray, beta, es.pdf_dir, cfg.max_light_vertices, cfg.rr_depth, TransportMode::Importance);
-    Some(LightWalk { walk, infinite: infinite.then_some((d, es.pdf_pos)) })
+    *out = Some(LightWalk { walk, infinite: infinite.then_some((d, es.pdf_pos)) });
 }
 
 /// Extend `path` (whose last vertex is where `ray` starts) by tracing `ray` and sampling
