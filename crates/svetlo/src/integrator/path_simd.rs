@@ -83,7 +83,8 @@ use crate::geometry::{Geometry, Sphere, SurfaceInteraction, TriangleShading};
 use crate::light::area::{SphereLanes, SphereSamples};
 use crate::light::{AreaLight, EnvMap, Light, LightSample};
 use crate::lpe::{AovSet, ForwardView, LayerMask, MAX_LAYERS};
-use crate::math::{warp, Frame, INV_PI, PI};
+use crate::math::lane::{cosine_hemisphere, dot3, offset3};
+use crate::math::{warp, Frame, INV_PI};
 use crate::sampling::{power_heuristic, Distribution1D, IndependentSampler, Sampler, SamplerKind, SobolSampler};
 use crate::scene::Scene;
 use crate::spectrum::Rgb;
@@ -196,7 +197,7 @@ impl Albedo {
 
     /// As `Material::bsdf` evaluates it (clamped to [0, 1]).
     #[inline(always)]
-    fn at(&self, tp: TexPoint) -> Rgb {
+    fn at(&self, tp: &TexPoint) -> Rgb {
         match self {
             Albedo::Constant(c) => *c,
             Albedo::Textured(t) => t.eval_inline(tp).clamp(0.0, 1.0),
@@ -1507,7 +1508,7 @@ impl SimdKernel {
                     }
                     Hit::Other(si) => si.tex_point(),
                 };
-                (sh.front.at(tp), sh.back.as_ref().map_or(Rgb::BLACK, |b| b.at(tp)))
+                (sh.front.at(&tp), sh.back.as_ref().map_or(Rgb::BLACK, |b| b.at(&tp)))
             } else {
                 // Constant on both sides. (No texture point made: copying one that was just
                 // stored field by field stalled on store forwarding, 1-2 % of veach-mis.)
@@ -2370,42 +2371,6 @@ fn sel(c: bool, a: f32, b: f32) -> f32 {
         a
     } else {
         b
-    }
-}
-
-/// `glam`'s `a.dot(b)`, operation for operation.
-#[inline(always)]
-fn dot3(a: [f32; 3], b: [f32; 3]) -> f32 {
-    (a[0] * b[0] + a[1] * b[1]) + a[2] * b[2]
-}
-
-/// `warp::square_to_cosine_hemisphere`, operation for operation, its branches as selects.
-#[inline(always)]
-fn cosine_hemisphere(ux: f32, uy: f32) -> [f32; 3] {
-    let (ox, oy) = (2.0 * ux - 1.0, 2.0 * uy - 1.0);
-    let x_major = ox.abs() > oy.abs();
-    let ratio = if x_major { oy / ox } else { ox / oy };
-    let (sn, cs) = warp::sin_cos_quarter((PI / 4.0) * ratio);
-    let (dx, dy) = if ox == 0.0 && oy == 0.0 {
-        (0.0, 0.0)
-    } else if x_major {
-        (ox * cs, ox * sn)
-    } else {
-        (oy * sn, oy * cs)
-    };
-    [dx, dy, (1.0 - (dx * dx + dy * dy)).max(0.0).sqrt()]
-}
-
-/// `geometry::ray::offset_ray_origin`, operation for operation.
-#[inline(always)]
-fn offset3(p: [f32; 3], ng: [f32; 3], w: [f32; 3]) -> [f32; 3] {
-    let m = |a: f32, b: f32| if a > b { a } else { b };
-    let mag = m(m(p[0].abs(), p[1].abs()), p[2].abs()).max(1.0);
-    let eps = mag * 2e-6;
-    if dot3(w, ng) >= 0.0 {
-        [p[0] + ng[0] * eps, p[1] + ng[1] * eps, p[2] + ng[2] * eps]
-    } else {
-        [p[0] - ng[0] * eps, p[1] - ng[1] * eps, p[2] - ng[2] * eps]
     }
 }
 

@@ -2,6 +2,7 @@
 
 pub mod approx;
 pub mod frame;
+pub mod lane;
 pub mod warp;
 
 pub use frame::Frame;

@@ -355,11 +355,11 @@ impl Texture {
     /// skips the call and the dispatch of `eval`. The same value bit for bit (`f32::floor` is
     /// `floor_exact`); elsewhere `floor` may be a libm call, so only such kernels use it.
     #[inline(always)]
-    pub fn eval_inline(&self, p: TexPoint) -> Rgb {
+    pub fn eval_inline(&self, p: &TexPoint) -> Rgb {
         match self {
             Texture::Constant(c) => *c,
             Texture::Bitmap { image, filter: FilterMode::Bilinear, wrap: wm, to_uv } => bilinear(image, *wm, to_uv, p.uv, f32::floor),
-            _ => self.eval_varying(p),
+            _ => self.eval_varying(*p),
         }
     }
     /// Scalar parameter (roughness, opacity, weights), read as Mitsuba 3's `eval_1` reads it:
@@ -519,7 +519,7 @@ mod tests {
         #[cfg(target_arch = "x86_64")]
         #[target_feature(enable = "avx2")]
         unsafe fn eval_inline_avx2(t: &Texture, p: TexPoint) -> Rgb {
-            t.eval_inline(p)
+            t.eval_inline(&p)
         }
         let mut rng = crate::sampling::rng::Pcg32::new(11, 3);
         let table: &'static [f32; 256] = Box::leak(Box::new(std::array::from_fn(|i| (i as f32 / 255.0).powf(2.2) + i as f32 * 1e-3)));
@@ -539,7 +539,7 @@ mod tests {
                         for uv in uvs {
                             let p = TexPoint::from(uv);
                             let want = bits(t.eval(p));
-                            assert_eq!(bits(t.eval_inline(p)), want, "{w}x{h} {filter:?} {wrap:?} {uv}");
+                            assert_eq!(bits(t.eval_inline(&p)), want, "{w}x{h} {filter:?} {wrap:?} {uv}");
                             #[cfg(target_arch = "x86_64")]
                             if is_x86_feature_detected!("avx2") {
                                 // SAFETY: the CPU has AVX2 (checked just above).
@@ -552,7 +552,7 @@ mod tests {
         }
         for t in [Texture::Constant(Rgb::new(0.1, 0.2, 0.3)), Texture::Checkerboard { color0: Rgb::BLACK, color1: Rgb::WHITE, to_uv: Affine2::IDENTITY }] {
             let p = TexPoint::from(Vec2::new(0.3, 0.7));
-            assert_eq!(bits(t.eval_inline(p)), bits(t.eval(p)));
+            assert_eq!(bits(t.eval_inline(&p)), bits(t.eval(p)));
         }
     }
 
