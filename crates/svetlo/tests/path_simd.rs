@@ -850,6 +850,8 @@ fn spheres_match_scalar() {
         s.rr_depth = 3;
         let k = SimdKernel::new(&scene, &s).expect("a scene of spheres qualifies");
         assert!(k.uses_packets(), "six spheres go with the packets");
+        // A sphere light: several packets a tile, their lanes' layers and sums kept apart.
+        assert!(k.packets_a_tile() > 1, "a sphere light steps several packets a tile");
         // The kernel (both builds, single rays) against the scalar tracer: the same bits, at any thread count.
         compare_exact(&scene, &s, &format!("cornell-spheres with more spheres, {sampler:?}"));
     }
@@ -875,6 +877,7 @@ fn spheres_match_scalar() {
     assert!(set.bind(&scene).is_empty());
     let s = RenderSettings { spp: 4, max_depth: 6, lpe: Some(Arc::new(set)), ..RenderSettings::from_scene(&scene) };
     let k = SimdKernel::new(&scene, &s).expect("qualifies with AOVs");
+    assert!(k.packets_a_tile() > 1, "the AOV layers of several packets a tile");
     let a = k.render(&scene, &s, &Progress::new()).expect("render");
     let b = svetlo::methods::by_name("path:simd=false").unwrap().render(&scene, &s, &Progress::new()).expect("render");
     let t3 = k.render(&scene, &RenderSettings { threads: 3, ..s.clone() }, &Progress::new()).expect("render");

@@ -14,6 +14,7 @@ use crate::error::{Error, Result};
 use crate::film::{Film, FilmTile};
 use crate::geometry::Ray;
 use crate::lpe::LightTracker;
+use crate::math::lane::lanes_of;
 use crate::path::{
     camera_connection, connect, light_subpath, light_subpath_traced, light_walk, set_lane, BatchScratch, CameraBatch, LightWalk, PathConfig, ShadowPackets,
     Staged, Vertex, WalkLanes,
@@ -163,7 +164,7 @@ impl Estimator {
         let mut lambert = WalkLanes::default();
         loop {
             // Idle lanes take the next samples; a walk that ends at once is finished here.
-            for l in lanes_of(!active) {
+            for l in lanes_of((!active).into()) {
                 while more && active & (1 << l) == 0 {
                     let Some((i, (x, y, s))) = samples.next() else {
                         more = false;
@@ -191,7 +192,7 @@ impl Estimator {
             // scatter together (`WalkLanes`), the others alone. A lane's walk goes on (bit 1)
             // or ends (bit 0) in `going`, its fate after the Lambertian step if gathered.
             let mut going = 0u8;
-            for l in lanes_of(active) {
+            for l in lanes_of(active.into()) {
                 let Some(w) = walks[l].as_mut() else { continue };
                 let hit = packets.interaction(scene, &hits, l, w.walk.ray());
                 let path = &mut paths[l];
@@ -216,7 +217,7 @@ impl Estimator {
             }
             lambert.run(&mut rays);
             // (Only lane `l`'s own bit of `active` changes in the loop.)
-            for l in lanes_of(active) {
+            for l in lanes_of(active.into()) {
                 let Some(w) = walks[l].as_mut() else { continue };
                 let goes_on = if lambert.has(l) { lambert.finish(l, &mut w.walk, &mut paths[l], &rays) } else { going & (1 << l) != 0 };
                 if goes_on {
@@ -273,20 +274,6 @@ impl Estimator {
         conns.slot(i).made = true;
         conns.release(out);
     }
-}
-
-/// The lanes set in `mask`, lowest first (a loop over all eight that skipped the unset ones
-/// tested and branched per lane).
-#[inline]
-fn lanes_of(mask: u8) -> impl Iterator<Item = usize> {
-    let mut m = mask;
-    std::iter::from_fn(move || {
-        (m != 0).then(|| {
-            let l = m.trailing_zeros() as usize;
-            m &= m - 1;
-            l
-        })
-    })
 }
 
 /// The pixel samples of a lockstep tile, black (light tracing adds its light by splats),

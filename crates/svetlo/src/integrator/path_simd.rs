@@ -874,6 +874,12 @@ impl SimdKernel {
         Some(SimdKernel { tracer, geometry, shapes, lights, sphere_lights, env_light, prefetch_texels, avx512: avx512(), packets })
     }
 
+    /// How many packets of eight paths a tile steps in phase (more than one where the
+    /// kernel draws Beckmann normals or sphere-light samples).
+    pub fn packets_a_tile(&self) -> usize {
+        self.packets
+    }
+
     /// Whether rays go as packets (else one by one through the scene's BVH).
     pub fn uses_packets(&self) -> bool {
         matches!(self.tracer, Tracer::Packets { .. })
@@ -1095,11 +1101,10 @@ impl SimdKernel {
             }
             // The sphere lights' and the environment map's samples and the Beckmann normals of
             // all lanes of all packets, then the scalar BSDFs toward them: the packets' latency
-            // chains side by side.
-            // Every packet's sphere arithmetic before any packet's lane-by-lane results, whose
-            // branches wait on it (the lanes a packet has not pending compute on what earlier
-            // steps left, and their results are not read; written in place: `array::from_fn`
-            // kept its closure out of line and copied the samples, memcpy).
+            // chains side by side. Every packet's sphere arithmetic comes before any packet's
+            // lane-by-lane results, whose branches wait on it (lanes not pending compute on
+            // what earlier steps left, unread; written in place: `array::from_fn` kept its
+            // closure out of line and copied the samples).
             let mut spheres = [None; PACKETS];
             for (o, p) in spheres.iter_mut().zip(packets.iter()) {
                 if p.v.sphere_pending != 0 {

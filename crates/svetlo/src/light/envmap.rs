@@ -14,6 +14,7 @@
 //!   is positive wherever the radiance's luminance is.
 //! * `to_world` must be a rotation (directions are normalised after it).
 
+use crate::math::lane::lanes_of;
 use crate::math::warp::sin_cos_2pi;
 use crate::math::{approx, safe_sqrt, INV_2PI, INV_PI, PI};
 use crate::sampling::Distribution1D;
@@ -345,24 +346,30 @@ impl BilinearDistribution {
     /// one reads.
     #[inline(always)]
     fn sample_points<const N: usize>(&self, u: &[Vec2; N], lanes: u32) -> [Vec2; N] {
+        // Lanes past N are none of the map's.
+        let set = || lanes_of(lanes & ((1u64 << N) - 1) as u32);
         let (mut iy, mut uy) = ([0usize; N], [0.0f32; N]);
-        for_lanes::<N>(lanes, |l| {
+        for l in set() {
             (iy[l], _, uy[l]) = self.marginal.sample_discrete(u[l].y);
             self.conditional[iy[l]].prefetch_guide(u[l].x);
-        });
-        for_lanes::<N>(lanes, |l| self.conditional[iy[l]].prefetch_cdf(u[l].x));
+        }
+        for l in set() {
+            self.conditional[iy[l]].prefetch_cdf(u[l].x);
+        }
         let (mut ix, mut ux) = ([0usize; N], [0.0f32; N]);
         let t = self.texels.as_ptr();
-        for_lanes::<N>(lanes, |l| {
+        for l in set() {
             (ix[l], _, ux[l]) = self.conditional[iy[l]].sample_discrete(u[l].x);
             // The cell's corners, two in each of two rows (wrapping: a hint never faults).
             let i = iy[l] * (self.cols + 1) + ix[l];
             for k in [i, i + 1, i + self.cols + 1, i + self.cols + 2] {
                 crate::accel::prefetch(t.wrapping_add(k), 1);
             }
-        });
+        }
         let mut g = [Vec2::ZERO; N];
-        for_lanes::<N>(lanes, |l| g[l] = self.point_in_cell(ix[l], iy[l], ux[l], uy[l]));
+        for l in set() {
+            g[l] = self.point_in_cell(ix[l], iy[l], ux[l], uy[l]);
+        }
         g
     }
 
@@ -400,17 +407,6 @@ impl BilinearDistribution {
             return 0.0;
         }
         f / self.integral
-    }
-}
-
-/// `f` of each lane set in `lanes` (of `N`), in order: a walk over the mask's bits, with
-/// no test of the other lanes.
-#[inline(always)]
-fn for_lanes<const N: usize>(lanes: u32, mut f: impl FnMut(usize)) {
-    let mut m = lanes & ((1u64 << N) - 1) as u32;
-    while m != 0 {
-        f(m.trailing_zeros() as usize);
-        m &= m - 1;
     }
 }
 

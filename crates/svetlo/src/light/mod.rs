@@ -204,10 +204,7 @@ impl Light {
                     infinite: true,
                 })
             }
-            Light::EnvMap(env) => {
-                let (wi, pdf, li) = env.sample_eval(u)?;
-                Some(LightSample { wi, li, pdf, p: point_at_infinity(bounds, p_ref, wi), n: Vec3::ZERO, infinite: true })
-            }
+            Light::EnvMap(env) => env.sample_eval(u).map(|s| Self::env_sample(s, p_ref, bounds)),
             Light::Luminaire(l) => l.sample_li(p_ref, u),
             Light::Goniometric(g) => g.sample_li(p_ref),
         }
@@ -217,8 +214,14 @@ impl Light {
     /// `g` that [`EnvMap::sample_points`] drew for its u: the same sample, bit for bit.
     #[inline(always)]
     pub fn sample_li_env_at(env: &EnvMap, p_ref: Vec3, g: Vec2, bounds: &SceneBounds) -> Option<LightSample> {
-        let (wi, pdf, li) = env.sample_eval_at(g)?;
-        Some(LightSample { wi, li, pdf, p: point_at_infinity(bounds, p_ref, wi), n: Vec3::ZERO, infinite: true })
+        env.sample_eval_at(g).map(|s| Self::env_sample(s, p_ref, bounds))
+    }
+
+    /// The light sample of an environment map's (direction, density, radiance) seen from
+    /// `p_ref`.
+    #[inline(always)]
+    fn env_sample((wi, pdf, li): (Vec3, f32, Rgb), p_ref: Vec3, bounds: &SceneBounds) -> LightSample {
+        LightSample { wi, li, pdf, p: point_at_infinity(bounds, p_ref, wi), n: Vec3::ZERO, infinite: true }
     }
 
     /// Radiance arriving from an infinite light along direction `-w` (w points away from the scene).

@@ -6,6 +6,20 @@
 use super::warp;
 use super::PI;
 
+/// The lanes set in `mask`, lowest first: a walk over its bits (a loop over all lanes that
+/// skipped the unset ones tested and branched per lane).
+#[inline(always)]
+pub(crate) fn lanes_of(mask: u32) -> impl Iterator<Item = usize> {
+    let mut m = mask;
+    std::iter::from_fn(move || {
+        (m != 0).then(|| {
+            let l = m.trailing_zeros() as usize;
+            m &= m - 1;
+            l
+        })
+    })
+}
+
 /// `glam`'s `a.dot(b)`, operation for operation.
 #[inline(always)]
 pub(crate) fn dot3(a: [f32; 3], b: [f32; 3]) -> f32 {
