@@ -13,11 +13,13 @@ use crate::accel::packet::{Rays8, LANES};
 use crate::error::{Error, Result};
 use crate::film::{Film, FilmTile};
 use crate::geometry::Ray;
+use crate::light::emit8::EmitLanes;
+use crate::light::{EmissionSample, Light};
 use crate::lpe::LightTracker;
 use crate::math::lane::lanes_of;
 use crate::path::{
-    camera_connection, connect, light_subpath, light_subpath_traced, light_walk, set_lane, BatchScratch, CameraBatch, LightWalk, PathConfig, ShadowPackets,
-    Staged, Vertex, WalkLanes,
+    camera_connection, connect, light_subpath, light_subpath_traced, light_walk_draws, light_walk_from, light_walk_light, set_lane, BatchScratch, CameraBatch,
+    LightWalk, PathConfig, ShadowPackets, Staged, Vertex, WalkLanes,
 };
 use crate::sampling::{IndependentSampler, Sampler, SamplerKind, SobolSampler};
 use crate::scene::Scene;
@@ -162,10 +164,22 @@ impl Estimator {
         let mut more = true;
         let mut blacks = BlackSamples::default();
         let mut lambert = WalkLanes::default();
+        // The starts of the lanes' paths: their light (index, probability), emission
+        // samples taken alone, and times.
+        let mut emit = EmitLanes::default();
+        let mut starts: [Option<(usize, f32)>; LANES] = [None; LANES];
+        let mut emitted: [Option<EmissionSample>; LANES] = [None; LANES];
+        let mut times = [0f32; LANES];
         loop {
-            // Idle lanes take the next samples; a walk that ends at once is finished here.
-            for l in lanes_of((!active).into()) {
-                while more && active & (1 << l) == 0 {
+            // Idle lanes take the next samples (in lane order, so in sample order), their
+            // emission samples on framed mesh lights as one step (`EmitLanes`), the others
+            // alone; a walk that ends at once is finished here and its lane takes the next.
+            // Which lane takes which sample changes nothing: each lane draws from its
+            // own sampler, started at the sample, and the splats keep sample order.
+            let mut idle = !active;
+            while more && idle != 0 {
+                let mut taken = 0u8;
+                for l in lanes_of(idle.into()) {
                     let Some((i, (x, y, s))) = samples.next() else {
                         more = false;
                         break;
@@ -174,15 +188,41 @@ impl Estimator {
                     let (raster, ray) = super::camera_sample(&cam, sampler, x, y, s);
                     blacks.push(t.tile, raster);
                     seq[l] = conns.open(i);
-                    light_walk(scene, &self.cfg, ray.time, sampler, &mut paths[l], &mut walks[l]);
-                    match &walks[l] {
-                        Some(w) if w.walk.goes_on(&paths[l]) => {
+                    times[l] = ray.time;
+                    let (u_light, u_pos, u_dir) = light_walk_draws(sampler);
+                    starts[l] = light_walk_light(scene, &self.cfg, u_light);
+                    if let Some((li, _)) = starts[l] {
+                        match &scene.lights[li] {
+                            Light::Area(a) if emit.gather(l, a, u_pos, u_dir) => {}
+                            light => emitted[l] = light.sample_le(u_pos, u_dir, ray.time, &scene.bounds),
+                        }
+                    }
+                    taken |= 1 << l;
+                }
+                emit.run();
+                for l in lanes_of(taken.into()) {
+                    let (path, walk) = (&mut paths[l], &mut walks[l]);
+                    *walk = None;
+                    path.clear();
+                    if let Some((li, pmf)) = starts[l] {
+                        let es = match &scene.lights[li] {
+                            Light::Area(a) if emit.has(l) => Some(emit.sample(l, a, times[l])),
+                            _ => emitted[l].take(),
+                        };
+                        if let Some(es) = es {
+                            light_walk_from(scene, &self.cfg, times[l], li, pmf, &es, path, walk);
+                        }
+                    }
+                    match walk {
+                        Some(w) if w.walk.goes_on(path) => {
                             set_lane(&mut rays, l, w.walk.ray());
                             active |= 1 << l;
                         }
-                        _ => self.finish_lane(scene, packets, walks[l].as_ref(), &mut paths[l], sampler, seq[l], &mut conns, &mut out),
+                        _ => self.finish_lane(scene, packets, walk.as_ref(), path, &mut samplers[l], seq[l], &mut conns, &mut out),
                     }
                 }
+                emit.clear();
+                idle = taken & !active;
             }
             if active == 0 {
                 break;

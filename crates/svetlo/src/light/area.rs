@@ -374,6 +374,29 @@ impl AreaLight {
         Some(EmissionSample { ray, le: self.radiance.eval(uv), pdf_pos, pdf_dir, n })
     }
 
+    /// What `sample_le`'s framed case (a mesh of constant radiance, a triangle with its
+    /// frame) takes from `u_pos` before its arithmetic: the triangle (first vertex, two
+    /// edges), its frame, and the triangle choice's remapped number; None in other cases.
+    /// For `emit8`, which does the arithmetic of eight samples at once.
+    #[inline]
+    pub(crate) fn framed_triangle(&self, u_pos: Vec2) -> Option<(&[Vec3; 3], &Frame, f32)> {
+        let (Geometry::Mesh(_), Some(dist)) = (&*self.geometry, &self.tri_distribution) else { return None };
+        if dist.is_empty() || !self.radiance.is_constant() || self.inv_area <= 0.0 {
+            return None;
+        }
+        let (t, _, ur) = dist.sample_discrete(u_pos.x);
+        let tri = self.tri_edges.get(t)?;
+        let frame = self.tri_frames.get(t)?.as_ref()?;
+        Some((tri, frame, ur))
+    }
+
+    /// The emission sample of `sample_le`'s framed case from its ray, its frame's normal
+    /// and its direction's density (what `emit8` computed).
+    #[inline]
+    pub(crate) fn framed_emission(&self, ray: Ray, n: Vec3, pdf_dir: f32) -> EmissionSample {
+        EmissionSample { ray, le: self.radiance.eval(Vec2::ZERO), pdf_pos: self.inv_area, pdf_dir, n }
+    }
+
     /// Densities of `sample_le` for a ray leaving the light at `ray.o` with normal `n`:
     /// (per unit area, per unit solid angle).
     pub fn pdf_le(&self, ray: &Ray, n: Vec3) -> (f32, f32) {

@@ -17,6 +17,7 @@
 
 pub mod area;
 mod directional;
+pub(crate) mod emit8;
 pub mod envmap;
 pub mod goniometric;
 pub mod luminaire;

@@ -49,7 +49,7 @@ pub use shadow::{set_lane, ClosestHits, ShadowPackets};
 pub(crate) use step8::WalkLanes;
 pub use vertex::{Event, EventKind, Vertex, VertexKind};
 pub use walk::{camera_subpath, light_subpath, random_walk};
-pub(crate) use walk::{camera_subpath_traced, light_subpath_traced, light_walk, LightWalk};
+pub(crate) use walk::{camera_subpath_traced, light_subpath_traced, light_walk_draws, light_walk_from, light_walk_light, LightWalk};
 
 use crate::scene::Scene;
 

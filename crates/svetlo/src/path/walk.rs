@@ -8,6 +8,7 @@ use super::vertex::{infinite_light_density, lambertian_sample, shading_correctio
 use super::{Event, PathConfig, Vertex};
 use crate::bsdf::{LobeFlags, TransportMode};
 use crate::geometry::{Ray, SurfaceInteraction};
+use crate::light::EmissionSample;
 use crate::sampling::Sampler;
 use crate::scene::Scene;
 use crate::spectrum::Rgb;
@@ -113,21 +114,52 @@ pub(crate) fn light_walk<S: Sampler + ?Sized>(
 ) {
     *out = None;
     path.clear();
+    let (u_light, u_pos, u_dir) = light_walk_draws(sampler);
+    let Some((li, pmf)) = light_walk_light(scene, cfg, u_light) else { return };
+    let Some(es) = scene.lights[li].sample_le(u_pos, u_dir, time, &scene.bounds) else { return };
+    light_walk_from(scene, cfg, time, li, pmf, &es, path, out);
+}
+
+/// [`light_walk`]'s draws: the light choice, the origin, the direction.
+#[inline(always)]
+pub(crate) fn light_walk_draws<S: Sampler + ?Sized>(sampler: &mut S) -> (f32, Vec2, Vec2) {
     let u_light = sampler.next_1d();
     let u_pos = sampler.next_2d();
     let u_dir = sampler.next_2d();
+    (u_light, u_pos, u_dir)
+}
+
+/// [`light_walk`]'s light (index, probability) for its draw `u_light`; None: no path.
+#[inline(always)]
+pub(crate) fn light_walk_light(scene: &Scene, cfg: &PathConfig, u_light: f32) -> Option<(usize, f32)> {
     if cfg.max_light_vertices == 0 || scene.lights.is_empty() {
-        return;
+        return None;
     }
     let (li, pmf, _) = scene.light_distribution.sample_discrete(u_light);
     if pmf <= 0.0 {
-        return;
+        return None;
     }
-    let light = &scene.lights[li];
-    let Some(es) = light.sample_le(u_pos, u_dir, time, &scene.bounds) else { return };
+    Some((li, pmf))
+}
+
+/// [`light_walk`] after its emission sample `es` of light `li` (chosen with probability
+/// `pmf`), with `path` cleared and `out` None.
+#[allow(clippy::too_many_arguments)]
+#[inline(always)]
+pub(crate) fn light_walk_from(
+    scene: &Scene,
+    cfg: &PathConfig,
+    time: f32,
+    li: usize,
+    pmf: f32,
+    es: &EmissionSample,
+    path: &mut Vec<Vertex>,
+    out: &mut Option<LightWalk>,
+) {
     if es.pdf_pos <= 0.0 || es.pdf_dir <= 0.0 || es.le.is_black() {
         return;
     }
+    let light = &scene.lights[li];
     let d = es.ray.d;
     let infinite = light.is_infinite();
     if infinite {
