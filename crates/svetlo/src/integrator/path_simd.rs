@@ -83,7 +83,7 @@ use crate::geometry::{Geometry, Sphere, SurfaceInteraction, TriangleShading};
 use crate::light::area::{SphereLanes, SphereSamples};
 use crate::light::{AreaLight, EnvMap, Light, LightSample};
 use crate::lpe::{AovSet, ForwardView, LayerMask, MAX_LAYERS};
-use crate::math::lane::{cosine_hemisphere, dot3, offset3};
+use crate::math::lane::{cosine_hemisphere, dot3, lanes_of, offset3};
 use crate::math::{warp, Frame, INV_PI};
 use crate::sampling::{power_heuristic, Distribution1D, IndependentSampler, Sampler, SamplerKind, SobolSampler};
 use crate::scene::Scene;
@@ -1121,7 +1121,13 @@ impl SimdKernel {
             }
             self.beckmann_samples(packets);
             for (pk, p) in packets.iter_mut().enumerate().filter(|(_, p)| p.active != 0) {
-                self.scatter_and_shade_on_cpu(scene, settings, events, pk, p, &mut layers, &mut results);
+                if p.go == 0 && !layers.on() {
+                    // No path goes on (every step at depth 1): the shading step's outputs are
+                    // read for `go` lanes only, so the ended ones just hand over their sums.
+                    p.finish_ends(&mut results);
+                } else {
+                    self.scatter_and_shade_on_cpu(scene, settings, events, pk, p, &mut layers, &mut results);
+                }
             }
         }
         if events.view.is_some() {
@@ -2708,6 +2714,19 @@ impl<S: Clone> Packet<S> {
             v: Soa::default(),
             o: Out::default(),
         }
+    }
+}
+
+impl<S> Packet<S> {
+    /// The lanes that ended at this step's vertex hand their radiance to their jobs' slots
+    /// of `results` (as `scatter_and_shade` does with no AOVs) and leave `active`.
+    #[inline(always)]
+    fn finish_ends(&mut self, results: &mut [(Vec2, Rgb)]) {
+        let st = &self.st;
+        for l in lanes_of(self.ends as u32) {
+            results[st.job[l]] = (st.raster[l], Rgb::new(st.l[0][l], st.l[1][l], st.l[2][l]));
+        }
+        self.active &= !self.ends;
     }
 }
 
