@@ -1068,15 +1068,13 @@ impl SimdKernel {
                         film[1][l] += d[1][l];
                     }
                     let r = cam.pinhole_lanes(&film, &d[4]);
-                    for l in (0..LANES).filter(|l| fill & (1 << l) != 0) {
-                        p.st.start(l, job[l], Vec2::new(film[0][l], film[1][l]), r.time[l]);
+                    p.st.start_lanes(fill, &job, &film, &r.time);
+                    for l in lanes_of(fill as u32) {
                         layers.start(pk, l, job[l]);
-                        for k in 0..3 {
-                            p.rays.o[k][l] = r.o[k][l];
-                            p.rays.d[k][l] = r.d[k][l];
-                        }
-                        p.rays.t_max[l] = r.t_max[l];
                     }
+                    let rays = &mut p.rays;
+                    (rays.o, rays.d) = (pick_rows(fill, &r.o, &rays.o), pick_rows(fill, &r.d, &rays.d));
+                    rays.t_max = pick(fill, &r.t_max, &rays.t_max);
                     p.active |= fill;
                     continue;
                 }
@@ -2666,6 +2664,26 @@ impl<S> Paths<S> {
         self.num.eta_scale[l] = 1.0;
     }
 
+    /// [`Self::start`] of the lanes of `lanes` (jobs `job`, raster positions `raster`, times
+    /// `time`), every row written whole with selects: lane-by-lane stores had been a
+    /// tenth of the tile loop's samples at depth 1.
+    #[inline(always)]
+    fn start_lanes(&mut self, lanes: u8, job: &[usize; LANES], raster: &[[f32; LANES]; 2], time: &[f32; LANES]) {
+        self.job = pick(lanes, job, &self.job);
+        let old = self.raster;
+        self.raster = std::array::from_fn(|l| if lanes & (1 << l) != 0 { Vec2::new(raster[0][l], raster[1][l]) } else { old[l] });
+        self.time = pick(lanes, time, &self.time);
+        let n = &mut self.num;
+        self.l = pick_rows(lanes, &[[0.0; LANES]; 3], &self.l);
+        n.beta = pick_rows(lanes, &[[1.0; LANES]; 3], &n.beta);
+        n.prev_p = pick_rows(lanes, &[[0.0; LANES]; 3], &n.prev_p);
+        n.prev_n = pick_rows(lanes, &[[0.0; LANES]; 3], &n.prev_n);
+        n.depth = pick(lanes, &[0; LANES], &n.depth);
+        n.prev_specular = pick(lanes, &[true; LANES], &n.prev_specular);
+        n.prev_pdf = pick(lanes, &[0.0; LANES], &n.prev_pdf);
+        n.eta_scale = pick(lanes, &[1.0; LANES], &n.eta_scale);
+    }
+
     /// Adds `c` to lane `l`'s radiance (as `Rgb`'s `+=`).
     #[inline(always)]
     fn add(&mut self, l: usize, c: Rgb) {
@@ -2736,6 +2754,18 @@ fn put_rgb(a: &mut [[f32; LANES]; 3], l: usize, x: Rgb) {
     a[0][l] = x.r;
     a[1][l] = x.g;
     a[2][l] = x.b;
+}
+
+/// Lanes of `lanes` from `new`, the others from `old`.
+#[inline(always)]
+fn pick<T: Copy>(lanes: u8, new: &[T; LANES], old: &[T; LANES]) -> [T; LANES] {
+    std::array::from_fn(|l| if lanes & (1 << l) != 0 { new[l] } else { old[l] })
+}
+
+/// [`pick`] of each row.
+#[inline(always)]
+fn pick_rows<T: Copy, const R: usize>(lanes: u8, new: &[[T; LANES]; R], old: &[[T; LANES]; R]) -> [[T; LANES]; R] {
+    std::array::from_fn(|k| pick(lanes, &new[k], &old[k]))
 }
 
 #[inline(always)]
