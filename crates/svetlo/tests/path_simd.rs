@@ -99,6 +99,10 @@ fn cornell_box_matches_scalar() {
     s.hide_emitters = false;
     s.rr_depth = 1;
     compare(&scene, &s, "cornell-box unbounded depth, rr from 1");
+    // Camera rays and emission only: every step's paths all end at their first vertex (the
+    // packets skip the shading step and start eight camera samples at once).
+    s.max_depth = 1;
+    compare(&scene, &s, "cornell-box depth 1");
 }
 
 #[test]
@@ -113,6 +117,8 @@ fn sobol_sampler_matches_scalar() {
     s.rr_depth = 1;
     s.max_depth = 4;
     compare(&scene, &s, "cornell-box, sobol, depth 4, rr from 1");
+    s.max_depth = 1;
+    compare(&scene, &s, "cornell-box, sobol, depth 1");
 }
 
 #[test]

@@ -340,15 +340,42 @@ impl FilmTile {
                 }
             }
             Filter::Box => {
-                for (p, l) in (0..n).map(at) {
-                    let l = if l.is_finite() { l } else { Rgb::BLACK };
-                    if let Some(px) = self.run_owner(&mut run, p) {
-                        px.add_box(l);
-                    }
-                }
+                self.add_box_runs(n, at);
+                return;
             }
         }
         self.store_run(&run);
+    }
+
+    /// The box filter's [`Self::add_samples_by`]: each run of samples whose floors are one
+    /// pixel's summed into a copy of that pixel, stored when the run ends. The sums of
+    /// `run_owner`'s runs, in their order (a run ended by a sample of the same owner stores
+    /// and reloads its pixel: the same values); the copy stays in registers, where the
+    /// `OwnerRun` had kept its sums in memory across samples (store forwarding on each).
+    #[inline(always)]
+    fn add_box_runs(&mut self, n: usize, at: impl Fn(usize) -> (Vec2, Rgb)) {
+        let finite = |l: Rgb| if l.is_finite() { l } else { Rgb::BLACK };
+        let mut i = 0;
+        while i < n {
+            let (p, l) = at(i);
+            i += 1;
+            let Some(k) = self.owner(p) else { continue };
+            let Some(&first) = self.pixels.get(k) else { continue };
+            let mut px = first;
+            px.add_box(finite(l));
+            // The square of positions with p's floors, all of them pixel k's.
+            let lo = Vec2::new(floor_i(p.x) as f32, floor_i(p.y) as f32);
+            let hi = lo + Vec2::ONE;
+            while i < n {
+                let (p, l) = at(i);
+                if !(p.x >= lo.x && p.x < hi.x && p.y >= lo.y && p.y < hi.y) {
+                    break;
+                }
+                px.add_box(finite(l));
+                i += 1;
+            }
+            self.pixels[k] = px;
+        }
     }
 
     /// [`Self::add_sample`] with a filter wider than the box (`eval` its 1-D weight), the

@@ -83,7 +83,7 @@ use crate::geometry::{Geometry, Sphere, SurfaceInteraction, TriangleShading};
 use crate::light::area::{SphereLanes, SphereSamples};
 use crate::light::{AreaLight, EnvMap, Light, LightSample};
 use crate::lpe::{AovSet, ForwardView, LayerMask, MAX_LAYERS};
-use crate::math::lane::{cosine_hemisphere, dot3, offset3};
+use crate::math::lane::{cosine_hemisphere, dot3, lanes_of, offset3};
 use crate::math::{warp, Frame, INV_PI};
 use crate::sampling::{power_heuristic, Distribution1D, IndependentSampler, Sampler, SamplerKind, SobolSampler};
 use crate::scene::Scene;
@@ -1023,7 +1023,13 @@ impl SimdKernel {
             (false, true) => (x + 1, y, s0),
             (false, false) => (x0, y + 1, s0),
         };
-        let mut results: Vec<(Vec2, Rgb)> = vec![(Vec2::ZERO, Rgb::BLACK); jobs];
+        // Every job's slot is written when its path ends, before the film reads it: the
+        // worker's slots of earlier tiles serve as they are.
+        let mut slots = RESULTS.take();
+        if slots.len() < jobs {
+            slots.resize(jobs, (Vec2::ZERO, Rgb::BLACK));
+        }
+        let results = &mut slots[..jobs];
         let aovs = settings.aovs();
         let mut layers = LaneLayers::new(events, aovs, jobs);
         let cam = scene.camera.ray_generator();
@@ -1068,15 +1074,13 @@ impl SimdKernel {
                         film[1][l] += d[1][l];
                     }
                     let r = cam.pinhole_lanes(&film, &d[4]);
-                    for l in (0..LANES).filter(|l| fill & (1 << l) != 0) {
-                        p.st.start(l, job[l], Vec2::new(film[0][l], film[1][l]), r.time[l]);
+                    p.st.start_lanes(fill, &job, &film, &r.time);
+                    for l in lanes_of(fill as u32) {
                         layers.start(pk, l, job[l]);
-                        for k in 0..3 {
-                            p.rays.o[k][l] = r.o[k][l];
-                            p.rays.d[k][l] = r.d[k][l];
-                        }
-                        p.rays.t_max[l] = r.t_max[l];
                     }
+                    let rays = &mut p.rays;
+                    (rays.o, rays.d) = (pick_rows(fill, &r.o, &rays.o), pick_rows(fill, &r.d, &rays.d));
+                    rays.t_max = pick(fill, &r.t_max, &rays.t_max);
                     p.active |= fill;
                     continue;
                 }
@@ -1121,7 +1125,13 @@ impl SimdKernel {
             }
             self.beckmann_samples(packets);
             for (pk, p) in packets.iter_mut().enumerate().filter(|(_, p)| p.active != 0) {
-                self.scatter_and_shade_on_cpu(scene, settings, events, pk, p, &mut layers, &mut results);
+                if p.go == 0 && !layers.on() {
+                    // No path goes on (every step at depth 1): the shading step's outputs are
+                    // read for `go` lanes only, so the ended ones just hand over their sums.
+                    p.finish_ends(results);
+                } else {
+                    self.scatter_and_shade_on_cpu(scene, settings, events, pk, p, &mut layers, results);
+                }
             }
         }
         if events.view.is_some() {
@@ -1130,8 +1140,9 @@ impl SimdKernel {
                 (raster, l, aov, touched)
             }));
         } else {
-            tile.add_samples(&results);
+            tile.add_samples(results);
         }
+        RESULTS.set(slots);
     }
 
     /// [`Self::trace_and_gather`] out of line in this CPU's build. (Inlined into the loop over
@@ -1203,8 +1214,9 @@ impl SimdKernel {
         }
         // Every active lane's numbers for this vertex, where the sampler draws them for
         // all lanes at once (a lane that ends before it needs them restarts its sampler
-        // with its next camera sample).
-        let draws = if S::BATCHED { S::vertex_draws(&mut st.sampler, active) } else { [[0.0; LANES]; 7] };
+        // with its next camera sample); none at max depth 1, where every path ends at its
+        // first vertex. (Asking each lane's depth instead cost Bitterli's box 1.02.)
+        let draws = if S::BATCHED && settings.depth_allows(2) { S::vertex_draws(&mut st.sampler, active) } else { [[0.0; LANES]; 7] };
         let (mut go, mut ends) = (0u8, 0u8);
         for l in 0..LANES {
             if active & (1 << l) == 0 {
@@ -2660,6 +2672,26 @@ impl<S> Paths<S> {
         self.num.eta_scale[l] = 1.0;
     }
 
+    /// [`Self::start`] of the lanes of `lanes` (jobs `job`, raster positions `raster`, times
+    /// `time`), every row written whole with selects: lane-by-lane stores had been a
+    /// tenth of the tile loop's samples at depth 1.
+    #[inline(always)]
+    fn start_lanes(&mut self, lanes: u8, job: &[usize; LANES], raster: &[[f32; LANES]; 2], time: &[f32; LANES]) {
+        self.job = pick(lanes, job, &self.job);
+        let old = self.raster;
+        self.raster = std::array::from_fn(|l| if lanes & (1 << l) != 0 { Vec2::new(raster[0][l], raster[1][l]) } else { old[l] });
+        self.time = pick(lanes, time, &self.time);
+        let n = &mut self.num;
+        self.l = pick_rows(lanes, &[[0.0; LANES]; 3], &self.l);
+        n.beta = pick_rows(lanes, &[[1.0; LANES]; 3], &n.beta);
+        n.prev_p = pick_rows(lanes, &[[0.0; LANES]; 3], &n.prev_p);
+        n.prev_n = pick_rows(lanes, &[[0.0; LANES]; 3], &n.prev_n);
+        n.depth = pick(lanes, &[0; LANES], &n.depth);
+        n.prev_specular = pick(lanes, &[true; LANES], &n.prev_specular);
+        n.prev_pdf = pick(lanes, &[0.0; LANES], &n.prev_pdf);
+        n.eta_scale = pick(lanes, &[1.0; LANES], &n.eta_scale);
+    }
+
     /// Adds `c` to lane `l`'s radiance (as `Rgb`'s `+=`).
     #[inline(always)]
     fn add(&mut self, l: usize, c: Rgb) {
@@ -2674,6 +2706,14 @@ impl<S> Paths<S> {
 /// four lanes on, the Cornell boxes (depth 6) ran 1.01-1.02 slower with 1 % fewer
 /// instructions, as the eight-lane step of `direct` had on veach-mis.
 const BATCHED_STARTS: u32 = 8;
+
+thread_local! {
+    /// Each worker's slots for its tile's finished samples, kept from tile to tile: a vector
+    /// made for each tile (20 bytes a sample of a pass: 160 KiB at 32) came from the top
+    /// of the heap, which the allocator trimmed at its free, and the next tile faulted its
+    /// pages in again.
+    static RESULTS: std::cell::Cell<Vec<(Vec2, Rgb)>> = const { std::cell::Cell::new(Vec::new()) };
+}
 
 /// Packets of eight paths a tile steps in phase: while one packet's latency chains
 /// (camera rays, sphere samples, Beckmann normals) wait, the other's work fills the wait.
@@ -2711,12 +2751,37 @@ impl<S: Clone> Packet<S> {
     }
 }
 
+impl<S> Packet<S> {
+    /// The lanes that ended at this step's vertex hand their radiance to their jobs' slots
+    /// of `results` (as `scatter_and_shade` does with no AOVs) and leave `active`.
+    #[inline(always)]
+    fn finish_ends(&mut self, results: &mut [(Vec2, Rgb)]) {
+        let st = &self.st;
+        for l in lanes_of(self.ends as u32) {
+            results[st.job[l]] = (st.raster[l], Rgb::new(st.l[0][l], st.l[1][l], st.l[2][l]));
+        }
+        self.active &= !self.ends;
+    }
+}
+
 /// Lane `l` of a structure-of-arrays colour.
 #[inline(always)]
 fn put_rgb(a: &mut [[f32; LANES]; 3], l: usize, x: Rgb) {
     a[0][l] = x.r;
     a[1][l] = x.g;
     a[2][l] = x.b;
+}
+
+/// Lanes of `lanes` from `new`, the others from `old`.
+#[inline(always)]
+fn pick<T: Copy>(lanes: u8, new: &[T; LANES], old: &[T; LANES]) -> [T; LANES] {
+    std::array::from_fn(|l| if lanes & (1 << l) != 0 { new[l] } else { old[l] })
+}
+
+/// [`pick`] of each row.
+#[inline(always)]
+fn pick_rows<T: Copy, const R: usize>(lanes: u8, new: &[[T; LANES]; R], old: &[[T; LANES]; R]) -> [[T; LANES]; R] {
+    std::array::from_fn(|k| pick(lanes, &new[k], &old[k]))
 }
 
 #[inline(always)]
