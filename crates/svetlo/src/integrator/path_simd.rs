@@ -1100,9 +1100,9 @@ impl SimdKernel {
             for p in packets.iter_mut().filter(|p| p.active != 0) {
                 self.trace_and_gather_on_cpu(scene, settings, env_map, p);
             }
-            // The sphere lights' and the environment map's samples and the Beckmann normals of
-            // all lanes of all packets, then the scalar BSDFs toward them: the packets' latency
-            // chains side by side. Every packet's sphere arithmetic comes before any packet's
+            // The sphere lights' and the environment map's samples of all lanes of all packets,
+            // then the Beckmann conductors' values toward them and samples (eight lanes a group
+            // across the packets): the packets' latency chains side by side. Every packet's sphere arithmetic comes before any packet's
             // lane-by-lane results, whose branches wait on it (lanes not pending compute on
             // what earlier steps left, unread; written in place: `array::from_fn` kept its
             // closure out of line and copied the samples).
@@ -1292,8 +1292,8 @@ impl SimdKernel {
         self.scatter_and_shade(scene, settings, events, pk, p, layers, results)
     }
 
-    /// The rest of a packet's step once its sphere samples and Beckmann normals are in: the
-    /// scalar BSDFs' scattering, `shade8`, the shadow rays, the light samples that count; the
+    /// The rest of a packet's step once its sphere samples and Beckmann conductors are in:
+    /// the scalar BSDFs' scattering, `shade8`, the shadow rays, the light samples that count; the
     /// samples that end go to their jobs' slots of `results`, and leave `active`.
     #[inline(always)]
     #[allow(clippy::too_many_arguments)]
