@@ -1,8 +1,9 @@
-//! The path kernel's per-vertex arithmetic (`shade8`), the light walks' Lambertian step
-//! (`path::step8`) and their emission samples (`light::emit8`) compile to eight-lane vector
-//! code in the shipped binary. Whether LLVM vectorises such a loop has flipped silently with unrelated edits (an `Option` field added
-//! to a struct it reads, a `bool` read under a condition), and the scalar loop cost 1.2-1.5x
-//! on every kernel scene with the same image: no other test sees it. Reads the release
+//! The path kernel's per-vertex arithmetic (`shade8`), its rough conductors' lanes
+//! (`conductor8`), the light walks' Lambertian step (`path::step8`) and their emission
+//! samples (`light::emit8`) compile to eight-lane vector code in the shipped binary. Whether
+//! LLVM vectorises such a loop has flipped silently with unrelated edits (an `Option` field
+//! added to a struct it reads, a `bool` read under a condition), and the scalar loop cost
+//! 1.2-1.5x on every kernel scene with the same image: no other test sees it. Reads the release
 //! binary's disassembly with `objdump` (binutils); skipped in debug builds, which do not
 //! vectorise, and off x86_64.
 
@@ -20,7 +21,16 @@ fn shade8_is_vector_code() {
         }
     };
     // Each copy with the fewest packed operations its vector code has.
-    for (copy, least) in [("shade8_avx2", 100), ("shade8_avx512", 100), ("step8_avx2", 100), ("step8_avx512", 100), ("emit8_avx2", 50), ("emit8_avx512", 50)] {
+    for (copy, least) in [
+        ("shade8_avx2", 100),
+        ("shade8_avx512", 100),
+        ("conductor8_avx2", 100),
+        ("conductor8_avx512", 100),
+        ("step8_avx2", 100),
+        ("step8_avx512", 100),
+        ("emit8_avx2", 50),
+        ("emit8_avx512", 50),
+    ] {
         // The mangled name of the copy (one function each: `#[inline(never)]`).
         let symbol = nm
             .lines()
@@ -40,9 +50,10 @@ fn shade8_is_vector_code() {
                 scalar += 1;
             }
         }
-        // Vector code: ~200-250 packed operations in `shade8`, ~140 in `step8`, ~85 in
-        // `emit8`, and none scalar (the scalar loop had one `..ss` per lane and operation,
-        // and a branch per lane).
+        // Vector code: ~200-250 packed operations in `shade8`, ~600 in `conductor8` (the
+        // rough conductors' lanes; its ~14 scalar ones test the numbers libm's expf is called
+        // for), ~140 in `step8`, ~85 in `emit8`, and few scalar (the scalar loop had one
+        // `..ss` per lane and operation, and a branch per lane).
         assert!(packed >= least && scalar * 8 <= packed, "{copy}: {packed} packed and {scalar} scalar float operations: its loop is no longer vector code");
     }
 }

@@ -35,21 +35,31 @@ pub fn dielectric(cos_i: f32, eta: f32) -> (f32, f32, f32, f32) {
 /// Reflectance of a conductor with complex relative IOR `eta + i k` at incidence
 /// cosine `cos_i` (>= 0), exact for unpolarized light. Evaluated in f64 per channel.
 pub fn conductor(cos_i: f32, eta: Rgb, k: Rgb) -> Rgb {
-    let c = cos_i.clamp(0.0, 1.0) as f64;
-    let one = |n: f32, kk: f32| -> f32 {
-        let (n, kk) = (n as f64, kk as f64);
-        let sin2 = 1.0 - c * c;
-        // eta^2 = (n^2 - k^2) + i 2nk; w = sqrt(eta^2 - sin^2) (principal root: the
-        // transmitted wave decays into the metal).
-        let e2 = (n * n - kk * kk, 2.0 * n * kk);
-        let w = csqrt((e2.0 - sin2, e2.1));
-        // r_s = (c - w) / (c + w), r_p = (eta^2 c - w) / (eta^2 c + w).
-        let rs = cabs2(csub((c, 0.0), w)) / cabs2(cadd((c, 0.0), w)).max(1e-300);
-        let e2c = (e2.0 * c, e2.1 * c);
-        let rp = cabs2(csub(e2c, w)) / cabs2(cadd(e2c, w)).max(1e-300);
-        (0.5 * (rs + rp)).clamp(0.0, 1.0) as f32
-    };
-    Rgb::new(one(eta.r, k.r), one(eta.g, k.g), one(eta.b, k.b))
+    let c = conductor_cos(cos_i);
+    Rgb::new(conductor_channel(c, eta.r, k.r), conductor_channel(c, eta.g, k.g), conductor_channel(c, eta.b, k.b))
+}
+
+/// [`conductor`]'s incidence cosine, as it computes it.
+#[inline(always)]
+pub(crate) fn conductor_cos(cos_i: f32) -> f64 {
+    cos_i.clamp(0.0, 1.0) as f64
+}
+
+/// One channel of [`conductor`] at cosine `c` ([`conductor_cos`]): IOR `n + i kk`. (The
+/// rough conductors' lanes run it over channels of several lanes at once.)
+#[inline(always)]
+pub(crate) fn conductor_channel(c: f64, n: f32, kk: f32) -> f32 {
+    let (n, kk) = (n as f64, kk as f64);
+    let sin2 = 1.0 - c * c;
+    // eta^2 = (n^2 - k^2) + i 2nk; w = sqrt(eta^2 - sin^2) (principal root: the
+    // transmitted wave decays into the metal).
+    let e2 = (n * n - kk * kk, 2.0 * n * kk);
+    let w = csqrt((e2.0 - sin2, e2.1));
+    // r_s = (c - w) / (c + w), r_p = (eta^2 c - w) / (eta^2 c + w).
+    let rs = cabs2(csub((c, 0.0), w)) / cabs2(cadd((c, 0.0), w)).max(1e-300);
+    let e2c = (e2.0 * c, e2.1 * c);
+    let rp = cabs2(csub(e2c, w)) / cabs2(cadd(e2c, w)).max(1e-300);
+    (0.5 * (rs + rp)).clamp(0.0, 1.0) as f32
 }
 
 type C64 = (f64, f64);
@@ -66,6 +76,7 @@ fn cabs2(a: C64) -> f64 {
     a.0 * a.0 + a.1 * a.1
 }
 /// Principal square root (non-negative real part).
+#[inline(always)]
 fn csqrt(z: C64) -> C64 {
     let r = cabs2(z).sqrt();
     let re = (0.5 * (r + z.0)).max(0.0).sqrt();

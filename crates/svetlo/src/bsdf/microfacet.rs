@@ -35,26 +35,22 @@ impl Microfacet {
             return 0.0;
         }
         let (ax, ay) = (self.alpha_u, self.alpha_v);
-        let c2 = m.z * m.z;
-        let e = (m.x / ax) * (m.x / ax) + (m.y / ay) * (m.y / ay);
-        let r = match self.kind {
+        match self.kind {
             MicrofacetKind::Beckmann => {
-                // Below -104, e^x is under half the smallest subnormal: libm's expf returns 0
-                // there through its underflow path (an underflowing multiply and errno: slow,
-                // and the common case for a light sample far off a smooth conductor's lobe).
-                let x = -e / c2;
-                let ex = if x < -104.0 { 0.0 } else { x.exp() };
-                ex / (PI * ax * ay * c2 * c2)
+                let (x, c2) = beckmann_d_exponent(ax, ay, m);
+                beckmann_d_of(beckmann_d_exp(x), ax, ay, c2)
             }
             MicrofacetKind::Ggx => {
+                let c2 = m.z * m.z;
+                let e = (m.x / ax) * (m.x / ax) + (m.y / ay) * (m.y / ay);
                 let t = e + c2;
-                1.0 / (PI * ax * ay * t * t)
+                let r = 1.0 / (PI * ax * ay * t * t);
+                if r.is_finite() {
+                    r
+                } else {
+                    0.0
+                }
             }
-        };
-        if r.is_finite() {
-            r
-        } else {
-            0.0
         }
     }
 
@@ -67,13 +63,7 @@ impl Microfacet {
         let a2t2 = xy / (v.z * v.z); // (alpha tan theta)^2 along v's azimuth
         match self.kind {
             MicrofacetKind::Ggx => 0.5 * ((1.0 + a2t2).sqrt() - 1.0),
-            MicrofacetKind::Beckmann => {
-                // Λ = (e^{-a²} / (a √π) - erfc(a)) / 2: the approximations' absolute error
-                // (below 4e-7 in Λ) is what G1 = 1 / (1 + Λ) sees.
-                let a = 1.0 / a2t2.sqrt();
-                let e = approx::exp(-a * a);
-                (0.5 * (e * INV_SQRT_PI / a - approx::erfc_nonneg(a, e))).max(0.0)
-            }
+            MicrofacetKind::Beckmann => beckmann_lambda_of(a2t2),
         }
     }
 
@@ -220,6 +210,62 @@ impl VisibleSampler {
 }
 
 const INV_SQRT_PI: f32 = 0.564_189_6;
+
+/// Beckmann's D(m) (m.z > 0) in three steps, so that eight lanes can run the first and last
+/// as vector code and only libm's expf lane by lane: the exponent -tan²θ/α² and cos²θ,
+/// its e^x, the density.
+#[inline(always)]
+pub(crate) fn beckmann_d_exponent(ax: f32, ay: f32, m: Vec3) -> (f32, f32) {
+    let c2 = m.z * m.z;
+    let e = (m.x / ax) * (m.x / ax) + (m.y / ay) * (m.y / ay);
+    (-e / c2, c2)
+}
+
+/// e^x of [`beckmann_d_exponent`]'s x. Below -104, e^x is under half the smallest subnormal:
+/// libm's expf returns 0 there through its underflow path (an underflowing multiply and
+/// errno: slow, and the common case for a light sample far off a smooth conductor's lobe).
+#[inline(always)]
+pub(crate) fn beckmann_d_exp(x: f32) -> f32 {
+    if x < -104.0 {
+        0.0
+    } else {
+        x.exp()
+    }
+}
+
+/// D(m) from [`beckmann_d_exp`]'s e^x and cos²θ `c2` (0 where not finite).
+#[inline(always)]
+pub(crate) fn beckmann_d_of(ex: f32, ax: f32, ay: f32, c2: f32) -> f32 {
+    let r = ex / (PI * ax * ay * c2 * c2);
+    if r.is_finite() {
+        r
+    } else {
+        0.0
+    }
+}
+
+/// [`Microfacet::lambda`] of a Beckmann distribution of roughness (`ax`, `ay`), as vector
+/// lanes run it (the test of its azimuth term a select).
+#[inline(always)]
+pub(crate) fn beckmann_lambda(ax: f32, ay: f32, v: Vec3) -> f32 {
+    let xy = (ax * v.x).powi(2) + (ay * v.y).powi(2);
+    let a2t2 = xy / (v.z * v.z);
+    if xy == 0.0 {
+        0.0
+    } else {
+        beckmann_lambda_of(a2t2)
+    }
+}
+
+/// Beckmann's Smith Λ from (α tanθ)² along the direction's azimuth (not 0):
+/// Λ = (e^{-a²} / (a √π) - erfc(a)) / 2, a = 1 / (α tanθ). The approximations' absolute
+/// error (below 4e-7 in Λ) is what G1 = 1 / (1 + Λ) sees.
+#[inline(always)]
+pub(crate) fn beckmann_lambda_of(a2t2: f32) -> f32 {
+    let a = 1.0 / a2t2.sqrt();
+    let e = approx::exp(-a * a);
+    (0.5 * (e * INV_SQRT_PI / a - approx::erfc_nonneg(a, e))).max(0.0)
+}
 
 /// `N` lanes' Beckmann visible-normal draws for [`sample_visible_beckmann_lanes`]: the
 /// roughness (`alpha_u`, `alpha_v`), the direction `v` and the numbers `u`, per lane.

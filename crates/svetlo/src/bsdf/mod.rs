@@ -326,46 +326,40 @@ impl Bsdf {
     /// vertex needs both (its light sample and its continuation); a rough conductor (without
     /// mask or surface detail) computes its masking from `wo` once for the two.
     pub fn eval_pdf_and_sample(&self, wo: Vec3, wi: Option<Vec3>, uc: f32, u: Vec2, mode: TransportMode) -> (Option<(Rgb, f32)>, Option<BsdfSample>) {
-        self.eval_pdf_and_sample_given(wo, wi, uc, u, mode, None)
-    }
-
-    /// Where this BSDF's sample toward `wo` draws a Beckmann visible normal (a rough
-    /// conductor's, the case `eval_pdf_and_sample` takes apart): the roughness (`alpha_u`,
-    /// `alpha_v`) and the direction (`wo` on the model's side) `Microfacet::sample_visible`
-    /// draws it for, so that a caller can draw it ahead (the path kernel, eight at once).
-    #[inline]
-    pub(crate) fn beckmann_view(&self, wo: Vec3) -> Option<(f32, f32, Vec3)> {
-        let (None, true, Some((BsdfModel::RoughConductor(c), flipped))) = (&self.detail, self.opacity >= 1.0, self.side(wo)) else { return None };
-        let md = &c.distribution;
-        let wo = if flipped { flip(wo) } else { wo };
-        (md.kind == MicrofacetKind::Beckmann && wo.z > 0.0).then_some((md.alpha_u, md.alpha_v, wo))
-    }
-
-    /// [`Self::eval_pdf_and_sample`] with the visible normal from `m` where given, which must
-    /// be `Microfacet::sample_visible`'s for [`Self::beckmann_view`] and `u`: the same bits.
-    pub(crate) fn eval_pdf_and_sample_given(
-        &self,
-        wo: Vec3,
-        wi: Option<Vec3>,
-        uc: f32,
-        u: Vec2,
-        mode: TransportMode,
-        m: Option<Vec3>,
-    ) -> (Option<(Rgb, f32)>, Option<BsdfSample>) {
         if let (None, true, Some((BsdfModel::RoughConductor(c), flipped))) = (&self.detail, self.opacity >= 1.0, self.side(wo)) {
             let side = |w: Vec3| if flipped { flip(w) } else { w };
-            let (nee, s) = c.eval_pdf_and_sample(side(wo), wi.map(side), u, m);
-            // As `eval_pdf` and `sample_local` finish theirs.
-            let nee = nee.map(|(f, pdf)| (f * self.opacity, pdf * self.opacity));
-            let s = s.map(|mut s| {
-                s.wi = side(s.wi);
-                s.f *= self.opacity;
-                s.pdf *= self.opacity;
-                s
-            });
-            return (nee, s);
+            let (nee, s) = c.eval_pdf_and_sample(side(wo), wi.map(side), u);
+            return self.finish_conductor(flipped, nee, s);
         }
         (wi.map(|wi| self.eval_pdf(wo, wi, mode)), self.sample(wo, uc, u, mode))
+    }
+
+    /// Where this BSDF toward `wo` is a Beckmann rough conductor without mask or surface
+    /// detail (the case `eval_pdf_and_sample` takes apart): the model, and whether directions
+    /// are mirrored to its side, so that a caller can evaluate and sample it for several
+    /// vertices at once (the path kernel: `conductor::rough_conductor_lanes`, then
+    /// [`Self::finish_conductor`]).
+    #[inline]
+    pub(crate) fn beckmann_conductor(&self, wo: Vec3) -> Option<(&conductor::RoughConductor, bool)> {
+        let (None, true, Some((BsdfModel::RoughConductor(c), flipped))) = (&self.detail, self.opacity >= 1.0, self.side(wo)) else { return None };
+        let wo = if flipped { flip(wo) } else { wo };
+        (c.distribution.kind == MicrofacetKind::Beckmann && wo.z > 0.0).then_some((c, flipped))
+    }
+
+    /// A rough conductor's value and density toward a light sample and its own sample, on
+    /// the model's side (`flipped` as `side` gave it), made this BSDF's (as
+    /// `eval_pdf_and_sample` finishes them).
+    #[inline]
+    pub(crate) fn finish_conductor(&self, flipped: bool, nee: Option<(Rgb, f32)>, s: Option<BsdfSample>) -> (Option<(Rgb, f32)>, Option<BsdfSample>) {
+        let side = |w: Vec3| if flipped { flip(w) } else { w };
+        let nee = nee.map(|(f, pdf)| (f * self.opacity, pdf * self.opacity));
+        let s = s.map(|mut s| {
+            s.wi = side(s.wi);
+            s.f *= self.opacity;
+            s.pdf *= self.opacity;
+            s
+        });
+        (nee, s)
     }
 
     pub fn sample(&self, wo: Vec3, uc: f32, u: Vec2, mode: TransportMode) -> Option<BsdfSample> {
@@ -616,8 +610,8 @@ mod tests {
     /// `Bsdf::eval_pdf_and_sample` (the path kernel's call at a vertex) gives the bits of
     /// `eval_pdf` and `sample` called apart, with and without the light's direction, for every
     /// wrapped model (two-sided rough conductors take the shared path), both modes, directions
-    /// on both sides and grazing; and so does `eval_pdf_and_sample_given` with the Beckmann
-    /// visible normal drawn ahead for `beckmann_view` by `sample_visible_beckmann_lanes`.
+    /// on both sides and grazing; and so does a Beckmann conductor's lane of
+    /// `conductor::rough_conductor_lanes` (finished by `finish_conductor`).
     #[test]
     fn eval_pdf_and_sample_is_eval_pdf_then_sample() {
         let mut rng = crate::sampling::rng::Pcg32::new(23, 4);
@@ -638,15 +632,17 @@ mod tests {
                     let alone = b.sample(wo, uc, u, mode);
                     sampled += usize::from(alone.is_some());
                     assert_eq!(sample_bits(s), sample_bits(alone), "{:?} {mode:?} {wo} u {uc} {u}", b.front);
-                    // The path kernel's way: the visible normal drawn ahead, by the lanes' sampler.
-                    if let Some((au, av, w)) = b.beckmann_view(wo) {
-                        let q = microfacet::BeckmannLanes::<1> { alpha: [[au], [av]], v: [[w.x], [w.y], [w.z]], u: [[u.x], [u.y]] };
-                        let m = microfacet::sample_visible_beckmann_lanes(&q);
-                        let (nee_m, s_m) = b.eval_pdf_and_sample_given(wo, wi, uc, u, mode, Some(Vec3::new(m[0][0], m[1][0], m[2][0])));
+                    // The path kernel's way: a Beckmann conductor's lane of `rough_conductor_lanes`.
+                    if let Some((c, flipped)) = b.beckmann_conductor(wo) {
+                        let side = |w: Vec3| if flipped { flip(w) } else { w };
+                        let mut q = conductor::RoughConductorLanes::<1>::default();
+                        q.set(0, c, side(wo), wi.map(side), u);
+                        let (nee_l, s_l) = conductor::rough_conductor_lanes(&q, 1).lane(0, wi.is_some());
+                        let (nee_m, s_m) = b.finish_conductor(flipped, nee_l, s_l);
                         assert_eq!(
                             (nee_m.map(bits), sample_bits(s_m)),
                             (nee.map(bits), sample_bits(s)),
-                            "{:?} {mode:?} {wo} u {u}: normal drawn ahead",
+                            "{:?} {mode:?} {wo} u {u}: the conductor's lane",
                             b.front
                         );
                         ahead += 1;

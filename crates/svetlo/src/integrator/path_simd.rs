@@ -26,8 +26,8 @@
 //! `Bsdf`, built once (`ShapeData::uniform`; its lanes neither rebuild nor copy it), and
 //! the value and density toward the light sample come with the BSDF's own sample from one
 //! call (`Bsdf::eval_pdf_and_sample`: a rough model's half vector, D and G1 computed once;
-//! a rough conductor's Λ(wo) once for both; a Beckmann one's visible normal drawn for all
-//! lanes at once before, by `beckmann_samples`, the same bits). Large scenes whose rays go
+//! a rough conductor's Λ(wo) once for both; a Beckmann one's visible normal, value, density
+//! and sample for all lanes at once before, by `conductor_samples`, the same bits). Large scenes whose rays go
 //! as packets take the kernel on their first render only with Lambertian materials (its
 //! set-up cost more than it gained there otherwise), on later renders with any; scenes that
 //! trace single rays read the triangles their rays hit from the meshes (unpacking them all
@@ -72,8 +72,8 @@
 use super::path::{bsdf_pdf_toward, PathTracer};
 use super::{camera_sample, render_tiles, Integrator, Progress, RenderSettings};
 use crate::accel::packet::{Hits8, PacketBvh, PacketSpheres, Rays8, LANES};
-use crate::bsdf::microfacet::{sample_visible_beckmann_lanes, BeckmannLanes};
-use crate::bsdf::{Bsdf, LobeFlags, Material, TransportMode};
+use crate::bsdf::conductor::{rough_conductor_lanes, RoughConductorLanes, RoughConductorOut};
+use crate::bsdf::{Bsdf, BsdfSample, LobeFlags, Material, TransportMode};
 use crate::error::{Error, Result};
 use crate::film::{Film, FilmTile};
 use crate::geometry::mesh::TriangleFrame;
@@ -869,7 +869,8 @@ impl SimdKernel {
             .collect();
         let env_light = scene.lights.iter().position(|l| matches!(l, Light::EnvMap(env) if env.large()));
         let prefetch_texels = geometry.unpacked && shapes.iter().any(|s| s.prefetch_texels);
-        let chains = sphere_lights.iter().any(Option::is_some) || shapes.iter().any(|s| s.uniform.as_ref().is_some_and(|b| b.beckmann_view(Vec3::Z).is_some()));
+        let chains =
+            sphere_lights.iter().any(Option::is_some) || shapes.iter().any(|s| s.uniform.as_ref().is_some_and(|b| b.beckmann_conductor(Vec3::Z).is_some()));
         let packets = if chains { PACKETS } else { 1 };
         Some(SimdKernel { tracer, geometry, shapes, lights, sphere_lights, env_light, prefetch_texels, avx512: avx512(), packets })
     }
@@ -1103,9 +1104,9 @@ impl SimdKernel {
             for p in packets.iter_mut().filter(|p| p.active != 0) {
                 self.trace_and_gather_on_cpu(scene, settings, env_map, p);
             }
-            // The sphere lights' and the environment map's samples and the Beckmann normals of
-            // all lanes of all packets, then the scalar BSDFs toward them: the packets' latency
-            // chains side by side. Every packet's sphere arithmetic comes before any packet's
+            // The sphere lights' and the environment map's samples of all lanes of all packets,
+            // then the Beckmann conductors' values toward them and samples (eight lanes a group
+            // across the packets): the packets' latency chains side by side. Every packet's sphere arithmetic comes before any packet's
             // lane-by-lane results, whose branches wait on it (lanes not pending compute on
             // what earlier steps left, unread; written in place: `array::from_fn` kept its
             // closure out of line and copied the samples).
@@ -1123,7 +1124,7 @@ impl SimdKernel {
             for p in packets.iter_mut() {
                 self.env_samples(scene, &mut p.v);
             }
-            self.beckmann_samples(packets);
+            self.conductor_samples(packets);
             for (pk, p) in packets.iter_mut().enumerate().filter(|(_, p)| p.active != 0) {
                 if p.go == 0 && !layers.on() {
                     // No path goes on (every step at depth 1): the shading step's outputs are
@@ -1303,8 +1304,8 @@ impl SimdKernel {
         self.scatter_and_shade(scene, settings, events, pk, p, layers, results)
     }
 
-    /// The rest of a packet's step once its sphere samples and Beckmann normals are in: the
-    /// scalar BSDFs' scattering, `shade8`, the shadow rays, the light samples that count; the
+    /// The rest of a packet's step once its sphere samples and Beckmann conductors are in:
+    /// the scalar BSDFs' scattering, `shade8`, the shadow rays, the light samples that count; the
     /// samples that end go to their jobs' slots of `results`, and leave `active`.
     #[inline(always)]
     #[allow(clippy::too_many_arguments)]
@@ -1762,47 +1763,73 @@ impl SimdKernel {
         }
     }
 
-    /// The visible normals the scalar BSDFs of Beckmann rough conductors (`Bsdf::beckmann_view`)
-    /// draw for their samples, all packets' lanes at once, eight a group
-    /// (`sample_visible_beckmann_lanes`, the bits of `Microfacet::sample_visible`), into each
-    /// packet's `v.beckmann_m` for `scalar_scatter`. (About one lane in eight holds such a
-    /// vertex a step: one group for all packets runs one Newton chain where each packet ran its own.)
+    /// The Beckmann rough conductors' (`Bsdf::beckmann_conductor`) values and densities
+    /// toward their light samples and their own samples, all packets' lanes at once, eight a
+    /// group (`rough_conductor_lanes`: the visible normal, then both directions' D, G1,
+    /// densities and Fresnel term as vector code, the bits of `Bsdf::eval_pdf_and_sample`),
+    /// into each packet's `v.conductor` for `scalar_scatter`. (About one lane in eight holds
+    /// such a vertex a step: one group for all packets runs one chain where each packet ran its own.)
     #[inline(always)]
-    fn beckmann_samples<S>(&self, packets: &mut [Packet<S>]) {
-        let mut q = BeckmannLanes::<LANES>::default();
-        // Each group lane's packet and lane.
-        let mut slot = [(0usize, 0usize); LANES];
+    fn conductor_samples<S>(&self, packets: &mut [Packet<S>]) {
+        // Made at the first such lane (most steps of most scenes have none).
+        let mut group: Option<RoughConductorLanes<LANES>> = None;
+        // Each group lane's packet, lane, mirroring, and whether it has a light sample.
+        let mut slot = [(0usize, 0usize, false, false); LANES];
         let mut used = 0usize;
         for pk in 0..packets.len() {
             for l in 0..LANES {
                 let v = &packets[pk].v;
                 let Some((si, u)) = &v.scatter[l] else { continue };
                 let Some(bsdf) = v.own[l].as_ref().or(self.shapes[si.shape as usize].uniform.as_ref()) else { continue };
-                let Some((au, av, wo)) = bsdf.beckmann_view(si.shading.to_local(si.wo)) else { continue };
-                (q.alpha[0][used], q.alpha[1][used]) = (au, av);
-                (q.v[0][used], q.v[1][used], q.v[2][used]) = (wo.x, wo.y, wo.z);
-                (q.u[0][used], q.u[1][used]) = (u[4], u[5]);
-                slot[used] = (pk, l);
+                let wo = si.shading.to_local(si.wo);
+                let Some((c, flipped)) = bsdf.beckmann_conductor(wo) else { continue };
+                let side = |w: Vec3| if flipped { Vec3::new(w.x, w.y, -w.z) } else { w };
+                let wi = nee_dir(v, l, si);
+                let q = group.get_or_insert_with(RoughConductorLanes::default);
+                q.set(used, c, side(wo), wi.map(side), Vec2::new(u[4], u[5]));
+                slot[used] = (pk, l, flipped, wi.is_some());
                 used += 1;
                 if used == LANES {
-                    Self::beckmann_group(&q, &slot[..used], packets);
+                    self.conductor_group(q, &slot[..used], packets);
                     used = 0;
                 }
             }
         }
-        if used > 0 {
-            Self::beckmann_group(&q, &slot[..used], packets);
+        if let Some(q) = group.as_ref().filter(|_| used > 0) {
+            self.conductor_group(q, &slot[..used], packets);
         }
     }
 
-    /// One group of [`Self::beckmann_samples`]: lanes `slot` (packet, lane) of `q`. (The
-    /// group's other lanes hold earlier draws: the lanes are independent.)
+    /// One group of [`Self::conductor_samples`]: lanes `slot` of `q`, each finished by its
+    /// BSDF. (The group's other lanes hold earlier lanes' values: the lanes are independent.)
     #[inline(always)]
-    fn beckmann_group<S>(q: &BeckmannLanes<LANES>, slot: &[(usize, usize)], packets: &mut [Packet<S>]) {
-        let m = sample_visible_beckmann_lanes(q);
-        for (i, &(pk, l)) in slot.iter().enumerate() {
-            packets[pk].v.beckmann_m[l] = Some(Vec3::new(m[0][i], m[1][i], m[2][i]));
+    fn conductor_group<S>(&self, q: &RoughConductorLanes<LANES>, slot: &[(usize, usize, bool, bool)], packets: &mut [Packet<S>]) {
+        let out = self.rough_conductor_lanes_on_cpu(q, slot.len());
+        for (i, &(pk, l, flipped, nee)) in slot.iter().enumerate() {
+            let v = &mut packets[pk].v;
+            let Some((si, _)) = &v.scatter[l] else { continue };
+            let Some(bsdf) = v.own[l].as_ref().or(self.shapes[si.shape as usize].uniform.as_ref()) else { continue };
+            let (nee, s) = out.lane(i, nee);
+            v.conductor[l] = Some(bsdf.finish_conductor(flipped, nee, s));
         }
+    }
+
+    /// [`rough_conductor_lanes`] in its own function of this CPU's build (as `shade8_on_cpu`).
+    #[inline(always)]
+    fn rough_conductor_lanes_on_cpu(&self, q: &RoughConductorLanes<LANES>, used: usize) -> RoughConductorOut<LANES> {
+        #[cfg(target_arch = "x86_64")]
+        if crate::accel::packet::avx2() {
+            // SAFETY: `avx2()` detects AVX2 at run time, and `avx512` is set only where
+            // AVX-512F and VL were.
+            return unsafe {
+                if self.avx512 {
+                    conductor8_avx512(q, used)
+                } else {
+                    conductor8_avx2(q, used)
+                }
+            };
+        }
+        rough_conductor_lanes(q, used)
     }
 
     /// The first part of lane `l`'s vertex `si` of a scalar BSDF: the BSDF (the shape's
@@ -1845,21 +1872,16 @@ impl SimdKernel {
         let own = if v.own[l].is_some() { v.own[l].take() } else { None };
         let Some(bsdf) = own.as_ref().or(uniform) else { unreachable!("a shape without a uniform BSDF builds its own") };
         let flags = v.flags[l];
-        let (p, frame) = (si.p, si.shading);
+        let frame = si.shading;
         let wo = frame.to_local(si.wo);
-        let lane = |a: &[[f32; LANES]; 3]| Vec3::new(a[0][l], a[1][l], a[2][l]);
-        // The light's direction as `shade8` finds it (a mesh light's as `AreaLight::sample_li`).
-        let wi = v.num.nee_ok[l].then(|| {
-            let wi_w = if v.num.generic[l] {
-                lane(&v.num.gwi)
-            } else {
-                let d = lane(&v.num.lp) - p;
-                d / d.length_squared().sqrt()
-            };
-            frame.to_local(wi_w)
-        });
-        // The value and density toward it, and the BSDF's own sample, from one call.
-        let (nee, bs) = bsdf.eval_pdf_and_sample_given(wo, wi, uc, Vec2::new(ux, uy), TransportMode::Radiance, v.beckmann_m[l].take());
+        // The light's direction as `shade8` finds it.
+        let wi = nee_dir(v, l, si);
+        // The value and density toward it, and the BSDF's own sample, from one call (a
+        // Beckmann conductor's from `conductor_samples`).
+        let (nee, bs) = match v.conductor[l].take() {
+            Some(r) => r,
+            None => bsdf.eval_pdf_and_sample(wo, wi, uc, Vec2::new(ux, uy), TransportMode::Radiance),
+        };
         if let (Some(wi), Some((f, pdf))) = (wi, nee) {
             v.num.nee_ok[l] = !f.is_black();
             put_rgb(&mut v.num.bf, l, f);
@@ -1920,6 +1942,22 @@ impl SimdKernel {
         v.shape[l] = ESCAPED;
         put_rgb(&mut v.emit, l, beta * le * w);
     }
+}
+
+/// Lane `l`'s direction toward its light sample at vertex `si`, local, where it has one (as
+/// `shade8` finds it; a mesh light's as `AreaLight::sample_li`).
+#[inline(always)]
+fn nee_dir(v: &Soa, l: usize, si: &SurfaceInteraction) -> Option<Vec3> {
+    let lane = |a: &[[f32; LANES]; 3]| Vec3::new(a[0][l], a[1][l], a[2][l]);
+    v.num.nee_ok[l].then(|| {
+        let wi_w = if v.num.generic[l] {
+            lane(&v.num.gwi)
+        } else {
+            let d = lane(&v.num.lp) - si.p;
+            d / d.length_squared().sqrt()
+        };
+        si.shading.to_local(wi_w)
+    })
 }
 
 /// Where a lane's ray hit: a triangle of the kernel's, or a shape that is not a mesh (the
@@ -1992,6 +2030,10 @@ struct VertexNums {
     bspecular: [bool; LANES],
 }
 
+/// A rough conductor's value and density toward the light sample and its own sample (as
+/// `Bsdf::eval_pdf_and_sample` gives them).
+type ConductorResult = (Option<(Rgb, f32)>, Option<BsdfSample>);
+
 /// One vertex of eight paths, structure of arrays: what `gather` collected.
 #[derive(Default)]
 struct Soa {
@@ -2025,9 +2067,9 @@ struct Soa {
     scatter: [Option<(SurfaceInteraction, [f32; 6])>; LANES],
     own: [Option<Bsdf>; LANES],
     flags: [LobeFlags; LANES],
-    /// Lanes of a Beckmann rough conductor: its sample's visible normal
-    /// (`SimdKernel::beckmann_samples`).
-    beckmann_m: [Option<Vec3>; LANES],
+    /// Lanes of a Beckmann rough conductor: its value and density toward the light sample
+    /// and its own sample (`SimdKernel::conductor_samples`).
+    conductor: [Option<ConductorResult>; LANES],
     /// The rays' grid points (u, v) and sin θ in the environment map (`EnvMap::dirs_to_grid`),
     /// set when some lane escaped.
     env_grid: [[f32; LANES]; 3],
@@ -2537,6 +2579,29 @@ unsafe fn shade8_avx512(v: &VertexNums, rr_depth: i32, st: &mut PathNums, rays: 
     shade8(v, rr_depth, st, rays, shadow, o)
 }
 
+/// [`rough_conductor_lanes`] of the kernel's eight lanes compiled for AVX2 (see
+/// [`SimdKernel::rough_conductor_lanes_on_cpu`]).
+///
+/// # Safety
+/// The CPU must support AVX2.
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx2")]
+#[inline(never)]
+unsafe fn conductor8_avx2(q: &RoughConductorLanes<LANES>, used: usize) -> RoughConductorOut<LANES> {
+    rough_conductor_lanes(q, used)
+}
+
+/// [`rough_conductor_lanes`] compiled for AVX-512VL.
+///
+/// # Safety
+/// The CPU must support AVX2, AVX-512F and AVX-512VL.
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx2,avx512f,avx512vl")]
+#[inline(never)]
+unsafe fn conductor8_avx512(q: &RoughConductorLanes<LANES>, used: usize) -> RoughConductorOut<LANES> {
+    rough_conductor_lanes(q, used)
+}
+
 /// A sampler of the kernel's lanes: one vertex's numbers for all of them at once, in the
 /// scalar tracer's order per vertex (light choice, light point, BSDF lobe, BSDF direction,
 /// Russian roulette: 1, 2, 1, 2 and 1 dimensions), each lane from its own sampler.
@@ -2886,6 +2951,81 @@ mod tests {
             differ_from_start += (qa != q) as u32;
         }
         assert!(differ_from_start > 1000, "the walk steps states");
+    }
+
+    /// The kernel's rough-conductor lanes (the baseline build and the AVX2 and AVX-512 copies
+    /// it runs) give `RoughConductor::eval_pdf_and_sample`'s bits lane by lane, with 1 to 8
+    /// lanes used: roughness from its floor to beyond 1, anisotropic, metals and
+    /// dielectric-like IORs, incidence from normal to grazing, light directions on both sides
+    /// and none, the numbers' ends.
+    #[test]
+    fn conductor_lanes_are_the_scalar_bsdf() {
+        use crate::bsdf::conductor::RoughConductor;
+        use crate::bsdf::microfacet::Microfacet;
+        use crate::bsdf::MicrofacetKind;
+        let mut rng = Pcg32::new(31, 9);
+        let mut f = |lo: f32, hi: f32| lo + (hi - lo) * rng.next_f32();
+        let alphas = [1e-4f32, 1e-3, 0.01, 0.05, 0.1, 0.3, 1.0, 2.0];
+        let us = [0.0f32, 1e-7, 0.5, 1.0 - 6e-8, 1.0];
+        let cos_ts = [1.0f32, 0.999_999, 0.5, 1e-2, 1e-4, 1e-6];
+        let bits = |(nee, s): (Option<(Rgb, f32)>, Option<BsdfSample>)| {
+            let rgb = |c: Rgb| [c.r, c.g, c.b].map(f32::to_bits);
+            (nee.map(|(c, p)| (rgb(c), p.to_bits())), s.map(|s| (s.wi.to_array().map(f32::to_bits), rgb(s.f), s.pdf.to_bits(), s.lobe, s.eta.to_bits())))
+        };
+        let (mut sampled, mut lit) = (0, 0);
+        for batch in 0..20_000usize {
+            let used = 1 + batch % LANES;
+            let mut q = RoughConductorLanes::<LANES>::default();
+            let mut lanes = Vec::new();
+            for l in 0..used {
+                let i = batch * LANES + l;
+                let (au, av) = if i.is_multiple_of(3) { (alphas[i / 3 % 8], alphas[i / 24 % 8]) } else { (f(1e-4, 0.6), f(1e-4, 0.6)) };
+                let (eta, k) = if i.is_multiple_of(4) {
+                    (Rgb::splat(1.5), Rgb::BLACK)
+                } else {
+                    (Rgb::new(f(0.1, 3.0), f(0.1, 3.0), f(0.1, 3.0)), Rgb::new(f(0.0, 5.0), f(0.0, 5.0), f(0.0, 5.0)))
+                };
+                let c = RoughConductor {
+                    distribution: Microfacet::new(MicrofacetKind::Beckmann, au, av),
+                    eta,
+                    k,
+                    specular_reflectance: Rgb::new(f(0.0, 1.0), f(0.0, 1.0), 1.0),
+                };
+                let dir = |cos_t: f32, phi: f32| {
+                    let sin_t = (1.0 - cos_t * cos_t).max(0.0).sqrt();
+                    Vec3::new(sin_t * phi.cos(), sin_t * phi.sin(), cos_t)
+                };
+                let wo = dir(if i.is_multiple_of(5) { cos_ts[i / 5 % cos_ts.len()] } else { f(1e-3, 1.0) }, f(0.0, 6.3));
+                // Near the mirror direction (a smooth plate's lobe), anywhere, below, or none.
+                let wi = match i % 4 {
+                    0 => Some((Vec3::new(-wo.x, -wo.y, wo.z) + 0.05 * dir(f(-1.0, 1.0), f(0.0, 6.3))).normalize()),
+                    1 => Some(dir(f(-1.0, 1.0), f(0.0, 6.3))),
+                    2 => Some(dir(f(0.0, 1.0), f(0.0, 6.3))),
+                    _ => None,
+                };
+                let u = if i.is_multiple_of(7) { Vec2::new(us[i / 7 % 5], us[i / 35 % 5]) } else { Vec2::new(f(0.0, 1.0), f(0.0, 1.0)) };
+                q.set(l, &c, wo, wi, u);
+                lanes.push((c, wo, wi, u));
+            }
+            let mut outs = vec![rough_conductor_lanes(&q, used)];
+            #[cfg(target_arch = "x86_64")]
+            if crate::accel::packet::avx2() {
+                // SAFETY: AVX2 was detected, AVX-512 where `avx512()` says so.
+                outs.push(unsafe { conductor8_avx2(&q, used) });
+                if avx512() {
+                    outs.push(unsafe { conductor8_avx512(&q, used) });
+                }
+            }
+            for (l, (c, wo, wi, u)) in lanes.iter().enumerate() {
+                let want = c.eval_pdf_and_sample(*wo, *wi, *u);
+                sampled += usize::from(want.1.is_some());
+                lit += usize::from(want.0.is_some_and(|(f, _)| !f.is_black()));
+                for (build, out) in outs.iter().enumerate() {
+                    assert_eq!(bits(out.lane(l, wi.is_some())), bits(want), "build {build}, {c:?} wo {wo} wi {wi:?} u {u}");
+                }
+            }
+        }
+        assert!(sampled > 40_000 && lit > 10_000, "{sampled} samples, {lit} lit light samples");
     }
 
     /// `shade8` in its own AVX2 and AVX-512 builds (the kernel's) gives the portable
