@@ -37,6 +37,8 @@ pub struct Accel {
     pub(super) prefetch: bool,
     /// The CPU has AVX: node tests take all eight children at once.
     pub(super) avx: bool,
+    /// The hierarchy is large enough for alike rays to be walked as one (`accel/coherent.rs`).
+    pub(super) coherent: bool,
 }
 
 /// Traversal cost 0.15 of a block test: cbox-rgb's rays cost 2% fewer instructions than at
@@ -46,6 +48,11 @@ const TRI_LEAF: LeafParams = LeafParams { group: LANES, max_leaf: 16, traversal_
 /// Hierarchies smaller than this (about an L2 cache) are not prefetched: in cache, the
 /// prefetch instructions cost more than they save.
 const PREFETCH_MIN_BYTES: usize = 1 << 20;
+/// Hierarchies smaller than this walk alike rays interleaved rather than as one: the
+/// bsdf_spheres scenes (a few megabytes) took 1.04-1.07 the render CPU as one (their rays'
+/// walks hit the caches, and the interleaved walks overlap what latency is left), the 1M-mesh
+/// (60 MB) 0.86 at depth 1.
+const COHERENT_MIN_BYTES: usize = 16 << 20;
 /// Up to this many meshes, a hit's mesh is found by a binary search of `Accel::meshes`
 /// (in L1) rather than read from `tri_mesh`, a load at a random place of a megabytes-long
 /// array: that load was 5-6 % of the closest-hit samples on the 1M-triangle bench scene
@@ -177,11 +184,12 @@ impl Accel {
             + std::mem::size_of_val(&spheres[..])
             + std::mem::size_of_val(&sdf_nodes[..]);
         let prefetch = bytes > PREFETCH_MIN_BYTES;
+        let coherent = bytes > COHERENT_MIN_BYTES;
         let (tri_nodes, tris, sph_nodes, spheres, sdf_nodes) =
             (tri_nodes.into_slice(), tris.into_slice(), sph_nodes.into_slice(), PagedSlice::new(spheres), sdf_nodes.into_slice());
         // Read once per closest hit, at a random place: on huge pages too.
         let tri_mesh = PagedSlice::new(tri_mesh);
-        Accel { tri_nodes, tris, meshes, tri_mesh, sph_nodes, spheres, sph_shapes, sdf_nodes, grids, voxels, bounds, prefetch, avx: has_avx() }
+        Accel { tri_nodes, tris, meshes, tri_mesh, sph_nodes, spheres, sph_shapes, sdf_nodes, grids, voxels, bounds, prefetch, avx: has_avx(), coherent }
     }
 
     pub fn bounds(&self) -> Aabb {
@@ -281,11 +289,7 @@ impl Accel {
     /// With `ANY` (no triangle hit), `Some` at the first hit.
     #[inline(always)]
     fn trace_others<const ANY: bool, const AVX: bool>(&self, ray: &Ray, bray: &BoxRay, mut t_max: f32, tri: Option<TriHit>) -> Option<PrimHit> {
-        let mut best = tri.map(|(b, lane, b1, b2)| {
-            let id = self.tris[b].ids[lane];
-            let (first, shape) = self.meshes[self.mesh_of(id)];
-            PrimHit { t: t_max, shape, prim: id - first, b1, b2 }
-        });
+        let mut best = tri.map(|hit| self.tri_hit(t_max, hit));
         if let Some(i) = nearest_prim::<ANY, AVX, _>(&self.sph_nodes, bray, &mut t_max, self.prefetch, &self.spheres, |s, t| s.intersect(ray.o, ray.d, t)) {
             if ANY {
                 return Some(PrimHit { t: t_max, shape: 0, prim: 0, b1: 0.0, b2: 0.0 });
@@ -318,8 +322,15 @@ impl Accel {
         #[cfg(target_arch = "x86_64")]
         if self.avx && self.prefetch && !self.tri_nodes.is_empty() {
             let mut hits = [None; RAY_LANES];
+            let done = |l, hit| hits[l] = hit;
             // SAFETY: `avx` is set only when the CPU reports AVX.
-            unsafe { self.trace_lanes_avx::<false>(rays, active, |l, hit| hits[l] = hit) };
+            unsafe {
+                if self.coherent && active.count_ones() >= COHERENT_MIN {
+                    self.trace_coherent_avx(rays, active, done)
+                } else {
+                    self.trace_lanes_avx::<false>(rays, active, done)
+                }
+            };
             return hits;
         }
         std::array::from_fn(|l| if active & (1 << l) != 0 { self.intersect(&rays[l]) } else { None })
@@ -407,6 +418,62 @@ impl Accel {
             };
             done(l, hit);
         }
+    }
+}
+
+/// Fewest rays worth a coherent walk (`accel/coherent.rs`).
+#[cfg(target_arch = "x86_64")]
+const COHERENT_MIN: u32 = 4;
+
+impl Accel {
+    /// [`Accel::trace_lanes_avx`] for closest hits, the rays walked as one where they share
+    /// their origin and octant (`accel/coherent.rs`), else interleaved. Each ray's hit is
+    /// the one its single walk finds, bit for bit: a ray whose nearest hit may tie with
+    /// another, or that met a triangle on an edge, is walked again alone.
+    ///
+    /// # Safety
+    /// The CPU must support AVX.
+    #[cfg(target_arch = "x86_64")]
+    #[target_feature(enable = "avx")]
+    unsafe fn trace_coherent_avx(&self, rays: &[Ray; RAY_LANES], active: u8, mut done: impl FnMut(usize, Option<PrimHit>)) {
+        use super::coherent::{walk, Coherent, TIE};
+        // SAFETY: this function runs only on CPUs with AVX.
+        let b = self.bounds;
+        let Some(c) = (unsafe { Coherent::new(rays, active, (b.max - b.min).max_element()) }) else {
+            // SAFETY: as above.
+            return unsafe { self.trace_lanes_avx::<false>(rays, active, done) };
+        };
+        let prefetch_leaf = |code| self.prefetch_tris(code);
+        // SAFETY: as above.
+        let f = unsafe { walk(&self.tri_nodes, &self.tris, &c, active, self.prefetch, prefetch_leaf) };
+        // The spheres' and grids' trees, where the scene has any, ray by ray.
+        let others = !self.sph_nodes.is_empty() || !self.sdf_nodes.is_empty();
+        let mut again = f.again as u8 & active;
+        let mut finish = active & !again;
+        while finish != 0 {
+            let l = finish.trailing_zeros() as usize & (RAY_LANES - 1);
+            finish &= finish - 1;
+            let r = &rays[l];
+            let hit = (f.slot[l] >= 0).then(|| (f.slot[l] as usize / LANES, f.slot[l] as usize % LANES, f.b1[l], f.b2[l]));
+            if hit.is_some() && f.rival[l] <= f.t[l] * (1.0 + TIE) {
+                again |= 1 << l;
+                continue;
+            }
+            let t = if hit.is_some() { f.t[l] } else { r.t_max };
+            done(l, if others { self.trace_others::<false, true>(r, &BoxRay::new(r.o, r.d), t, hit) } else { hit.map(|h| self.tri_hit(t, h)) });
+        }
+        if again != 0 {
+            // SAFETY: as above.
+            unsafe { self.trace_lanes_avx::<false>(rays, again, done) };
+        }
+    }
+
+    /// The closest hit of a triangle hit `(block, lane, b1, b2)` at `t`.
+    #[inline(always)]
+    fn tri_hit(&self, t: f32, (b, lane, b1, b2): TriHit) -> PrimHit {
+        let id = self.tris[b].ids[lane];
+        let (first, shape) = self.meshes[self.mesh_of(id)];
+        PrimHit { t, shape, prim: id - first, b1, b2 }
     }
 }
 

@@ -3,6 +3,8 @@
 
 mod build;
 mod bvh;
+#[cfg(target_arch = "x86_64")]
+mod coherent;
 mod geometry_cache;
 mod kdtree;
 pub mod packet;

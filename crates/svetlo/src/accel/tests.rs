@@ -480,3 +480,75 @@ unsafe fn avx_test(block: &super::tri8::Tri8, w: &WatertightRay, t_max: f32) -> 
     let r = unsafe { super::tri8::TriRay8::new(w) };
     r.test(block, w, t_max)
 }
+
+/// Groups of eight rays as a pinhole camera makes them (origins on its near plane along
+/// the rays, directions within a small cone: what the coherent walk takes) give each ray
+/// what its single walk gives, bit for bit: rays aimed at the meshes' shared vertices and
+/// edges (several triangles tie there), at 40 copies of one triangle (exact ties), at points
+/// just beside the surface (near misses), with finite and infinite t_max.
+#[test]
+fn coherent_walks_match_single_walks() {
+    let mut rng = Pcg32::new(9, 7);
+    let sphere = bumpy_sphere(60, Vec3::new(0.45, 0.5, 0.5), 0.3);
+    let tri = [Vec3::new(0.7, 0.1, 0.2), Vec3::new(0.95, 0.1, 0.2), Vec3::new(0.7, 0.35, 0.2)];
+    let mut copies = TriangleMesh::default();
+    for k in 0..40u32 {
+        copies.positions.extend(tri);
+        copies.indices.push([3 * k, 3 * k + 1, 3 * k + 2]);
+    }
+    let mut shapes = soup(&mut rng, 400);
+    shapes.push(Geometry::Mesh(sphere.clone()));
+    shapes.push(Geometry::Mesh(copies));
+    let refs: Vec<&Geometry> = shapes.iter().collect();
+    let mut accel = Accel::build(&refs);
+    // The walks of large scenes (the coherent and interleaved walks are for those only).
+    accel.prefetch = true;
+    accel.coherent = true;
+    let bits = |h: Option<PrimHit>| h.map(|h| (h.t.to_bits(), h.shape, h.prim, h.b1.to_bits(), h.b2.to_bits()));
+    let mut coherent = 0;
+    for g in 0..1500 {
+        let eye = v3(&mut rng) * 3.0 - 1.0;
+        // Targets: a vertex of the sphere, the middle of one of its edges, the triangle copies, beside the sphere.
+        let target = |rng: &mut Pcg32| -> Vec3 {
+            let i = (rng.next_f32() * sphere.positions.len() as f32) as usize % sphere.positions.len();
+            match g % 4 {
+                0 => sphere.positions[i],
+                1 => {
+                    let [a, b, _] = sphere.indices[i % sphere.indices.len()];
+                    (sphere.positions[a as usize] + sphere.positions[b as usize]) * 0.5
+                }
+                2 => (tri[0] + tri[1] + tri[2]) / 3.0 + (v3(rng) - 0.5) * 0.05,
+                _ => sphere.positions[i] + (v3(rng) - 0.5) * 0.01,
+            }
+        };
+        let base = target(&mut rng);
+        // Up to a spread the walk takes as one (`coherent::DIR_SPREAD`), and a little past it.
+        let spread = [0.0, 1e-4, 1e-3, 1e-2, 4e-2][g % 5];
+        let mut eight = [Ray::new(Vec3::ZERO, Vec3::Z); RAY_LANES];
+        for (k, ray) in eight.iter_mut().enumerate() {
+            // Half of a group aims exactly at its point (a vertex, an edge, the copies), half beside it.
+            let p = if k % 2 == 0 { base } else { base + (v3(&mut rng) - 0.5) * spread };
+            // As a pinhole camera: the ray starts on the near plane, along its line from the eye.
+            let v = p - eye;
+            let o = eye + v * 0.01;
+            *ray = if g % 3 == 0 { Ray::with_max(o, v.normalize(), v.length() * 0.999) } else { Ray::new(o, v.normalize()) };
+        }
+        if std::is_x86_feature_detected!("avx") {
+            // SAFETY: AVX is present.
+            coherent += unsafe { super::coherent::Coherent::new(&eight, 0xff, 1.0) }.is_some() as usize;
+        }
+        for active in [0xff, 0x7f, 0xf0, 0x3c] {
+            let hits = accel.intersect_lanes(&eight, active);
+            for (l, ray) in eight.iter().enumerate() {
+                let want = if active & (1 << l) != 0 { bits(accel.intersect(ray)) } else { None };
+                assert_eq!(bits(hits[l]), want, "lane {l} of group {g} (active {active:#x})");
+            }
+        }
+        for ray in &eight[..2] {
+            check(&shapes, &accel, ray);
+        }
+    }
+    if std::is_x86_feature_detected!("avx") {
+        assert!(coherent > 1000, "{coherent} groups walked as one");
+    }
+}

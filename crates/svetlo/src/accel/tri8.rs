@@ -89,7 +89,7 @@ impl Tri8 {
     /// As [`Self::intersect_avx`].
     #[cfg(target_arch = "x86_64")]
     #[inline(always)]
-    unsafe fn lanes_avx(&self, r: &TriRay8, t_max: f32) -> Lanes {
+    pub(super) unsafe fn lanes_avx(&self, r: &TriRay8, t_max: f32) -> Lanes {
         use std::arch::x86_64::*;
         let base = self.p.as_ptr() as *const f32;
         // SAFETY: `r.k*` are axis * LANES with axis < 3, so every offset stays inside `p`;
@@ -183,13 +183,13 @@ pub(super) fn nearest_lane(mut mask: u32, t: &[f32]) -> (usize, f32) {
 /// What the block test's lanes give before the distances are divided out.
 #[cfg(target_arch = "x86_64")]
 #[derive(Clone, Copy)]
-struct Lanes {
-    mask: u32,
-    on_edge: u32,
-    t_scaled: std::arch::x86_64::__m256,
-    det: std::arch::x86_64::__m256,
-    v: std::arch::x86_64::__m256,
-    w: std::arch::x86_64::__m256,
+pub(super) struct Lanes {
+    pub mask: u32,
+    pub on_edge: u32,
+    pub t_scaled: std::arch::x86_64::__m256,
+    pub det: std::arch::x86_64::__m256,
+    pub v: std::arch::x86_64::__m256,
+    pub w: std::arch::x86_64::__m256,
 }
 
 /// The watertight ray's permutation (as float offsets of an axis row of [`Tri8::p`]) and
@@ -230,6 +230,31 @@ impl TriRay8 {
             sx: splat(w.sx),
             sy: splat(w.sy),
             sz: splat(w.sz),
+        }
+    }
+
+    /// The ray of a permutation given as float offsets of an axis row of [`Tri8::p`] (each
+    /// axis * LANES, axis < 3), the origin permuted and the shear: what `new` makes of a
+    /// `WatertightRay` with that permutation, origin and shear.
+    ///
+    /// # Safety
+    /// As [`Tri8::intersect_avx`].
+    #[inline(always)]
+    pub(super) unsafe fn from_parts(k: [usize; 3], o: [f32; 3], s: [f32; 3]) -> TriRay8 {
+        use std::arch::x86_64::_mm256_set1_ps as splat;
+        debug_assert!(k.iter().all(|&k| k.is_multiple_of(LANES) && k < 3 * LANES));
+        // No closures here: they are not compiled with the caller's AVX (the splats were calls).
+        TriRay8 {
+            // Clamped: `lanes_avx` loads at these offsets unchecked.
+            kx: k[0].min(2 * LANES),
+            ky: k[1].min(2 * LANES),
+            kz: k[2].min(2 * LANES),
+            ox: splat(o[0]),
+            oy: splat(o[1]),
+            oz: splat(o[2]),
+            sx: splat(s[0]),
+            sy: splat(s[1]),
+            sz: splat(s[2]),
         }
     }
 }

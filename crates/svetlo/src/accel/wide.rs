@@ -39,7 +39,7 @@ pub fn leaf_range(code: u32) -> (usize, usize) {
 #[repr(C, align(64))]
 pub struct Node {
     planes: [[Vec4; GROUPS]; 6],
-    children: [u32; WIDTH],
+    pub(super) children: [u32; WIDTH],
 }
 
 impl Node {
@@ -93,11 +93,11 @@ pub struct BoxRay {
 }
 
 /// Bytes of one plane's row in `Node::planes` (the eight children's values).
-const PLANE_BYTES: usize = std::mem::size_of::<[Vec4; GROUPS]>();
+pub(super) const PLANE_BYTES: usize = std::mem::size_of::<[Vec4; GROUPS]>();
 
 /// Slack on the far distance: 1 + 2 gamma(3) (PBRT's bound on the rounding error of
 /// the slab test), so that a box whose face a triangle touches is not missed.
-const FAR_SLACK: f32 = 1.0 + 2.0 * (3.0 * f32::EPSILON * 0.5) / (1.0 - 3.0 * f32::EPSILON * 0.5);
+pub(super) const FAR_SLACK: f32 = 1.0 + 2.0 * (3.0 * f32::EPSILON * 0.5) / (1.0 - 3.0 * f32::EPSILON * 0.5);
 
 impl BoxRay {
     #[inline(always)]
@@ -119,7 +119,7 @@ impl BoxRay {
 
     /// The row of planes of `n` at byte offset `off` (one of `near`, `far`).
     #[inline(always)]
-    fn plane(n: &Node, off: usize) -> &[Vec4; GROUPS] {
+    pub(super) fn plane(n: &Node, off: usize) -> &[Vec4; GROUPS] {
         debug_assert!(off.is_multiple_of(PLANE_BYTES) && off < 6 * PLANE_BYTES);
         // SAFETY: `off` comes from `new`: a multiple of a row's size below six rows, so the
         // row lies inside `n.planes` (rows are contiguous, `planes` being an array).
