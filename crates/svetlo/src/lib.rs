@@ -9,6 +9,7 @@ pub mod accel;
 pub mod bsdf;
 pub(crate) mod bytes;
 pub mod camera;
+pub mod cpu;
 pub mod error;
 pub mod film;
 #[doc(hidden)]

@@ -109,11 +109,11 @@ impl Isa {
     fn cpu() -> Isa {
         #[cfg(target_arch = "x86_64")]
         {
-            let avx2 = std::arch::is_x86_feature_detected!("avx2") && std::arch::is_x86_feature_detected!("popcnt");
-            if avx2 && std::arch::is_x86_feature_detected!("avx512f") && std::arch::is_x86_feature_detected!("avx512vl") {
+            let popcnt = std::arch::is_x86_feature_detected!("popcnt");
+            if popcnt && crate::cpu::avx512() {
                 return Isa::Avx512;
             }
-            if avx2 {
+            if popcnt && crate::cpu::avx2() {
                 return Isa::Avx2;
             }
         }
@@ -1193,16 +1193,6 @@ impl PacketSpheres {
         }
         (ids, unsure)
     }
-}
-
-/// Whether this CPU runs the eight-wide paths (AVX2, detected at run time).
-pub fn avx2() -> bool {
-    #[cfg(target_arch = "x86_64")]
-    {
-        std::arch::is_x86_feature_detected!("avx2")
-    }
-    #[cfg(not(target_arch = "x86_64"))]
-    false
 }
 
 #[cfg(test)]

@@ -660,7 +660,7 @@ mod tests {
             }
             let m = sample_visible_beckmann_lanes(&q);
             #[cfg(target_arch = "x86_64")]
-            if crate::accel::packet::avx2() {
+            if crate::cpu::avx2() {
                 // SAFETY: the CPU has AVX2.
                 let a = unsafe { beckmann_lanes_avx2(&q) };
                 assert_eq!(a.map(|r| r.map(f32::to_bits)), m.map(|r| r.map(f32::to_bits)), "batch {batch}: the AVX2 build differs");

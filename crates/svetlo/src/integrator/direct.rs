@@ -186,7 +186,7 @@ impl DirectEstimator {
     /// contraction, so the same results).
     fn render_tile_lockstep_on_cpu<S: LaneSampler>(&self, job: TileJob, packets: &ShadowPackets, sampler: S) {
         #[cfg(target_arch = "x86_64")]
-        if crate::accel::packet::avx2() {
+        if crate::cpu::avx2() {
             // SAFETY: `avx2()` detects AVX2 at run time.
             return unsafe { self.render_tile_lockstep_avx2(job, packets, sampler) };
         }

@@ -122,7 +122,7 @@ impl SimdPathTracer {
 impl SimdPathTracer {
     /// Whether a render asks the eight-wide kernel first (it may still decline the scene).
     fn tries_kernel(&self, settings: &RenderSettings) -> bool {
-        self.simd && lanes_route(settings) && crate::accel::packet::avx2()
+        self.simd && lanes_route(settings) && crate::cpu::avx2()
     }
 }
 
@@ -872,7 +872,7 @@ impl SimdKernel {
         let chains =
             sphere_lights.iter().any(Option::is_some) || shapes.iter().any(|s| s.uniform.as_ref().is_some_and(|b| b.beckmann_conductor(Vec3::Z).is_some()));
         let packets = if chains { PACKETS } else { 1 };
-        Some(SimdKernel { tracer, geometry, shapes, lights, sphere_lights, env_light, prefetch_texels, avx512: avx512(), packets })
+        Some(SimdKernel { tracer, geometry, shapes, lights, sphere_lights, env_light, prefetch_texels, avx512: crate::cpu::avx512(), packets })
     }
 
     /// How many packets of eight paths a tile steps in phase (more than one where the
@@ -906,7 +906,7 @@ impl SimdKernel {
 
     /// Chooses the AVX-512VL build (when the CPU has it) or the AVX2 one.
     pub fn set_avx512(&mut self, on: bool) {
-        self.avx512 = on && avx512();
+        self.avx512 = on && crate::cpu::avx512();
     }
 
     pub fn render(&self, scene: &Scene, settings: &RenderSettings, progress: &Progress) -> Result<Film> {
@@ -937,7 +937,7 @@ impl SimdKernel {
         sampler: S,
     ) {
         #[cfg(target_arch = "x86_64")]
-        if crate::accel::packet::avx2() {
+        if crate::cpu::avx2() {
             // SAFETY: `avx2()` detects AVX2 at run time, and
             // `avx512` only where AVX-512F and VL were.
             return unsafe {
@@ -1152,7 +1152,7 @@ impl SimdKernel {
     #[inline(always)]
     fn trace_and_gather_on_cpu<S: LaneSampler>(&self, scene: &Scene, settings: &RenderSettings, env_map: Option<&EnvMap>, p: &mut Packet<S>) {
         #[cfg(target_arch = "x86_64")]
-        if crate::accel::packet::avx2() {
+        if crate::cpu::avx2() {
             // SAFETY: `avx2()` detects AVX2 at run time, and `avx512` is set only where
             // AVX-512F and VL were.
             return unsafe {
@@ -1252,7 +1252,7 @@ impl SimdKernel {
         results: &mut [(Vec2, Rgb)],
     ) {
         #[cfg(target_arch = "x86_64")]
-        if crate::accel::packet::avx2() {
+        if crate::cpu::avx2() {
             // SAFETY: `avx2()` detects AVX2 at run time, and `avx512` is set only where
             // AVX-512F and VL were.
             return unsafe {
@@ -1374,7 +1374,7 @@ impl SimdKernel {
     #[inline(always)]
     fn shade8_on_cpu<S>(&self, v: &Soa, rr_depth: i32, st: &mut Paths<S>, rays: &mut Rays8, shadow: &mut Rays8, o: &mut Out) {
         #[cfg(target_arch = "x86_64")]
-        if crate::accel::packet::avx2() {
+        if crate::cpu::avx2() {
             // SAFETY: `avx2()` detects AVX2 at run time, and `avx512` is set only where
             // AVX-512F and VL were.
             return unsafe {
@@ -1818,7 +1818,7 @@ impl SimdKernel {
     #[inline(always)]
     fn rough_conductor_lanes_on_cpu(&self, q: &RoughConductorLanes<LANES>, used: usize) -> RoughConductorOut<LANES> {
         #[cfg(target_arch = "x86_64")]
-        if crate::accel::packet::avx2() {
+        if crate::cpu::avx2() {
             // SAFETY: `avx2()` detects AVX2 at run time, and `avx512` is set only where
             // AVX-512F and VL were.
             return unsafe {
@@ -2125,7 +2125,7 @@ impl<'a> LaneEvents<'a> {
         let (table, ends, _) = view.tables();
         // (A scene without lights has no light samples to route: it keeps the scalar lookups.)
         let fits = |t: &[u32]| (1..=i32::MAX as usize).contains(&t.len());
-        e.gathers = cfg!(target_arch = "x86_64") && crate::accel::packet::avx2() && [table, ends, &e.scatter, &e.light, &e.emitter].into_iter().all(fits);
+        e.gathers = cfg!(target_arch = "x86_64") && crate::cpu::avx2() && [table, ends, &e.scatter, &e.light, &e.emitter].into_iter().all(fits);
         e
     }
 
@@ -2858,16 +2858,6 @@ fn set_ray(r: &mut Rays8, l: usize, o: Vec3, d: Vec3, t_max: f32) {
     r.t_max[l] = t_max;
 }
 
-/// Whether this CPU has AVX-512F and AVX-512VL (the 32-register build of the kernel).
-fn avx512() -> bool {
-    #[cfg(target_arch = "x86_64")]
-    {
-        std::arch::is_x86_feature_detected!("avx512f") && std::arch::is_x86_feature_detected!("avx512vl")
-    }
-    #[cfg(not(target_arch = "x86_64"))]
-    false
-}
-
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -2878,7 +2868,7 @@ mod tests {
     /// rendered without it.
     #[test]
     fn prepare_keeps_the_set_up_with_the_scene() {
-        if !crate::accel::packet::avx2() {
+        if !crate::cpu::avx2() {
             eprintln!("SKIPPED: no AVX2");
             return;
         }
@@ -2913,7 +2903,7 @@ mod tests {
     /// states, shapes (some escaped), lights and lane masks.
     #[test]
     fn gathered_lookups_are_the_scalar_ones() {
-        if !crate::accel::packet::avx2() {
+        if !crate::cpu::avx2() {
             eprintln!("SKIPPED: no AVX2");
             return;
         }
@@ -3009,10 +2999,10 @@ mod tests {
             }
             let mut outs = vec![rough_conductor_lanes(&q, used)];
             #[cfg(target_arch = "x86_64")]
-            if crate::accel::packet::avx2() {
-                // SAFETY: AVX2 was detected, AVX-512 where `avx512()` says so.
+            if crate::cpu::avx2() {
+                // SAFETY: AVX2 was detected, AVX-512 where `cpu::avx512()` says so.
                 outs.push(unsafe { conductor8_avx2(&q, used) });
-                if avx512() {
+                if crate::cpu::avx512() {
                     outs.push(unsafe { conductor8_avx512(&q, used) });
                 }
             }
@@ -3035,7 +3025,7 @@ mod tests {
     fn shade8_builds_agree() {
         #[cfg(target_arch = "x86_64")]
         {
-            if !crate::accel::packet::avx2() {
+            if !crate::cpu::avx2() {
                 eprintln!("SKIPPED: no AVX2");
                 return;
             }
@@ -3074,7 +3064,7 @@ mod tests {
                 st.depth = std::array::from_fn(|_| f(0.0, 6.0) as i32);
                 let run = |which: usize| {
                     let (mut st, mut rays, mut shadow, mut o) = (st.clone(), Rays8::default(), Rays8::default(), Out::default());
-                    // SAFETY: AVX2 was detected above, AVX-512 where `avx512()` says so.
+                    // SAFETY: AVX2 was detected above, AVX-512 where `cpu::avx512()` says so.
                     match which {
                         0 => shade8(&v, 3, &mut st, &mut rays, &mut shadow, &mut o),
                         1 => unsafe { shade8_avx2(&v, 3, &mut st, &mut rays, &mut shadow, &mut o) },
@@ -3083,7 +3073,7 @@ mod tests {
                     (st, rays, shadow, o)
                 };
                 let want = run(0);
-                for which in if avx512() { 1..3 } else { 1..2 } {
+                for which in if crate::cpu::avx512() { 1..3 } else { 1..2 } {
                     let got = run(which);
                     let rows_of = |x: &(PathNums, Rays8, Rays8, Out)| -> Vec<[f32; LANES]> {
                         let (st, r, s, o) = x;

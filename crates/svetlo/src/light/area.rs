@@ -529,7 +529,7 @@ mod tests {
             }
             let o = AreaLight::sample_constant_spheres(&q);
             #[cfg(target_arch = "x86_64")]
-            if crate::accel::packet::avx2() {
+            if crate::cpu::avx2() {
                 // SAFETY: the CPU has AVX2.
                 let v = unsafe { spheres_avx2(&q) };
                 let bits = |o: &SphereSamples<8>| (o.inside, o.found, [o.wi, o.p, o.n].map(|a| a.map(|r| r.map(f32::to_bits))), o.pdf.map(f32::to_bits));

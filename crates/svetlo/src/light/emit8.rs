@@ -54,7 +54,7 @@ pub(crate) struct EmitLanes {
 
 impl Default for EmitLanes {
     fn default() -> Self {
-        EmitLanes { v: EmitNums::default(), o: EmitOut::default(), lanes: 0, avx512: avx512() }
+        EmitLanes { v: EmitNums::default(), o: EmitOut::default(), lanes: 0, avx512: crate::cpu::avx512() }
     }
 }
 
@@ -98,11 +98,11 @@ impl EmitLanes {
         }
         #[cfg(target_arch = "x86_64")]
         {
-            // SAFETY: `avx512()` checked the CPU, and AVX2 is checked here.
+            // SAFETY: `cpu::avx512()` checked the CPU, and AVX2 is checked here.
             if self.avx512 {
                 return unsafe { emit8_avx512(&self.v, &mut self.o) };
             }
-            if std::arch::is_x86_feature_detected!("avx2") {
+            if crate::cpu::avx2() {
                 return unsafe { emit8_avx2(&self.v, &mut self.o) };
             }
         }
@@ -175,15 +175,6 @@ unsafe fn emit8_avx512(v: &EmitNums, o: &mut EmitOut) {
     emit8(v, o)
 }
 
-fn avx512() -> bool {
-    #[cfg(target_arch = "x86_64")]
-    {
-        std::arch::is_x86_feature_detected!("avx2") && std::arch::is_x86_feature_detected!("avx512f") && std::arch::is_x86_feature_detected!("avx512vl")
-    }
-    #[cfg(not(target_arch = "x86_64"))]
-    false
-}
-
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -235,7 +226,7 @@ mod tests {
             let mut copies = vec![EmitOut::default()];
             emit8(&lanes.v, &mut copies[0]);
             #[cfg(target_arch = "x86_64")]
-            if std::arch::is_x86_feature_detected!("avx2") {
+            if crate::cpu::avx2() {
                 copies.push(EmitOut::default());
                 // SAFETY: the CPU has AVX2.
                 unsafe { emit8_avx2(&lanes.v, copies.last_mut().expect("pushed")) };

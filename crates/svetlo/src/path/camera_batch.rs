@@ -34,7 +34,7 @@ pub struct CameraBatch {
 
 impl CameraBatch {
     pub fn new(cfg: &PathConfig) -> Option<CameraBatch> {
-        if !cfg.camera_connectible || !crate::accel::packet::avx2() {
+        if !cfg.camera_connectible || !crate::cpu::avx2() {
             return None;
         }
         cfg.lens.as_ref()?.pinhole().map(|pinhole| CameraBatch { pinhole })

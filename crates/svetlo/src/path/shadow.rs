@@ -65,7 +65,7 @@ impl ShadowPackets {
     /// None where packets cannot answer for the scene's BVH or would not pay: moving shapes,
     /// a ray epsilon, shapes other than meshes, a large scene, or no eight-wide SIMD.
     pub fn new(scene: &Scene) -> Option<ShadowPackets> {
-        if !scene.moving.is_empty() || scene.settings.ray_epsilon > 0.0 || !crate::accel::packet::avx2() {
+        if !scene.moving.is_empty() || scene.settings.ray_epsilon > 0.0 || !crate::cpu::avx2() {
             return None;
         }
         // (The scene's BVH then indexes `scene.shapes` itself, as the packet tree does.)

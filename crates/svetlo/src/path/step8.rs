@@ -82,7 +82,7 @@ pub(crate) struct WalkLanes {
 
 impl Default for WalkLanes {
     fn default() -> Self {
-        WalkLanes { v: VertexNums::default(), o: StepOut::default(), lanes: 0, avx512: avx512() }
+        WalkLanes { v: VertexNums::default(), o: StepOut::default(), lanes: 0, avx512: crate::cpu::avx512() }
     }
 }
 
@@ -152,12 +152,12 @@ impl WalkLanes {
         }
         #[cfg(target_arch = "x86_64")]
         {
-            // SAFETY: `avx512()` checked the CPU; the lockstep walks run only where packets
+            // SAFETY: `cpu::avx512()` checked the CPU; the lockstep walks run only where packets
             // do, which need AVX2.
             if self.avx512 {
                 return unsafe { step8_avx512(&self.v, &mut self.o, rays) };
             }
-            if std::arch::is_x86_feature_detected!("avx2") {
+            if crate::cpu::avx2() {
                 return unsafe { step8_avx2(&self.v, &mut self.o, rays) };
             }
         }
@@ -316,15 +316,6 @@ unsafe fn step8_avx512(v: &VertexNums, o: &mut StepOut, rays: &mut Rays8) {
     step8(v, o, rays)
 }
 
-fn avx512() -> bool {
-    #[cfg(target_arch = "x86_64")]
-    {
-        std::arch::is_x86_feature_detected!("avx2") && std::arch::is_x86_feature_detected!("avx512f") && std::arch::is_x86_feature_detected!("avx512vl")
-    }
-    #[cfg(not(target_arch = "x86_64"))]
-    false
-}
-
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -392,7 +383,7 @@ mod tests {
         step8(&lanes.v, &mut o, &mut r);
         assert_eq!(out_bits(&o, &r), want, "plain");
         #[cfg(target_arch = "x86_64")]
-        if std::arch::is_x86_feature_detected!("avx2") {
+        if crate::cpu::avx2() {
             // SAFETY: the CPU has AVX2.
             unsafe { step8_avx2(&lanes.v, &mut o, &mut r) };
             assert_eq!(out_bits(&o, &r), want, "avx2");

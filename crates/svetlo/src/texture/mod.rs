@@ -541,7 +541,7 @@ mod tests {
                             let want = bits(t.eval(p));
                             assert_eq!(bits(t.eval_inline(&p)), want, "{w}x{h} {filter:?} {wrap:?} {uv}");
                             #[cfg(target_arch = "x86_64")]
-                            if is_x86_feature_detected!("avx2") {
+                            if crate::cpu::avx2() {
                                 // SAFETY: the CPU has AVX2 (checked just above).
                                 assert_eq!(bits(unsafe { eval_inline_avx2(&t, p) }), want, "AVX2 {w}x{h} {filter:?} {wrap:?} {uv}");
                             }
