@@ -426,8 +426,8 @@ impl Accel {
 const COHERENT_MIN: u32 = 4;
 
 impl Accel {
-    /// [`Accel::trace_lanes_avx`] for closest hits, the rays walked as one where they share
-    /// their origin and octant (`accel/coherent.rs`), else interleaved. Each ray's hit is
+    /// [`Accel::trace_lanes_avx`] for closest hits, the rays walked as one where they are
+    /// alike (one octant, near directions and origins: `accel/coherent.rs`), else interleaved. Each ray's hit is
     /// the one its single walk finds, bit for bit: a ray whose nearest hit may tie with
     /// another, or that met a triangle on an edge, is walked again alone.
     ///
