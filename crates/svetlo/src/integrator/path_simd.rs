@@ -27,9 +27,10 @@
 //! the value and density toward the light sample come with the BSDF's own sample from one
 //! call (`Bsdf::eval_pdf_and_sample`: a rough model's half vector, D and G1 computed once;
 //! a rough conductor's Λ(wo) once for both; a Beckmann one's visible normal, value, density
-//! and sample for all lanes at once before, by `conductor_samples`, the same bits). Large scenes whose rays go
-//! as packets take the kernel on their first render only with Lambertian materials (its
-//! set-up cost more than it gained there otherwise), on later renders with any; scenes that
+//! and sample for all lanes at once before, by `conductor_samples`, the same bits). Large
+//! scenes whose rays go as packets take the kernel on their first render only with
+//! Lambertian materials (its set-up cost more than it gained there otherwise), on later
+//! renders with any; scenes that
 //! trace single rays read the triangles their rays hit from the meshes (unpacking them all
 //! only where a render takes several camera samples a triangle) and take it on any render.
 //! Lights: area lights of constant radiance on meshes
@@ -1106,10 +1107,10 @@ impl SimdKernel {
             }
             // The sphere lights' and the environment map's samples of all lanes of all packets,
             // then the Beckmann conductors' values toward them and samples (eight lanes a group
-            // across the packets): the packets' latency chains side by side. Every packet's sphere arithmetic comes before any packet's
-            // lane-by-lane results, whose branches wait on it (lanes not pending compute on
-            // what earlier steps left, unread; written in place: `array::from_fn` kept its
-            // closure out of line and copied the samples).
+            // across the packets): the packets' latency chains side by side. Every packet's
+            // sphere arithmetic comes before any packet's lane-by-lane results, whose branches
+            // wait on it (lanes not pending compute on what earlier steps left, unread; written
+            // in place: `array::from_fn` kept its closure out of line and copied the samples).
             let mut spheres = [None; PACKETS];
             for (o, p) in spheres.iter_mut().zip(packets.iter()) {
                 if p.v.sphere_pending != 0 {
@@ -1305,8 +1306,8 @@ impl SimdKernel {
     }
 
     /// The rest of a packet's step once its sphere samples and Beckmann conductors are in:
-    /// the scalar BSDFs' scattering, `shade8`, the shadow rays, the light samples that count; the
-    /// samples that end go to their jobs' slots of `results`, and leave `active`.
+    /// the scalar BSDFs' scattering, `shade8`, the shadow rays, the light samples that count;
+    /// the samples that end go to their jobs' slots of `results`, and leave `active`.
     #[inline(always)]
     #[allow(clippy::too_many_arguments)]
     fn scatter_and_shade<S>(
