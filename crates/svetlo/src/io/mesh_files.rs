@@ -8,7 +8,7 @@ use crate::geometry::TriangleMesh;
 use glam::{Vec2, Vec3};
 use std::path::Path;
 
-fn mesh_err(path: &Path, msg: impl std::fmt::Display) -> Error {
+pub(super) fn mesh_err(path: &Path, msg: impl std::fmt::Display) -> Error {
     Error::Mesh { file: path.to_path_buf(), msg: msg.to_string() }
 }
 
@@ -66,7 +66,7 @@ fn group_attributes(names: &[(String, bool)]) -> Vec<(String, Vec<usize>, f32)> 
         .collect()
 }
 
-fn attribute_values(extra: &[f32], channels: &[usize], scale: f32) -> crate::spectrum::Rgb {
+pub(super) fn attribute_values(extra: &[f32], channels: &[usize], scale: f32) -> crate::spectrum::Rgb {
     let c = |k: usize| channels.get(k).and_then(|&i| extra.get(i)).copied().unwrap_or(0.0) * scale;
     if channels.len() == 1 {
         crate::spectrum::Rgb::splat(c(0))
@@ -359,8 +359,9 @@ pub fn load_ply(path: &Path, flip_tex_coords: bool) -> Result<LoadedMesh> {
 
 /// The element counts a PLY header announces, checked before the PLY reader allocates for
 /// them: a binary file must hold at least one byte per property of every element, a text
-/// file two (a digit and a separator), and the parsed elements must fit the budget.
-fn check_ply_header(bytes: &[u8], path: &Path) -> Result<()> {
+/// file two (a digit and a separator), and the parsed elements must fit the budget. Returns
+/// each element's (count, properties) as the header declares them.
+pub(super) fn check_ply_header(bytes: &[u8], path: &Path) -> Result<Vec<(u64, u64)>> {
     let end = bytes.windows(10).position(|w| w == b"end_header").ok_or_else(|| mesh_err(path, "invalid PLY: no end_header"))?;
     let header = String::from_utf8_lossy(&bytes[..end]);
     let ascii = header.lines().any(|l| l.trim().starts_with("format ascii"));
@@ -390,11 +391,12 @@ fn check_ply_header(bytes: &[u8], path: &Path) -> Result<()> {
     // Bounded by ~64 bytes per property of every element (vertices and faces are read into
     // fixed structs, face lists into vectors: less than that).
     let parsed: u64 = elements.iter().map(|&(n, p)| n.saturating_mul(64 * p + 64)).fold(0, u64::saturating_add);
-    crate::limits::check(format!("{}: a PLY of {} elements", path.display(), elements.iter().map(|e| e.0).sum::<u64>()), parsed)
+    crate::limits::check(format!("{}: a PLY of {} elements", path.display(), elements.iter().map(|e| e.0).sum::<u64>()), parsed)?;
+    Ok(elements)
 }
 
 /// Vertex properties a PLY mesh may give, in the order of [`PlyVertex::values`].
-const PLY_VERTEX_KEYS: [&str; 12] = ["x", "y", "z", "nx", "ny", "nz", "u", "v", "texture_u", "texture_v", "s", "t"];
+pub(super) const PLY_VERTEX_KEYS: [&str; 12] = ["x", "y", "z", "nx", "ny", "nz", "u", "v", "texture_u", "texture_v", "s", "t"];
 
 /// One PLY vertex as the parser fills it: a fixed slot per known property (no map per
 /// vertex), with a bit per slot set when the file gave it as a scalar.
@@ -463,11 +465,36 @@ impl ply_rs_bw::ply::PropertyAccess for PlySkipped {
 /// [`load_ply`] for a file held in memory; `path` names it in errors.
 pub fn load_ply_bytes(bytes: &[u8], path: &Path, flip_tex_coords: bool) -> Result<LoadedMesh> {
     use ply_rs_bw::parser::{Parser, Reader};
-    use ply_rs_bw::ply::Property;
-    check_ply_header(bytes, path)?;
+    let declared = check_ply_header(bytes, path)?;
     let mut reader = Reader::new(std::io::Cursor::new(bytes));
     let invalid = |e: ply_rs_bw::parser::ParseError| mesh_err(path, format!("invalid PLY: {e}"));
     let header = Parser::<PlySkipped>::new().read_header(&mut reader).map_err(invalid)?;
+    let payload = reader.get_ref().position() as usize;
+    if let Some(mesh) = super::ply_binary::read(bytes, &header, &declared, payload, path, flip_tex_coords) {
+        return mesh;
+    }
+    read_ply_payload(reader, &header, path, flip_tex_coords)
+}
+
+/// [`load_ply_bytes`] without the binary fast path (what the fast path is tested against).
+#[cfg(test)]
+pub(super) fn load_ply_general(bytes: &[u8], path: &Path, flip_tex_coords: bool) -> Result<LoadedMesh> {
+    check_ply_header(bytes, path)?;
+    let mut reader = ply_rs_bw::parser::Reader::new(std::io::Cursor::new(bytes));
+    let header = ply_rs_bw::parser::Parser::<PlySkipped>::new().read_header(&mut reader).map_err(|e| mesh_err(path, format!("invalid PLY: {e}")))?;
+    read_ply_payload(reader, &header, path, flip_tex_coords)
+}
+
+/// The general reader's payload: any layout, ASCII or binary.
+fn read_ply_payload(
+    mut reader: ply_rs_bw::parser::Reader<std::io::Cursor<&[u8]>>,
+    header: &ply_rs_bw::ply::Header,
+    path: &Path,
+    flip_tex_coords: bool,
+) -> Result<LoadedMesh> {
+    use ply_rs_bw::parser::Parser;
+    use ply_rs_bw::ply::Property;
+    let invalid = |e: ply_rs_bw::parser::ParseError| mesh_err(path, format!("invalid PLY: {e}"));
     let (mut verts, mut faces): (Option<Vec<PlyVertex>>, Option<Vec<PlyFace>>) = (None, None);
     let mut vertex_names: Vec<&str> = Vec::new();
     // The extra scalar properties of vertices and faces: (name, 8-bit).
@@ -489,14 +516,14 @@ pub fn load_ply_bytes(bytes: &[u8], path: &Path, flip_tex_coords: bool) -> Resul
             "vertex" if verts.is_none() => {
                 vertex_names = def.properties.keys().map(|k| k.as_str()).collect();
                 vertex_extra = extras(def, &PLY_VERTEX_KEYS);
-                verts = Some(Parser::<PlyVertex>::new().read_payload_for_element(&mut reader, def, &header).map_err(invalid)?);
+                verts = Some(Parser::<PlyVertex>::new().read_payload_for_element(&mut reader, def, header).map_err(invalid)?);
             }
             "face" if faces.is_none() => {
                 face_extra = extras(def, &["vertex_indices", "vertex_index"]);
-                faces = Some(Parser::<PlyFace>::new().read_payload_for_element(&mut reader, def, &header).map_err(invalid)?)
+                faces = Some(Parser::<PlyFace>::new().read_payload_for_element(&mut reader, def, header).map_err(invalid)?)
             }
             _ => {
-                Parser::<PlySkipped>::new().read_payload_for_element(&mut reader, def, &header).map_err(invalid)?;
+                Parser::<PlySkipped>::new().read_payload_for_element(&mut reader, def, header).map_err(invalid)?;
             }
         }
     }
@@ -527,13 +554,7 @@ pub fn load_ply_bytes(bytes: &[u8], path: &Path, flip_tex_coords: bool) -> Resul
             mesh.uvs.push(Vec2::new(get(ku)?, if flip_tex_coords { 1.0 - vv } else { vv }));
         }
     }
-    let vertex_groups = group_attributes(&vertex_extra);
-    let face_groups = group_attributes(&face_extra);
-    let mut attributes: Vec<Attribute> = vertex_groups
-        .iter()
-        .map(|(n, ch, _)| Attribute { name: format!("vertex_{n}"), per_face: false, channels: ch.len(), values: Vec::with_capacity(verts.len()) })
-        .chain(face_groups.iter().map(|(n, ch, _)| Attribute { name: format!("face_{n}"), per_face: true, channels: ch.len(), values: Vec::new() }))
-        .collect();
+    let (vertex_groups, face_groups, mut attributes) = ply_attributes(&vertex_extra, &face_extra, verts.len());
     if !vertex_groups.is_empty() {
         for (i, v) in verts.iter().enumerate() {
             if v.extra.len() != vertex_extra.len() {
@@ -557,13 +578,7 @@ pub fn load_ply_bytes(bytes: &[u8], path: &Path, flip_tex_coords: bool) -> Resul
             Property::ListUInt(l) => l.iter().map(|&x| x as i64).collect(),
             _ => return Err(mesh_err(path, format!("face {fi}: vertex indices are not an integer list"))),
         };
-        if let Some(bad) = idx.iter().find(|&&i| i < 0 || i >= nv) {
-            return Err(mesh_err(path, format!("face {fi}: vertex index {bad} out of range (the mesh has {nv} vertices)")));
-        }
-        // Polygons become fans around their first vertex.
-        for k in 2..idx.len() {
-            mesh.indices.push([idx[0] as u32, idx[k - 1] as u32, idx[k] as u32]);
-        }
+        push_fan(&mut mesh.indices, &idx, nv, fi, path)?;
         if !face_groups.is_empty() {
             if f.extra.len() != face_extra.len() {
                 return Err(mesh_err(path, format!("face {fi}: {} attribute values, the header declares {}", f.extra.len(), face_extra.len())));
@@ -575,6 +590,41 @@ pub fn load_ply_bytes(bytes: &[u8], path: &Path, flip_tex_coords: bool) -> Resul
             }
         }
     }
+    finish_ply(path, mesh, attributes)
+}
+
+/// The attributes of a PLY's extra vertex and face properties ((name, 8-bit) each, in the
+/// header's order): each element's groups and the empty attributes, vertices' first.
+type AttributeGroups = Vec<(String, Vec<usize>, f32)>;
+pub(super) fn ply_attributes(
+    vertex_extra: &[(String, bool)],
+    face_extra: &[(String, bool)],
+    vertices: usize,
+) -> (AttributeGroups, AttributeGroups, Vec<Attribute>) {
+    let vertex_groups = group_attributes(vertex_extra);
+    let face_groups = group_attributes(face_extra);
+    let attributes = vertex_groups
+        .iter()
+        .map(|(n, ch, _)| Attribute { name: format!("vertex_{n}"), per_face: false, channels: ch.len(), values: Vec::with_capacity(vertices) })
+        .chain(face_groups.iter().map(|(n, ch, _)| Attribute { name: format!("face_{n}"), per_face: true, channels: ch.len(), values: Vec::new() }))
+        .collect();
+    (vertex_groups, face_groups, attributes)
+}
+
+/// Face `face`'s polygon `idx` as a fan of triangles around its first vertex, its indices
+/// checked against the `nv` vertices.
+pub(super) fn push_fan(indices: &mut Vec<[u32; 3]>, idx: &[i64], nv: i64, face: usize, path: &Path) -> Result<()> {
+    if let Some(bad) = idx.iter().find(|&&i| i < 0 || i >= nv) {
+        return Err(mesh_err(path, format!("face {face}: vertex index {bad} out of range (the mesh has {nv} vertices)")));
+    }
+    for k in 2..idx.len() {
+        indices.push([idx[0] as u32, idx[k - 1] as u32, idx[k] as u32]);
+    }
+    Ok(())
+}
+
+/// A PLY mesh as read, checked.
+pub(super) fn finish_ply(path: &Path, mesh: TriangleMesh, attributes: Vec<Attribute>) -> Result<LoadedMesh> {
     check_finite(path, &mesh)?;
     if mesh.indices.is_empty() {
         return Err(mesh_err(path, "the PLY file has no faces"));

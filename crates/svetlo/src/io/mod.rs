@@ -6,6 +6,7 @@ pub mod image_io;
 pub mod mesh_files;
 pub mod mitsuba;
 pub mod pbrt;
+mod ply_binary;
 pub mod serialized;
 pub mod spectra;
 pub mod vol;
