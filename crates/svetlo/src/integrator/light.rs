@@ -236,23 +236,16 @@ impl Estimator {
                 let Some(w) = walks[l].as_mut() else { continue };
                 let hit = packets.interaction(scene, &hits, l, w.walk.ray());
                 let path = &mut paths[l];
-                match w.walk.arrive_unsettled(scene, hit.as_ref(), path) {
-                    None => continue,
-                    Some(false) => {
-                        w.walk.settle(path);
-                        continue;
-                    }
-                    Some(true) => {}
+                // (The vertices' densities are left out: light tracing reads none.)
+                if w.walk.arrive_unsettled(scene, hit.as_ref(), path) != Some(true) {
+                    continue;
                 }
                 let sampler = &mut samplers[l];
                 let uc = sampler.next_1d();
                 let u = sampler.next_2d();
                 let u_rr = sampler.next_1d();
-                if !lambert.gather(l, &w.walk, path, uc, u, u_rr) {
-                    w.walk.settle(path);
-                    if w.walk.scatter(uc, u, u_rr, path) {
-                        going |= 1 << l;
-                    }
+                if !lambert.gather(l, &w.walk, path, uc, u, u_rr) && w.walk.scatter(uc, u, u_rr, path) {
+                    going |= 1 << l;
                 }
             }
             lambert.run(&mut rays);

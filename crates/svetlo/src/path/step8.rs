@@ -1,10 +1,11 @@
 //! The scattering half of eight lockstep walks' step ([`Walk::scatter`]) as one eight-lane
 //! vector step, for the lanes whose vertex is Lambertian (as `walk::lambertian_sample`
-//! takes it): the cosine sample, its densities both ways, the shading-normal correction, the
-//! next ray, Russian roulette and the reverse density in area measure, over plain arrays.
-//! The same operations in the same order as the scalar step, branches as selects, so each
-//! lane's numbers are its scalar step's bit for bit (a test compares them). Other lanes
-//! scatter alone.
+//! takes it): the cosine sample, the shading-normal correction, the next ray and Russian
+//! roulette, over plain arrays. The same operations in the same order as the scalar step,
+//! branches as selects, so each lane's numbers are its scalar step's bit for bit (a test
+//! compares them). Other lanes scatter alone. The vertices' densities (`pdf_fwd`,
+//! `pdf_rev`) are left out: the lockstep walks are light tracing's, which weighs no
+//! strategy against another and reads none of them.
 //!
 //! As the path kernel's `shade8` (integrator/path_simd.rs): the arrays are plain (no
 //! `Option` field in a struct the loop reads), no `bool` array is read or written under a
@@ -41,12 +42,7 @@ struct VertexNums {
     u_rr: [f32; LANES],
     /// Russian roulette at this vertex (its segments reach the walk's `rr_depth`).
     rr: [bool; LANES],
-    /// The previous vertex: where the reverse density is converted to.
-    prev_p: [[f32; LANES]; 3],
-    prev_ng: [[f32; LANES]; 3],
-    prev_infinite: [bool; LANES],
-    /// The walks' state before the step (`pdf_dir`: the density of the ray that arrived).
-    pdf_dir: [f32; LANES],
+    /// The walks' state before the step.
     beta: [[f32; LANES]; 3],
     scatter: [[f32; LANES]; 3],
     eta_scale: [f32; LANES],
@@ -55,15 +51,11 @@ struct VertexNums {
 /// What [`step8`] writes per lane.
 #[derive(Clone, Default)]
 struct StepOut {
-    /// A direction was sampled: the vertex's event and the previous vertex's reverse
-    /// density are set, and the walk's state below is its new one.
+    /// A direction was sampled: the vertex's event is set, and the walk's state below is
+    /// its new one.
     sampled: [bool; LANES],
     /// The walk goes on (its next ray in the lane of the step's rays).
     cont: [bool; LANES],
-    /// The vertex's own density in area measure (`Walk::settle`'s).
-    pdf_at: [f32; LANES],
-    pdf_rev: [f32; LANES],
-    pdf_fwd: [f32; LANES],
     beta: [[f32; LANES]; 3],
     scatter: [[f32; LANES]; 3],
 }
@@ -89,8 +81,7 @@ impl Default for WalkLanes {
 impl WalkLanes {
     /// Lane `l`'s walk after [`Walk::arrive_unsettled`] (Some(true)) with the vertex's
     /// draws, as [`Walk::scatter`] would take them: into the lanes where the vertex is
-    /// Lambertian and the previous one finite (true), else nothing (false: the caller settles
-    /// and scatters it alone).
+    /// Lambertian (true), else nothing (false: the caller scatters it alone).
     #[inline(always)]
     pub fn gather(&mut self, l: usize, walk: &Walk, path: &[Vertex], uc: f32, u: Vec2, u_rr: f32) -> bool {
         let n = path.len();
@@ -105,10 +96,6 @@ impl WalkLanes {
             Some(_) => return false,
         };
         if bsdf.detail.is_some() || (bsdf.opacity < 1.0 && uc >= bsdf.opacity) || walk.mode != TransportMode::Importance {
-            return false;
-        }
-        let prev = &path[n - 2];
-        if prev.infinite {
             return false;
         }
         let x = &mut self.v;
@@ -132,10 +119,6 @@ impl WalkLanes {
         x.u[1][l] = u.y;
         x.u_rr[l] = u_rr;
         x.rr[l] = (n - 1) as i32 >= walk.rr_depth;
-        put(&mut x.prev_p, prev.p);
-        put(&mut x.prev_ng, prev.ng);
-        x.prev_infinite[l] = prev.infinite;
-        x.pdf_dir[l] = walk.pdf_fwd;
         put(&mut x.beta, rgb(walk.beta));
         put(&mut x.scatter, rgb(walk.scatter));
         x.eta_scale[l] = walk.eta_scale;
@@ -171,25 +154,22 @@ impl WalkLanes {
     }
 
     /// After [`Self::run`]: gathered lane `l`'s step into its walk and path, as
-    /// [`Walk::settle`] and [`Walk::scatter`] leave them; returns whether the walk goes on
+    /// [`Walk::scatter`] leaves them but for the densities; returns whether the walk goes on
     /// (with its next ray the one `run` put in lane `l`).
     #[inline(always)]
     pub fn finish(&self, l: usize, walk: &mut Walk, path: &mut [Vertex], rays: &Rays8) -> bool {
         debug_assert!(self.has(l));
         let o = &self.o;
-        let n = path.len();
-        path[n - 1].pdf_fwd = o.pdf_at[l];
         if !o.sampled[l] {
             return false;
         }
+        let n = path.len();
         path[n - 1].event = Event::from_lobe(LobeFlags::DIFFUSE_REFLECTION);
-        path[n - 2].pdf_rev = o.pdf_rev[l];
         let mut ray = Ray::new(Vec3::new(rays.o[0][l], rays.o[1][l], rays.o[2][l]), Vec3::new(rays.d[0][l], rays.d[1][l], rays.d[2][l]));
         ray.time = walk.ray.time;
         walk.ray = ray;
         walk.beta = Rgb::new(o.beta[0][l], o.beta[1][l], o.beta[2][l]);
         walk.scatter = Rgb::new(o.scatter[0][l], o.scatter[1][l], o.scatter[2][l]);
-        walk.pdf_fwd = o.pdf_fwd[l];
         o.cont[l]
     }
 
@@ -200,9 +180,9 @@ impl WalkLanes {
     }
 }
 
-/// [`Walk::scatter`] at a Lambertian vertex for eight lanes: `lambertian_sample`, the
-/// weight and its shading correction (importance transport), the offset ray, the reverse
-/// density converted to the previous vertex (`Vertex::convert_density`), Russian roulette.
+/// [`Walk::scatter`] at a Lambertian vertex for eight lanes, its densities left out:
+/// `lambertian_sample`, the weight and its shading correction (importance transport), the
+/// offset ray, Russian roulette.
 /// Failures and comparisons keep the scalar step's sense on NaN (`!(x <= 0)`, not `x > 0`).
 #[inline(always)]
 #[allow(clippy::neg_cmp_op_on_partial_ord)]
@@ -210,7 +190,7 @@ fn step8(v: &VertexNums, o: &mut StepOut, rays: &mut Rays8) {
     for l in 0..LANES {
         let g = |a: &[[f32; LANES]; 3]| [a[0][l], a[1][l], a[2][l]];
         let (p, ng, fs, ft, fnn, wo) = (g(&v.p), g(&v.ng), g(&v.fs), g(&v.ft), g(&v.fnn), g(&v.wo));
-        let (has_back, rr, prev_infinite) = (v.has_back[l], v.rr[l], v.prev_infinite[l]);
+        let (has_back, rr) = (v.has_back[l], v.rr[l]);
         let opacity = v.opacity[l];
         // `Bsdf::side`: the front from above, else the back with wo mirrored.
         let zo = dot3(wo, fnn);
@@ -220,11 +200,6 @@ fn step8(v: &VertexNums, o: &mut StepOut, rays: &mut Rays8) {
         let wim = cosine_hemisphere(v.u[0][l], v.u[1][l]);
         let pdf = wim[2].max(0.0) * INV_PI;
         let wz = if front_side { wim[2] } else { -wim[2] };
-        // `lambertian_pdf(bsdf, wi.z, zo)`: the reverse density.
-        let rev_front = wz >= 0.0;
-        let (ra, rb) = if rev_front { (wz, zo) } else { (-wz, -zo) };
-        let cos_pdf = if (ra <= 0.0) | (rb <= 0.0) { 0.0 } else { rb.max(0.0) * INV_PI };
-        let rev_local = if rev_front | has_back { cos_pdf * opacity } else { 0.0 };
         let f = [(refl[0] * INV_PI) * opacity, (refl[1] * INV_PI) * opacity, (refl[2] * INV_PI) * opacity];
         let bpdf = pdf * opacity;
         let f_black = (f[0] == 0.0) & (f[1] == 0.0) & (f[2] == 0.0);
@@ -246,36 +221,6 @@ fn step8(v: &VertexNums, o: &mut StepOut, rays: &mut Rays8) {
         let (beta, scatter) = (g(&v.beta), g(&v.scatter));
         let mut nb = [beta[0] * w[0], beta[1] * w[1], beta[2] * w[2]];
         let mut ns = [scatter[0] * w[0], scatter[1] * w[1], scatter[2] * w[2]];
-        // The vertex's density per unit area (`Vertex::convert_density_to_point` from the
-        // previous vertex, finite here).
-        let pp = g(&v.prev_p);
-        let da = [p[0] - pp[0], p[1] - pp[1], p[2] - pp[2]];
-        let d2a = dot3(da, da);
-        let lena = d2a.sqrt();
-        let wa = [da[0] / lena, da[1] / lena, da[2] / lena];
-        let ng_on = !((ng[0] == 0.0) & (ng[1] == 0.0) & (ng[2] == 0.0));
-        let at = v.pdf_dir[l] / d2a;
-        let at = if ng_on { at * dot3(ng, wa).abs() } else { at };
-        let at = if at.is_finite() { at } else { 0.0 };
-        o.pdf_at[l] = if d2a == 0.0 { 0.0 } else { at };
-        // The reverse density per unit area at the previous vertex.
-        let d = [pp[0] - p[0], pp[1] - p[1], pp[2] - p[2]];
-        let d2 = dot3(d, d);
-        let len = d2.sqrt();
-        let dir = [d[0] / len, d[1] / len, d[2] / len];
-        let pn = g(&v.prev_ng);
-        let on_surface = !((pn[0] == 0.0) & (pn[1] == 0.0) & (pn[2] == 0.0));
-        let per_d2 = rev_local / d2;
-        let area = if on_surface { per_d2 * dot3(pn, dir).abs() } else { per_d2 };
-        let area = if area.is_finite() { area } else { 0.0 };
-        o.pdf_rev[l] = if prev_infinite {
-            rev_local
-        } else if d2 == 0.0 {
-            0.0
-        } else {
-            area
-        };
-        o.pdf_fwd[l] = bpdf;
         // Russian roulette on the scattering throughput.
         let eta = v.eta_scale[l];
         let q = (ns[0] * eta).max(ns[1] * eta).max(ns[2] * eta).min(0.95);
@@ -367,7 +312,7 @@ mod tests {
 
     /// The step's outputs as bits (every lane).
     fn out_bits(o: &StepOut, rays: &Rays8) -> Vec<u32> {
-        let mut b: Vec<u32> = [o.pdf_at, o.pdf_rev, o.pdf_fwd, rays.t_max].iter().flatten().map(|x| x.to_bits()).collect();
+        let mut b: Vec<u32> = rays.t_max.iter().map(|x| x.to_bits()).collect();
         for a in [&o.beta, &o.scatter, &rays.o, &rays.d] {
             b.extend(a.iter().flatten().map(|x| x.to_bits()));
         }
@@ -390,8 +335,8 @@ mod tests {
         }
     }
 
-    /// Eight lanes stepped together leave each walk and path as `Walk::settle` and
-    /// `Walk::scatter` do, bit for bit, and go on where they do; vertices it does not cover
+    /// Eight lanes stepped together leave each walk and path as `Walk::scatter` does, bit
+    /// for bit, but for the densities, and go on where they do; vertices it does not cover
     /// are refused.
     #[test]
     fn step8_is_the_scalar_scatter() {
@@ -410,13 +355,11 @@ mod tests {
             same_as_every_copy(&lanes, &rays);
             for (l, (w, path, u)) in cases.iter().enumerate() {
                 let (mut want_w, mut want_p) = (w.clone(), path.clone());
-                want_w.settle(&mut want_p);
                 let want = want_w.scatter(u[0], Vec2::new(u[1], u[2]), u[3], &mut want_p);
                 if !gathered[l] {
-                    // Only a mask's pass-through and a vertex after one at infinity are left
-                    // to the scalar step.
+                    // Only a mask's pass-through is left to the scalar step.
                     let o = path[1].bsdf.as_ref().map_or(1.0, |b| b.opacity);
-                    assert!((o < 1.0 && u[0] >= o) || path[0].infinite, "round {round} lane {l}");
+                    assert!(o < 1.0 && u[0] >= o, "round {round} lane {l}");
                     seen[2] += 1;
                     continue;
                 }
@@ -424,11 +367,11 @@ mod tests {
                 let goes = lanes.finish(l, gw, gp, &rays);
                 assert_eq!(goes, want, "round {round} lane {l}");
                 assert_eq!(
-                    format!("{:?}", (&gw.ray, gw.beta, gw.scatter, gw.pdf_fwd)),
-                    format!("{:?}", (&want_w.ray, want_w.beta, want_w.scatter, want_w.pdf_fwd)),
+                    format!("{:?}", (&gw.ray, gw.beta, gw.scatter)),
+                    format!("{:?}", (&want_w.ray, want_w.beta, want_w.scatter)),
                     "round {round} lane {l}"
                 );
-                let bits = |v: &Vertex| (v.pdf_fwd.to_bits(), v.pdf_rev.to_bits(), v.event, v.delta);
+                let bits = |v: &Vertex| (v.event, v.delta);
                 assert_eq!((bits(&gp[0]), bits(&gp[1])), (bits(&want_p[0]), bits(&want_p[1])), "round {round} lane {l}");
                 if goes {
                     let r = &want_w.ray;

@@ -269,9 +269,8 @@ impl Walk {
     }
 
     /// [`Self::arrive`] with the vertex's density in area measure left out (0): None where
-    /// the ray escaped, else whether the walk samples a direction there. The lockstep walks
-    /// convert the densities of Lambertian lanes together (`WalkLanes`), the others'
-    /// with [`Self::settle`], before [`Self::scatter`].
+    /// the ray escaped, else whether the walk samples a direction there. For light tracing's
+    /// lockstep walks, which read no densities (it weighs no strategy against another).
     #[inline(always)]
     pub fn arrive_unsettled(&mut self, scene: &Scene, hit: Option<&SurfaceInteraction>, path: &mut Vec<Vertex>) -> Option<bool> {
         let Some(si) = hit else {
@@ -280,14 +279,6 @@ impl Walk {
         };
         Vertex::push_surface(path, scene, si, self.beta, 0.0);
         Some(path.len() < self.max_vertices)
-    }
-
-    /// The density [`Self::arrive_unsettled`] left out, into the vertex it pushed.
-    #[inline(always)]
-    pub fn settle(&self, path: &mut [Vertex]) {
-        let n = path.len();
-        let (p, ng) = (path[n - 1].p, path[n - 1].ng);
-        path[n - 1].pdf_fwd = path[n - 2].convert_density_to_point(self.pdf_fwd, p, ng);
     }
 
     /// The second half of [`Self::step`]: the direction sampled at the vertex just arrived
