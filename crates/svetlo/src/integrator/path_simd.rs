@@ -1612,6 +1612,12 @@ impl SimdKernel {
                     v.env_u[l] = u_l2;
                     return;
                 }
+                // A point light inline (through `sample_li`'s dispatch, out of line, its few
+                // operations had cost a call and a wait on the point passed in memory).
+                if let Light::Point { position, intensity } = &scene.lights[li] {
+                    Self::take_light_sample(l, v, crate::light::point_sample_li(*position, *intensity, p), true);
+                    return;
+                }
                 Self::generic_light_sample(scene, l, v, li, p, u_l2);
             }
             // A mesh light: its point, as `MeshLight::sample_li` up to the distance test.

@@ -127,6 +127,19 @@ impl SceneBounds {
     }
 }
 
+/// [`Light::sample_li`] of a point light at `position` of `intensity`, seen from `p_ref`
+/// (inline, for the path kernel's lanes: the same operations).
+#[inline(always)]
+pub(crate) fn point_sample_li(position: Vec3, intensity: Rgb, p_ref: Vec3) -> Option<LightSample> {
+    let d = position - p_ref;
+    let dist2 = d.length_squared();
+    if dist2 == 0.0 {
+        return None;
+    }
+    let wi = d / dist2.sqrt();
+    Some(LightSample { wi, li: intensity / dist2, pdf: 1.0, p: position, n: Vec3::ZERO, infinite: false })
+}
+
 impl Light {
     /// The Mitsuba plugin name of this emitter.
     pub fn kind_name(&self) -> &'static str {
@@ -155,15 +168,7 @@ impl Light {
     pub fn sample_li(&self, p_ref: Vec3, u: Vec2, bounds: &SceneBounds) -> Option<LightSample> {
         match self {
             Light::Area(a) => a.sample_li(p_ref, u),
-            Light::Point { position, intensity } => {
-                let d = *position - p_ref;
-                let dist2 = d.length_squared();
-                if dist2 == 0.0 {
-                    return None;
-                }
-                let wi = d / dist2.sqrt();
-                Some(LightSample { wi, li: *intensity / dist2, pdf: 1.0, p: *position, n: Vec3::ZERO, infinite: false })
-            }
+            Light::Point { position, intensity } => point_sample_li(*position, *intensity, p_ref),
             Light::Spot { position, .. } => {
                 let d = *position - p_ref;
                 let dist2 = d.length_squared();
