@@ -12,6 +12,17 @@ pub fn avx2() -> bool {
     false
 }
 
+/// FMA: the rough conductors' copies (glibc's `expf` as vector lanes, `math::expf`).
+#[inline]
+pub fn fma() -> bool {
+    #[cfg(target_arch = "x86_64")]
+    {
+        std::arch::is_x86_feature_detected!("fma")
+    }
+    #[cfg(not(target_arch = "x86_64"))]
+    false
+}
+
 /// AVX2 with AVX-512F and AVX-512VL: the eight-lane steps' 32-register copies.
 #[inline]
 pub fn avx512() -> bool {

@@ -4,6 +4,7 @@
 use super::fresnel::{self, reflect};
 use super::microfacet::{self as mf, BeckmannLanes, Microfacet};
 use super::{BsdfSample, LobeFlags, TransportMode};
+use crate::math::expf;
 use crate::spectrum::Rgb;
 use glam::{Vec2, Vec3};
 
@@ -206,8 +207,8 @@ pub(crate) struct RoughConductorOut<const N: usize> {
 /// [`RoughConductor::eval_pdf_and_sample`] of `used` lanes at once: the visible normals
 /// (`sample_visible_beckmann_lanes`), then for both directions (the light sample's and the
 /// sample's) the half vector, D, G1 both ways, the densities and the Fresnel term, each
-/// lane's operations those of the scalar routine, with selects for its branches. Only libm's
-/// expf (in D) runs lane by lane, and the Fresnel channels that count (`d` not 0) are
+/// lane's operations those of the scalar routine, with selects for its branches. D's expf is
+/// glibc's as vector lanes (`math::expf`), and the Fresnel channels that count (`d` not 0) are
 /// packed eight f64 lanes a step, whichever lane and direction they come from: about three
 /// lanes in eight are used, and a channel is five divisions and square roots. The same bits.
 #[inline(always)]
@@ -234,12 +235,28 @@ pub(crate) fn rough_conductor_lanes<const N: usize>(q: &RoughConductorLanes<N>, 
             }
         }
     }
-    // D's e^x (libm), only where D is asked for and m.z > 0 (`Microfacet::d`'s first test).
-    let mut ex = [[0.0f32; N]; 2];
-    for l in 0..used.min(N) {
-        for e in 0..2 {
-            if ok[e][l] {
-                ex[e][l] = mf::beckmann_d_exp(x[e][l]);
+    // D's e^x, only where D is asked for and m.z > 0 (`Microfacet::d`'s first test) and x is
+    // not below -104 (`beckmann_d_exp`): glibc's expf as vector lanes, and libm's lane by
+    // lane where one leaves glibc's main path (x <= -88 or NaN: rare).
+    // (`&`, not `&&`: a branch per lane kept the loop scalar.)
+    let (mut ex, mut off) = ([[0.0f32; N]; 2], [[false; N]; 2]);
+    for e in 0..2 {
+        for l in 0..N {
+            let xe = x[e][l];
+            // NaN is not below -104: the fallback below gives libm's NaN.
+            let below = xe < -104.0;
+            let want = (l < used) & ok[e][l] & !below;
+            let v = expf::expf_main(xe);
+            ex[e][l] = if want { v } else { 0.0 };
+            off[e][l] = want & !expf::main_path(xe);
+        }
+    }
+    if off.as_flattened().iter().fold(false, |a, &o| a | o) {
+        for l in 0..used.min(N) {
+            for e in 0..2 {
+                if ok[e][l] {
+                    ex[e][l] = mf::beckmann_d_exp(x[e][l]);
+                }
             }
         }
     }

@@ -335,7 +335,8 @@ pub(crate) fn sample_visible_beckmann_lanes<const N: usize>(q: &BeckmannLanes<N>
             hi[l] = if go { nhi } else { hi[l] };
             going[l] = go;
         }
-        if !going.iter().any(|&g| g) {
+        // (A fold, not `any`: `any` stops at the first lane, tested one byte at a time.)
+        if !going.iter().fold(false, |a, &g| a | g) {
             break;
         }
     }

@@ -1825,9 +1825,9 @@ impl SimdKernel {
     #[inline(always)]
     fn rough_conductor_lanes_on_cpu(&self, q: &RoughConductorLanes<LANES>, used: usize) -> RoughConductorOut<LANES> {
         #[cfg(target_arch = "x86_64")]
-        if crate::cpu::avx2() {
-            // SAFETY: `avx2()` detects AVX2 at run time, and `avx512` is set only where
-            // AVX-512F and VL were.
+        if crate::cpu::avx2() && crate::cpu::fma() {
+            // SAFETY: `avx2()` and `fma()` detect AVX2 and FMA at run time, and `avx512` is
+            // set only where AVX-512F and VL were.
             return unsafe {
                 if self.avx512 {
                     conductor8_avx512(q, used)
@@ -2590,9 +2590,9 @@ unsafe fn shade8_avx512(v: &VertexNums, rr_depth: i32, st: &mut PathNums, rays: 
 /// [`SimdKernel::rough_conductor_lanes_on_cpu`]).
 ///
 /// # Safety
-/// The CPU must support AVX2.
+/// The CPU must support AVX2 and FMA (glibc's expf as vector lanes).
 #[cfg(target_arch = "x86_64")]
-#[target_feature(enable = "avx2")]
+#[target_feature(enable = "avx2,fma")]
 #[inline(never)]
 unsafe fn conductor8_avx2(q: &RoughConductorLanes<LANES>, used: usize) -> RoughConductorOut<LANES> {
     rough_conductor_lanes(q, used)
@@ -2601,9 +2601,9 @@ unsafe fn conductor8_avx2(q: &RoughConductorLanes<LANES>, used: usize) -> RoughC
 /// [`rough_conductor_lanes`] compiled for AVX-512VL.
 ///
 /// # Safety
-/// The CPU must support AVX2, AVX-512F and AVX-512VL.
+/// The CPU must support AVX2, FMA, AVX-512F and AVX-512VL.
 #[cfg(target_arch = "x86_64")]
-#[target_feature(enable = "avx2,avx512f,avx512vl")]
+#[target_feature(enable = "avx2,fma,avx512f,avx512vl")]
 #[inline(never)]
 unsafe fn conductor8_avx512(q: &RoughConductorLanes<LANES>, used: usize) -> RoughConductorOut<LANES> {
     rough_conductor_lanes(q, used)
@@ -3006,8 +3006,8 @@ mod tests {
             }
             let mut outs = vec![rough_conductor_lanes(&q, used)];
             #[cfg(target_arch = "x86_64")]
-            if crate::cpu::avx2() {
-                // SAFETY: AVX2 was detected, AVX-512 where `cpu::avx512()` says so.
+            if crate::cpu::avx2() && crate::cpu::fma() {
+                // SAFETY: AVX2 and FMA were detected, AVX-512 where `cpu::avx512()` says so.
                 outs.push(unsafe { conductor8_avx2(&q, used) });
                 if crate::cpu::avx512() {
                     outs.push(unsafe { conductor8_avx512(&q, used) });

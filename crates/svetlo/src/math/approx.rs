@@ -20,13 +20,16 @@ pub fn exp(x: f32) -> f32 {
         return 0.0;
     }
     let x = x.min(88.0);
-    let n = (x * LOG2_E + ROUND_MAGIC) - ROUND_MAGIC;
+    let t = x * LOG2_E + ROUND_MAGIC;
+    let n = t - ROUND_MAGIC;
     // Cody-Waite reduction with ln 2 split in two: r in [-ln2/2, ln2/2] almost exactly.
     let r = (x - n * 0.693_145_751_953_125) - n * 1.428_606_765_330_187e-6;
     // Taylor to degree 7: truncation below 5e-9 on that interval.
     let p = 1.0 + r * (1.0 + r * (0.5 + r * (1.0 / 6.0 + r * (1.0 / 24.0 + r * (1.0 / 120.0 + r * (1.0 / 720.0 + r * (1.0 / 5040.0)))))));
-    // n in [-126, 127]: 2^n is a normal float.
-    p * f32::from_bits(((n as i32 + 127) as u32) << 23)
+    // n in [-126, 127]: 2^n is a normal float. n is `t`'s low mantissa bits (t's ulp is 1),
+    // read as an integer: `n as i32` saturates, which lanes of vector code ran one by one.
+    let n_bits = t.to_bits().wrapping_sub(ROUND_MAGIC.to_bits());
+    p * f32::from_bits(n_bits.wrapping_add(127) << 23)
 }
 
 /// ln x for x > 0, absolute error below 1.5e-7 · max(1, |ln x|); inputs below the smallest
@@ -183,6 +186,34 @@ mod tests {
         assert_eq!(exp(-1e30), 0.0);
         assert_eq!(exp(f32::NAN), 0.0);
         assert_eq!(exp(0.0), 1.0);
+    }
+
+    /// `exp`'s power of two from the rounding sum's bits is the float-to-int conversion it
+    /// replaced, on every float of (-87, 88] and beyond (infinities, NaN).
+    #[test]
+    fn exp_scale_bits_are_the_conversion() {
+        let old = |x: f32| {
+            if x.is_nan() || x <= -87.0 {
+                return 0.0;
+            }
+            let x = x.min(88.0);
+            let n = (x * LOG2_E + ROUND_MAGIC) - ROUND_MAGIC;
+            let r = (x - n * 0.693_145_751_953_125) - n * 1.428_606_765_330_187e-6;
+            let p = 1.0 + r * (1.0 + r * (0.5 + r * (1.0 / 6.0 + r * (1.0 / 24.0 + r * (1.0 / 120.0 + r * (1.0 / 720.0 + r * (1.0 / 5040.0)))))));
+            p * f32::from_bits(((n as i32 + 127) as u32) << 23)
+        };
+        let mut checked = 0u32;
+        for bits in (0..=u32::MAX).step_by(11) {
+            let x = f32::from_bits(bits);
+            if x > -90.0 && x < 90.0 || bits % 999 == 0 {
+                assert_eq!(exp(x).to_bits(), old(x).to_bits(), "exp({x:e})");
+                checked += 1;
+            }
+        }
+        assert!(checked > 100_000_000);
+        for x in [f32::INFINITY, f32::NEG_INFINITY, f32::NAN, 88.0, -87.0, f32::MAX, f32::MIN] {
+            assert_eq!(exp(x).to_bits(), old(x).to_bits(), "exp({x:e})");
+        }
     }
 
     #[test]

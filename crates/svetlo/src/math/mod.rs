@@ -1,6 +1,7 @@
 //! Vector math (glam, f32), orthonormal frames and sample warps.
 
 pub mod approx;
+pub(crate) mod expf;
 pub mod frame;
 pub mod lane;
 pub mod warp;
