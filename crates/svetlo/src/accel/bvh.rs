@@ -35,7 +35,7 @@ pub struct Accel {
     bounds: Aabb,
     /// The hierarchy is larger than the caches: traversal prefetches what it pushes.
     pub(super) prefetch: bool,
-    /// The CPU has AVX: node tests take all eight children at once.
+    /// The CPU has AVX (and POPCNT): node tests take all eight children at once.
     pub(super) avx: bool,
     /// The hierarchy is large enough for alike rays to be walked as one (`accel/coherent.rs`).
     pub(super) coherent: bool,
@@ -208,7 +208,7 @@ impl Accel {
     fn trace<const ANY: bool>(&self, ray: &Ray) -> Option<PrimHit> {
         #[cfg(target_arch = "x86_64")]
         if self.avx {
-            // SAFETY: `avx` is set only when the CPU reports AVX.
+            // SAFETY: `avx` is set only when the CPU reports AVX and POPCNT.
             return unsafe { self.trace_avx::<ANY>(ray) };
         }
         self.trace_sse::<ANY>(ray)
@@ -223,9 +223,9 @@ impl Accel {
     }
 
     /// # Safety
-    /// The CPU must support AVX.
+    /// The CPU must support AVX and POPCNT.
     #[cfg(target_arch = "x86_64")]
-    #[target_feature(enable = "avx")]
+    #[target_feature(enable = "avx,popcnt")]
     unsafe fn trace_avx<const ANY: bool>(&self, ray: &Ray) -> Option<PrimHit> {
         let w = WatertightRay::new(ray.o, ray.d);
         // SAFETY: this function runs only on CPUs with AVX (see `trace`).
@@ -323,7 +323,7 @@ impl Accel {
         if self.avx && self.prefetch && !self.tri_nodes.is_empty() {
             let mut hits = [None; RAY_LANES];
             let done = |l, hit| hits[l] = hit;
-            // SAFETY: `avx` is set only when the CPU reports AVX.
+            // SAFETY: `avx` is set only when the CPU reports AVX and POPCNT.
             unsafe {
                 if self.coherent && active.count_ones() >= COHERENT_MIN {
                     self.trace_coherent_avx(rays, active, done)
@@ -341,7 +341,7 @@ impl Accel {
         #[cfg(target_arch = "x86_64")]
         if self.avx && self.prefetch && !self.tri_nodes.is_empty() {
             let mut blocked = 0;
-            // SAFETY: `avx` is set only when the CPU reports AVX.
+            // SAFETY: `avx` is set only when the CPU reports AVX and POPCNT.
             unsafe { self.trace_lanes_avx::<true>(rays, active, |l, hit| blocked |= (hit.is_some() as u8) << l) };
             return blocked;
         }
@@ -355,9 +355,9 @@ impl Accel {
     /// store-forwarding stall, 22 % of the occlusion walk's samples on bsdf_spheres).
     ///
     /// # Safety
-    /// The CPU must support AVX.
+    /// The CPU must support AVX and POPCNT.
     #[cfg(target_arch = "x86_64")]
-    #[target_feature(enable = "avx")]
+    #[target_feature(enable = "avx,popcnt")]
     unsafe fn trace_lanes_avx<const ANY: bool>(&self, rays: &[Ray; RAY_LANES], active: u8, mut done: impl FnMut(usize, Option<PrimHit>)) {
         use super::wide::{Walk, WalkStack};
         use std::mem::MaybeUninit;
@@ -432,9 +432,9 @@ impl Accel {
     /// another, or that met a triangle on an edge, is walked again alone.
     ///
     /// # Safety
-    /// The CPU must support AVX.
+    /// The CPU must support AVX and POPCNT.
     #[cfg(target_arch = "x86_64")]
-    #[target_feature(enable = "avx")]
+    #[target_feature(enable = "avx,popcnt")]
     unsafe fn trace_coherent_avx(&self, rays: &[Ray; RAY_LANES], active: u8, mut done: impl FnMut(usize, Option<PrimHit>)) {
         use super::coherent::{walk, Coherent, TIE};
         // SAFETY: this function runs only on CPUs with AVX.
@@ -573,7 +573,8 @@ impl TriKernel for TriRay8 {
 fn has_avx() -> bool {
     #[cfg(target_arch = "x86_64")]
     {
-        std::is_x86_feature_detected!("avx") && std::env::var_os("SVETLO_NO_AVX").is_none()
+        // POPCNT comes with every AVX CPU; the walk's sorted pushes count with it.
+        std::is_x86_feature_detected!("avx") && std::is_x86_feature_detected!("popcnt") && std::env::var_os("SVETLO_NO_AVX").is_none()
     }
     #[cfg(not(target_arch = "x86_64"))]
     {

@@ -248,6 +248,26 @@ pub fn traverse<const ANY: bool, const AVX: bool>(
     walk.found()
 }
 
+/// How many of the entries `hits` (child slots) go below slot `k`'s when they are pushed
+/// with the nearest on top: the farther ones, and those as far in a lower slot. This is the
+/// order a stable sort by decreasing distance of the entries in slot order gives (the
+/// insertion sort the walk had), without a branch on the distances (none is NaN).
+#[inline(always)]
+pub(super) fn entries_below<const AVX: bool>(tn: &[f32; WIDTH], hits: u32, k: usize) -> usize {
+    #[cfg(target_arch = "x86_64")]
+    if AVX {
+        use std::arch::x86_64::*;
+        // SAFETY: AVX = true is only instantiated inside functions compiled with AVX, which
+        // callers enter only after detecting it at run time (as `test_dispatch`).
+        let (farther, tied) = unsafe {
+            let (all, t) = (_mm256_loadu_ps(tn.as_ptr()), _mm256_set1_ps(tn[k]));
+            (_mm256_movemask_ps(_mm256_cmp_ps::<_CMP_GT_OQ>(all, t)) as u32, _mm256_movemask_ps(_mm256_cmp_ps::<_CMP_EQ_OQ>(all, t)) as u32)
+        };
+        return ((farther | tied & ((1 << k) - 1)) & hits).count_ones() as usize;
+    }
+    (0..WIDTH).filter(|&j| hits >> j & 1 != 0 && (tn[j] > tn[k] || tn[j] == tn[k] && j < k)).count()
+}
+
 /// A walk's stack: (child code, entry distance) of the children still to visit.
 pub type WalkStack = [MaybeUninit<(u32, f32)>; MAX_STACK];
 
@@ -339,31 +359,34 @@ impl Walk {
                     prefetch_child(interleaved, nodes, c[near], leaf_at);
                     return true;
                 }
-                // Three or more children: push all, sort the new entries so that the nearest is on top.
+                // Three or more children: push all, the nearest on top.
                 pushed_now = true;
-                let base = sp;
-                stack[sp].write((c[first], tn[first]));
-                stack[sp + 1].write((c[second], tn[second]));
-                sp += 2;
-                prefetch_child(prefetch, nodes, c[first], leaf_at);
-                prefetch_child(prefetch, nodes, c[second], leaf_at);
-                while mask != 0 {
-                    let k = mask.trailing_zeros() as usize & (WIDTH - 1);
-                    mask &= mask - 1;
-                    prefetch_child(prefetch, nodes, c[k], leaf_at);
-                    stack[sp].write((c[k], tn[k]));
-                    sp += 1;
-                }
-                if !ANY {
-                    // SAFETY: entries base..sp were written just above.
-                    let top = unsafe { std::slice::from_raw_parts_mut(stack.as_mut_ptr().add(base) as *mut (u32, f32), sp - base) };
-                    for i in 1..top.len() {
-                        let mut j = i;
-                        while j > 0 && top[j - 1].1 < top[j].1 {
-                            top.swap(j - 1, j);
-                            j -= 1;
-                        }
+                if ANY {
+                    stack[sp].write((c[first], tn[first]));
+                    stack[sp + 1].write((c[second], tn[second]));
+                    sp += 2;
+                    prefetch_child(prefetch, nodes, c[first], leaf_at);
+                    prefetch_child(prefetch, nodes, c[second], leaf_at);
+                    while mask != 0 {
+                        let k = mask.trailing_zeros() as usize & (WIDTH - 1);
+                        mask &= mask - 1;
+                        prefetch_child(prefetch, nodes, c[k], leaf_at);
+                        stack[sp].write((c[k], tn[k]));
+                        sp += 1;
                     }
+                } else {
+                    // Each entry straight to its place in the order the insertion sort of the
+                    // entries in bit order gave (see `entries_below`): that sort's branches on
+                    // the distances were mispredicted.
+                    let hits = mask | 1 << first | 1 << second;
+                    let mut rest = hits;
+                    while rest != 0 {
+                        let k = rest.trailing_zeros() as usize & (WIDTH - 1);
+                        rest &= rest - 1;
+                        prefetch_child(prefetch, nodes, c[k], leaf_at);
+                        stack[sp + entries_below::<AVX>(&tn, hits, k)].write((c[k], tn[k]));
+                    }
+                    sp += hits.count_ones() as usize;
                 }
             }
         } else if cur != EMPTY_CHILD && leaf(cur, t_max) {
