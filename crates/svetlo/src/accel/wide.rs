@@ -340,25 +340,24 @@ impl Walk {
                 // `& (WIDTH - 1)`: the mask has WIDTH bits, and saying so drops the bounds checks.
                 let first = mask.trailing_zeros() as usize & (WIDTH - 1);
                 mask &= mask - 1;
-                if mask == 0 {
-                    self.cur = c[first];
-                    self.fresh = true;
-                    prefetch_child(interleaved, nodes, c[first], leaf_at);
-                    return true;
-                }
-                let second = mask.trailing_zeros() as usize & (WIDTH - 1);
-                mask &= mask - 1;
-                if mask == 0 {
+                if mask & mask.wrapping_sub(1) == 0 {
+                    // One or two children: on to the nearer, the other one pushed. Without a
+                    // branch on their number (a coin toss for the predictor): with one, the
+                    // second is the first again, written above the stack's top and not counted.
+                    let two = mask != 0;
+                    let second = if two { mask.trailing_zeros() as usize & (WIDTH - 1) } else { first };
                     // Occlusion needs no order: any hit ends the walk.
                     let (near, far) = if ANY || tn[first] <= tn[second] { (first, second) } else { (second, first) };
                     prefetch_child(prefetch, nodes, c[far], leaf_at);
                     stack[sp].write((c[far], tn[far]));
-                    self.sp = sp + 1;
+                    self.sp = sp + usize::from(two);
                     self.cur = c[near];
                     self.fresh = true;
                     prefetch_child(interleaved, nodes, c[near], leaf_at);
                     return true;
                 }
+                let second = mask.trailing_zeros() as usize & (WIDTH - 1);
+                mask &= mask - 1;
                 // Three or more children: push all, the nearest on top.
                 pushed_now = true;
                 if ANY {
