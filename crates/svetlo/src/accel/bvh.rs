@@ -8,7 +8,7 @@ use super::tri4::{intersect_half, TriRay};
 #[cfg(target_arch = "x86_64")]
 use super::tri8::TriRay8;
 use super::tri8::{Hit, Tri8, LANES, NO_TRI};
-use super::wide::{leaf_code, leaf_range, prefetch, traverse, BoxRay, Node};
+use super::wide::{leaf_code, leaf_range, traverse, BoxRay, Node};
 use super::PrimHit;
 use crate::geometry::triangle::WatertightRay;
 use crate::geometry::{Aabb, Geometry, Ray, SdfGrid, Sphere, TriangleMesh};
@@ -35,7 +35,7 @@ pub struct Accel {
     bounds: Aabb,
     /// The hierarchy is larger than the caches: traversal prefetches what it pushes.
     pub(super) prefetch: bool,
-    /// The CPU has AVX: node tests take all eight children at once.
+    /// The CPU has AVX (and POPCNT): node tests take all eight children at once.
     pub(super) avx: bool,
     /// The hierarchy is large enough for alike rays to be walked as one (`accel/coherent.rs`).
     pub(super) coherent: bool,
@@ -208,7 +208,7 @@ impl Accel {
     fn trace<const ANY: bool>(&self, ray: &Ray) -> Option<PrimHit> {
         #[cfg(target_arch = "x86_64")]
         if self.avx {
-            // SAFETY: `avx` is set only when the CPU reports AVX.
+            // SAFETY: `avx` is set only when the CPU reports AVX and POPCNT.
             return unsafe { self.trace_avx::<ANY>(ray) };
         }
         self.trace_sse::<ANY>(ray)
@@ -223,9 +223,9 @@ impl Accel {
     }
 
     /// # Safety
-    /// The CPU must support AVX.
+    /// The CPU must support AVX and POPCNT.
     #[cfg(target_arch = "x86_64")]
-    #[target_feature(enable = "avx")]
+    #[target_feature(enable = "avx,popcnt")]
     unsafe fn trace_avx<const ANY: bool>(&self, ray: &Ray) -> Option<PrimHit> {
         let w = WatertightRay::new(ray.o, ray.d);
         // SAFETY: this function runs only on CPUs with AVX (see `trace`).
@@ -239,8 +239,8 @@ impl Accel {
         let bray = BoxRay::new(ray.o, ray.d);
         let mut t_max = ray.t_max;
         let mut hit = None;
-        let prefetch_leaf = |code| self.prefetch_tris(code);
-        let any_hit = traverse::<ANY, AVX>(&self.tri_nodes, &bray, &mut t_max, self.prefetch, prefetch_leaf, |code, t_max| {
+        let tris_at = |code| self.tris_at(code);
+        let any_hit = traverse::<ANY, AVX>(&self.tri_nodes, &bray, &mut t_max, self.prefetch, tris_at, |code, t_max| {
             self.tri_leaf::<ANY, K>(code, t_max, tray, w, &mut hit)
         });
         if ANY && any_hit {
@@ -249,11 +249,11 @@ impl Accel {
         self.trace_others::<ANY, AVX>(ray, &bray, t_max, hit)
     }
 
-    /// Asks for a leaf's first triangle block: the first only (a constant length, so no
-    /// loop), as further blocks are often not reached.
+    /// Where a leaf's first triangle block starts: the walks ask for that block only (a
+    /// constant length, so no loop), as further blocks are often not reached.
     #[inline(always)]
-    fn prefetch_tris(&self, code: u32) {
-        prefetch(self.tris.as_ptr().wrapping_add(leaf_range(code).0), std::mem::size_of::<Tri8>());
+    fn tris_at(&self, code: u32) -> *const u8 {
+        self.tris.as_ptr().wrapping_add(leaf_range(code).0) as *const u8
     }
 
     /// Tests the ray against the triangle blocks of leaf `code`. Closest hit: records the
@@ -323,7 +323,7 @@ impl Accel {
         if self.avx && self.prefetch && !self.tri_nodes.is_empty() {
             let mut hits = [None; RAY_LANES];
             let done = |l, hit| hits[l] = hit;
-            // SAFETY: `avx` is set only when the CPU reports AVX.
+            // SAFETY: `avx` is set only when the CPU reports AVX and POPCNT.
             unsafe {
                 if self.coherent && active.count_ones() >= COHERENT_MIN {
                     self.trace_coherent_avx(rays, active, done)
@@ -341,7 +341,7 @@ impl Accel {
         #[cfg(target_arch = "x86_64")]
         if self.avx && self.prefetch && !self.tri_nodes.is_empty() {
             let mut blocked = 0;
-            // SAFETY: `avx` is set only when the CPU reports AVX.
+            // SAFETY: `avx` is set only when the CPU reports AVX and POPCNT.
             unsafe { self.trace_lanes_avx::<true>(rays, active, |l, hit| blocked |= (hit.is_some() as u8) << l) };
             return blocked;
         }
@@ -355,9 +355,9 @@ impl Accel {
     /// store-forwarding stall, 22 % of the occlusion walk's samples on bsdf_spheres).
     ///
     /// # Safety
-    /// The CPU must support AVX.
+    /// The CPU must support AVX and POPCNT.
     #[cfg(target_arch = "x86_64")]
-    #[target_feature(enable = "avx")]
+    #[target_feature(enable = "avx,popcnt")]
     unsafe fn trace_lanes_avx<const ANY: bool>(&self, rays: &[Ray; RAY_LANES], active: u8, mut done: impl FnMut(usize, Option<PrimHit>)) {
         use super::wide::{Walk, WalkStack};
         use std::mem::MaybeUninit;
@@ -383,7 +383,7 @@ impl Accel {
             lanes[l].write(Lane { bray: BoxRay::new(r.o, r.d), tray, w, t_max: r.t_max, hit: None, walk: Walk::new() });
         }
         let nodes = &self.tri_nodes[..];
-        let prefetch_leaf = |code| self.prefetch_tris(code);
+        let tris_at = |code| self.tris_at(code);
         let mut live = active;
         while live != 0 {
             let mut turn = live;
@@ -395,7 +395,7 @@ impl Accel {
                 let mut leaf = |code, t_max: &mut f32| self.tri_leaf::<ANY, TriRay8>(code, t_max, &lane.tray, &lane.w, &mut lane.hit);
                 // A lane keeps the turn while its next entry was asked for steps ago (likely in cache).
                 loop {
-                    if !lane.walk.step::<ANY, true>(&mut stacks[l], nodes, &lane.bray, &mut lane.t_max, true, true, &prefetch_leaf, &mut leaf) {
+                    if !lane.walk.step::<ANY, true>(&mut stacks[l], nodes, &lane.bray, &mut lane.t_max, true, true, &tris_at, &mut leaf) {
                         live &= !(1 << l);
                         break;
                     }
@@ -432,9 +432,9 @@ impl Accel {
     /// another, or that met a triangle on an edge, is walked again alone.
     ///
     /// # Safety
-    /// The CPU must support AVX.
+    /// The CPU must support AVX and POPCNT.
     #[cfg(target_arch = "x86_64")]
-    #[target_feature(enable = "avx")]
+    #[target_feature(enable = "avx,popcnt")]
     unsafe fn trace_coherent_avx(&self, rays: &[Ray; RAY_LANES], active: u8, mut done: impl FnMut(usize, Option<PrimHit>)) {
         use super::coherent::{walk, Coherent, TIE};
         // SAFETY: this function runs only on CPUs with AVX.
@@ -443,9 +443,8 @@ impl Accel {
             // SAFETY: as above.
             return unsafe { self.trace_lanes_avx::<false>(rays, active, done) };
         };
-        let prefetch_leaf = |code| self.prefetch_tris(code);
         // SAFETY: as above.
-        let f = unsafe { walk(&self.tri_nodes, &self.tris, &c, active, self.prefetch, prefetch_leaf) };
+        let f = unsafe { walk(&self.tri_nodes, &self.tris, &c, active, self.prefetch, |code| self.tris_at(code)) };
         // The spheres' and grids' trees, where the scene has any, ray by ray.
         let others = !self.sph_nodes.is_empty() || !self.sdf_nodes.is_empty();
         let mut again = f.again as u8 & active;
@@ -508,7 +507,7 @@ fn nearest_prim<const ANY: bool, const AVX: bool, P>(
         bray,
         t_max,
         prefetch,
-        |_| {},
+        |code| prims.as_ptr().wrapping_add(leaf_range(code).0) as *const u8,
         |code, t_max| {
             let (start, count) = leaf_range(code);
             let mut found = false;
@@ -574,7 +573,8 @@ impl TriKernel for TriRay8 {
 fn has_avx() -> bool {
     #[cfg(target_arch = "x86_64")]
     {
-        std::is_x86_feature_detected!("avx") && std::env::var_os("SVETLO_NO_AVX").is_none()
+        // POPCNT comes with every AVX CPU; the walk's sorted pushes count with it.
+        std::is_x86_feature_detected!("avx") && std::is_x86_feature_detected!("popcnt") && std::env::var_os("SVETLO_NO_AVX").is_none()
     }
     #[cfg(not(target_arch = "x86_64"))]
     {

@@ -32,7 +32,7 @@
 
 use super::build::MAX_STACK;
 use super::tri8::{nearest_lane, Lanes, Tri8, TriRay8, LANES, NO_TRI};
-use super::wide::{leaf_range, prefetch, BoxRay, Node, EMPTY_CHILD, FAR_SLACK, LEAF_BIT, PLANE_BYTES, WIDTH};
+use super::wide::{leaf_range, prefetch_child, BoxRay, Node, EMPTY_CHILD, FAR_SLACK, LEAF_BIT, PLANE_BYTES, WIDTH};
 use crate::geometry::Ray;
 use std::arch::x86_64::*;
 use std::mem::MaybeUninit;
@@ -391,13 +391,13 @@ impl Best {
 const LEAF_LANES_MIN: u32 = 4;
 
 /// Walks the tree rooted at `nodes[0]` with the rays of `r` (lanes of `active`), their
-/// triangles in `tris`. With `prefetch_nodes`, pushed nodes are prefetched and
-/// `prefetch_leaf(code)` may prefetch a pushed leaf's triangles.
+/// triangles in `tris`. With `prefetch_nodes`, pushed children are prefetched (a leaf's
+/// triangles at `tris_at(code)`).
 ///
 /// # Safety
 /// The CPU must support AVX, and the caller must be compiled with it enabled.
 #[inline(always)]
-pub unsafe fn walk(nodes: &[Node], tris: &[Tri8], r: &Coherent, active: u8, prefetch_nodes: bool, prefetch_leaf: impl Fn(u32)) -> Found {
+pub unsafe fn walk(nodes: &[Node], tris: &[Tri8], r: &Coherent, active: u8, prefetch_nodes: bool, tris_at: impl Fn(u32) -> *const u8) -> Found {
     let inf = f32::INFINITY;
     let found = Found { t: [inf; LANES], rival: [inf; LANES], slot: [-1; LANES], b1: [0.0; LANES], b2: [0.0; LANES], again: 0 };
     let mut best = Best { f: found, bound: r.t_max };
@@ -408,15 +408,7 @@ pub unsafe fn walk(nodes: &[Node], tris: &[Tri8], r: &Coherent, active: u8, pref
     let mut stack: [MaybeUninit<(u32, f32, u32)>; MAX_STACK] = [const { MaybeUninit::uninit() }; MAX_STACK];
     let mut sp = 0usize;
     let (mut cur, mut from) = (0u32, 0u32);
-    let push_prefetch = |code: u32| {
-        if prefetch_nodes {
-            if code & LEAF_BIT == 0 {
-                prefetch(nodes.as_ptr().wrapping_add(code as usize), std::mem::size_of::<Node>());
-            } else {
-                prefetch_leaf(code);
-            }
-        }
-    };
+    let push_prefetch = |code: u32| prefetch_child(prefetch_nodes, nodes, code, &tris_at);
     'walk: loop {
         if cur & LEAF_BIT == 0 {
             let node = &nodes[cur as usize];

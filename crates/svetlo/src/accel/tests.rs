@@ -552,3 +552,45 @@ fn coherent_walks_match_single_walks() {
         assert!(coherent > 1000, "{coherent} groups walked as one");
     }
 }
+
+/// The order a node's pushes take (`wide::entries_below`, scalar and AVX) is the stable
+/// insertion sort's by decreasing distance of the entries in slot order, ties included.
+#[test]
+fn sorted_pushes_match_the_insertion_sort() {
+    use super::wide::{entries_below, WIDTH};
+    #[cfg(target_arch = "x86_64")]
+    #[target_feature(enable = "avx,popcnt")]
+    unsafe fn below_avx(tn: &[f32; WIDTH], hits: u32, k: usize) -> usize {
+        entries_below::<true>(tn, hits, k)
+    }
+    let mut rng = Pcg32::new(7, 3);
+    // Few distinct values (the signed zeros and infinity among them), so that ties are common.
+    let values = [0.0, -0.0, 0.5, 0.5, 1.0, 2.0, f32::INFINITY];
+    for _ in 0..20_000 {
+        let tn: [f32; WIDTH] = std::array::from_fn(|_| values[(rng.next_f32() * values.len() as f32) as usize % values.len()]);
+        let hits = (rng.next_f32() * 256.0) as u32 & 0xff;
+        if hits.count_ones() < 3 {
+            continue;
+        }
+        let mut want: Vec<(usize, f32)> = (0..WIDTH).filter(|&k| hits >> k & 1 != 0).map(|k| (k, tn[k])).collect();
+        for i in 1..want.len() {
+            let mut j = i;
+            while j > 0 && want[j - 1].1 < want[j].1 {
+                want.swap(j - 1, j);
+                j -= 1;
+            }
+        }
+        let mut got = vec![(WIDTH, 0.0); want.len()];
+        for k in (0..WIDTH).filter(|&k| hits >> k & 1 != 0) {
+            let at = entries_below::<false>(&tn, hits, k);
+            #[cfg(target_arch = "x86_64")]
+            if std::is_x86_feature_detected!("avx") && std::is_x86_feature_detected!("popcnt") {
+                // SAFETY: AVX and POPCNT were detected just above.
+                assert_eq!(unsafe { below_avx(&tn, hits, k) }, at, "{tn:?} {hits:#b} {k}");
+            }
+            got[at] = (k, tn[k]);
+        }
+        let slots = |v: &[(usize, f32)]| v.iter().map(|e| e.0).collect::<Vec<_>>();
+        assert_eq!(slots(&got), slots(&want), "{tn:?} {hits:#b}");
+    }
+}

@@ -208,30 +208,35 @@ pub fn prefetch<T>(p: *const T, len: usize) {
     let _ = (p, len);
 }
 
+/// Asks for a child's lines ahead of its visit: a node's four, or as many of a leaf's
+/// primitives and one line more (`leaf_at(code)`: where they start; a triangle block is five
+/// lines). The address is chosen without a branch: near the tree's bottom whether a child is a
+/// leaf is a coin toss, and a mispredicted branch cost more than a line asked for in vain.
 #[inline(always)]
-fn prefetch_child(enabled: bool, nodes: &[Node], code: u32, leaf: &impl Fn(u32)) {
+pub(super) fn prefetch_child(enabled: bool, nodes: &[Node], code: u32, leaf_at: &impl Fn(u32) -> *const u8) {
     if !enabled {
         return;
     }
-    if code & LEAF_BIT == 0 {
-        prefetch(nodes.as_ptr().wrapping_add(code as usize), std::mem::size_of::<Node>());
-    } else {
-        leaf(code);
-    }
+    let leaf = code & LEAF_BIT != 0;
+    let node = nodes.as_ptr().wrapping_add(code as usize) as *const u8;
+    let p = if leaf { leaf_at(code) } else { node };
+    prefetch(p, std::mem::size_of::<Node>());
+    // A node's first line again (already asked for), a leaf's fifth.
+    prefetch(p.wrapping_add(std::mem::size_of::<Node>() * usize::from(leaf)), 1);
 }
 
 /// Walks the tree rooted at `nodes[0]`, calling `leaf(code, t_max)` on every leaf the
 /// ray reaches. The callback returns whether it found a hit (and then has lowered
 /// `t_max` to it). With `ANY`, stops at the first hit. Returns whether any leaf hit.
-/// With `prefetch`, pushed nodes are prefetched and `prefetch_leaf(code)` may prefetch a
-/// pushed leaf's primitives: worth it only when the tree does not fit in the caches.
+/// With `prefetch`, pushed children are prefetched (a leaf's primitives at `leaf_at(code)`):
+/// worth it only when the tree does not fit in the caches.
 #[inline(always)]
 pub fn traverse<const ANY: bool, const AVX: bool>(
     nodes: &[Node],
     ray: &BoxRay,
     t_max: &mut f32,
     prefetch: bool,
-    prefetch_leaf: impl Fn(u32),
+    leaf_at: impl Fn(u32) -> *const u8,
     mut leaf: impl FnMut(u32, &mut f32) -> bool,
 ) -> bool {
     if nodes.is_empty() {
@@ -239,8 +244,28 @@ pub fn traverse<const ANY: bool, const AVX: bool>(
     }
     let mut stack = Walk::stack();
     let mut walk = Walk::new();
-    while walk.step::<ANY, AVX>(&mut stack, nodes, ray, t_max, prefetch, false, &prefetch_leaf, &mut leaf) {}
+    while walk.step::<ANY, AVX>(&mut stack, nodes, ray, t_max, prefetch, false, &leaf_at, &mut leaf) {}
     walk.found()
+}
+
+/// How many of the entries `hits` (child slots) go below slot `k`'s when they are pushed
+/// with the nearest on top: the farther ones, and those as far in a lower slot. This is the
+/// order a stable sort by decreasing distance of the entries in slot order gives (the
+/// insertion sort the walk had), without a branch on the distances (none is NaN).
+#[inline(always)]
+pub(super) fn entries_below<const AVX: bool>(tn: &[f32; WIDTH], hits: u32, k: usize) -> usize {
+    #[cfg(target_arch = "x86_64")]
+    if AVX {
+        use std::arch::x86_64::*;
+        // SAFETY: AVX = true is only instantiated inside functions compiled with AVX, which
+        // callers enter only after detecting it at run time (as `test_dispatch`).
+        let (farther, tied) = unsafe {
+            let (all, t) = (_mm256_loadu_ps(tn.as_ptr()), _mm256_set1_ps(tn[k]));
+            (_mm256_movemask_ps(_mm256_cmp_ps::<_CMP_GT_OQ>(all, t)) as u32, _mm256_movemask_ps(_mm256_cmp_ps::<_CMP_EQ_OQ>(all, t)) as u32)
+        };
+        return ((farther | tied & ((1 << k) - 1)) & hits).count_ones() as usize;
+    }
+    (0..WIDTH).filter(|&j| hits >> j & 1 != 0 && (tn[j] > tn[k] || tn[j] == tn[k] && j < k)).count()
 }
 
 /// A walk's stack: (child code, entry distance) of the children still to visit.
@@ -300,7 +325,7 @@ impl Walk {
         t_max: &mut f32,
         prefetch: bool,
         interleaved: bool,
-        prefetch_leaf: &impl Fn(u32),
+        leaf_at: &impl Fn(u32) -> *const u8,
         leaf: &mut impl FnMut(u32, &mut f32) -> bool,
     ) -> bool {
         let cur = self.cur;
@@ -315,50 +340,52 @@ impl Walk {
                 // `& (WIDTH - 1)`: the mask has WIDTH bits, and saying so drops the bounds checks.
                 let first = mask.trailing_zeros() as usize & (WIDTH - 1);
                 mask &= mask - 1;
-                if mask == 0 {
-                    self.cur = c[first];
+                if mask & mask.wrapping_sub(1) == 0 {
+                    // One or two children: on to the nearer, the other one pushed. Without a
+                    // branch on their number (a coin toss for the predictor): with one, the
+                    // second is the first again, written above the stack's top and not counted.
+                    let two = mask != 0;
+                    let second = if two { mask.trailing_zeros() as usize & (WIDTH - 1) } else { first };
+                    // Occlusion needs no order: any hit ends the walk.
+                    let (near, far) = if ANY || tn[first] <= tn[second] { (first, second) } else { (second, first) };
+                    prefetch_child(prefetch, nodes, c[far], leaf_at);
+                    stack[sp].write((c[far], tn[far]));
+                    self.sp = sp + usize::from(two);
+                    self.cur = c[near];
                     self.fresh = true;
-                    prefetch_child(interleaved, nodes, c[first], prefetch_leaf);
+                    prefetch_child(interleaved, nodes, c[near], leaf_at);
                     return true;
                 }
                 let second = mask.trailing_zeros() as usize & (WIDTH - 1);
                 mask &= mask - 1;
-                if mask == 0 {
-                    // Occlusion needs no order: any hit ends the walk.
-                    let (near, far) = if ANY || tn[first] <= tn[second] { (first, second) } else { (second, first) };
-                    prefetch_child(prefetch, nodes, c[far], prefetch_leaf);
-                    stack[sp].write((c[far], tn[far]));
-                    self.sp = sp + 1;
-                    self.cur = c[near];
-                    self.fresh = true;
-                    prefetch_child(interleaved, nodes, c[near], prefetch_leaf);
-                    return true;
-                }
-                // Three or more children: push all, sort the new entries so that the nearest is on top.
+                // Three or more children: push all, the nearest on top.
                 pushed_now = true;
-                let base = sp;
-                stack[sp].write((c[first], tn[first]));
-                stack[sp + 1].write((c[second], tn[second]));
-                sp += 2;
-                prefetch_child(prefetch, nodes, c[first], prefetch_leaf);
-                prefetch_child(prefetch, nodes, c[second], prefetch_leaf);
-                while mask != 0 {
-                    let k = mask.trailing_zeros() as usize & (WIDTH - 1);
-                    mask &= mask - 1;
-                    prefetch_child(prefetch, nodes, c[k], prefetch_leaf);
-                    stack[sp].write((c[k], tn[k]));
-                    sp += 1;
-                }
-                if !ANY {
-                    // SAFETY: entries base..sp were written just above.
-                    let top = unsafe { std::slice::from_raw_parts_mut(stack.as_mut_ptr().add(base) as *mut (u32, f32), sp - base) };
-                    for i in 1..top.len() {
-                        let mut j = i;
-                        while j > 0 && top[j - 1].1 < top[j].1 {
-                            top.swap(j - 1, j);
-                            j -= 1;
-                        }
+                if ANY {
+                    stack[sp].write((c[first], tn[first]));
+                    stack[sp + 1].write((c[second], tn[second]));
+                    sp += 2;
+                    prefetch_child(prefetch, nodes, c[first], leaf_at);
+                    prefetch_child(prefetch, nodes, c[second], leaf_at);
+                    while mask != 0 {
+                        let k = mask.trailing_zeros() as usize & (WIDTH - 1);
+                        mask &= mask - 1;
+                        prefetch_child(prefetch, nodes, c[k], leaf_at);
+                        stack[sp].write((c[k], tn[k]));
+                        sp += 1;
                     }
+                } else {
+                    // Each entry straight to its place in the order the insertion sort of the
+                    // entries in bit order gave (see `entries_below`): that sort's branches on
+                    // the distances were mispredicted.
+                    let hits = mask | 1 << first | 1 << second;
+                    let mut rest = hits;
+                    while rest != 0 {
+                        let k = rest.trailing_zeros() as usize & (WIDTH - 1);
+                        rest &= rest - 1;
+                        prefetch_child(prefetch, nodes, c[k], leaf_at);
+                        stack[sp + entries_below::<AVX>(&tn, hits, k)].write((c[k], tn[k]));
+                    }
+                    sp += hits.count_ones() as usize;
                 }
             }
         } else if cur != EMPTY_CHILD && leaf(cur, t_max) {
