@@ -348,11 +348,12 @@ impl KernelGeometry {
             crate::accel::prefetch(p, 1);
             crate::accel::prefetch((p as *const u8).wrapping_add(std::mem::size_of::<T>() - 1), 1);
         }
-        let lanes = || (0..LANES).filter(move |&l| active & (1 << l) != 0).filter_map(|l| mesh(prim[l]));
-        for (_, m, t) in lanes() {
+        // Each lane's mesh found once (a search of the mesh starts), used by both passes.
+        let hit: [_; LANES] = std::array::from_fn(|l| if active & (1 << l) != 0 { mesh(prim[l]) } else { None });
+        for &(_, m, t) in hit.iter().flatten() {
             ask(m.indices.as_ptr().wrapping_add(t));
         }
-        for (s, m, t) in lanes() {
+        for &(s, m, t) in hit.iter().flatten() {
             let Some(idx) = m.indices.get(t) else { continue };
             for &i in idx {
                 ask(m.positions.as_ptr().wrapping_add(i as usize));
