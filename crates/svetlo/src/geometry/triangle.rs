@@ -21,34 +21,20 @@ impl WatertightRay {
     #[inline(always)]
     pub fn new(o: Vec3, d: Vec3) -> Self {
         let a = d.abs();
-        let kz = if a.x > a.y {
-            if a.x > a.z {
-                0
-            } else {
-                2
-            }
-        } else if a.y > a.z {
-            1
-        } else {
-            2
-        };
-        // Matches rather than table look-ups: they compile to selects, with no bounds checks.
-        let (mut kx, mut ky) = match kz {
-            0 => (1, 2),
-            1 => (2, 0),
-            _ => (0, 1),
-        };
-        let comp = |k: usize| match k {
-            0 => d.x,
-            1 => d.y,
-            _ => d.z,
-        };
-        let dz = comp(kz);
-        if dz < 0.0 {
-            std::mem::swap(&mut kx, &mut ky);
-        }
+        // The dominant axis and its permutation without branches: which axis dominates is a
+        // coin toss for incoherent rays, and the branches it compiled to were 5 % of a
+        // render's mispredictions (the 1M-triangle mesh, one set-up per traced ray). The
+        // same choice as the nested comparisons `x > y ? (x > z ? 0 : 2) : (y > z ? 1 : 2)`.
+        let (x_y, x_z, y_z) = (a.x > a.y, a.x > a.z, a.y > a.z);
+        let kz = usize::from(x_y) * (2 - 2 * usize::from(x_z)) + usize::from(!x_y) * (2 - usize::from(y_z));
+        // (kz + 1) % 3 and (kz + 2) % 3, by table: kz < 3, so `& 3` only drops the check.
+        let (kx, ky) = ([1, 2, 0, 0][kz & 3], [2, 0, 1, 0][kz & 3]);
+        let comp = [d.x, d.y, d.z, 0.0];
+        let dz = comp[kz & 3];
+        // A negative dz swaps kx and ky (the winding stays that of the +z view).
+        let (kx, ky) = if dz < 0.0 { (ky, kx) } else { (kx, ky) };
         let sz = 1.0 / dz;
-        WatertightRay { o, kx, ky, kz, sx: comp(kx) / dz, sy: comp(ky) / dz, sz }
+        WatertightRay { o, kx, ky, kz, sx: comp[kx & 3] / dz, sy: comp[ky & 3] / dz, sz }
     }
 
     /// Returns (t, b1, b2) with the hit point `(1-b1-b2) p0 + b1 p1 + b2 p2`.
@@ -118,6 +104,40 @@ mod tests {
         assert!((b1 - 0.1).abs() < 1e-6 && (b2 - 0.6).abs() < 1e-6, "barycentrics ({b1}, {b2})");
         let r = WatertightRay::new(Vec3::new(0.75, 0.75, 1.0), Vec3::new(0.0, 0.0, -1.0));
         assert!(r.intersect(p0, p1, p2, f32::INFINITY).is_none());
+    }
+
+    #[test]
+    fn permutation_is_the_nested_choice() {
+        // The branch-free set-up against the nested comparisons it replaces, ties, zeros,
+        // signed zeros and infinities included.
+        let vals = [0.0f32, -0.0, 1.0, -1.0, 2.0, -2.0, 0.5, f32::INFINITY, f32::NEG_INFINITY, f32::MIN_POSITIVE];
+        for &x in &vals {
+            for &y in &vals {
+                for &z in &vals {
+                    let d = Vec3::new(x, y, z);
+                    let a = d.abs();
+                    let kz = if a.x > a.y {
+                        if a.x > a.z {
+                            0
+                        } else {
+                            2
+                        }
+                    } else if a.y > a.z {
+                        1
+                    } else {
+                        2
+                    };
+                    let (mut kx, mut ky) = ((kz + 1) % 3, (kz + 2) % 3);
+                    if d[kz] < 0.0 {
+                        std::mem::swap(&mut kx, &mut ky);
+                    }
+                    let r = WatertightRay::new(Vec3::ZERO, d);
+                    assert_eq!((r.kx, r.ky, r.kz), (kx, ky, kz), "{d}");
+                    let same = |p: f32, q: f32| p.to_bits() == q.to_bits() || (p.is_nan() && q.is_nan());
+                    assert!(same(r.sx, d[kx] / d[kz]) && same(r.sy, d[ky] / d[kz]) && same(r.sz, 1.0 / d[kz]), "{d}");
+                }
+            }
+        }
     }
 
     #[test]
