@@ -37,6 +37,9 @@ pub struct Accel {
     pub(super) prefetch: bool,
     /// The CPU has AVX (and POPCNT): node tests take all eight children at once.
     pub(super) avx: bool,
+    /// With `avx`, the CPU has AVX-512F and VL too: the interleaved walks take their copy
+    /// compiled with them (`trace_lanes_avx512`).
+    pub(super) avx512: bool,
     /// The hierarchy is large enough for alike rays to be walked as one (`accel/coherent.rs`).
     pub(super) coherent: bool,
 }
@@ -189,7 +192,9 @@ impl Accel {
             (tri_nodes.into_slice(), tris.into_slice(), sph_nodes.into_slice(), PagedSlice::new(spheres), sdf_nodes.into_slice());
         // Read once per closest hit, at a random place: on huge pages too.
         let tri_mesh = PagedSlice::new(tri_mesh);
-        Accel { tri_nodes, tris, meshes, tri_mesh, sph_nodes, spheres, sph_shapes, sdf_nodes, grids, voxels, bounds, prefetch, avx: has_avx(), coherent }
+        let avx = has_avx();
+        let avx512 = avx && crate::cpu::avx512();
+        Accel { tri_nodes, tris, meshes, tri_mesh, sph_nodes, spheres, sph_shapes, sdf_nodes, grids, voxels, bounds, prefetch, avx, avx512, coherent }
     }
 
     pub fn bounds(&self) -> Aabb {
@@ -328,7 +333,7 @@ impl Accel {
                 if self.coherent && active.count_ones() >= COHERENT_MIN {
                     self.trace_coherent_avx(rays, active, done)
                 } else {
-                    self.trace_lanes_avx::<false>(rays, active, done)
+                    self.trace_lanes::<false>(rays, active, done)
                 }
             };
             return hits;
@@ -342,10 +347,50 @@ impl Accel {
         if self.avx && self.prefetch && !self.tri_nodes.is_empty() {
             let mut blocked = 0;
             // SAFETY: `avx` is set only when the CPU reports AVX and POPCNT.
-            unsafe { self.trace_lanes_avx::<true>(rays, active, |l, hit| blocked |= (hit.is_some() as u8) << l) };
+            unsafe { self.trace_lanes::<true>(rays, active, |l, hit| blocked |= (hit.is_some() as u8) << l) };
             return blocked;
         }
         (0..RAY_LANES).filter(|&l| active & (1 << l) != 0 && self.occluded(&rays[l])).fold(0, |m, l| m | 1 << l)
+    }
+
+    /// [`Accel::trace_lanes_body`] in the copy for this CPU.
+    ///
+    /// # Safety
+    /// The CPU must support AVX and POPCNT.
+    #[cfg(target_arch = "x86_64")]
+    #[inline(always)]
+    unsafe fn trace_lanes<const ANY: bool>(&self, rays: &[Ray; RAY_LANES], active: u8, done: impl FnMut(usize, Option<PrimHit>)) {
+        // SAFETY: the caller's contract; `avx512` is set only where the CPU has AVX-512F and VL too.
+        unsafe {
+            if self.avx512 {
+                self.trace_lanes_avx512::<ANY>(rays, active, done)
+            } else {
+                self.trace_lanes_avx::<ANY>(rays, active, done)
+            }
+        }
+    }
+
+    /// # Safety
+    /// The CPU must support AVX and POPCNT.
+    #[cfg(target_arch = "x86_64")]
+    #[target_feature(enable = "avx,popcnt")]
+    unsafe fn trace_lanes_avx<const ANY: bool>(&self, rays: &[Ray; RAY_LANES], active: u8, done: impl FnMut(usize, Option<PrimHit>)) {
+        // SAFETY: this function runs only on CPUs with AVX and POPCNT.
+        unsafe { self.trace_lanes_body::<ANY, false>(rays, active, done) }
+    }
+
+    /// The same walks compiled with AVX-512VL: the same operations (no FMA is enabled, so no
+    /// rounding changes), with 32 vector registers where AVX has 16, so that a lane's ray
+    /// stays in registers through a leaf's blocks instead of being copied to the stack at
+    /// every leaf.
+    ///
+    /// # Safety
+    /// The CPU must support AVX2, POPCNT, AVX-512F and AVX-512VL.
+    #[cfg(target_arch = "x86_64")]
+    #[target_feature(enable = "avx,avx2,popcnt,avx512f,avx512vl")]
+    unsafe fn trace_lanes_avx512<const ANY: bool>(&self, rays: &[Ray; RAY_LANES], active: u8, done: impl FnMut(usize, Option<PrimHit>)) {
+        // SAFETY: this function runs only on CPUs with these sets.
+        unsafe { self.trace_lanes_body::<ANY, true>(rays, active, done) }
     }
 
     /// `trace` of each active lane, the triangle walks interleaved (see `intersect_lanes`):
@@ -354,11 +399,15 @@ impl Accel {
     /// out read each lane's fields, just stored one by one, with wide loads (a
     /// store-forwarding stall, 22 % of the occlusion walk's samples on bsdf_spheres).
     ///
+    /// `COPY` only tells the two copies apart: each then has closures of its own, inlined into
+    /// it, where closures shared by both stayed out of line, compiled without AVX (the
+    /// intrinsics in them became calls: three times the render's time).
+    ///
     /// # Safety
-    /// The CPU must support AVX and POPCNT.
+    /// The CPU must support AVX and POPCNT, and the caller must be compiled with them.
     #[cfg(target_arch = "x86_64")]
-    #[target_feature(enable = "avx,popcnt")]
-    unsafe fn trace_lanes_avx<const ANY: bool>(&self, rays: &[Ray; RAY_LANES], active: u8, mut done: impl FnMut(usize, Option<PrimHit>)) {
+    #[inline(always)]
+    unsafe fn trace_lanes_body<const ANY: bool, const COPY: bool>(&self, rays: &[Ray; RAY_LANES], active: u8, mut done: impl FnMut(usize, Option<PrimHit>)) {
         use super::wide::{Walk, WalkStack};
         use std::mem::MaybeUninit;
         struct Lane {
@@ -433,7 +482,7 @@ impl Accel {
 const COHERENT_MIN: u32 = 4;
 
 impl Accel {
-    /// [`Accel::trace_lanes_avx`] for closest hits, the rays walked as one where they are
+    /// [`Accel::trace_lanes`] for closest hits, the rays walked as one where they are
     /// alike (one octant, near directions and origins: `accel/coherent.rs`), else interleaved. Each ray's hit is
     /// the one its single walk finds, bit for bit: a ray whose nearest hit may tie with
     /// another, or that met a triangle on an edge, is walked again alone.
@@ -448,7 +497,7 @@ impl Accel {
         let b = self.bounds;
         let Some(c) = (unsafe { Coherent::new(rays, active, (b.max - b.min).max_element()) }) else {
             // SAFETY: as above.
-            return unsafe { self.trace_lanes_avx::<false>(rays, active, done) };
+            return unsafe { self.trace_lanes::<false>(rays, active, done) };
         };
         // SAFETY: as above.
         let f = unsafe { walk(&self.tri_nodes, &self.tris, &c, active, self.prefetch, |code| self.tris_at(code)) };
@@ -470,7 +519,7 @@ impl Accel {
         }
         if again != 0 {
             // SAFETY: as above.
-            unsafe { self.trace_lanes_avx::<false>(rays, again, done) };
+            unsafe { self.trace_lanes::<false>(rays, again, done) };
         }
     }
 

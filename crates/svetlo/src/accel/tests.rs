@@ -161,6 +161,12 @@ fn run(shapes: &[Geometry], rays: &[Ray]) -> usize {
         accel.prefetch = interleaved;
         check_lanes(&accel, rays);
     }
+    if accel.avx512 {
+        // The interleaved walks' AVX copy too (the AVX-512 one ran above).
+        accel.avx512 = false;
+        accel.prefetch = true;
+        check_lanes(&accel, rays);
+    }
     accel.avx = false;
     accel.prefetch = !prefetch;
     for r in rays {
