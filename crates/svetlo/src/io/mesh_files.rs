@@ -646,18 +646,36 @@ fn check_finite(path: &Path, m: &TriangleMesh) -> Result<()> {
 /// normals. Vertices that only touch degenerate triangles get a zero normal, which the mesh
 /// treats as "use the geometric normal".
 pub fn compute_vertex_normals(m: &mut TriangleMesh) {
+    // Faces a chunk at a time: their normals and corner cosines, then the cosines' arc cosines
+    // as vector lanes (libm's bits, `math::acosf`: the call per corner was most of this), then
+    // the sums in face order (the same additions in the same order).
+    const CHUNK: usize = 256;
     let mut acc = vec![Vec3::ZERO; m.positions.len()];
-    for t in &m.indices {
-        let p = t.map(|i| m.positions[i as usize]);
-        let n = (p[1] - p[0]).cross(p[2] - p[0]).normalize_or_zero();
-        if n == Vec3::ZERO {
-            continue;
+    let mut normals = [Vec3::ZERO; CHUNK];
+    let mut angles = [0.0f32; 3 * CHUNK];
+    for faces in m.indices.chunks(CHUNK) {
+        for (j, t) in faces.iter().enumerate() {
+            let p = t.map(|i| m.positions[i as usize]);
+            let (a, b, c) = (p[1] - p[0], p[2] - p[0], p[2] - p[1]);
+            normals[j] = a.cross(b).normalize_or_zero();
+            // Each edge normalized once: the corner at its other end sees its negation, which
+            // is the negated difference normalized, exactly (a zero's sign aside, which the
+            // dot products' values and acos(+-0) do not see).
+            let (ua, ub, uc) = (a.normalize_or_zero(), b.normalize_or_zero(), c.normalize_or_zero());
+            let cosines = [ua.dot(ub), uc.dot(-ua), (-ub).dot(-uc)];
+            for (k, cos) in cosines.into_iter().enumerate() {
+                angles[3 * j + k] = cos.clamp(-1.0, 1.0);
+            }
         }
-        for k in 0..3 {
-            let e1 = (p[(k + 1) % 3] - p[k]).normalize_or_zero();
-            let e2 = (p[(k + 2) % 3] - p[k]).normalize_or_zero();
-            let angle = e1.dot(e2).clamp(-1.0, 1.0).acos();
-            acc[t[k] as usize] += n * angle;
+        let angles = &mut angles[..3 * faces.len()];
+        crate::math::acosf::acosf_in_place(angles);
+        for ((t, n), angle) in faces.iter().zip(&normals).zip(angles.chunks_exact(3)) {
+            if *n == Vec3::ZERO {
+                continue;
+            }
+            for k in 0..3 {
+                acc[t[k] as usize] += *n * angle[k];
+            }
         }
     }
     m.normals = acc.into_iter().map(|n| n.normalize_or_zero()).collect();
@@ -676,6 +694,54 @@ mod tests {
     fn same(a: &tobj::Mesh, b: &tobj::Mesh) -> bool {
         let bits = |v: &[f32]| v.iter().map(|x| x.to_bits()).collect::<Vec<_>>();
         bits(&a.positions) == bits(&b.positions) && bits(&a.normals) == bits(&b.normals) && bits(&a.texcoords) == bits(&b.texcoords) && a.indices == b.indices
+    }
+
+    /// The chunked vertex normals (edges normalized once, arc cosines as vector lanes) are the
+    /// per-corner computation's bits, on a random mesh with degenerate and repeated triangles,
+    /// where libm is glibc's (see `math::acosf`).
+    #[test]
+    fn vertex_normals_are_the_per_corner_ones() {
+        #[cfg(all(target_arch = "x86_64", target_os = "linux", target_env = "gnu"))]
+        {
+            use crate::sampling::rng::Pcg32;
+            let mut rng = Pcg32::new(5, 9);
+            let mut m = TriangleMesh::default();
+            for i in 0..3000 {
+                let v = Vec3::new(rng.next_f32(), rng.next_f32(), rng.next_f32());
+                // Some vertices coincide (zero edges), some lie on a line with others.
+                m.positions.push(match i % 50 {
+                    7 => m.positions[i - 1],
+                    8 => m.positions[i - 2] * 2.0 - m.positions[i - 3],
+                    _ => v * 2.0 - 1.0,
+                });
+            }
+            let pick = |rng: &mut Pcg32| (rng.next_f32() * 3000.0) as u32 % 3000;
+            for i in 0..2000 {
+                let t = [pick(&mut rng), pick(&mut rng), pick(&mut rng)];
+                m.indices.push(t);
+                if i % 9 == 0 {
+                    m.indices.push([i % 3000, i % 3000 + 1, i % 3000 + 2]);
+                    m.indices.push([t[1], t[1], t[0]]);
+                }
+            }
+            let mut acc = vec![Vec3::ZERO; m.positions.len()];
+            for t in &m.indices {
+                let p = t.map(|i| m.positions[i as usize]);
+                let n = (p[1] - p[0]).cross(p[2] - p[0]).normalize_or_zero();
+                if n == Vec3::ZERO {
+                    continue;
+                }
+                for k in 0..3 {
+                    let e1 = (p[(k + 1) % 3] - p[k]).normalize_or_zero();
+                    let e2 = (p[(k + 2) % 3] - p[k]).normalize_or_zero();
+                    acc[t[k] as usize] += n * e1.dot(e2).clamp(-1.0, 1.0).acos();
+                }
+            }
+            let want: Vec<[u32; 3]> = acc.iter().map(|n| n.normalize_or_zero().to_array().map(f32::to_bits)).collect();
+            compute_vertex_normals(&mut m);
+            let got: Vec<[u32; 3]> = m.normals.iter().map(|n| n.to_array().map(f32::to_bits)).collect();
+            assert!(got == want);
+        }
     }
 
     /// The single-object reader gives tobj's mesh bit for bit where it reads a file, and
