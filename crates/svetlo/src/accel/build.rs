@@ -140,19 +140,58 @@ impl Box3 {
     }
 }
 
+/// A bin's box as one row of eight lanes: the lower corner, then the upper corner negated, so
+/// that a union is one vector minimum where the CPU has AVX (min(-a, -b) is -max(a, b), a
+/// zero's sign aside, which neither a comparison nor the surface area's value sees).
+#[derive(Clone, Copy, Debug)]
+#[repr(C, align(32))]
+struct BinBox {
+    lo: Vec3A,
+    neg_hi: Vec3A,
+}
+
+impl BinBox {
+    const EMPTY: BinBox = BinBox { lo: Vec3A::INFINITY, neg_hi: Vec3A::INFINITY };
+
+    #[inline(always)]
+    fn of(b: &Box3) -> BinBox {
+        BinBox { lo: b.min, neg_hi: -b.max }
+    }
+    #[inline(always)]
+    fn union(self, o: BinBox) -> BinBox {
+        BinBox { lo: self.lo.min(o.lo), neg_hi: self.neg_hi.min(o.neg_hi) }
+    }
+    /// `union` in one AVX instruction (the same lanes).
+    ///
+    /// # Safety
+    /// The CPU must have AVX; called only from `#[target_feature(enable = "avx")]` code, into
+    /// which it inlines.
+    #[cfg(target_arch = "x86_64")]
+    #[inline(always)]
+    unsafe fn union_avx(&mut self, o: &BinBox) {
+        use std::arch::x86_64::*;
+        let (a, b) = (self as *mut BinBox as *mut f32, o as *const BinBox as *const f32);
+        _mm256_store_ps(a, _mm256_min_ps(_mm256_load_ps(a), _mm256_load_ps(b)));
+    }
+    #[inline(always)]
+    fn box3(self) -> Box3 {
+        Box3 { min: self.lo, max: -self.neg_hi }
+    }
+}
+
 /// The split search's bins, kept by a thread from node to node: each search empties the bins it
 /// filled (a node of a few primitives fills a few of the 3 x 32), where every node filled all of
 /// them anew (6 KiB of stores and copies, on nodes of mostly a few dozen primitives).
 struct Bins {
-    boxes: [[Box3; BINS]; 3],
+    boxes: [[BinBox; BINS]; 3],
     /// The second set of boxes of large nodes (see `best_split`).
-    odd: [[Box3; BINS]; 3],
+    odd: [[BinBox; BINS]; 3],
     counts: [[u32; BINS]; 3],
 }
 
 impl Bins {
     fn new() -> Bins {
-        Bins { boxes: [[Box3::EMPTY; BINS]; 3], odd: [[Box3::EMPTY; BINS]; 3], counts: [[0; BINS]; 3] }
+        Bins { boxes: [[BinBox::EMPTY; BINS]; 3], odd: [[BinBox::EMPTY; BINS]; 3], counts: [[0; BINS]; 3] }
     }
 
     /// Adds `o`'s boxes and counts to these (the odd sets are left as they are).
@@ -494,20 +533,20 @@ fn best_split(bins: &mut Bins, boxes: &[Box3], lo: Vec3A, scale: Vec3A, g: usize
         let (bin_b, bin_n, occupied) = (&bin_b[axis], &bin_n[axis], occupied[axis]);
         // The cost of the bins from each occupied one up (bin 0 never starts a right side).
         let mut right_cost = [0.0f32; BINS];
-        let (mut acc, mut cnt) = (Box3::EMPTY, 0usize);
+        let (mut acc, mut cnt) = (BinBox::EMPTY, 0usize);
         let mut m = occupied & !1;
         while m != 0 {
             let k = 31 - m.leading_zeros() as usize;
             m &= !(1 << k);
             acc = acc.union(bin_b[k]);
             cnt += bin_n[k] as usize;
-            right_cost[k] = acc.surface_area() * groups_of(cnt);
+            right_cost[k] = acc.box3().surface_area() * groups_of(cnt);
         }
         // Split candidates: between an occupied bin `a` and the next occupied one `b`, every
         // split in a+1..=b has the same two sides, hence the same cost, and the first of equal
         // costs wins: only a+1 is tried. An empty bin changes neither box nor count, so the
         // unions and costs are those of a sweep over all bins.
-        let (mut acc, mut cnt) = (Box3::EMPTY, 0usize);
+        let (mut acc, mut cnt) = (BinBox::EMPTY, 0usize);
         let mut m = occupied;
         while m != 0 {
             let a = m.trailing_zeros() as usize;
@@ -521,7 +560,7 @@ fn best_split(bins: &mut Bins, boxes: &[Box3], lo: Vec3A, scale: Vec3A, g: usize
             if !right_cost[b].is_finite() {
                 continue;
             }
-            let cost = acc.surface_area() * groups_of(cnt) + right_cost[b];
+            let cost = acc.box3().surface_area() * groups_of(cnt) + right_cost[b];
             if best.is_none_or(|x| cost < x.0) {
                 best = Some((cost, axis, a + 1));
             }
@@ -533,7 +572,7 @@ fn best_split(bins: &mut Bins, boxes: &[Box3], lo: Vec3A, scale: Vec3A, g: usize
         while m != 0 {
             let k = m.trailing_zeros() as usize;
             m &= m - 1;
-            set[k] = Box3::EMPTY;
+            set[k] = BinBox::EMPTY;
             n[k] = 0;
         }
     }
@@ -542,16 +581,45 @@ fn best_split(bins: &mut Bins, boxes: &[Box3], lo: Vec3A, scale: Vec3A, g: usize
 
 /// Bins `boxes` into `bins` (empty bins of one set, the odd set left empty).
 fn fill_bins(bins: &mut Bins, boxes: &[Box3], lo: Vec3A, scale: Vec3A) {
-    let Bins { boxes: bin_b, odd: odd_b, counts: bin_n } = bins;
-    let mut add = |bin_b: &mut [[Box3; BINS]; 3], b: &Box3| {
-        let k = bin_indices(b.center(), lo, scale);
-        for axis in 0..3 {
-            // The mask keeps the index (at most BINS - 1) and drops the bounds checks.
-            let i = k[axis] & (BINS - 1);
-            bin_b[axis][i] = bin_b[axis][i].union(*b);
-            bin_n[axis][i] += 1;
+    #[cfg(target_arch = "x86_64")]
+    if std::is_x86_feature_detected!("avx") {
+        // SAFETY: the CPU has AVX.
+        unsafe { fill_bins_avx(bins, boxes, lo, scale) };
+        return;
+    }
+    fill_bins_with::<false>(bins, boxes, lo, scale);
+}
+
+/// [`fill_bins`] compiled for AVX: each bin's union one instruction (see [`BinBox`]).
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx")]
+unsafe fn fill_bins_avx(bins: &mut Bins, boxes: &[Box3], lo: Vec3A, scale: Vec3A) {
+    fill_bins_with::<true>(bins, boxes, lo, scale);
+}
+
+/// Adds one box to a set of bins and its counts (`AVX` only inside AVX code).
+#[inline(always)]
+fn bin_one<const AVX: bool>(set: &mut [[BinBox; BINS]; 3], counts: &mut [[u32; BINS]; 3], b: &Box3, lo: Vec3A, scale: Vec3A) {
+    let k = bin_indices(b.center(), lo, scale);
+    let row = BinBox::of(b);
+    for axis in 0..3 {
+        // The mask keeps the index (at most BINS - 1) and drops the bounds checks.
+        let i = k[axis] & (BINS - 1);
+        #[cfg(target_arch = "x86_64")]
+        if AVX {
+            // SAFETY: AVX = true is only instantiated inside `fill_bins_avx`.
+            unsafe { set[axis][i].union_avx(&row) };
+            counts[axis][i] += 1;
+            continue;
         }
-    };
+        set[axis][i] = set[axis][i].union(row);
+        counts[axis][i] += 1;
+    }
+}
+
+#[inline(always)]
+fn fill_bins_with<const AVX: bool>(bins: &mut Bins, boxes: &[Box3], lo: Vec3A, scale: Vec3A) {
+    let Bins { boxes: bin_b, odd: odd_b, counts: bin_n } = bins;
     if boxes.len() >= TWO_BIN_SETS_MIN {
         // Neighbours often land in the same bin: two sets of boxes (even and odd primitives)
         // halve the chains of unions through memory. Unions are exact in any order: the
@@ -559,11 +627,11 @@ fn fill_bins(bins: &mut Bins, boxes: &[Box3], lo: Vec3A, scale: Vec3A) {
         let pairs = boxes.chunks_exact(2);
         let rest = pairs.remainder();
         for pair in pairs {
-            add(bin_b, &pair[0]);
-            add(odd_b, &pair[1]);
+            bin_one::<AVX>(bin_b, bin_n, &pair[0], lo, scale);
+            bin_one::<AVX>(odd_b, bin_n, &pair[1], lo, scale);
         }
         for b in rest {
-            add(bin_b, b);
+            bin_one::<AVX>(bin_b, bin_n, b, lo, scale);
         }
         // The counts are both sets': an odd bin in use is an occupied one.
         let occupied = occupied_bins(bin_n);
@@ -573,12 +641,12 @@ fn fill_bins(bins: &mut Bins, boxes: &[Box3], lo: Vec3A, scale: Vec3A) {
                 let k = m.trailing_zeros() as usize;
                 m &= m - 1;
                 set[k] = set[k].union(odd[k]);
-                odd[k] = Box3::EMPTY;
+                odd[k] = BinBox::EMPTY;
             }
         }
     } else {
         for b in boxes {
-            add(bin_b, b);
+            bin_one::<AVX>(bin_b, bin_n, b, lo, scale);
         }
     }
 }
