@@ -653,7 +653,26 @@ fn fill_bins_with<const AVX: bool>(bins: &mut Bins, boxes: &[Box3], lo: Vec3A, s
 
 /// The occupied bins of each axis (a bin's occupancy in one bit): what is swept and emptied.
 fn occupied_bins(counts: &[[u32; BINS]; 3]) -> [u32; 3] {
-    counts.map(|n| (0..BINS).fold(0u32, |m, k| m | u32::from(n[k] != 0) << k))
+    counts.map(|n| {
+        #[cfg(target_arch = "x86_64")]
+        {
+            use std::arch::x86_64::*;
+            // The 32 counts compared with 0 four at a time, narrowed to bytes, their sign bits
+            // gathered: a few instructions where the fold took a hundred and fifty.
+            const _: () = assert!(BINS == 32);
+            // SAFETY: SSE2 is part of the x86_64 baseline; the eight loads of four read the 32 counts.
+            unsafe {
+                let p = n.as_ptr() as *const __m128i;
+                let zero = _mm_setzero_si128();
+                let empty = |k: usize| _mm_cmpeq_epi32(_mm_loadu_si128(p.add(k)), zero);
+                let low = _mm_packs_epi16(_mm_packs_epi32(empty(0), empty(1)), _mm_packs_epi32(empty(2), empty(3)));
+                let high = _mm_packs_epi16(_mm_packs_epi32(empty(4), empty(5)), _mm_packs_epi32(empty(6), empty(7)));
+                !(_mm_movemask_epi8(low) as u32 | (_mm_movemask_epi8(high) as u32) << 16)
+            }
+        }
+        #[cfg(not(target_arch = "x86_64"))]
+        (0..BINS).fold(0u32, |m, k| m | u32::from(n[k] != 0) << k)
+    })
 }
 
 #[cfg(test)]
@@ -741,6 +760,28 @@ mod tests {
         assert!(MEDIAN_SPLITS.load(std::sync::atomic::Ordering::Relaxed) > 0, "the deep set did not reach the median splits");
         same_tree(&soup[..1], tri);
         same_tree(&[], tri);
+    }
+
+    #[test]
+    fn occupied_bins_are_the_nonzero_counts() {
+        let mut rng = Pcg32::new(3, 5);
+        for _ in 0..2000 {
+            let mut counts = [[0u32; BINS]; 3];
+            for row in &mut counts {
+                for c in row.iter_mut() {
+                    // Mostly empty bins, some counts with only high bits set.
+                    *c = match rng.next_u32() % 8 {
+                        0 => rng.next_u32(),
+                        1 => 1,
+                        2 => 0x8000_0000,
+                        3 => 0x1_0000,
+                        _ => 0,
+                    };
+                }
+            }
+            let want = counts.map(|n| (0..BINS).fold(0u32, |m, k| m | u32::from(n[k] != 0) << k));
+            assert_eq!(occupied_bins(&counts), want);
+        }
     }
 
     #[test]
