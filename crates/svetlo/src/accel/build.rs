@@ -456,40 +456,28 @@ fn bin_indices(c: Vec3A, lo: Vec3A, scale: Vec3A) -> [usize; 3] {
 }
 
 /// Whether a centroid's bin on the split axis is left of the split bin, as
-/// `bin_indices(c, lo, scale)[axis] < bin`, with the same result: on x86_64 a compare of all
-/// three indices at once and one bit of the mask, not a trip of the indices through memory.
+/// `bin_indices(c, lo, scale)[axis] < bin`, with the same result: for a split bin in
+/// 1..=BINS - 1, the clamped and truncated distance is below it exactly when the distance
+/// `(c - lo) * scale` is not at least it (a NaN, which the clamp makes 0, is not), so one
+/// compare of the distances (all three axes at once, one bit of the mask) does without the
+/// clamp and the conversion.
 struct SideTest {
     lo: Vec3A,
     scale: Vec3A,
     axis: usize,
-    bin: usize,
+    bin: Vec3A,
 }
 
 impl SideTest {
     fn new(lo: Vec3A, scale: Vec3A, axis: usize, bin: usize) -> SideTest {
-        SideTest { lo, scale, axis, bin }
+        debug_assert!((1..BINS).contains(&bin), "split bin {bin}");
+        SideTest { lo, scale, axis, bin: Vec3A::splat(bin as f32) }
     }
 
     #[inline(always)]
     fn left(&self, c: Vec3A) -> bool {
-        #[cfg(target_arch = "x86_64")]
-        {
-            use std::arch::x86_64::*;
-            let v = (c - self.lo) * self.scale;
-            // SAFETY: SSE2 is part of the x86_64 baseline.
-            let mask = unsafe {
-                // The clamp and truncation of `bin_indices`; the indices are in [0, BINS - 1],
-                // so a signed compare with `bin` (at most BINS) is the unsigned one.
-                let m = _mm_max_ps(_mm_min_ps(_mm_set1_ps((BINS - 1) as f32), v.into()), _mm_setzero_ps());
-                let i = _mm_cvttps_epi32(m);
-                _mm_movemask_ps(_mm_castsi128_ps(_mm_cmplt_epi32(i, _mm_set1_epi32(self.bin as i32))))
-            };
-            mask >> self.axis & 1 != 0
-        }
-        #[cfg(not(target_arch = "x86_64"))]
-        {
-            bin_indices(c, self.lo, self.scale)[self.axis] < self.bin
-        }
+        let v = (c - self.lo) * self.scale;
+        v.cmpge(self.bin).bitmask() >> self.axis & 1 == 0
     }
 }
 
@@ -781,6 +769,23 @@ mod tests {
             }
             let want = counts.map(|n| (0..BINS).fold(0u32, |m, k| m | u32::from(n[k] != 0) << k));
             assert_eq!(occupied_bins(&counts), want);
+        }
+    }
+
+    #[test]
+    fn side_test_is_the_bin_index_compare() {
+        let mut rng = Pcg32::new(9, 2);
+        let specials = [0.0f32, -0.0, 1e-30, -1e-30, 1e30, f32::INFINITY, f32::NEG_INFINITY, f32::NAN, 31.0, 30.999998, 1.0, 0.99999994];
+        for case in 0..200_000 {
+            let mut pick = |k: usize| match rng.next_u32() % 8 {
+                0 => specials[(rng.next_u32() as usize + k) % specials.len()],
+                _ => rng.next_f32() * 12.0 - 4.0,
+            };
+            let (c, lo) = (Vec3A::new(pick(0), pick(1), pick(2)), Vec3A::new(pick(3), pick(4), pick(5)));
+            let scale = Vec3A::new(pick(6), pick(7), pick(8)).abs() * 3.0;
+            let (axis, bin) = (case % 3, 1 + (case / 3) % (BINS - 1));
+            let want = bin_indices(c, lo, scale)[axis] < bin;
+            assert_eq!(SideTest::new(lo, scale, axis, bin).left(c), want, "c {c} lo {lo} scale {scale} axis {axis} bin {bin}");
         }
     }
 
