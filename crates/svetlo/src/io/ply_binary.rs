@@ -100,6 +100,58 @@ impl Payload<'_> {
     fn left(&self) -> usize {
         self.data.len() - self.at
     }
+
+    /// A vertex of three `float`s (x, y, z), as three `f32` reads give it.
+    #[inline(always)]
+    fn xyz(&mut self) -> Option<Vec3> {
+        let b = self.data.get(self.at..self.at + 12)?;
+        let big = self.big;
+        let p = Vec3::new(f32::from_bits(word(b, 0, big)), f32::from_bits(word(b, 4, big)), f32::from_bits(word(b, 8, big)));
+        self.at += 12;
+        Some(p)
+    }
+
+    /// A face of the common layout (a `uchar` count, `int` or `uint` indices: `item`) when it is
+    /// a triangle whose indices lie among the `nv` vertices, read as the general face loop reads
+    /// it (the fan of a triangle is itself); `None`, reading nothing, for anything else, which
+    /// that loop then reads (or refuses) as before.
+    #[inline(always)]
+    fn triangle(&mut self, item: Ty, nv: i64) -> Option<[u32; 3]> {
+        let b = self.data.get(self.at..self.at + 13)?;
+        if b[0] != 3 {
+            return None;
+        }
+        let (big, signed) = (self.big, item == Ty::I32);
+        let idx = [index(b, 1, big, signed), index(b, 5, big, signed), index(b, 9, big, signed)];
+        if idx.iter().any(|&i| i < 0 || i >= nv) {
+            return None;
+        }
+        self.at += 13;
+        Some([idx[0] as u32, idx[1] as u32, idx[2] as u32])
+    }
+}
+
+/// The four bytes of `b` at `at` as a word of the file's byte order (`b` holds them).
+#[inline(always)]
+fn word(b: &[u8], at: usize, big: bool) -> u32 {
+    let w = [b[at], b[at + 1], b[at + 2], b[at + 3]];
+    if big {
+        u32::from_be_bytes(w)
+    } else {
+        u32::from_le_bytes(w)
+    }
+}
+
+/// The index at `at` of `b`: `int` indices are signed (a negative one is out of range),
+/// `uint` ones are not.
+#[inline(always)]
+fn index(b: &[u8], at: usize, big: bool, signed: bool) -> i64 {
+    let u = word(b, at, big);
+    if signed {
+        i64::from(u as i32)
+    } else {
+        i64::from(u)
+    }
 }
 
 /// Where a vertex property goes: a slot of [`PLY_VERTEX_KEYS`] or the extras, in order.
@@ -192,6 +244,16 @@ pub fn read(bytes: &[u8], header: &Header, declared: &[(u64, u64)], payload: usi
     let uv = [("u", "v"), ("texture_u", "texture_v"), ("s", "t")].iter().find(|(a, b)| declared_key(a) && declared_key(b)).map(|(a, b)| (slot(a), slot(b)));
     let (x, y, z, nx, ny, nz) = (slot("x"), slot("y"), slot("z"), slot("nx"), slot("ny"), slot("nz"));
 
+    // The layout most exporters write (positions alone; triangles as a `uchar` count and 32-bit
+    // indices, nothing else per face) read a vertex and a face at a time: the field by field
+    // reads were most of a 1M-triangle file's read.
+    let xyz_only =
+        matches!(vfields[..], [VertexField::Slot(a, Ty::F32), VertexField::Slot(b, Ty::F32), VertexField::Slot(c, Ty::F32)] if (a, b, c) == (x, y, z));
+    let triangles = match ffields[..] {
+        [FaceField::Indices(Ty::U8, item @ (Ty::I32 | Ty::U32))] => Some(item),
+        _ => None,
+    };
+
     let mut data = Payload { data: bytes.get(payload..)?, at: 0, big };
     let ends = |what: &str, i: usize, n: usize| mesh_err(path, format!("invalid PLY: the file ends inside {what} {i} of {n}"));
     let mut mesh = TriangleMesh::default();
@@ -201,6 +263,11 @@ pub fn read(bytes: &[u8], header: &Header, declared: &[(u64, u64)], payload: usi
         if k == vi {
             mesh.positions.reserve(d.count);
             for i in 0..d.count {
+                if xyz_only {
+                    let Some(p) = data.xyz() else { return Some(Err(ends("vertex", i, d.count))) };
+                    mesh.positions.push(p);
+                    continue;
+                }
                 let mut v = [0.0f32; 12];
                 extra.clear();
                 for f in &vfields {
@@ -229,6 +296,12 @@ pub fn read(bytes: &[u8], header: &Header, declared: &[(u64, u64)], payload: usi
             let mut idx: Vec<i64> = Vec::new();
             mesh.indices.reserve(d.count);
             for i in 0..d.count {
+                if let Some(item) = triangles {
+                    if let Some(t) = data.triangle(item, nv) {
+                        mesh.indices.push(t);
+                        continue;
+                    }
+                }
                 extra.clear();
                 for f in &ffields {
                     match *f {
@@ -540,6 +613,53 @@ mod tests {
         let e = fast(&negative, false).expect("fast layout").err().expect("refused").to_string();
         assert!(e.contains("negative"), "{e}");
         assert!(load_ply_general(&negative, Path::new("t.ply"), false).is_err());
+    }
+
+    /// The common layout (x, y, z floats; a `uchar` count and `int` or `uint` indices), read a
+    /// vertex and a triangle at a time, with quads, indices out of range or negative, list
+    /// lengths of 0 and 255 and cuts among the triangles: the general reader's mesh or refusal.
+    #[test]
+    fn common_layout_is_the_general_reader() {
+        let mut rng = Rng(11);
+        for case in 0..200 {
+            let (big, item) = (case % 2 == 0, if case % 4 < 2 { Ty::I32 } else { Ty::U32 });
+            let (nv, nf) = (3 + rng.below(40) as usize, 1 + rng.below(60) as usize);
+            let head = format!(
+                "ply\nformat binary_{}_endian 1.0\nelement vertex {nv}\nproperty float x\nproperty float y\nproperty float z\nelement face {nf}\nproperty list uchar {} vertex_indices\nend_header\n",
+                if big { "big" } else { "little" },
+                if item == Ty::I32 { "int" } else { "uint" }
+            );
+            let mut bytes: Vec<u8> = head.into_bytes();
+            for _ in 0..3 * nv {
+                put(&mut bytes, Ty::F32, rng.below(1000) as f64 * 0.01 - 5.0, big);
+            }
+            for _ in 0..nf {
+                let n = match rng.below(40) {
+                    0 => 4,
+                    1 if case % 5 == 0 => [0, 255][rng.below(2) as usize],
+                    _ => 3,
+                };
+                put(&mut bytes, Ty::U8, n as f64, big);
+                for _ in 0..n {
+                    let i = match rng.below(200) {
+                        0 if case % 3 == 0 => nv as f64,
+                        1 if case % 3 == 0 => -1.0,
+                        _ => rng.below(nv as u64) as f64,
+                    };
+                    put(&mut bytes, item, i, big);
+                }
+            }
+            assert!(fast(&bytes, false).is_some(), "case {case}: not read by the fast path");
+            let start = bytes.len() - 13 * nf.min(3);
+            for end in [bytes.len(), start, start + 7] {
+                let b = &bytes[..end];
+                match (load_ply_bytes(b, Path::new("t.ply"), false), load_ply_general(b, Path::new("t.ply"), false)) {
+                    (Err(_), Err(_)) => {}
+                    (Ok(a), Ok(b)) => assert!(same(&a, &b), "case {case} end {end}"),
+                    (a, b) => panic!("case {case} end {end}: fast {:?}, general {:?}", a.err(), b.err()),
+                }
+            }
+        }
     }
 
     /// Layouts the fast path leaves to the general reader.

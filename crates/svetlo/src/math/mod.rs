@@ -1,5 +1,6 @@
 //! Vector math (glam, f32), orthonormal frames and sample warps.
 
+pub(crate) mod acosf;
 pub mod approx;
 pub(crate) mod expf;
 pub mod frame;
