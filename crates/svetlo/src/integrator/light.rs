@@ -234,10 +234,17 @@ impl Estimator {
             let mut going = 0u8;
             for l in lanes_of(active.into()) {
                 let Some(w) = walks[l].as_mut() else { continue };
-                let hit = packets.interaction(scene, &hits, l, w.walk.ray());
                 let path = &mut paths[l];
-                // (The vertices' densities are left out: light tracing reads none.)
-                if w.walk.arrive_unsettled(scene, hit.as_ref(), path) != Some(true) {
+                // (The vertices' densities are left out: light tracing reads none.) A constant
+                // diffuse surface's vertex is written from the hit at once.
+                let arrived = match packets.diffuse(&hits, l) {
+                    Some(d) => Some(w.walk.arrive_pushed(path, |ray, beta, path| d.push(ray, beta, path))),
+                    None => {
+                        let hit = packets.interaction(scene, &hits, l, w.walk.ray());
+                        w.walk.arrive_unsettled(scene, hit.as_ref(), path)
+                    }
+                };
+                if arrived != Some(true) {
                     continue;
                 }
                 let sampler = &mut samplers[l];

@@ -18,12 +18,18 @@
 //! nearer than a glass box's bottom) but cost ~5% more CPU than `PacketShadows` (Mitsuba
 //! cbox with dielectric boxes, 64², 256 spp).
 
+use super::vertex::push_written;
+use super::Vertex;
 use crate::accel::packet::{Hits8, PacketBvh, Rays8, LANES};
 use crate::bsdf::Material;
 use crate::geometry::mesh::TriangleFrame;
 use crate::geometry::{Geometry, Ray, SurfaceInteraction};
+use crate::light::Light;
 use crate::scene::Scene;
+use crate::spectrum::Rgb;
+use crate::texture::Texture;
 use glam::{Vec2, Vec3};
+use std::mem::MaybeUninit;
 
 /// Scenes with more triangles than this test shadow rays one at a time: eight rays then
 /// share few nodes (the path kernel's bound).
@@ -52,6 +58,46 @@ struct HitTriangle {
     /// The vertices' uvs (None: the mesh has none, uv = the barycentrics).
     uvs: Option<[Vec2; 3]>,
     shading: TriangleFrame,
+    /// Where the shape's material is diffuse of constant reflectance without surface
+    /// detail: the reflectance (clamped, as `Vertex::write_surface` takes it) and its area
+    /// light, so that the lockstep walks' vertices skip the shape's and material's lookups.
+    diffuse: Option<DiffuseSurface>,
+}
+
+/// A packet triangle's constant diffuse surface ([`ShadowPackets::diffuse`]).
+#[derive(Clone, Copy, Debug)]
+struct DiffuseSurface {
+    reflectance: Rgb,
+    light: Option<u32>,
+}
+
+/// A lane's hit on a triangle of constant diffuse material ([`ShadowPackets::diffuse`]).
+pub(crate) struct DiffuseHit<'a> {
+    tri: &'a HitTriangle,
+    surface: &'a DiffuseSurface,
+    /// The packet's hits and the lane's index (its distance and barycentrics read where the
+    /// walk stored them: copied here, they were read back in a wider word).
+    hits: &'a Hits8,
+    l: usize,
+}
+
+impl DiffuseHit<'_> {
+    /// `Vertex::push_surface(path, scene, &interaction, beta, 0.0)` for the hit's surface
+    /// record along `ray`, without the scene's lookups of its shape, material and light,
+    /// and without the record in memory: built by one call and read back by the next, its
+    /// fields were loaded in wider words than they had just been stored with (a
+    /// store-forwarding stall a vertex).
+    #[inline]
+    pub fn push(&self, ray: &Ray, beta: Rgb, path: &mut Vec<Vertex>) {
+        push_written(path, |dst| self.write(dst, ray, beta));
+    }
+
+    #[inline(never)]
+    fn write<'v>(&self, dst: &'v mut MaybeUninit<Vertex>, ray: &Ray, beta: Rgb) -> &'v mut Vertex {
+        let (h, l) = (self.hits, self.l);
+        let si = self.tri.interaction(h.t[l], h.b1[l], h.b2[l], ray);
+        Vertex::write_diffuse_surface(dst, &si, self.surface.reflectance, self.surface.light, beta, 0.0)
+    }
 }
 
 /// Closest hits of up to eight rays ([`ShadowPackets::closest`]).
@@ -80,10 +126,17 @@ impl ShadowPackets {
             if tris.len() + m.triangle_count() > MAX_TRIANGLES {
                 return None;
             }
+            let diffuse = match &scene.materials[s.material as usize] {
+                Material::Diffuse { reflectance: Texture::Constant(c) } if !s.detail => {
+                    let light = s.light.filter(|&li| matches!(scene.lights[li as usize], Light::Area(_)));
+                    Some(DiffuseSurface { reflectance: c.clamp(0.0, 1.0), light })
+                }
+                _ => None,
+            };
             tris.extend((0..m.triangle_count()).map(|t| {
                 let shading = TriangleFrame::new(s.flat.get(t).copied().flatten(), m, t);
                 let uvs = (!m.uvs.is_empty()).then(|| m.indices[t].map(|i| m.uvs[i as usize]));
-                HitTriangle { shape: shape as u32, prim: t as u32, p: m.vertices(t), uvs, shading }
+                HitTriangle { shape: shape as u32, prim: t as u32, p: m.vertices(t), uvs, shading, diffuse }
             }));
         }
         let bvh = PacketBvh::build(&tris.iter().map(|t| t.p).collect::<Vec<_>>());
@@ -152,6 +205,19 @@ impl ShadowPackets {
         // A miss's prim is u32::MAX, past the table.
         let tri = self.tris.get(hits.hits.prim[l] as usize)?;
         Some(tri.interaction(hits.hits.t[l], hits.hits.b1[l], hits.hits.b2[l], ray))
+    }
+
+    /// Lane `l`'s hit where [`Self::interaction`] finds it on a triangle of constant diffuse
+    /// material, for its vertex to be written at once ([`DiffuseHit::push`]); None: a miss,
+    /// a tied lane, another material.
+    #[inline(always)]
+    pub(crate) fn diffuse<'a>(&'a self, hits: &'a ClosestHits, l: usize) -> Option<DiffuseHit<'a>> {
+        if hits.tied & (1 << l) != 0 {
+            return None;
+        }
+        let tri = self.tris.get(hits.hits.prim[l] as usize)?;
+        let surface = tri.diffuse.as_ref()?;
+        Some(DiffuseHit { tri, surface, hits: &hits.hits, l })
     }
 
     /// `scene.intersect(ray)`, bit for bit: the scene BVH's hit, its surface record from
@@ -268,5 +334,49 @@ mod tests {
             }
         }
         assert!(hits > n / 4 && smooth > hits / 4 && smooth < hits * 3 / 4, "{n} rays, {hits} hits, {smooth} on smooth triangles");
+    }
+
+    /// A vertex written from a triangle's diffuse constants (`diffuse`, as the lockstep
+    /// walks write theirs) is `Vertex::push_surface`'s of the lane's record, bit for bit:
+    /// constant reflectances (clamped), an emitting one (its area light), and none for a
+    /// textured reflectance.
+    #[test]
+    fn diffuse_vertices_are_surface_vertices() {
+        let mut b = SceneBuilder::new();
+        let plain = b.add_material(Material::Diffuse { reflectance: Texture::Constant(Rgb::new(1.5, 0.25, -0.5)) });
+        let checker = Texture::Checkerboard { color0: Rgb::splat(0.2), color1: Rgb::splat(0.7), to_uv: Default::default() };
+        let textured = b.add_material(Material::Diffuse { reflectance: checker });
+        for (k, (m, emits)) in [(plain, false), (textured, false), (plain, true)].into_iter().enumerate() {
+            let emission = emits.then_some(Texture::Constant(Rgb::splat(3.0)));
+            b.add_shape(Geometry::Mesh(grid(0.3 * k as f32, 4, k == 1, 1)), m, emission, &format!("grid {k}")).unwrap();
+        }
+        b.set_camera(Camera::pinhole(glam::Mat4::IDENTITY, 60.0, 8, 8));
+        let scene = b.build().unwrap();
+        let Some(packets) = ShadowPackets::new(&scene) else { return };
+        let mut rng = Pcg32::new(7, 3);
+        let mut seen = [0usize; 3];
+        for round in 0..2000 {
+            let rays: [Ray; LANES] = std::array::from_fn(|_| {
+                let o = Vec3::new(rng.next_f32(), rng.next_f32(), -0.5 + 2.0 * rng.next_f32());
+                Ray::new(o, square_to_uniform_sphere(Vec2::new(rng.next_f32(), rng.next_f32())))
+            });
+            let h = packets.closest(&rays, 0xff);
+            for (l, r) in rays.iter().enumerate() {
+                let Some(si) = packets.interaction(&scene, &h, l, r) else { continue };
+                let beta = Rgb::new(rng.next_f32(), 1.0, 2.0);
+                let mut want = vec![];
+                crate::path::Vertex::push_surface(&mut want, &scene, &si, beta, 0.0);
+                let Some(d) = packets.diffuse(&h, l) else {
+                    assert!(si.shape == 1 || h.tied & (1 << l) != 0, "round {round} lane {l}");
+                    seen[0] += 1;
+                    continue;
+                };
+                let mut got = vec![];
+                d.push(r, beta, &mut got);
+                assert_eq!(format!("{got:?}"), format!("{want:?}"), "round {round} lane {l}");
+                seen[1 + usize::from(si.shape == 2)] += 1;
+            }
+        }
+        assert!(seen.iter().all(|&n| n > 100), "{seen:?}");
     }
 }

@@ -334,6 +334,27 @@ impl Vertex {
         }
     }
 
+    /// [`Self::write_surface`] at a surface known to be constant diffuse without surface
+    /// detail, of (clamped) `reflectance` and area `light` (`ShadowPackets::diffuse`), without
+    /// looking up the shape, its material and its light. The BSDF is written black and its
+    /// reflectance set after: built whole, its model went through the stack in 8-byte words
+    /// across its 4-byte fields, a store-forwarding stall.
+    #[inline(always)]
+    pub(crate) fn write_diffuse_surface<'a>(
+        dst: &'a mut MaybeUninit<Vertex>,
+        si: &SurfaceInteraction,
+        reflectance: Rgb,
+        light: Option<u32>,
+        beta: Rgb,
+        pdf_fwd: f32,
+    ) -> &'a mut Vertex {
+        let v = dst.write(Self::at_surface(si, Bsdf::new(BsdfModel::Diffuse(Diffuse { reflectance: Rgb::BLACK })), light, beta, pdf_fwd));
+        if let Some(Bsdf { front: BsdfModel::Diffuse(d), .. }) = &mut v.bsdf {
+            d.reflectance = reflectance;
+        }
+        v
+    }
+
     /// `path.push(Vertex::light_point(..))`, written where it lands (as
     /// [`Self::push_surface`]; a light subpath starts with one).
     #[inline]
@@ -637,7 +658,7 @@ impl Vertex {
 /// `path.push(v)` for the vertex `write` puts in the path's next slot (and hands back,
 /// which only writing it can do), so that it is built there rather than copied there.
 #[inline]
-fn push_written(path: &mut Vec<Vertex>, write: impl for<'a> FnOnce(&'a mut MaybeUninit<Vertex>) -> &'a mut Vertex) {
+pub(crate) fn push_written(path: &mut Vec<Vertex>, write: impl for<'a> FnOnce(&'a mut MaybeUninit<Vertex>) -> &'a mut Vertex) {
     path.reserve(1);
     let len = path.len();
     let slot = &mut path.spare_capacity_mut()[0];

@@ -281,6 +281,15 @@ impl Walk {
         Some(path.len() < self.max_vertices)
     }
 
+    /// [`Self::arrive_unsettled`] at a hit whose vertex `push` writes (given the ray traced
+    /// and the walk's throughput, as `push_surface` takes them): whether the walk samples a
+    /// direction there.
+    #[inline(always)]
+    pub fn arrive_pushed(&self, path: &mut Vec<Vertex>, push: impl FnOnce(&Ray, Rgb, &mut Vec<Vertex>)) -> bool {
+        push(&self.ray, self.beta, path);
+        path.len() < self.max_vertices
+    }
+
     /// The second half of [`Self::step`]: the direction sampled at the vertex just arrived
     /// at, with its draws `uc` (lobe), `u` (direction) and `u_rr` (Russian roulette).
     #[inline(always)]
