@@ -1578,8 +1578,14 @@ impl SimdKernel {
                 // stored field by field stalled on store forwarding, 1-2 % of veach-mis.)
                 (sh.front.constant(), sh.back.as_ref().map_or(Rgb::BLACK, Albedo::constant))
             };
-            putc(&mut v.num.front, front);
-            putc(&mut v.num.back, back);
+            // The reflectance of the side the path sees (`shade8`'s test of wo's cosine with
+            // the shading normal, the same operations), picked here: both sides handed over
+            // and picked in `shade8`, LLVM read the side's array per lane there and the
+            // AVX-512 copy gathered them (three `vgatherqps`, 7 % of its time). (Both sides
+            // evaluated, then selected: a branch on the side mispredicted in the Cornell box.)
+            let front_side = dot3(wo_w.to_array(), frame.n.to_array()) >= 0.0;
+            let refl = Rgb::new(sel(front_side, front.r, back.r), sel(front_side, front.g, back.g), sel(front_side, front.b, back.b));
+            putc(&mut v.num.refl, refl);
             v.num.has_back[l] = sh.back.is_some();
             v.num.u[0][l] = u.x;
             v.num.u[1][l] = u.y;
@@ -2048,8 +2054,8 @@ struct VertexNums {
     fnn: [[f32; LANES]; 3],
     /// Toward the previous vertex (world).
     wo: [[f32; LANES]; 3],
-    front: [[f32; LANES]; 3],
-    back: [[f32; LANES]; 3],
+    /// The reflectance of the side `wo` is on (black: a back without a material).
+    refl: [[f32; LANES]; 3],
     has_back: [bool; LANES],
     /// The BSDF sample's square point (cosine-warped in `shade8`).
     u: [[f32; LANES]; 2],
@@ -2503,7 +2509,7 @@ fn shade8(v: &VertexNums, rr_depth: i32, st: &mut PathNums, rays: &mut Rays8, sh
         // AVX-512F lack, and LLVM left the whole loop scalar code.
         let side_ok = front_side | v.has_back[l];
         let flip = if front_side { 1.0f32 } else { -1.0 };
-        let refl = if front_side { g(&v.front) } else { g(&v.back) };
+        let refl = g(&v.refl);
         let f = [refl[0] * INV_PI, refl[1] * INV_PI, refl[2] * INV_PI];
         let f_black = f[0] == 0.0 && f[1] == 0.0 && f[2] == 0.0;
         let wo_up = wo[2] * flip > 0.0;
@@ -3177,7 +3183,7 @@ mod tests {
                 for a in [&mut v.p, &mut v.ng, &mut v.fs, &mut v.ft, &mut v.fnn, &mut v.wo, &mut v.gwi, &mut v.lp, &mut v.ln, &mut v.bwi] {
                     *a = rows(&mut f, -2.0, 2.0);
                 }
-                for a in [&mut v.front, &mut v.back, &mut v.lrad, &mut v.bf, &mut v.bweight, &mut st.beta] {
+                for a in [&mut v.refl, &mut v.lrad, &mut v.bf, &mut v.bweight, &mut st.beta] {
                     *a = rows(&mut f, 0.0, 1.0);
                 }
                 for a in [&mut v.u_rr, &mut v.gpdf, &mut v.pmf, &mut v.pdf_area, &mut v.bpdf_nee, &mut v.bpdf, &mut st.prev_pdf, &mut st.eta_scale] {
