@@ -75,6 +75,7 @@ use super::{camera_sample, render_tiles, Integrator, Progress, RenderSettings};
 use crate::accel::packet::{Hits8, PacketBvh, PacketSpheres, Rays8, LANES};
 use crate::bsdf::conductor::{rough_conductor_lanes, RoughConductorLanes, RoughConductorOut};
 use crate::bsdf::{Bsdf, BsdfSample, LobeFlags, Material, TransportMode};
+use crate::camera::{RayGenerator, RayLanes};
 use crate::error::{Error, Result};
 use crate::film::{Film, FilmTile};
 use crate::geometry::mesh::TriangleFrame;
@@ -1066,14 +1067,7 @@ impl SimdKernel {
         let [x0, y0, x1, y1] = rect;
         let w = x1 - x0;
         let jobs = (w * (y1 - y0) * n) as usize;
-        // Job `next`'s pixel and sample, stepped with it (pixels in rows, samples innermost;
-        // two integer divisions a job had cost 3 % at depth 1).
-        let mut at = (x0, y0, s0);
-        let step = |(x, y, s): (u32, u32, u32)| match (s + 1 < s0 + n, x + 1 < x1) {
-            (true, _) => (x, y, s + 1),
-            (false, true) => (x + 1, y, s0),
-            (false, false) => (x0, y + 1, s0),
-        };
+        let mut jobs_at = JobCursor { at: (x0, y0, s0), next: 0, rect, s0, n };
         // Every job's slot is written when its path ends, before the film reads it: the
         // worker's slots of earlier tiles serve as they are.
         let mut slots = RESULTS.take();
@@ -1087,7 +1081,8 @@ impl SimdKernel {
         let pinhole = cam.is_pinhole();
         let mut all: [Packet<S>; PACKETS] = std::array::from_fn(|_| Packet::new(sampler.clone()));
         let packets = &mut all[..self.packets];
-        let mut next = 0usize;
+        // Camera samples started eight at a time for lanes that fall idle a few a step.
+        let mut ahead = CameraAhead::new(sampler.clone());
         let env_map = scene.environment_lights.first().and_then(|&ei| match &scene.lights[ei as usize] {
             Light::EnvMap(env) => Some(&**env),
             _ => None,
@@ -1096,10 +1091,11 @@ impl SimdKernel {
             for (pk, p) in packets.iter_mut().enumerate() {
                 // The lanes that take the next jobs, in lane order: the idle ones, at the
                 // tile's end the first of them.
+                let left = jobs - jobs_at.next + ahead.len();
                 let mut fill = !p.active;
-                if jobs - next < LANES {
+                if left < LANES {
                     let (mut idle, mut first) = (fill, 0u8);
-                    for _ in 0..jobs - next {
+                    for _ in 0..left {
                         first |= idle & idle.wrapping_neg();
                         idle &= idle.wrapping_sub(1);
                     }
@@ -1108,44 +1104,43 @@ impl SimdKernel {
                 if fill == 0 {
                     continue;
                 }
-                if pinhole && fill.count_ones() >= BATCHED_STARTS {
-                    // Their samplers started, their numbers drawn side by side, then their
-                    // rays all eight at once (`pinhole_lanes`, as `direct`'s: the same bits).
-                    let (mut film, mut job) = ([[0.0f32; LANES]; 2], [0usize; LANES]);
-                    for l in (0..LANES).filter(|l| fill & (1 << l) != 0) {
-                        let (x, y, s) = at;
-                        at = step(at);
-                        p.st.sampler[l].start_pixel_sample(x, y, s);
-                        (film[0][l], film[1][l], job[l]) = (x as f32, y as f32, next);
-                        next += 1;
-                    }
-                    let d = S::camera_draws(&mut p.st.sampler, fill);
-                    for l in 0..LANES {
-                        film[0][l] += d[0][l];
-                        film[1][l] += d[1][l];
-                    }
-                    let r = cam.pinhole_lanes(&film, &d[4]);
+                if pinhole && fill == u8::MAX && ahead.len() == 0 {
+                    // A whole packet (every step at depth 1): its samplers started, their
+                    // numbers drawn side by side, then their rays all eight at once
+                    // (`pinhole_lanes`, as `direct`'s: the same bits), each row written whole.
+                    let (job, film, r) = jobs_at.camera_eight(&cam, &mut p.st.sampler);
                     p.st.start_lanes(fill, &job, &film, &r.time);
-                    for l in lanes_of(fill as u32) {
-                        layers.start(pk, l, job[l]);
+                    for (l, &j) in job.iter().enumerate() {
+                        layers.start(pk, l, j);
                     }
                     let rays = &mut p.rays;
-                    (rays.o, rays.d) = (pick_rows(fill, &r.o, &rays.o), pick_rows(fill, &r.d, &rays.d));
-                    rays.t_max = pick(fill, &r.t_max, &rays.t_max);
-                    p.active |= fill;
+                    (rays.o, rays.d, rays.t_max) = (r.o, r.d, r.t_max);
+                    p.active = fill;
                     continue;
                 }
                 while fill != 0 {
                     let l = fill.trailing_zeros() as usize;
                     fill &= fill - 1;
-                    let (x, y, s) = at;
-                    at = step(at);
-                    let (raster, ray) = camera_sample(&cam, &mut p.st.sampler[l], x, y, s);
-                    p.st.start(l, next, raster, ray.time);
-                    layers.start(pk, l, next);
-                    set_ray(&mut p.rays, l, ray.o, ray.d, ray.t_max);
+                    if pinhole && ahead.len() == 0 && jobs - jobs_at.next >= LANES {
+                        ahead.refill(&mut jobs_at, &cam);
+                    }
+                    let (job, raster, time) = if let Some(i) = ahead.take() {
+                        // The next started sample: its sampler goes on in the lane.
+                        p.st.sampler[l].clone_from(&ahead.sampler[i]);
+                        let r = &ahead.rays;
+                        let (o, d) = (Vec3::new(r.o[0][i], r.o[1][i], r.o[2][i]), Vec3::new(r.d[0][i], r.d[1][i], r.d[2][i]));
+                        set_ray(&mut p.rays, l, o, d, r.t_max[i]);
+                        (ahead.job[i], Vec2::new(ahead.film[0][i], ahead.film[1][i]), r.time[i])
+                    } else {
+                        // The tile's last few, or a camera other than a pinhole: one by one.
+                        let (x, y, s, job) = jobs_at.take();
+                        let (raster, ray) = camera_sample(&cam, &mut p.st.sampler[l], x, y, s);
+                        set_ray(&mut p.rays, l, ray.o, ray.d, ray.t_max);
+                        (job, raster, ray.time)
+                    };
+                    p.st.start(l, job, raster, time);
+                    layers.start(pk, l, job);
                     p.active |= 1 << l;
-                    next += 1;
                 }
             }
             if packets.iter().all(|p| p.active == 0) {
@@ -1583,8 +1578,14 @@ impl SimdKernel {
                 // stored field by field stalled on store forwarding, 1-2 % of veach-mis.)
                 (sh.front.constant(), sh.back.as_ref().map_or(Rgb::BLACK, Albedo::constant))
             };
-            putc(&mut v.num.front, front);
-            putc(&mut v.num.back, back);
+            // The reflectance of the side the path sees (`shade8`'s test of wo's cosine with
+            // the shading normal, the same operations), picked here: both sides handed over
+            // and picked in `shade8`, LLVM read the side's array per lane there and the
+            // AVX-512 copy gathered them (three `vgatherqps`, 7 % of its time). (Both sides
+            // evaluated, then selected: a branch on the side mispredicted in the Cornell box.)
+            let front_side = dot3(wo_w.to_array(), frame.n.to_array()) >= 0.0;
+            let refl = Rgb::new(sel(front_side, front.r, back.r), sel(front_side, front.g, back.g), sel(front_side, front.b, back.b));
+            putc(&mut v.num.refl, refl);
             v.num.has_back[l] = sh.back.is_some();
             v.num.u[0][l] = u.x;
             v.num.u[1][l] = u.y;
@@ -2053,8 +2054,8 @@ struct VertexNums {
     fnn: [[f32; LANES]; 3],
     /// Toward the previous vertex (world).
     wo: [[f32; LANES]; 3],
-    front: [[f32; LANES]; 3],
-    back: [[f32; LANES]; 3],
+    /// The reflectance of the side `wo` is on (black: a back without a material).
+    refl: [[f32; LANES]; 3],
     has_back: [bool; LANES],
     /// The BSDF sample's square point (cosine-warped in `shade8`).
     u: [[f32; LANES]; 2],
@@ -2508,7 +2509,7 @@ fn shade8(v: &VertexNums, rr_depth: i32, st: &mut PathNums, rays: &mut Rays8, sh
         // AVX-512F lack, and LLVM left the whole loop scalar code.
         let side_ok = front_side | v.has_back[l];
         let flip = if front_side { 1.0f32 } else { -1.0 };
-        let refl = if front_side { g(&v.front) } else { g(&v.back) };
+        let refl = g(&v.refl);
         let f = [refl[0] * INV_PI, refl[1] * INV_PI, refl[2] * INV_PI];
         let f_black = f[0] == 0.0 && f[1] == 0.0 && f[2] == 0.0;
         let wo_up = wo[2] * flip > 0.0;
@@ -2823,11 +2824,96 @@ impl<S> Paths<S> {
     }
 }
 
-/// The fewest lanes of a packet that start camera samples together for their rays to be made
-/// all eight at once: only a whole packet (every step at depth 1, and a tile's first). From
-/// four lanes on, the Cornell boxes (depth 6) ran 1.01-1.02 slower with 1 % fewer
-/// instructions, as the eight-lane step of `direct` had on veach-mis.
-const BATCHED_STARTS: u32 = 8;
+/// A tile's next job (camera sample) and its pixel and sample, stepped with it (pixels in
+/// rows, samples innermost; two integer divisions a job had cost 3 % at depth 1).
+struct JobCursor {
+    at: (u32, u32, u32),
+    next: usize,
+    rect: [u32; 4],
+    s0: u32,
+    n: u32,
+}
+
+impl JobCursor {
+    /// The next job's pixel, sample and number.
+    #[inline(always)]
+    fn take(&mut self) -> (u32, u32, u32, usize) {
+        let ((x, y, s), job) = (self.at, self.next);
+        let [x0, _, x1, _] = self.rect;
+        self.at = match (s + 1 < self.s0 + self.n, x + 1 < x1) {
+            (true, _) => (x, y, s + 1),
+            (false, true) => (x + 1, y, self.s0),
+            (false, false) => (x0, y + 1, self.s0),
+        };
+        self.next += 1;
+        (x, y, s, job)
+    }
+
+    /// The next eight jobs' camera samples in `samplers` (started, their numbers drawn side by
+    /// side) and their rays made all eight at once (`pinhole_lanes`, as `direct`'s, from a
+    /// pinhole): the jobs, film points and rays of `camera_sample`, the same bits.
+    #[inline(always)]
+    fn camera_eight<S: LaneSampler>(&mut self, cam: &RayGenerator<'_>, samplers: &mut [S; LANES]) -> ([usize; LANES], [[f32; LANES]; 2], RayLanes<LANES>) {
+        let (mut film, mut job) = ([[0.0f32; LANES]; 2], [0usize; LANES]);
+        for (l, sampler) in samplers.iter_mut().enumerate() {
+            let (x, y, s, j) = self.take();
+            sampler.start_pixel_sample(x, y, s);
+            (film[0][l], film[1][l], job[l]) = (x as f32, y as f32, j);
+        }
+        let d = S::camera_draws(samplers, u8::MAX);
+        for l in 0..LANES {
+            film[0][l] += d[0][l];
+            film[1][l] += d[1][l];
+        }
+        let r = cam.pinhole_lanes(&film, &d[4]);
+        (job, film, r)
+    }
+}
+
+/// Camera samples started ahead, eight at a time ([`JobCursor::camera_eight`]), for the
+/// lanes that fall idle a few a step (paths of several bounces end at different steps),
+/// handed out in job order: one by one, a lane's camera sample was a chain of its sampler's
+/// steps, a square root and divisions (a sixth of veach-mis's tile loop). Each sample's
+/// sampler goes on in the lane that takes it: the same numbers, rays and film order.
+struct CameraAhead<S> {
+    sampler: [S; LANES],
+    job: [usize; LANES],
+    film: [[f32; LANES]; 2],
+    rays: RayLanes<LANES>,
+    /// The next to hand out (`LANES`: none left).
+    at: usize,
+}
+
+impl<S: LaneSampler> CameraAhead<S> {
+    fn new(sampler: S) -> Self {
+        let rays = RayLanes { o: [[0.0; LANES]; 3], d: [[0.0; LANES]; 3], t_max: [0.0; LANES], time: [0.0; LANES] };
+        CameraAhead { sampler: std::array::from_fn(|_| sampler.clone()), job: [0; LANES], film: [[0.0; LANES]; 2], rays, at: LANES }
+    }
+
+    /// How many are left to hand out.
+    #[inline(always)]
+    fn len(&self) -> usize {
+        LANES - self.at
+    }
+
+    /// The next eight jobs of `jobs`, from a pinhole `cam` (once all are handed out).
+    #[inline(always)]
+    fn refill(&mut self, jobs: &mut JobCursor, cam: &RayGenerator<'_>) {
+        debug_assert_eq!(self.len(), 0);
+        (self.job, self.film, self.rays) = jobs.camera_eight(cam, &mut self.sampler);
+        self.at = 0;
+    }
+
+    /// The slot of the next one to hand out.
+    #[inline(always)]
+    fn take(&mut self) -> Option<usize> {
+        let i = self.at;
+        (i < LANES).then(|| {
+            self.at += 1;
+            i
+        })
+    }
+}
 
 thread_local! {
     /// Each worker's slots for its tile's finished samples, kept from tile to tile: a vector
@@ -3097,7 +3183,7 @@ mod tests {
                 for a in [&mut v.p, &mut v.ng, &mut v.fs, &mut v.ft, &mut v.fnn, &mut v.wo, &mut v.gwi, &mut v.lp, &mut v.ln, &mut v.bwi] {
                     *a = rows(&mut f, -2.0, 2.0);
                 }
-                for a in [&mut v.front, &mut v.back, &mut v.lrad, &mut v.bf, &mut v.bweight, &mut st.beta] {
+                for a in [&mut v.refl, &mut v.lrad, &mut v.bf, &mut v.bweight, &mut st.beta] {
                     *a = rows(&mut f, 0.0, 1.0);
                 }
                 for a in [&mut v.u_rr, &mut v.gpdf, &mut v.pmf, &mut v.pdf_area, &mut v.bpdf_nee, &mut v.bpdf, &mut st.prev_pdf, &mut st.eta_scale] {
