@@ -1831,8 +1831,8 @@ impl SimdKernel {
     fn conductor_samples<S>(&self, packets: &mut [Packet<S>]) {
         // Made at the first such lane (most steps of most scenes have none).
         let mut group: Option<RoughConductorLanes<LANES>> = None;
-        // Each group lane's packet, lane, mirroring, and whether it has a light sample.
-        let mut slot = [(0usize, 0usize, false, false); LANES];
+        // Each group lane's packet, lane, mirroring, and outgoing and light directions (local).
+        let mut slot = [(0usize, 0usize, false, Vec3::ZERO, None); LANES];
         let mut used = 0usize;
         for pk in 0..packets.len() {
             for l in 0..LANES {
@@ -1845,7 +1845,7 @@ impl SimdKernel {
                 let wi = nee_dir(v, l, si);
                 let q = group.get_or_insert_with(RoughConductorLanes::default);
                 q.set(used, c, side(wo), wi.map(side), Vec2::new(u[4], u[5]));
-                slot[used] = (pk, l, flipped, wi.is_some());
+                slot[used] = (pk, l, flipped, wo, wi);
                 used += 1;
                 if used == LANES {
                     self.conductor_group(q, &slot[..used], packets);
@@ -1861,14 +1861,14 @@ impl SimdKernel {
     /// One group of [`Self::conductor_samples`]: lanes `slot` of `q`, each finished by its
     /// BSDF. (The group's other lanes hold earlier lanes' values: the lanes are independent.)
     #[inline(always)]
-    fn conductor_group<S>(&self, q: &RoughConductorLanes<LANES>, slot: &[(usize, usize, bool, bool)], packets: &mut [Packet<S>]) {
+    fn conductor_group<S>(&self, q: &RoughConductorLanes<LANES>, slot: &[(usize, usize, bool, Vec3, Option<Vec3>)], packets: &mut [Packet<S>]) {
         let out = self.rough_conductor_lanes_on_cpu(q, slot.len());
-        for (i, &(pk, l, flipped, nee)) in slot.iter().enumerate() {
+        for (i, &(pk, l, flipped, wo, wi)) in slot.iter().enumerate() {
             let v = &mut packets[pk].v;
             let Some((si, _)) = &v.scatter[l] else { continue };
             let Some(bsdf) = v.own[l].as_ref().or(self.shapes[si.shape as usize].uniform.as_ref()) else { continue };
-            let (nee, s) = out.lane(i, nee);
-            v.conductor[l] = Some(bsdf.finish_conductor(flipped, nee, s));
+            let (nee, s) = out.lane(i, wi.is_some());
+            v.conductor[l] = Some((bsdf.finish_conductor(flipped, nee, s), wo, wi));
         }
     }
 
@@ -1931,14 +1931,16 @@ impl SimdKernel {
         let Some(bsdf) = own.as_ref().or(uniform) else { unreachable!("a shape without a uniform BSDF builds its own") };
         let flags = v.flags[l];
         let frame = si.shading;
-        let wo = frame.to_local(si.wo);
-        // The light's direction as `shade8` finds it.
-        let wi = nee_dir(v, l, si);
-        // The value and density toward it, and the BSDF's own sample, from one call (a
-        // Beckmann conductor's from `conductor_samples`).
-        let (nee, bs) = match v.conductor[l].take() {
-            Some(r) => r,
-            None => bsdf.eval_pdf_and_sample(wo, wi, uc, Vec2::new(ux, uy), TransportMode::Radiance),
+        // The outgoing direction, local, and the light's direction as `shade8` finds it; the
+        // value and density toward it, and the BSDF's own sample, from one call (a Beckmann
+        // conductor's all from `conductor_samples`).
+        let (wo, wi, (nee, bs)) = match v.conductor[l].take() {
+            Some((r, wo, wi)) => (wo, wi, r),
+            None => {
+                let wo = frame.to_local(si.wo);
+                let wi = nee_dir(v, l, si);
+                (wo, wi, bsdf.eval_pdf_and_sample(wo, wi, uc, Vec2::new(ux, uy), TransportMode::Radiance))
+            }
         };
         if let (Some(wi), Some((f, pdf))) = (wi, nee) {
             v.num.nee_ok[l] = !f.is_black();
@@ -2126,8 +2128,10 @@ struct Soa {
     own: [Option<Bsdf>; LANES],
     flags: [LobeFlags; LANES],
     /// Lanes of a Beckmann rough conductor: its value and density toward the light sample
-    /// and its own sample (`SimdKernel::conductor_samples`).
-    conductor: [Option<ConductorResult>; LANES],
+    /// and its own sample (`SimdKernel::conductor_samples`), with the outgoing and light
+    /// directions, local, that it found them for (`scalar_scatter` takes them rather than
+    /// transforming both again).
+    conductor: [Option<(ConductorResult, Vec3, Option<Vec3>)>; LANES],
     /// The rays' grid points (u, v) and sin θ in the environment map (`EnvMap::dirs_to_grid`),
     /// set when some lane escaped.
     env_grid: [[f32; LANES]; 3],
