@@ -1367,7 +1367,10 @@ impl SimdKernel {
     ) {
         let Packet { st, rays, shadow, v, o, active, go, ends, .. } = p;
         let (active, go, mut ends) = (*active, *go, *ends);
-        for l in 0..LANES {
+        let mut lanes = std::mem::take(&mut v.scatter_lanes);
+        while lanes != 0 {
+            let l = lanes.trailing_zeros() as usize;
+            lanes &= lanes - 1;
             if let Some((si, u)) = v.scatter[l].take() {
                 self.scalar_scatter(events, st, l, v, &si, u);
             }
@@ -1613,6 +1616,7 @@ impl SimdKernel {
             };
             self.scalar_light_sample(scene, l, v, &si, u6);
             v.scatter[l] = Some((si, u6));
+            v.scatter_lanes |= 1 << l;
         } else {
             self.light_sample(scene, l, v, p, u_light, u_l2);
         }
@@ -1835,7 +1839,10 @@ impl SimdKernel {
         let mut slot = [(0usize, 0usize, false, Vec3::ZERO, None); LANES];
         let mut used = 0usize;
         for pk in 0..packets.len() {
-            for l in 0..LANES {
+            let mut lanes = packets[pk].v.scatter_lanes;
+            while lanes != 0 {
+                let l = lanes.trailing_zeros() as usize;
+                lanes &= lanes - 1;
                 let v = &packets[pk].v;
                 let Some((si, u)) = &v.scatter[l] else { continue };
                 let Some(bsdf) = v.own[l].as_ref().or(self.shapes[si.shape as usize].uniform.as_ref()) else { continue };
@@ -2125,6 +2132,8 @@ struct Soa {
     /// Lanes of a scalar BSDF: the hit and the vertex's numbers, its own BSDF (None: the
     /// shape's uniform one) and lobes, for `scalar_scatter` once the sphere samples are in.
     scatter: [Option<(SurfaceInteraction, [f32; 6])>; LANES],
+    /// The lanes whose `scatter` is set (the loops over them skip the others' `Option`s).
+    scatter_lanes: u8,
     own: [Option<Bsdf>; LANES],
     flags: [LobeFlags; LANES],
     /// Lanes of a Beckmann rough conductor: its value and density toward the light sample
