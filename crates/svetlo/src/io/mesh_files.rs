@@ -5,6 +5,7 @@
 
 use crate::error::{Error, Result};
 use crate::geometry::TriangleMesh;
+use crate::math::lane::dot3;
 use glam::{Vec2, Vec3};
 use std::path::Path;
 
@@ -727,7 +728,7 @@ impl FaceLanes {
             for k in 0..3 {
                 normals[k][j] = normal[k];
             }
-            let cosines = [lane_dot(ua, ub), lane_dot(uc, lane_neg(ua)), lane_dot(lane_neg(ub), lane_neg(uc))];
+            let cosines = [dot3(ua, ub), dot3(uc, lane_neg(ua)), dot3(lane_neg(ub), lane_neg(uc))];
             for k in 0..3 {
                 angles[k][j] = cosines[k].clamp(-1.0, 1.0);
             }
@@ -735,13 +736,7 @@ impl FaceLanes {
     }
 }
 
-/// `Vec3::dot` on a lane's components (functions, not closures: these inline into the AVX2
-/// copy).
-#[inline(always)]
-fn lane_dot(a: [f32; 3], b: [f32; 3]) -> f32 {
-    a[0] * b[0] + a[1] * b[1] + a[2] * b[2]
-}
-
+/// A lane's components negated (functions, not closures: these inline into the AVX2 copy).
 #[inline(always)]
 fn lane_neg(a: [f32; 3]) -> [f32; 3] {
     [-a[0], -a[1], -a[2]]
@@ -750,7 +745,7 @@ fn lane_neg(a: [f32; 3]) -> [f32; 3] {
 /// `Vec3::normalize_or_zero` on a lane's components.
 #[inline(always)]
 fn lane_normalize(v: [f32; 3]) -> [f32; 3] {
-    let rcp = 1.0 / lane_dot(v, v).sqrt();
+    let rcp = 1.0 / dot3(v, v).sqrt();
     if rcp.is_finite() && rcp > 0.0 {
         [v[0] * rcp, v[1] * rcp, v[2] * rcp]
     } else {
