@@ -864,6 +864,22 @@ impl Film {
         }
     }
 
+    /// `splat` at pixel (x, y)'s centre, for a caller that found the pixel (x < width,
+    /// y < height) itself: the same sum without the position's conversions and checks
+    /// (light tracing's splat merge made them twice per splat).
+    #[inline]
+    pub fn splat_pixel(&mut self, x: u32, y: u32, l: Rgb) {
+        debug_assert!(x < self.width && y < self.height);
+        if !l.is_finite() {
+            return;
+        }
+        let stride = self.splat_stride();
+        if self.splats.is_empty() {
+            self.splats = vec![0.0; (self.width * self.height) as usize * stride];
+        }
+        add_rgb(&mut self.splats, (y * self.width + x) as usize * stride, l);
+    }
+
     /// The developed image: filtered samples plus scaled splats.
     pub fn image(&self) -> Image {
         let mut data: Vec<Rgb> = self.full.pixels.iter().map(|p| if p.weight > 0.0 { p.sum / p.weight as f32 } else { Rgb::BLACK }).collect();
@@ -1264,5 +1280,23 @@ mod tile_tests {
         again.merge_tile(&a);
         assert_eq!(again.image().data, direct.image().data);
         assert_eq!(again.layer_image(0).data, direct.layer_image(0).data);
+    }
+
+    /// A splat at a pixel found by the caller (`splat_pixel`) adds what `splat` at the
+    /// pixel's centre adds, bit for bit, with layers beside the beauty and non-finite values
+    /// left out.
+    #[test]
+    fn splat_pixel_is_the_centre_splat() {
+        let names = ["a".to_string(), "b".to_string()];
+        let (mut by_centre, mut by_pixel) = (Film::with_layers(5, 3, Filter::Box, &names), Film::with_layers(5, 3, Filter::Box, &names));
+        let values = [Rgb::new(0.1, 0.2, 0.3), Rgb::new(1e-30, -0.0, 3.5e7), Rgb::new(f32::NAN, 1.0, 1.0), Rgb::new(0.7, f32::INFINITY, 0.0)];
+        for (k, l) in values.iter().cycle().take(40).enumerate() {
+            let (x, y) = ((k * 7 % 5) as u32, (k % 3) as u32);
+            by_centre.splat(Vec2::new(x as f32 + 0.5, y as f32 + 0.5), *l);
+            by_pixel.splat_pixel(x, y, *l);
+        }
+        let bits = |f: &Film| f.splats.iter().map(|v| v.to_bits()).collect::<Vec<_>>();
+        assert_eq!(bits(&by_centre), bits(&by_pixel));
+        assert!(!by_pixel.splats.is_empty());
     }
 }

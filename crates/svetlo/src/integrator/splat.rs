@@ -506,9 +506,8 @@ impl OpenPass {
                 let (Some(x), Some(y)) = (pixel_index(sp.raster.x, w), pixel_index(sp.raster.y, h)) else {
                     continue;
                 };
-                let centre = Vec2::new(x as f32 + 0.5, y as f32 + 0.5);
                 match sp.channel {
-                    0 => film.splat(centre, sp.value),
+                    0 => film.splat_pixel(x, y, sp.value),
                     NO_CHANNEL => {}
                     c => {
                         if let Some(e) = extra.get_mut(c as usize - 1) {
@@ -516,7 +515,9 @@ impl OpenPass {
                         }
                     }
                 }
-                film.splat_layers(sp.layers, centre, sp.value);
+                if sp.layers != 0 {
+                    film.splat_layers(sp.layers, Vec2::new(x as f32 + 0.5, y as f32 + 0.5), sp.value);
+                }
             }
         }
         true
