@@ -1377,20 +1377,12 @@ impl SimdKernel {
         }
         // Writes every lane's next ray, shadow ray and state; only `go` lanes' count.
         self.shade8_on_cpu(v, settings.rr_depth, st, rays, shadow, o);
-        let (mut smask, mut counted) = (0u8, 0u8);
-        for l in 0..LANES {
-            if go & (1 << l) == 0 {
-                continue;
-            }
-            match o.nee[l] {
-                1 => counted |= 1 << l,
-                2 => smask |= 1 << l,
-                _ => {}
-            }
-            if !o.cont[l] {
-                ends |= 1 << l;
-            }
-        }
+        // The `go` lanes' light samples that count now (1) or once their shadow ray is clear
+        // (2), and those whose path ends: masks from whole rows (a branch per lane on each
+        // mispredicted where the lanes differ).
+        let counted = go & lane_bits(&o.nee.map(|n| n == 1));
+        let smask = go & lane_bits(&o.nee.map(|n| n == 2));
+        ends |= go & !lane_bits(&o.cont);
         let clear = smask & !self.tracer.occluded(scene, shadow, &st.time, smask);
         if layers.on() {
             layers.route(pk, v, o, active, counted | clear, go & !ends);
@@ -1407,11 +1399,12 @@ impl SimdKernel {
             }
         }
         st.l = sum;
-        for l in 0..LANES {
-            if ends & (1 << l) != 0 {
-                let beauty = Rgb::new(st.l[0][l], st.l[1][l], st.l[2][l]);
-                results[st.job[l]] = (st.raster[l], layers.finish(pk, l, beauty));
-            }
+        let mut done = ends;
+        while done != 0 {
+            let l = done.trailing_zeros() as usize;
+            done &= done - 1;
+            let beauty = Rgb::new(st.l[0][l], st.l[1][l], st.l[2][l]);
+            results[st.job[l]] = (st.raster[l], layers.finish(pk, l, beauty));
         }
         p.active &= !ends;
     }
