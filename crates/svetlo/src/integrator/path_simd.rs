@@ -1745,11 +1745,14 @@ impl SimdKernel {
             return;
         }
         let g = env.sample_points(&v.env_u, pending as u32);
+        // The points' directions, all lanes' at once (vector code; unused lanes' unread).
+        let (d, sin_t) = env.grid_to_dirs(&g);
         let mut lanes = pending;
         while lanes != 0 {
             let l = lanes.trailing_zeros() as usize;
             lanes &= lanes - 1;
-            let ls = Light::sample_li_env_at(env, v.env_p[l], g[l], &scene.bounds);
+            let dir = (Vec3::new(d[0][l], d[1][l], d[2][l]), sin_t[l]);
+            let ls = Light::sample_li_env_at(env, v.env_p[l], g[l], dir, &scene.bounds);
             Self::take_light_sample(l, v, ls, light.is_delta());
         }
     }
