@@ -735,6 +735,8 @@ pub struct SimdKernel {
     /// Whether some shape's texels are asked for ahead of shading (`prefetch_texels`; with
     /// the triangles unpacked, whose uvs it reads).
     prefetch_texels: bool,
+    /// Those shapes' meshes as the kernel's triangle indices name them: first, end, shape.
+    texel_meshes: Vec<(u32, u32, u32)>,
     /// Run the AVX-512VL build of the kernel (detected at run time; tests may clear it).
     avx512: bool,
     /// Packets a tile steps in phase: [`PACKETS`] where Beckmann normals or sphere-light
@@ -920,10 +922,15 @@ impl SimdKernel {
             .collect();
         let env_light = scene.lights.iter().position(|l| matches!(l, Light::EnvMap(env) if env.large()));
         let prefetch_texels = geometry.unpacked && shapes.iter().any(|s| s.prefetch_texels);
+        let meshes = &geometry.meshes;
+        let texel_meshes = (0..meshes.len())
+            .filter(|&i| prefetch_texels && shapes[meshes[i].1 as usize].prefetch_texels)
+            .map(|i| (meshes[i].0, meshes.get(i + 1).map_or(geometry.triangles, |m| m.0), meshes[i].1))
+            .collect();
         let chains =
             sphere_lights.iter().any(Option::is_some) || shapes.iter().any(|s| s.uniform.as_ref().is_some_and(|b| b.beckmann_conductor(Vec3::Z).is_some()));
         let packets = if chains { PACKETS } else { 1 };
-        Some(SimdKernel { tracer, geometry, shapes, lights, sphere_lights, env_light, prefetch_texels, avx512: crate::cpu::avx512(), packets })
+        Some(SimdKernel { tracer, geometry, shapes, lights, sphere_lights, env_light, prefetch_texels, texel_meshes, avx512: crate::cpu::avx512(), packets })
     }
 
     /// How many packets of eight paths a tile steps in phase (more than one where the
@@ -1731,11 +1738,14 @@ impl SimdKernel {
             return;
         }
         let g = env.sample_points(&v.env_u, pending as u32);
+        // The points' directions, all lanes' at once (vector code; unused lanes' unread).
+        let (d, sin_t) = env.grid_to_dirs(&g);
         let mut lanes = pending;
         while lanes != 0 {
             let l = lanes.trailing_zeros() as usize;
             lanes &= lanes - 1;
-            let ls = Light::sample_li_env_at(env, v.env_p[l], g[l], &scene.bounds);
+            let dir = (Vec3::new(d[0][l], d[1][l], d[2][l]), sin_t[l]);
+            let ls = Light::sample_li_env_at(env, v.env_p[l], g[l], dir, &scene.bounds);
             Self::take_light_sample(l, v, ls, light.is_delta());
         }
     }
@@ -1783,19 +1793,20 @@ impl SimdKernel {
     /// misses overlap. The uvs go to `uv_ahead` for `gather`.
     #[inline(never)]
     fn prefetch_texels(&self, scene: &Scene, hits: &Hits8, active: u8, uv_ahead: &mut [Vec2; LANES]) {
-        for (l, uv_out) in uv_ahead.iter_mut().enumerate() {
-            if active & (1 << l) == 0 {
-                continue;
-            }
-            let Some(tri) = self.geometry.unpacked_triangle(hits.prim[l]) else { continue };
-            let sh = &self.shapes[tri.shape as usize];
-            if sh.prefetch_texels {
-                let uv = self.uv(scene, tri, hits.b1[l], hits.b2[l]);
-                *uv_out = uv;
-                sh.front.prefetch(uv);
-                if let Some(b) = &sh.back {
-                    b.prefetch(uv);
-                }
+        for l in lanes_of(active as u32) {
+            // The hit's mesh and its index there from the kernel's index alone (`self.uv` of
+            // the unpacked triangle, the same value): the triangle's record, just asked for by
+            // `prefetch_hits`, is not waited on here (3 % of the grid's render, most of its
+            // lanes on shapes without such a bitmap).
+            let prim = hits.prim[l];
+            let Some(&(first, _, si)) = self.texel_meshes.iter().find(|&&(f, e, _)| f <= prim && prim < e) else { continue };
+            let Geometry::Mesh(m) = &*scene.shapes[si as usize].geometry else { continue };
+            let uv = m.uv((prim - first) as usize, hits.b1[l], hits.b2[l]);
+            uv_ahead[l] = uv;
+            let sh = &self.shapes[si as usize];
+            sh.front.prefetch(uv);
+            if let Some(b) = &sh.back {
+                b.prefetch(uv);
             }
         }
     }

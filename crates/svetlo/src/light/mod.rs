@@ -217,10 +217,11 @@ impl Light {
     }
 
     /// [`Self::sample_li`] of environment map `env` from `p_ref`, finished at the grid point
-    /// `g` that [`EnvMap::sample_points`] drew for its u: the same sample, bit for bit.
+    /// `g` that [`EnvMap::sample_points`] drew for its u, whose direction and sin θ are `dir`
+    /// ([`EnvMap::grid_to_dirs`]): the same sample, bit for bit.
     #[inline(always)]
-    pub fn sample_li_env_at(env: &EnvMap, p_ref: Vec3, g: Vec2, bounds: &SceneBounds) -> Option<LightSample> {
-        env.sample_eval_at(g).map(|s| Self::env_sample(s, p_ref, bounds))
+    pub fn sample_li_env_at(env: &EnvMap, p_ref: Vec3, g: Vec2, dir: (Vec3, f32), bounds: &SceneBounds) -> Option<LightSample> {
+        env.sample_eval_toward(g, || dir).map(|s| Self::env_sample(s, p_ref, bounds))
     }
 
     /// The light sample of an environment map's (direction, density, radiance) seen from
