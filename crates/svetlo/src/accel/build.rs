@@ -816,7 +816,9 @@ fn partition_with<const ISA: u8>(boxes: &mut [Box3], order: &mut [u32], side: &S
         let b = boxes[k];
         let c = b.center();
         if side.left(c) {
-            boxes.swap(k, l);
+            // The swap, with the box at k already in registers.
+            boxes[k] = boxes[l];
+            boxes[l] = b;
             order.swap(k, l);
             l += 1;
             if let Some((bins, (lo, scale))) = &mut left {
