@@ -5,8 +5,10 @@
 //!
 //! The primitives' boxes travel with the primitive order (contiguous, in SIMD registers, no
 //! lookup through the order), all three axes are binned in one pass, and the pass that
-//! partitions a node also bounds its two children (boxes and centroids): two passes over a
-//! node's primitives where there were five. The tree is the one the straightforward build
+//! partitions a node also bins its two children (their bins keep their centroids' bounds too,
+//! so that a split's children have their bounds and grids before that pass): one pass over a
+//! node's primitives where there were five, and two at the nodes near the root that bin
+//! themselves on all threads. The tree is the one the straightforward build
 //! (`reference`, kept for the tests) gives: the same splits, the same primitive order, the
 //! same boxes (min and max are exact, whatever the order of the unions; only the sign of a
 //! zero may differ, which no comparison sees).
@@ -16,6 +18,7 @@ use super::wide::{Node, EMPTY_CHILD, LEAF_BIT, WIDTH};
 use crate::geometry::Aabb;
 use glam::{Vec3A, Vec3Swizzles};
 use std::sync::atomic::{AtomicUsize, Ordering};
+use std::sync::Mutex;
 
 #[cfg(test)]
 mod reference;
@@ -140,69 +143,128 @@ impl Box3 {
     }
 }
 
-/// A bin's box as one row of eight lanes: the lower corner, then the upper corner negated, so
-/// that a union is one vector minimum where the CPU has AVX (min(-a, -b) is -max(a, b), a
-/// zero's sign aside, which neither a comparison nor the surface area's value sees).
+/// A bin as one row of sixteen lanes: its primitives' box (the lower corner, then the upper
+/// corner negated) and their centroids' box (the same way), so that a union is one vector
+/// minimum where the CPU has AVX-512, two where it has AVX (min(-a, -b) is -max(a, b), a zero's
+/// sign aside, which neither a comparison nor the surface area's value sees). The centroids'
+/// boxes give a split's children their centroid bounds, and so their bins' grids, before the
+/// partition that bins them (see [`partition`]).
 #[derive(Clone, Copy, Debug)]
-#[repr(C, align(32))]
-struct BinBox {
+#[repr(C, align(64))]
+struct Bin {
     lo: Vec3A,
     neg_hi: Vec3A,
+    c_lo: Vec3A,
+    neg_c_hi: Vec3A,
 }
 
-impl BinBox {
-    const EMPTY: BinBox = BinBox { lo: Vec3A::INFINITY, neg_hi: Vec3A::INFINITY };
+/// The instruction sets a bin's union is compiled for (a const parameter: the binning loops have
+/// one copy per set, picked at run time by [`isa`]).
+const SSE: u8 = 0;
+const AVX: u8 = 1;
+const AVX512: u8 = 2;
+
+fn isa() -> u8 {
+    #[cfg(target_arch = "x86_64")]
+    {
+        if std::is_x86_feature_detected!("avx512f") {
+            return AVX512;
+        }
+        if std::is_x86_feature_detected!("avx") {
+            return AVX;
+        }
+    }
+    SSE
+}
+
+impl Bin {
+    const EMPTY: Bin = Bin { lo: Vec3A::INFINITY, neg_hi: Vec3A::INFINITY, c_lo: Vec3A::INFINITY, neg_c_hi: Vec3A::INFINITY };
 
     #[inline(always)]
-    fn of(b: &Box3) -> BinBox {
-        BinBox { lo: b.min, neg_hi: -b.max }
+    fn of(b: &Box3, c: Vec3A) -> Bin {
+        Bin { lo: b.min, neg_hi: -b.max, c_lo: c, neg_c_hi: -c }
     }
     #[inline(always)]
-    fn union(self, o: BinBox) -> BinBox {
-        BinBox { lo: self.lo.min(o.lo), neg_hi: self.neg_hi.min(o.neg_hi) }
+    fn union(self, o: Bin) -> Bin {
+        Bin { lo: self.lo.min(o.lo), neg_hi: self.neg_hi.min(o.neg_hi), c_lo: self.c_lo.min(o.c_lo), neg_c_hi: self.neg_c_hi.min(o.neg_c_hi) }
     }
-    /// `union` in one AVX instruction (the same lanes).
+    /// `*self = self.union(*o)`, in one or two instructions where `ISA` has them (the same lanes).
     ///
     /// # Safety
-    /// The CPU must have AVX; called only from `#[target_feature(enable = "avx")]` code, into
-    /// which it inlines.
-    #[cfg(target_arch = "x86_64")]
+    /// `ISA` must be [`SSE`], or [`AVX`] (or [`AVX512`]) inside code compiled for AVX (AVX-512F),
+    /// into which this inlines.
     #[inline(always)]
-    unsafe fn union_avx(&mut self, o: &BinBox) {
-        use std::arch::x86_64::*;
-        let (a, b) = (self as *mut BinBox as *mut f32, o as *const BinBox as *const f32);
-        _mm256_store_ps(a, _mm256_min_ps(_mm256_load_ps(a), _mm256_load_ps(b)));
+    unsafe fn add<const ISA: u8>(&mut self, o: &Bin) {
+        #[cfg(target_arch = "x86_64")]
+        {
+            use std::arch::x86_64::*;
+            let (a, b) = (self as *mut Bin as *mut f32, o as *const Bin as *const f32);
+            // SAFETY: the caller's CPU has the set (see above); a bin is 64-byte aligned.
+            unsafe {
+                if ISA == AVX512 {
+                    _mm512_store_ps(a, _mm512_min_ps(_mm512_load_ps(a), _mm512_load_ps(b)));
+                    return;
+                }
+                if ISA == AVX {
+                    _mm256_store_ps(a, _mm256_min_ps(_mm256_load_ps(a), _mm256_load_ps(b)));
+                    _mm256_store_ps(a.add(8), _mm256_min_ps(_mm256_load_ps(a.add(8)), _mm256_load_ps(b.add(8))));
+                    return;
+                }
+            }
+        }
+        *self = self.union(*o);
+    }
+    /// The union of this bin's box with `acc` (the sweep's boxes, centroids left out).
+    #[inline(always)]
+    fn grow_box(&self, acc: Box3) -> Box3 {
+        Box3 { min: acc.min.min(self.lo), max: acc.max.min(self.neg_hi) }
     }
     #[inline(always)]
-    fn box3(self) -> Box3 {
+    fn box3(&self) -> Box3 {
         Box3 { min: self.lo, max: -self.neg_hi }
+    }
+    #[inline(always)]
+    fn centroids(&self) -> Box3 {
+        Box3 { min: self.c_lo, max: -self.neg_c_hi }
     }
 }
 
-/// The split search's bins, kept by a thread from node to node: each search empties the bins it
+/// A thread's bins for one node, kept from node to node: each search empties the bins it
 /// filled (a node of a few primitives fills a few of the 3 x 32), where every node filled all of
-/// them anew (6 KiB of stores and copies, on nodes of mostly a few dozen primitives).
+/// them anew (stores and copies, on nodes of mostly a few dozen primitives).
 struct Bins {
-    boxes: [[BinBox; BINS]; 3],
-    /// The second set of boxes of large nodes (see `best_split`).
-    odd: [[BinBox; BINS]; 3],
+    bins: [[Bin; BINS]; 3],
+    /// The second set of boxes of large nodes (see `fill_bins_with`).
+    odd: [[Bin; BINS]; 3],
     counts: [[u32; BINS]; 3],
 }
 
 impl Bins {
     fn new() -> Bins {
-        Bins { boxes: [[BinBox::EMPTY; BINS]; 3], odd: [[BinBox::EMPTY; BINS]; 3], counts: [[0; BINS]; 3] }
+        Bins { bins: [[Bin::EMPTY; BINS]; 3], odd: [[Bin::EMPTY; BINS]; 3], counts: [[0; BINS]; 3] }
     }
 
     /// Adds `o`'s boxes and counts to these (the odd sets are left as they are).
     fn merge(&mut self, o: &Bins) {
         for axis in 0..3 {
             for k in 0..BINS {
-                self.boxes[axis][k] = self.boxes[axis][k].union(o.boxes[axis][k]);
+                self.bins[axis][k] = self.bins[axis][k].union(o.bins[axis][k]);
                 self.counts[axis][k] += o.counts[axis][k];
             }
         }
     }
+}
+
+/// A node's bins, made on first use: a recursion's node at relative depth d bins into slot d,
+/// and its partition bins its left child into slot d + 1 and its right child into slot d (its
+/// own, emptied by its split search), so that a right child's bins wait in their slot while the
+/// left subtree is built below it.
+type Slot = Option<Box<Bins>>;
+/// Slots in a stack: nodes bin only above `SAH_MAX_DEPTH`.
+const SLOTS: usize = SAH_MAX_DEPTH + 1;
+
+fn slot(s: &mut Slot) -> &mut Bins {
+    s.get_or_insert_with(|| Box::new(Bins::new()))
 }
 
 /// Builds the wide tree over `n` primitives, `bound(i)` the box of the i-th. Returns the nodes
@@ -230,7 +292,10 @@ pub fn build_wide(n: usize, bound: impl Fn(usize) -> Aabb + Sync, params: LeafPa
     // On huge pages where large: its 4 KiB page faults were 2 % of the build's CPU time.
     let mut inner: PagedVec<Inner> = PagedVec::with_capacity(n - 1);
     let arena = Arena { ptr: inner.as_mut_ptr(), cap: inner.capacity(), next: AtomicUsize::new(0) };
-    let root = build_rec(params, &arena, &mut Bins::new(), &mut boxes, &mut order, 0, root_bounds, root_centroids, 0);
+    let threads = rayon::current_num_threads().max(1);
+    let cx = Ctx { p: params, arena: &arena, isa: isa(), fuse_max: (n / threads).max(PARALLEL_MIN - 1), spare: Mutex::new(Vec::new()) };
+    let mut slots: Vec<Slot> = (0..SLOTS).map(|_| None).collect();
+    let root = build_rec(&cx, &mut slots, false, &mut boxes, &mut order, 0, root_bounds, root_centroids, 0);
     // SAFETY: the first `next` places were written (`Arena::push`), the threads have joined.
     unsafe { inner.set_len(arena.next.into_inner()) };
     drop(boxes);
@@ -308,19 +373,45 @@ fn groups(n: usize, group: usize) -> f32 {
     n.div_ceil(group) as f32
 }
 
+/// What the recursion's calls share.
+struct Ctx<'a> {
+    p: LeafParams,
+    arena: &'a Arena,
+    isa: u8,
+    /// Children of at most this many primitives are binned by their parent's partition (one
+    /// pass over them where there were two); larger ones bin themselves, on all threads: near
+    /// the root, where there are fewer subtrees than threads.
+    fuse_max: usize,
+    /// Slot stacks (their bins empty) for the subtrees that start on other threads.
+    spare: Mutex<Vec<Vec<Slot>>>,
+}
+
+impl Ctx<'_> {
+    fn stack(&self) -> Vec<Slot> {
+        let spare = self.spare.lock().unwrap_or_else(|e| e.into_inner()).pop();
+        spare.unwrap_or_else(|| (0..SLOTS).map(|_| None).collect())
+    }
+    fn give_back(&self, stack: Vec<Slot>) {
+        self.spare.lock().unwrap_or_else(|e| e.into_inner()).push(stack);
+    }
+}
+
 /// The subtree over `boxes` (and the primitive ids `order`, permuted alongside), which start
 /// at `first` in the whole order, bounded by `bb`, their centroids by `cb`. Inner nodes go to
-/// `arena`; `bins` is the thread's (empty) scratch for the split search.
+/// `cx.arena`. `slots[0]` holds the node's bins, filled where `binned` (by the parent's
+/// partition), else empty; the slots after it are the subtree's (see [`Slot`]).
 #[allow(clippy::too_many_arguments)]
-fn build_rec(p: LeafParams, arena: &Arena, bins: &mut Bins, boxes: &mut [Box3], order: &mut [u32], first: usize, bb: Aabb, cb: Box3, depth: usize) -> BNode {
-    let n = order.len();
+fn build_rec(cx: &Ctx, slots: &mut [Slot], binned: bool, boxes: &mut [Box3], order: &mut [u32], first: usize, bb: Aabb, cb: Box3, depth: usize) -> BNode {
+    let (p, n) = (cx.p, order.len());
     let leaf = BNode::leaf(first, n);
     if n <= 1 {
+        debug_assert!(!binned, "a single primitive binned");
         return leaf;
     }
     let ext = cb.aabb().extent();
     let mid = n / 2;
     if depth >= SAH_MAX_DEPTH {
+        debug_assert!(!binned, "a median split's node binned");
         if n <= p.max_leaf {
             return leaf;
         }
@@ -336,39 +427,35 @@ fn build_rec(p: LeafParams, arena: &Arena, bins: &mut Bins, boxes: &mut [Box3], 
             boxes[k] = old_boxes[i as usize];
             order[k] = old_order[i as usize];
         }
-        return split_folded(p, arena, bins, boxes, order, first, mid, depth);
+        return split_folded(cx, slots, boxes, order, first, mid, depth);
     }
-    let scale = Vec3A::select(Vec3A::from(ext).cmpgt(Vec3A::ZERO), Vec3A::splat(BINS as f32) / Vec3A::from(ext), Vec3A::ZERO);
-    let split = best_split(bins, boxes, cb.min, scale, p.group);
+    let scale = bin_scale(Vec3A::from(ext));
+    // Above SAH_MAX_DEPTH a stack has two slots from this node's on (see `SLOTS`).
+    let (own, below) = slots.split_at_mut(1);
+    let bins = slot(&mut own[0]);
+    if !binned {
+        fill_bins(cx.isa, bins, boxes, cb.min, scale);
+    }
+    let split = best_split(bins, scale, p.group);
     let leaf_cost = groups(n, p.group);
     match split {
-        Some((cost, axis, bin)) => {
+        Some(s) => {
             // Costs are in units of parent area: traversal + sum of area ratio * groups.
-            let split_cost = p.traversal_cost + cost / bb.surface_area().max(f32::MIN_POSITIVE);
+            let split_cost = p.traversal_cost + s.cost / bb.surface_area().max(f32::MIN_POSITIVE);
             if n <= p.max_leaf && leaf_cost <= split_cost {
                 return leaf;
             }
-            // Partition by bin, bounding both sides (boxes and centroids) on the way.
-            let (mut lb, mut rb, mut lc, mut rc) = (Box3::EMPTY, Box3::EMPTY, Box3::EMPTY, Box3::EMPTY);
-            let mut l = 0;
-            let side = SideTest::new(cb.min, scale, axis, bin);
-            for k in 0..n {
-                let b = boxes[k];
-                let c = b.center();
-                if side.left(c) {
-                    boxes.swap(k, l);
-                    order.swap(k, l);
-                    l += 1;
-                    lb = lb.union(b);
-                    lc = lc.grow(c);
-                } else {
-                    rb = rb.union(b);
-                    rc = rc.grow(c);
-                }
-            }
-            if l > 0 && l < n {
-                return split_into(p, arena, bins, boxes, order, first, l, depth, [lb, rb], [lc, rc]);
-            }
+            // The children that will search for a split bin in the partition's pass, on the
+            // grids their centroid bounds give: the left one into the next slot, the right one
+            // into this node's.
+            let sizes = [s.count, n - s.count];
+            let fused = sizes.map(|m| m >= 2 && depth + 1 < SAH_MAX_DEPTH && m <= cx.fuse_max);
+            let grid = |k: usize| (s.centroids[k].min, bin_scale(s.centroids[k].max - s.centroids[k].min));
+            let kids = [fused[0].then(|| (slot(&mut below[0]), grid(0))), fused[1].then(|| (slot(&mut own[0]), grid(1)))];
+            let l = partition(cx.isa, boxes, order, &SideTest::new(cb.min, scale, s.axis, s.bin), kids);
+            // The side test is the bins' (see `SideTest`): both sides are the bins' and not empty.
+            debug_assert_eq!(l, s.count);
+            return split_into(cx, slots, boxes, order, first, l, depth, s.bounds, s.centroids, fused);
         }
         None => {
             // All centroids coincide: nothing to gain from splitting but leaf size.
@@ -377,7 +464,13 @@ fn build_rec(p: LeafParams, arena: &Arena, bins: &mut Bins, boxes: &mut [Box3], 
             }
         }
     }
-    split_folded(p, arena, bins, boxes, order, first, mid, depth)
+    split_folded(cx, slots, boxes, order, first, mid, depth)
+}
+
+/// Bins per unit of each axis of a centroid box's extent `ext` (0 on a flat axis).
+#[inline(always)]
+fn bin_scale(ext: Vec3A) -> Vec3A {
+    Vec3A::select(ext.cmpgt(Vec3A::ZERO), Vec3A::splat(BINS as f32) / ext, Vec3A::ZERO)
 }
 
 /// Median splits made (the tests check that they reach that path).
@@ -385,11 +478,10 @@ fn build_rec(p: LeafParams, arena: &Arena, bins: &mut Bins, boxes: &mut [Box3], 
 static MEDIAN_SPLITS: std::sync::atomic::AtomicUsize = std::sync::atomic::AtomicUsize::new(0);
 
 /// Splits at `mid`, bounding each side by a pass over it.
-#[allow(clippy::too_many_arguments)]
-fn split_folded(p: LeafParams, arena: &Arena, bins: &mut Bins, boxes: &mut [Box3], order: &mut [u32], first: usize, mid: usize, depth: usize) -> BNode {
+fn split_folded(cx: &Ctx, slots: &mut [Slot], boxes: &mut [Box3], order: &mut [u32], first: usize, mid: usize, depth: usize) -> BNode {
     let (left, right) = boxes.split_at(mid);
     let ((lb, lc), (rb, rc)) = (bound_seq(left), bound_seq(right));
-    split_into(p, arena, bins, boxes, order, first, mid, depth, [lb, rb], [lc, rc])
+    split_into(cx, slots, boxes, order, first, mid, depth, [lb, rb], [lc, rc], [false; 2])
 }
 
 /// The box and the centroids' box of `boxes`.
@@ -397,12 +489,12 @@ fn bound_seq(boxes: &[Box3]) -> (Box3, Box3) {
     boxes.iter().fold((Box3::EMPTY, Box3::EMPTY), |(b, c), x| (b.union(*x), c.grow(x.center())))
 }
 
-/// Builds the two children of a split at `mid`, given their boxes and centroid bounds.
+/// Builds the two children of a split at `mid`, given their boxes and centroid bounds, and
+/// whether their bins are filled (the left one's in `slots[1]`, the right one's in `slots[0]`).
 #[allow(clippy::too_many_arguments)]
 fn split_into(
-    p: LeafParams,
-    arena: &Arena,
-    bins: &mut Bins,
+    cx: &Ctx,
+    slots: &mut [Slot],
     boxes: &mut [Box3],
     order: &mut [u32],
     first: usize,
@@ -410,22 +502,33 @@ fn split_into(
     depth: usize,
     bounds: [Box3; 2],
     centroids: [Box3; 2],
+    binned: [bool; 2],
 ) -> BNode {
     let n = order.len();
     let (lbox, rbox) = boxes.split_at_mut(mid);
     let (lord, rord) = order.split_at_mut(mid);
     let (lb, rb) = (bounds[0].aabb(), bounds[1].aabb());
+    // Median splits below SAH_MAX_DEPTH may run out of slots; they use none.
+    let (own, below) = slots.split_at_mut(slots.len().min(1));
     let (a, b) = if n >= PARALLEL_MIN {
-        // The right side may run on another thread: bins of its own.
         rayon::join(
-            || build_rec(p, arena, bins, lbox, lord, first, lb, centroids[0], depth + 1),
-            || build_rec(p, arena, &mut Bins::new(), rbox, rord, first + mid, rb, centroids[1], depth + 1),
+            || build_rec(cx, below, binned[0], lbox, lord, first, lb, centroids[0], depth + 1),
+            || {
+                // The right side may run on another thread: a stack of its own, its bins moved there.
+                let mut stack = cx.stack();
+                if let Some(s) = own.first_mut() {
+                    std::mem::swap(&mut stack[0], s);
+                }
+                let b = build_rec(cx, &mut stack, binned[1], rbox, rord, first + mid, rb, centroids[1], depth + 1);
+                cx.give_back(stack);
+                b
+            },
         )
     } else {
-        let a = build_rec(p, arena, bins, lbox, lord, first, lb, centroids[0], depth + 1);
-        (a, build_rec(p, arena, bins, rbox, rord, first + mid, rb, centroids[1], depth + 1))
+        let a = build_rec(cx, below, binned[0], lbox, lord, first, lb, centroids[0], depth + 1);
+        (a, build_rec(cx, slots, binned[1], rbox, rord, first + mid, rb, centroids[1], depth + 1))
     };
-    arena.push(Inner { bounds: [lb, rb], children: [a, b] })
+    cx.arena.push(Inner { bounds: [lb, rb], children: [a, b] })
 }
 
 /// `(((c - lo) * scale) as usize).min(BINS - 1)` on the three axes at once, with the same
@@ -481,37 +584,34 @@ impl SideTest {
     }
 }
 
-/// Best binned SAH split over the three axes: (sum of area * groups, axis, first bin of the
-/// right side). `lo` is the centroids' lower corner, `scale` bins per unit (0 on a flat axis).
-/// `bins` come empty and are left empty.
-fn best_split(bins: &mut Bins, boxes: &[Box3], lo: Vec3A, scale: Vec3A, g: usize) -> Option<(f32, usize, usize)> {
-    if boxes.len() >= PARALLEL_MIN {
-        // The nodes near the root on rayon's threads, chunk by chunk: unions are exact in any
-        // order and counts add up, so the merged bins are the serial pass's (a zero's sign aside).
-        use rayon::prelude::*;
-        let fill = |chunk: &[Box3]| {
-            let mut b = Box::new(Bins::new());
-            fill_bins(&mut b, chunk, lo, scale);
-            b
-        };
-        let merged = boxes.par_chunks(PARALLEL_MIN / 2).map(fill).reduce_with(|mut a, b| {
-            a.merge(&b);
-            a
-        });
-        if let Some(m) = merged {
-            bins.merge(&m);
-        }
-    } else {
-        fill_bins(bins, boxes, lo, scale);
-    }
+/// A node's best binned SAH split.
+struct Split {
+    /// Sum of area * groups of the two sides.
+    cost: f32,
+    axis: usize,
+    /// The first bin of the right side.
+    bin: usize,
+    /// Primitives on the left side.
+    count: usize,
+    /// The sides' boxes and their centroids' boxes (the unions of their bins).
+    bounds: [Box3; 2],
+    centroids: [Box3; 2],
+}
+
+/// Best binned SAH split over the three axes of the filled `bins` (`scale` bins per unit, 0 on a
+/// flat axis), which are left empty.
+fn best_split(bins: &mut Bins, scale: Vec3A, g: usize) -> Option<Split> {
     let occupied = occupied_bins(&bins.counts);
-    let Bins { boxes: bin_b, counts: bin_n, .. } = bins;
+    let Bins { bins: bin_b, counts: bin_n, .. } = bins;
     // ceil(n / g) without a division where g is a power of two (leaf groups are).
     let shift = g.is_power_of_two().then(|| g.trailing_zeros());
     let groups_of = |n: usize| match shift {
         Some(s) => ((n + g - 1) >> s) as f32,
         None => groups(n, g),
     };
+    // The boxes swept are kept as bins are (the upper corner negated).
+    const NONE: Box3 = Box3 { min: Vec3A::INFINITY, max: Vec3A::INFINITY };
+    let area = |b: Box3| Box3 { min: b.min, max: -b.max }.surface_area();
     let mut best: Option<(f32, usize, usize)> = None;
     for axis in 0..3 {
         // A flat axis: its scale is 0 (the extent was not positive).
@@ -521,25 +621,25 @@ fn best_split(bins: &mut Bins, boxes: &[Box3], lo: Vec3A, scale: Vec3A, g: usize
         let (bin_b, bin_n, occupied) = (&bin_b[axis], &bin_n[axis], occupied[axis]);
         // The cost of the bins from each occupied one up (bin 0 never starts a right side).
         let mut right_cost = [0.0f32; BINS];
-        let (mut acc, mut cnt) = (BinBox::EMPTY, 0usize);
+        let (mut acc, mut cnt) = (NONE, 0usize);
         let mut m = occupied & !1;
         while m != 0 {
             let k = 31 - m.leading_zeros() as usize;
             m &= !(1 << k);
-            acc = acc.union(bin_b[k]);
+            acc = bin_b[k].grow_box(acc);
             cnt += bin_n[k] as usize;
-            right_cost[k] = acc.box3().surface_area() * groups_of(cnt);
+            right_cost[k] = area(acc) * groups_of(cnt);
         }
         // Split candidates: between an occupied bin `a` and the next occupied one `b`, every
         // split in a+1..=b has the same two sides, hence the same cost, and the first of equal
         // costs wins: only a+1 is tried. An empty bin changes neither box nor count, so the
         // unions and costs are those of a sweep over all bins.
-        let (mut acc, mut cnt) = (BinBox::EMPTY, 0usize);
+        let (mut acc, mut cnt) = (NONE, 0usize);
         let mut m = occupied;
         while m != 0 {
             let a = m.trailing_zeros() as usize;
             m &= m - 1;
-            acc = acc.union(bin_b[a]);
+            acc = bin_b[a].grow_box(acc);
             cnt += bin_n[a] as usize;
             if m == 0 {
                 break;
@@ -548,66 +648,101 @@ fn best_split(bins: &mut Bins, boxes: &[Box3], lo: Vec3A, scale: Vec3A, g: usize
             if !right_cost[b].is_finite() {
                 continue;
             }
-            let cost = acc.box3().surface_area() * groups_of(cnt) + right_cost[b];
+            let cost = area(acc) * groups_of(cnt) + right_cost[b];
             if best.is_none_or(|x| cost < x.0) {
                 best = Some((cost, axis, a + 1));
             }
         }
     }
+    // The sides' bounds and counts: unions of their bins (exact, a zero's sign aside).
+    let split = best.map(|(cost, axis, bin)| {
+        let (mut sides, mut count) = ([Bin::EMPTY; 2], 0usize);
+        let mut m = occupied[axis];
+        while m != 0 {
+            let k = m.trailing_zeros() as usize;
+            m &= m - 1;
+            let s = usize::from(k >= bin);
+            sides[s] = sides[s].union(bin_b[axis][k]);
+            count += if s == 0 { bin_n[axis][k] as usize } else { 0 };
+        }
+        Split { cost, axis, bin, count, bounds: sides.map(|b| b.box3()), centroids: sides.map(|b| b.centroids()) }
+    });
     // Empty what was filled (a flat axis's primitives went to its bin 0).
     for ((set, n), &occ) in bin_b.iter_mut().zip(bin_n.iter_mut()).zip(&occupied) {
         let mut m = occ;
         while m != 0 {
             let k = m.trailing_zeros() as usize;
             m &= m - 1;
-            set[k] = BinBox::EMPTY;
+            set[k] = Bin::EMPTY;
             n[k] = 0;
         }
     }
-    best
+    split
 }
 
-/// Bins `boxes` into `bins` (empty bins of one set, the odd set left empty).
-fn fill_bins(bins: &mut Bins, boxes: &[Box3], lo: Vec3A, scale: Vec3A) {
-    #[cfg(target_arch = "x86_64")]
-    if std::is_x86_feature_detected!("avx") {
-        // SAFETY: the CPU has AVX.
-        unsafe { fill_bins_avx(bins, boxes, lo, scale) };
+/// Bins `boxes` into `bins` (empty, the odd set left empty), on the grid from `lo` at `scale`
+/// bins per unit. The nodes near the root on rayon's threads, chunk by chunk: unions are exact
+/// in any order and counts add up, so the merged bins are the serial pass's (a zero's sign aside).
+fn fill_bins(isa: u8, bins: &mut Bins, boxes: &[Box3], lo: Vec3A, scale: Vec3A) {
+    if boxes.len() >= PARALLEL_MIN {
+        use rayon::prelude::*;
+        let fill = |chunk: &[Box3]| {
+            let mut b = Box::new(Bins::new());
+            fill_bins(isa, &mut b, chunk, lo, scale);
+            b
+        };
+        let merged = boxes.par_chunks(PARALLEL_MIN / 2).map(fill).reduce_with(|mut a, b| {
+            a.merge(&b);
+            a
+        });
+        if let Some(m) = merged {
+            bins.merge(&m);
+        }
         return;
     }
-    fill_bins_with::<false>(bins, boxes, lo, scale);
+    #[cfg(target_arch = "x86_64")]
+    {
+        // SAFETY: the CPU has the set `isa` names.
+        match isa {
+            AVX512 => return unsafe { fill_bins_avx512(bins, boxes, lo, scale) },
+            AVX => return unsafe { fill_bins_avx(bins, boxes, lo, scale) },
+            _ => {}
+        }
+    }
+    fill_bins_with::<SSE>(bins, boxes, lo, scale);
 }
 
-/// [`fill_bins`] compiled for AVX: each bin's union one instruction (see [`BinBox`]).
+/// [`fill_bins`] compiled for AVX: each bin's union two instructions (see [`Bin`]).
 #[cfg(target_arch = "x86_64")]
 #[target_feature(enable = "avx")]
 unsafe fn fill_bins_avx(bins: &mut Bins, boxes: &[Box3], lo: Vec3A, scale: Vec3A) {
-    fill_bins_with::<true>(bins, boxes, lo, scale);
+    fill_bins_with::<AVX>(bins, boxes, lo, scale);
 }
 
-/// Adds one box to a set of bins and its counts (`AVX` only inside AVX code).
+/// [`fill_bins`] compiled for AVX-512: each bin's union one instruction.
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx,avx2,avx512f")]
+unsafe fn fill_bins_avx512(bins: &mut Bins, boxes: &[Box3], lo: Vec3A, scale: Vec3A) {
+    fill_bins_with::<AVX512>(bins, boxes, lo, scale);
+}
+
+/// Adds one box, of centroid `c`, to a set of bins and its counts (`ISA` as in [`Bin::add`]).
 #[inline(always)]
-fn bin_one<const AVX: bool>(set: &mut [[BinBox; BINS]; 3], counts: &mut [[u32; BINS]; 3], b: &Box3, lo: Vec3A, scale: Vec3A) {
-    let k = bin_indices(b.center(), lo, scale);
-    let row = BinBox::of(b);
+fn bin_one<const ISA: u8>(set: &mut [[Bin; BINS]; 3], counts: &mut [[u32; BINS]; 3], b: &Box3, c: Vec3A, lo: Vec3A, scale: Vec3A) {
+    let k = bin_indices(c, lo, scale);
+    let row = Bin::of(b, c);
     for axis in 0..3 {
         // The mask keeps the index (at most BINS - 1) and drops the bounds checks.
         let i = k[axis] & (BINS - 1);
-        #[cfg(target_arch = "x86_64")]
-        if AVX {
-            // SAFETY: AVX = true is only instantiated inside `fill_bins_avx`.
-            unsafe { set[axis][i].union_avx(&row) };
-            counts[axis][i] += 1;
-            continue;
-        }
-        set[axis][i] = set[axis][i].union(row);
+        // SAFETY: `ISA` is only instantiated inside code compiled for it.
+        unsafe { set[axis][i].add::<ISA>(&row) };
         counts[axis][i] += 1;
     }
 }
 
 #[inline(always)]
-fn fill_bins_with<const AVX: bool>(bins: &mut Bins, boxes: &[Box3], lo: Vec3A, scale: Vec3A) {
-    let Bins { boxes: bin_b, odd: odd_b, counts: bin_n } = bins;
+fn fill_bins_with<const ISA: u8>(bins: &mut Bins, boxes: &[Box3], lo: Vec3A, scale: Vec3A) {
+    let Bins { bins: bin_b, odd: odd_b, counts: bin_n } = bins;
     if boxes.len() >= TWO_BIN_SETS_MIN {
         // Neighbours often land in the same bin: two sets of boxes (even and odd primitives)
         // halve the chains of unions through memory. Unions are exact in any order: the
@@ -615,11 +750,11 @@ fn fill_bins_with<const AVX: bool>(bins: &mut Bins, boxes: &[Box3], lo: Vec3A, s
         let pairs = boxes.chunks_exact(2);
         let rest = pairs.remainder();
         for pair in pairs {
-            bin_one::<AVX>(bin_b, bin_n, &pair[0], lo, scale);
-            bin_one::<AVX>(odd_b, bin_n, &pair[1], lo, scale);
+            bin_one::<ISA>(bin_b, bin_n, &pair[0], pair[0].center(), lo, scale);
+            bin_one::<ISA>(odd_b, bin_n, &pair[1], pair[1].center(), lo, scale);
         }
         for b in rest {
-            bin_one::<AVX>(bin_b, bin_n, b, lo, scale);
+            bin_one::<ISA>(bin_b, bin_n, b, b.center(), lo, scale);
         }
         // The counts are both sets': an odd bin in use is an occupied one.
         let occupied = occupied_bins(bin_n);
@@ -629,14 +764,71 @@ fn fill_bins_with<const AVX: bool>(bins: &mut Bins, boxes: &[Box3], lo: Vec3A, s
                 let k = m.trailing_zeros() as usize;
                 m &= m - 1;
                 set[k] = set[k].union(odd[k]);
-                odd[k] = BinBox::EMPTY;
+                odd[k] = Bin::EMPTY;
             }
         }
     } else {
         for b in boxes {
-            bin_one::<AVX>(bin_b, bin_n, b, lo, scale);
+            bin_one::<ISA>(bin_b, bin_n, b, b.center(), lo, scale);
         }
     }
+}
+
+/// A child's bins, with the lower corner and scale of its grid.
+type Kid<'a> = Option<(&'a mut Bins, (Vec3A, Vec3A))>;
+
+/// Partitions `boxes` and `order` by `side` (the left side first, in the order of the swaps,
+/// which is the tree's primitive order) and adds each primitive to its side's bins where `kids`
+/// has them: the children's split searches need no pass of their own over their primitives.
+/// Returns the left side's size.
+fn partition(isa: u8, boxes: &mut [Box3], order: &mut [u32], side: &SideTest, kids: [Kid; 2]) -> usize {
+    #[cfg(target_arch = "x86_64")]
+    {
+        // SAFETY: the CPU has the set `isa` names.
+        match isa {
+            AVX512 => return unsafe { partition_avx512(boxes, order, side, kids) },
+            AVX => return unsafe { partition_avx(boxes, order, side, kids) },
+            _ => {}
+        }
+    }
+    partition_with::<SSE>(boxes, order, side, kids)
+}
+
+/// [`partition`] compiled for AVX.
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx")]
+unsafe fn partition_avx(boxes: &mut [Box3], order: &mut [u32], side: &SideTest, kids: [Kid; 2]) -> usize {
+    partition_with::<AVX>(boxes, order, side, kids)
+}
+
+/// [`partition`] compiled for AVX-512.
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx,avx2,avx512f")]
+unsafe fn partition_avx512(boxes: &mut [Box3], order: &mut [u32], side: &SideTest, kids: [Kid; 2]) -> usize {
+    partition_with::<AVX512>(boxes, order, side, kids)
+}
+
+#[inline(always)]
+fn partition_with<const ISA: u8>(boxes: &mut [Box3], order: &mut [u32], side: &SideTest, kids: [Kid; 2]) -> usize {
+    let [mut left, mut right] = kids;
+    let mut l = 0;
+    for k in 0..boxes.len() {
+        let b = boxes[k];
+        let c = b.center();
+        if side.left(c) {
+            // The swap, with the box at k already in registers.
+            boxes[k] = boxes[l];
+            boxes[l] = b;
+            order.swap(k, l);
+            l += 1;
+            if let Some((bins, (lo, scale))) = &mut left {
+                bin_one::<ISA>(&mut bins.bins, &mut bins.counts, &b, c, *lo, *scale);
+            }
+        } else if let Some((bins, (lo, scale))) = &mut right {
+            bin_one::<ISA>(&mut bins.bins, &mut bins.counts, &b, c, *lo, *scale);
+        }
+    }
+    l
 }
 
 /// The occupied bins of each axis (a bin's occupancy in one bit): what is swept and emptied.
@@ -744,6 +936,12 @@ mod tests {
             for params in [tri, one, odd] {
                 same_tree(set, params);
             }
+        }
+        // The children binned in their parent's partition or by themselves (`Ctx::fuse_max`
+        // depends on the threads): the same tree either way.
+        for threads in [1, 3] {
+            let pool = rayon::ThreadPoolBuilder::new().num_threads(threads).build().expect("rayon pool");
+            pool.install(|| same_tree(&soup, tri));
         }
         assert!(MEDIAN_SPLITS.load(std::sync::atomic::Ordering::Relaxed) > 0, "the deep set did not reach the median splits");
         same_tree(&soup[..1], tri);
