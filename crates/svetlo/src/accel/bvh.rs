@@ -267,7 +267,10 @@ impl Accel {
     #[inline(always)]
     fn tri_leaf<const ANY: bool, K: TriKernel>(&self, code: u32, t_max: &mut f32, tray: &K, w: &WatertightRay, hit: &mut Option<TriHit>) -> bool {
         let (start, count) = leaf_range(code);
-        let blocks = &self.tris[start..start + count];
+        debug_assert!(start + count <= self.tris.len());
+        // SAFETY: a leaf code of this tree names a run of its blocks (`Accel::build`), so the range
+        // lies inside `tris` (unchecked: as the node index in `Walk::step`).
+        let blocks = unsafe { self.tris.get_unchecked(start..start + count) };
         if ANY {
             // Any hit ends the walk: no nearest lane, no barycentrics. A loop, not `any`: in
             // the interleaved walk `any` stayed out of line, and its AVX intrinsics with it.

@@ -333,7 +333,11 @@ impl Walk {
         // Whether the entry popped below was pushed by this step.
         let mut pushed_now = false;
         if cur & LEAF_BIT == 0 {
-            let node = &nodes[cur as usize];
+            debug_assert!((cur as usize) < nodes.len());
+            // SAFETY: `cur` is the root (0, of a non-empty tree) or an inner node's code taken from
+            // a node of this tree, which the build makes an index into `nodes`. Unchecked: the
+            // check's compare and branch on every node visit, and the length kept in a register.
+            let node = unsafe { nodes.get_unchecked(cur as usize) };
             let (tn, mut mask) = ray.test_dispatch::<AVX>(node, *t_max);
             if mask != 0 {
                 let c = &node.children;
