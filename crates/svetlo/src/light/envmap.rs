@@ -110,14 +110,7 @@ impl EnvMap {
         let m = &self.to_local;
         let mut out = [[0.0; N]; 3];
         for k in 0..N {
-            let (x, y, z) = (d[0][k], d[1][k], d[2][k]);
-            // `Mat3 * Vec3` and `normalize_or_zero` as glam computes them.
-            let lx = (m.x_axis.x * x + m.y_axis.x * y) + m.z_axis.x * z;
-            let ly = (m.x_axis.y * x + m.y_axis.y * y) + m.z_axis.y * z;
-            let lz = (m.x_axis.z * x + m.y_axis.z * y) + m.z_axis.z * z;
-            let rcp = 1.0 / ((lx * lx + ly * ly) + lz * lz).sqrt();
-            let ok = rcp.is_finite() && rcp > 0.0;
-            let (lx, ly, lz) = if ok { (lx * rcp, ly * rcp, lz * rcp) } else { (0.0, 0.0, 0.0) };
+            let (lx, ly, lz) = rotate_normalize(m, d[0][k], d[1][k], d[2][k]);
             let u = approx::atan2_branchless(lx, -lz) * INV_2PI - self.half_texel;
             let sin_t = safe_sqrt(lx * lx + lz * lz);
             out[0][k] = if u < 0.0 { u + 1.0 } else { u };
@@ -168,14 +161,7 @@ impl EnvMap {
         for k in 0..N {
             let (sp, cp) = sin_cos_2pi(g[k].x + self.half_texel);
             let (st, ct) = sin_cos_2pi(0.5 * g[k].y);
-            let (x, y, z) = (sp * st, ct, -cp * st);
-            // `Mat3 * Vec3` and `normalize_or_zero` as glam computes them.
-            let wx = (m.x_axis.x * x + m.y_axis.x * y) + m.z_axis.x * z;
-            let wy = (m.x_axis.y * x + m.y_axis.y * y) + m.z_axis.y * z;
-            let wz = (m.x_axis.z * x + m.y_axis.z * y) + m.z_axis.z * z;
-            let rcp = 1.0 / ((wx * wx + wy * wy) + wz * wz).sqrt();
-            let ok = rcp.is_finite() && rcp > 0.0;
-            let (wx, wy, wz) = if ok { (wx * rcp, wy * rcp, wz * rcp) } else { (0.0, 0.0, 0.0) };
+            let (wx, wy, wz) = rotate_normalize(m, sp * st, ct, -cp * st);
             (d[0][k], d[1][k], d[2][k]) = (wx, wy, wz);
             sin[k] = st.max(0.0);
         }
@@ -293,6 +279,22 @@ impl EnvMap {
 
 /// Grids of at least this many vertices (16 bytes each: 1 MiB) are asked for ahead of lookups.
 const PREFETCH_TEXELS_MIN: usize = 1 << 16;
+
+/// `(m * Vec3::new(x, y, z)).normalize_or_zero()` as glam computes them, on plain floats
+/// without branches, so that the lane loops of `dirs_to_grid` and `grid_to_dirs` vectorise.
+#[inline(always)]
+fn rotate_normalize(m: &Mat3, x: f32, y: f32, z: f32) -> (f32, f32, f32) {
+    let wx = (m.x_axis.x * x + m.y_axis.x * y) + m.z_axis.x * z;
+    let wy = (m.x_axis.y * x + m.y_axis.y * y) + m.z_axis.y * z;
+    let wz = (m.x_axis.z * x + m.y_axis.z * y) + m.z_axis.z * z;
+    let rcp = 1.0 / ((wx * wx + wy * wy) + wz * wz).sqrt();
+    let ok = rcp.is_finite() && rcp > 0.0;
+    if ok {
+        (wx * rcp, wy * rcp, wz * rcp)
+    } else {
+        (0.0, 0.0, 0.0)
+    }
+}
 
 /// Sample t in [0,1) with density proportional to (1 - t) a + t b (a, b >= 0).
 #[inline]
