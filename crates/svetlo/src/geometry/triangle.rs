@@ -34,6 +34,10 @@ impl WatertightRay {
         // for a table was written to the stack for every ray.
         let at = 2 * (kz & 3) + 6 * usize::from(dz < 0.0);
         let (kx, ky) = ((0x489 >> at) & 3, (0x252 >> at) & 3);
+        // SAFETY: kz is 0, 1 or 2 by its sum above, and kx, ky are two bits of 0x489 or 0x252
+        // at an even shift, each pair 0, 1 or 2. Said so that the users' clamps to 0..3 fold
+        // away (`TriRay8::new`'s offsets: a compare and a move each, every ray).
+        unsafe { std::hint::assert_unchecked(kx < 3 && ky < 3 && kz < 3) };
         let sz = 1.0 / dz;
         WatertightRay { o, kx, ky, kz, sx: comp[kx & 3] / dz, sy: comp[ky & 3] / dz, sz }
     }
