@@ -27,12 +27,17 @@ impl WatertightRay {
         // same choice as the nested comparisons `x > y ? (x > z ? 0 : 2) : (y > z ? 1 : 2)`.
         let (x_y, x_z, y_z) = (a.x > a.y, a.x > a.z, a.y > a.z);
         let kz = usize::from(x_y) * (2 - 2 * usize::from(x_z)) + usize::from(!x_y) * (2 - usize::from(y_z));
-        // (kz + 1) % 3 and (kz + 2) % 3, by table: kz < 3, so `& 3` only drops the check.
-        let (kx, ky) = ([1, 2, 0, 0][kz & 3], [2, 0, 1, 0][kz & 3]);
         let comp = [d.x, d.y, d.z, 0.0];
         let dz = comp[kz & 3];
-        // A negative dz swaps kx and ky (the winding stays that of the +z view).
-        let (kx, ky) = if dz < 0.0 { (ky, kx) } else { (kx, ky) };
+        // (kz + 1) % 3 and (kz + 2) % 3, swapped for a negative dz (the winding stays that of
+        // the +z view): two bits each of a constant, at 2 kz (6 further for the swap). An array
+        // for a table was written to the stack for every ray.
+        let at = 2 * (kz & 3) + 6 * usize::from(dz < 0.0);
+        let (kx, ky) = ((0x489 >> at) & 3, (0x252 >> at) & 3);
+        // SAFETY: kz is 0, 1 or 2 by its sum above, and kx, ky are two bits of 0x489 or 0x252
+        // at an even shift, each pair 0, 1 or 2. Said so that the users' clamps to 0..3 fold
+        // away (`TriRay8::new`'s offsets: a compare and a move each, every ray).
+        unsafe { std::hint::assert_unchecked(kx < 3 && ky < 3 && kz < 3) };
         let sz = 1.0 / dz;
         WatertightRay { o, kx, ky, kz, sx: comp[kx & 3] / dz, sy: comp[ky & 3] / dz, sz }
     }
