@@ -1,6 +1,17 @@
 //! The vector instruction sets this CPU runs, detected at run time (std caches the answers):
 //! the eight-lane steps are compiled once per set from one source and pick their copy here.
 
+/// AVX: the BVH build's bin unions and partition.
+#[inline]
+pub fn avx() -> bool {
+    #[cfg(target_arch = "x86_64")]
+    {
+        std::arch::is_x86_feature_detected!("avx")
+    }
+    #[cfg(not(target_arch = "x86_64"))]
+    false
+}
+
 /// AVX2: the eight-wide paths (ray packets, the kernels' eight-lane steps).
 #[inline]
 pub fn avx2() -> bool {

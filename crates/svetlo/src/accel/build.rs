@@ -165,16 +165,13 @@ const AVX: u8 = 1;
 const AVX512: u8 = 2;
 
 fn isa() -> u8 {
-    #[cfg(target_arch = "x86_64")]
-    {
-        if std::is_x86_feature_detected!("avx512f") {
-            return AVX512;
-        }
-        if std::is_x86_feature_detected!("avx") {
-            return AVX;
-        }
+    if crate::cpu::avx512() {
+        AVX512
+    } else if crate::cpu::avx() {
+        AVX
+    } else {
+        SSE
     }
-    SSE
 }
 
 impl Bin {

@@ -758,6 +758,12 @@ impl Film {
         if x >= self.width || y >= self.height {
             return None;
         }
+        self.pixel_row(x, y)
+    }
+
+    /// Pixel (x, y)'s splat row (x < width, y < height), the buffer made on first use.
+    #[inline]
+    fn pixel_row(&mut self, x: u32, y: u32) -> Option<&mut [f32]> {
         let stride = self.splat_stride();
         if self.splats.is_empty() {
             self.splats = vec![0.0; (self.width * self.height) as usize * stride];
@@ -873,11 +879,9 @@ impl Film {
         if !l.is_finite() {
             return;
         }
-        let stride = self.splat_stride();
-        if self.splats.is_empty() {
-            self.splats = vec![0.0; (self.width * self.height) as usize * stride];
+        if let Some(row) = self.pixel_row(x, y) {
+            add_rgb(row, 0, l);
         }
-        add_rgb(&mut self.splats, (y * self.width + x) as usize * stride, l);
     }
 
     /// The developed image: filtered samples plus scaled splats.

@@ -332,14 +332,10 @@ impl KernelGeometry {
             return;
         }
         let mesh = |p: u32| {
-            if !self.is_triangle(p) {
-                return None;
-            }
-            // As in `read`: the last mesh that starts at or before `p`.
-            let (first, si) = self.meshes[self.meshes.partition_point(|&(f, _)| f <= p) - 1];
-            let s = &scene.shapes[si as usize];
+            let (si, t) = self.mesh_of(p)?;
+            let s = &scene.shapes[si];
             match &*s.geometry {
-                Geometry::Mesh(m) => Some((s, m, (p - first) as usize)),
+                Geometry::Mesh(m) => Some((s, m, t)),
                 _ => None,
             }
         };
@@ -453,6 +449,18 @@ impl KernelGeometry {
         prim < self.triangles
     }
 
+    /// The shape whose mesh holds the kernel's triangle `prim`, and the triangle's index in
+    /// it; None where `prim` names no triangle.
+    #[inline(always)]
+    fn mesh_of(&self, prim: u32) -> Option<(usize, usize)> {
+        if !self.is_triangle(prim) {
+            return None;
+        }
+        // The last mesh that starts at or before `prim` (the first starts at 0).
+        let (first, si) = self.meshes[self.meshes.partition_point(|&(f, _)| f <= prim) - 1];
+        Some((si as usize, (prim - first) as usize))
+    }
+
     /// The kernel's triangle `prim` where the triangles are unpacked; else None (and where it
     /// names none: a ray that escaped, or hit a shape that is not a mesh).
     #[inline(always)]
@@ -467,14 +475,10 @@ impl KernelGeometry {
     /// kernel's loop stays that of unpacked triangles.
     #[inline(never)]
     fn read(&self, scene: &Scene, prim: u32) -> Option<Tri> {
-        if !self.is_triangle(prim) {
-            return None;
-        }
-        // The last mesh that starts at or before `prim` (the first starts at 0).
-        let (first, si) = self.meshes[self.meshes.partition_point(|&(f, _)| f <= prim) - 1];
-        let s = &scene.shapes[si as usize];
+        let (si, t) = self.mesh_of(prim)?;
+        let s = &scene.shapes[si];
         let Geometry::Mesh(m) = &*s.geometry else { return None };
-        Some(Tri::of(s, m, si as usize, (prim - first) as usize))
+        Some(Tri::of(s, m, si, t))
     }
 }
 
@@ -735,8 +739,6 @@ pub struct SimdKernel {
     /// Whether some shape's texels are asked for ahead of shading (`prefetch_texels`; with
     /// the triangles unpacked, whose uvs it reads).
     prefetch_texels: bool,
-    /// Those shapes' meshes as the kernel's triangle indices name them: first, end, shape.
-    texel_meshes: Vec<(u32, u32, u32)>,
     /// Run the AVX-512VL build of the kernel (detected at run time; tests may clear it).
     avx512: bool,
     /// Packets a tile steps in phase: [`PACKETS`] where Beckmann normals or sphere-light
@@ -922,15 +924,10 @@ impl SimdKernel {
             .collect();
         let env_light = scene.lights.iter().position(|l| matches!(l, Light::EnvMap(env) if env.large()));
         let prefetch_texels = geometry.unpacked && shapes.iter().any(|s| s.prefetch_texels);
-        let meshes = &geometry.meshes;
-        let texel_meshes = (0..meshes.len())
-            .filter(|&i| prefetch_texels && shapes[meshes[i].1 as usize].prefetch_texels)
-            .map(|i| (meshes[i].0, meshes.get(i + 1).map_or(geometry.triangles, |m| m.0), meshes[i].1))
-            .collect();
         let chains =
             sphere_lights.iter().any(Option::is_some) || shapes.iter().any(|s| s.uniform.as_ref().is_some_and(|b| b.beckmann_conductor(Vec3::Z).is_some()));
         let packets = if chains { PACKETS } else { 1 };
-        Some(SimdKernel { tracer, geometry, shapes, lights, sphere_lights, env_light, prefetch_texels, texel_meshes, avx512: crate::cpu::avx512(), packets })
+        Some(SimdKernel { tracer, geometry, shapes, lights, sphere_lights, env_light, prefetch_texels, avx512: crate::cpu::avx512(), packets })
     }
 
     /// How many packets of eight paths a tile steps in phase (more than one where the
@@ -1798,12 +1795,14 @@ impl SimdKernel {
             // the unpacked triangle, the same value): the triangle's record, just asked for by
             // `prefetch_hits`, is not waited on here (3 % of the grid's render, most of its
             // lanes on shapes without such a bitmap).
-            let prim = hits.prim[l];
-            let Some(&(first, _, si)) = self.texel_meshes.iter().find(|&&(f, e, _)| f <= prim && prim < e) else { continue };
-            let Geometry::Mesh(m) = &*scene.shapes[si as usize].geometry else { continue };
-            let uv = m.uv((prim - first) as usize, hits.b1[l], hits.b2[l]);
+            let Some((si, t)) = self.geometry.mesh_of(hits.prim[l]) else { continue };
+            let sh = &self.shapes[si];
+            if !sh.prefetch_texels {
+                continue;
+            }
+            let Geometry::Mesh(m) = &*scene.shapes[si].geometry else { continue };
+            let uv = m.uv(t, hits.b1[l], hits.b2[l]);
             uv_ahead[l] = uv;
-            let sh = &self.shapes[si as usize];
             sh.front.prefetch(uv);
             if let Some(b) = &sh.back {
                 b.prefetch(uv);
