@@ -119,10 +119,11 @@ impl Accel {
             |i| Aabb::from_points(&triangle(i as u32)),
             TRI_LEAF,
             |prims| {
-                let start = blocks.len();
-                for chunk in prims.chunks(LANES) {
-                    blocks.push((leaf_tris.len() as u32, chunk.len() as u32));
-                    leaf_tris.extend_from_slice(chunk);
+                let (start, first) = (blocks.len(), leaf_tris.len());
+                // One copy per leaf, not a `memcpy` call per block (this pass runs on one thread).
+                leaf_tris.extend_from_slice(prims);
+                for (k, chunk) in prims.chunks(LANES).enumerate() {
+                    blocks.push(((first + k * LANES) as u32, chunk.len() as u32));
                 }
                 leaf_code(start, blocks.len() - start)
             },
