@@ -280,25 +280,28 @@ pub(crate) fn rough_conductor_lanes<const N: usize>(q: &RoughConductorLanes<N>, 
             cos[e][l] = wo.dot(hh);
         }
     }
-    // The Fresnel channels that count, packed: (lane, direction) pairs' three channels.
+    // The Fresnel channels that count, packed: (lane, direction) pairs' three channels,
+    // channel `a` at `a` of the flat rows (a row of eight f64 a step).
     const STEP: usize = 8;
     let mut fc = [[0.0f64; STEP]; 6];
     let mut fnk = [[[1.0f32; STEP]; 6]; 2];
     let mut at = [[0usize; N]; 2];
     let mut n = 0usize;
-    for l in 0..used.min(N) {
-        for e in 0..2 {
-            if !fresnel[e][l] {
-                continue;
+    {
+        let (fc, [fn_, fk]) = (fc.as_flattened_mut(), fnk.each_mut().map(|r| r.as_flattened_mut()));
+        for l in 0..used.min(N) {
+            for e in 0..2 {
+                if !fresnel[e][l] {
+                    continue;
+                }
+                at[e][l] = n;
+                let c = fresnel::conductor_cos(cos[e][l]);
+                for k in 0..3 {
+                    fc[n + k] = c;
+                    (fn_[n + k], fk[n + k]) = (q.eta[k][l], q.k[k][l]);
+                }
+                n += 3;
             }
-            at[e][l] = n;
-            let c = fresnel::conductor_cos(cos[e][l]);
-            for k in 0..3 {
-                let (i, j) = ((n + k) / STEP, (n + k) % STEP);
-                fc[i][j] = c;
-                (fnk[0][i][j], fnk[1][i][j]) = (q.eta[k][l], q.k[k][l]);
-            }
-            n += 3;
         }
     }
     let mut fr = [[0.0f32; STEP]; 6];
@@ -307,6 +310,7 @@ pub(crate) fn rough_conductor_lanes<const N: usize>(q: &RoughConductorLanes<N>, 
             fr[i][j] = fresnel::conductor_channel(fc[i][j], fnk[0][i][j], fnk[1][i][j]);
         }
     }
+    let fr = fr.as_flattened();
     let mut f = [[[0.0f32; N]; 3]; 2];
     for l in 0..used.min(N) {
         for e in 0..2 {
@@ -314,8 +318,7 @@ pub(crate) fn rough_conductor_lanes<const N: usize>(q: &RoughConductorLanes<N>, 
                 continue;
             }
             for (k, row) in f[e].iter_mut().enumerate() {
-                let a = at[e][l] + k;
-                row[l] = fr[a / STEP][a % STEP] * q.specular_reflectance[k][l] * scale[e][l];
+                row[l] = fr[at[e][l] + k] * q.specular_reflectance[k][l] * scale[e][l];
             }
         }
     }

@@ -329,7 +329,7 @@ impl Bsdf {
         if let (None, true, Some((BsdfModel::RoughConductor(c), flipped))) = (&self.detail, self.opacity >= 1.0, self.side(wo)) {
             let side = |w: Vec3| if flipped { flip(w) } else { w };
             let (nee, s) = c.eval_pdf_and_sample(side(wo), wi.map(side), u);
-            return self.finish_conductor(flipped, nee, s);
+            return Self::finish_conductor(self.opacity, flipped, nee, s);
         }
         (wi.map(|wi| self.eval_pdf(wo, wi, mode)), self.sample(wo, uc, u, mode))
     }
@@ -347,16 +347,17 @@ impl Bsdf {
     }
 
     /// A rough conductor's value and density toward a light sample and its own sample, on
-    /// the model's side (`flipped` as `side` gave it), made this BSDF's (as
-    /// `eval_pdf_and_sample` finishes them).
+    /// the model's side (`flipped` as `side` gave it), made those of a BSDF of this `opacity`
+    /// (as `eval_pdf_and_sample` finishes them). (The opacity alone: the path kernel keeps
+    /// it, not a borrow of the BSDF, until its conductor lanes' values are in.)
     #[inline]
-    pub(crate) fn finish_conductor(&self, flipped: bool, nee: Option<(Rgb, f32)>, s: Option<BsdfSample>) -> (Option<(Rgb, f32)>, Option<BsdfSample>) {
+    pub(crate) fn finish_conductor(opacity: f32, flipped: bool, nee: Option<(Rgb, f32)>, s: Option<BsdfSample>) -> (Option<(Rgb, f32)>, Option<BsdfSample>) {
         let side = |w: Vec3| if flipped { flip(w) } else { w };
-        let nee = nee.map(|(f, pdf)| (f * self.opacity, pdf * self.opacity));
+        let nee = nee.map(|(f, pdf)| (f * opacity, pdf * opacity));
         let s = s.map(|mut s| {
             s.wi = side(s.wi);
-            s.f *= self.opacity;
-            s.pdf *= self.opacity;
+            s.f *= opacity;
+            s.pdf *= opacity;
             s
         });
         (nee, s)
@@ -638,7 +639,7 @@ mod tests {
                         let mut q = conductor::RoughConductorLanes::<1>::default();
                         q.set(0, c, side(wo), wi.map(side), u);
                         let (nee_l, s_l) = conductor::rough_conductor_lanes(&q, 1).lane(0, wi.is_some());
-                        let (nee_m, s_m) = b.finish_conductor(flipped, nee_l, s_l);
+                        let (nee_m, s_m) = Bsdf::finish_conductor(b.opacity, flipped, nee_l, s_l);
                         assert_eq!(
                             (nee_m.map(bits), sample_bits(s_m)),
                             (nee.map(bits), sample_bits(s)),

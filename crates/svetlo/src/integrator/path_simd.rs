@@ -1173,7 +1173,7 @@ impl SimdKernel {
             for p in packets.iter_mut() {
                 self.env_samples(scene, &mut p.v);
             }
-            self.conductor_samples(packets);
+            self.conductor_samples(events, packets);
             for (pk, p) in packets.iter_mut().enumerate().filter(|(_, p)| p.active != 0) {
                 if p.go == 0 && !layers.on() {
                     // No path goes on (every step at depth 1): the shading step's outputs are
@@ -1375,9 +1375,7 @@ impl SimdKernel {
         while lanes != 0 {
             let l = lanes.trailing_zeros() as usize;
             lanes &= lanes - 1;
-            if let Some((si, u)) = v.scatter[l].take() {
-                self.scalar_scatter(events, st, l, v, &si, u);
-            }
+            self.scalar_scatter(events, st, l, v);
         }
         // Writes every lane's next ray, shadow ray and state; only `go` lanes' count.
         self.shade8_on_cpu(v, settings.rr_depth, st, rays, shadow, o);
@@ -1594,15 +1592,16 @@ impl SimdKernel {
             }
         }
         if sh.scalar_bsdf {
-            let u6 = [u_light, u_l2.x, u_l2.y, uc, u.x, u.y];
-            let si = match hit {
+            // The hit's record only where `Scene::bsdf` builds the hit's own BSDF from it:
+            // the rest of the vertex is in `v.num` (a record per lane, built and copied into
+            // `Soa` and read back, had been most of a scalar lane's `gather`).
+            let si = sh.uniform.is_none().then(|| match hit {
                 Hit::Tri(tri) => SurfaceInteraction {
                     p,
                     t: 0.0,
                     ng,
                     shading: frame,
-                    // Only `Scene::bsdf` reads it: a uniform BSDF needs none.
-                    uv: if sh.uniform.is_some() { Vec2::ZERO } else { self.uv(scene, tri, b1, b2) },
+                    uv: self.uv(scene, tri, b1, b2),
                     shape: tri.shape,
                     prim: tri.local,
                     bary: Vec2::new(b1, b2),
@@ -1610,9 +1609,9 @@ impl SimdKernel {
                     time: st.time[l],
                 },
                 Hit::Other(si) => *si,
-            };
-            self.scalar_light_sample(scene, l, v, &si, u6);
-            v.scatter[l] = Some((si, u6));
+            });
+            self.scalar_light_sample(scene, l, v, shape, p, si.as_ref(), u_light, u_l2);
+            (v.scatter_u[0][l], v.scatter_u[1][l], v.scatter_u[2][l]) = (uc, u.x, u.y);
             v.scatter_lanes |= 1 << l;
         } else {
             self.light_sample(scene, l, v, p, u_light, u_l2);
@@ -1832,53 +1831,76 @@ impl SimdKernel {
     /// toward their light samples and their own samples, all packets' lanes at once, eight a
     /// group (`rough_conductor_lanes`: the visible normal, then both directions' D, G1,
     /// densities and Fresnel term as vector code, the bits of `Bsdf::eval_pdf_and_sample`),
-    /// into each packet's `v.conductor` for `scalar_scatter`. (About one lane in eight holds
-    /// such a vertex a step: one group for all packets runs one chain where each packet ran its own.)
+    /// written where `scalar_scatter` writes a lane's results; such lanes leave
+    /// `scatter_lanes`. (About one lane in eight holds such a vertex a step: one group for all
+    /// packets runs one chain where each packet ran its own.)
     #[inline(always)]
-    fn conductor_samples<S>(&self, packets: &mut [Packet<S>]) {
+    fn conductor_samples<S>(&self, events: &LaneEvents, packets: &mut [Packet<S>]) {
         // Made at the first such lane (most steps of most scenes have none).
         let mut group: Option<RoughConductorLanes<LANES>> = None;
-        // Each group lane's packet, lane, mirroring, and outgoing and light directions (local).
-        let mut slot = [(0usize, 0usize, false, Vec3::ZERO, None); LANES];
+        let mut slot = [ConductorSlot::default(); LANES];
         let mut used = 0usize;
         for pk in 0..packets.len() {
             let mut lanes = packets[pk].v.scatter_lanes;
             while lanes != 0 {
                 let l = lanes.trailing_zeros() as usize;
                 lanes &= lanes - 1;
-                let v = &packets[pk].v;
-                let Some((si, u)) = &v.scatter[l] else { continue };
-                let Some(bsdf) = v.own[l].as_ref().or(self.shapes[si.shape as usize].uniform.as_ref()) else { continue };
-                let wo = si.shading.to_local(si.wo);
+                let Packet { st, v, .. } = &mut packets[pk];
+                let shape = v.shape[l];
+                let Some(bsdf) = v.own[l].as_ref().or(self.shapes[shape as usize].uniform.as_ref()) else { continue };
+                let frame = v.num.frame(l);
+                let wo = frame.to_local(lane3(&v.num.wo, l));
                 let Some((c, flipped)) = bsdf.beckmann_conductor(wo) else { continue };
                 let side = |w: Vec3| if flipped { Vec3::new(w.x, w.y, -w.z) } else { w };
-                let wi = nee_dir(v, l, si);
+                let wi = nee_dir(v, l, &frame);
                 let q = group.get_or_insert_with(RoughConductorLanes::default);
-                q.set(used, c, side(wo), wi.map(side), Vec2::new(u[4], u[5]));
-                slot[used] = (pk, l, flipped, wo, wi);
+                q.set(used, c, side(wo), wi.map(side), Vec2::new(v.scatter_u[1][l], v.scatter_u[2][l]));
+                slot[used] = ConductorSlot { pk, l, flipped, opacity: bsdf.opacity, lit: wi.is_some() };
+                // What `scalar_scatter` writes that does not wait on the values: the vertex
+                // kept for the MIS weight of the emitter its sample reaches (taken back in
+                // `conductor_group` where the lane does not move; its own BSDF, if any, goes
+                // with it as `scalar_scatter` moves it), and the light sample's event.
+                st.prev_bsdf[l] = Some(PrevBsdf { shape, frame, wo });
+                if let (Some(view), Some(wi)) = (events.view, wi) {
+                    v.class_nee[l] = view.class(events.aovs.scatter_event(v.shape[l], v.flags[l], None, wi.z * wo.z < 0.0));
+                }
+                if v.own[l].is_some() {
+                    st.prev_own[l] = v.own[l].take();
+                }
+                v.scatter_lanes &= !(1 << l);
                 used += 1;
                 if used == LANES {
-                    self.conductor_group(q, &slot[..used], packets);
+                    self.conductor_group(events, q, &slot[..used], packets);
                     used = 0;
                 }
             }
         }
         if let Some(q) = group.as_ref().filter(|_| used > 0) {
-            self.conductor_group(q, &slot[..used], packets);
+            self.conductor_group(events, q, &slot[..used], packets);
         }
     }
 
-    /// One group of [`Self::conductor_samples`]: lanes `slot` of `q`, each finished by its
-    /// BSDF. (The group's other lanes hold earlier lanes' values: the lanes are independent.)
+    /// One group of [`Self::conductor_samples`]: lanes `slot` of `q`, each finished as its
+    /// BSDF finishes them and written into its packet's `v` (as `scalar_scatter`). (The
+    /// group's other lanes hold earlier lanes' values: the lanes are independent.)
     #[inline(always)]
-    fn conductor_group<S>(&self, q: &RoughConductorLanes<LANES>, slot: &[(usize, usize, bool, Vec3, Option<Vec3>)], packets: &mut [Packet<S>]) {
+    fn conductor_group<S>(&self, events: &LaneEvents, q: &RoughConductorLanes<LANES>, slot: &[ConductorSlot], packets: &mut [Packet<S>]) {
         let out = self.rough_conductor_lanes_on_cpu(q, slot.len());
-        for (i, &(pk, l, flipped, wo, wi)) in slot.iter().enumerate() {
-            let v = &mut packets[pk].v;
-            let Some((si, _)) = &v.scatter[l] else { continue };
-            let Some(bsdf) = v.own[l].as_ref().or(self.shapes[si.shape as usize].uniform.as_ref()) else { continue };
-            let (nee, s) = out.lane(i, wi.is_some());
-            v.conductor[l] = Some((bsdf.finish_conductor(flipped, nee, s), wo, wi));
+        for (i, c) in slot.iter().enumerate() {
+            let Packet { st, v, .. } = &mut packets[c.pk];
+            let l = c.l;
+            let (nee, s) = out.lane(i, c.lit);
+            let (nee, s) = Bsdf::finish_conductor(c.opacity, c.flipped, nee, s);
+            if let Some((f, pdf)) = nee {
+                put_light_value(v, l, f, pdf);
+            }
+            let bs = s.filter(|bs| bs.pdf > 0.0 && !bs.f.is_black());
+            v.num.bmoved[l] = bs.is_some();
+            match bs {
+                // (Never of a delta lobe: the vertex `conductor_samples` kept stays.)
+                Some(bs) => put_sample(events, v, l, v.flags[l], &bs),
+                None => st.prev_bsdf[l] = None,
+            }
         }
     }
 
@@ -1900,63 +1922,57 @@ impl SimdKernel {
         rough_conductor_lanes(q, used)
     }
 
-    /// The first part of lane `l`'s vertex `si` of a scalar BSDF: the BSDF (the shape's
-    /// uniform one, or the hit's own, as `Scene::bsdf` makes it, kept in `v.own`), its lobes,
-    /// and the light sample unless it has delta lobes only (a sphere light's comes with the
-    /// other lanes'). Out of line: the Lambertian lanes' `gather` stays small.
+    /// The first part of lane `l`'s vertex at `p` on `shape` of a scalar BSDF: the BSDF (the
+    /// shape's uniform one, or the hit's own, as `Scene::bsdf` makes it from the hit's record
+    /// `si`, kept in `v.own`), its lobes, and the light sample (numbers `u_light`, `u_l2`)
+    /// unless it has delta lobes only (a sphere light's comes with the other lanes'). Out of
+    /// line: the Lambertian lanes' `gather` stays small.
+    #[allow(clippy::too_many_arguments)]
     #[inline(never)]
-    fn scalar_light_sample(&self, scene: &Scene, l: usize, v: &mut Soa, si: &SurfaceInteraction, u: [f32; 6]) {
-        let [u_light, ul_x, ul_y, ..] = u;
-        let sh = &self.shapes[si.shape as usize];
+    fn scalar_light_sample(&self, scene: &Scene, l: usize, v: &mut Soa, shape: u32, p: Vec3, si: Option<&SurfaceInteraction>, u_light: f32, u_l2: Vec2) {
+        let sh = &self.shapes[shape as usize];
         // `v.own[l]` is None here (`scalar_scatter` took it) and stays so with a uniform
         // BSDF: moving a None in and out copied the whole `Option<Bsdf>` (memcpy) each hit.
-        let flags = if sh.uniform.is_none() {
-            let own = scene.bsdf(si);
-            let flags = own.flags();
-            v.own[l] = Some(own);
-            flags
-        } else {
-            sh.uniform_flags
+        let flags = match si {
+            Some(si) => {
+                let own = scene.bsdf(si);
+                let flags = own.flags();
+                v.own[l] = Some(own);
+                flags
+            }
+            None => sh.uniform_flags,
         };
         if flags.has_non_specular() {
-            self.light_sample(scene, l, v, si.p, u_light, Vec2::new(ul_x, ul_y));
+            self.light_sample(scene, l, v, p, u_light, u_l2);
         } else {
             v.num.nee_ok[l] = false;
         }
         v.flags[l] = flags;
     }
 
-    /// The rest of lane `l`'s vertex `si` of a scalar BSDF (`scalar_light_sample` took the
-    /// light sample): the BSDF's value and density toward it (as `path::light_sample_unshadowed`), its
-    /// own sample (as `camera_walk`), and the events of both, into `v` for `shade8`; the
-    /// lane's next MIS vertex and radiance scale into `st`. `u`: the vertex's numbers (light
-    /// choice, light point, lobe, direction).
-    #[allow(clippy::too_many_arguments)]
+    /// The rest of lane `l`'s vertex of a scalar BSDF (`scalar_light_sample` took the light
+    /// sample; the vertex in `v.num`, its numbers in `v.scatter_u`): the BSDF's value and
+    /// density toward it (as `path::light_sample_unshadowed`), its own sample (as
+    /// `camera_walk`), and the events of both, into `v` for `shade8`; the lane's next MIS
+    /// vertex and radiance scale into `st`.
     #[inline(never)]
-    fn scalar_scatter<S>(&self, events: &LaneEvents, st: &mut Paths<S>, l: usize, v: &mut Soa, si: &SurfaceInteraction, u: [f32; 6]) {
-        let [_, _, _, uc, ux, uy] = u;
+    fn scalar_scatter<S>(&self, events: &LaneEvents, st: &mut Paths<S>, l: usize, v: &mut Soa) {
+        let (uc, ux, uy) = (v.scatter_u[0][l], v.scatter_u[1][l], v.scatter_u[2][l]);
+        let shape = v.shape[l];
         // The shape's uniform BSDF, or this hit's own (moved into `prev_own` at the end).
-        let uniform = self.shapes[si.shape as usize].uniform.as_ref();
+        let uniform = self.shapes[shape as usize].uniform.as_ref();
         let own = if v.own[l].is_some() { v.own[l].take() } else { None };
         let Some(bsdf) = own.as_ref().or(uniform) else { unreachable!("a shape without a uniform BSDF builds its own") };
         let flags = v.flags[l];
-        let frame = si.shading;
+        let frame = v.num.frame(l);
         // The outgoing direction, local, and the light's direction as `shade8` finds it; the
         // value and density toward it, and the BSDF's own sample, from one call (a Beckmann
-        // conductor's all from `conductor_samples`).
-        let (wo, wi, (nee, bs)) = match v.conductor[l].take() {
-            Some((r, wo, wi)) => (wo, wi, r),
-            None => {
-                let wo = frame.to_local(si.wo);
-                let wi = nee_dir(v, l, si);
-                (wo, wi, bsdf.eval_pdf_and_sample(wo, wi, uc, Vec2::new(ux, uy), TransportMode::Radiance))
-            }
-        };
+        // conductor's lanes come not here: `conductor_samples` wrote theirs).
+        let wo = frame.to_local(lane3(&v.num.wo, l));
+        let wi = nee_dir(v, l, &frame);
+        let (nee, bs) = bsdf.eval_pdf_and_sample(wo, wi, uc, Vec2::new(ux, uy), TransportMode::Radiance);
         if let (Some(wi), Some((f, pdf))) = (wi, nee) {
-            v.num.nee_ok[l] = !f.is_black();
-            put_rgb(&mut v.num.bf, l, f);
-            // A delta light takes no MIS weight (nor the density).
-            v.num.bpdf_nee[l] = if v.num.delta[l] { 0.0 } else { pdf };
+            put_light_value(v, l, f, pdf);
             if let Some(view) = events.view {
                 v.class_nee[l] = view.class(events.aovs.scatter_event(v.shape[l], flags, None, wi.z * wo.z < 0.0));
             }
@@ -1965,22 +1981,12 @@ impl SimdKernel {
         v.num.bmoved[l] = bs.is_some();
         st.prev_bsdf[l] = None;
         let Some(bs) = bs else { return };
-        let transmission = bs.lobe.contains(LobeFlags::TRANSMISSION);
-        for k in 0..3 {
-            v.num.bwi[k][l] = bs.wi[k];
-        }
-        put_rgb(&mut v.num.bweight, l, bs.weight());
-        v.num.bpdf[l] = bs.pdf;
-        v.num.bspecular[l] = bs.lobe.is_specular();
-        if let Some(view) = events.view {
-            // A null interaction (a mask let the path through) is no event.
-            v.class_step[l] = (!bs.lobe.is_null()).then(|| view.class(events.aovs.scatter_event(v.shape[l], flags, Some(bs.lobe), transmission)));
-        }
-        if transmission {
+        put_sample(events, v, l, flags, &bs);
+        if bs.lobe.contains(LobeFlags::TRANSMISSION) {
             st.num.eta_scale[l] *= bs.eta * bs.eta;
         }
         if !bs.lobe.is_specular() {
-            st.prev_bsdf[l] = Some(PrevBsdf { shape: si.shape, frame, wo });
+            st.prev_bsdf[l] = Some(PrevBsdf { shape, frame, wo });
             if own.is_some() {
                 st.prev_own[l] = own;
             }
@@ -2014,20 +2020,64 @@ impl SimdKernel {
     }
 }
 
-/// Lane `l`'s direction toward its light sample at vertex `si`, local, where it has one (as
-/// `shade8` finds it; a mesh light's as `AreaLight::sample_li`).
+/// Lane `l`'s direction toward its light sample from its vertex (`v.num.p`, shading frame
+/// `frame`), local, where it has one (as `shade8` finds it; a mesh light's as
+/// `AreaLight::sample_li`).
 #[inline(always)]
-fn nee_dir(v: &Soa, l: usize, si: &SurfaceInteraction) -> Option<Vec3> {
-    let lane = |a: &[[f32; LANES]; 3]| Vec3::new(a[0][l], a[1][l], a[2][l]);
+fn nee_dir(v: &Soa, l: usize, frame: &Frame) -> Option<Vec3> {
     v.num.nee_ok[l].then(|| {
         let wi_w = if v.num.generic[l] {
-            lane(&v.num.gwi)
+            lane3(&v.num.gwi, l)
         } else {
-            let d = lane(&v.num.lp) - si.p;
+            let d = lane3(&v.num.lp, l) - lane3(&v.num.p, l);
             d / d.length_squared().sqrt()
         };
-        si.shading.to_local(wi_w)
+        frame.to_local(wi_w)
     })
+}
+
+/// Lane `l` of a row of vectors.
+#[inline(always)]
+fn lane3(a: &[[f32; LANES]; 3], l: usize) -> Vec3 {
+    Vec3::new(a[0][l], a[1][l], a[2][l])
+}
+
+/// Lane `l`'s scalar BSDF's value `f` and density `pdf` toward its light sample, for
+/// `shade8` (a delta light takes no MIS weight, nor the density).
+#[inline(always)]
+fn put_light_value(v: &mut Soa, l: usize, f: Rgb, pdf: f32) {
+    v.num.nee_ok[l] = !f.is_black();
+    put_rgb(&mut v.num.bf, l, f);
+    v.num.bpdf_nee[l] = if v.num.delta[l] { 0.0 } else { pdf };
+}
+
+/// Lane `l`'s scalar BSDF's own sample `bs` (which moves the path), for `shade8`, and its
+/// event (`flags`: the BSDF's lobes).
+#[inline(always)]
+fn put_sample(events: &LaneEvents, v: &mut Soa, l: usize, flags: LobeFlags, bs: &BsdfSample) {
+    for k in 0..3 {
+        v.num.bwi[k][l] = bs.wi[k];
+    }
+    put_rgb(&mut v.num.bweight, l, bs.weight());
+    v.num.bpdf[l] = bs.pdf;
+    v.num.bspecular[l] = bs.lobe.is_specular();
+    if let Some(view) = events.view {
+        // A null interaction (a mask let the path through) is no event.
+        let transmission = bs.lobe.contains(LobeFlags::TRANSMISSION);
+        v.class_step[l] = (!bs.lobe.is_null()).then(|| view.class(events.aovs.scatter_event(v.shape[l], flags, Some(bs.lobe), transmission)));
+    }
+}
+
+/// A lane of a group of rough conductors (`SimdKernel::conductor_samples`): its packet and
+/// lane, whether its directions were mirrored to the model's side, its BSDF's opacity, and
+/// whether it has a light sample.
+#[derive(Clone, Copy, Default)]
+struct ConductorSlot {
+    pk: usize,
+    l: usize,
+    flipped: bool,
+    opacity: f32,
+    lit: bool,
 }
 
 /// Where a lane's ray hit: a triangle of the kernel's, or a shape that is not a mesh (the
@@ -2100,10 +2150,6 @@ struct VertexNums {
     bspecular: [bool; LANES],
 }
 
-/// A rough conductor's value and density toward the light sample and its own sample (as
-/// `Bsdf::eval_pdf_and_sample` gives them).
-type ConductorResult = (Option<(Rgb, f32)>, Option<BsdfSample>);
-
 /// One vertex of eight paths, structure of arrays: what `gather` collected.
 #[derive(Default)]
 struct Soa {
@@ -2132,21 +2178,26 @@ struct Soa {
     env_pending: u8,
     env_p: [Vec3; LANES],
     env_u: [Vec2; LANES],
-    /// Lanes of a scalar BSDF: the hit and the vertex's numbers, its own BSDF (None: the
-    /// shape's uniform one) and lobes, for `scalar_scatter` once the sphere samples are in.
-    scatter: [Option<(SurfaceInteraction, [f32; 6])>; LANES],
-    /// The lanes whose `scatter` is set (the loops over them skip the others' `Option`s).
+    /// Lanes of a scalar BSDF: the vertex's lobe number and the sample's square point (the
+    /// vertex itself is in `num`), its own BSDF (None: the shape's uniform one) and lobes,
+    /// for `scalar_scatter` once the sphere samples are in.
+    scatter_u: [[f32; LANES]; 3],
+    /// The lanes that wait on `scalar_scatter` (a Beckmann conductor's lane leaves in
+    /// `conductor_samples`).
     scatter_lanes: u8,
     own: [Option<Bsdf>; LANES],
     flags: [LobeFlags; LANES],
-    /// Lanes of a Beckmann rough conductor: its value and density toward the light sample
-    /// and its own sample (`SimdKernel::conductor_samples`), with the outgoing and light
-    /// directions, local, that it found them for (`scalar_scatter` takes them rather than
-    /// transforming both again).
-    conductor: [Option<(ConductorResult, Vec3, Option<Vec3>)>; LANES],
     /// The rays' grid points (u, v) and sin θ in the environment map (`EnvMap::dirs_to_grid`),
     /// set when some lane escaped.
     env_grid: [[f32; LANES]; 3],
+}
+
+impl VertexNums {
+    /// Lane `l`'s shading frame.
+    #[inline(always)]
+    fn frame(&self, l: usize) -> Frame {
+        Frame { s: lane3(&self.fs, l), t: lane3(&self.ft, l), n: lane3(&self.fnn, l) }
+    }
 }
 
 /// A camera-path vertex of a scalar BSDF that scattered by a non-delta lobe, kept for the
