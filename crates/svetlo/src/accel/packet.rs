@@ -697,11 +697,17 @@ macro_rules! walk_simd {
                             // lane to the exact scalar test.
                             let on_edge = _mm256_cmp_ps::<_CMP_EQ_OQ>(_mm256_mul_ps(_mm256_mul_ps(u, vv), w), zero);
                             let mixed = _mm256_or_ps(_mm256_or_ps(_mm256_xor_ps(u, vv), _mm256_xor_ps(u, w)), on_edge);
-                            let cand = _mm256_movemask_ps(_mm256_andnot_ps(mixed, live)) as u8;
+                            let cand_v = _mm256_andnot_ps(mixed, live);
+                            let cand = _mm256_movemask_ps(cand_v) as u8;
                             let edge = _mm256_movemask_ps(_mm256_and_ps(on_edge, live)) as u8;
                             // No branch on `cand`: with eight incoherent rays it goes either
                             // way, and a mispredicted branch costs more than the rest of the test.
+                            // The lanes that hit as a vector mask (`ok_v`) and as bits (`m`): the
+                            // blends below take the vector, so that t_max's chain from one
+                            // triangle to the next does not go through the bits and back (a
+                            // movemask, a broadcast and a compare: about 7 cycles a test).
                             let mut m;
+                            let mut ok_v;
                             let (mut t, mut b1, mut b2) = (zero, zero, zero);
                             {
                                 // det has the common sign; flipping t_scaled and t_max * det by it
@@ -715,7 +721,8 @@ macro_rules! walk_simd {
                                 let ts = _mm256_xor_ps(t_scaled, sgn);
                                 let tmd = _mm256_xor_ps(_mm256_mul_ps(t_max, det), sgn);
                                 let ok = _mm256_and_ps(_mm256_cmp_ps::<_CMP_GT_OQ>(ts, zero), _mm256_cmp_ps::<_CMP_LE_OQ>(ts, tmd));
-                                m = _mm256_movemask_ps(ok) as u8 & cand;
+                                ok_v = _mm256_and_ps(ok, cand_v);
+                                m = _mm256_movemask_ps(ok_v) as u8;
                                 if TIES && !ANY {
                                     // Within TIE_TOL of the lane's nearest hit (t_max * |det| scaled).
                                     let near = _mm256_and_ps(
@@ -731,7 +738,8 @@ macro_rules! walk_simd {
                                     let invd = _mm256_div_ps(one, det);
                                     t = _mm256_mul_ps(t_scaled, invd);
                                     // t > 0 (it may underflow).
-                                    m &= _mm256_movemask_ps(_mm256_cmp_ps::<_CMP_GT_OQ>(t, zero)) as u8;
+                                    ok_v = _mm256_and_ps(ok_v, _mm256_cmp_ps::<_CMP_GT_OQ>(t, zero));
+                                    m = _mm256_movemask_ps(ok_v) as u8;
                                     b1 = _mm256_mul_ps(vv, invd);
                                     b2 = _mm256_mul_ps(w, invd);
                                 }
@@ -762,11 +770,12 @@ macro_rules! walk_simd {
                                 t = ld(&ta);
                                 b1 = ld(&b1a);
                                 b2 = ld(&b2a);
+                                ok_v = _mm256_castsi256_ps(_mm256_cmpgt_epi32(_mm256_and_si256(_mm256_set1_epi32(m as i32), lane_bits), zero_i));
                             }
                             if ANY && m == 0 {
                                 continue;
                             }
-                            let ok = _mm256_castsi256_ps(_mm256_cmpgt_epi32(_mm256_and_si256(_mm256_set1_epi32(m as i32), lane_bits), zero_i));
+                            let ok = ok_v;
                             hit_mask |= m;
                             if ANY {
                                 live = _mm256_andnot_ps(ok, live);
