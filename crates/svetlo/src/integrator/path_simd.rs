@@ -74,6 +74,7 @@ use super::path::{bsdf_pdf_toward, PathTracer};
 use super::{camera_sample, render_tiles, Integrator, Progress, RenderSettings};
 use crate::accel::packet::{Hits8, PacketBvh, PacketSpheres, Rays8, LANES};
 use crate::bsdf::conductor::{rough_conductor_lanes, RoughConductorLanes, RoughConductorOut};
+use crate::bsdf::plastic::{rough_plastic_lanes, RoughPlasticLanes, RoughPlasticOut};
 use crate::bsdf::{Bsdf, BsdfSample, LobeFlags, Material, TransportMode};
 use crate::camera::{RayGenerator, RayLanes};
 use crate::error::{Error, Result};
@@ -1174,6 +1175,7 @@ impl SimdKernel {
                 self.env_samples(scene, &mut p.v);
             }
             self.conductor_samples(packets);
+            self.plastic_samples(packets);
             for (pk, p) in packets.iter_mut().enumerate().filter(|(_, p)| p.active != 0) {
                 if p.go == 0 && !layers.on() {
                     // No path goes on (every step at depth 1): the shading step's outputs are
@@ -1898,6 +1900,83 @@ impl SimdKernel {
             };
         }
         rough_conductor_lanes(q, used)
+    }
+
+    /// The Beckmann rough plastics' (`Bsdf::beckmann_plastic`) values and densities toward
+    /// their light samples and their own samples, all packets' lanes at once, eight a group
+    /// (`rough_plastic_lanes`: the lobe, the visible normal or cosine direction, then both
+    /// directions' D, G1, densities, Fresnel term and coating transmittances as vector code,
+    /// the bits of `Bsdf::eval_pdf_and_sample`), into each packet's `v.conductor`, which
+    /// `scalar_scatter` takes as a conductor's. (Out of line: inlined, it changed how LLVM
+    /// compiled the tile loop around it.)
+    #[inline(never)]
+    fn plastic_samples<S>(&self, packets: &mut [Packet<S>]) {
+        if packets.iter().fold(0, |a, p| a | p.v.scatter_lanes) == 0 {
+            return;
+        }
+        let mut group: Option<RoughPlasticLanes<LANES>> = None;
+        let mut slot = [(0usize, 0usize, false, Vec3::ZERO, None); LANES];
+        let mut used = 0usize;
+        for pk in 0..packets.len() {
+            let mut lanes = packets[pk].v.scatter_lanes;
+            while lanes != 0 {
+                let l = lanes.trailing_zeros() as usize;
+                lanes &= lanes - 1;
+                let v = &packets[pk].v;
+                // A plastic without a mask has these lobes (with a back of other lobes it is
+                // left to `scalar_scatter`): most scalar lanes are other models.
+                if v.flags[l] != LobeFlags::GLOSSY_REFLECTION | LobeFlags::DIFFUSE_REFLECTION {
+                    continue;
+                }
+                let Some((si, u)) = &v.scatter[l] else { continue };
+                let Some(bsdf) = v.own[l].as_ref().or(self.shapes[si.shape as usize].uniform.as_ref()) else { continue };
+                let wo = si.shading.to_local(si.wo);
+                let Some((p, flipped)) = bsdf.beckmann_plastic(wo) else { continue };
+                let side = |w: Vec3| if flipped { Vec3::new(w.x, w.y, -w.z) } else { w };
+                let wi = nee_dir(v, l, si);
+                let q = group.get_or_insert_with(RoughPlasticLanes::default);
+                q.set(used, p, side(wo), wi.map(side), u[3], Vec2::new(u[4], u[5]));
+                slot[used] = (pk, l, flipped, wo, wi);
+                used += 1;
+                if used == LANES {
+                    self.plastic_group(q, &slot[..used], packets);
+                    used = 0;
+                }
+            }
+        }
+        if let Some(q) = group.as_ref().filter(|_| used > 0) {
+            self.plastic_group(q, &slot[..used], packets);
+        }
+    }
+
+    /// One group of [`Self::plastic_samples`]: lanes `slot` of `q`, each finished by its BSDF.
+    #[inline(always)]
+    fn plastic_group<S>(&self, q: &RoughPlasticLanes<LANES>, slot: &[(usize, usize, bool, Vec3, Option<Vec3>)], packets: &mut [Packet<S>]) {
+        let out = self.rough_plastic_lanes_on_cpu(q, slot.len());
+        for (i, &(pk, l, flipped, wo, wi)) in slot.iter().enumerate() {
+            let v = &mut packets[pk].v;
+            let Some((si, _)) = &v.scatter[l] else { continue };
+            let Some(bsdf) = v.own[l].as_ref().or(self.shapes[si.shape as usize].uniform.as_ref()) else { continue };
+            let (nee, s) = out.lane(i, wi.is_some());
+            v.conductor[l] = Some((bsdf.finish_conductor(flipped, nee, s), wo, wi));
+        }
+    }
+
+    /// [`rough_plastic_lanes`] in its own function of this CPU's build.
+    #[inline(always)]
+    fn rough_plastic_lanes_on_cpu(&self, q: &RoughPlasticLanes<LANES>, used: usize) -> RoughPlasticOut<LANES> {
+        #[cfg(target_arch = "x86_64")]
+        if crate::cpu::avx2() && crate::cpu::fma() {
+            // SAFETY: as `rough_conductor_lanes_on_cpu`.
+            return unsafe {
+                if self.avx512 {
+                    plastic8_avx512(q, used)
+                } else {
+                    plastic8_avx2(q, used)
+                }
+            };
+        }
+        rough_plastic_lanes(q, used)
     }
 
     /// The first part of lane `l`'s vertex `si` of a scalar BSDF: the BSDF (the shape's
@@ -2676,6 +2755,28 @@ unsafe fn conductor8_avx512(q: &RoughConductorLanes<LANES>, used: usize) -> Roug
     rough_conductor_lanes(q, used)
 }
 
+/// [`rough_plastic_lanes`] of the kernel's eight lanes compiled for AVX2.
+///
+/// # Safety
+/// The CPU must support AVX2 and FMA (glibc's expf as vector lanes).
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx2,fma")]
+#[inline(never)]
+unsafe fn plastic8_avx2(q: &RoughPlasticLanes<LANES>, used: usize) -> RoughPlasticOut<LANES> {
+    rough_plastic_lanes(q, used)
+}
+
+/// [`rough_plastic_lanes`] compiled for AVX-512VL.
+///
+/// # Safety
+/// The CPU must support AVX2, FMA, AVX-512F and AVX-512VL.
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx2,fma,avx512f,avx512vl")]
+#[inline(never)]
+unsafe fn plastic8_avx512(q: &RoughPlasticLanes<LANES>, used: usize) -> RoughPlasticOut<LANES> {
+    rough_plastic_lanes(q, used)
+}
+
 /// A sampler of the kernel's lanes: one vertex's numbers for all of them at once, in the
 /// scalar tracer's order per vertex (light choice, light point, BSDF lobe, BSDF direction,
 /// Russian roulette: 1, 2, 1, 2 and 1 dimensions), each lane from its own sampler.
@@ -3175,6 +3276,81 @@ mod tests {
             }
         }
         assert!(sampled > 40_000 && lit > 10_000, "{sampled} samples, {lit} lit light samples");
+    }
+
+    /// The kernel's rough-plastic lanes (the baseline build and the AVX2 and AVX-512 copies
+    /// it runs) give `RoughPlastic::eval_pdf` and `sample`'s bits lane by lane, with 1 to 8
+    /// lanes used: several roughnesses, IORs (1 included), sampling weights (both lobes
+    /// always, never, mixed), linear and nonlinear bases, incidence from normal to grazing,
+    /// light directions on both sides and none, the numbers' ends.
+    #[test]
+    fn plastic_lanes_are_the_scalar_bsdf() {
+        use crate::bsdf::plastic::RoughPlastic;
+        use crate::bsdf::MicrofacetKind;
+        let mut rng = Pcg32::new(37, 5);
+        let mut f = |lo: f32, hi: f32| lo + (hi - lo) * rng.next_f32();
+        let mut models = Vec::new();
+        for (i, &alpha) in [1e-4f32, 0.05, 0.1, 0.4, 1.0].iter().enumerate() {
+            for (j, &eta) in [1.5f32, 1.0, 1.9].iter().enumerate() {
+                let weight = [0.0f32, 1.0, 0.5, 0.667][(i + j) % 4];
+                let diffuse = if (i + j).is_multiple_of(2) { Rgb::new(0.1, 0.27, 0.36) } else { Rgb::splat(0.5) };
+                models.push(RoughPlastic::new(MicrofacetKind::Beckmann, alpha, diffuse, Rgb::new(1.0, 0.8, 0.6), eta, j == 2, weight));
+            }
+        }
+        let us = [0.0f32, 1e-7, 0.5, 1.0 - 6e-8, 1.0];
+        let cos_ts = [1.0f32, 0.999_999, 0.5, 1e-2, 1e-4, 1e-6];
+        let bits = |(nee, s): (Option<(Rgb, f32)>, Option<BsdfSample>)| {
+            let rgb = |c: Rgb| [c.r, c.g, c.b].map(f32::to_bits);
+            (nee.map(|(c, p)| (rgb(c), p.to_bits())), s.map(|s| (s.wi.to_array().map(f32::to_bits), rgb(s.f), s.pdf.to_bits(), s.lobe, s.eta.to_bits())))
+        };
+        let (mut glossy, mut diffuse, mut lit) = (0, 0, 0);
+        for batch in 0..12_000usize {
+            let used = 1 + batch % LANES;
+            let mut q = RoughPlasticLanes::<LANES>::default();
+            let mut lanes = Vec::new();
+            for l in 0..used {
+                let i = batch * LANES + l;
+                let p = &models[(i * 7 + batch) % models.len()];
+                let dir = |cos_t: f32, phi: f32| {
+                    let sin_t = (1.0 - cos_t * cos_t).max(0.0).sqrt();
+                    Vec3::new(sin_t * phi.cos(), sin_t * phi.sin(), cos_t)
+                };
+                let wo = dir(if i.is_multiple_of(5) { cos_ts[i / 5 % cos_ts.len()] } else { f(1e-3, 1.0) }, f(0.0, 6.3));
+                // Near the mirror direction (the glossy lobe), anywhere, above, or none.
+                let wi = match i % 4 {
+                    0 => Some((Vec3::new(-wo.x, -wo.y, wo.z) + 0.05 * dir(f(-1.0, 1.0), f(0.0, 6.3))).normalize()),
+                    1 => Some(dir(f(-1.0, 1.0), f(0.0, 6.3))),
+                    2 => Some(dir(f(0.0, 1.0), f(0.0, 6.3))),
+                    _ => None,
+                };
+                let uc = if i.is_multiple_of(11) { us[i / 11 % 5] } else { f(0.0, 1.0) };
+                let u = if i.is_multiple_of(7) { Vec2::new(us[i / 7 % 5], us[i / 35 % 5]) } else { Vec2::new(f(0.0, 1.0), f(0.0, 1.0)) };
+                q.set(l, p, wo, wi, uc, u);
+                lanes.push((p, wo, wi, uc, u));
+            }
+            let mut outs = vec![rough_plastic_lanes(&q, used)];
+            #[cfg(target_arch = "x86_64")]
+            if crate::cpu::avx2() && crate::cpu::fma() {
+                // SAFETY: AVX2 and FMA were detected, AVX-512 where `cpu::avx512()` says so.
+                outs.push(unsafe { plastic8_avx2(&q, used) });
+                if crate::cpu::avx512() {
+                    outs.push(unsafe { plastic8_avx512(&q, used) });
+                }
+            }
+            for (l, &(p, wo, wi, uc, u)) in lanes.iter().enumerate() {
+                let want = (wi.map(|wi| p.eval_pdf(wo, wi)), p.sample(wo, uc, u, TransportMode::Radiance));
+                match want.1.map(|s| s.lobe) {
+                    Some(LobeFlags::GLOSSY_REFLECTION) => glossy += 1,
+                    Some(_) => diffuse += 1,
+                    None => {}
+                }
+                lit += usize::from(want.0.is_some_and(|(f, _)| !f.is_black()));
+                for (build, out) in outs.iter().enumerate() {
+                    assert_eq!(bits(out.lane(l, wi.is_some())), bits(want), "build {build}, {p:?} wo {wo} wi {wi:?} uc {uc} u {u}");
+                }
+            }
+        }
+        assert!(glossy > 10_000 && diffuse > 10_000 && lit > 10_000, "{glossy} glossy and {diffuse} diffuse samples, {lit} lit light samples");
     }
 
     /// `shade8` in its own AVX2 and AVX-512 builds (the kernel's) gives the portable
