@@ -1,11 +1,11 @@
-//! The path kernel's per-vertex arithmetic (`shade8`), its rough conductors' lanes
-//! (`conductor8`), the light walks' Lambertian step (`path::step8`) and their emission
-//! samples (`light::emit8`) compile to eight-lane vector code in the shipped binary. Whether
-//! LLVM vectorises such a loop has flipped silently with unrelated edits (an `Option` field
-//! added to a struct it reads, a `bool` read under a condition), and the scalar loop cost
-//! 1.2-1.5x on every kernel scene with the same image: no other test sees it. Reads the release
-//! binary's disassembly with `objdump` (binutils); skipped in debug builds, which do not
-//! vectorise, and off x86_64.
+//! The path kernel's per-vertex arithmetic (`shade8`), its rough conductors' and rough
+//! plastics' lanes (`conductor8`, `plastic8`), the light walks' Lambertian step
+//! (`path::step8`) and their emission samples (`light::emit8`) compile to eight-lane vector
+//! code in the shipped binary. Whether LLVM vectorises such a loop has flipped silently with
+//! unrelated edits (an `Option` field added to a struct it reads, a `bool` read under a
+//! condition), and the scalar loop cost 1.2-1.5x on every kernel scene with the same image:
+//! no other test sees it. Reads the release binary's disassembly with `objdump` (binutils);
+//! skipped in debug builds, which do not vectorise, and off x86_64.
 
 #[cfg(all(target_arch = "x86_64", not(debug_assertions)))]
 #[test]
@@ -26,6 +26,8 @@ fn shade8_is_vector_code() {
         ("shade8_avx512", 100),
         ("conductor8_avx2", 100),
         ("conductor8_avx512", 100),
+        ("plastic8_avx2", 100),
+        ("plastic8_avx512", 100),
         ("step8_avx2", 100),
         ("step8_avx512", 100),
         ("emit8_avx2", 50),
@@ -52,7 +54,7 @@ fn shade8_is_vector_code() {
         }
         // Vector code: ~200-250 packed operations in `shade8`, ~600 in `conductor8` (the
         // rough conductors' lanes; its ~14 scalar ones test the numbers libm's expf is called
-        // for), ~140 in `step8`, ~85 in `emit8`, and few scalar (the scalar loop had one
+        // for), ~750 in `plastic8` (the rough plastics' lanes), ~140 in `step8`, ~85 in `emit8`, and few scalar (the scalar loop had one
         // `..ss` per lane and operation, and a branch per lane).
         assert!(packed >= least && scalar * 8 <= packed, "{copy}: {packed} packed and {scalar} scalar float operations: its loop is no longer vector code");
     }

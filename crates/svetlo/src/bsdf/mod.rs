@@ -346,6 +346,17 @@ impl Bsdf {
         (c.distribution.kind == MicrofacetKind::Beckmann && wo.z > 0.0).then_some((c, flipped))
     }
 
+    /// Where this BSDF toward `wo` is a Beckmann rough plastic without mask or surface detail:
+    /// the model, and whether directions are mirrored to its side, so that the path kernel
+    /// can evaluate and sample several vertices at once (`plastic::rough_plastic_lanes`,
+    /// finished as a conductor's by [`Self::finish_conductor`]: the same wrapping).
+    #[inline]
+    pub(crate) fn beckmann_plastic(&self, wo: Vec3) -> Option<(&plastic::RoughPlastic, bool)> {
+        let (None, true, Some((BsdfModel::RoughPlastic(p), flipped))) = (&self.detail, self.opacity >= 1.0, self.side(wo)) else { return None };
+        let wo = if flipped { flip(wo) } else { wo };
+        (p.distribution.kind == MicrofacetKind::Beckmann && wo.z > 0.0).then_some((p, flipped))
+    }
+
     /// A rough conductor's value and density toward a light sample and its own sample, on
     /// the model's side (`flipped` as `side` gave it), made those of a BSDF of this `opacity`
     /// (as `eval_pdf_and_sample` finishes them). (The opacity alone: the path kernel keeps
@@ -568,6 +579,8 @@ mod tests {
             specular_reflectance: Rgb::WHITE,
         });
         let plastic = BsdfModel::RoughPlastic(plastic::RoughPlastic::new(MicrofacetKind::Ggx, 0.2, Rgb::new(0.1, 0.27, 0.36), Rgb::WHITE, 1.5, true, 0.5));
+        let beckmann_plastic =
+            BsdfModel::RoughPlastic(plastic::RoughPlastic::new(MicrofacetKind::Beckmann, 0.1, Rgb::splat(0.5), Rgb::WHITE, 1.5, false, 0.667));
         let dielectric = BsdfModel::RoughDielectric(dielectric::RoughDielectric {
             distribution: md,
             eta: 1.5,
@@ -576,7 +589,7 @@ mod tests {
         });
         let diffuse = BsdfModel::Diffuse(diffuse::Diffuse { reflectance: Rgb::splat(0.5) });
         let mut cases = vec![];
-        for front in [conductor, plastic, dielectric, diffuse] {
+        for front in [conductor, plastic, beckmann_plastic, dielectric, diffuse] {
             cases.push(Bsdf::new(front.clone()));
             cases.push(Bsdf { back: Some(back.clone()), ..Bsdf::new(front.clone()) });
             cases.push(Bsdf { back: Some(front.clone()), opacity: 0.6, ..Bsdf::new(front.clone()) });
@@ -644,6 +657,21 @@ mod tests {
                             (nee_m.map(bits), sample_bits(s_m)),
                             (nee.map(bits), sample_bits(s)),
                             "{:?} {mode:?} {wo} u {u}: the conductor's lane",
+                            b.front
+                        );
+                        ahead += 1;
+                    }
+                    // And a Beckmann plastic's lane of `plastic::rough_plastic_lanes`.
+                    if let Some((p, flipped)) = b.beckmann_plastic(wo) {
+                        let side = |w: Vec3| if flipped { flip(w) } else { w };
+                        let mut q = plastic::RoughPlasticLanes::<1>::default();
+                        q.set(0, p, side(wo), wi.map(side), uc, u);
+                        let (nee_l, s_l) = plastic::rough_plastic_lanes(&q, 1).lane(0, wi.is_some());
+                        let (nee_m, s_m) = Bsdf::finish_conductor(b.opacity, flipped, nee_l, s_l);
+                        assert_eq!(
+                            (nee_m.map(bits), sample_bits(s_m)),
+                            (nee.map(bits), sample_bits(s)),
+                            "{:?} {mode:?} {wo} u {uc} {u}: the plastic's lane",
                             b.front
                         );
                         ahead += 1;

@@ -9,9 +9,9 @@
 
 use super::fresnel;
 use super::material::MicrofacetKind;
-use super::microfacet::{Microfacet, VisibleSampler};
+use super::microfacet::{self as mf, BeckmannLanes, Microfacet, VisibleSampler};
 use super::{BsdfSample, LobeFlags, TransportMode};
-use crate::math::{warp, INV_PI};
+use crate::math::{expf, lane, warp, INV_PI};
 use crate::spectrum::Rgb;
 use glam::{Vec2, Vec3};
 use rayon::prelude::*;
@@ -382,6 +382,233 @@ impl RoughPlastic {
         let t = self.tables;
         base_albedo(self.diffuse_reflectance, t.internal_reflectance, self.nonlinear) * (t.mean_transmittance * t.mean_transmittance / (self.eta * self.eta))
     }
+}
+
+/// No coating: the transmittance table of a group's unused lanes.
+static NO_TABLE: [f32; TRANSMITTANCE_RES] = [0.0; TRANSMITTANCE_RES];
+
+/// [`CoatingTables::transmittance_at`] of each lane's table `t` at `cos`, as vector lanes
+/// run it: the index and weight, then the two entries lane by lane (loads only: AVX2 has no
+/// gather LLVM takes for them, and the arithmetic around them stayed scalar), then the
+/// blend. The index's float-to-integer conversion goes through `i32` (the clamped `x` is in
+/// [0, 63] or NaN, which both conversions take to 0): the same index, weight and sum.
+#[inline(always)]
+fn transmittance_lanes<const N: usize>(t: &[&[f32; TRANSMITTANCE_RES]; N], cos: &[f32; N]) -> [f32; N] {
+    let (mut x, mut i) = ([0.0f32; N], [0usize; N]);
+    for l in 0..N {
+        x[l] = cos[l].clamp(0.0, 1.0) * (TRANSMITTANCE_RES - 1) as f32;
+        i[l] = (x[l] as i32).clamp(0, TRANSMITTANCE_RES as i32 - 2) as usize;
+    }
+    let (mut a, mut b) = ([0.0f32; N], [0.0f32; N]);
+    for l in 0..N {
+        (a[l], b[l]) = (t[l][i[l]], t[l][i[l] + 1]);
+    }
+    std::array::from_fn(|l| {
+        let w = x[l] - i[l] as f32;
+        a[l] * (1.0 - w) + b[l] * w
+    })
+}
+
+/// [`specular_probability`] with its test as a select.
+#[inline(always)]
+fn specular_probability_lane(specular: f32, diffuse: f32, weight: f32) -> f32 {
+    let ps = specular * weight;
+    let pd = diffuse * (1.0 - weight);
+    let p = ps / (ps + pd);
+    if ps + pd > 0.0 {
+        p
+    } else {
+        0.0
+    }
+}
+
+/// `N` lanes of Beckmann rough plastics for [`rough_plastic_lanes`], on the model's side (as
+/// `Bsdf::side` mirrors them). Unused lanes keep the defaults (or earlier lanes' values).
+#[derive(Clone, Copy, Debug)]
+pub(crate) struct RoughPlasticLanes<const N: usize> {
+    /// The roughness, `wo` (upper hemisphere) and the direction's numbers `u`.
+    pub beckmann: BeckmannLanes<N>,
+    /// The lobe's number.
+    pub uc: [f32; N],
+    /// Toward the light sample (local; below the surface where there is none).
+    pub wi: [[f32; N]; 3],
+    pub eta: [f32; N],
+    pub sampling_weight: [f32; N],
+    pub specular_reflectance: [[f32; N]; 3],
+    /// The base's albedo under the coating (`base_albedo`) and INV_PI / eta².
+    pub base: [[f32; N]; 3],
+    pub base_scale: [f32; N],
+    pub transmittance: [&'static [f32; TRANSMITTANCE_RES]; N],
+}
+
+impl<const N: usize> Default for RoughPlasticLanes<N> {
+    fn default() -> Self {
+        RoughPlasticLanes {
+            beckmann: BeckmannLanes::default(),
+            uc: [0.5; N],
+            wi: [[0.0; N], [0.0; N], [-1.0; N]],
+            eta: [1.5; N],
+            sampling_weight: [0.5; N],
+            specular_reflectance: [[1.0; N]; 3],
+            base: [[0.0; N]; 3],
+            base_scale: [0.0; N],
+            transmittance: [&NO_TABLE; N],
+        }
+    }
+}
+
+impl<const N: usize> RoughPlasticLanes<N> {
+    /// Lane `l`: plastic `p` seen from `wo` (on its side, upper hemisphere), the light sample
+    /// toward `wi` where there is one, the lobe's number `uc` and the direction's `u`.
+    #[inline]
+    pub(crate) fn set(&mut self, l: usize, p: &RoughPlastic, wo: Vec3, wi: Option<Vec3>, uc: f32, u: Vec2) {
+        let md = &p.distribution;
+        let wi = wi.unwrap_or(Vec3::NEG_Z);
+        let q = &mut self.beckmann;
+        (q.alpha[0][l], q.alpha[1][l]) = (md.alpha_u, md.alpha_v);
+        (q.u[0][l], q.u[1][l]) = (u.x, u.y);
+        let t = p.tables;
+        let base = base_albedo(p.diffuse_reflectance, t.internal_reflectance, p.nonlinear);
+        for k in 0..3 {
+            q.v[k][l] = wo[k];
+            self.wi[k][l] = wi[k];
+            (self.specular_reflectance[k][l], self.base[k][l]) = (p.specular_reflectance[k], base[k]);
+        }
+        (self.uc[l], self.eta[l], self.sampling_weight[l]) = (uc, p.eta, p.specular_sampling_weight);
+        self.base_scale[l] = INV_PI / (p.eta * p.eta);
+        self.transmittance[l] = &t.transmittance;
+    }
+}
+
+/// What [`rough_plastic_lanes`] gives per lane: [`RoughPlastic::eval_pdf`] toward `wi`
+/// (`nee_f`, `nee_pdf`) and [`RoughPlastic::sample`] (where `sampled`: `wi`, `f`, `pdf`, and
+/// whether the glossy lobe was chosen).
+#[derive(Clone, Copy, Debug)]
+pub(crate) struct RoughPlasticOut<const N: usize> {
+    pub nee_f: [[f32; N]; 3],
+    pub nee_pdf: [f32; N],
+    pub sampled: [bool; N],
+    pub glossy: [bool; N],
+    pub wi: [[f32; N]; 3],
+    pub f: [[f32; N]; 3],
+    pub pdf: [f32; N],
+}
+
+impl<const N: usize> RoughPlasticOut<N> {
+    /// Lane `l` as (`eval_pdf` where it was given a light sample, `sample`) give it.
+    #[inline]
+    pub(crate) fn lane(&self, l: usize, nee: bool) -> (Option<(Rgb, f32)>, Option<BsdfSample>) {
+        let rgb = |a: &[[f32; N]; 3]| Rgb::new(a[0][l], a[1][l], a[2][l]);
+        let s = self.sampled[l].then(|| BsdfSample {
+            wi: Vec3::new(self.wi[0][l], self.wi[1][l], self.wi[2][l]),
+            f: rgb(&self.f),
+            pdf: self.pdf[l],
+            lobe: if self.glossy[l] { LobeFlags::GLOSSY_REFLECTION } else { LobeFlags::DIFFUSE_REFLECTION },
+            eta: 1.0,
+        });
+        (nee.then(|| (rgb(&self.nee_f), self.nee_pdf[l])), s)
+    }
+}
+
+/// ([`RoughPlastic::eval_pdf`] toward `wi`, [`RoughPlastic::sample`]) of `used` lanes at
+/// once: the lobe's choice, the glossy lanes' visible normals
+/// (`sample_visible_beckmann_lanes`) or the cosine-weighted directions, then for both
+/// directions the half vector, D, G1 both ways, the densities, the coating's Fresnel term
+/// and transmittances, each lane's operations those of the scalar routines, with selects for
+/// their branches (D's expf as `conductor::rough_conductor_lanes` takes it). The same bits.
+#[inline(always)]
+pub(crate) fn rough_plastic_lanes<const N: usize>(q: &RoughPlasticLanes<N>, used: usize) -> RoughPlasticOut<N> {
+    let b = &q.beckmann;
+    // `sample`'s start: the transmittance toward wo and the lobe. Lanes that take the
+    // diffuse lobe draw no normal: they ask the Newton loop for an idle lane's, which
+    // settles at once.
+    let t_o = transmittance_lanes(&q.transmittance, &b.v[2]);
+    let (mut ps, mut glossy) = ([0.0f32; N], [false; N]);
+    let (idle, mut draw) = (BeckmannLanes::<N>::default(), *b);
+    for l in 0..N {
+        ps[l] = specular_probability_lane(1.0 - t_o[l], t_o[l], q.sampling_weight[l]);
+        glossy[l] = q.uc[l] < ps[l];
+        let g = glossy[l] & (l < used);
+        for k in 0..2 {
+            draw.alpha[k][l] = if g { b.alpha[k][l] } else { idle.alpha[k][l] };
+            draw.u[k][l] = if g { b.u[k][l] } else { idle.u[k][l] };
+        }
+        for k in 0..3 {
+            draw.v[k][l] = if g { b.v[k][l] } else { idle.v[k][l] };
+        }
+    }
+    let any_glossy = glossy[..used.min(N)].iter().fold(false, |a, &g| a | g);
+    let m = if any_glossy { mf::sample_visible_beckmann_lanes(&draw) } else { [[0.0; N], [0.0; N], [1.0; N]] };
+    // Per direction (0: toward the light sample, 1: the sample's), as `eval_pdf`.
+    let (mut wi, mut h) = ([[[0.0f32; N]; 3]; 2], [[[0.0f32; N]; 3]; 2]);
+    let (mut x, mut c2, mut ok) = ([[0.0f32; N]; 2], [[0.0f32; N]; 2], [[false; N]; 2]);
+    let mut lambda = [[0.0f32; N]; 3];
+    for l in 0..N {
+        let (ax, ay) = (b.alpha[0][l], b.alpha[1][l]);
+        let wo = Vec3::new(b.v[0][l], b.v[1][l], b.v[2][l]);
+        let r = fresnel::reflect(wo, Vec3::new(m[0][l], m[1][l], m[2][l]));
+        let c = lane::cosine_hemisphere(b.u[0][l], b.u[1][l]);
+        let ws = if glossy[l] { r } else { Vec3::from_array(c) };
+        lambda[0][l] = mf::beckmann_lambda(ax, ay, wo);
+        for (e, w) in [Vec3::new(q.wi[0][l], q.wi[1][l], q.wi[2][l]), ws].into_iter().enumerate() {
+            let hh = (wo + w).normalize();
+            (x[e][l], c2[e][l]) = mf::beckmann_d_exponent(ax, ay, hh);
+            lambda[1 + e][l] = mf::beckmann_lambda(ax, ay, w);
+            ok[e][l] = !(wo.z <= 0.0 || w.z <= 0.0) && hh.z > 0.0;
+            for k in 0..3 {
+                wi[e][k][l] = w[k];
+                h[e][k][l] = hh[k];
+            }
+        }
+    }
+    // D's e^x where D is asked for, as `rough_conductor_lanes` (`&`, not `&&`: vector code).
+    let (mut ex, mut off) = ([[0.0f32; N]; 2], [[false; N]; 2]);
+    for e in 0..2 {
+        for l in 0..N {
+            let xe = x[e][l];
+            let below = xe < -104.0;
+            let want = (l < used) & ok[e][l] & !below;
+            let v = expf::expf_main(xe);
+            ex[e][l] = if want { v } else { 0.0 };
+            off[e][l] = want & !expf::main_path(xe);
+        }
+    }
+    if off.as_flattened().iter().fold(false, |a, &o| a | o) {
+        for l in 0..used.min(N) {
+            for e in 0..2 {
+                if ok[e][l] {
+                    ex[e][l] = mf::beckmann_d_exp(x[e][l]);
+                }
+            }
+        }
+    }
+    let t_i = [transmittance_lanes(&q.transmittance, &wi[0][2]), transmittance_lanes(&q.transmittance, &wi[1][2])];
+    let (mut f, mut pdf) = ([[[0.0f32; N]; 3]; 2], [[0.0f32; N]; 2]);
+    for l in 0..N {
+        let (ax, ay) = (b.alpha[0][l], b.alpha[1][l]);
+        let wo = Vec3::new(b.v[0][l], b.v[1][l], b.v[2][l]);
+        for e in 0..2 {
+            let w = Vec3::new(wi[e][0][l], wi[e][1][l], wi[e][2][l]);
+            let hh = Vec3::new(h[e][0][l], h[e][1][l], h[e][2][l]);
+            let d = if hh.z <= 0.0 { 0.0 } else { mf::beckmann_d_of(ex[e][l], ax, ay, c2[e][l]) };
+            let g1o = Microfacet::g1_given(wo, hh, || lambda[0][l]);
+            let hi = w.dot(hh);
+            let spec_pdf = if hi > 0.0 { Microfacet::pdf_visible_given(wo, hh, d, g1o) / (4.0 * hi) } else { 0.0 };
+            let p = ps[l] * spec_pdf + (1.0 - ps[l]) * warp::square_to_cosine_hemisphere_pdf(w);
+            let fr = fresnel::dielectric_reflectance(wo.dot(hh), q.eta[l]);
+            let spec = fr * d * (g1o * Microfacet::g1_given(w, hh, || lambda[1 + e][l])) / (4.0 * wo.z * w.z);
+            let diff = q.base_scale[l] * t_o[l] * t_i[e][l];
+            let valid = !(wo.z <= 0.0 || w.z <= 0.0);
+            for (k, row) in f[e].iter_mut().enumerate() {
+                let v = q.specular_reflectance[k][l] * spec + q.base[k][l] * diff;
+                row[l] = if valid { v } else { 0.0 };
+            }
+            pdf[e][l] = if valid { p } else { 0.0 };
+        }
+    }
+    let [nee_f, sf] = f;
+    let sampled = std::array::from_fn(|l| wi[1][2][l] > 0.0 && super::positive_finite(pdf[1][l]));
+    RoughPlasticOut { nee_f, nee_pdf: pdf[0], sampled, glossy, wi: wi[1], f: sf, pdf: pdf[1] }
 }
 
 #[cfg(test)]

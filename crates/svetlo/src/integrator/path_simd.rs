@@ -74,6 +74,7 @@ use super::path::{bsdf_pdf_toward, PathTracer};
 use super::{camera_sample, render_tiles, Integrator, Progress, RenderSettings};
 use crate::accel::packet::{Hits8, PacketBvh, PacketSpheres, Rays8, LANES};
 use crate::bsdf::conductor::{rough_conductor_lanes, RoughConductorLanes, RoughConductorOut};
+use crate::bsdf::plastic::{rough_plastic_lanes, RoughPlasticLanes, RoughPlasticOut};
 use crate::bsdf::{Bsdf, BsdfSample, LobeFlags, Material, TransportMode};
 use crate::camera::{RayGenerator, RayLanes};
 use crate::error::{Error, Result};
@@ -1174,6 +1175,7 @@ impl SimdKernel {
                 self.env_samples(scene, &mut p.v);
             }
             self.conductor_samples(events, packets);
+            self.plastic_samples(events, packets);
             for (pk, p) in packets.iter_mut().enumerate().filter(|(_, p)| p.active != 0) {
                 if p.go == 0 && !layers.on() {
                     // No path goes on (every step at depth 1): the shading step's outputs are
@@ -1838,7 +1840,7 @@ impl SimdKernel {
     fn conductor_samples<S>(&self, events: &LaneEvents, packets: &mut [Packet<S>]) {
         // Made at the first such lane (most steps of most scenes have none).
         let mut group: Option<RoughConductorLanes<LANES>> = None;
-        let mut slot = [ConductorSlot::default(); LANES];
+        let mut slot = [GroupSlot::default(); LANES];
         let mut used = 0usize;
         for pk in 0..packets.len() {
             let mut lanes = packets[pk].v.scatter_lanes;
@@ -1855,19 +1857,8 @@ impl SimdKernel {
                 let wi = nee_dir(v, l, &frame);
                 let q = group.get_or_insert_with(RoughConductorLanes::default);
                 q.set(used, c, side(wo), wi.map(side), Vec2::new(v.scatter_u[1][l], v.scatter_u[2][l]));
-                slot[used] = ConductorSlot { pk, l, flipped, opacity: bsdf.opacity, lit: wi.is_some() };
-                // What `scalar_scatter` writes that does not wait on the values: the vertex
-                // kept for the MIS weight of the emitter its sample reaches (taken back in
-                // `conductor_group` where the lane does not move; its own BSDF, if any, goes
-                // with it as `scalar_scatter` moves it), and the light sample's event.
-                st.prev_bsdf[l] = Some(PrevBsdf { shape, frame, wo });
-                if let (Some(view), Some(wi)) = (events.view, wi) {
-                    v.class_nee[l] = view.class(events.aovs.scatter_event(v.shape[l], v.flags[l], None, wi.z * wo.z < 0.0));
-                }
-                if v.own[l].is_some() {
-                    st.prev_own[l] = v.own[l].take();
-                }
-                v.scatter_lanes &= !(1 << l);
+                slot[used] = GroupSlot { pk, l, flipped, opacity: bsdf.opacity, lit: wi.is_some() };
+                take_lane(events, st, v, l, PrevBsdf { shape, frame, wo }, wi);
                 used += 1;
                 if used == LANES {
                     self.conductor_group(events, q, &slot[..used], packets);
@@ -1884,23 +1875,11 @@ impl SimdKernel {
     /// BSDF finishes them and written into its packet's `v` (as `scalar_scatter`). (The
     /// group's other lanes hold earlier lanes' values: the lanes are independent.)
     #[inline(always)]
-    fn conductor_group<S>(&self, events: &LaneEvents, q: &RoughConductorLanes<LANES>, slot: &[ConductorSlot], packets: &mut [Packet<S>]) {
+    fn conductor_group<S>(&self, events: &LaneEvents, q: &RoughConductorLanes<LANES>, slot: &[GroupSlot], packets: &mut [Packet<S>]) {
         let out = self.rough_conductor_lanes_on_cpu(q, slot.len());
         for (i, c) in slot.iter().enumerate() {
-            let Packet { st, v, .. } = &mut packets[c.pk];
-            let l = c.l;
             let (nee, s) = out.lane(i, c.lit);
-            let (nee, s) = Bsdf::finish_conductor(c.opacity, c.flipped, nee, s);
-            if let Some((f, pdf)) = nee {
-                put_light_value(v, l, f, pdf);
-            }
-            let bs = s.filter(|bs| bs.pdf > 0.0 && !bs.f.is_black());
-            v.num.bmoved[l] = bs.is_some();
-            match bs {
-                // (Never of a delta lobe: the vertex `conductor_samples` kept stays.)
-                Some(bs) => put_sample(events, v, l, v.flags[l], &bs),
-                None => st.prev_bsdf[l] = None,
-            }
+            put_lane(events, c, packets, nee, s);
         }
     }
 
@@ -1920,6 +1899,83 @@ impl SimdKernel {
             };
         }
         rough_conductor_lanes(q, used)
+    }
+
+    /// The Beckmann rough plastics' (`Bsdf::beckmann_plastic`) values and densities toward
+    /// their light samples and their own samples, all packets' lanes at once, eight a group
+    /// (`rough_plastic_lanes`: the lobe, the visible normal or cosine direction, then both
+    /// directions' D, G1, densities, Fresnel term and coating transmittances as vector code,
+    /// the bits of `Bsdf::eval_pdf_and_sample`), written as [`Self::conductor_samples`]
+    /// writes a conductor's. (Out of line: inlined, it changed how LLVM compiled the tile
+    /// loop around it.)
+    #[inline(never)]
+    fn plastic_samples<S>(&self, events: &LaneEvents, packets: &mut [Packet<S>]) {
+        if packets.iter().fold(0, |a, p| a | p.v.scatter_lanes) == 0 {
+            return;
+        }
+        let mut group: Option<RoughPlasticLanes<LANES>> = None;
+        let mut slot = [GroupSlot::default(); LANES];
+        let mut used = 0usize;
+        for pk in 0..packets.len() {
+            let mut lanes = packets[pk].v.scatter_lanes;
+            while lanes != 0 {
+                let l = lanes.trailing_zeros() as usize;
+                lanes &= lanes - 1;
+                let Packet { st, v, .. } = &mut packets[pk];
+                // A plastic without a mask has these lobes (with a back of other lobes it is
+                // left to `scalar_scatter`): most scalar lanes are other models.
+                if v.flags[l] != LobeFlags::GLOSSY_REFLECTION | LobeFlags::DIFFUSE_REFLECTION {
+                    continue;
+                }
+                let shape = v.shape[l];
+                let Some(bsdf) = v.own[l].as_ref().or(self.shapes[shape as usize].uniform.as_ref()) else { continue };
+                let frame = v.num.frame(l);
+                let wo = frame.to_local(lane3(&v.num.wo, l));
+                let Some((p, flipped)) = bsdf.beckmann_plastic(wo) else { continue };
+                let side = |w: Vec3| if flipped { Vec3::new(w.x, w.y, -w.z) } else { w };
+                let wi = nee_dir(v, l, &frame);
+                let q = group.get_or_insert_with(RoughPlasticLanes::default);
+                q.set(used, p, side(wo), wi.map(side), v.scatter_u[0][l], Vec2::new(v.scatter_u[1][l], v.scatter_u[2][l]));
+                slot[used] = GroupSlot { pk, l, flipped, opacity: bsdf.opacity, lit: wi.is_some() };
+                take_lane(events, st, v, l, PrevBsdf { shape, frame, wo }, wi);
+                used += 1;
+                if used == LANES {
+                    self.plastic_group(events, q, &slot[..used], packets);
+                    used = 0;
+                }
+            }
+        }
+        if let Some(q) = group.as_ref().filter(|_| used > 0) {
+            self.plastic_group(events, q, &slot[..used], packets);
+        }
+    }
+
+    /// One group of [`Self::plastic_samples`]: lanes `slot` of `q`, each finished and written
+    /// as a conductor group's lanes are.
+    #[inline(always)]
+    fn plastic_group<S>(&self, events: &LaneEvents, q: &RoughPlasticLanes<LANES>, slot: &[GroupSlot], packets: &mut [Packet<S>]) {
+        let out = self.rough_plastic_lanes_on_cpu(q, slot.len());
+        for (i, c) in slot.iter().enumerate() {
+            let (nee, s) = out.lane(i, c.lit);
+            put_lane(events, c, packets, nee, s);
+        }
+    }
+
+    /// [`rough_plastic_lanes`] in its own function of this CPU's build.
+    #[inline(always)]
+    fn rough_plastic_lanes_on_cpu(&self, q: &RoughPlasticLanes<LANES>, used: usize) -> RoughPlasticOut<LANES> {
+        #[cfg(target_arch = "x86_64")]
+        if crate::cpu::avx2() && crate::cpu::fma() {
+            // SAFETY: as `rough_conductor_lanes_on_cpu`.
+            return unsafe {
+                if self.avx512 {
+                    plastic8_avx512(q, used)
+                } else {
+                    plastic8_avx2(q, used)
+                }
+            };
+        }
+        rough_plastic_lanes(q, used)
     }
 
     /// The first part of lane `l`'s vertex at `p` on `shape` of a scalar BSDF: the BSDF (the
@@ -2068,11 +2124,48 @@ fn put_sample(events: &LaneEvents, v: &mut Soa, l: usize, flags: LobeFlags, bs: 
     }
 }
 
-/// A lane of a group of rough conductors (`SimdKernel::conductor_samples`): its packet and
-/// lane, whether its directions were mirrored to the model's side, its BSDF's opacity, and
+/// A lane taken by a vector BSDF step (`conductor_samples`, `plastic_samples`): what
+/// `scalar_scatter` writes that does not wait on the values, so the lane leaves
+/// `scatter_lanes`. The vertex `kept` for the MIS weight of the emitter its sample reaches
+/// (taken back in [`put_lane`] where the lane does not move; its own BSDF, if any, goes with
+/// it as `scalar_scatter` moves it), and the light sample's event toward `wi`.
+#[inline(always)]
+fn take_lane<S>(events: &LaneEvents, st: &mut Paths<S>, v: &mut Soa, l: usize, kept: PrevBsdf, wi: Option<Vec3>) {
+    if let (Some(view), Some(wi)) = (events.view, wi) {
+        v.class_nee[l] = view.class(events.aovs.scatter_event(v.shape[l], v.flags[l], None, wi.z * kept.wo.z < 0.0));
+    }
+    st.prev_bsdf[l] = Some(kept);
+    if v.own[l].is_some() {
+        st.prev_own[l] = v.own[l].take();
+    }
+    v.scatter_lanes &= !(1 << l);
+}
+
+/// The values of slot `c`'s lane from its vector step, on the model's side, finished as its
+/// BSDF finishes them (`Bsdf::finish_conductor`) and written where `scalar_scatter` writes
+/// a lane's: the light sample's value and density `nee`, the lane's own sample `s`.
+#[inline(always)]
+fn put_lane<S>(events: &LaneEvents, c: &GroupSlot, packets: &mut [Packet<S>], nee: Option<(Rgb, f32)>, s: Option<BsdfSample>) {
+    let Packet { st, v, .. } = &mut packets[c.pk];
+    let l = c.l;
+    let (nee, s) = Bsdf::finish_conductor(c.opacity, c.flipped, nee, s);
+    if let Some((f, pdf)) = nee {
+        put_light_value(v, l, f, pdf);
+    }
+    let bs = s.filter(|bs| bs.pdf > 0.0 && !bs.f.is_black());
+    v.num.bmoved[l] = bs.is_some();
+    match bs {
+        // (Never of a delta lobe: the vertex `take_lane` kept stays.)
+        Some(bs) => put_sample(events, v, l, v.flags[l], &bs),
+        None => st.prev_bsdf[l] = None,
+    }
+}
+
+/// A lane of a vector BSDF step's group (`SimdKernel::conductor_samples`,
+/// `plastic_samples`): its packet and lane, whether its directions were mirrored to the model's side, its BSDF's opacity, and
 /// whether it has a light sample.
 #[derive(Clone, Copy, Default)]
-struct ConductorSlot {
+struct GroupSlot {
     pk: usize,
     l: usize,
     flipped: bool,
@@ -2727,6 +2820,28 @@ unsafe fn conductor8_avx512(q: &RoughConductorLanes<LANES>, used: usize) -> Roug
     rough_conductor_lanes(q, used)
 }
 
+/// [`rough_plastic_lanes`] of the kernel's eight lanes compiled for AVX2.
+///
+/// # Safety
+/// The CPU must support AVX2 and FMA (glibc's expf as vector lanes).
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx2,fma")]
+#[inline(never)]
+unsafe fn plastic8_avx2(q: &RoughPlasticLanes<LANES>, used: usize) -> RoughPlasticOut<LANES> {
+    rough_plastic_lanes(q, used)
+}
+
+/// [`rough_plastic_lanes`] compiled for AVX-512VL.
+///
+/// # Safety
+/// The CPU must support AVX2, FMA, AVX-512F and AVX-512VL.
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx2,fma,avx512f,avx512vl")]
+#[inline(never)]
+unsafe fn plastic8_avx512(q: &RoughPlasticLanes<LANES>, used: usize) -> RoughPlasticOut<LANES> {
+    rough_plastic_lanes(q, used)
+}
+
 /// A sampler of the kernel's lanes: one vertex's numbers for all of them at once, in the
 /// scalar tracer's order per vertex (light choice, light point, BSDF lobe, BSDF direction,
 /// Russian roulette: 1, 2, 1, 2 and 1 dimensions), each lane from its own sampler.
@@ -3226,6 +3341,81 @@ mod tests {
             }
         }
         assert!(sampled > 40_000 && lit > 10_000, "{sampled} samples, {lit} lit light samples");
+    }
+
+    /// The kernel's rough-plastic lanes (the baseline build and the AVX2 and AVX-512 copies
+    /// it runs) give `RoughPlastic::eval_pdf` and `sample`'s bits lane by lane, with 1 to 8
+    /// lanes used: several roughnesses, IORs (1 included), sampling weights (both lobes
+    /// always, never, mixed), linear and nonlinear bases, incidence from normal to grazing,
+    /// light directions on both sides and none, the numbers' ends.
+    #[test]
+    fn plastic_lanes_are_the_scalar_bsdf() {
+        use crate::bsdf::plastic::RoughPlastic;
+        use crate::bsdf::MicrofacetKind;
+        let mut rng = Pcg32::new(37, 5);
+        let mut f = |lo: f32, hi: f32| lo + (hi - lo) * rng.next_f32();
+        let mut models = Vec::new();
+        for (i, &alpha) in [1e-4f32, 0.05, 0.1, 0.4, 1.0].iter().enumerate() {
+            for (j, &eta) in [1.5f32, 1.0, 1.9].iter().enumerate() {
+                let weight = [0.0f32, 1.0, 0.5, 0.667][(i + j) % 4];
+                let diffuse = if (i + j).is_multiple_of(2) { Rgb::new(0.1, 0.27, 0.36) } else { Rgb::splat(0.5) };
+                models.push(RoughPlastic::new(MicrofacetKind::Beckmann, alpha, diffuse, Rgb::new(1.0, 0.8, 0.6), eta, j == 2, weight));
+            }
+        }
+        let us = [0.0f32, 1e-7, 0.5, 1.0 - 6e-8, 1.0];
+        let cos_ts = [1.0f32, 0.999_999, 0.5, 1e-2, 1e-4, 1e-6];
+        let bits = |(nee, s): (Option<(Rgb, f32)>, Option<BsdfSample>)| {
+            let rgb = |c: Rgb| [c.r, c.g, c.b].map(f32::to_bits);
+            (nee.map(|(c, p)| (rgb(c), p.to_bits())), s.map(|s| (s.wi.to_array().map(f32::to_bits), rgb(s.f), s.pdf.to_bits(), s.lobe, s.eta.to_bits())))
+        };
+        let (mut glossy, mut diffuse, mut lit) = (0, 0, 0);
+        for batch in 0..12_000usize {
+            let used = 1 + batch % LANES;
+            let mut q = RoughPlasticLanes::<LANES>::default();
+            let mut lanes = Vec::new();
+            for l in 0..used {
+                let i = batch * LANES + l;
+                let p = &models[(i * 7 + batch) % models.len()];
+                let dir = |cos_t: f32, phi: f32| {
+                    let sin_t = (1.0 - cos_t * cos_t).max(0.0).sqrt();
+                    Vec3::new(sin_t * phi.cos(), sin_t * phi.sin(), cos_t)
+                };
+                let wo = dir(if i.is_multiple_of(5) { cos_ts[i / 5 % cos_ts.len()] } else { f(1e-3, 1.0) }, f(0.0, 6.3));
+                // Near the mirror direction (the glossy lobe), anywhere, above, or none.
+                let wi = match i % 4 {
+                    0 => Some((Vec3::new(-wo.x, -wo.y, wo.z) + 0.05 * dir(f(-1.0, 1.0), f(0.0, 6.3))).normalize()),
+                    1 => Some(dir(f(-1.0, 1.0), f(0.0, 6.3))),
+                    2 => Some(dir(f(0.0, 1.0), f(0.0, 6.3))),
+                    _ => None,
+                };
+                let uc = if i.is_multiple_of(11) { us[i / 11 % 5] } else { f(0.0, 1.0) };
+                let u = if i.is_multiple_of(7) { Vec2::new(us[i / 7 % 5], us[i / 35 % 5]) } else { Vec2::new(f(0.0, 1.0), f(0.0, 1.0)) };
+                q.set(l, p, wo, wi, uc, u);
+                lanes.push((p, wo, wi, uc, u));
+            }
+            let mut outs = vec![rough_plastic_lanes(&q, used)];
+            #[cfg(target_arch = "x86_64")]
+            if crate::cpu::avx2() && crate::cpu::fma() {
+                // SAFETY: AVX2 and FMA were detected, AVX-512 where `cpu::avx512()` says so.
+                outs.push(unsafe { plastic8_avx2(&q, used) });
+                if crate::cpu::avx512() {
+                    outs.push(unsafe { plastic8_avx512(&q, used) });
+                }
+            }
+            for (l, &(p, wo, wi, uc, u)) in lanes.iter().enumerate() {
+                let want = (wi.map(|wi| p.eval_pdf(wo, wi)), p.sample(wo, uc, u, TransportMode::Radiance));
+                match want.1.map(|s| s.lobe) {
+                    Some(LobeFlags::GLOSSY_REFLECTION) => glossy += 1,
+                    Some(_) => diffuse += 1,
+                    None => {}
+                }
+                lit += usize::from(want.0.is_some_and(|(f, _)| !f.is_black()));
+                for (build, out) in outs.iter().enumerate() {
+                    assert_eq!(bits(out.lane(l, wi.is_some())), bits(want), "build {build}, {p:?} wo {wo} wi {wi:?} uc {uc} u {u}");
+                }
+            }
+        }
+        assert!(glossy > 10_000 && diffuse > 10_000 && lit > 10_000, "{glossy} glossy and {diffuse} diffuse samples, {lit} lit light samples");
     }
 
     /// `shade8` in its own AVX2 and AVX-512 builds (the kernel's) gives the portable

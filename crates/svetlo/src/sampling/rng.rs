@@ -71,12 +71,27 @@ pub fn mix64(mut z: u64) -> u64 {
 /// Hash several integers into one seed.
 #[inline]
 pub fn hash_seed(parts: &[u64]) -> u64 {
-    parts.iter().fold(0x9e37_79b9_7f4a_7c15u64, |h, &p| mix64(h ^ p.wrapping_add(0x9e37_79b9_7f4a_7c15)))
+    hash_seed_after(0x9e37_79b9_7f4a_7c15, parts)
+}
+
+/// [`hash_seed`] of the parts that gave `h` followed by `parts`: a caller that hashes many
+/// tuples with the same first parts hashes those once.
+#[inline]
+pub fn hash_seed_after(h: u64, parts: &[u64]) -> u64 {
+    parts.iter().fold(h, |h, &p| mix64(h ^ p.wrapping_add(0x9e37_79b9_7f4a_7c15)))
 }
 
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// A seed hashed on from its first parts' hash is the whole tuple's.
+    #[test]
+    fn hash_seed_after_continues_hash_seed() {
+        for (seed, x, y) in [(0u64, 0u64, 0u64), (1, 2, 3), (u64::MAX, 47, 1 << 40), (0x1234_5678_9abc, u64::MAX, 0)] {
+            assert_eq!(hash_seed_after(hash_seed(&[seed]), &[x, y]), hash_seed(&[seed, x, y]));
+        }
+    }
 
     /// The eight generators side by side give each one's `next_f32` values in order and
     /// leave each where those calls would.

@@ -2,7 +2,7 @@
 //! state is a pure function of (seed, pixel, sample index), so the image does not
 //! depend on thread count or tile order.
 
-use super::rng::{hash_seed, Pcg32};
+use super::rng::{hash_seed, hash_seed_after, Pcg32};
 use glam::Vec2;
 
 pub trait Sampler: Send + Sync {
@@ -33,14 +33,15 @@ pub enum SamplerKind {
 
 #[derive(Clone, Debug)]
 pub struct IndependentSampler {
-    seed: u64,
+    /// `hash_seed(&[seed])`: each pixel sample's hash goes on from it.
+    seed_hash: u64,
     spp: u32,
     rng: Pcg32,
 }
 
 impl IndependentSampler {
     pub fn new(spp: u32, seed: u64) -> Self {
-        IndependentSampler { seed, spp, rng: Pcg32::new(seed, 0) }
+        IndependentSampler { seed_hash: hash_seed(&[seed]), spp, rng: Pcg32::new(seed, 0) }
     }
 
     /// The next `N` one-dimensional values of eight samplers, row `i` the `i`-th of every
@@ -61,7 +62,8 @@ impl IndependentSampler {
 
 impl Sampler for IndependentSampler {
     fn start_pixel_sample(&mut self, x: u32, y: u32, index: u32) {
-        let h = hash_seed(&[self.seed, x as u64, y as u64]);
+        // hash_seed(&[seed, x, y]), its first part's round done once.
+        let h = hash_seed_after(self.seed_hash, &[x as u64, y as u64]);
         self.rng = Pcg32::new(h, index as u64);
     }
     #[inline]
