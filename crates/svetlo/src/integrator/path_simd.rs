@@ -747,6 +747,8 @@ pub struct SimdKernel {
     /// packet's longer drain at a tile's end and its bookkeeping cost 2 % more instructions
     /// on cbox-rgb, for nothing to overlap).
     packets: usize,
+    /// Whether some shape may have a Beckmann rough plastic (`plastic_samples`).
+    plastics: bool,
 }
 
 /// The reflectance of a diffuse model (a constant one clamped as `Material::bsdf` does).
@@ -928,7 +930,9 @@ impl SimdKernel {
         let chains =
             sphere_lights.iter().any(Option::is_some) || shapes.iter().any(|s| s.uniform.as_ref().is_some_and(|b| b.beckmann_conductor(Vec3::Z).is_some()));
         let packets = if chains { PACKETS } else { 1 };
-        Some(SimdKernel { tracer, geometry, shapes, lights, sphere_lights, env_light, prefetch_texels, avx512: crate::cpu::avx512(), packets })
+        // A shape whose BSDF is built per hit may be a plastic too.
+        let plastics = shapes.iter().any(|s| s.scalar_bsdf && s.uniform.as_ref().is_none_or(|b| b.beckmann_plastic(Vec3::Z).is_some()));
+        Some(SimdKernel { tracer, geometry, shapes, lights, sphere_lights, env_light, prefetch_texels, avx512: crate::cpu::avx512(), packets, plastics })
     }
 
     /// How many packets of eight paths a tile steps in phase (more than one where the
@@ -1175,7 +1179,9 @@ impl SimdKernel {
                 self.env_samples(scene, &mut p.v);
             }
             self.conductor_samples(events, packets);
-            self.plastic_samples(events, packets);
+            if self.plastics {
+                self.plastic_samples(events, packets);
+            }
             for (pk, p) in packets.iter_mut().enumerate().filter(|(_, p)| p.active != 0) {
                 if p.go == 0 && !layers.on() {
                     // No path goes on (every step at depth 1): the shading step's outputs are
