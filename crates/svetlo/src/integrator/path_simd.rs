@@ -73,8 +73,8 @@
 use super::path::{bsdf_pdf_toward, PathTracer};
 use super::{camera_sample, render_tiles, Integrator, Progress, RenderSettings};
 use crate::accel::packet::{Hits8, PacketBvh, PacketSpheres, Rays8, LANES};
-use crate::bsdf::conductor::{rough_conductor_lanes, RoughConductorLanes, RoughConductorOut};
-use crate::bsdf::plastic::{rough_plastic_lanes, RoughPlasticLanes, RoughPlasticOut};
+use crate::bsdf::conductor::{rough_conductor_lanes, RoughConductor, RoughConductorLanes, RoughConductorOut};
+use crate::bsdf::plastic::{rough_plastic_lanes, RoughPlastic, RoughPlasticLanes, RoughPlasticOut};
 use crate::bsdf::{Bsdf, BsdfSample, LobeFlags, Material, TransportMode};
 use crate::camera::{RayGenerator, RayLanes};
 use crate::error::{Error, Result};
@@ -1844,82 +1844,28 @@ impl SimdKernel {
     /// packets runs one chain where each packet ran its own.)
     #[inline(always)]
     fn conductor_samples<S>(&self, events: &LaneEvents, packets: &mut [Packet<S>]) {
-        // Made at the first such lane (most steps of most scenes have none).
-        let mut group: Option<RoughConductorLanes<LANES>> = None;
-        let mut slot = [GroupSlot::default(); LANES];
-        let mut used = 0usize;
-        for pk in 0..packets.len() {
-            let mut lanes = packets[pk].v.scatter_lanes;
-            while lanes != 0 {
-                let l = lanes.trailing_zeros() as usize;
-                lanes &= lanes - 1;
-                let Packet { st, v, .. } = &mut packets[pk];
-                let shape = v.shape[l];
-                let Some(bsdf) = v.own[l].as_ref().or(self.shapes[shape as usize].uniform.as_ref()) else { continue };
-                let frame = v.num.frame(l);
-                let wo = frame.to_local(lane3(&v.num.wo, l));
-                let Some((c, flipped)) = bsdf.beckmann_conductor(wo) else { continue };
-                let side = |w: Vec3| if flipped { Vec3::new(w.x, w.y, -w.z) } else { w };
-                let wi = nee_dir(v, l, &frame);
-                let q = group.get_or_insert_with(RoughConductorLanes::default);
-                q.set(used, c, side(wo), wi.map(side), Vec2::new(v.scatter_u[1][l], v.scatter_u[2][l]));
-                slot[used] = GroupSlot { pk, l, flipped, opacity: bsdf.opacity, lit: wi.is_some() };
-                take_lane(events, st, v, l, PrevBsdf { shape, frame, wo }, wi);
-                used += 1;
-                if used == LANES {
-                    self.conductor_group(events, q, &slot[..used], packets);
-                    used = 0;
-                }
-            }
-        }
-        if let Some(q) = group.as_ref().filter(|_| used > 0) {
-            self.conductor_group(events, q, &slot[..used], packets);
-        }
-    }
-
-    /// One group of [`Self::conductor_samples`]: lanes `slot` of `q`, each finished as its
-    /// BSDF finishes them and written into its packet's `v` (as `scalar_scatter`). (The
-    /// group's other lanes hold earlier lanes' values: the lanes are independent.)
-    #[inline(always)]
-    fn conductor_group<S>(&self, events: &LaneEvents, q: &RoughConductorLanes<LANES>, slot: &[GroupSlot], packets: &mut [Packet<S>]) {
-        let out = self.rough_conductor_lanes_on_cpu(q, slot.len());
-        for (i, c) in slot.iter().enumerate() {
-            let (nee, s) = out.lane(i, c.lit);
-            put_lane(events, c, packets, nee, s);
-        }
-    }
-
-    /// [`rough_conductor_lanes`] in its own function of this CPU's build (as `shade8_on_cpu`).
-    #[inline(always)]
-    fn rough_conductor_lanes_on_cpu(&self, q: &RoughConductorLanes<LANES>, used: usize) -> RoughConductorOut<LANES> {
-        #[cfg(target_arch = "x86_64")]
-        if crate::cpu::avx2() && crate::cpu::fma() {
-            // SAFETY: `avx2()` and `fma()` detect AVX2 and FMA at run time, and `avx512` is
-            // set only where AVX-512F and VL were.
-            return unsafe {
-                if self.avx512 {
-                    conductor8_avx512(q, used)
-                } else {
-                    conductor8_avx2(q, used)
-                }
-            };
-        }
-        rough_conductor_lanes(q, used)
+        self.group_samples::<S, RoughConductorStep>(events, packets);
     }
 
     /// The Beckmann rough plastics' (`Bsdf::beckmann_plastic`) values and densities toward
-    /// their light samples and their own samples, all packets' lanes at once, eight a group
-    /// (`rough_plastic_lanes`: the lobe, the visible normal or cosine direction, then both
-    /// directions' D, G1, densities, Fresnel term and coating transmittances as vector code,
-    /// the bits of `Bsdf::eval_pdf_and_sample`), written as [`Self::conductor_samples`]
-    /// writes a conductor's. (Out of line: inlined, it changed how LLVM compiled the tile
-    /// loop around it.)
+    /// their light samples and their own samples, as [`Self::conductor_samples`] does a
+    /// conductor's (`rough_plastic_lanes`: the lobe, the visible normal or cosine direction,
+    /// then both directions' D, G1, densities, Fresnel term and coating transmittances).
+    /// (Out of line: inlined, it changed how LLVM compiled the tile loop around it.)
     #[inline(never)]
     fn plastic_samples<S>(&self, events: &LaneEvents, packets: &mut [Packet<S>]) {
         if packets.iter().fold(0, |a, p| a | p.v.scatter_lanes) == 0 {
             return;
         }
-        let mut group: Option<RoughPlasticLanes<LANES>> = None;
+        self.group_samples::<S, RoughPlasticStep>(events, packets);
+    }
+
+    /// The scalar-BSDF lanes of all packets whose BSDF is model `M`'s, evaluated and sampled
+    /// eight a group by `M`'s vector step and written as `scalar_scatter` writes a lane's.
+    #[inline(always)]
+    fn group_samples<S, M: LaneStep>(&self, events: &LaneEvents, packets: &mut [Packet<S>]) {
+        // Made at the first such lane (most steps of most scenes have none).
+        let mut group: Option<M::Group> = None;
         let mut slot = [GroupSlot::default(); LANES];
         let mut used = 0usize;
         for pk in 0..packets.len() {
@@ -1928,60 +1874,42 @@ impl SimdKernel {
                 let l = lanes.trailing_zeros() as usize;
                 lanes &= lanes - 1;
                 let Packet { st, v, .. } = &mut packets[pk];
-                // A plastic without a mask has these lobes (with a back of other lobes it is
-                // left to `scalar_scatter`): most scalar lanes are other models.
-                if v.flags[l] != LobeFlags::GLOSSY_REFLECTION | LobeFlags::DIFFUSE_REFLECTION {
+                if !M::takes(v.flags[l]) {
                     continue;
                 }
                 let shape = v.shape[l];
                 let Some(bsdf) = v.own[l].as_ref().or(self.shapes[shape as usize].uniform.as_ref()) else { continue };
                 let frame = v.num.frame(l);
                 let wo = frame.to_local(lane3(&v.num.wo, l));
-                let Some((p, flipped)) = bsdf.beckmann_plastic(wo) else { continue };
+                let Some((m, flipped)) = M::model(bsdf, wo) else { continue };
                 let side = |w: Vec3| if flipped { Vec3::new(w.x, w.y, -w.z) } else { w };
                 let wi = nee_dir(v, l, &frame);
-                let q = group.get_or_insert_with(RoughPlasticLanes::default);
-                q.set(used, p, side(wo), wi.map(side), v.scatter_u[0][l], Vec2::new(v.scatter_u[1][l], v.scatter_u[2][l]));
+                let q = group.get_or_insert_with(M::Group::default);
+                M::set(q, used, m, side(wo), wi.map(side), [v.scatter_u[0][l], v.scatter_u[1][l], v.scatter_u[2][l]]);
                 slot[used] = GroupSlot { pk, l, flipped, opacity: bsdf.opacity, lit: wi.is_some() };
                 take_lane(events, st, v, l, PrevBsdf { shape, frame, wo }, wi);
                 used += 1;
                 if used == LANES {
-                    self.plastic_group(events, q, &slot[..used], packets);
+                    self.finish_group::<S, M>(events, q, &slot[..used], packets);
                     used = 0;
                 }
             }
         }
         if let Some(q) = group.as_ref().filter(|_| used > 0) {
-            self.plastic_group(events, q, &slot[..used], packets);
+            self.finish_group::<S, M>(events, q, &slot[..used], packets);
         }
     }
 
-    /// One group of [`Self::plastic_samples`]: lanes `slot` of `q`, each finished and written
-    /// as a conductor group's lanes are.
+    /// One group of [`Self::group_samples`]: lanes `slot` of `q`, each finished as its BSDF
+    /// finishes them and written into its packet's `v` (as `scalar_scatter`). (The group's
+    /// other lanes hold earlier lanes' values: the lanes are independent.)
     #[inline(always)]
-    fn plastic_group<S>(&self, events: &LaneEvents, q: &RoughPlasticLanes<LANES>, slot: &[GroupSlot], packets: &mut [Packet<S>]) {
-        let out = self.rough_plastic_lanes_on_cpu(q, slot.len());
+    fn finish_group<S, M: LaneStep>(&self, events: &LaneEvents, q: &M::Group, slot: &[GroupSlot], packets: &mut [Packet<S>]) {
+        let out = M::run(self.avx512, q, slot.len());
         for (i, c) in slot.iter().enumerate() {
-            let (nee, s) = out.lane(i, c.lit);
+            let (nee, s) = M::lane(&out, i, c.lit);
             put_lane(events, c, packets, nee, s);
         }
-    }
-
-    /// [`rough_plastic_lanes`] in its own function of this CPU's build.
-    #[inline(always)]
-    fn rough_plastic_lanes_on_cpu(&self, q: &RoughPlasticLanes<LANES>, used: usize) -> RoughPlasticOut<LANES> {
-        #[cfg(target_arch = "x86_64")]
-        if crate::cpu::avx2() && crate::cpu::fma() {
-            // SAFETY: as `rough_conductor_lanes_on_cpu`.
-            return unsafe {
-                if self.avx512 {
-                    plastic8_avx512(q, used)
-                } else {
-                    plastic8_avx2(q, used)
-                }
-            };
-        }
-        rough_plastic_lanes(q, used)
     }
 
     /// The first part of lane `l`'s vertex at `p` on `shape` of a scalar BSDF: the BSDF (the
@@ -2164,6 +2092,110 @@ fn put_lane<S>(events: &LaneEvents, c: &GroupSlot, packets: &mut [Packet<S>], ne
         // (Never of a delta lobe: the vertex `take_lane` kept stays.)
         Some(bs) => put_sample(events, v, l, v.flags[l], &bs),
         None => st.prev_bsdf[l] = None,
+    }
+}
+
+/// A BSDF model whose lanes the path kernel evaluates and samples eight at a time
+/// ([`SimdKernel::group_samples`]): each lane's value and density toward its light sample
+/// and its own sample, the bits of `Bsdf::eval_pdf_and_sample`, on the model's side.
+trait LaneStep {
+    type Model;
+    /// The inputs of up to eight lanes.
+    type Group: Default;
+    /// Their results.
+    type Out;
+    /// Whether a lane of these lobes may be the model's (a cheap test before `model`).
+    fn takes(_flags: LobeFlags) -> bool {
+        true
+    }
+    /// The model, where `bsdf` toward `wo` is one, and whether directions are mirrored to its side.
+    fn model(bsdf: &Bsdf, wo: Vec3) -> Option<(&Self::Model, bool)>;
+    /// Group lane `i`: directions on the model's side, the vertex's three numbers (lobe, direction).
+    fn set(q: &mut Self::Group, i: usize, m: &Self::Model, wo: Vec3, wi: Option<Vec3>, u: [f32; 3]);
+    /// The first `used` lanes' results, by this CPU's vector build.
+    fn run(avx512: bool, q: &Self::Group, used: usize) -> Self::Out;
+    /// Lane `i`'s light-sample value and density (where it has a light sample: `lit`) and own sample.
+    fn lane(out: &Self::Out, i: usize, lit: bool) -> (Option<(Rgb, f32)>, Option<BsdfSample>);
+}
+
+/// Beckmann rough conductors (`conductor8`).
+struct RoughConductorStep;
+
+impl LaneStep for RoughConductorStep {
+    type Model = RoughConductor;
+    type Group = RoughConductorLanes<LANES>;
+    type Out = RoughConductorOut<LANES>;
+    #[inline(always)]
+    fn model(bsdf: &Bsdf, wo: Vec3) -> Option<(&RoughConductor, bool)> {
+        bsdf.beckmann_conductor(wo)
+    }
+    #[inline(always)]
+    fn set(q: &mut Self::Group, i: usize, m: &RoughConductor, wo: Vec3, wi: Option<Vec3>, u: [f32; 3]) {
+        q.set(i, m, wo, wi, Vec2::new(u[1], u[2]));
+    }
+    #[inline(always)]
+    fn run(avx512: bool, q: &Self::Group, used: usize) -> Self::Out {
+        #[cfg(target_arch = "x86_64")]
+        if crate::cpu::avx2() && crate::cpu::fma() {
+            // SAFETY: `avx2()` and `fma()` detect AVX2 and FMA at run time, and the kernel's
+            // `avx512` is set only where AVX-512F and VL were.
+            return unsafe {
+                if avx512 {
+                    conductor8_avx512(q, used)
+                } else {
+                    conductor8_avx2(q, used)
+                }
+            };
+        }
+        let _ = avx512;
+        rough_conductor_lanes(q, used)
+    }
+    #[inline(always)]
+    fn lane(out: &Self::Out, i: usize, lit: bool) -> (Option<(Rgb, f32)>, Option<BsdfSample>) {
+        out.lane(i, lit)
+    }
+}
+
+/// Beckmann rough plastics (`plastic8`).
+struct RoughPlasticStep;
+
+impl LaneStep for RoughPlasticStep {
+    type Model = RoughPlastic;
+    type Group = RoughPlasticLanes<LANES>;
+    type Out = RoughPlasticOut<LANES>;
+    /// A plastic without a mask has these lobes (with a back of other lobes it is left to
+    /// `scalar_scatter`): most scalar lanes are other models.
+    #[inline(always)]
+    fn takes(flags: LobeFlags) -> bool {
+        flags == LobeFlags::GLOSSY_REFLECTION | LobeFlags::DIFFUSE_REFLECTION
+    }
+    #[inline(always)]
+    fn model(bsdf: &Bsdf, wo: Vec3) -> Option<(&RoughPlastic, bool)> {
+        bsdf.beckmann_plastic(wo)
+    }
+    #[inline(always)]
+    fn set(q: &mut Self::Group, i: usize, m: &RoughPlastic, wo: Vec3, wi: Option<Vec3>, u: [f32; 3]) {
+        q.set(i, m, wo, wi, u[0], Vec2::new(u[1], u[2]));
+    }
+    #[inline(always)]
+    fn run(avx512: bool, q: &Self::Group, used: usize) -> Self::Out {
+        #[cfg(target_arch = "x86_64")]
+        if crate::cpu::avx2() && crate::cpu::fma() {
+            // SAFETY: as the conductors'.
+            return unsafe {
+                if avx512 {
+                    plastic8_avx512(q, used)
+                } else {
+                    plastic8_avx2(q, used)
+                }
+            };
+        }
+        let _ = avx512;
+        rough_plastic_lanes(q, used)
+    }
+    #[inline(always)]
+    fn lane(out: &Self::Out, i: usize, lit: bool) -> (Option<(Rgb, f32)>, Option<BsdfSample>) {
+        out.lane(i, lit)
     }
 }
 
@@ -2804,7 +2836,7 @@ unsafe fn shade8_avx512(v: &VertexNums, rr_depth: i32, st: &mut PathNums, rays: 
 }
 
 /// [`rough_conductor_lanes`] of the kernel's eight lanes compiled for AVX2 (see
-/// [`SimdKernel::rough_conductor_lanes_on_cpu`]).
+/// [`RoughConductorStep::run`]).
 ///
 /// # Safety
 /// The CPU must support AVX2 and FMA (glibc's expf as vector lanes).
