@@ -4,7 +4,6 @@
 use super::fresnel::{self, reflect};
 use super::microfacet::{self as mf, BeckmannLanes, Microfacet};
 use super::{BsdfSample, LobeFlags, TransportMode};
-use crate::math::expf;
 use crate::spectrum::Rgb;
 use glam::{Vec2, Vec3};
 
@@ -236,30 +235,8 @@ pub(crate) fn rough_conductor_lanes<const N: usize>(q: &RoughConductorLanes<N>, 
         }
     }
     // D's e^x, only where D is asked for and m.z > 0 (`Microfacet::d`'s first test) and x is
-    // not below -104 (`beckmann_d_exp`): glibc's expf as vector lanes, and libm's lane by
-    // lane where one leaves glibc's main path (x <= -88 or NaN: rare).
-    // (`&`, not `&&`: a branch per lane kept the loop scalar.)
-    let (mut ex, mut off) = ([[0.0f32; N]; 2], [[false; N]; 2]);
-    for e in 0..2 {
-        for l in 0..N {
-            let xe = x[e][l];
-            // NaN is not below -104: the fallback below gives libm's NaN.
-            let below = xe < -104.0;
-            let want = (l < used) & ok[e][l] & !below;
-            let v = expf::expf_main(xe);
-            ex[e][l] = if want { v } else { 0.0 };
-            off[e][l] = want & !expf::main_path(xe);
-        }
-    }
-    if off.as_flattened().iter().fold(false, |a, &o| a | o) {
-        for l in 0..used.min(N) {
-            for e in 0..2 {
-                if ok[e][l] {
-                    ex[e][l] = mf::beckmann_d_exp(x[e][l]);
-                }
-            }
-        }
-    }
+    // not below -104 (`beckmann_d_exp`).
+    let ex = mf::beckmann_d_exp_lanes(&x, &ok, used);
     let (mut scale, mut pdf, mut cos) = ([[0.0f32; N]; 2], [[0.0f32; N]; 2], [[0.0f32; N]; 2]);
     let mut fresnel = [[false; N]; 2];
     for l in 0..N {

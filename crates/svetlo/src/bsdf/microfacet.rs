@@ -10,7 +10,7 @@
 //! (bracketed so that it always converges; see `SlopeX`).
 
 use super::material::MicrofacetKind;
-use crate::math::{approx, PI};
+use crate::math::{approx, expf, PI};
 use glam::{Vec2, Vec3};
 
 /// Smallest roughness: below it, f32 cannot represent the lobe (Mitsuba clamps likewise).
@@ -231,6 +231,36 @@ pub(crate) fn beckmann_d_exp(x: f32) -> f32 {
     } else {
         x.exp()
     }
+}
+
+/// [`beckmann_d_exp`] of two directions' exponents `x` of `N` lanes, where D is asked for
+/// (`ok`, among the first `used` lanes; 0 elsewhere): glibc's expf as vector lanes, and
+/// libm's lane by lane where one leaves glibc's main path (x <= -88 or NaN: rare). The same
+/// bits. (`&`, not `&&`: a branch per lane kept the loop scalar.)
+#[inline(always)]
+pub(crate) fn beckmann_d_exp_lanes<const N: usize>(x: &[[f32; N]; 2], ok: &[[bool; N]; 2], used: usize) -> [[f32; N]; 2] {
+    let (mut ex, mut off) = ([[0.0f32; N]; 2], [[false; N]; 2]);
+    for e in 0..2 {
+        for l in 0..N {
+            let xe = x[e][l];
+            // NaN is not below -104: the fallback below gives libm's NaN.
+            let below = xe < -104.0;
+            let want = (l < used) & ok[e][l] & !below;
+            let v = expf::expf_main(xe);
+            ex[e][l] = if want { v } else { 0.0 };
+            off[e][l] = want & !expf::main_path(xe);
+        }
+    }
+    if off.as_flattened().iter().fold(false, |a, &o| a | o) {
+        for l in 0..used.min(N) {
+            for e in 0..2 {
+                if ok[e][l] {
+                    ex[e][l] = beckmann_d_exp(x[e][l]);
+                }
+            }
+        }
+    }
+    ex
 }
 
 /// D(m) from [`beckmann_d_exp`]'s e^x and cos²θ `c2` (0 where not finite).

@@ -11,7 +11,7 @@ use super::fresnel;
 use super::material::MicrofacetKind;
 use super::microfacet::{self as mf, BeckmannLanes, Microfacet, VisibleSampler};
 use super::{BsdfSample, LobeFlags, TransportMode};
-use crate::math::{expf, lane, warp, INV_PI};
+use crate::math::{lane, warp, INV_PI};
 use crate::spectrum::Rgb;
 use glam::{Vec2, Vec3};
 use rayon::prelude::*;
@@ -561,27 +561,8 @@ pub(crate) fn rough_plastic_lanes<const N: usize>(q: &RoughPlasticLanes<N>, used
             }
         }
     }
-    // D's e^x where D is asked for, as `rough_conductor_lanes` (`&`, not `&&`: vector code).
-    let (mut ex, mut off) = ([[0.0f32; N]; 2], [[false; N]; 2]);
-    for e in 0..2 {
-        for l in 0..N {
-            let xe = x[e][l];
-            let below = xe < -104.0;
-            let want = (l < used) & ok[e][l] & !below;
-            let v = expf::expf_main(xe);
-            ex[e][l] = if want { v } else { 0.0 };
-            off[e][l] = want & !expf::main_path(xe);
-        }
-    }
-    if off.as_flattened().iter().fold(false, |a, &o| a | o) {
-        for l in 0..used.min(N) {
-            for e in 0..2 {
-                if ok[e][l] {
-                    ex[e][l] = mf::beckmann_d_exp(x[e][l]);
-                }
-            }
-        }
-    }
+    // D's e^x where D is asked for, as `rough_conductor_lanes`.
+    let ex = mf::beckmann_d_exp_lanes(&x, &ok, used);
     let t_i = [transmittance_lanes(&q.transmittance, &wi[0][2]), transmittance_lanes(&q.transmittance, &wi[1][2])];
     let (mut f, mut pdf) = ([[[0.0f32; N]; 3]; 2], [[0.0f32; N]; 2]);
     for l in 0..N {
