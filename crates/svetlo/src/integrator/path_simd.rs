@@ -2118,6 +2118,28 @@ trait LaneStep {
     fn lane(out: &Self::Out, i: usize, lit: bool) -> (Option<(Rgb, f32)>, Option<BsdfSample>);
 }
 
+/// A vector step's copy for one instruction set (`conductor8_avx2`, ...): it needs that
+/// set, so calling it is unsafe.
+type VectorStep<Q, O> = unsafe fn(&Q, usize) -> O;
+
+/// A [`LaneStep`]'s step by this CPU's build: its AVX-512 copy where the kernel runs AVX-512
+/// (`avx512`), its AVX2 copy where the CPU has AVX2 and FMA, else the `portable` code.
+#[inline(always)]
+fn by_cpu<Q, O>(avx512: bool, q: &Q, used: usize, vector: Option<(VectorStep<Q, O>, VectorStep<Q, O>)>, portable: fn(&Q, usize) -> O) -> O {
+    if let Some((avx2, avx512_copy)) = vector.filter(|_| crate::cpu::avx2() && crate::cpu::fma()) {
+        // SAFETY: `avx2()` and `fma()` detect AVX2 and FMA at run time, and the kernel's
+        // `avx512` is set only where AVX-512F and VL were.
+        return unsafe {
+            if avx512 {
+                avx512_copy(q, used)
+            } else {
+                avx2(q, used)
+            }
+        };
+    }
+    portable(q, used)
+}
+
 /// Beckmann rough conductors (`conductor8`).
 struct RoughConductorStep;
 
@@ -2136,19 +2158,10 @@ impl LaneStep for RoughConductorStep {
     #[inline(always)]
     fn run(avx512: bool, q: &Self::Group, used: usize) -> Self::Out {
         #[cfg(target_arch = "x86_64")]
-        if crate::cpu::avx2() && crate::cpu::fma() {
-            // SAFETY: `avx2()` and `fma()` detect AVX2 and FMA at run time, and the kernel's
-            // `avx512` is set only where AVX-512F and VL were.
-            return unsafe {
-                if avx512 {
-                    conductor8_avx512(q, used)
-                } else {
-                    conductor8_avx2(q, used)
-                }
-            };
-        }
-        let _ = avx512;
-        rough_conductor_lanes(q, used)
+        let vector = Some((conductor8_avx2 as VectorStep<_, _>, conductor8_avx512 as VectorStep<_, _>));
+        #[cfg(not(target_arch = "x86_64"))]
+        let vector = None;
+        by_cpu(avx512, q, used, vector, rough_conductor_lanes)
     }
     #[inline(always)]
     fn lane(out: &Self::Out, i: usize, lit: bool) -> (Option<(Rgb, f32)>, Option<BsdfSample>) {
@@ -2180,18 +2193,10 @@ impl LaneStep for RoughPlasticStep {
     #[inline(always)]
     fn run(avx512: bool, q: &Self::Group, used: usize) -> Self::Out {
         #[cfg(target_arch = "x86_64")]
-        if crate::cpu::avx2() && crate::cpu::fma() {
-            // SAFETY: as the conductors'.
-            return unsafe {
-                if avx512 {
-                    plastic8_avx512(q, used)
-                } else {
-                    plastic8_avx2(q, used)
-                }
-            };
-        }
-        let _ = avx512;
-        rough_plastic_lanes(q, used)
+        let vector = Some((plastic8_avx2 as VectorStep<_, _>, plastic8_avx512 as VectorStep<_, _>));
+        #[cfg(not(target_arch = "x86_64"))]
+        let vector = None;
+        by_cpu(avx512, q, used, vector, rough_plastic_lanes)
     }
     #[inline(always)]
     fn lane(out: &Self::Out, i: usize, lit: bool) -> (Option<(Rgb, f32)>, Option<BsdfSample>) {
