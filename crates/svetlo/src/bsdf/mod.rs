@@ -624,8 +624,9 @@ mod tests {
     /// `Bsdf::eval_pdf_and_sample` (the path kernel's call at a vertex) gives the bits of
     /// `eval_pdf` and `sample` called apart, with and without the light's direction, for every
     /// wrapped model (two-sided rough conductors take the shared path), both modes, directions
-    /// on both sides and grazing; and so does a Beckmann conductor's lane of
-    /// `conductor::rough_conductor_lanes` (finished by `finish_conductor`).
+    /// on both sides and grazing; and so do a Beckmann conductor's lane of
+    /// `conductor::rough_conductor_lanes` and a Beckmann plastic's of
+    /// `plastic::rough_plastic_lanes` (finished by `finish_conductor`).
     #[test]
     fn eval_pdf_and_sample_is_eval_pdf_then_sample() {
         let mut rng = crate::sampling::rng::Pcg32::new(23, 4);
@@ -633,7 +634,7 @@ mod tests {
         let sample_bits = |s: Option<BsdfSample>| s.map(|s| (s.wi.to_array().map(f32::to_bits), bits((s.f, s.pdf)), s.lobe, s.eta.to_bits()));
         let dir = |rng: &mut crate::sampling::rng::Pcg32| crate::math::warp::square_to_uniform_sphere(Vec2::new(rng.next_f32(), rng.next_f32()));
         let grazing = [Vec3::new(1.0, 0.0, 1e-4).normalize(), Vec3::new(0.0, -1.0, -1e-4).normalize(), Vec3::new(0.6, 0.8, 0.0), Vec3::Z, -Vec3::Z];
-        let (mut sampled, mut ahead) = (0, 0);
+        let (mut sampled, mut conductor_lanes, mut plastic_lanes) = (0, 0, 0);
         for b in &wrapped_models() {
             for mode in [TransportMode::Radiance, TransportMode::Importance] {
                 let mut pairs: Vec<(Vec3, Vec3)> = (0..2000).map(|_| (dir(&mut rng), dir(&mut rng))).collect();
@@ -659,7 +660,7 @@ mod tests {
                             "{:?} {mode:?} {wo} u {u}: the conductor's lane",
                             b.front
                         );
-                        ahead += 1;
+                        conductor_lanes += 1;
                     }
                     // And a Beckmann plastic's lane of `plastic::rough_plastic_lanes`.
                     if let Some((p, flipped)) = b.beckmann_plastic(wo) {
@@ -674,12 +675,16 @@ mod tests {
                             "{:?} {mode:?} {wo} u {uc} {u}: the plastic's lane",
                             b.front
                         );
-                        ahead += 1;
+                        plastic_lanes += 1;
                     }
                 }
             }
         }
-        assert!(sampled > 30_000 && ahead > 3_000, "{sampled} samples, {ahead} with the normal drawn ahead");
+        // Each kind of lane on its own, so that neither count hides a model's lanes gone missing.
+        assert!(
+            sampled > 50_000 && conductor_lanes > 3_000 && plastic_lanes > 3_000,
+            "{sampled} samples, {conductor_lanes} conductor lanes, {plastic_lanes} plastic lanes"
+        );
     }
 
     /// `sample_delta` gives each delta lobe's own weight and its choice probability: their
