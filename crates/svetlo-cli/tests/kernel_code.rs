@@ -54,8 +54,9 @@ fn shade8_is_vector_code() {
         }
         // Vector code: ~200-250 packed operations in `shade8`, ~600 in `conductor8` (the
         // rough conductors' lanes; its ~14 scalar ones test the numbers libm's expf is called
-        // for), ~750 in `plastic8` (the rough plastics' lanes), ~140 in `step8`, ~85 in `emit8`, and few scalar (the scalar loop had one
-        // `..ss` per lane and operation, and a branch per lane).
+        // for), ~750 in `plastic8` (the rough plastics' lanes), ~140 in `step8`, ~85 in
+        // `emit8`, and few scalar (the scalar loop had one `..ss` per lane and operation, and
+        // a branch per lane).
         assert!(packed >= least && scalar * 8 <= packed, "{copy}: {packed} packed and {scalar} scalar float operations: its loop is no longer vector code");
     }
 }

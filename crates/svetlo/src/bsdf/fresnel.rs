@@ -141,6 +141,22 @@ pub fn refract(w: Vec3, m: Vec3, cos_t: f32, eta_ti: f32) -> Vec3 {
 mod tests {
     use super::*;
 
+    /// The select form gives `dielectric`'s reflectance bit for bit: both sides, grazing and
+    /// normal incidence, total internal reflection, index 1, and cosines past ±1.
+    #[test]
+    fn dielectric_reflectance_is_dielectrics() {
+        let mut rng = crate::sampling::rng::Pcg32::new(5, 9);
+        let mut cases: Vec<(f32, f32)> = (0..20_000).map(|_| (rng.next_f32() * 2.0 - 1.0, 0.5 + rng.next_f32() * 2.5)).collect();
+        for c in [0.0, -0.0, 1.0, -1.0, 1.0 + 1e-6, -1.0 - 1e-6, 1e-7, -1e-7, 0.3, -0.3] {
+            for eta in [1.0, 1.5, 1.0 / 1.5, 1.333, 2.4, 0.4] {
+                cases.push((c, eta));
+            }
+        }
+        for (c, eta) in cases {
+            assert_eq!(dielectric_reflectance(c, eta).to_bits(), dielectric(c, eta).0.to_bits(), "cos {c} eta {eta}");
+        }
+    }
+
     /// Independent reference: Fresnel equations written with Snell angles in f64.
     fn fresnel_ref(cos_i: f64, n1: f64, n2: f64) -> f64 {
         let sin_t = n1 / n2 * (1.0 - cos_i * cos_i).sqrt();
