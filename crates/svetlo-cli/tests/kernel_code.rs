@@ -28,6 +28,8 @@ fn shade8_is_vector_code() {
         ("conductor8_avx512", 100),
         ("plastic8_avx2", 100),
         ("plastic8_avx512", 100),
+        ("dielectric8_avx2", 100),
+        ("dielectric8_avx512", 100),
         ("step8_avx2", 100),
         ("step8_avx512", 100),
         ("emit8_avx2", 50),

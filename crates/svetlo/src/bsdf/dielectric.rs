@@ -4,7 +4,7 @@
 //! compression of Veach's thesis §5.2); importance is not scaled.
 
 use super::fresnel::{self, reflect, refract};
-use super::microfacet::Microfacet;
+use super::microfacet::{self as mf, BeckmannLanes, Microfacet};
 use super::{BsdfSample, LobeFlags, TransportMode};
 use crate::spectrum::Rgb;
 use glam::{Vec2, Vec3};
@@ -174,6 +174,188 @@ impl RoughDielectric {
         };
         (value, pdf)
     }
+}
+
+/// `N` lanes of Beckmann rough dielectrics for [`rough_dielectric_lanes`]. Unused lanes keep
+/// the defaults (or earlier lanes' values).
+#[derive(Clone, Copy, Debug)]
+pub(crate) struct RoughDielectricLanes<const N: usize> {
+    /// The roughness, `wo` mirrored to the upper hemisphere and the direction's numbers `u`.
+    pub beckmann: BeckmannLanes<N>,
+    /// `wo` itself (either side, not grazing).
+    pub wo: [[f32; N]; 3],
+    /// The lobe's number.
+    pub uc: [f32; N],
+    /// Toward the light sample (local; zero where there is none).
+    pub wi: [[f32; N]; 3],
+    pub eta: [f32; N],
+    pub specular_reflectance: [[f32; N]; 3],
+    pub specular_transmittance: [[f32; N]; 3],
+}
+
+impl<const N: usize> Default for RoughDielectricLanes<N> {
+    fn default() -> Self {
+        RoughDielectricLanes {
+            beckmann: BeckmannLanes::default(),
+            wo: [[0.0; N], [0.0; N], [1.0; N]],
+            uc: [0.5; N],
+            wi: [[0.0; N]; 3],
+            eta: [1.5; N],
+            specular_reflectance: [[1.0; N]; 3],
+            specular_transmittance: [[1.0; N]; 3],
+        }
+    }
+}
+
+impl<const N: usize> RoughDielectricLanes<N> {
+    /// Lane `l`: dielectric `d` seen from `wo` (wo.z not 0), the light sample toward `wi`
+    /// where there is one, the lobe's number `uc` and the direction's `u`.
+    #[inline]
+    pub(crate) fn set(&mut self, l: usize, d: &RoughDielectric, wo: Vec3, wi: Option<Vec3>, uc: f32, u: Vec2) {
+        let md = &d.distribution;
+        let wi = wi.unwrap_or(Vec3::ZERO);
+        let v = wo * wo.z.signum();
+        let q = &mut self.beckmann;
+        (q.alpha[0][l], q.alpha[1][l]) = (md.alpha_u, md.alpha_v);
+        (q.u[0][l], q.u[1][l]) = (u.x, u.y);
+        for k in 0..3 {
+            (q.v[k][l], self.wo[k][l], self.wi[k][l]) = (v[k], wo[k], wi[k]);
+            (self.specular_reflectance[k][l], self.specular_transmittance[k][l]) = (d.specular_reflectance[k], d.specular_transmittance[k]);
+        }
+        (self.uc[l], self.eta[l]) = (uc, d.eta);
+    }
+}
+
+/// What [`rough_dielectric_lanes`] gives per lane: [`RoughDielectric::eval_pdf`] toward `wi`
+/// (`nee_f`, `nee_pdf`) and [`RoughDielectric::sample`] (where `sampled`: `wi`, `f`, `pdf`,
+/// whether it reflects, and its `eta`), in radiance mode.
+#[derive(Clone, Copy, Debug)]
+pub(crate) struct RoughDielectricOut<const N: usize> {
+    pub nee_f: [[f32; N]; 3],
+    pub nee_pdf: [f32; N],
+    pub sampled: [bool; N],
+    pub reflected: [bool; N],
+    pub eta: [f32; N],
+    pub wi: [[f32; N]; 3],
+    pub f: [[f32; N]; 3],
+    pub pdf: [f32; N],
+}
+
+impl<const N: usize> RoughDielectricOut<N> {
+    /// Lane `l` as (`eval_pdf` where it was given a light sample, `sample`) give it.
+    #[inline]
+    pub(crate) fn lane(&self, l: usize, nee: bool) -> (Option<(Rgb, f32)>, Option<BsdfSample>) {
+        let rgb = |a: &[[f32; N]; 3]| Rgb::new(a[0][l], a[1][l], a[2][l]);
+        let s = self.sampled[l].then(|| BsdfSample {
+            wi: Vec3::new(self.wi[0][l], self.wi[1][l], self.wi[2][l]),
+            f: rgb(&self.f),
+            pdf: self.pdf[l],
+            lobe: if self.reflected[l] { LobeFlags::GLOSSY_REFLECTION } else { LobeFlags::GLOSSY_TRANSMISSION },
+            eta: self.eta[l],
+        });
+        (nee.then(|| (rgb(&self.nee_f), self.nee_pdf[l])), s)
+    }
+}
+
+/// ([`RoughDielectric::eval_pdf`] toward `wi`, [`RoughDielectric::sample`]) in radiance mode
+/// of `used` lanes at once: the visible normals (`sample_visible_beckmann_lanes`), the lobe by
+/// their Fresnel term and the reflected or refracted direction, then for both directions the
+/// generalised half vector, D, G1 both ways, the density and the value, each lane's
+/// operations those of the scalar routines, with selects for their branches (D's expf as
+/// `conductor::rough_conductor_lanes` takes it). The same bits.
+#[inline(always)]
+pub(crate) fn rough_dielectric_lanes<const N: usize>(q: &RoughDielectricLanes<N>, used: usize) -> RoughDielectricOut<N> {
+    let b = &q.beckmann;
+    let m = mf::sample_visible_beckmann_lanes(b);
+    // `sample`: the lobe and the direction.
+    let (mut reflected, mut eta_s, mut ws) = ([false; N], [0.0f32; N], [[0.0f32; N]; 3]);
+    for l in 0..N {
+        let wo = Vec3::new(q.wo[0][l], q.wo[1][l], q.wo[2][l]);
+        let mm = Vec3::new(m[0][l], m[1][l], m[2][l]);
+        let (f, cos_t, eta_it, eta_ti) = fresnel::dielectric_lane(wo.dot(mm), q.eta[l]);
+        let r = q.uc[l] < f;
+        let (wr, wt) = (reflect(wo, mm), refract(wo, mm, cos_t, eta_ti));
+        let w = Vec3::new(if r { wr.x } else { wt.x }, if r { wr.y } else { wt.y }, if r { wr.z } else { wt.z });
+        // `normalize_or_zero`.
+        let rcp = w.length_recip();
+        let wn = w * rcp;
+        let keep = rcp.is_finite() & (rcp > 0.0);
+        for k in 0..3 {
+            ws[k][l] = if keep { wn[k] } else { 0.0 };
+        }
+        reflected[l] = r;
+        eta_s[l] = if r { 1.0 } else { eta_it };
+    }
+    // Per direction (0: toward the light sample, 1: the sample's), as `eval_pdf`.
+    let mut h = [[[0.0f32; N]; 3]; 2];
+    let (mut x, mut c2, mut ok, mut valid) = ([[0.0f32; N]; 2], [[0.0f32; N]; 2], [[false; N]; 2], [[false; N]; 2]);
+    let mut lambda = [[0.0f32; N]; 3];
+    for l in 0..N {
+        let (ax, ay) = (b.alpha[0][l], b.alpha[1][l]);
+        let wo = Vec3::new(q.wo[0][l], q.wo[1][l], q.wo[2][l]);
+        lambda[0][l] = mf::beckmann_lambda(ax, ay, wo);
+        for (e, w) in [Vec3::new(q.wi[0][l], q.wi[1][l], q.wi[2][l]), Vec3::new(ws[0][l], ws[1][l], ws[2][l])].into_iter().enumerate() {
+            // `half_vector`.
+            let refl = wo.z * w.z > 0.0;
+            let eta = if wo.z > 0.0 { q.eta[l] } else { 1.0 / q.eta[l] };
+            let hm = wo + w * if refl { 1.0 } else { eta };
+            let len = hm.length();
+            let hh = hm / len * hm.z.signum();
+            let seen = !(wo.dot(hh) * wo.z <= 0.0 || w.dot(hh) * w.z <= 0.0);
+            valid[e][l] = (wo.z != 0.0) & (w.z != 0.0) & super::positive_finite(len) & seen;
+            (x[e][l], c2[e][l]) = mf::beckmann_d_exponent(ax, ay, hh);
+            lambda[1 + e][l] = mf::beckmann_lambda(ax, ay, w);
+            ok[e][l] = valid[e][l] & (hh.z > 0.0);
+            for k in 0..3 {
+                h[e][k][l] = hh[k];
+            }
+        }
+    }
+    let ex = mf::beckmann_d_exp_lanes(&x, &ok, used);
+    // Direction by direction, lanes inner: with the directions inner, LLVM kept the loop
+    // scalar.
+    let (mut f, mut pdf) = ([[[0.0f32; N]; 3]; 2], [[0.0f32; N]; 2]);
+    for (e, dir) in [&q.wi, &ws].into_iter().enumerate() {
+        for l in 0..N {
+            let (ax, ay) = (b.alpha[0][l], b.alpha[1][l]);
+            let wo = Vec3::new(q.wo[0][l], q.wo[1][l], q.wo[2][l]);
+            let v = Vec3::new(b.v[0][l], b.v[1][l], b.v[2][l]);
+            let w = Vec3::new(dir[0][l], dir[1][l], dir[2][l]);
+            let hh = Vec3::new(h[e][0][l], h[e][1][l], h[e][2][l]);
+            let refl = wo.z * w.z > 0.0;
+            let eta = if wo.z > 0.0 { q.eta[l] } else { 1.0 / q.eta[l] };
+            let d = if hh.z <= 0.0 { 0.0 } else { mf::beckmann_d_of(ex[e][l], ax, ay, c2[e][l]) };
+            let g1o = Microfacet::g1_given(wo, hh, || lambda[0][l]);
+            let (om, im) = (wo.dot(hh), w.dot(hh));
+            let fr = fresnel::dielectric_reflectance(om, q.eta[l]);
+            // The density.
+            let jac = if refl { 1.0 / (4.0 * im.abs()) } else { eta * eta * im.abs() / ((om + eta * im) * (om + eta * im)) };
+            let p = Microfacet::pdf_visible_given(v, hh, d, g1o) * if refl { fr } else { 1.0 - fr } * jac;
+            let p = if p.is_finite() { p } else { 0.0 };
+            // The value.
+            let g = g1o * Microfacet::g1_given(w, hh, || lambda[1 + e][l]);
+            let sr = fr * d * g / (4.0 * wo.z.abs() * w.z.abs());
+            let denom = om + eta * im;
+            let inv = 1.0 / eta;
+            let st = inv * inv * (1.0 - fr) * d * g * eta * eta * (om * im).abs() / ((wo.z * w.z).abs() * denom * denom);
+            let st = if st.is_finite() { st } else { 0.0 };
+            let ok = valid[e][l];
+            for (k, row) in f[e].iter_mut().enumerate() {
+                let (cr, ct) = (q.specular_reflectance[k][l] * sr, q.specular_transmittance[k][l] * st);
+                let c = if refl { cr } else { ct };
+                row[l] = if ok { c } else { 0.0 };
+            }
+            pdf[e][l] = if ok { p } else { 0.0 };
+        }
+    }
+    let [nee_f, sf] = f;
+    // `sample`'s tests: a direction off the macrosurface side of its lobe, or no density.
+    let mut sampled = [false; N];
+    for l in 0..N {
+        let (woz, wz) = (q.wo[2][l], ws[2][l]);
+        sampled[l] = (wz != 0.0) & ((wz * woz > 0.0) == reflected[l]) & super::positive_finite(pdf[1][l]);
+    }
+    RoughDielectricOut { nee_f, nee_pdf: pdf[0], sampled, reflected, eta: eta_s, wi: ws, f: sf, pdf: pdf[1] }
 }
 
 /// Mitsuba `thindielectric`: a thin slab whose internal reflections are summed in closed

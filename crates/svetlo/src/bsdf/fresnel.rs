@@ -52,6 +52,27 @@ pub(crate) fn dielectric_reflectance(cos_i: f32, eta: f32) -> f32 {
     }
 }
 
+/// [`dielectric`] whole (reflectance, transmitted cosine, relative IORs), its branches as
+/// selects: the rough dielectric's lanes. The same bits.
+#[inline(always)]
+pub(crate) fn dielectric_lane(cos_i: f32, eta: f32) -> (f32, f32, f32, f32) {
+    let outside = cos_i >= 0.0;
+    let eta_it = if outside { eta } else { 1.0 / eta };
+    let eta_ti = 1.0 / eta_it;
+    let ci = cos_i.abs().min(1.0);
+    let cos_t2 = 1.0 - eta_ti * eta_ti * (1.0 - ci * ci);
+    let ct = cos_t2.sqrt();
+    let rs = (ci - eta_it * ct) / (ci + eta_it * ct);
+    let rp = (eta_it * ci - ct) / (eta_it * ci + ct);
+    let f = 0.5 * (rs * rs + rp * rp);
+    let tir = cos_t2 <= 0.0;
+    let f = if tir { 1.0 } else { f };
+    let ct = if outside { -ct } else { ct };
+    let ct = if tir { 0.0 } else { ct };
+    let one = eta == 1.0;
+    (if one { 0.0 } else { f }, if one { -cos_i } else { ct }, if one { 1.0 } else { eta_it }, if one { 1.0 } else { eta_ti })
+}
+
 /// Reflectance of a conductor with complex relative IOR `eta + i k` at incidence
 /// cosine `cos_i` (>= 0), exact for unpolarized light. Evaluated in f64 per channel.
 pub fn conductor(cos_i: f32, eta: Rgb, k: Rgb) -> Rgb {
@@ -154,6 +175,22 @@ mod tests {
         }
         for (c, eta) in cases {
             assert_eq!(dielectric_reflectance(c, eta).to_bits(), dielectric(c, eta).0.to_bits(), "cos {c} eta {eta}");
+        }
+    }
+
+    /// The whole select form gives `dielectric`'s four values bit for bit, on the cases above.
+    #[test]
+    fn dielectric_lane_is_dielectrics() {
+        let mut rng = crate::sampling::rng::Pcg32::new(7, 3);
+        let mut cases: Vec<(f32, f32)> = (0..20_000).map(|_| (rng.next_f32() * 2.0 - 1.0, 0.5 + rng.next_f32() * 2.5)).collect();
+        for c in [0.0, -0.0, 1.0, -1.0, 1.0 + 1e-6, -1.0 - 1e-6, 1e-7, -1e-7, 0.3, -0.3] {
+            for eta in [1.0, 1.5, 1.0 / 1.5, 1.333, 2.4, 0.4] {
+                cases.push((c, eta));
+            }
+        }
+        let bits = |v: (f32, f32, f32, f32)| [v.0, v.1, v.2, v.3].map(f32::to_bits);
+        for (c, eta) in cases {
+            assert_eq!(bits(dielectric_lane(c, eta)), bits(dielectric(c, eta)), "cos {c} eta {eta}");
         }
     }
 

@@ -357,6 +357,16 @@ impl Bsdf {
         (p.distribution.kind == MicrofacetKind::Beckmann && wo.z > 0.0).then_some((p, flipped))
     }
 
+    /// Where this BSDF toward `wo` (not grazing) is a Beckmann rough dielectric without mask
+    /// or surface detail: the model, and whether directions are mirrored to its side (never:
+    /// it takes both sides), for the path kernel's lanes (`dielectric::rough_dielectric_lanes`,
+    /// finished as a conductor's by [`Self::finish_conductor`]).
+    #[inline]
+    pub(crate) fn beckmann_dielectric(&self, wo: Vec3) -> Option<(&dielectric::RoughDielectric, bool)> {
+        let (None, true, Some((BsdfModel::RoughDielectric(d), flipped))) = (&self.detail, self.opacity >= 1.0, self.side(wo)) else { return None };
+        (d.distribution.kind == MicrofacetKind::Beckmann && wo.z != 0.0).then_some((d, flipped))
+    }
+
     /// A rough conductor's value and density toward a light sample and its own sample, on
     /// the model's side (`flipped` as `side` gave it), made those of a BSDF of this `opacity`
     /// (as `eval_pdf_and_sample` finishes them). (The opacity alone: the path kernel keeps

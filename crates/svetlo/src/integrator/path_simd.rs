@@ -74,6 +74,7 @@ use super::path::{bsdf_pdf_toward, PathTracer};
 use super::{camera_sample, render_tiles, Integrator, Progress, RenderSettings};
 use crate::accel::packet::{Hits8, PacketBvh, PacketSpheres, Rays8, LANES};
 use crate::bsdf::conductor::{rough_conductor_lanes, RoughConductor, RoughConductorLanes, RoughConductorOut};
+use crate::bsdf::dielectric::{rough_dielectric_lanes, RoughDielectric, RoughDielectricLanes, RoughDielectricOut};
 use crate::bsdf::plastic::{rough_plastic_lanes, RoughPlastic, RoughPlasticLanes, RoughPlasticOut};
 use crate::bsdf::{Bsdf, BsdfSample, LobeFlags, Material, TransportMode};
 use crate::camera::{RayGenerator, RayLanes};
@@ -749,6 +750,8 @@ pub struct SimdKernel {
     packets: usize,
     /// Whether some shape may have a Beckmann rough plastic (`plastic_samples`).
     plastics: bool,
+    /// Whether some shape may have a Beckmann rough dielectric (`dielectric_samples`).
+    dielectrics: bool,
 }
 
 /// The reflectance of a diffuse model (a constant one clamped as `Material::bsdf` does).
@@ -932,7 +935,20 @@ impl SimdKernel {
         let packets = if chains { PACKETS } else { 1 };
         // A shape whose BSDF is built per hit may be a plastic too.
         let plastics = shapes.iter().any(|s| s.scalar_bsdf && s.uniform.as_ref().is_none_or(|b| b.beckmann_plastic(Vec3::Z).is_some()));
-        Some(SimdKernel { tracer, geometry, shapes, lights, sphere_lights, env_light, prefetch_texels, avx512: crate::cpu::avx512(), packets, plastics })
+        let dielectrics = shapes.iter().any(|s| s.scalar_bsdf && s.uniform.as_ref().is_none_or(|b| b.beckmann_dielectric(Vec3::Z).is_some()));
+        Some(SimdKernel {
+            tracer,
+            geometry,
+            shapes,
+            lights,
+            sphere_lights,
+            env_light,
+            prefetch_texels,
+            avx512: crate::cpu::avx512(),
+            packets,
+            plastics,
+            dielectrics,
+        })
     }
 
     /// How many packets of eight paths a tile steps in phase (more than one where the
@@ -1181,6 +1197,9 @@ impl SimdKernel {
             self.conductor_samples(events, packets);
             if self.plastics {
                 self.plastic_samples(events, packets);
+            }
+            if self.dielectrics {
+                self.dielectric_samples(events, packets);
             }
             for (pk, p) in packets.iter_mut().enumerate().filter(|(_, p)| p.active != 0) {
                 if p.go == 0 && !layers.on() {
@@ -1860,6 +1879,18 @@ impl SimdKernel {
         self.group_samples::<S, RoughPlasticStep>(events, packets);
     }
 
+    /// The Beckmann rough dielectrics' (`Bsdf::beckmann_dielectric`) values and densities
+    /// toward their light samples and their own samples, as [`Self::plastic_samples`] does a
+    /// plastic's (`rough_dielectric_lanes`: the visible normal, the lobe by its Fresnel term,
+    /// then both directions' half vector, D, G1, densities and values).
+    #[inline(never)]
+    fn dielectric_samples<S>(&self, events: &LaneEvents, packets: &mut [Packet<S>]) {
+        if packets.iter().fold(0, |a, p| a | p.v.scatter_lanes) == 0 {
+            return;
+        }
+        self.group_samples::<S, RoughDielectricStep>(events, packets);
+    }
+
     /// The scalar-BSDF lanes of all packets whose BSDF is model `M`'s, evaluated and sampled
     /// eight a group by `M`'s vector step and written as `scalar_scatter` writes a lane's.
     #[inline(always)]
@@ -2090,7 +2121,12 @@ fn put_lane<S>(events: &LaneEvents, c: &GroupSlot, packets: &mut [Packet<S>], ne
     v.num.bmoved[l] = bs.is_some();
     match bs {
         // (Never of a delta lobe: the vertex `take_lane` kept stays.)
-        Some(bs) => put_sample(events, v, l, v.flags[l], &bs),
+        Some(bs) => {
+            put_sample(events, v, l, v.flags[l], &bs);
+            if bs.lobe.contains(LobeFlags::TRANSMISSION) {
+                st.num.eta_scale[l] *= bs.eta * bs.eta;
+            }
+        }
         None => st.prev_bsdf[l] = None,
     }
 }
@@ -2197,6 +2233,40 @@ impl LaneStep for RoughPlasticStep {
         #[cfg(not(target_arch = "x86_64"))]
         let vector = None;
         by_cpu(avx512, q, used, vector, rough_plastic_lanes)
+    }
+    #[inline(always)]
+    fn lane(out: &Self::Out, i: usize, lit: bool) -> (Option<(Rgb, f32)>, Option<BsdfSample>) {
+        out.lane(i, lit)
+    }
+}
+
+/// Beckmann rough dielectrics (`dielectric8`).
+struct RoughDielectricStep;
+
+impl LaneStep for RoughDielectricStep {
+    type Model = RoughDielectric;
+    type Group = RoughDielectricLanes<LANES>;
+    type Out = RoughDielectricOut<LANES>;
+    /// A dielectric without a mask has these lobes.
+    #[inline(always)]
+    fn takes(flags: LobeFlags) -> bool {
+        flags == LobeFlags::GLOSSY_REFLECTION | LobeFlags::GLOSSY_TRANSMISSION
+    }
+    #[inline(always)]
+    fn model(bsdf: &Bsdf, wo: Vec3) -> Option<(&RoughDielectric, bool)> {
+        bsdf.beckmann_dielectric(wo)
+    }
+    #[inline(always)]
+    fn set(q: &mut Self::Group, i: usize, m: &RoughDielectric, wo: Vec3, wi: Option<Vec3>, u: [f32; 3]) {
+        q.set(i, m, wo, wi, u[0], Vec2::new(u[1], u[2]));
+    }
+    #[inline(always)]
+    fn run(avx512: bool, q: &Self::Group, used: usize) -> Self::Out {
+        #[cfg(target_arch = "x86_64")]
+        let vector = Some((dielectric8_avx2 as VectorStep<_, _>, dielectric8_avx512 as VectorStep<_, _>));
+        #[cfg(not(target_arch = "x86_64"))]
+        let vector = None;
+        by_cpu(avx512, q, used, vector, rough_dielectric_lanes)
     }
     #[inline(always)]
     fn lane(out: &Self::Out, i: usize, lit: bool) -> (Option<(Rgb, f32)>, Option<BsdfSample>) {
@@ -2885,6 +2955,28 @@ unsafe fn plastic8_avx512(q: &RoughPlasticLanes<LANES>, used: usize) -> RoughPla
     rough_plastic_lanes(q, used)
 }
 
+/// [`rough_dielectric_lanes`] of the kernel's eight lanes compiled for AVX2.
+///
+/// # Safety
+/// The CPU must support AVX2 and FMA (glibc's expf as vector lanes).
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx2,fma")]
+#[inline(never)]
+unsafe fn dielectric8_avx2(q: &RoughDielectricLanes<LANES>, used: usize) -> RoughDielectricOut<LANES> {
+    rough_dielectric_lanes(q, used)
+}
+
+/// [`rough_dielectric_lanes`] compiled for AVX-512VL.
+///
+/// # Safety
+/// The CPU must support AVX2, FMA, AVX-512F and AVX-512VL.
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx2,fma,avx512f,avx512vl")]
+#[inline(never)]
+unsafe fn dielectric8_avx512(q: &RoughDielectricLanes<LANES>, used: usize) -> RoughDielectricOut<LANES> {
+    rough_dielectric_lanes(q, used)
+}
+
 /// A sampler of the kernel's lanes: one vertex's numbers for all of them at once, in the
 /// scalar tracer's order per vertex (light choice, light point, BSDF lobe, BSDF direction,
 /// Russian roulette: 1, 2, 1, 2 and 1 dimensions), each lane from its own sampler.
@@ -3459,6 +3551,89 @@ mod tests {
             }
         }
         assert!(glossy > 10_000 && diffuse > 10_000 && lit > 10_000, "{glossy} glossy and {diffuse} diffuse samples, {lit} lit light samples");
+    }
+
+    /// The kernel's rough-dielectric lanes (the baseline build and the AVX2 and AVX-512 copies
+    /// it runs) give `RoughDielectric::eval_pdf` and `sample`'s bits (radiance mode) lane by
+    /// lane, with 1 to 8 lanes used: roughness from its floor to beyond 1, anisotropic, IORs
+    /// above and below 1 (and 1), both sides of the surface, incidence from normal to grazing
+    /// (total internal reflection inside), light directions on both sides, near the mirror
+    /// and refracted directions, and none, the numbers' ends.
+    #[test]
+    fn dielectric_lanes_are_the_scalar_bsdf() {
+        use crate::bsdf::microfacet::Microfacet;
+        use crate::bsdf::MicrofacetKind;
+        let mut rng = Pcg32::new(41, 3);
+        let mut f = |lo: f32, hi: f32| lo + (hi - lo) * rng.next_f32();
+        let alphas = [1e-4f32, 1e-3, 0.02, 0.05, 0.1, 0.3, 1.0, 2.0];
+        let etas = [1.5168f32, 1.0, 1.33, 2.4, 1.0 / 1.5, 1.0001];
+        let us = [0.0f32, 1e-7, 0.5, 1.0 - 6e-8, 1.0];
+        let cos_ts = [1.0f32, 0.999_999, 0.5, 1e-2, 1e-4, 1e-6];
+        let bits = |(nee, s): (Option<(Rgb, f32)>, Option<BsdfSample>)| {
+            let rgb = |c: Rgb| [c.r, c.g, c.b].map(f32::to_bits);
+            (nee.map(|(c, p)| (rgb(c), p.to_bits())), s.map(|s| (s.wi.to_array().map(f32::to_bits), rgb(s.f), s.pdf.to_bits(), s.lobe, s.eta.to_bits())))
+        };
+        let (mut reflected, mut refracted, mut lit, mut lit_through) = (0, 0, 0, 0);
+        for batch in 0..20_000usize {
+            let used = 1 + batch % LANES;
+            let mut q = RoughDielectricLanes::<LANES>::default();
+            let mut lanes = Vec::new();
+            for l in 0..used {
+                let i = batch * LANES + l;
+                let (au, av) = if i.is_multiple_of(3) { (alphas[i / 3 % 8], alphas[i / 24 % 8]) } else { (f(1e-4, 0.6), f(1e-4, 0.6)) };
+                let d = RoughDielectric {
+                    distribution: Microfacet::new(MicrofacetKind::Beckmann, au, av),
+                    eta: if i.is_multiple_of(2) { etas[i / 2 % etas.len()] } else { f(0.4, 2.5) },
+                    specular_reflectance: Rgb::new(f(0.0, 1.0), 1.0, f(0.0, 1.0)),
+                    specular_transmittance: Rgb::new(f(0.0, 1.0), f(0.0, 1.0), 1.0),
+                };
+                let dir = |cos_t: f32, phi: f32| {
+                    let sin_t = (1.0 - cos_t * cos_t).max(0.0).sqrt();
+                    Vec3::new(sin_t * phi.cos(), sin_t * phi.sin(), cos_t)
+                };
+                let side = if i % 3 == 1 { -1.0 } else { 1.0 };
+                let wo = dir(side * if i.is_multiple_of(5) { cos_ts[i / 5 % cos_ts.len()] } else { f(1e-3, 1.0) }, f(0.0, 6.3));
+                // Near the mirror direction, near straight through (a smooth pane's lobes),
+                // anywhere, or none.
+                let wi = match i % 5 {
+                    0 => Some((Vec3::new(-wo.x, -wo.y, wo.z) + 0.05 * dir(f(-1.0, 1.0), f(0.0, 6.3))).normalize()),
+                    1 => Some((-wo + 0.05 * dir(f(-1.0, 1.0), f(0.0, 6.3))).normalize()),
+                    2 | 3 => Some(dir(f(-1.0, 1.0), f(0.0, 6.3))),
+                    _ => None,
+                };
+                let uc = if i.is_multiple_of(11) { us[i / 11 % 5] } else { f(0.0, 1.0) };
+                let u = if i.is_multiple_of(7) { Vec2::new(us[i / 7 % 5], us[i / 35 % 5]) } else { Vec2::new(f(0.0, 1.0), f(0.0, 1.0)) };
+                q.set(l, &d, wo, wi, uc, u);
+                lanes.push((d, wo, wi, uc, u));
+            }
+            let mut outs = vec![rough_dielectric_lanes(&q, used)];
+            #[cfg(target_arch = "x86_64")]
+            if crate::cpu::avx2() && crate::cpu::fma() {
+                // SAFETY: AVX2 and FMA were detected, AVX-512 where `cpu::avx512()` says so.
+                outs.push(unsafe { dielectric8_avx2(&q, used) });
+                if crate::cpu::avx512() {
+                    outs.push(unsafe { dielectric8_avx512(&q, used) });
+                }
+            }
+            for (l, (d, wo, wi, uc, u)) in lanes.iter().enumerate() {
+                let want = (wi.map(|wi| d.eval_pdf(*wo, wi, TransportMode::Radiance)), d.sample(*wo, *uc, *u, TransportMode::Radiance));
+                match want.1.map(|s| s.lobe) {
+                    Some(LobeFlags::GLOSSY_REFLECTION) => reflected += 1,
+                    Some(_) => refracted += 1,
+                    None => {}
+                }
+                let nee = want.0.filter(|(f, _)| !f.is_black()).zip(*wi);
+                lit += usize::from(nee.is_some());
+                lit_through += usize::from(nee.is_some_and(|(_, wi)| wi.z * wo.z < 0.0));
+                for (build, out) in outs.iter().enumerate() {
+                    assert_eq!(bits(out.lane(l, wi.is_some())), bits(want), "build {build}, {d:?} wo {wo} wi {wi:?} uc {uc} u {u}");
+                }
+            }
+        }
+        assert!(
+            reflected > 10_000 && refracted > 10_000 && lit > 10_000 && lit_through > 3_000,
+            "{reflected} reflected and {refracted} refracted samples, {lit} lit light samples ({lit_through} through)"
+        );
     }
 
     /// `shade8` in its own AVX2 and AVX-512 builds (the kernel's) gives the portable
