@@ -13,7 +13,7 @@ pub use filter::Filter;
 use filter::FilterWeights;
 
 use crate::spectrum::Rgb;
-use glam::Vec2;
+use glam::{Vec2, Vec4, Vec4Swizzles};
 
 #[derive(Clone, Copy, Debug, Default)]
 struct Pixel {
@@ -406,29 +406,33 @@ impl FilmTile {
             return;
         }
         let (w, h) = ((self.x1 - self.x0) as usize, (self.y1 - self.y0) as usize);
-        // The weights of the owner's column (centre x + 0.5, exact) and of its neighbour's on
-        // p's side, the sum of both neighbours' (one is 0: the sum is the other's, exactly).
+        // The weights of the owner's column and row (centre x + 0.5, exact) and of their
+        // neighbours' on p's side, the sum of both neighbours' (one is 0: the sum is the
+        // other's, exactly); both axes side by side, the same operations lane by lane.
         // No branch on the side: it is a coin toss per sample.
         let (x, y) = (run.lo.x, run.lo.y);
-        let wx = [tent((x + 0.5) - p.x), tent((x - 0.5) - p.x) + tent((x + 1.5) - p.x)];
-        let wy = [tent((y + 0.5) - p.y), tent((y - 0.5) - p.y) + tent((y + 1.5) - p.y)];
+        let tent4 = |v: Vec4| (Vec4::ONE - v.abs()).max(Vec4::ZERO);
+        let pp = Vec4::new(p.x, p.y, p.x, p.y);
+        // (x + -0.5 is x - 0.5, bit for bit.)
+        let near = tent4(Vec4::new(x, y, x, y) + Vec4::new(0.5, 0.5, -0.5, -0.5) - pp);
+        let far = tent4(Vec4::new(x, y, x, y) + Vec4::new(1.5, 1.5, 1.5, 1.5) - pp);
+        let side = near.zwzw() + far.xyxy();
+        // Per pixel (owner, column neighbour, row neighbour, diagonal): fy * fx.
+        let wgt = Vec4::new(near.x, side.x, near.x, side.x) * Vec4::new(near.y, near.y, side.y, side.y);
         // The neighbours' column and row (wrapping to usize::MAX left of or above the tile).
-        let side = |right: bool| (2 * right as usize).wrapping_sub(1);
-        let cols = [run.col, run.col.wrapping_add(side(p.x >= x + 0.5))];
-        let rows = [run.row, run.row.wrapping_add(side(p.y >= y + 0.5))];
-        for (r, fy) in rows.into_iter().zip(wy) {
-            if r >= h || fy == 0.0 {
+        let step = |right: bool| (2 * right as usize).wrapping_sub(1);
+        let c1 = run.col.wrapping_add(step(p.x >= x + 0.5));
+        let r1 = run.row.wrapping_add(step(p.y >= y + 0.5));
+        let (cin, rin) = (c1 < w, r1 < h);
+        let at = [(run.row, run.col, true), (run.row, c1, cin), (r1, run.col, rin), (r1, c1, rin && cin)];
+        let pixels = &mut self.pixels[..];
+        for ((r, c, inside), wgt) in at.into_iter().zip(wgt.to_array()) {
+            if !inside || wgt == 0.0 {
                 continue;
             }
-            for (c, fx) in cols.into_iter().zip(wx) {
-                let wgt = fy * fx;
-                if c >= w || wgt == 0.0 {
-                    continue;
-                }
-                if let Some(px) = self.pixels.get_mut(r * w + c) {
-                    px.sum += l * wgt;
-                    px.weight += wgt as f64;
-                }
+            if let Some(px) = pixels.get_mut(r * w + c) {
+                px.sum += l * wgt;
+                px.weight += wgt as f64;
             }
         }
     }
@@ -439,12 +443,10 @@ impl FilmTile {
     #[inline(always)]
     fn run_owner<'r>(&mut self, run: &'r mut OwnerRun, p: Vec2) -> Option<&'r mut Pixel> {
         if !run.holds(p) {
-            let k = self.owner(p)?;
+            let (k, col, row) = self.owner_at(p)?;
             if k != run.k {
                 self.store_run(run);
-                run.k = k;
-                let w = (self.x1 - self.x0) as usize;
-                (run.col, run.row) = (k % w, k / w);
+                (run.k, run.col, run.row) = (k, col, row);
                 run.px = self.pixels.get(k).copied().unwrap_or_default();
             }
             // The floors of an owned position are a few thousand at most: exact as floats,
@@ -541,6 +543,12 @@ impl FilmTile {
     /// border and never share a pixel (the per-tile pass sums rely on it).
     #[inline]
     fn owner(&self, p: Vec2) -> Option<usize> {
+        self.owner_at(p).map(|(k, _, _)| k)
+    }
+
+    /// [`Self::owner`] with its column and row in the tile.
+    #[inline(always)]
+    fn owner_at(&self, p: Vec2) -> Option<(usize, usize, usize)> {
         let (w, h) = (self.x1 - self.x0, self.y1 - self.y0);
         let (mut ox, mut oy) = (floor_i(p.x) - self.x0 as i64, floor_i(p.y) - self.y0 as i64);
         if self.filter == Filter::Box {
@@ -550,7 +558,7 @@ impl FilmTile {
         if ox < 0 || oy < 0 || ox as u32 >= w || oy as u32 >= h {
             return None;
         }
-        Some((oy as u32 * w + ox as u32) as usize)
+        Some(((oy as u32 * w + ox as u32) as usize, ox as usize, oy as usize))
     }
 
     /// A box-filtered sample into pixel `k`: its statistics and its whole weight.
