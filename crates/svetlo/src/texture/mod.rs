@@ -307,12 +307,16 @@ impl Texture {
     #[inline]
     pub fn prefetch(&self, uv: Vec2) {
         if let Texture::Bitmap { image, to_uv, .. } = self {
+            // A hint needs no exact place: the sizes through u32 and the texel through i32,
+            // one instruction each where usize's conversions are branchy sequences without
+            // AVX-512 (most of a lane's hint). `prefetch_texel` checks the index.
+            let (w, h) = (image.width as u32 as f32, image.height as u32 as f32);
             let p = to_uv.transform_point2(uv);
-            let (x, y) = (p.x * image.width as f32 - 0.5, p.y * image.height as f32 - 0.5);
+            let (x, y) = (p.x * w - 0.5, p.y * h - 0.5);
             // The bilinear lookup's two rows at its first column (the next column mostly
             // shares the line; a nearest lookup reads one of them). NaN fails the test.
-            if x >= 0.0 && y >= 0.0 && x < image.width as f32 && y + 1.0 < image.height as f32 {
-                let (x, y) = (x as usize, y as usize);
+            if x >= 0.0 && y >= 0.0 && x < w && y + 1.0 < h {
+                let (x, y) = (x as i32 as usize, y as i32 as usize);
                 image.prefetch_texel(x, y);
                 image.prefetch_texel(x, y + 1);
             }
