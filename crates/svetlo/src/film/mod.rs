@@ -892,6 +892,27 @@ impl Film {
         }
     }
 
+    /// `splat_pixel(x, y, l)` for each of `splats` in order, the stride looked up once (the
+    /// splat merge's beauty splats; the buffer made at the first finite one, as there).
+    pub fn splat_pixels(&mut self, splats: impl Iterator<Item = (u32, u32, Rgb)>) {
+        let (stride, width) = (self.splat_stride(), self.width);
+        for (x, y, l) in splats {
+            debug_assert!(x < width && y < self.height);
+            if !l.is_finite() {
+                continue;
+            }
+            if self.splats.is_empty() {
+                self.splats = vec![0.0; (width * self.height) as usize * stride];
+            }
+            let k = (y * width + x) as usize * stride;
+            if let Some(c) = self.splats.get_mut(k..k + 3) {
+                c[0] += l.r;
+                c[1] += l.g;
+                c[2] += l.b;
+            }
+        }
+    }
+
     /// The developed image: filtered samples plus scaled splats.
     pub fn image(&self) -> Image {
         let mut data: Vec<Rgb> = self.full.pixels.iter().map(|p| if p.weight > 0.0 { p.sum / p.weight as f32 } else { Rgb::BLACK }).collect();
@@ -1296,19 +1317,27 @@ mod tile_tests {
 
     /// A splat at a pixel found by the caller (`splat_pixel`) adds what `splat` at the
     /// pixel's centre adds, bit for bit, with layers beside the beauty and non-finite values
-    /// left out.
+    /// left out; `splat_pixels` of the same list too.
     #[test]
     fn splat_pixel_is_the_centre_splat() {
         let names = ["a".to_string(), "b".to_string()];
         let (mut by_centre, mut by_pixel) = (Film::with_layers(5, 3, Filter::Box, &names), Film::with_layers(5, 3, Filter::Box, &names));
+        let mut by_run = Film::with_layers(5, 3, Filter::Box, &names);
         let values = [Rgb::new(0.1, 0.2, 0.3), Rgb::new(1e-30, -0.0, 3.5e7), Rgb::new(f32::NAN, 1.0, 1.0), Rgb::new(0.7, f32::INFINITY, 0.0)];
-        for (k, l) in values.iter().cycle().take(40).enumerate() {
-            let (x, y) = ((k * 7 % 5) as u32, (k % 3) as u32);
-            by_centre.splat(Vec2::new(x as f32 + 0.5, y as f32 + 0.5), *l);
-            by_pixel.splat_pixel(x, y, *l);
+        let list: Vec<_> = values.iter().cycle().take(40).enumerate().map(|(k, l)| ((k * 7 % 5) as u32, (k % 3) as u32, *l)).collect();
+        for &(x, y, l) in &list {
+            by_centre.splat(Vec2::new(x as f32 + 0.5, y as f32 + 0.5), l);
+            by_pixel.splat_pixel(x, y, l);
         }
+        by_run.splat_pixels(list.into_iter());
         let bits = |f: &Film| f.splats.iter().map(|v| v.to_bits()).collect::<Vec<_>>();
         assert_eq!(bits(&by_centre), bits(&by_pixel));
+        assert_eq!(bits(&by_run), bits(&by_pixel));
         assert!(!by_pixel.splats.is_empty());
+        // No finite splat (or none at all): no buffer, as `splat_pixel` leaves it.
+        let mut none = Film::new(5, 3, Filter::Box);
+        none.splat_pixels([(1, 1, Rgb::new(f32::NAN, 0.0, 0.0))].into_iter());
+        none.splat_pixels(std::iter::empty());
+        assert!(none.splats.is_empty());
     }
 }

@@ -292,9 +292,12 @@ impl Estimator {
         if let Some(w) = walk {
             w.finish(path);
         }
+        // (The lens samples a pinhole's lanes do not read are left undrawn: the lane's
+        // sampler restarts at its next sample.)
+        let mut owed = 0;
         for s in 1..=path.len() {
             match &self.batch {
-                Some(batch) => match batch.stage(scene, &self.cfg, path, s, sampler, &mut conns.lanes) {
+                Some(batch) => match batch.stage_lazy(scene, &self.cfg, path, s, sampler, &mut owed, &mut conns.lanes) {
                     Staged::None | Staged::Scalar(None) => {}
                     Staged::Scalar(Some((l, raster, ray))) => conns.scalar(packets, i, l, raster, ray),
                     Staged::Lane(k) => {

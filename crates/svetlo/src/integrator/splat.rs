@@ -502,6 +502,11 @@ impl OpenPass {
         let (w, h) = (layout.w, layout.h);
         for (t, splats) in results.into_iter().flatten() {
             self.tiles.push(t);
+            if splats.iter().all(|sp| sp.channel == 0 && sp.layers == 0) {
+                // Beauty splats only (light tracing's): the film's loop over them.
+                film.splat_pixels(splats.iter().filter_map(|sp| Some((pixel_index(sp.raster.x, w)?, pixel_index(sp.raster.y, h)?, sp.value))));
+                continue;
+            }
             for sp in splats {
                 let (Some(x), Some(y)) = (pixel_index(sp.raster.x, w), pixel_index(sp.raster.y, h)) else {
                     continue;

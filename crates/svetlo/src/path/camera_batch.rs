@@ -42,8 +42,10 @@ impl CameraBatch {
 
     /// `camera_connection(scene, cfg, light, s, sampler)` for s = 1..=light.len(), in
     /// order, each that exists given to `emit` as (contribution, raster, shadow ray): one
-    /// path's [`Self::stage`] and [`Self::run`]. `scratch` holds the lanes (none staged);
-    /// one per caller serves all its paths.
+    /// path's [`Self::stage`] (or, `lazy`, [`Self::stage_lazy`], the owed draws drawn at
+    /// the end) and [`Self::run`]. `scratch` holds the lanes (none staged); one per caller
+    /// serves all its paths.
+    #[allow(clippy::too_many_arguments)]
     pub fn connections<S: Sampler + ?Sized>(
         &self,
         scene: &Scene,
@@ -51,13 +53,16 @@ impl CameraBatch {
         light: &[Vertex],
         sampler: &mut S,
         scratch: &mut BatchScratch,
+        lazy: bool,
         mut emit: impl FnMut(Rgb, Vec2, Option<Ray>),
     ) {
         // The strategies staged since the last run, in order.
         let mut staged: [Staged; LANES] = [Staged::None; LANES];
         let mut k = 0;
+        let mut owed = 0;
         for s in 1..=light.len() {
-            staged[k] = self.stage(scene, cfg, light, s, sampler, scratch);
+            staged[k] =
+                if lazy { self.stage_lazy(scene, cfg, light, s, sampler, &mut owed, scratch) } else { self.stage(scene, cfg, light, s, sampler, scratch) };
             k += 1;
             if k == LANES || s == light.len() || scratch.is_full() {
                 if scratch.lanes.n > 0 {
@@ -78,6 +83,7 @@ impl CameraBatch {
                 k = 0;
             }
         }
+        pay_lens_draws(sampler, &mut owed);
     }
 
     /// Strategy (s, 1) of `light` as `camera_connection` begins it (its checks, its lens
@@ -94,18 +100,45 @@ impl CameraBatch {
         sampler: &mut S,
         scratch: &mut BatchScratch,
     ) -> Staged {
+        let mut owed = 0;
+        let staged = self.stage_lazy(scene, cfg, light, s, sampler, &mut owed, scratch);
+        pay_lens_draws(sampler, &mut owed);
+        staged
+    }
+
+    /// [`Self::stage`] for a caller that draws nothing more from `sampler` after the path's
+    /// connections (the light tracer's lanes: a lane's next sample restarts its sampler):
+    /// the lens samples that the lanes do not read (a pinhole's) are counted in `owed`, and
+    /// drawn only where a scalar connection needs the draw after them.
+    #[inline]
+    #[allow(clippy::too_many_arguments)]
+    pub fn stage_lazy<S: Sampler + ?Sized>(
+        &self,
+        scene: &Scene,
+        cfg: &PathConfig,
+        light: &[Vertex],
+        s: usize,
+        sampler: &mut S,
+        owed: &mut u32,
+        scratch: &mut BatchScratch,
+    ) -> Staged {
         debug_assert!(!scratch.is_full());
         if !camera_strategy_exists(cfg, light, s) {
             return Staged::None;
         }
-        let u = sampler.next_2d();
+        *owed += 1;
         let qs = &light[s - 1];
         if !camera_connectible(scene, cfg, qs, s) {
             return Staged::None;
         }
         match scratch.lanes.push(scene, qs, s) {
             Some(lane) => Staged::Lane(lane),
-            None => Staged::Scalar(camera_connection_at(scene, cfg, qs, s, u).map(|c| (c.l, c.raster, c.shadow))),
+            None => {
+                *owed -= 1;
+                pay_lens_draws(sampler, owed);
+                let u = sampler.next_2d();
+                Staged::Scalar(camera_connection_at(scene, cfg, qs, s, u).map(|c| (c.l, c.raster, c.shadow)))
+            }
         }
     }
 
@@ -118,6 +151,15 @@ impl CameraBatch {
             kernel(&self.pinhole, &scratch.lanes, &mut scratch.out)
         };
     }
+}
+
+/// The lens samples owed by [`CameraBatch::stage_lazy`], drawn and dropped.
+#[inline]
+fn pay_lens_draws<S: Sampler + ?Sized>(sampler: &mut S, owed: &mut u32) {
+    for _ in 0..*owed {
+        sampler.next_2d();
+    }
+    *owed = 0;
 }
 
 /// Where [`CameraBatch::stage`] put a strategy.
@@ -509,10 +551,16 @@ mod tests {
             let mut b = a.clone();
             let want: Vec<_> =
                 (1..=path.len()).filter_map(|s| camera_connection(&scene, &cfg, &path, s, &mut a)).map(|c| bits((c.l, c.raster, c.shadow))).collect();
+            let mut c = b.clone();
             let mut got = Vec::new();
-            batch.connections(&scene, &cfg, &path, &mut b, &mut scratch, |l, r, ray| got.push(bits((l, r, ray))));
+            batch.connections(&scene, &cfg, &path, &mut b, &mut scratch, false, |l, r, ray| got.push(bits((l, r, ray))));
             assert_eq!(got, want, "path {k}");
-            assert_eq!(a.next_1d().to_bits(), b.next_1d().to_bits(), "the same sampler dimensions");
+            let mut lazy = Vec::new();
+            batch.connections(&scene, &cfg, &path, &mut c, &mut scratch, true, |l, r, ray| lazy.push(bits((l, r, ray))));
+            assert_eq!(lazy, want, "path {k}: lens draws owed");
+            let next = a.next_1d().to_bits();
+            assert_eq!(next, b.next_1d().to_bits(), "the same sampler dimensions");
+            assert_eq!(next, c.next_1d().to_bits(), "the same sampler dimensions, owed draws paid");
             total += want.len();
             emitted += usize::from(camera_connection(&scene, &cfg, &path, 1, &mut IndependentSampler::new(1, k as u64)).is_some());
             lambertian += path.iter().skip(1).filter(|v| matches!(v.bsdf.as_ref().map(|b| &b.front), Some(BsdfModel::Diffuse(_)))).count();
