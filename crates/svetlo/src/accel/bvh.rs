@@ -315,6 +315,23 @@ impl Accel {
     }
 }
 
+/// Where a caller reads first after a closest hit (its triangle's record for shading): the
+/// interleaved walks ask for a hit's record as they find it, so that it arrives while they
+/// go on (read after the walks, it was a miss at a random place of a large array per hit).
+pub struct HitRecords {
+    /// Per mesh of the tree (`Accel::meshes`), the address of its first triangle's record;
+    /// 0 for none. Addresses, never read: only prefetched, which cannot fault.
+    base: Vec<usize>,
+    /// Bytes from one triangle's record to the next, and a record's.
+    stride: usize,
+    size: usize,
+}
+
+impl HitRecords {
+    /// None asked for.
+    pub const NONE: HitRecords = HitRecords { base: Vec::new(), stride: 0, size: 0 };
+}
+
 /// The rays of [`Accel::intersect_lanes`] and [`Accel::occluded_lanes`].
 pub const RAY_LANES: usize = 8;
 
@@ -328,6 +345,11 @@ impl Accel {
     /// prefetching its next node or leaf, so that the rays wait on memory together rather
     /// than one after the other.
     pub fn intersect_lanes(&self, rays: &[Ray; RAY_LANES], active: u8) -> [Option<PrimHit>; RAY_LANES] {
+        self.intersect_lanes_asking(rays, active, &HitRecords::NONE)
+    }
+
+    /// [`Accel::intersect_lanes`], the hits' `records` asked for as the walks find them.
+    pub fn intersect_lanes_asking(&self, rays: &[Ray; RAY_LANES], active: u8, records: &HitRecords) -> [Option<PrimHit>; RAY_LANES] {
         #[cfg(target_arch = "x86_64")]
         if self.avx && self.prefetch && !self.tri_nodes.is_empty() {
             let mut hits = [None; RAY_LANES];
@@ -335,9 +357,9 @@ impl Accel {
             // SAFETY: `avx` is set only when the CPU reports AVX and POPCNT.
             unsafe {
                 if self.coherent && active.count_ones() >= COHERENT_MIN {
-                    self.trace_coherent_avx(rays, active, done)
+                    self.trace_coherent_avx(rays, active, records, done)
                 } else {
-                    self.trace_lanes::<false>(rays, active, done)
+                    self.trace_lanes::<false>(rays, active, records, done)
                 }
             };
             return hits;
@@ -351,7 +373,7 @@ impl Accel {
         if self.avx && self.prefetch && !self.tri_nodes.is_empty() {
             let mut blocked = 0;
             // SAFETY: `avx` is set only when the CPU reports AVX and POPCNT.
-            unsafe { self.trace_lanes::<true>(rays, active, |l, hit| blocked |= (hit.is_some() as u8) << l) };
+            unsafe { self.trace_lanes::<true>(rays, active, &HitRecords::NONE, |l, hit| blocked |= (hit.is_some() as u8) << l) };
             return blocked;
         }
         (0..RAY_LANES).filter(|&l| active & (1 << l) != 0 && self.occluded(&rays[l])).fold(0, |m, l| m | 1 << l)
@@ -363,13 +385,13 @@ impl Accel {
     /// The CPU must support AVX and POPCNT.
     #[cfg(target_arch = "x86_64")]
     #[inline(always)]
-    unsafe fn trace_lanes<const ANY: bool>(&self, rays: &[Ray; RAY_LANES], active: u8, done: impl FnMut(usize, Option<PrimHit>)) {
+    unsafe fn trace_lanes<const ANY: bool>(&self, rays: &[Ray; RAY_LANES], active: u8, records: &HitRecords, done: impl FnMut(usize, Option<PrimHit>)) {
         // SAFETY: the caller's contract; `avx512` is set only where the CPU has AVX-512F and VL too.
         unsafe {
             if self.avx512 {
-                self.trace_lanes_avx512::<ANY>(rays, active, done)
+                self.trace_lanes_avx512::<ANY>(rays, active, records, done)
             } else {
-                self.trace_lanes_avx::<ANY>(rays, active, done)
+                self.trace_lanes_avx::<ANY>(rays, active, records, done)
             }
         }
     }
@@ -378,9 +400,9 @@ impl Accel {
     /// The CPU must support AVX and POPCNT.
     #[cfg(target_arch = "x86_64")]
     #[target_feature(enable = "avx,popcnt")]
-    unsafe fn trace_lanes_avx<const ANY: bool>(&self, rays: &[Ray; RAY_LANES], active: u8, done: impl FnMut(usize, Option<PrimHit>)) {
+    unsafe fn trace_lanes_avx<const ANY: bool>(&self, rays: &[Ray; RAY_LANES], active: u8, records: &HitRecords, done: impl FnMut(usize, Option<PrimHit>)) {
         // SAFETY: this function runs only on CPUs with AVX and POPCNT.
-        unsafe { self.trace_lanes_body::<ANY, false>(rays, active, done) }
+        unsafe { self.trace_lanes_body::<ANY, false>(rays, active, records, done) }
     }
 
     /// The same walks compiled with AVX-512VL: the same operations (no FMA is enabled, so no
@@ -392,9 +414,9 @@ impl Accel {
     /// The CPU must support AVX2, POPCNT, AVX-512F and AVX-512VL.
     #[cfg(target_arch = "x86_64")]
     #[target_feature(enable = "avx,avx2,popcnt,avx512f,avx512vl")]
-    unsafe fn trace_lanes_avx512<const ANY: bool>(&self, rays: &[Ray; RAY_LANES], active: u8, done: impl FnMut(usize, Option<PrimHit>)) {
+    unsafe fn trace_lanes_avx512<const ANY: bool>(&self, rays: &[Ray; RAY_LANES], active: u8, records: &HitRecords, done: impl FnMut(usize, Option<PrimHit>)) {
         // SAFETY: this function runs only on CPUs with these sets.
-        unsafe { self.trace_lanes_body::<ANY, true>(rays, active, done) }
+        unsafe { self.trace_lanes_body::<ANY, true>(rays, active, records, done) }
     }
 
     /// `trace` of each active lane, the triangle walks interleaved (see `intersect_lanes`):
@@ -411,7 +433,13 @@ impl Accel {
     /// The CPU must support AVX and POPCNT, and the caller must be compiled with them.
     #[cfg(target_arch = "x86_64")]
     #[inline(always)]
-    unsafe fn trace_lanes_body<const ANY: bool, const COPY: bool>(&self, rays: &[Ray; RAY_LANES], active: u8, mut done: impl FnMut(usize, Option<PrimHit>)) {
+    unsafe fn trace_lanes_body<const ANY: bool, const COPY: bool>(
+        &self,
+        rays: &[Ray; RAY_LANES],
+        active: u8,
+        records: &HitRecords,
+        mut done: impl FnMut(usize, Option<PrimHit>),
+    ) {
         use super::wide::{Walk, WalkStack};
         use std::mem::MaybeUninit;
         struct Lane {
@@ -445,7 +473,13 @@ impl Accel {
                 turn &= turn - 1;
                 // SAFETY: `live` is a subset of `active`, whose lanes were all written above.
                 let lane = unsafe { lanes[l].assume_init_mut() };
-                let mut leaf = |code, t_max: &mut f32| self.tri_leaf::<ANY, TriRay8>(code, t_max, &lane.tray, &lane.w, &mut lane.hit);
+                let mut leaf = |code, t_max: &mut f32| {
+                    let found = self.tri_leaf::<ANY, TriRay8>(code, t_max, &lane.tray, &lane.w, &mut lane.hit);
+                    if let (false, true, Some((block, tri, _, _))) = (ANY, found, lane.hit) {
+                        self.ask_record(records, block, tri);
+                    }
+                    found
+                };
                 // A lane keeps the turn while its next entry was asked for steps ago (likely in cache).
                 loop {
                     if !lane.walk.step::<ANY, true>(&mut stacks[l], nodes, &lane.bray, &mut lane.t_max, true, true, &tris_at, &mut leaf) {
@@ -495,13 +529,13 @@ impl Accel {
     /// The CPU must support AVX and POPCNT.
     #[cfg(target_arch = "x86_64")]
     #[target_feature(enable = "avx,popcnt")]
-    unsafe fn trace_coherent_avx(&self, rays: &[Ray; RAY_LANES], active: u8, mut done: impl FnMut(usize, Option<PrimHit>)) {
+    unsafe fn trace_coherent_avx(&self, rays: &[Ray; RAY_LANES], active: u8, records: &HitRecords, mut done: impl FnMut(usize, Option<PrimHit>)) {
         use super::coherent::{walk, Coherent, TIE};
         // SAFETY: this function runs only on CPUs with AVX.
         let b = self.bounds;
         let Some(c) = (unsafe { Coherent::new(rays, active, (b.max - b.min).max_element()) }) else {
             // SAFETY: as above.
-            return unsafe { self.trace_lanes::<false>(rays, active, done) };
+            return unsafe { self.trace_lanes::<false>(rays, active, records, done) };
         };
         // SAFETY: as above.
         let f = unsafe { walk(&self.tri_nodes, &self.tris, &c, active, self.prefetch, |code| self.tris_at(code)) };
@@ -523,8 +557,32 @@ impl Accel {
         }
         if again != 0 {
             // SAFETY: as above.
-            unsafe { self.trace_lanes::<false>(rays, again, done) };
+            unsafe { self.trace_lanes::<false>(rays, again, records, done) };
         }
+    }
+
+    /// `records` of the triangle in `block`'s `lane` (see [`HitRecords`]), where the tree has
+    /// few meshes (else finding the triangle's mesh would be a miss of its own).
+    #[inline(always)]
+    fn ask_record(&self, records: &HitRecords, block: usize, lane: usize) {
+        if records.base.is_empty() || !self.tri_mesh.is_empty() {
+            return;
+        }
+        let id = self.tris[block].ids[lane & (LANES - 1)];
+        let k = self.mesh_of(id);
+        if let (Some(&base), Some(&(first, _))) = (records.base.get(k), self.meshes.get(k)) {
+            if base != 0 {
+                // + 63: a record that starts inside a line may reach a line further.
+                super::wide::prefetch((base as *const u8).wrapping_add((id - first) as usize * records.stride), records.size + 63);
+            }
+        }
+    }
+
+    /// [`HitRecords`] of `size` bytes every `stride` bytes, each mesh's first at
+    /// `first(shape)` (the shape's index among those the tree was built from; None: not asked for).
+    pub fn hit_records(&self, stride: usize, size: usize, first: impl Fn(u32) -> Option<*const u8>) -> HitRecords {
+        let base = self.meshes.iter().map(|&(_, shape)| first(shape).map_or(0, |p| p as usize)).collect();
+        HitRecords { base, stride, size }
     }
 
     /// The closest hit of a triangle hit `(block, lane, b1, b2)` at `t`.

@@ -73,6 +73,7 @@
 use super::path::{bsdf_pdf_toward, PathTracer};
 use super::{camera_sample, render_tiles, Integrator, Progress, RenderSettings};
 use crate::accel::packet::{Hits8, PacketBvh, PacketSpheres, Rays8, LANES};
+use crate::accel::HitRecords;
 use crate::bsdf::conductor::{rough_conductor_lanes, RoughConductor, RoughConductorLanes, RoughConductorOut};
 use crate::bsdf::dielectric::{rough_dielectric_lanes, RoughDielectric, RoughDielectricLanes, RoughDielectricOut};
 use crate::bsdf::plastic::{rough_plastic_lanes, RoughPlastic, RoughPlasticLanes, RoughPlasticOut};
@@ -525,7 +526,7 @@ enum Tracer {
     /// few nodes, and a packet pays for the union of their walks; the only way to shapes
     /// other than meshes. `first`: the kernel's index of each shape's first triangle
     /// ([`NOT_MESH`] for a shape of no triangles of the kernel's).
-    Single { first: Vec<u32> },
+    Single { first: Vec<u32>, records: HitRecords },
     /// One by one through the scene's own queries (`Scene::closest`, `occluded_ray`), each
     /// lane's ray at its path's time: scenes with a ray epsilon, and scenes with moving shapes
     /// that would trace single rays. `first` as in `Single`.
@@ -594,14 +595,15 @@ impl Tracer {
                 }
                 (h, tied | unsure, first)
             }
-            Tracer::Single { first } | Tracer::Scene { first } => {
+            Tracer::Single { first, .. } | Tracer::Scene { first } => {
                 (Hits8 { t: rays.t_max, prim: [u32::MAX; LANES], b1: [0.0; LANES], b2: [0.0; LANES] }, active, first)
             }
         };
         if lanes == 0 {
             return h;
         }
-        let lane_hits = scene.accel.intersect_lanes(&lane_rays(rays), lanes);
+        let records = if let Tracer::Single { records, .. } = self { records } else { &HitRecords::NONE };
+        let lane_hits = scene.accel.intersect_lanes_asking(&lane_rays(rays), lanes, records);
         for l in (0..LANES).filter(|l| lanes & (1 << l) != 0) {
             let hit = lane_hits[l];
             h.t[l] = hit.map_or(rays.t_max[l], |hit| hit.t);
@@ -706,8 +708,34 @@ fn first_triangles(scene: &Scene) -> Vec<u32> {
     first
 }
 
-fn single_tracer(scene: &Scene) -> Tracer {
-    Tracer::Single { first: first_triangles(scene) }
+fn single_tracer(scene: &Scene, geometry: &KernelGeometry) -> Tracer {
+    let first = first_triangles(scene);
+    // What shading reads first at a hit (the unpacked record, else the mesh's index row),
+    // asked for by the walks as they find it; as `KernelGeometry::prefetch_hits`, not below
+    // an L2 cache's worth of records.
+    let records = if geometry.unpacked {
+        if std::mem::size_of_val(&geometry.tris[..]) < PREFETCH_HITS_MIN_BYTES {
+            HitRecords::NONE
+        } else {
+            let shape_first = |shape: u32| {
+                let si = scene.static_shapes.get(shape as usize).copied().unwrap_or(shape);
+                first.get(si as usize).filter(|&&f| f != NOT_MESH).map(|&f| geometry.tris.as_ptr().wrapping_add(f as usize) as *const u8)
+            };
+            scene.accel.hit_records(std::mem::size_of::<Tri>(), std::mem::size_of::<Tri>(), shape_first)
+        }
+    } else if (geometry.triangles as usize) * std::mem::size_of::<[u32; 3]>() < PREFETCH_HITS_MIN_BYTES {
+        HitRecords::NONE
+    } else {
+        let rows = |shape: u32| {
+            let si = scene.static_shapes.get(shape as usize).copied().unwrap_or(shape);
+            match scene.shapes.get(si as usize).map(|s| &*s.geometry) {
+                Some(Geometry::Mesh(m)) => Some(m.indices.as_ptr() as *const u8),
+                _ => None,
+            }
+        };
+        scene.accel.hit_records(std::mem::size_of::<[u32; 3]>(), std::mem::size_of::<[u32; 3]>(), rows)
+    };
+    Tracer::Single { first, records }
 }
 
 fn lane_ray(rays: &Rays8, l: usize) -> Ray {
@@ -905,7 +933,7 @@ impl SimdKernel {
         let tracer = if scene.settings.ray_epsilon > 0.0 || (single_rays && !scene.moving.is_empty()) {
             Tracer::Scene { first: first_triangles(scene) }
         } else if single_rays {
-            single_tracer(scene)
+            single_tracer(scene, &geometry)
         } else if spheres.is_empty() {
             // A large scene's tied lanes go to the scene's BVH too: its image stays the one of
             // single rays (which these scenes traced before), bit for bit.
@@ -965,8 +993,11 @@ impl SimdKernel {
     /// Traces one ray at a time through the scene's BVH whatever the scene's size (for
     /// comparisons; `scene` must be the one the kernel was made for).
     pub fn use_single_rays(&mut self, scene: &Scene) {
-        self.tracer =
-            if scene.moving.is_empty() && scene.settings.ray_epsilon <= 0.0 { single_tracer(scene) } else { Tracer::Scene { first: first_triangles(scene) } };
+        self.tracer = if scene.moving.is_empty() && scene.settings.ray_epsilon <= 0.0 {
+            single_tracer(scene, &self.geometry)
+        } else {
+            Tracer::Scene { first: first_triangles(scene) }
+        };
     }
 
     /// Whether the meshes' triangles are unpacked (else each hit reads its triangle from the
