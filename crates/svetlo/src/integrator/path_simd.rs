@@ -2211,33 +2211,39 @@ trait LaneStep {
     fn model(bsdf: &Bsdf, wo: Vec3) -> Option<(&Self::Model, bool)>;
     /// Group lane `i`: directions on the model's side, the vertex's three numbers (lobe, direction).
     fn set(q: &mut Self::Group, i: usize, m: &Self::Model, wo: Vec3, wi: Option<Vec3>, u: [f32; 3]);
-    /// The first `used` lanes' results, by this CPU's vector build.
-    fn run(avx512: bool, q: &Self::Group, used: usize) -> Self::Out;
+    /// The vector step, portable code.
+    const PORTABLE: fn(&Self::Group, usize) -> Self::Out;
+    /// Its copies for AVX2 with FMA and for AVX-512VL (made by `vector_step_copies!`).
+    #[cfg(target_arch = "x86_64")]
+    const COPIES: Copies<Self::Group, Self::Out>;
+    /// The first `used` lanes' results, by this CPU's build of the step: its AVX-512 copy
+    /// where the kernel runs AVX-512 (`avx512`), its AVX2 copy where the CPU has AVX2 and
+    /// FMA, else the portable code.
+    #[inline(always)]
+    fn run(avx512: bool, q: &Self::Group, used: usize) -> Self::Out {
+        #[cfg(target_arch = "x86_64")]
+        if crate::cpu::avx2() && crate::cpu::fma() {
+            let (avx2_copy, avx512_copy) = Self::COPIES;
+            // SAFETY: `avx2()` and `fma()` detect AVX2 and FMA at run time, and the kernel's
+            // `avx512` is set only where AVX-512F and VL were.
+            return unsafe {
+                if avx512 {
+                    avx512_copy(q, used)
+                } else {
+                    avx2_copy(q, used)
+                }
+            };
+        }
+        Self::PORTABLE(q, used)
+    }
     /// Lane `i`'s light-sample value and density (where it has a light sample: `lit`) and own sample.
     fn lane(out: &Self::Out, i: usize, lit: bool) -> (Option<(Rgb, f32)>, Option<BsdfSample>);
 }
 
-/// A vector step's copy for one instruction set (`conductor8_avx2`, ...): it needs that
-/// set, so calling it is unsafe.
-type VectorStep<Q, O> = unsafe fn(&Q, usize) -> O;
-
-/// A [`LaneStep`]'s step by this CPU's build: its AVX-512 copy where the kernel runs AVX-512
-/// (`avx512`), its AVX2 copy where the CPU has AVX2 and FMA, else the `portable` code.
-#[inline(always)]
-fn by_cpu<Q, O>(avx512: bool, q: &Q, used: usize, vector: Option<(VectorStep<Q, O>, VectorStep<Q, O>)>, portable: fn(&Q, usize) -> O) -> O {
-    if let Some((avx2, avx512_copy)) = vector.filter(|_| crate::cpu::avx2() && crate::cpu::fma()) {
-        // SAFETY: `avx2()` and `fma()` detect AVX2 and FMA at run time, and the kernel's
-        // `avx512` is set only where AVX-512F and VL were.
-        return unsafe {
-            if avx512 {
-                avx512_copy(q, used)
-            } else {
-                avx2(q, used)
-            }
-        };
-    }
-    portable(q, used)
-}
+/// A vector step's copies for AVX2 and AVX-512 (`conductor8_avx2`, ...): each needs its
+/// instruction set, so calling one is unsafe.
+#[cfg(target_arch = "x86_64")]
+type Copies<Q, O> = (unsafe fn(&Q, usize) -> O, unsafe fn(&Q, usize) -> O);
 
 /// Beckmann rough conductors (`conductor8`).
 struct RoughConductorStep;
@@ -2254,14 +2260,9 @@ impl LaneStep for RoughConductorStep {
     fn set(q: &mut Self::Group, i: usize, m: &RoughConductor, wo: Vec3, wi: Option<Vec3>, u: [f32; 3]) {
         q.set(i, m, wo, wi, Vec2::new(u[1], u[2]));
     }
-    #[inline(always)]
-    fn run(avx512: bool, q: &Self::Group, used: usize) -> Self::Out {
-        #[cfg(target_arch = "x86_64")]
-        let vector = Some((conductor8_avx2 as VectorStep<_, _>, conductor8_avx512 as VectorStep<_, _>));
-        #[cfg(not(target_arch = "x86_64"))]
-        let vector = None;
-        by_cpu(avx512, q, used, vector, rough_conductor_lanes)
-    }
+    const PORTABLE: fn(&Self::Group, usize) -> Self::Out = rough_conductor_lanes;
+    #[cfg(target_arch = "x86_64")]
+    const COPIES: Copies<Self::Group, Self::Out> = (conductor8_avx2, conductor8_avx512);
     #[inline(always)]
     fn lane(out: &Self::Out, i: usize, lit: bool) -> (Option<(Rgb, f32)>, Option<BsdfSample>) {
         out.lane(i, lit)
@@ -2289,14 +2290,9 @@ impl LaneStep for RoughPlasticStep {
     fn set(q: &mut Self::Group, i: usize, m: &RoughPlastic, wo: Vec3, wi: Option<Vec3>, u: [f32; 3]) {
         q.set(i, m, wo, wi, u[0], Vec2::new(u[1], u[2]));
     }
-    #[inline(always)]
-    fn run(avx512: bool, q: &Self::Group, used: usize) -> Self::Out {
-        #[cfg(target_arch = "x86_64")]
-        let vector = Some((plastic8_avx2 as VectorStep<_, _>, plastic8_avx512 as VectorStep<_, _>));
-        #[cfg(not(target_arch = "x86_64"))]
-        let vector = None;
-        by_cpu(avx512, q, used, vector, rough_plastic_lanes)
-    }
+    const PORTABLE: fn(&Self::Group, usize) -> Self::Out = rough_plastic_lanes;
+    #[cfg(target_arch = "x86_64")]
+    const COPIES: Copies<Self::Group, Self::Out> = (plastic8_avx2, plastic8_avx512);
     #[inline(always)]
     fn lane(out: &Self::Out, i: usize, lit: bool) -> (Option<(Rgb, f32)>, Option<BsdfSample>) {
         out.lane(i, lit)
@@ -2323,14 +2319,9 @@ impl LaneStep for RoughDielectricStep {
     fn set(q: &mut Self::Group, i: usize, m: &RoughDielectric, wo: Vec3, wi: Option<Vec3>, u: [f32; 3]) {
         q.set(i, m, wo, wi, u[0], Vec2::new(u[1], u[2]));
     }
-    #[inline(always)]
-    fn run(avx512: bool, q: &Self::Group, used: usize) -> Self::Out {
-        #[cfg(target_arch = "x86_64")]
-        let vector = Some((dielectric8_avx2 as VectorStep<_, _>, dielectric8_avx512 as VectorStep<_, _>));
-        #[cfg(not(target_arch = "x86_64"))]
-        let vector = None;
-        by_cpu(avx512, q, used, vector, rough_dielectric_lanes)
-    }
+    const PORTABLE: fn(&Self::Group, usize) -> Self::Out = rough_dielectric_lanes;
+    #[cfg(target_arch = "x86_64")]
+    const COPIES: Copies<Self::Group, Self::Out> = (dielectric8_avx2, dielectric8_avx512);
     #[inline(always)]
     fn lane(out: &Self::Out, i: usize, lit: bool) -> (Option<(Rgb, f32)>, Option<BsdfSample>) {
         out.lane(i, lit)
@@ -2982,72 +2973,38 @@ unsafe fn shade8_avx512(v: &VertexNums, rr_depth: i32, st: &mut PathNums, rays: 
     shade8(v, rr_depth, st, rays, shadow, o)
 }
 
-/// [`rough_conductor_lanes`] of the kernel's eight lanes compiled for AVX2 (see
-/// [`RoughConductorStep::run`]).
-///
-/// # Safety
-/// The CPU must support AVX2 and FMA (glibc's expf as vector lanes).
-#[cfg(target_arch = "x86_64")]
-#[target_feature(enable = "avx2,fma")]
-#[inline(never)]
-unsafe fn conductor8_avx2(q: &RoughConductorLanes<LANES>, used: usize) -> RoughConductorOut<LANES> {
-    rough_conductor_lanes(q, used)
+/// A vector BSDF step's two copies: `$avx2` compiled for AVX2 with FMA (glibc's expf as
+/// vector lanes) and `$avx512` for AVX-512VL, of `$step` over the kernel's eight lanes (see
+/// [`LaneStep::COPIES`]; `kernel_code.rs` checks both are vector code).
+macro_rules! vector_step_copies {
+    ($step:ident($group:ty) -> $out:ty, $avx2:ident, $avx512:ident) => {
+        #[doc = concat!("[`", stringify!($step), "`] of the kernel's eight lanes compiled for AVX2.")]
+        ///
+        /// # Safety
+        /// The CPU must support AVX2 and FMA.
+        #[cfg(target_arch = "x86_64")]
+        #[target_feature(enable = "avx2,fma")]
+        #[inline(never)]
+        unsafe fn $avx2(q: &$group, used: usize) -> $out {
+            $step(q, used)
+        }
+
+        #[doc = concat!("[`", stringify!($step), "`] compiled for AVX-512VL.")]
+        ///
+        /// # Safety
+        /// The CPU must support AVX2, FMA, AVX-512F and AVX-512VL.
+        #[cfg(target_arch = "x86_64")]
+        #[target_feature(enable = "avx2,fma,avx512f,avx512vl")]
+        #[inline(never)]
+        unsafe fn $avx512(q: &$group, used: usize) -> $out {
+            $step(q, used)
+        }
+    };
 }
 
-/// [`rough_conductor_lanes`] compiled for AVX-512VL.
-///
-/// # Safety
-/// The CPU must support AVX2, FMA, AVX-512F and AVX-512VL.
-#[cfg(target_arch = "x86_64")]
-#[target_feature(enable = "avx2,fma,avx512f,avx512vl")]
-#[inline(never)]
-unsafe fn conductor8_avx512(q: &RoughConductorLanes<LANES>, used: usize) -> RoughConductorOut<LANES> {
-    rough_conductor_lanes(q, used)
-}
-
-/// [`rough_plastic_lanes`] of the kernel's eight lanes compiled for AVX2.
-///
-/// # Safety
-/// The CPU must support AVX2 and FMA (glibc's expf as vector lanes).
-#[cfg(target_arch = "x86_64")]
-#[target_feature(enable = "avx2,fma")]
-#[inline(never)]
-unsafe fn plastic8_avx2(q: &RoughPlasticLanes<LANES>, used: usize) -> RoughPlasticOut<LANES> {
-    rough_plastic_lanes(q, used)
-}
-
-/// [`rough_plastic_lanes`] compiled for AVX-512VL.
-///
-/// # Safety
-/// The CPU must support AVX2, FMA, AVX-512F and AVX-512VL.
-#[cfg(target_arch = "x86_64")]
-#[target_feature(enable = "avx2,fma,avx512f,avx512vl")]
-#[inline(never)]
-unsafe fn plastic8_avx512(q: &RoughPlasticLanes<LANES>, used: usize) -> RoughPlasticOut<LANES> {
-    rough_plastic_lanes(q, used)
-}
-
-/// [`rough_dielectric_lanes`] of the kernel's eight lanes compiled for AVX2.
-///
-/// # Safety
-/// The CPU must support AVX2 and FMA (glibc's expf as vector lanes).
-#[cfg(target_arch = "x86_64")]
-#[target_feature(enable = "avx2,fma")]
-#[inline(never)]
-unsafe fn dielectric8_avx2(q: &RoughDielectricLanes<LANES>, used: usize) -> RoughDielectricOut<LANES> {
-    rough_dielectric_lanes(q, used)
-}
-
-/// [`rough_dielectric_lanes`] compiled for AVX-512VL.
-///
-/// # Safety
-/// The CPU must support AVX2, FMA, AVX-512F and AVX-512VL.
-#[cfg(target_arch = "x86_64")]
-#[target_feature(enable = "avx2,fma,avx512f,avx512vl")]
-#[inline(never)]
-unsafe fn dielectric8_avx512(q: &RoughDielectricLanes<LANES>, used: usize) -> RoughDielectricOut<LANES> {
-    rough_dielectric_lanes(q, used)
-}
+vector_step_copies!(rough_conductor_lanes(RoughConductorLanes<LANES>) -> RoughConductorOut<LANES>, conductor8_avx2, conductor8_avx512);
+vector_step_copies!(rough_plastic_lanes(RoughPlasticLanes<LANES>) -> RoughPlasticOut<LANES>, plastic8_avx2, plastic8_avx512);
+vector_step_copies!(rough_dielectric_lanes(RoughDielectricLanes<LANES>) -> RoughDielectricOut<LANES>, dielectric8_avx2, dielectric8_avx512);
 
 /// A sampler of the kernel's lanes: one vertex's numbers for all of them at once, in the
 /// scalar tracer's order per vertex (light choice, light point, BSDF lobe, BSDF direction,
