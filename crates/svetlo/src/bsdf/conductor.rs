@@ -2,6 +2,7 @@
 //! IOR per RGB channel, scaled by `specular_reflectance`. Front side only.
 
 use super::fresnel::{self, reflect};
+use super::lane_samples::LaneSamples;
 use super::microfacet::{self as mf, BeckmannLanes, Microfacet};
 use super::{BsdfSample, LobeFlags, TransportMode};
 use crate::spectrum::Rgb;
@@ -174,35 +175,6 @@ impl<const N: usize> RoughConductorLanes<N> {
     }
 }
 
-impl<const N: usize> RoughConductorOut<N> {
-    /// Lane `l` as [`RoughConductor::eval_pdf_and_sample`] gives it (`nee`: whether it was
-    /// given a light sample).
-    #[inline]
-    pub(crate) fn lane(&self, l: usize, nee: bool) -> (Option<(Rgb, f32)>, Option<BsdfSample>) {
-        let rgb = |a: &[[f32; N]; 3]| Rgb::new(a[0][l], a[1][l], a[2][l]);
-        let s = self.sampled[l].then(|| BsdfSample {
-            wi: Vec3::new(self.wi[0][l], self.wi[1][l], self.wi[2][l]),
-            f: rgb(&self.f),
-            pdf: self.pdf[l],
-            lobe: LobeFlags::GLOSSY_REFLECTION,
-            eta: 1.0,
-        });
-        (nee.then(|| (rgb(&self.nee_f), self.nee_pdf[l])), s)
-    }
-}
-
-/// What [`rough_conductor_lanes`] gives per lane: [`RoughConductor::eval_pdf`] toward `wi`
-/// (`nee_f`, `nee_pdf`) and [`RoughConductor::sample`] (where `sampled`: `wi`, `f`, `pdf`).
-#[derive(Clone, Copy, Debug)]
-pub(crate) struct RoughConductorOut<const N: usize> {
-    pub nee_f: [[f32; N]; 3],
-    pub nee_pdf: [f32; N],
-    pub sampled: [bool; N],
-    pub wi: [[f32; N]; 3],
-    pub f: [[f32; N]; 3],
-    pub pdf: [f32; N],
-}
-
 /// [`RoughConductor::eval_pdf_and_sample`] of `used` lanes at once: the visible normals
 /// (`sample_visible_beckmann_lanes`), then for both directions (the light sample's and the
 /// sample's) the half vector, D, G1 both ways, the densities and the Fresnel term, each
@@ -211,7 +183,7 @@ pub(crate) struct RoughConductorOut<const N: usize> {
 /// packed eight f64 lanes a step, whichever lane and direction they come from: about three
 /// lanes in eight are used, and a channel is five divisions and square roots. The same bits.
 #[inline(always)]
-pub(crate) fn rough_conductor_lanes<const N: usize>(q: &RoughConductorLanes<N>, used: usize) -> RoughConductorOut<N> {
+pub(crate) fn rough_conductor_lanes<const N: usize>(q: &RoughConductorLanes<N>, used: usize) -> LaneSamples<N> {
     let b = &q.beckmann;
     let m = mf::sample_visible_beckmann_lanes(b);
     // Per direction (0: toward the light sample, 1: the sample's), as `eval_pdf_given`.
@@ -301,5 +273,5 @@ pub(crate) fn rough_conductor_lanes<const N: usize>(q: &RoughConductorLanes<N>, 
     }
     let [nee_f, sf] = f;
     let sampled = std::array::from_fn(|l| wi[1][2][l] > 0.0 && super::positive_finite(pdf[1][l]));
-    RoughConductorOut { nee_f, nee_pdf: pdf[0], sampled, wi: wi[1], f: sf, pdf: pdf[1] }
+    LaneSamples { nee_f, nee_pdf: pdf[0], sampled, glossy: [true; N], eta: [1.0; N], wi: wi[1], f: sf, pdf: pdf[1] }
 }

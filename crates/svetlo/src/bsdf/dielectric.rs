@@ -4,6 +4,7 @@
 //! compression of Veach's thesis §5.2); importance is not scaled.
 
 use super::fresnel::{self, reflect, refract};
+use super::lane_samples::LaneSamples;
 use super::microfacet::{self as mf, BeckmannLanes, Microfacet};
 use super::{BsdfSample, LobeFlags, TransportMode};
 use crate::spectrum::Rgb;
@@ -226,37 +227,6 @@ impl<const N: usize> RoughDielectricLanes<N> {
     }
 }
 
-/// What [`rough_dielectric_lanes`] gives per lane: [`RoughDielectric::eval_pdf`] toward `wi`
-/// (`nee_f`, `nee_pdf`) and [`RoughDielectric::sample`] (where `sampled`: `wi`, `f`, `pdf`,
-/// whether it reflects, and its `eta`), in radiance mode.
-#[derive(Clone, Copy, Debug)]
-pub(crate) struct RoughDielectricOut<const N: usize> {
-    pub nee_f: [[f32; N]; 3],
-    pub nee_pdf: [f32; N],
-    pub sampled: [bool; N],
-    pub reflected: [bool; N],
-    pub eta: [f32; N],
-    pub wi: [[f32; N]; 3],
-    pub f: [[f32; N]; 3],
-    pub pdf: [f32; N],
-}
-
-impl<const N: usize> RoughDielectricOut<N> {
-    /// Lane `l` as (`eval_pdf` where it was given a light sample, `sample`) give it.
-    #[inline]
-    pub(crate) fn lane(&self, l: usize, nee: bool) -> (Option<(Rgb, f32)>, Option<BsdfSample>) {
-        let rgb = |a: &[[f32; N]; 3]| Rgb::new(a[0][l], a[1][l], a[2][l]);
-        let s = self.sampled[l].then(|| BsdfSample {
-            wi: Vec3::new(self.wi[0][l], self.wi[1][l], self.wi[2][l]),
-            f: rgb(&self.f),
-            pdf: self.pdf[l],
-            lobe: if self.reflected[l] { LobeFlags::GLOSSY_REFLECTION } else { LobeFlags::GLOSSY_TRANSMISSION },
-            eta: self.eta[l],
-        });
-        (nee.then(|| (rgb(&self.nee_f), self.nee_pdf[l])), s)
-    }
-}
-
 /// ([`RoughDielectric::eval_pdf`] toward `wi`, [`RoughDielectric::sample`]) in radiance mode
 /// of `used` lanes at once: the visible normals (`sample_visible_beckmann_lanes`), the lobe by
 /// their Fresnel term and the reflected or refracted direction, then for both directions the
@@ -264,7 +234,7 @@ impl<const N: usize> RoughDielectricOut<N> {
 /// operations those of the scalar routines, with selects for their branches (D's expf as
 /// `conductor::rough_conductor_lanes` takes it). The same bits.
 #[inline(always)]
-pub(crate) fn rough_dielectric_lanes<const N: usize>(q: &RoughDielectricLanes<N>, used: usize) -> RoughDielectricOut<N> {
+pub(crate) fn rough_dielectric_lanes<const N: usize>(q: &RoughDielectricLanes<N>, used: usize) -> LaneSamples<N> {
     let b = &q.beckmann;
     let m = mf::sample_visible_beckmann_lanes(b);
     // `sample`: the lobe and the direction.
@@ -355,7 +325,7 @@ pub(crate) fn rough_dielectric_lanes<const N: usize>(q: &RoughDielectricLanes<N>
         let (woz, wz) = (q.wo[2][l], ws[2][l]);
         sampled[l] = (wz != 0.0) & ((wz * woz > 0.0) == reflected[l]) & super::positive_finite(pdf[1][l]);
     }
-    RoughDielectricOut { nee_f, nee_pdf: pdf[0], sampled, reflected, eta: eta_s, wi: ws, f: sf, pdf: pdf[1] }
+    LaneSamples { nee_f, nee_pdf: pdf[0], sampled, glossy: reflected, eta: eta_s, wi: ws, f: sf, pdf: pdf[1] }
 }
 
 /// Mitsuba `thindielectric`: a thin slab whose internal reflections are summed in closed

@@ -36,20 +36,7 @@ pub fn dielectric(cos_i: f32, eta: f32) -> (f32, f32, f32, f32) {
 /// that calls it runs as vector code (the rough plastic's lanes). The same bits.
 #[inline(always)]
 pub(crate) fn dielectric_reflectance(cos_i: f32, eta: f32) -> f32 {
-    let eta_it = if cos_i >= 0.0 { eta } else { 1.0 / eta };
-    let eta_ti = 1.0 / eta_it;
-    let ci = cos_i.abs().min(1.0);
-    let cos_t2 = 1.0 - eta_ti * eta_ti * (1.0 - ci * ci);
-    let ct = cos_t2.sqrt();
-    let rs = (ci - eta_it * ct) / (ci + eta_it * ct);
-    let rp = (eta_it * ci - ct) / (eta_it * ci + ct);
-    let f = 0.5 * (rs * rs + rp * rp);
-    let f = if cos_t2 <= 0.0 { 1.0 } else { f };
-    if eta == 1.0 {
-        0.0
-    } else {
-        f
-    }
+    dielectric_lane(cos_i, eta).0
 }
 
 /// [`dielectric`] whole (reflectance, transmitted cosine, relative IORs), its branches as

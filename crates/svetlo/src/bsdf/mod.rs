@@ -13,6 +13,7 @@ pub mod diffuse;
 pub mod diffuse_transmission;
 pub mod fresnel;
 pub mod glass;
+pub(crate) mod lane_samples;
 pub mod lobes;
 pub mod material;
 pub mod microfacet;
@@ -662,7 +663,7 @@ mod tests {
                         let side = |w: Vec3| if flipped { flip(w) } else { w };
                         let mut q = conductor::RoughConductorLanes::<1>::default();
                         q.set(0, c, side(wo), wi.map(side), u);
-                        let (nee_l, s_l) = conductor::rough_conductor_lanes(&q, 1).lane(0, wi.is_some());
+                        let (nee_l, s_l) = conductor::rough_conductor_lanes(&q, 1).lane(0, wi.is_some(), LobeFlags::GLOSSY_REFLECTION);
                         let (nee_m, s_m) = Bsdf::finish_conductor(b.opacity, flipped, nee_l, s_l);
                         assert_eq!(
                             (nee_m.map(bits), sample_bits(s_m)),
@@ -677,7 +678,7 @@ mod tests {
                         let side = |w: Vec3| if flipped { flip(w) } else { w };
                         let mut q = plastic::RoughPlasticLanes::<1>::default();
                         q.set(0, p, side(wo), wi.map(side), uc, u);
-                        let (nee_l, s_l) = plastic::rough_plastic_lanes(&q, 1).lane(0, wi.is_some());
+                        let (nee_l, s_l) = plastic::rough_plastic_lanes(&q, 1).lane(0, wi.is_some(), LobeFlags::DIFFUSE_REFLECTION);
                         let (nee_m, s_m) = Bsdf::finish_conductor(b.opacity, flipped, nee_l, s_l);
                         assert_eq!(
                             (nee_m.map(bits), sample_bits(s_m)),

@@ -8,6 +8,7 @@
 //! Mitsuba 3, so that images agree. Front side only.
 
 use super::fresnel;
+use super::lane_samples::LaneSamples;
 use super::material::MicrofacetKind;
 use super::microfacet::{self as mf, BeckmannLanes, Microfacet, VisibleSampler};
 use super::{BsdfSample, LobeFlags, TransportMode};
@@ -480,36 +481,6 @@ impl<const N: usize> RoughPlasticLanes<N> {
     }
 }
 
-/// What [`rough_plastic_lanes`] gives per lane: [`RoughPlastic::eval_pdf`] toward `wi`
-/// (`nee_f`, `nee_pdf`) and [`RoughPlastic::sample`] (where `sampled`: `wi`, `f`, `pdf`, and
-/// whether the glossy lobe was chosen).
-#[derive(Clone, Copy, Debug)]
-pub(crate) struct RoughPlasticOut<const N: usize> {
-    pub nee_f: [[f32; N]; 3],
-    pub nee_pdf: [f32; N],
-    pub sampled: [bool; N],
-    pub glossy: [bool; N],
-    pub wi: [[f32; N]; 3],
-    pub f: [[f32; N]; 3],
-    pub pdf: [f32; N],
-}
-
-impl<const N: usize> RoughPlasticOut<N> {
-    /// Lane `l` as (`eval_pdf` where it was given a light sample, `sample`) give it.
-    #[inline]
-    pub(crate) fn lane(&self, l: usize, nee: bool) -> (Option<(Rgb, f32)>, Option<BsdfSample>) {
-        let rgb = |a: &[[f32; N]; 3]| Rgb::new(a[0][l], a[1][l], a[2][l]);
-        let s = self.sampled[l].then(|| BsdfSample {
-            wi: Vec3::new(self.wi[0][l], self.wi[1][l], self.wi[2][l]),
-            f: rgb(&self.f),
-            pdf: self.pdf[l],
-            lobe: if self.glossy[l] { LobeFlags::GLOSSY_REFLECTION } else { LobeFlags::DIFFUSE_REFLECTION },
-            eta: 1.0,
-        });
-        (nee.then(|| (rgb(&self.nee_f), self.nee_pdf[l])), s)
-    }
-}
-
 /// ([`RoughPlastic::eval_pdf`] toward `wi`, [`RoughPlastic::sample`]) of `used` lanes at
 /// once: the lobe's choice, the glossy lanes' visible normals
 /// (`sample_visible_beckmann_lanes`) or the cosine-weighted directions, then for both
@@ -517,7 +488,7 @@ impl<const N: usize> RoughPlasticOut<N> {
 /// and transmittances, each lane's operations those of the scalar routines, with selects for
 /// their branches (D's expf as `conductor::rough_conductor_lanes` takes it). The same bits.
 #[inline(always)]
-pub(crate) fn rough_plastic_lanes<const N: usize>(q: &RoughPlasticLanes<N>, used: usize) -> RoughPlasticOut<N> {
+pub(crate) fn rough_plastic_lanes<const N: usize>(q: &RoughPlasticLanes<N>, used: usize) -> LaneSamples<N> {
     let b = &q.beckmann;
     // `sample`'s start: the transmittance toward wo and the lobe. Lanes that take the
     // diffuse lobe draw no normal: they ask the Newton loop for an idle lane's, which
@@ -589,7 +560,7 @@ pub(crate) fn rough_plastic_lanes<const N: usize>(q: &RoughPlasticLanes<N>, used
     }
     let [nee_f, sf] = f;
     let sampled = std::array::from_fn(|l| wi[1][2][l] > 0.0 && super::positive_finite(pdf[1][l]));
-    RoughPlasticOut { nee_f, nee_pdf: pdf[0], sampled, glossy, wi: wi[1], f: sf, pdf: pdf[1] }
+    LaneSamples { nee_f, nee_pdf: pdf[0], sampled, glossy, eta: [1.0; N], wi: wi[1], f: sf, pdf: pdf[1] }
 }
 
 #[cfg(test)]

@@ -74,9 +74,10 @@ use super::path::{bsdf_pdf_toward, PathTracer};
 use super::{camera_sample, render_tiles, Integrator, Progress, RenderSettings};
 use crate::accel::packet::{Hits8, PacketBvh, PacketSpheres, Rays8, LANES};
 use crate::accel::HitRecords;
-use crate::bsdf::conductor::{rough_conductor_lanes, RoughConductor, RoughConductorLanes, RoughConductorOut};
-use crate::bsdf::dielectric::{rough_dielectric_lanes, RoughDielectric, RoughDielectricLanes, RoughDielectricOut};
-use crate::bsdf::plastic::{rough_plastic_lanes, RoughPlastic, RoughPlasticLanes, RoughPlasticOut};
+use crate::bsdf::conductor::{rough_conductor_lanes, RoughConductor, RoughConductorLanes};
+use crate::bsdf::dielectric::{rough_dielectric_lanes, RoughDielectric, RoughDielectricLanes};
+use crate::bsdf::lane_samples::LaneSamples;
+use crate::bsdf::plastic::{rough_plastic_lanes, RoughPlastic, RoughPlasticLanes};
 use crate::bsdf::{Bsdf, BsdfSample, LobeFlags, Material, TransportMode};
 use crate::camera::{RayGenerator, RayLanes};
 use crate::error::{Error, Result};
@@ -2201,8 +2202,6 @@ trait LaneStep {
     type Model;
     /// The inputs of up to eight lanes.
     type Group: Default;
-    /// Their results.
-    type Out;
     /// Whether a lane of these lobes may be the model's (a cheap test before `model`).
     fn takes(_flags: LobeFlags) -> bool {
         true
@@ -2212,15 +2211,15 @@ trait LaneStep {
     /// Group lane `i`: directions on the model's side, the vertex's three numbers (lobe, direction).
     fn set(q: &mut Self::Group, i: usize, m: &Self::Model, wo: Vec3, wi: Option<Vec3>, u: [f32; 3]);
     /// The vector step, portable code.
-    const PORTABLE: fn(&Self::Group, usize) -> Self::Out;
+    const PORTABLE: fn(&Self::Group, usize) -> LaneSamples<LANES>;
     /// Its copies for AVX2 with FMA and for AVX-512VL (made by `vector_step_copies!`).
     #[cfg(target_arch = "x86_64")]
-    const COPIES: Copies<Self::Group, Self::Out>;
+    const COPIES: Copies<Self::Group, LaneSamples<LANES>>;
     /// The first `used` lanes' results, by this CPU's build of the step: its AVX-512 copy
     /// where the kernel runs AVX-512 (`avx512`), its AVX2 copy where the CPU has AVX2 and
     /// FMA, else the portable code.
     #[inline(always)]
-    fn run(avx512: bool, q: &Self::Group, used: usize) -> Self::Out {
+    fn run(avx512: bool, q: &Self::Group, used: usize) -> LaneSamples<LANES> {
         #[cfg(target_arch = "x86_64")]
         if crate::cpu::avx2() && crate::cpu::fma() {
             let (avx2_copy, avx512_copy) = Self::COPIES;
@@ -2236,8 +2235,13 @@ trait LaneStep {
         }
         Self::PORTABLE(q, used)
     }
+    /// The model's lobe besides the glossy reflection (the conductor has none: its own).
+    const OTHER_LOBE: LobeFlags;
     /// Lane `i`'s light-sample value and density (where it has a light sample: `lit`) and own sample.
-    fn lane(out: &Self::Out, i: usize, lit: bool) -> (Option<(Rgb, f32)>, Option<BsdfSample>);
+    #[inline(always)]
+    fn lane(out: &LaneSamples<LANES>, i: usize, lit: bool) -> (Option<(Rgb, f32)>, Option<BsdfSample>) {
+        out.lane(i, lit, Self::OTHER_LOBE)
+    }
 }
 
 /// A vector step's copies for AVX2 and AVX-512 (`conductor8_avx2`, ...): each needs its
@@ -2251,7 +2255,6 @@ struct RoughConductorStep;
 impl LaneStep for RoughConductorStep {
     type Model = RoughConductor;
     type Group = RoughConductorLanes<LANES>;
-    type Out = RoughConductorOut<LANES>;
     #[inline(always)]
     fn model(bsdf: &Bsdf, wo: Vec3) -> Option<(&RoughConductor, bool)> {
         bsdf.beckmann_conductor(wo)
@@ -2260,13 +2263,10 @@ impl LaneStep for RoughConductorStep {
     fn set(q: &mut Self::Group, i: usize, m: &RoughConductor, wo: Vec3, wi: Option<Vec3>, u: [f32; 3]) {
         q.set(i, m, wo, wi, Vec2::new(u[1], u[2]));
     }
-    const PORTABLE: fn(&Self::Group, usize) -> Self::Out = rough_conductor_lanes;
+    const PORTABLE: fn(&Self::Group, usize) -> LaneSamples<LANES> = rough_conductor_lanes;
     #[cfg(target_arch = "x86_64")]
-    const COPIES: Copies<Self::Group, Self::Out> = (conductor8_avx2, conductor8_avx512);
-    #[inline(always)]
-    fn lane(out: &Self::Out, i: usize, lit: bool) -> (Option<(Rgb, f32)>, Option<BsdfSample>) {
-        out.lane(i, lit)
-    }
+    const COPIES: Copies<Self::Group, LaneSamples<LANES>> = (conductor8_avx2, conductor8_avx512);
+    const OTHER_LOBE: LobeFlags = LobeFlags::GLOSSY_REFLECTION;
 }
 
 /// Beckmann rough plastics (`plastic8`).
@@ -2275,7 +2275,6 @@ struct RoughPlasticStep;
 impl LaneStep for RoughPlasticStep {
     type Model = RoughPlastic;
     type Group = RoughPlasticLanes<LANES>;
-    type Out = RoughPlasticOut<LANES>;
     /// A plastic without a mask has these lobes (with a back of other lobes it is left to
     /// `scalar_scatter`): most scalar lanes are other models.
     #[inline(always)]
@@ -2290,13 +2289,10 @@ impl LaneStep for RoughPlasticStep {
     fn set(q: &mut Self::Group, i: usize, m: &RoughPlastic, wo: Vec3, wi: Option<Vec3>, u: [f32; 3]) {
         q.set(i, m, wo, wi, u[0], Vec2::new(u[1], u[2]));
     }
-    const PORTABLE: fn(&Self::Group, usize) -> Self::Out = rough_plastic_lanes;
+    const PORTABLE: fn(&Self::Group, usize) -> LaneSamples<LANES> = rough_plastic_lanes;
     #[cfg(target_arch = "x86_64")]
-    const COPIES: Copies<Self::Group, Self::Out> = (plastic8_avx2, plastic8_avx512);
-    #[inline(always)]
-    fn lane(out: &Self::Out, i: usize, lit: bool) -> (Option<(Rgb, f32)>, Option<BsdfSample>) {
-        out.lane(i, lit)
-    }
+    const COPIES: Copies<Self::Group, LaneSamples<LANES>> = (plastic8_avx2, plastic8_avx512);
+    const OTHER_LOBE: LobeFlags = LobeFlags::DIFFUSE_REFLECTION;
 }
 
 /// Beckmann rough dielectrics (`dielectric8`).
@@ -2305,7 +2301,6 @@ struct RoughDielectricStep;
 impl LaneStep for RoughDielectricStep {
     type Model = RoughDielectric;
     type Group = RoughDielectricLanes<LANES>;
-    type Out = RoughDielectricOut<LANES>;
     /// A dielectric without a mask has these lobes.
     #[inline(always)]
     fn takes(flags: LobeFlags) -> bool {
@@ -2319,13 +2314,10 @@ impl LaneStep for RoughDielectricStep {
     fn set(q: &mut Self::Group, i: usize, m: &RoughDielectric, wo: Vec3, wi: Option<Vec3>, u: [f32; 3]) {
         q.set(i, m, wo, wi, u[0], Vec2::new(u[1], u[2]));
     }
-    const PORTABLE: fn(&Self::Group, usize) -> Self::Out = rough_dielectric_lanes;
+    const PORTABLE: fn(&Self::Group, usize) -> LaneSamples<LANES> = rough_dielectric_lanes;
     #[cfg(target_arch = "x86_64")]
-    const COPIES: Copies<Self::Group, Self::Out> = (dielectric8_avx2, dielectric8_avx512);
-    #[inline(always)]
-    fn lane(out: &Self::Out, i: usize, lit: bool) -> (Option<(Rgb, f32)>, Option<BsdfSample>) {
-        out.lane(i, lit)
-    }
+    const COPIES: Copies<Self::Group, LaneSamples<LANES>> = (dielectric8_avx2, dielectric8_avx512);
+    const OTHER_LOBE: LobeFlags = LobeFlags::GLOSSY_TRANSMISSION;
 }
 
 /// A lane of a vector BSDF step's group (`SimdKernel::conductor_samples`,
@@ -3002,9 +2994,9 @@ macro_rules! vector_step_copies {
     };
 }
 
-vector_step_copies!(rough_conductor_lanes(RoughConductorLanes<LANES>) -> RoughConductorOut<LANES>, conductor8_avx2, conductor8_avx512);
-vector_step_copies!(rough_plastic_lanes(RoughPlasticLanes<LANES>) -> RoughPlasticOut<LANES>, plastic8_avx2, plastic8_avx512);
-vector_step_copies!(rough_dielectric_lanes(RoughDielectricLanes<LANES>) -> RoughDielectricOut<LANES>, dielectric8_avx2, dielectric8_avx512);
+vector_step_copies!(rough_conductor_lanes(RoughConductorLanes<LANES>) -> LaneSamples<LANES>, conductor8_avx2, conductor8_avx512);
+vector_step_copies!(rough_plastic_lanes(RoughPlasticLanes<LANES>) -> LaneSamples<LANES>, plastic8_avx2, plastic8_avx512);
+vector_step_copies!(rough_dielectric_lanes(RoughDielectricLanes<LANES>) -> LaneSamples<LANES>, dielectric8_avx2, dielectric8_avx512);
 
 /// A sampler of the kernel's lanes: one vertex's numbers for all of them at once, in the
 /// scalar tracer's order per vertex (light choice, light point, BSDF lobe, BSDF direction,
@@ -3512,7 +3504,7 @@ mod tests {
                 sampled += usize::from(want.1.is_some());
                 lit += usize::from(want.0.is_some_and(|(f, _)| !f.is_black()));
                 for (build, out) in outs.iter().enumerate() {
-                    assert_eq!(bits(out.lane(l, wi.is_some())), bits(want), "build {build}, {c:?} wo {wo} wi {wi:?} u {u}");
+                    assert_eq!(bits(RoughConductorStep::lane(out, l, wi.is_some())), bits(want), "build {build}, {c:?} wo {wo} wi {wi:?} u {u}");
                 }
             }
         }
@@ -3587,7 +3579,7 @@ mod tests {
                 }
                 lit += usize::from(want.0.is_some_and(|(f, _)| !f.is_black()));
                 for (build, out) in outs.iter().enumerate() {
-                    assert_eq!(bits(out.lane(l, wi.is_some())), bits(want), "build {build}, {p:?} wo {wo} wi {wi:?} uc {uc} u {u}");
+                    assert_eq!(bits(RoughPlasticStep::lane(out, l, wi.is_some())), bits(want), "build {build}, {p:?} wo {wo} wi {wi:?} uc {uc} u {u}");
                 }
             }
         }
@@ -3667,7 +3659,7 @@ mod tests {
                 lit += usize::from(nee.is_some());
                 lit_through += usize::from(nee.is_some_and(|(_, wi)| wi.z * wo.z < 0.0));
                 for (build, out) in outs.iter().enumerate() {
-                    assert_eq!(bits(out.lane(l, wi.is_some())), bits(want), "build {build}, {d:?} wo {wo} wi {wi:?} uc {uc} u {u}");
+                    assert_eq!(bits(RoughDielectricStep::lane(out, l, wi.is_some())), bits(want), "build {build}, {d:?} wo {wo} wi {wi:?} uc {uc} u {u}");
                 }
             }
         }
