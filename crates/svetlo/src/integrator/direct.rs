@@ -296,6 +296,13 @@ impl DirectEstimator {
                     }
                 }
             }
+            // With one light and one BSDF sample (the default), the eight lanes' numbers side
+            // by side (`LaneSampler::vertex_draws`: its rows are the draws each lane makes in
+            // order, light choice and point first, then the BSDF's; a lane that misses does
+            // not read them, and its sampler restarts at its next sample).
+            let hit_lanes = (0..k).filter(|&l| hits[l].is_some()).fold(0u8, |m, l| m | 1 << l);
+            // (Not `then`'s closure: built apart from this function, without its AVX2.)
+            let nums = if emitter_samples == 1 && bsdf_samples == 1 && hit_lanes != 0 { Some(S::vertex_draws(&mut samplers, hit_lanes)) } else { None };
             let mut sums = [Rgb::BLACK; LANES];
             let mut lanes: [Option<LaneHit>; LANES] = [None; LANES];
             terms.clear();
@@ -317,16 +324,21 @@ impl DirectEstimator {
                     }
                 }
                 sums[l] = sum;
-                let bsdf = scene.bsdf(si);
+                let bsdf = scene.bsdf_inline(si);
                 let wo = si.to_local(si.wo);
                 let flags = bsdf.flags();
                 let sky = SkySampling::new(&bsdf, flags);
                 // A sample's contribution is made before its shadow ray is tested (the same
                 // operations: it is dropped if the ray is blocked).
+                // The row of `nums` the BSDF sample's numbers start at.
+                let mut row = 0;
                 if flags.has_non_specular() {
                     for _ in 0..emitter_samples {
-                        let ul = sampler.next_1d();
-                        let u = sampler.next_2d();
+                        let (ul, u) = match &nums {
+                            Some(d) => (d[0][l], Vec2::new(d[1][l], d[2][l])),
+                            None => (sampler.next_1d(), sampler.next_2d()),
+                        };
+                        row = 3;
                         let other = if self.lights.dist.is_empty() {
                             None
                         } else {
@@ -340,8 +352,10 @@ impl DirectEstimator {
                 }
                 let mut scatter = None;
                 if bsdf_samples == 1 {
-                    let uc = sampler.next_1d();
-                    let u = sampler.next_2d();
+                    let (uc, u) = match &nums {
+                        Some(d) => (d[row][l], Vec2::new(d[row + 1][l], d[row + 2][l])),
+                        None => (sampler.next_1d(), sampler.next_2d()),
+                    };
                     if let Some(bs) = bsdf.sample_inline(wo, uc, u, TransportMode::Radiance).filter(|bs| bs.pdf > 0.0) {
                         let wi = si.to_world(bs.wi);
                         scatter = Some((bs, wi, si.spawn_ray(wi)));
