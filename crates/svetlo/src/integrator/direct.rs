@@ -10,7 +10,7 @@
 //! test, a textured spot under a constant sky, that choice was most of the variance) for one
 //! shadow ray per delta light.
 
-use super::path::{bsdf_pdf_toward, light_sample_unshadowed, settle, Unshadowed};
+use super::path::{bsdf_pdf_toward, bsdf_toward, light_sample_finish, light_sample_unshadowed, settle, Unshadowed};
 use super::path_simd::LaneSampler;
 use super::{camera_sample, render_tiles, Integrator, Progress, RenderSettings};
 use crate::accel::packet::{Rays8, LANES};
@@ -296,6 +296,13 @@ impl DirectEstimator {
                     }
                 }
             }
+            // With one light and one BSDF sample (the default), the eight lanes' numbers side
+            // by side (`LaneSampler::vertex_draws`: its rows are the draws each lane makes in
+            // order, light choice and point first, then the BSDF's; a lane that misses does
+            // not read them, and its sampler restarts at its next sample).
+            let hit_lanes = (0..k).filter(|&l| hits[l].is_some()).fold(0u8, |m, l| m | 1 << l);
+            // (Not `then`'s closure: built apart from this function, without its AVX2.)
+            let nums = if emitter_samples == 1 && bsdf_samples == 1 && hit_lanes != 0 { Some(S::vertex_draws(&mut samplers, hit_lanes)) } else { None };
             let mut sums = [Rgb::BLACK; LANES];
             let mut lanes: [Option<LaneHit>; LANES] = [None; LANES];
             terms.clear();
@@ -317,32 +324,39 @@ impl DirectEstimator {
                     }
                 }
                 sums[l] = sum;
-                let bsdf = scene.bsdf(si);
+                let bsdf = scene.bsdf_inline(si);
                 let wo = si.to_local(si.wo);
                 let flags = bsdf.flags();
                 let sky = SkySampling::new(&bsdf, flags);
                 // A sample's contribution is made before its shadow ray is tested (the same
                 // operations: it is dropped if the ray is blocked).
-                let term = |ls: Option<Unshadowed>| match ls {
-                    Some(ls) => (l, ls.contribution(&bsdf, wo, counts).0, ls.shadow),
-                    None => (l, Rgb::BLACK, None),
-                };
+                // The row of `nums` the BSDF sample's numbers start at.
+                let mut row = 0;
                 if flags.has_non_specular() {
                     for _ in 0..emitter_samples {
-                        let ul = sampler.next_1d();
-                        let u = sampler.next_2d();
-                        let other = (!self.lights.dist.is_empty()).then(|| term(self.other_light_sample(scene, si, wo, &bsdf, sky, ul, u).1));
+                        let (ul, u) = match &nums {
+                            Some(d) => (d[0][l], Vec2::new(d[1][l], d[2][l])),
+                            None => (sampler.next_1d(), sampler.next_2d()),
+                        };
+                        row = 3;
+                        let other = if self.lights.dist.is_empty() {
+                            None
+                        } else {
+                            Some(lane_term(l, self.other_light_sample(scene, si, wo, &bsdf, sky, ul, u).1, &bsdf, wo, counts))
+                        };
                         for &d in &self.lights.deltas {
-                            terms.push(term(light_sample_unshadowed(scene, d, 1.0, si.p, si.ng, &si.shading, wo, &bsdf, u, si.time)));
+                            terms.push(lane_term(l, delta_light_sample(scene, d, si, wo, &bsdf, u), &bsdf, wo, counts));
                         }
                         terms.extend(other);
                     }
                 }
                 let mut scatter = None;
                 if bsdf_samples == 1 {
-                    let uc = sampler.next_1d();
-                    let u = sampler.next_2d();
-                    if let Some(bs) = bsdf.sample(wo, uc, u, TransportMode::Radiance).filter(|bs| bs.pdf > 0.0) {
+                    let (uc, u) = match &nums {
+                        Some(d) => (d[row][l], Vec2::new(d[row + 1][l], d[row + 2][l])),
+                        None => (sampler.next_1d(), sampler.next_2d()),
+                    };
+                    if let Some(bs) = bsdf.sample_inline(wo, uc, u, TransportMode::Radiance).filter(|bs| bs.pdf > 0.0) {
                         let wi = si.to_world(bs.wi);
                         scatter = Some((bs, wi, si.spawn_ray(wi)));
                     }
@@ -397,7 +411,7 @@ impl DirectEstimator {
     /// The light other than the delta lights that a light sample `(ul, u)` at `si` takes,
     /// and that light's sample before its shadow ray (None: it adds nothing).
     #[allow(clippy::too_many_arguments)]
-    #[inline]
+    #[inline(always)]
     fn other_light_sample(
         &self,
         scene: &Scene,
@@ -421,7 +435,7 @@ impl DirectEstimator {
     /// met `hit` (None: it escaped), and the event its path ends with; None where it adds
     /// nothing (a surface that does not emit, or no radiance). `bsdf`: the BSDF at `si`, made
     /// again where None and needed.
-    #[inline]
+    #[inline(always)]
     fn bsdf_term(
         &self,
         scene: &Scene,
@@ -571,13 +585,37 @@ fn route_light_sample(scene: &Scene, events: &Tracker, layers: &mut LayerSample,
     layers.add(events.ends2(here, aovs.emitter_event(&scene.lights[li as usize])), c);
 }
 
+/// Lane `l`'s light sample `ls` as the lockstep tile keeps it: its contribution should its
+/// shadow ray be clear, and that ray (inline: a call each cost more than the Lambertian's
+/// arithmetic).
+#[inline(always)]
+fn lane_term(l: usize, ls: Option<Unshadowed>, bsdf: &Bsdf, wo: Vec3, counts: (f32, f32)) -> (usize, Rgb, Option<Ray>) {
+    match ls {
+        Some(ls) => (l, ls.contribution(bsdf, wo, counts).0, ls.shadow),
+        None => (l, Rgb::BLACK, None),
+    }
+}
+
+/// [`light_sample_unshadowed`] of delta light `d` (probability 1) at `si`: a spot's sample
+/// inline (`Light::spot_sample_li_inline`), the same operations.
+#[inline(always)]
+fn delta_light_sample(scene: &Scene, d: u32, si: &SurfaceInteraction, wo: Vec3, bsdf: &Bsdf, u: Vec2) -> Option<Unshadowed> {
+    let light = &scene.lights[d as usize];
+    if !matches!(light, Light::Spot { .. }) {
+        return light_sample_unshadowed(scene, d, 1.0, si.p, si.ng, &si.shading, wo, bsdf, u, si.time);
+    }
+    let ls = light.spot_sample_li_inline(si.p)?;
+    let f = bsdf_toward(bsdf, &si.shading, wo, &ls)?;
+    light_sample_finish(scene, ls, f, 1.0, true, si.p, si.ng, si.time)
+}
+
 /// Next-event estimation toward a constant environment of radiance `le`, chosen with
 /// probability `pmf`, by [`SkySampling`], up to its shadow ray (None: it adds nothing).
 #[allow(clippy::too_many_arguments)]
-#[inline]
+#[inline(always)]
 fn sky_unshadowed(scene: &Scene, si: &SurfaceInteraction, wo: Vec3, bsdf: &Bsdf, sky: SkySampling, le: Rgb, pmf: f32, u: Vec2) -> Option<Unshadowed> {
     let (wi, pdf) = sky.sample(wo, u)?;
-    let f = bsdf.eval(wo, wi, TransportMode::Radiance);
+    let f = bsdf.eval_inline(wo, wi, TransportMode::Radiance);
     if f.is_black() || pmf <= 0.0 {
         return None;
     }

@@ -81,9 +81,9 @@ pub(crate) struct Unshadowed {
 impl Unshadowed {
     /// The contribution of the sample, its shadow ray clear (`counts`: samples of each
     /// strategy), and whether it arrives through the surface.
-    #[inline]
+    #[inline(always)]
     pub fn contribution(&self, bsdf: &crate::bsdf::Bsdf, wo: Vec3, counts: (f32, f32)) -> (Rgb, bool) {
-        let w = if self.delta { 1.0 } else { power_heuristic(counts.0, self.pdf_light, counts.1, bsdf.pdf(wo, self.wi, TransportMode::Radiance)) };
+        let w = if self.delta { 1.0 } else { power_heuristic(counts.0, self.pdf_light, counts.1, bsdf.pdf_inline(wo, self.wi, TransportMode::Radiance)) };
         (self.f * self.li * (self.wi.z.abs() * w / self.pdf_light), self.wi.z * wo.z < 0.0)
     }
 }
@@ -109,16 +109,40 @@ pub(crate) fn light_sample_unshadowed(
     }
     let light = &scene.lights[li as usize];
     let ls = light.sample_li(p, u, &scene.bounds)?;
+    let f = bsdf_toward(bsdf, frame, wo, &ls)?;
+    light_sample_finish(scene, ls, f, pmf, light.is_delta(), p, ng, time)
+}
+
+/// The local direction of light sample `ls` and the BSDF's value toward it (None where the
+/// sample or that value adds nothing): [`light_sample_unshadowed`]'s first half, with
+/// [`Bsdf::eval_inline`] (the same value as `eval`).
+#[inline(always)]
+pub(crate) fn bsdf_toward(bsdf: &Bsdf, frame: &crate::math::Frame, wo: Vec3, ls: &crate::light::LightSample) -> Option<(Rgb, Vec3)> {
     if ls.pdf <= 0.0 || ls.li.is_black() {
         return None;
     }
     let wi = frame.to_local(ls.wi);
-    let f = bsdf.eval(wo, wi, TransportMode::Radiance);
-    if f.is_black() {
-        return None;
-    }
+    let f = bsdf.eval_inline(wo, wi, TransportMode::Radiance);
+    (!f.is_black()).then_some((f, wi))
+}
+
+/// [`light_sample_unshadowed`]'s second half: the sample `ls` of a light chosen with
+/// probability `pmf` (`delta`: a delta light), the BSDF's value `f` toward its local
+/// direction `wi`, and its shadow ray from `p` (geometric normal `ng`).
+#[allow(clippy::too_many_arguments)]
+#[inline(always)]
+pub(crate) fn light_sample_finish(
+    scene: &Scene,
+    ls: crate::light::LightSample,
+    (f, wi): (Rgb, Vec3),
+    pmf: f32,
+    delta: bool,
+    p: Vec3,
+    ng: Vec3,
+    time: f32,
+) -> Option<Unshadowed> {
     let shadow = if ls.infinite { Some(scene.dir_ray_at(p, ng, ls.wi, time)) } else { scene.shadow_ray(p, ng, ls.p, ls.n, time) };
-    Some(Unshadowed { f, li: ls.li, wi, pdf_light: pmf * ls.pdf, delta: light.is_delta(), shadow })
+    Some(Unshadowed { f, li: ls.li, wi, pdf_light: pmf * ls.pdf, delta, shadow })
 }
 
 impl PixelEstimator for PathTracer {

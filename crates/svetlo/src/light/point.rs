@@ -58,6 +58,7 @@ impl Light {
     }
 
     /// The spot's profile toward world direction `w` (leaving the light); 1 for other lights.
+    #[inline]
     pub fn spot_falloff(&self, w: Vec3) -> f32 {
         match *self {
             Light::Spot { frame, cos_cutoff, cos_beam, cutoff_angle, beam_width, .. } => {
@@ -84,6 +85,17 @@ impl Light {
     /// (x, y, z) maps to uv = 1/2 + (x, y) / (2 z tan(cutoff)).
     pub fn spot_intensity(&self, w: Vec3) -> Rgb {
         match self {
+            Light::Spot { .. } => self.spot_intensity_with::<false>(w),
+            Light::Luminaire(l) => l.intensity(w),
+            _ => Rgb::BLACK,
+        }
+    }
+
+    /// [`Self::spot_intensity`] of a spot (black for other lights), its texture looked up by
+    /// `Texture::eval_inline` where `INLINE` (the same value as `eval`).
+    #[inline(always)]
+    fn spot_intensity_with<const INLINE: bool>(&self, w: Vec3) -> Rgb {
+        match self {
             Light::Spot { frame, intensity, texture, .. } => {
                 let fall = self.spot_falloff(w);
                 if fall <= 0.0 {
@@ -93,13 +105,32 @@ impl Light {
                 if let (Some(tex), Light::Spot { tan_cutoff, .. }) = (texture, self) {
                     let l = frame.to_local(w);
                     let k = 0.5 / (l.z * tan_cutoff);
-                    i *= tex.eval(glam::Vec2::new(0.5 + l.x * k, 0.5 + l.y * k));
+                    let uv = glam::Vec2::new(0.5 + l.x * k, 0.5 + l.y * k);
+                    i *= if INLINE { tex.eval_inline(&uv.into()) } else { tex.eval(uv) };
                 }
                 i
             }
-            Light::Luminaire(l) => l.intensity(w),
             _ => Rgb::BLACK,
         }
+    }
+
+    /// [`Light::sample_li`] of a spot from `p_ref` (None for other lights), inline at the call
+    /// site with its texture's bilinear lookup too (`Texture::eval_inline`): for a caller's
+    /// vector build (`direct`'s lockstep tiles), where its floors are single instructions.
+    #[inline(always)]
+    pub fn spot_sample_li_inline(&self, p_ref: Vec3) -> Option<super::LightSample> {
+        let Light::Spot { position, .. } = self else { return None };
+        let d = *position - p_ref;
+        let dist2 = d.length_squared();
+        if dist2 == 0.0 {
+            return None;
+        }
+        let wi = d / dist2.sqrt();
+        let i = self.spot_intensity_with::<true>(-wi);
+        if i.is_black() {
+            return None;
+        }
+        Some(super::LightSample { wi, li: i / dist2, pdf: 1.0, p: *position, n: Vec3::ZERO, infinite: false })
     }
 }
 

@@ -373,6 +373,7 @@ impl Scene {
 
     /// The ray [`Self::occluded_between`] tests (None: the offset ends coincide and nothing
     /// can block), for callers that test several at once.
+    #[inline]
     pub fn shadow_ray(&self, p0: Vec3, n0: Vec3, p1: Vec3, n1: Vec3, time: f32) -> Option<Ray> {
         let d = p1 - p0;
         let o = crate::geometry::ray::offset_ray_origin(p0, n0, d);
@@ -426,6 +427,18 @@ impl Scene {
             // No uv parameterisation: the shading frame's axes stand in.
             Geometry::SdfGrid(_) => (si.shading.s, si.shading.t),
         }
+    }
+
+    /// [`Self::bsdf`], a Lambertian of constant reflectance without detail built inline (the
+    /// same BSDF): for a caller's vector build, where the call cost more than building it.
+    #[inline(always)]
+    pub fn bsdf_inline(&self, si: &SurfaceInteraction) -> crate::bsdf::Bsdf {
+        if let (crate::bsdf::Material::Diffuse { reflectance: crate::texture::Texture::Constant(c) }, false) =
+            (self.material(si), self.shapes[si.shape as usize].detail)
+        {
+            return crate::bsdf::Bsdf::new(crate::bsdf::BsdfModel::Diffuse(crate::bsdf::diffuse::Diffuse { reflectance: c.clamp(0.0, 1.0) }));
+        }
+        self.bsdf(si)
     }
 
     /// The area light of the shape hit, if it emits.
