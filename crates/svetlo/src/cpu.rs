@@ -34,12 +34,16 @@ pub fn fma() -> bool {
     false
 }
 
-/// AVX2 with AVX-512F and AVX-512VL: the eight-lane steps' 32-register copies.
+/// AVX2 with AVX-512F, VL and DQ: the eight-lane steps' 32-register copies (DQ: the path
+/// kernel's 64-bit multiplies).
 #[inline]
 pub fn avx512() -> bool {
     #[cfg(target_arch = "x86_64")]
     {
-        avx2() && std::arch::is_x86_feature_detected!("avx512f") && std::arch::is_x86_feature_detected!("avx512vl")
+        avx2()
+            && std::arch::is_x86_feature_detected!("avx512f")
+            && std::arch::is_x86_feature_detected!("avx512vl")
+            && std::arch::is_x86_feature_detected!("avx512dq")
     }
     #[cfg(not(target_arch = "x86_64"))]
     false

@@ -908,7 +908,7 @@ pub struct PacketSpheres {
     rr_cull: Vec<f32>,
     /// Radius squared in f32 (the reach test of `test_avx2`).
     rr32: Vec<f32>,
-    simd: bool,
+    isa: Isa,
 }
 
 /// Relative slack of the f32 cull that skips a sphere on the lanes whose ray passes surely
@@ -934,7 +934,7 @@ impl PacketSpheres {
             rr32: spheres.iter().map(|s| s.radius * s.radius).collect(),
             r,
             spheres: spheres.to_vec(),
-            simd: Isa::detect() > Isa::Portable,
+            isa: Isa::detect(),
         }
     }
 
@@ -956,9 +956,12 @@ impl PacketSpheres {
             return ([u32::MAX; LANES], 0);
         }
         #[cfg(target_arch = "x86_64")]
-        if self.simd {
-            // SAFETY: `simd` is set only where the CPU has AVX2.
-            return unsafe { self.test_avx2::<false>(r, active, t) };
+        match self.isa {
+            // SAFETY: `isa` is at most what the CPU runs (`Isa::detect`).
+            Isa::Avx512 => return unsafe { self.test_avx512::<false>(r, active, t) },
+            // SAFETY: as above.
+            Isa::Avx2 => return unsafe { self.test_avx2::<false>(r, active, t) },
+            Isa::Portable => {}
         }
         self.test_lanes::<false>(r, active, t)
     }
@@ -971,9 +974,15 @@ impl PacketSpheres {
         }
         let mut t = r.t_max;
         #[cfg(target_arch = "x86_64")]
-        if self.simd {
-            // SAFETY: `simd` is set only where the CPU has AVX2.
-            let (ids, unsure) = unsafe { self.test_avx2::<true>(r, active, &mut t) };
+        if self.isa > Isa::Portable {
+            // SAFETY: `isa` is at most what the CPU runs (`Isa::detect`).
+            let (ids, unsure) = unsafe {
+                if self.isa == Isa::Avx512 {
+                    self.test_avx512::<true>(r, active, &mut t)
+                } else {
+                    self.test_avx2::<true>(r, active, &mut t)
+                }
+            };
             return (lanes_of(&ids), unsure);
         }
         let (ids, unsure) = self.test_lanes::<true>(r, active, &mut t);
@@ -1024,184 +1033,195 @@ fn lanes_of(ids: &SphereIds) -> u8 {
     (0..LANES).filter(|&l| ids[l] != u32::MAX).fold(0, |m, l| m | 1 << l)
 }
 
+/// `PacketSpheres::test_avx2` and its AVX-512VL copy (32 registers, broadcast operands):
+/// one body.
 #[cfg(target_arch = "x86_64")]
-impl PacketSpheres {
-    /// `test_lanes` in two halves of four f64 lanes: `Sphere::intersect`'s operations in
-    /// its order (no fused multiply-adds), so the same bits.
-    ///
-    /// # Safety
-    /// The CPU must support AVX2.
-    #[target_feature(enable = "avx2")]
-    unsafe fn test_avx2<const ANY: bool>(&self, r: &Rays8, active: u8, t: &mut [f32; LANES]) -> (SphereIds, u8) {
-        use std::arch::x86_64::*;
-        let sign = _mm256_set1_pd(-0.0);
-        let abs = |x: __m256d| _mm256_andnot_pd(sign, x);
-        let zero = _mm256_setzero_pd();
-        let dot =
-            |a: [__m256d; 3], b: [__m256d; 3]| _mm256_add_pd(_mm256_add_pd(_mm256_mul_pd(a[0], b[0]), _mm256_mul_pd(a[1], b[1])), _mm256_mul_pd(a[2], b[2]));
-        // Per half, where a lane of it passes a sphere's cull (rarely: they are made there, not
-        // ahead for every call): origin (f32: the scalar test subtracts the center in f32),
-        // direction, |d|^2, its largest component, t_max and the live lanes.
-        // (Not `map`ped: `array::map` stayed a call, with the closures' AVX code out of line
-        // behind it, 2.5 % of veach-mis's instructions.)
-        let half_o = |h: usize| {
-            let f = |a: usize| _mm_loadu_ps(r.o[a].as_ptr().add(4 * h));
-            [f(0), f(1), f(2)]
-        };
-        let half_d = |h: usize| {
-            let f = |a: usize| _mm256_cvtps_pd(_mm_loadu_ps(r.d[a].as_ptr().add(4 * h)));
-            [f(0), f(1), f(2)]
-        };
-        let max_abs = |d: [__m256d; 3]| _mm256_max_pd(_mm256_max_pd(abs(d[0]), abs(d[1])), abs(d[2]));
-        let half_t = |h: usize| _mm256_cvtps_pd(_mm_loadu_ps(t.as_ptr().add(4 * h)));
-        let lane_bits = _mm256_setr_epi64x(1, 2, 4, 8);
-        let half_mask = |bits: u8, h: usize| {
-            let m = _mm256_set1_epi64x(((bits >> (4 * h)) & 0xf) as i64);
-            _mm256_castsi256_pd(_mm256_cmpeq_epi64(_mm256_and_si256(m, lane_bits), lane_bits))
-        };
-        // The lanes still to test (with ANY, a lane surely blocked leaves).
-        let mut live = active;
-        // Whether any lane reached the f64 test (else nothing was met).
-        let mut tested = false;
-        // The cull's operands: eight lanes of f32.
-        let o8 = [_mm256_loadu_ps(r.o[0].as_ptr()), _mm256_loadu_ps(r.o[1].as_ptr()), _mm256_loadu_ps(r.o[2].as_ptr())];
-        let d8 = [_mm256_loadu_ps(r.d[0].as_ptr()), _mm256_loadu_ps(r.d[1].as_ptr()), _mm256_loadu_ps(r.d[2].as_ptr())];
-        let dot8 =
-            |a: [__m256; 3], b: [__m256; 3]| _mm256_add_ps(_mm256_add_ps(_mm256_mul_ps(a[0], b[0]), _mm256_mul_ps(a[1], b[1])), _mm256_mul_ps(a[2], b[2]));
-        let a8 = dot8(d8, d8);
-        // |d|^2 t_max, widened by REACH_TOL (infinite where t_max is: then nothing is beyond it),
-        // for the reach test below.
-        let reach_tol = _mm256_set1_ps(1.0 + REACH_TOL);
-        let at8 = _mm256_mul_ps(_mm256_mul_ps(a8, _mm256_loadu_ps(t.as_ptr())), reach_tol);
-        let mut best = [_mm256_set1_pd(f64::INFINITY); 2];
-        let mut best_id = [_mm256_set1_pd(f64::from_bits(u32::MAX as u64)); 2];
-        let mut near = [zero; 2];
-        // With ANY: lanes with a hit outside rounding of the box / with any hit.
-        let mut sure = [zero; 2];
-        let mut any = [zero; 2];
-        for (k, s) in self.spheres.iter().enumerate() {
-            let c = [_mm_set1_ps(s.center.x), _mm_set1_ps(s.center.y), _mm_set1_ps(s.center.z)];
-            let (rk, rr) = (_mm256_set1_pd(self.r[k]), _mm256_set1_pd(self.rr[k]));
-            let tol = _mm256_sub_pd(rk, _mm256_set1_pd(self.margin[k]));
-            let id = _mm256_set1_pd(f64::from_bits(k as u64));
-            // Cull: the lanes whose ray passes farther from the center than the radius, by a
-            // margin above the rounding (|(o - c) x d|^2 > |d|^2 (r^2 + tol |o - c|^2)).
-            let oc8_at = |ax: usize| _mm256_sub_ps(o8[ax], _mm256_set1_ps(s.center[ax]));
-            let oc8 = [oc8_at(0), oc8_at(1), oc8_at(2)];
-            let cross = |i: usize, j: usize| _mm256_sub_ps(_mm256_mul_ps(oc8[i], d8[j]), _mm256_mul_ps(oc8[j], d8[i]));
-            let cr = [cross(1, 2), cross(2, 0), cross(0, 1)];
-            let oc2 = dot8(oc8, oc8);
-            let cr2 = dot8(cr, cr);
-            let bound = _mm256_mul_ps(a8, _mm256_add_ps(_mm256_set1_ps(self.rr_cull[k]), _mm256_mul_ps(_mm256_set1_ps(CULL_TOL), oc2)));
-            let near_lanes = _mm256_movemask_ps(_mm256_cmp_ps::<_CMP_LE_OQ>(cr2, bound)) as u8;
-            let mut lanes = near_lanes & live;
-            // (Shadow rays only: the closest-hit rays it spared too few f64 tests to pay.)
-            if ANY && lanes != 0 {
-                // Out of reach: the lanes whose ray meets the sphere only past t_max (a shadow
-                // ray toward a point on it) or only behind its origin. In units of |d|^2 t the
-                // roots are -b -+ sqrt(X), X = r^2 |d|^2 - |oc x d|^2 (= |d|^2 disc). With
-                // E = |oc|^2 |d|^2 and u = 2^-24, the rounding of X is below
-                // 8u (|oc x d| sqrt(E) + |oc x d|^2 + r^2 |d|^2) + 16u^2 E (the cross product's
-                // components are off by 2u |oc||d| each), that of b below 3u sqrt(E). The bound
-                // `s` on sqrt(X) takes four times the former under the root, and 1e-6 sqrt(E) for
-                // the latter and the f64 test's rounding (below 1e-8 sqrt(E)). Where a lane is out
-                // of reach by s, the f64 test finds no root in (0, t_max): skipping it keeps
-                // every bit.
-                let ru = _mm256_set1_ps(32.0 * f32::EPSILON * 0.5);
-                let rra = _mm256_mul_ps(_mm256_set1_ps(self.rr32[k]), a8);
-                let e = _mm256_mul_ps(oc2, a8);
-                let se = _mm256_sqrt_ps(e);
-                let dx = _mm256_add_ps(
-                    _mm256_mul_ps(ru, _mm256_add_ps(_mm256_mul_ps(_mm256_sqrt_ps(cr2), se), _mm256_add_ps(cr2, rra))),
-                    _mm256_mul_ps(_mm256_mul_ps(ru, ru), e),
-                );
-                let s = _mm256_sqrt_ps(_mm256_max_ps(_mm256_add_ps(_mm256_sub_ps(rra, cr2), dx), _mm256_setzero_ps()));
-                let s = _mm256_add_ps(_mm256_mul_ps(s, _mm256_set1_ps(1.0 + 1e-6)), _mm256_mul_ps(se, _mm256_set1_ps(1e-6)));
-                let nb = _mm256_xor_ps(dot8(oc8, d8), _mm256_set1_ps(-0.0));
-                let past = _mm256_cmp_ps::<_CMP_GT_OQ>(_mm256_sub_ps(nb, s), at8);
-                let behind = _mm256_cmp_ps::<_CMP_LT_OQ>(_mm256_add_ps(nb, s), _mm256_setzero_ps());
-                lanes &= !(_mm256_movemask_ps(_mm256_or_ps(past, behind)) as u8);
+macro_rules! sphere_test_simd {
+    ($name:ident, $feat:literal) => {
+        /// `test_lanes` in two halves of four f64 lanes: `Sphere::intersect`'s operations in
+        /// its order (no fused multiply-adds), so the same bits.
+        ///
+        /// # Safety
+        /// The CPU must support the target features of this function.
+        #[target_feature(enable = $feat)]
+        unsafe fn $name<const ANY: bool>(&self, r: &Rays8, active: u8, t: &mut [f32; LANES]) -> (SphereIds, u8) {
+            use std::arch::x86_64::*;
+            let sign = _mm256_set1_pd(-0.0);
+            let abs = |x: __m256d| _mm256_andnot_pd(sign, x);
+            let zero = _mm256_setzero_pd();
+            let dot = |a: [__m256d; 3], b: [__m256d; 3]| {
+                _mm256_add_pd(_mm256_add_pd(_mm256_mul_pd(a[0], b[0]), _mm256_mul_pd(a[1], b[1])), _mm256_mul_pd(a[2], b[2]))
+            };
+            // Per half, where a lane of it passes a sphere's cull (rarely: they are made there, not
+            // ahead for every call): origin (f32: the scalar test subtracts the center in f32),
+            // direction, |d|^2, its largest component, t_max and the live lanes.
+            // (Not `map`ped: `array::map` stayed a call, with the closures' AVX code out of line
+            // behind it, 2.5 % of veach-mis's instructions.)
+            let half_o = |h: usize| {
+                let f = |a: usize| _mm_loadu_ps(r.o[a].as_ptr().add(4 * h));
+                [f(0), f(1), f(2)]
+            };
+            let half_d = |h: usize| {
+                let f = |a: usize| _mm256_cvtps_pd(_mm_loadu_ps(r.d[a].as_ptr().add(4 * h)));
+                [f(0), f(1), f(2)]
+            };
+            let max_abs = |d: [__m256d; 3]| _mm256_max_pd(_mm256_max_pd(abs(d[0]), abs(d[1])), abs(d[2]));
+            let half_t = |h: usize| _mm256_cvtps_pd(_mm_loadu_ps(t.as_ptr().add(4 * h)));
+            let lane_bits = _mm256_setr_epi64x(1, 2, 4, 8);
+            let half_mask = |bits: u8, h: usize| {
+                let m = _mm256_set1_epi64x(((bits >> (4 * h)) & 0xf) as i64);
+                _mm256_castsi256_pd(_mm256_cmpeq_epi64(_mm256_and_si256(m, lane_bits), lane_bits))
+            };
+            // The lanes still to test (with ANY, a lane surely blocked leaves).
+            let mut live = active;
+            // Whether any lane reached the f64 test (else nothing was met).
+            let mut tested = false;
+            // The cull's operands: eight lanes of f32.
+            let o8 = [_mm256_loadu_ps(r.o[0].as_ptr()), _mm256_loadu_ps(r.o[1].as_ptr()), _mm256_loadu_ps(r.o[2].as_ptr())];
+            let d8 = [_mm256_loadu_ps(r.d[0].as_ptr()), _mm256_loadu_ps(r.d[1].as_ptr()), _mm256_loadu_ps(r.d[2].as_ptr())];
+            let dot8 =
+                |a: [__m256; 3], b: [__m256; 3]| _mm256_add_ps(_mm256_add_ps(_mm256_mul_ps(a[0], b[0]), _mm256_mul_ps(a[1], b[1])), _mm256_mul_ps(a[2], b[2]));
+            let a8 = dot8(d8, d8);
+            // |d|^2 t_max, widened by REACH_TOL (infinite where t_max is: then nothing is beyond it),
+            // for the reach test below.
+            let reach_tol = _mm256_set1_ps(1.0 + REACH_TOL);
+            let at8 = _mm256_mul_ps(_mm256_mul_ps(a8, _mm256_loadu_ps(t.as_ptr())), reach_tol);
+            let mut best = [_mm256_set1_pd(f64::INFINITY); 2];
+            let mut best_id = [_mm256_set1_pd(f64::from_bits(u32::MAX as u64)); 2];
+            let mut near = [zero; 2];
+            // With ANY: lanes with a hit outside rounding of the box / with any hit.
+            let mut sure = [zero; 2];
+            let mut any = [zero; 2];
+            for (k, s) in self.spheres.iter().enumerate() {
+                let c = [_mm_set1_ps(s.center.x), _mm_set1_ps(s.center.y), _mm_set1_ps(s.center.z)];
+                let (rk, rr) = (_mm256_set1_pd(self.r[k]), _mm256_set1_pd(self.rr[k]));
+                let tol = _mm256_sub_pd(rk, _mm256_set1_pd(self.margin[k]));
+                let id = _mm256_set1_pd(f64::from_bits(k as u64));
+                // Cull: the lanes whose ray passes farther from the center than the radius, by a
+                // margin above the rounding (|(o - c) x d|^2 > |d|^2 (r^2 + tol |o - c|^2)).
+                let oc8_at = |ax: usize| _mm256_sub_ps(o8[ax], _mm256_set1_ps(s.center[ax]));
+                let oc8 = [oc8_at(0), oc8_at(1), oc8_at(2)];
+                let cross = |i: usize, j: usize| _mm256_sub_ps(_mm256_mul_ps(oc8[i], d8[j]), _mm256_mul_ps(oc8[j], d8[i]));
+                let cr = [cross(1, 2), cross(2, 0), cross(0, 1)];
+                let oc2 = dot8(oc8, oc8);
+                let cr2 = dot8(cr, cr);
+                let bound = _mm256_mul_ps(a8, _mm256_add_ps(_mm256_set1_ps(self.rr_cull[k]), _mm256_mul_ps(_mm256_set1_ps(CULL_TOL), oc2)));
+                let near_lanes = _mm256_movemask_ps(_mm256_cmp_ps::<_CMP_LE_OQ>(cr2, bound)) as u8;
+                let mut lanes = near_lanes & live;
+                // (Shadow rays only: the closest-hit rays it spared too few f64 tests to pay.)
+                if ANY && lanes != 0 {
+                    // Out of reach: the lanes whose ray meets the sphere only past t_max (a shadow
+                    // ray toward a point on it) or only behind its origin. In units of |d|^2 t the
+                    // roots are -b -+ sqrt(X), X = r^2 |d|^2 - |oc x d|^2 (= |d|^2 disc). With
+                    // E = |oc|^2 |d|^2 and u = 2^-24, the rounding of X is below
+                    // 8u (|oc x d| sqrt(E) + |oc x d|^2 + r^2 |d|^2) + 16u^2 E (the cross product's
+                    // components are off by 2u |oc||d| each), that of b below 3u sqrt(E). The bound
+                    // `s` on sqrt(X) takes four times the former under the root, and 1e-6 sqrt(E) for
+                    // the latter and the f64 test's rounding (below 1e-8 sqrt(E)). Where a lane is out
+                    // of reach by s, the f64 test finds no root in (0, t_max): skipping it keeps
+                    // every bit.
+                    let ru = _mm256_set1_ps(32.0 * f32::EPSILON * 0.5);
+                    let rra = _mm256_mul_ps(_mm256_set1_ps(self.rr32[k]), a8);
+                    let e = _mm256_mul_ps(oc2, a8);
+                    let se = _mm256_sqrt_ps(e);
+                    let dx = _mm256_add_ps(
+                        _mm256_mul_ps(ru, _mm256_add_ps(_mm256_mul_ps(_mm256_sqrt_ps(cr2), se), _mm256_add_ps(cr2, rra))),
+                        _mm256_mul_ps(_mm256_mul_ps(ru, ru), e),
+                    );
+                    let s = _mm256_sqrt_ps(_mm256_max_ps(_mm256_add_ps(_mm256_sub_ps(rra, cr2), dx), _mm256_setzero_ps()));
+                    let s = _mm256_add_ps(_mm256_mul_ps(s, _mm256_set1_ps(1.0 + 1e-6)), _mm256_mul_ps(se, _mm256_set1_ps(1e-6)));
+                    let nb = _mm256_xor_ps(dot8(oc8, d8), _mm256_set1_ps(-0.0));
+                    let past = _mm256_cmp_ps::<_CMP_GT_OQ>(_mm256_sub_ps(nb, s), at8);
+                    let behind = _mm256_cmp_ps::<_CMP_LT_OQ>(_mm256_add_ps(nb, s), _mm256_setzero_ps());
+                    lanes &= !(_mm256_movemask_ps(_mm256_or_ps(past, behind)) as u8);
+                }
+                for h in 0..2 {
+                    if (lanes >> (4 * h)) & 0xf == 0 {
+                        continue;
+                    }
+                    tested = true;
+                    let (o, d) = (half_o(h), half_d(h));
+                    let a = dot(d, d);
+                    let oc_at = |ax: usize| _mm256_cvtps_pd(_mm_sub_ps(o[ax], c[ax]));
+                    let oc = [oc_at(0), oc_at(1), oc_at(2)];
+                    let b = dot(oc, d);
+                    let ba = _mm256_div_pd(b, a);
+                    let l_at = |ax: usize| _mm256_sub_pd(oc[ax], _mm256_mul_pd(d[ax], ba));
+                    let l = [l_at(0), l_at(1), l_at(2)];
+                    let disc = _mm256_sub_pd(rr, dot(l, l));
+                    let go = _mm256_and_pd(half_mask(live, h), _mm256_cmp_pd::<_CMP_GE_OQ>(disc, zero));
+                    if _mm256_movemask_pd(go) == 0 {
+                        continue;
+                    }
+                    let cc = _mm256_sub_pd(dot(oc, oc), rr);
+                    let root = _mm256_sqrt_pd(_mm256_mul_pd(a, disc));
+                    // b.signum() (b is not NaN where the lane goes on).
+                    let sgn = _mm256_or_pd(_mm256_and_pd(b, sign), _mm256_set1_pd(1.0));
+                    let q = _mm256_xor_pd(_mm256_add_pd(b, _mm256_mul_pd(sgn, root)), sign);
+                    let q0 = _mm256_cmp_pd::<_CMP_EQ_OQ>(q, zero);
+                    let t0 = _mm256_andnot_pd(q0, _mm256_div_pd(cc, q));
+                    let t1 = _mm256_andnot_pd(q0, _mm256_div_pd(q, a));
+                    let swap = _mm256_cmp_pd::<_CMP_GT_OQ>(t0, t1);
+                    let (lo, hi) = (_mm256_blendv_pd(t0, t1, swap), _mm256_blendv_pd(t1, t0, swap));
+                    let t_max = half_t(h);
+                    let within = |x| _mm256_and_pd(_mm256_cmp_pd::<_CMP_GT_OQ>(x, zero), _mm256_cmp_pd::<_CMP_LT_OQ>(x, t_max));
+                    let (ok0, ok1) = (within(lo), within(hi));
+                    let th = _mm256_blendv_pd(hi, lo, ok0);
+                    let hit = _mm256_and_pd(go, _mm256_or_pd(ok0, ok1));
+                    if _mm256_movemask_pd(hit) == 0 {
+                        continue;
+                    }
+                    // `near_box`.
+                    let p_at = |ax: usize| abs(_mm256_add_pd(oc[ax], _mm256_mul_pd(th, d[ax])));
+                    let p = [p_at(0), p_at(1), p_at(2)];
+                    let m = _mm256_max_pd(_mm256_max_pd(_mm256_max_pd(p[0], p[1]), p[2]), zero);
+                    let lim = _mm256_sub_pd(tol, _mm256_mul_pd(_mm256_mul_pd(_mm256_set1_pd(SPHERE_BOX_TOL), th), max_abs(d)));
+                    let nb = _mm256_cmp_pd::<_CMP_GT_OQ>(m, lim);
+                    if ANY {
+                        any[h] = _mm256_or_pd(any[h], hit);
+                        sure[h] = _mm256_or_pd(sure[h], _mm256_andnot_pd(nb, hit));
+                        best_id[h] = _mm256_blendv_pd(best_id[h], id, hit);
+                        // A lane surely blocked needs no further sphere.
+                        live &= !((_mm256_movemask_pd(sure[h]) as u8 & 0xf) << (4 * h));
+                        continue;
+                    }
+                    // The distance as f32 decides, as the scalar walk's t_max is f32.
+                    let th32 = _mm256_cvtps_pd(_mm256_cvtpd_ps(th));
+                    let closer = _mm256_and_pd(hit, _mm256_cmp_pd::<_CMP_LT_OQ>(th32, best[h]));
+                    let tie = _mm256_and_pd(hit, _mm256_cmp_pd::<_CMP_EQ_OQ>(th32, best[h]));
+                    best[h] = _mm256_blendv_pd(best[h], th32, closer);
+                    best_id[h] = _mm256_blendv_pd(best_id[h], id, closer);
+                    near[h] = _mm256_or_pd(_mm256_blendv_pd(near[h], nb, closer), tie);
+                }
+            }
+            let mut ids = [u32::MAX; LANES];
+            let mut unsure = 0u8;
+            if !tested {
+                return (ids, unsure);
             }
             for h in 0..2 {
-                if (lanes >> (4 * h)) & 0xf == 0 {
-                    continue;
+                let mut id = [0u64; 4];
+                _mm256_storeu_pd(id.as_mut_ptr() as *mut f64, best_id[h]);
+                let mut bt = [0.0f64; 4];
+                _mm256_storeu_pd(bt.as_mut_ptr(), best[h]);
+                for j in 0..4 {
+                    ids[4 * h + j] = id[j] as u32;
+                    if !ANY && id[j] as u32 != u32::MAX {
+                        t[4 * h + j] = bt[j] as f32;
+                    }
                 }
-                tested = true;
-                let (o, d) = (half_o(h), half_d(h));
-                let a = dot(d, d);
-                let oc_at = |ax: usize| _mm256_cvtps_pd(_mm_sub_ps(o[ax], c[ax]));
-                let oc = [oc_at(0), oc_at(1), oc_at(2)];
-                let b = dot(oc, d);
-                let ba = _mm256_div_pd(b, a);
-                let l_at = |ax: usize| _mm256_sub_pd(oc[ax], _mm256_mul_pd(d[ax], ba));
-                let l = [l_at(0), l_at(1), l_at(2)];
-                let disc = _mm256_sub_pd(rr, dot(l, l));
-                let go = _mm256_and_pd(half_mask(live, h), _mm256_cmp_pd::<_CMP_GE_OQ>(disc, zero));
-                if _mm256_movemask_pd(go) == 0 {
-                    continue;
-                }
-                let cc = _mm256_sub_pd(dot(oc, oc), rr);
-                let root = _mm256_sqrt_pd(_mm256_mul_pd(a, disc));
-                // b.signum() (b is not NaN where the lane goes on).
-                let sgn = _mm256_or_pd(_mm256_and_pd(b, sign), _mm256_set1_pd(1.0));
-                let q = _mm256_xor_pd(_mm256_add_pd(b, _mm256_mul_pd(sgn, root)), sign);
-                let q0 = _mm256_cmp_pd::<_CMP_EQ_OQ>(q, zero);
-                let t0 = _mm256_andnot_pd(q0, _mm256_div_pd(cc, q));
-                let t1 = _mm256_andnot_pd(q0, _mm256_div_pd(q, a));
-                let swap = _mm256_cmp_pd::<_CMP_GT_OQ>(t0, t1);
-                let (lo, hi) = (_mm256_blendv_pd(t0, t1, swap), _mm256_blendv_pd(t1, t0, swap));
-                let t_max = half_t(h);
-                let within = |x| _mm256_and_pd(_mm256_cmp_pd::<_CMP_GT_OQ>(x, zero), _mm256_cmp_pd::<_CMP_LT_OQ>(x, t_max));
-                let (ok0, ok1) = (within(lo), within(hi));
-                let th = _mm256_blendv_pd(hi, lo, ok0);
-                let hit = _mm256_and_pd(go, _mm256_or_pd(ok0, ok1));
-                if _mm256_movemask_pd(hit) == 0 {
-                    continue;
-                }
-                // `near_box`.
-                let p_at = |ax: usize| abs(_mm256_add_pd(oc[ax], _mm256_mul_pd(th, d[ax])));
-                let p = [p_at(0), p_at(1), p_at(2)];
-                let m = _mm256_max_pd(_mm256_max_pd(_mm256_max_pd(p[0], p[1]), p[2]), zero);
-                let lim = _mm256_sub_pd(tol, _mm256_mul_pd(_mm256_mul_pd(_mm256_set1_pd(SPHERE_BOX_TOL), th), max_abs(d)));
-                let nb = _mm256_cmp_pd::<_CMP_GT_OQ>(m, lim);
-                if ANY {
-                    any[h] = _mm256_or_pd(any[h], hit);
-                    sure[h] = _mm256_or_pd(sure[h], _mm256_andnot_pd(nb, hit));
-                    best_id[h] = _mm256_blendv_pd(best_id[h], id, hit);
-                    // A lane surely blocked needs no further sphere.
-                    live &= !((_mm256_movemask_pd(sure[h]) as u8 & 0xf) << (4 * h));
-                    continue;
-                }
-                // The distance as f32 decides, as the scalar walk's t_max is f32.
-                let th32 = _mm256_cvtps_pd(_mm256_cvtpd_ps(th));
-                let closer = _mm256_and_pd(hit, _mm256_cmp_pd::<_CMP_LT_OQ>(th32, best[h]));
-                let tie = _mm256_and_pd(hit, _mm256_cmp_pd::<_CMP_EQ_OQ>(th32, best[h]));
-                best[h] = _mm256_blendv_pd(best[h], th32, closer);
-                best_id[h] = _mm256_blendv_pd(best_id[h], id, closer);
-                near[h] = _mm256_or_pd(_mm256_blendv_pd(near[h], nb, closer), tie);
+                let flags = if ANY { _mm256_andnot_pd(sure[h], any[h]) } else { near[h] };
+                unsure |= ((_mm256_movemask_pd(flags) as u8) & 0xf) << (4 * h);
             }
+            (ids, unsure)
         }
-        let mut ids = [u32::MAX; LANES];
-        let mut unsure = 0u8;
-        if !tested {
-            return (ids, unsure);
-        }
-        for h in 0..2 {
-            let mut id = [0u64; 4];
-            _mm256_storeu_pd(id.as_mut_ptr() as *mut f64, best_id[h]);
-            let mut bt = [0.0f64; 4];
-            _mm256_storeu_pd(bt.as_mut_ptr(), best[h]);
-            for j in 0..4 {
-                ids[4 * h + j] = id[j] as u32;
-                if !ANY && id[j] as u32 != u32::MAX {
-                    t[4 * h + j] = bt[j] as f32;
-                }
-            }
-            let flags = if ANY { _mm256_andnot_pd(sure[h], any[h]) } else { near[h] };
-            unsure |= ((_mm256_movemask_pd(flags) as u8) & 0xf) << (4 * h);
-        }
-        (ids, unsure)
-    }
+    };
+}
+
+#[cfg(target_arch = "x86_64")]
+impl PacketSpheres {
+    sphere_test_simd!(test_avx2, "avx2");
+    sphere_test_simd!(test_avx512, "avx2,avx512f,avx512vl");
 }
 
 #[cfg(test)]
@@ -1702,11 +1722,11 @@ mod tests {
         let backward: Vec<usize> = forward.iter().rev().copied().collect();
         let mut packed = PacketSpheres::new(&spheres);
         let (mut lanes, mut unsure_n, mut hits) = (0usize, 0usize, 0usize);
-        for simd in [true, false] {
-            if simd && Isa::cpu() == Isa::Portable {
+        for isa in [Isa::Avx512, Isa::Avx2, Isa::Portable] {
+            if isa > Isa::cpu() {
                 continue;
             }
-            packed.simd = simd;
+            packed.isa = isa;
             for p in 0..4000 {
                 let mut r = Rays8::default();
                 let active = if p % 5 == 0 { (rng.next_u32() & 0xff) as u8 } else { 0xff };
@@ -1748,7 +1768,7 @@ mod tests {
                     }
                     lanes += 1;
                     let want = [&forward, &backward].map(|order| spheres_in_order(&spheres, o, d, r.t_max[l], order));
-                    assert_eq!(blocked & (1 << l) != 0, want[0].is_some(), "simd {simd}: occlusion of lane {l}");
+                    assert_eq!(blocked & (1 << l) != 0, want[0].is_some(), "{isa:?}: occlusion of lane {l}");
                     hits += want[0].is_some() as usize;
                     if occ_unsure & (1 << l) != 0 {
                         assert!(blocked & (1 << l) != 0, "an unsure occlusion is a hit");
@@ -1759,12 +1779,12 @@ mod tests {
                     }
                     for w in want {
                         match w {
-                            None => assert_eq!((ids[l], t[l]), (u32::MAX, r.t_max[l]), "simd {simd}: lane {l}: false hit"),
+                            None => assert_eq!((ids[l], t[l]), (u32::MAX, r.t_max[l]), "{isa:?}: lane {l}: false hit"),
                             // The twin spheres are one surface: either index is the hit.
                             Some((k, th)) => {
                                 let same = ids[l] as usize == k
                                     || (spheres[ids[l] as usize].center == spheres[k].center && spheres[ids[l] as usize].radius == spheres[k].radius);
-                                assert!(same && t[l].to_bits() == th.to_bits(), "simd {simd}: lane {l}: sphere {} at {} for {k} at {th}", ids[l], t[l]);
+                                assert!(same && t[l].to_bits() == th.to_bits(), "{isa:?}: lane {l}: sphere {} at {} for {k} at {th}", ids[l], t[l]);
                             }
                         }
                     }
@@ -1778,8 +1798,8 @@ mod tests {
 
     /// Shadow rays toward points on spheres (t_max short of the point by 1e-4, or within a few
     /// ulps either side of it), rays from the surfaces and from inside, and spheres behind the
-    /// origin: the AVX2 test (whose f32 reach test skips the f64 one on lanes that meet a
-    /// sphere only past t_max or behind them) gives the lane-by-lane test's spheres,
+    /// origin: the AVX2 test and its AVX-512 copy (whose f32 reach test skips the f64 one on
+    /// lanes that meet a sphere only past t_max or behind them) give the lane-by-lane test's spheres,
     /// distances and unsure lanes bit for bit, for nearest hits and occlusion.
     #[test]
     fn sphere_reach_test_keeps_the_bits() {
@@ -1793,7 +1813,7 @@ mod tests {
                 Sphere { center: c, radius: [1.0, 0.5, 0.05, 0.002, 2.0][i], flip_normals: false }
             })
             .collect();
-        let mut packed = PacketSpheres::new(&spheres);
+        let packed = PacketSpheres::new(&spheres);
         let (mut hits, mut near_misses) = (0usize, 0usize);
         for p in 0..20000 {
             let mut r = Rays8::default();
@@ -1825,23 +1845,29 @@ mod tests {
             }
             let active = if p % 7 == 0 { (rng.next_u32() & 0xff) as u8 } else { 0xff };
             for any in [false, true] {
-                packed.simd = true;
-                let mut t_simd = r.t_max;
-                // SAFETY: the CPU has AVX2 (checked above).
-                let (ids_simd, un_simd) = if any {
-                    unsafe { packed.test_avx2::<true>(&r, active, &mut t_simd) }
-                } else {
-                    unsafe { packed.test_avx2::<false>(&r, active, &mut t_simd) }
-                };
-                let mut t_lanes = r.t_max;
-                let (ids_lanes, un_lanes) =
-                    if any { packed.test_lanes::<true>(&r, active, &mut t_lanes) } else { packed.test_lanes::<false>(&r, active, &mut t_lanes) };
-                if any {
-                    assert_eq!((lanes_of(&ids_simd), un_simd), (lanes_of(&ids_lanes), un_lanes), "packet {p}: occlusion");
-                } else {
-                    assert_eq!((ids_simd, un_simd), (ids_lanes, un_lanes), "packet {p}: nearest");
-                    assert_eq!(t_simd.map(f32::to_bits), t_lanes.map(f32::to_bits), "packet {p}: distances");
-                    hits += lanes_of(&ids_lanes).count_ones() as usize;
+                for isa in [Isa::Avx2, Isa::Avx512].into_iter().filter(|&i| i <= Isa::cpu()) {
+                    let mut t_simd = r.t_max;
+                    // SAFETY: the CPU runs `isa` (`Isa::cpu`).
+                    let (ids_simd, un_simd) = unsafe {
+                        match (isa, any) {
+                            (Isa::Avx512, true) => packed.test_avx512::<true>(&r, active, &mut t_simd),
+                            (Isa::Avx512, false) => packed.test_avx512::<false>(&r, active, &mut t_simd),
+                            (_, true) => packed.test_avx2::<true>(&r, active, &mut t_simd),
+                            (_, false) => packed.test_avx2::<false>(&r, active, &mut t_simd),
+                        }
+                    };
+                    let mut t_lanes = r.t_max;
+                    let (ids_lanes, un_lanes) =
+                        if any { packed.test_lanes::<true>(&r, active, &mut t_lanes) } else { packed.test_lanes::<false>(&r, active, &mut t_lanes) };
+                    if any {
+                        assert_eq!((lanes_of(&ids_simd), un_simd), (lanes_of(&ids_lanes), un_lanes), "{isa:?} packet {p}: occlusion");
+                    } else {
+                        assert_eq!((ids_simd, un_simd), (ids_lanes, un_lanes), "{isa:?} packet {p}: nearest");
+                        assert_eq!(t_simd.map(f32::to_bits), t_lanes.map(f32::to_bits), "{isa:?} packet {p}: distances");
+                        if isa == Isa::Avx2 {
+                            hits += lanes_of(&ids_lanes).count_ones() as usize;
+                        }
+                    }
                 }
             }
             for l in (0..LANES).filter(|&l| l % 4 == 1 && active & (1 << l) != 0) {
