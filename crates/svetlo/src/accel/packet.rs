@@ -659,6 +659,8 @@ macro_rules! walk_simd {
                 let mut t_max = _mm256_blendv_ps(_mm256_set1_ps(f32::NEG_INFINITY), ld(&h.t), live);
                 let mut hit_mask = 0u8;
                 let mut ties = 0u8;
+                // The closest hits' barycentrics and ids, kept in registers and stored at the end.
+                let (mut hb1, mut hb2, mut hprim) = (ld(&h.b1), ld(&h.b2), _mm256_loadu_ps(h.prim.as_ptr() as *const f32));
                 let verts = self.verts.as_ptr() as *const f32;
                 // Entries: a code and the entry distances of the lanes that met its box (a
                 // popped entry that no lane can still improve on is skipped).
@@ -786,14 +788,12 @@ macro_rules! walk_simd {
                                 continue;
                             }
                             t_max = _mm256_blendv_ps(t_max, t, ok);
-                            // Barycentrics and ids live in memory (registers are scarce); the
-                            // closest-hit walk blends them in on every test, hit or not (no branch).
-                            let keep = |dst: &mut [f32; LANES], x: __m256| _mm256_storeu_ps(dst.as_mut_ptr(), _mm256_blendv_ps(ld(dst), x, ok));
-                            keep(&mut h.b1, b1);
-                            keep(&mut h.b2, b2);
+                            // The closest-hit walk blends barycentrics and ids in on every test,
+                            // hit or not (no branch).
                             let id = _mm256_castsi256_ps(_mm256_set1_epi32(*self.ids.get_unchecked(i) as i32));
-                            let pp = h.prim.as_mut_ptr() as *mut f32;
-                            _mm256_storeu_ps(pp, _mm256_blendv_ps(_mm256_loadu_ps(pp), id, ok));
+                            hb1 = _mm256_blendv_ps(hb1, b1, ok);
+                            hb2 = _mm256_blendv_ps(hb2, b2, ok);
+                            hprim = _mm256_blendv_ps(hprim, id, ok);
                         }
                     } else {
                         let node = self.nodes.get_unchecked(code as usize);
@@ -872,6 +872,9 @@ macro_rules! walk_simd {
                     // `prim`, `b1` and `b2` were only ever written where a lane hit.
                     let hit = _mm256_castsi256_ps(_mm256_cmpgt_epi32(_mm256_and_si256(_mm256_set1_epi32(hit_mask as i32), lane_bits), zero_i));
                     _mm256_storeu_ps(h.t.as_mut_ptr(), _mm256_blendv_ps(ld(&r.t_max), t_max, hit));
+                    _mm256_storeu_ps(h.b1.as_mut_ptr(), hb1);
+                    _mm256_storeu_ps(h.b2.as_mut_ptr(), hb2);
+                    _mm256_storeu_ps(h.prim.as_mut_ptr() as *mut f32, hprim);
                     return ties;
                 }
                 hit_mask
