@@ -87,6 +87,7 @@ use crate::geometry::ray::SHADOW_EPSILON;
 use crate::geometry::Ray;
 use crate::geometry::{Geometry, Sphere, SurfaceInteraction, TriangleShading};
 use crate::light::area::{SphereLanes, SphereSamples};
+use crate::light::envmap::EnvCells;
 use crate::light::{AreaLight, EnvMap, Light, LightSample};
 use crate::lpe::{AovSet, ForwardView, LayerMask, MAX_LAYERS};
 use crate::math::lane::{cosine_hemisphere, dot3, lanes_of, offset3};
@@ -1306,8 +1307,9 @@ impl SimdKernel {
         let env_ahead = env_map.filter(|env| env.large());
         if let Some(env) = env_ahead {
             v.env_grid = env.dirs_to_grid(&rays.d);
+            v.env_cells = env.cells_of(&v.env_grid);
             for l in (0..LANES).filter(|l| active & (1 << l) != 0) {
-                env.prefetch_at(Vec2::new(v.env_grid[0][l], v.env_grid[1][l]));
+                env.prefetch_in(&v.env_cells, l);
             }
         }
         let hits = self.tracer.intersect(scene, rays, &st.time, active, others);
@@ -1321,6 +1323,7 @@ impl SimdKernel {
         if let Some(env) = env_map.filter(|_| env_ahead.is_none()) {
             if (0..LANES).any(|l| active & (1 << l) != 0 && hits.prim[l] != OTHER && !self.geometry.is_triangle(hits.prim[l])) {
                 v.env_grid = env.dirs_to_grid(&rays.d);
+                v.env_cells = env.cells_of(&v.env_grid);
             }
         }
         // Every active lane's numbers for this vertex, where the sampler draws them for
@@ -2091,7 +2094,7 @@ impl SimdKernel {
         // An environment map locates the direction once for its radiance and its density
         // (render_tile located the escaped lanes' directions together).
         let (le, pdf_light) = match light {
-            Light::EnvMap(env) => env.eval_pdf_at(Vec2::new(v.env_grid[0][l], v.env_grid[1][l]), v.env_grid[2][l], !st.num.prev_specular[l]),
+            Light::EnvMap(env) => env.eval_pdf_in(&v.env_cells, l, v.env_grid[2][l], !st.num.prev_specular[l]),
             _ => light.le_pdf_escaped(d, !st.num.prev_specular[l]),
         };
         if le.is_black() {
@@ -2447,6 +2450,8 @@ struct Soa {
     /// The rays' grid points (u, v) and sin θ in the environment map (`EnvMap::dirs_to_grid`),
     /// set when some lane escaped.
     env_grid: [[f32; LANES]; 3],
+    /// Their cells in its grid (`EnvMap::cells_of`).
+    env_cells: EnvCells<LANES>,
 }
 
 impl VertexNums {

@@ -55,6 +55,22 @@ impl Texel {
     }
 }
 
+/// `N` lanes' grid points located in the map's grid (see [`EnvMap::cells_of`]): each
+/// one's cell (column `ix`, row `iy`) and its place in it (`fx`, `fy`).
+#[derive(Clone, Copy, Debug)]
+pub struct EnvCells<const N: usize> {
+    ix: [u32; N],
+    iy: [u32; N],
+    fx: [f32; N],
+    fy: [f32; N],
+}
+
+impl<const N: usize> Default for EnvCells<N> {
+    fn default() -> Self {
+        EnvCells { ix: [0; N], iy: [0; N], fx: [0.0; N], fy: [0.0; N] }
+    }
+}
+
 impl EnvMap {
     /// Build the map and its sampling distribution. Degenerate images (empty, one row)
     /// are padded so that nothing downstream can index out of range.
@@ -132,6 +148,17 @@ impl EnvMap {
     #[inline(always)]
     pub fn prefetch_at(&self, g: Vec2) {
         let (ix, iy, _, _) = self.dist.locate(g);
+        self.prefetch_cell(ix, iy);
+    }
+
+    /// [`Self::prefetch_at`] of lane `l` of `cells` (as [`Self::cells_of`] gives them).
+    #[inline(always)]
+    pub fn prefetch_in<const N: usize>(&self, cells: &EnvCells<N>, l: usize) {
+        self.prefetch_cell(cells.ix[l] as usize, cells.iy[l] as usize);
+    }
+
+    #[inline(always)]
+    fn prefetch_cell(&self, ix: usize, iy: usize) {
         let i = iy * (self.dist.cols + 1) + ix;
         let t = self.dist.texels.as_ptr();
         // The cell's corners: two in each of two rows (one line a row, but where the first
@@ -184,10 +211,22 @@ impl EnvMap {
     /// [`Self::dirs_to_grid`] locates it).
     #[inline]
     pub fn eval_pdf_at(&self, g: Vec2, sin_t: f32, with_pdf: bool) -> (Rgb, f32) {
+        self.eval_pdf_cell(self.dist.locate(g), sin_t, with_pdf)
+    }
+
+    /// [`Self::eval_pdf_at`] of lane `l`: its grid point located in `cells` (as
+    /// [`Self::cells_of`] gives them), its sin θ `sin_t`.
+    #[inline(always)]
+    pub fn eval_pdf_in<const N: usize>(&self, cells: &EnvCells<N>, l: usize, sin_t: f32, with_pdf: bool) -> (Rgb, f32) {
+        self.eval_pdf_cell((cells.ix[l] as usize, cells.iy[l] as usize, cells.fx[l], cells.fy[l]), sin_t, with_pdf)
+    }
+
+    #[inline(always)]
+    fn eval_pdf_cell(&self, cell: (usize, usize, f32, f32), sin_t: f32, with_pdf: bool) -> (Rgb, f32) {
+        let (le, pdf_uv) = self.eval_cell_pdf(cell);
         if !with_pdf {
-            return (self.eval_grid(g), 0.0);
+            return (le, 0.0);
         }
-        let (le, pdf_uv) = self.eval_grid_pdf(g);
         if le.is_black() || sin_t <= 0.0 {
             return (le, 0.0);
         }
@@ -202,9 +241,47 @@ impl EnvMap {
     /// interpolation of the cell's texels (radiance and weight together).
     #[inline]
     fn eval_grid_pdf(&self, g: Vec2) -> (Rgb, f32) {
-        let (ix, iy, fx, fy) = self.dist.locate(g);
+        self.eval_cell_pdf(self.dist.locate(g))
+    }
+
+    /// [`Self::eval_grid_pdf`] of a located grid point (cell and fraction, as `locate`).
+    #[inline(always)]
+    fn eval_cell_pdf(&self, (ix, iy, fx, fy): (usize, usize, f32, f32)) -> (Rgb, f32) {
         let v = self.dist.bilerp(ix, iy, fx, fy);
         (Rgb::new(v.x, v.y, v.z) * self.scale, self.dist.density(v.w))
+    }
+
+    /// The cells and fractions (as `locate` gives them, bit for bit) of `N` grid points
+    /// (`g` as [`Self::dirs_to_grid`] gives it), without branches: the path kernel's eight
+    /// lanes as SIMD arithmetic. Lane by lane, `locate`'s saturating float-to-integer
+    /// conversions (which LLVM does not vectorise) were most of an escaped ray's lookup,
+    /// twice: its prefetch and its value.
+    #[inline(always)]
+    pub fn cells_of<const N: usize>(&self, g: &[[f32; N]; 3]) -> EnvCells<N> {
+        let d = &self.dist;
+        let mut c = EnvCells::default();
+        let Some((last_col, last_row)) = d.last_cell else {
+            for (k, (&gx, &gy)) in g[0].iter().zip(&g[1]).enumerate() {
+                let (ix, iy, fx, fy) = d.locate(Vec2::new(gx, gy));
+                (c.ix[k], c.iy[k], c.fx[k], c.fy[k]) = (ix as u32, iy as u32, fx, fy);
+            }
+            return c;
+        };
+        for (k, (&gx, &gy)) in g[0].iter().zip(&g[1]).enumerate() {
+            let x = at_least_zero(gx * d.cols_f);
+            let y = at_least_zero(gy * d.rows_f);
+            // Truncating after the clamp to the last cell (an integer) is clamping after
+            // truncating, as `locate` does: x >= 0, where truncation is monotone.
+            // SAFETY: `at_least_zero` made a NaN 0, and `min` keeps the value in
+            // [0, last_col], within i32's range: the conversion is defined (and a vector
+            // instruction).
+            let (ix, iy) = unsafe { (x.min(last_col).to_int_unchecked::<i32>(), y.min(last_row).to_int_unchecked::<i32>()) };
+            // Below 2^24 the cells' indices are exact as floats (`last_cell`).
+            c.fx[k] = (x - ix as f32).min(1.0);
+            c.fy[k] = (y - iy as f32).min(1.0);
+            (c.ix[k], c.iy[k]) = (ix as u32, iy as u32);
+        }
+        c
     }
 
     /// A direction toward the environment and its solid-angle density.
@@ -323,6 +400,9 @@ struct BilinearDistribution {
     /// sequence on x86-64 without AVX-512.
     cols_f: f32,
     rows_f: f32,
+    /// The last cell's column and row as floats, for `EnvMap::cells_of`: None where one is
+    /// 2^24 or more (not every index is a float there; then it locates lane by lane).
+    last_cell: Option<(f32, f32)>,
     /// Rows of cells by the sum of their cells' integrals.
     marginal: Distribution1D,
     /// Cells within each row by their integral (mean of the 4 corners).
@@ -346,7 +426,8 @@ impl BilinearDistribution {
         let row_integrals: Vec<f32> = conditional.iter().map(|c| c.integral).collect();
         let marginal = Distribution1D::new(&row_integrals);
         let integral = marginal.integral;
-        BilinearDistribution { texels, cols, rows, cols_f: cols as f32, rows_f: rows as f32, marginal, conditional, integral }
+        let last_cell = (cols <= 1 << 24 && rows <= 1 << 24).then(|| ((cols - 1) as f32, (rows - 1) as f32));
+        BilinearDistribution { texels, cols, rows, cols_f: cols as f32, rows_f: rows as f32, last_cell, marginal, conditional, integral }
     }
 
     #[inline]
@@ -420,8 +501,8 @@ impl BilinearDistribution {
     /// Cell and fractional position of grid coordinates in [0,1]².
     #[inline]
     fn locate(&self, g: Vec2) -> (usize, usize, f32, f32) {
-        let x = (g.x * self.cols_f).max(0.0);
-        let y = (g.y * self.rows_f).max(0.0);
+        let x = at_least_zero(g.x * self.cols_f);
+        let y = at_least_zero(g.y * self.rows_f);
         // Through u32: x and y are in [0, size] (a NaN became 0 above), far below 2^32, so
         // the conversions are the usize ones, each a single instruction.
         let ix = (x as u32 as usize).min(self.cols - 1);
@@ -441,6 +522,18 @@ impl BilinearDistribution {
             return 0.0;
         }
         f / self.integral
+    }
+}
+
+/// `v.max(0.0)` with the sign of a zero kept (-0 stays -0) and a NaN taken as 0, the same
+/// in scalar and vector code (`f32::max` leaves a zero's sign to the build: `locate` and
+/// `EnvMap::cells_of` must agree bit for bit).
+#[inline(always)]
+fn at_least_zero(v: f32) -> f32 {
+    if v >= 0.0 {
+        v
+    } else {
+        0.0
     }
 }
 
@@ -647,10 +740,47 @@ mod tests {
                 assert_eq!((g.x.to_bits(), g.y.to_bits(), st.to_bits()), (u.to_bits(), v.to_bits(), sin_t.to_bits()), "{d}");
                 assert_eq!(bits(env.dist.locate(g)), bits(reference_locate(g, env.dist.cols, env.dist.rows)), "{d}");
             }
-            for g in
-                [Vec2::ZERO, Vec2::ONE, Vec2::new(1.0 - f32::EPSILON, 0.5), Vec2::new(-0.0, 1.0), Vec2::new(f32::NAN, 0.2), Vec2::new(0.999_999_9, 0.999_999_9)]
-            {
+            let edges = [
+                Vec2::ZERO,
+                Vec2::ONE,
+                Vec2::new(1.0 - f32::EPSILON, 0.5),
+                Vec2::new(-0.0, 1.0),
+                Vec2::new(f32::NAN, 0.2),
+                Vec2::new(0.999_999_9, 0.999_999_9),
+            ];
+            for g in edges {
                 assert_eq!(bits(env.dist.locate(g)), bits(reference_locate(g, env.dist.cols, env.dist.rows)), "{g}");
+            }
+            // The lanes' cells: `locate`'s, on the lanes' grid points and on points off the
+            // grid (NaN, infinite, negative, huge).
+            let mut points: Vec<Vec2> = Vec::new();
+            for chunk in lane_dirs.chunks(8) {
+                let mut d = [[0.0f32; 8]; 3];
+                for (k, w) in chunk.iter().enumerate() {
+                    (d[0][k], d[1][k], d[2][k]) = (w.x, w.y, w.z);
+                }
+                let g = env.dirs_to_grid(&d);
+                points.extend((0..chunk.len()).map(|k| Vec2::new(g[0][k], g[1][k])));
+            }
+            points.extend(edges);
+            points.extend([
+                Vec2::splat(f32::INFINITY),
+                Vec2::splat(-f32::INFINITY),
+                Vec2::new(-3.0, 7.0),
+                Vec2::new(3e9, -1e-30),
+                Vec2::new(f32::NAN, f32::NAN),
+            ]);
+            for chunk in points.chunks(8) {
+                let mut g = [[0.0f32; 8]; 3];
+                for (k, p) in chunk.iter().enumerate() {
+                    (g[0][k], g[1][k]) = (p.x, p.y);
+                }
+                let cells = env.cells_of(&g);
+                for (k, &p) in chunk.iter().enumerate() {
+                    let lane = (cells.ix[k] as usize, cells.iy[k] as usize, cells.fx[k], cells.fy[k]);
+                    assert_eq!(bits(lane), bits(env.dist.locate(p)), "{p}");
+                    assert_eq!(env.eval_pdf_in(&cells, k, 0.5, true), env.eval_pdf_at(p, 0.5, true), "{p}");
+                }
             }
             // Sampled grid points: the cell's position divided by the precomputed sizes.
             for _ in 0..5000 {
