@@ -8,7 +8,7 @@
 //! divisions, square roots and comparisons give the same bits in a lane as alone); what a
 //! vertex alone decides (which side of its BSDF is seen, its constants) is done per vertex
 //! before. Other vertices (the light's own, other BSDFs, a thin lens) take the scalar path.
-//! Lanes may hold several paths' vertices (`stage` one at a time, `run` when full): the
+//! Lanes may hold several paths' vertices (`stage_lazy` one at a time, `run` when full): the
 //! light tracer fills all eight so.
 
 use super::connect::{camera_connectible, camera_connection_at, camera_strategy_exists};
@@ -42,7 +42,7 @@ impl CameraBatch {
 
     /// `camera_connection(scene, cfg, light, s, sampler)` for s = 1..=light.len(), in
     /// order, each that exists given to `emit` as (contribution, raster, shadow ray): one
-    /// path's [`Self::stage`] (or, `lazy`, [`Self::stage_lazy`], the owed draws drawn at
+    /// path's [`Self::stage_lazy`] (the owed draws paid after each strategy, or, `lazy`, at
     /// the end) and [`Self::run`]. `scratch` holds the lanes (none staged); one per caller
     /// serves all its paths.
     #[allow(clippy::too_many_arguments)]
@@ -61,8 +61,10 @@ impl CameraBatch {
         let mut k = 0;
         let mut owed = 0;
         for s in 1..=light.len() {
-            staged[k] =
-                if lazy { self.stage_lazy(scene, cfg, light, s, sampler, &mut owed, scratch) } else { self.stage(scene, cfg, light, s, sampler, scratch) };
+            staged[k] = self.stage_lazy(scene, cfg, light, s, sampler, &mut owed, scratch);
+            if !lazy {
+                pay_lens_draws(sampler, &mut owed);
+            }
             k += 1;
             if k == LANES || s == light.len() || scratch.is_full() {
                 if scratch.lanes.n > 0 {
@@ -86,30 +88,14 @@ impl CameraBatch {
         pay_lens_draws(sampler, &mut owed);
     }
 
-    /// Strategy (s, 1) of `light` as `camera_connection` begins it (its checks, its lens
-    /// sample drawn from `sampler`): none, computed here, or put in the next lane of
-    /// `scratch` for [`Self::run`] (which the caller runs before staging into a full one).
-    /// Lanes may hold the strategies of several paths: each lane is alone.
-    #[inline]
-    pub fn stage<S: Sampler + ?Sized>(
-        &self,
-        scene: &Scene,
-        cfg: &PathConfig,
-        light: &[Vertex],
-        s: usize,
-        sampler: &mut S,
-        scratch: &mut BatchScratch,
-    ) -> Staged {
-        let mut owed = 0;
-        let staged = self.stage_lazy(scene, cfg, light, s, sampler, &mut owed, scratch);
-        pay_lens_draws(sampler, &mut owed);
-        staged
-    }
-
-    /// [`Self::stage`] for a caller that draws nothing more from `sampler` after the path's
-    /// connections (the light tracer's lanes: a lane's next sample restarts its sampler):
-    /// the lens samples that the lanes do not read (a pinhole's) are counted in `owed`, and
-    /// drawn only where a scalar connection needs the draw after them.
+    /// Strategy (s, 1) of `light` as `camera_connection` begins it (its checks; its lens
+    /// sample counted in `owed`, for `pay_lens_draws` to draw): none, computed here, or put
+    /// in the next lane of `scratch` for [`Self::run`] (which the caller runs before staging
+    /// into a full one). Lanes may hold the strategies of several paths: each lane is alone.
+    /// A caller that draws nothing more from `sampler` after the path's connections (the
+    /// light tracer's lanes: a lane's next sample restarts its sampler) leaves the lens
+    /// samples that the lanes do not read (a pinhole's) owed, drawn only where a scalar
+    /// connection needs the draw after them; any other pays them after each strategy.
     #[inline]
     #[allow(clippy::too_many_arguments)]
     pub fn stage_lazy<S: Sampler + ?Sized>(
@@ -162,7 +148,7 @@ fn pay_lens_draws<S: Sampler + ?Sized>(sampler: &mut S, owed: &mut u32) {
     *owed = 0;
 }
 
-/// Where [`CameraBatch::stage`] put a strategy.
+/// Where [`CameraBatch::stage_lazy`] put a strategy.
 #[derive(Clone, Copy, Debug)]
 pub enum Staged {
     /// No connection (the strategy does not exist, or its vertex cannot see the camera).
@@ -173,7 +159,7 @@ pub enum Staged {
     Lane(usize),
 }
 
-/// The lane buffers of [`CameraBatch::stage`] and [`CameraBatch::run`], kept by the caller
+/// The lane buffers of [`CameraBatch::stage_lazy`] and [`CameraBatch::run`], kept by the caller
 /// from path to path: clearing a fresh pair per path cost about 1 % of light tracing. Lanes
 /// at and above `Lanes::n` keep an earlier batch's numbers, which the kernel computes and
 /// masks off.
