@@ -374,10 +374,19 @@ impl Material {
     /// without surface detail: normal and bump maps need the geometry of
     /// [`Self::bsdf_with_detail`]. A null material gives a BSDF that lets every ray pass
     /// (opacity 0).
+    #[inline]
     pub fn bsdf(&self, uv: impl Into<TexPoint>) -> Bsdf {
-        let uv = uv.into();
+        // A constant Lambertian, the most common case, built inline; the rest out of line.
+        if let Material::Diffuse { reflectance: Texture::Constant(c) } = self {
+            return Bsdf::new(BsdfModel::Diffuse(Diffuse { reflectance: c.clamp(0.0, 1.0) }));
+        }
+        self.bsdf_at(uv.into())
+    }
+
+    #[inline(never)]
+    fn bsdf_at(&self, uv: TexPoint) -> Bsdf {
         match self {
-            // The common case built in place, without the Option of `model`.
+            // Built in place, without the Option of `model`.
             Material::Diffuse { reflectance } => Bsdf::new(BsdfModel::Diffuse(Diffuse { reflectance: reflectance.eval(uv).clamp(0.0, 1.0) })),
             Material::Null => Bsdf { front: BsdfModel::Diffuse(Diffuse { reflectance: Rgb::BLACK }), back: None, opacity: 0.0, detail: None },
             Material::TwoSided { front, back } => {

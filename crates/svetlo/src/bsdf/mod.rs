@@ -289,8 +289,18 @@ impl Bsdf {
         (w.z * pw.z > 0.0).then(|| pw.z.abs() / w.z.abs() * d.shadowing(w))
     }
 
+    /// The BSDF's value: inline where a plain Lambertian front is seen from the front
+    /// (`eval_local`'s first case, most calls in diffuse scenes), the rest out of line.
+    #[inline]
     pub fn eval(&self, wo: Vec3, wi: Vec3, mode: TransportMode) -> Rgb {
-        let Some(d) = &self.detail else { return self.eval_local(wo, wi, mode) };
+        match &self.detail {
+            None => self.eval_local(wo, wi, mode),
+            Some(d) => self.eval_detail(d, wo, wi, mode),
+        }
+    }
+
+    #[inline(never)]
+    fn eval_detail(&self, d: &detail::Detail, wo: Vec3, wi: Vec3, mode: TransportMode) -> Rgb {
         let f = d.frame(wo);
         let (pwo, pwi) = (f.to_local(wo), f.to_local(wi));
         match Self::detail_factor(d, mode, (wo, wi), (pwo, pwi)) {
@@ -299,8 +309,17 @@ impl Bsdf {
         }
     }
 
+    /// The density of [`Self::sample`]: inline as [`Self::eval`].
+    #[inline]
     pub fn pdf(&self, wo: Vec3, wi: Vec3, mode: TransportMode) -> f32 {
-        let Some(d) = &self.detail else { return self.pdf_local(wo, wi, mode) };
+        match &self.detail {
+            None => self.pdf_local(wo, wi, mode),
+            Some(d) => self.pdf_detail(d, wo, wi, mode),
+        }
+    }
+
+    #[inline(never)]
+    fn pdf_detail(&self, d: &detail::Detail, wo: Vec3, wi: Vec3, mode: TransportMode) -> f32 {
         let f = d.frame(wo);
         let (pwo, pwi) = (f.to_local(wo), f.to_local(wi));
         match Self::detail_factor(d, mode, (wo, wi), (pwo, pwi)) {
@@ -385,8 +404,18 @@ impl Bsdf {
         (nee, s)
     }
 
+    /// A sample of the BSDF: inline as [`Self::eval`] where the surface is opaque (a mask's
+    /// pass-through comes first).
+    #[inline]
     pub fn sample(&self, wo: Vec3, uc: f32, u: Vec2, mode: TransportMode) -> Option<BsdfSample> {
-        let Some(d) = &self.detail else { return self.sample_local(wo, uc, u, mode) };
+        match &self.detail {
+            None => self.sample_local(wo, uc, u, mode),
+            Some(d) => self.sample_detail(d, wo, uc, u, mode),
+        }
+    }
+
+    #[inline(never)]
+    fn sample_detail(&self, d: &detail::Detail, wo: Vec3, uc: f32, u: Vec2, mode: TransportMode) -> Option<BsdfSample> {
         let f = d.frame(wo);
         let pwo = f.to_local(wo);
         let mut s = self.sample_local(pwo, uc, u, mode)?;
@@ -396,45 +425,26 @@ impl Bsdf {
         Some(s)
     }
 
-    /// [`Self::eval`], [`Self::pdf`] and [`Self::sample`] with a plain Lambertian front seen
-    /// from the front inline at the call site (the same operations as `eval_local`'s and
-    /// the others' first case), else the call: for a caller's vector build (`direct`'s
-    /// lockstep tiles), where each call cost more than the Lambertian's few instructions.
+    /// The Lambertian front seen from the front (`side`'s answer there), without the dispatch
+    /// over every model: most of the calls in diffuse scenes.
     #[inline(always)]
-    pub fn eval_inline(&self, wo: Vec3, wi: Vec3, mode: TransportMode) -> Rgb {
-        if let (None, BsdfModel::Diffuse(m), true) = (&self.detail, &self.front, wo.z >= 0.0) {
-            return m.eval(wo, wi, mode) * self.opacity;
+    fn lambertian_front(&self, wo: Vec3) -> Option<&diffuse::Diffuse> {
+        match (&self.front, wo.z >= 0.0) {
+            (BsdfModel::Diffuse(m), true) => Some(m),
+            _ => None,
         }
-        self.eval(wo, wi, mode)
     }
 
-    /// See [`Self::eval_inline`].
-    #[inline(always)]
-    pub fn pdf_inline(&self, wo: Vec3, wi: Vec3, mode: TransportMode) -> f32 {
-        if let (None, BsdfModel::Diffuse(m), true) = (&self.detail, &self.front, wo.z >= 0.0) {
-            return m.pdf(wo, wi, mode) * self.opacity;
-        }
-        self.pdf(wo, wi, mode)
-    }
-
-    /// See [`Self::eval_inline`] (opaque surfaces only: a mask's pass-through comes first).
-    #[inline(always)]
-    pub fn sample_inline(&self, wo: Vec3, uc: f32, u: Vec2, mode: TransportMode) -> Option<BsdfSample> {
-        if let (None, BsdfModel::Diffuse(m), true, false) = (&self.detail, &self.front, wo.z >= 0.0, self.opacity < 1.0) {
-            let mut s = m.sample(wo, uc, u, mode)?;
-            s.f *= self.opacity;
-            s.pdf *= self.opacity;
-            return Some(s);
-        }
-        self.sample(wo, uc, u, mode)
-    }
-
+    #[inline]
     fn eval_local(&self, wo: Vec3, wi: Vec3, mode: TransportMode) -> Rgb {
-        // A Lambertian front seen from the front (`side`'s answer there), without the
-        // dispatch over every model: most of the calls in diffuse scenes.
-        if let (BsdfModel::Diffuse(m), true) = (&self.front, wo.z >= 0.0) {
-            return m.eval(wo, wi, mode) * self.opacity;
+        match self.lambertian_front(wo) {
+            Some(m) => m.eval(wo, wi, mode) * self.opacity,
+            None => self.eval_side(wo, wi, mode),
         }
+    }
+
+    #[inline(never)]
+    fn eval_side(&self, wo: Vec3, wi: Vec3, mode: TransportMode) -> Rgb {
         match self.side(wo) {
             Some((m, false)) => m.eval(wo, wi, mode) * self.opacity,
             Some((m, true)) => m.eval(flip(wo), flip(wi), mode) * self.opacity,
@@ -442,11 +452,16 @@ impl Bsdf {
         }
     }
 
+    #[inline]
     fn pdf_local(&self, wo: Vec3, wi: Vec3, mode: TransportMode) -> f32 {
-        // As in `eval_local`.
-        if let (BsdfModel::Diffuse(m), true) = (&self.front, wo.z >= 0.0) {
-            return m.pdf(wo, wi, mode) * self.opacity;
+        match self.lambertian_front(wo) {
+            Some(m) => m.pdf(wo, wi, mode) * self.opacity,
+            None => self.pdf_side(wo, wi, mode),
         }
+    }
+
+    #[inline(never)]
+    fn pdf_side(&self, wo: Vec3, wi: Vec3, mode: TransportMode) -> f32 {
         match self.side(wo) {
             Some((m, false)) => m.pdf(wo, wi, mode) * self.opacity,
             Some((m, true)) => m.pdf(flip(wo), flip(wi), mode) * self.opacity,
@@ -454,29 +469,44 @@ impl Bsdf {
         }
     }
 
+    #[inline]
     fn sample_local(&self, wo: Vec3, uc: f32, u: Vec2, mode: TransportMode) -> Option<BsdfSample> {
-        let mut uc = uc;
         if self.opacity < 1.0 {
-            // Mask: pass through with probability 1 - opacity (delta, weight 1).
-            if uc >= self.opacity {
-                let wi = -wo;
-                return Some(BsdfSample {
-                    wi,
-                    f: Rgb::splat((1.0 - self.opacity) / wi.z.abs().max(1e-12)),
-                    pdf: 1.0 - self.opacity,
-                    lobe: LobeFlags::NULL_TRANSMISSION,
-                    eta: 1.0,
-                });
-            }
-            uc /= self.opacity;
+            return self.sample_masked(wo, uc, u, mode);
         }
-        // As in `eval_local`.
-        if let (BsdfModel::Diffuse(m), true) = (&self.front, wo.z >= 0.0) {
-            let mut s = m.sample(wo, uc, u, mode)?;
-            s.f *= self.opacity;
-            s.pdf *= self.opacity;
-            return Some(s);
+        self.sample_opaque(wo, uc, u, mode)
+    }
+
+    #[inline(never)]
+    fn sample_masked(&self, wo: Vec3, uc: f32, u: Vec2, mode: TransportMode) -> Option<BsdfSample> {
+        // Mask: pass through with probability 1 - opacity (delta, weight 1).
+        if uc >= self.opacity {
+            let wi = -wo;
+            return Some(BsdfSample {
+                wi,
+                f: Rgb::splat((1.0 - self.opacity) / wi.z.abs().max(1e-12)),
+                pdf: 1.0 - self.opacity,
+                lobe: LobeFlags::NULL_TRANSMISSION,
+                eta: 1.0,
+            });
         }
+        self.sample_opaque(wo, uc / self.opacity, u, mode)
+    }
+
+    /// [`Self::sample_local`] after the mask's choice (`uc` rescaled to the surface's part).
+    #[inline]
+    fn sample_opaque(&self, wo: Vec3, uc: f32, u: Vec2, mode: TransportMode) -> Option<BsdfSample> {
+        let mut s = match self.lambertian_front(wo) {
+            Some(m) => m.sample(wo, uc, u, mode)?,
+            None => return self.sample_side(wo, uc, u, mode),
+        };
+        s.f *= self.opacity;
+        s.pdf *= self.opacity;
+        Some(s)
+    }
+
+    #[inline(never)]
+    fn sample_side(&self, wo: Vec3, uc: f32, u: Vec2, mode: TransportMode) -> Option<BsdfSample> {
         let (m, flipped) = self.side(wo)?;
         let mut s = if flipped { m.sample(flip(wo), uc, u, mode)? } else { m.sample(wo, uc, u, mode)? };
         if flipped {

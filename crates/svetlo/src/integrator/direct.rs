@@ -324,7 +324,7 @@ impl DirectEstimator {
                     }
                 }
                 sums[l] = sum;
-                let bsdf = scene.bsdf_inline(si);
+                let bsdf = scene.bsdf(si);
                 let wo = si.to_local(si.wo);
                 let flags = bsdf.flags();
                 let sky = SkySampling::new(&bsdf, flags);
@@ -356,7 +356,7 @@ impl DirectEstimator {
                         Some(d) => (d[row][l], Vec2::new(d[row + 1][l], d[row + 2][l])),
                         None => (sampler.next_1d(), sampler.next_2d()),
                     };
-                    if let Some(bs) = bsdf.sample_inline(wo, uc, u, TransportMode::Radiance).filter(|bs| bs.pdf > 0.0) {
+                    if let Some(bs) = bsdf.sample(wo, uc, u, TransportMode::Radiance).filter(|bs| bs.pdf > 0.0) {
                         let wi = si.to_world(bs.wi);
                         scatter = Some((bs, wi, si.spawn_ray(wi)));
                     }
@@ -615,7 +615,7 @@ fn delta_light_sample(scene: &Scene, d: u32, si: &SurfaceInteraction, wo: Vec3, 
 #[inline(always)]
 fn sky_unshadowed(scene: &Scene, si: &SurfaceInteraction, wo: Vec3, bsdf: &Bsdf, sky: SkySampling, le: Rgb, pmf: f32, u: Vec2) -> Option<Unshadowed> {
     let (wi, pdf) = sky.sample(wo, u)?;
-    let f = bsdf.eval_inline(wo, wi, TransportMode::Radiance);
+    let f = bsdf.eval(wo, wi, TransportMode::Radiance);
     if f.is_black() || pmf <= 0.0 {
         return None;
     }

@@ -83,7 +83,7 @@ impl Unshadowed {
     /// strategy), and whether it arrives through the surface.
     #[inline(always)]
     pub fn contribution(&self, bsdf: &crate::bsdf::Bsdf, wo: Vec3, counts: (f32, f32)) -> (Rgb, bool) {
-        let w = if self.delta { 1.0 } else { power_heuristic(counts.0, self.pdf_light, counts.1, bsdf.pdf_inline(wo, self.wi, TransportMode::Radiance)) };
+        let w = if self.delta { 1.0 } else { power_heuristic(counts.0, self.pdf_light, counts.1, bsdf.pdf(wo, self.wi, TransportMode::Radiance)) };
         (self.f * self.li * (self.wi.z.abs() * w / self.pdf_light), self.wi.z * wo.z < 0.0)
     }
 }
@@ -114,15 +114,14 @@ pub(crate) fn light_sample_unshadowed(
 }
 
 /// The local direction of light sample `ls` and the BSDF's value toward it (None where the
-/// sample or that value adds nothing): [`light_sample_unshadowed`]'s first half, with
-/// [`Bsdf::eval_inline`] (the same value as `eval`).
+/// sample or that value adds nothing): [`light_sample_unshadowed`]'s first half.
 #[inline(always)]
 pub(crate) fn bsdf_toward(bsdf: &Bsdf, frame: &crate::math::Frame, wo: Vec3, ls: &crate::light::LightSample) -> Option<(Rgb, Vec3)> {
     if ls.pdf <= 0.0 || ls.li.is_black() {
         return None;
     }
     let wi = frame.to_local(ls.wi);
-    let f = bsdf.eval_inline(wo, wi, TransportMode::Radiance);
+    let f = bsdf.eval(wo, wi, TransportMode::Radiance);
     (!f.is_black()).then_some((f, wi))
 }
 

@@ -306,13 +306,10 @@ impl Walk {
         let (bs, mut pdf_rev) = match lambertian_sample(bsdf, &v.shading, wo, uc, u) {
             Some(Some(s)) => s,
             Some(None) => return false,
-            None => {
-                let wo = v.shading.to_local(wo);
-                let Some(bs) = bsdf.sample(wo, uc, u, mode) else { return false };
-                // (Unused when the check below ends the walk.)
-                let pdf_rev = bsdf.pdf(bs.wi, wo, flip(mode));
-                (bs, pdf_rev)
-            }
+            None => match sample_generic(bsdf, &v.shading, wo, uc, u, mode) {
+                Some(s) => s,
+                None => return false,
+            },
         };
         if bs.pdf <= 0.0 || bs.f.is_black() {
             return false;
@@ -356,4 +353,22 @@ fn flip(m: TransportMode) -> TransportMode {
         TransportMode::Radiance => TransportMode::Importance,
         TransportMode::Importance => TransportMode::Radiance,
     }
+}
+
+/// [`Walk::scatter`]'s sample where [`lambertian_sample`] does not take the vertex: the
+/// BSDF's sample in the local frame and its reverse density (unused when the walk ends
+/// there). Out of line: the BSDF calls' inline Lambertian case is dead here.
+#[inline(never)]
+fn sample_generic(
+    bsdf: &crate::bsdf::Bsdf,
+    frame: &crate::math::Frame,
+    wo: Vec3,
+    uc: f32,
+    u: Vec2,
+    mode: TransportMode,
+) -> Option<(crate::bsdf::BsdfSample, f32)> {
+    let wo = frame.to_local(wo);
+    let bs = bsdf.sample(wo, uc, u, mode)?;
+    let pdf_rev = bsdf.pdf(bs.wi, wo, flip(mode));
+    Some((bs, pdf_rev))
 }

@@ -415,6 +415,13 @@ impl Scene {
         if !self.shapes[si.shape as usize].detail {
             return m.bsdf(si.tex_point());
         }
+        self.bsdf_with_detail(m, si)
+    }
+
+    /// [`Self::bsdf`] where the shape's material has surface detail (out of line: the
+    /// common case stays small at its callers).
+    #[inline(never)]
+    fn bsdf_with_detail(&self, m: &Material, si: &SurfaceInteraction) -> crate::bsdf::Bsdf {
         let (dpdu, dpdv) = self.dp_duv(si);
         m.bsdf_with_detail(si.tex_point(), &crate::bsdf::material::ShadingGeometry { shading: si.shading, ng: si.ng, dpdu, dpdv })
     }
@@ -427,18 +434,6 @@ impl Scene {
             // No uv parameterisation: the shading frame's axes stand in.
             Geometry::SdfGrid(_) => (si.shading.s, si.shading.t),
         }
-    }
-
-    /// [`Self::bsdf`], a Lambertian of constant reflectance without detail built inline (the
-    /// same BSDF): for a caller's vector build, where the call cost more than building it.
-    #[inline(always)]
-    pub fn bsdf_inline(&self, si: &SurfaceInteraction) -> crate::bsdf::Bsdf {
-        if let (crate::bsdf::Material::Diffuse { reflectance: crate::texture::Texture::Constant(c) }, false) =
-            (self.material(si), self.shapes[si.shape as usize].detail)
-        {
-            return crate::bsdf::Bsdf::new(crate::bsdf::BsdfModel::Diffuse(crate::bsdf::diffuse::Diffuse { reflectance: c.clamp(0.0, 1.0) }));
-        }
-        self.bsdf(si)
     }
 
     /// The area light of the shape hit, if it emits.
