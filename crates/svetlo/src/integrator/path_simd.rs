@@ -1326,11 +1326,12 @@ impl SimdKernel {
                 v.env_cells = env.cells_of(&v.env_grid);
             }
         }
-        // Every active lane's numbers for this vertex, where the sampler draws them for
-        // all lanes at once (a lane that ends before it needs them restarts its sampler
-        // with its next camera sample); none at max depth 1, where every path ends at its
-        // first vertex. (Asking each lane's depth instead cost Bitterli's box 1.02.)
-        let draws = if S::BATCHED && settings.depth_allows(2) { S::vertex_draws(&mut st.sampler, active) } else { [[0.0; LANES]; 7] };
+        // Every lane's numbers for this vertex, where the sampler draws them for all lanes
+        // at once (a lane that ends before it needs them, or is idle, restarts its sampler
+        // with its next camera sample: all eight step, no per-lane write-back test); none at
+        // max depth 1, where every path ends at its first vertex. (Asking each lane's depth
+        // instead cost Bitterli's box 1.02.)
+        let draws = if S::BATCHED && settings.depth_allows(2) { S::vertex_draws(&mut st.sampler, u8::MAX) } else { [[0.0; LANES]; 7] };
         let (mut go, mut ends) = (0u8, 0u8);
         v.late_texels = 0;
         for l in 0..LANES {
