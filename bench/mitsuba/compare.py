@@ -11,14 +11,15 @@ prints the median ratio svetlo / Mitsuba of
 and each renderer's relMSE at equal spp against the scene's reference. CPU time of one
 thread is what stays comparable on a busy machine; quote the ratios, not the seconds.
 
-    python3 bench/mitsuba/compare.py [--repeats 3] [--only NAME,...] [--variant scalar_rgb] [--spp N --res N] [--threads N] [--mitsuba-avx2]
+    python3 bench/mitsuba/compare.py [--repeats 3] [--only NAME,...] [--more] [--variant scalar_rgb] [--spp N --res N] [--threads N] [--mitsuba-avx2]
 
 `--threads N` gives both N render threads on cores 0..N-1 (CPU ratios then compare the work,
 the wall ratio the scaling). The scenes: Mitsuba's cbox-rgb (path; light against ptracer),
 Bitterli's cornell-box and veach-mis (their Mitsuba 3 versions, Tungsten's references
 box-downsampled), `bsdf_spheres` (area light, environment map, a bitmap-textured diffuse
 sphere), `spot_light` (direct), and a generated 1M-triangle displaced sphere on a floor
-(written once to bench/out/mesh1m/; no reference: its relMSE columns are empty).
+(written once to bench/out/mesh1m/; no reference: its relMSE columns are empty); with
+`--more`, Mitsuba's other thirteen bsdf_spheres scenes too.
 """
 import argparse
 import os
@@ -54,6 +55,16 @@ SCENES = [
     ("spot_light direct", f"{SPOT}/test_spot_direct.xml", f"{SPOT}/refs/test_spot_ref_rgb.exr", "direct", None, 32, None, None, {}),
     ("mesh 1M", f"{MESH1M}/scene.xml", None, "path", None, 64, None, None, {}),
 ]
+
+# `--more`: Mitsuba's other bsdf_spheres scenes (glass, metals, plastics, principled, surface
+# detail, point and constant lights), each at 128 spp, to show the speed on every BSDF family
+# the kernel and the scalar tracer read, not only on the table's scenes.
+MORE_SPHERES = [
+    "bumpmap", "constant", "normalmap", "normalmap_identity_roughconductor", "normalmap_roughconductor", "pointlight",
+    "roughdielectric", "roughplastic_linear", "roughplastic_nonlinear", "textured_roughconductor",
+    "texturedprincipled1", "texturedprincipled2", "texturedprincipledthin",
+]
+MORE = [(f"spheres {n}", f"{SPHERES}/test_{n}_path.xml", f"{SPHERES}/refs/test_{n}_ref_rgb.exr", "path", None, 128, None, None, {}) for n in MORE_SPHERES]
 
 
 def displacement(p):
@@ -208,11 +219,12 @@ def main():
     ap.add_argument("--res", type=int, default=0, help="override every scene's resolution (quick runs)")
     ap.add_argument("--threads", type=int, default=1, help="render threads of each renderer (cores 0..N-1)")
     ap.add_argument("--svetlo", default=os.path.join(ROOT, "target", "release", "svetlo"))
+    ap.add_argument("--more", action="store_true", help="add Mitsuba's other bsdf_spheres scenes (every BSDF family)")
     ap.add_argument("--mitsuba-avx2", action="store_true", help="Mitsuba's LLVM kernels as on an AVX2-only CPU (eight-wide, no AVX-512; a diagnostic)")
     a = ap.parse_args()
     THREADS = max(1, a.threads)
     MITSUBA_AVX2 = a.mitsuba_avx2
-    scenes = [s for s in SCENES if not a.only or any(s[0].startswith(o) for o in a.only.split(","))]
+    scenes = [s for s in SCENES + (MORE if a.more else []) if not a.only or any(s[0].startswith(o) for o in a.only.split(","))]
     scenes = [s[:5] + (a.spp or s[5], a.res or s[6], s[7], s[8]) for s in scenes]
     if any(s[0] == "mesh 1M" for s in scenes):
         write_mesh1m()
