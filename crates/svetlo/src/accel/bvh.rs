@@ -3,6 +3,7 @@
 //! the occupied voxels of SDF grids. A ray walks all three; the nearest hit wins.
 
 use super::build::{build_wide, LeafParams};
+use super::packet::Rays8;
 use super::pages::{PagedSlice, PagedVec};
 use super::tri4::{intersect_half, TriRay};
 #[cfg(target_arch = "x86_64")]
@@ -335,6 +336,36 @@ impl HitRecords {
 /// The rays of [`Accel::intersect_lanes`] and [`Accel::occluded_lanes`].
 pub const RAY_LANES: usize = 8;
 
+/// Eight rays as the lane walks read them: an array of rays, or rows of lanes (`Rays8`, as
+/// the path kernel keeps them: no array of rays built for a walk that makes rows again).
+pub trait LaneRays {
+    /// Lane `l`'s ray (its time unread by the walks).
+    fn ray(&self, l: usize) -> Ray;
+    /// The rays as rows, where they are kept so.
+    #[inline(always)]
+    fn rows(&self) -> Option<&Rays8> {
+        None
+    }
+}
+
+impl LaneRays for [Ray; RAY_LANES] {
+    #[inline(always)]
+    fn ray(&self, l: usize) -> Ray {
+        self[l]
+    }
+}
+
+impl LaneRays for Rays8 {
+    #[inline(always)]
+    fn ray(&self, l: usize) -> Ray {
+        Ray::with_max(Vec3::new(self.o[0][l], self.o[1][l], self.o[2][l]), Vec3::new(self.d[0][l], self.d[1][l], self.d[2][l]), self.t_max[l])
+    }
+    #[inline(always)]
+    fn rows(&self) -> Option<&Rays8> {
+        Some(self)
+    }
+}
+
 /// A triangle hit found by the walk: (block, lane, b1, b2).
 type TriHit = (usize, usize, f32, f32);
 
@@ -350,10 +381,17 @@ impl Accel {
 
     /// [`Accel::intersect_lanes`], the hits' `records` asked for as the walks find them.
     pub fn intersect_lanes_asking(&self, rays: &[Ray; RAY_LANES], active: u8, records: &HitRecords) -> [Option<PrimHit>; RAY_LANES] {
+        let mut hits = [None; RAY_LANES];
+        self.intersect_lanes_with(rays, active, records, |l, hit| hits[l] = hit);
+        hits
+    }
+
+    /// [`Accel::intersect_lanes_asking`] of rays of either form, each active lane's hit
+    /// handed to `done(lane, hit)` (no array of hits for the caller to copy out).
+    #[inline(always)]
+    pub fn intersect_lanes_with(&self, rays: &impl LaneRays, active: u8, records: &HitRecords, mut done: impl FnMut(usize, Option<PrimHit>)) {
         #[cfg(target_arch = "x86_64")]
         if self.avx && self.prefetch && !self.tri_nodes.is_empty() {
-            let mut hits = [None; RAY_LANES];
-            let done = |l, hit| hits[l] = hit;
             // SAFETY: `avx` is set only when the CPU reports AVX and POPCNT.
             unsafe {
                 if self.coherent && active.count_ones() >= COHERENT_MIN {
@@ -362,13 +400,21 @@ impl Accel {
                     self.trace_lanes::<false>(rays, active, records, done)
                 }
             };
-            return hits;
+            return;
         }
-        std::array::from_fn(|l| if active & (1 << l) != 0 { self.intersect(&rays[l]) } else { None })
+        for l in (0..RAY_LANES).filter(|&l| active & (1 << l) != 0) {
+            done(l, self.intersect(&rays.ray(l)));
+        }
     }
 
     /// The mask of the rays of `active` (as in [`Accel::intersect_lanes`]) that something blocks.
     pub fn occluded_lanes(&self, rays: &[Ray; RAY_LANES], active: u8) -> u8 {
+        self.occluded_lanes_of(rays, active)
+    }
+
+    /// [`Accel::occluded_lanes`] of rays of either form.
+    #[inline(always)]
+    pub fn occluded_lanes_of(&self, rays: &impl LaneRays, active: u8) -> u8 {
         #[cfg(target_arch = "x86_64")]
         if self.avx && self.prefetch && !self.tri_nodes.is_empty() {
             let mut blocked = 0;
@@ -376,7 +422,7 @@ impl Accel {
             unsafe { self.trace_lanes::<true>(rays, active, &HitRecords::NONE, |l, hit| blocked |= (hit.is_some() as u8) << l) };
             return blocked;
         }
-        (0..RAY_LANES).filter(|&l| active & (1 << l) != 0 && self.occluded(&rays[l])).fold(0, |m, l| m | 1 << l)
+        (0..RAY_LANES).filter(|&l| active & (1 << l) != 0 && self.occluded(&rays.ray(l))).fold(0, |m, l| m | 1 << l)
     }
 
     /// [`Accel::trace_lanes_body`] in the copy for this CPU.
@@ -385,7 +431,7 @@ impl Accel {
     /// The CPU must support AVX and POPCNT.
     #[cfg(target_arch = "x86_64")]
     #[inline(always)]
-    unsafe fn trace_lanes<const ANY: bool>(&self, rays: &[Ray; RAY_LANES], active: u8, records: &HitRecords, done: impl FnMut(usize, Option<PrimHit>)) {
+    unsafe fn trace_lanes<const ANY: bool>(&self, rays: &impl LaneRays, active: u8, records: &HitRecords, done: impl FnMut(usize, Option<PrimHit>)) {
         // SAFETY: the caller's contract; `avx512` is set only where the CPU has AVX-512F and VL too.
         unsafe {
             if self.avx512 {
@@ -400,7 +446,7 @@ impl Accel {
     /// The CPU must support AVX and POPCNT.
     #[cfg(target_arch = "x86_64")]
     #[target_feature(enable = "avx,popcnt")]
-    unsafe fn trace_lanes_avx<const ANY: bool>(&self, rays: &[Ray; RAY_LANES], active: u8, records: &HitRecords, done: impl FnMut(usize, Option<PrimHit>)) {
+    unsafe fn trace_lanes_avx<const ANY: bool>(&self, rays: &impl LaneRays, active: u8, records: &HitRecords, done: impl FnMut(usize, Option<PrimHit>)) {
         // SAFETY: this function runs only on CPUs with AVX and POPCNT.
         unsafe { self.trace_lanes_body::<ANY, false>(rays, active, records, done) }
     }
@@ -414,7 +460,7 @@ impl Accel {
     /// The CPU must support AVX2, POPCNT, AVX-512F and AVX-512VL.
     #[cfg(target_arch = "x86_64")]
     #[target_feature(enable = "avx,avx2,popcnt,avx512f,avx512vl")]
-    unsafe fn trace_lanes_avx512<const ANY: bool>(&self, rays: &[Ray; RAY_LANES], active: u8, records: &HitRecords, done: impl FnMut(usize, Option<PrimHit>)) {
+    unsafe fn trace_lanes_avx512<const ANY: bool>(&self, rays: &impl LaneRays, active: u8, records: &HitRecords, done: impl FnMut(usize, Option<PrimHit>)) {
         // SAFETY: this function runs only on CPUs with these sets.
         unsafe { self.trace_lanes_body::<ANY, true>(rays, active, records, done) }
     }
@@ -435,7 +481,7 @@ impl Accel {
     #[inline(always)]
     unsafe fn trace_lanes_body<const ANY: bool, const COPY: bool>(
         &self,
-        rays: &[Ray; RAY_LANES],
+        rays: &impl LaneRays,
         active: u8,
         records: &HitRecords,
         mut done: impl FnMut(usize, Option<PrimHit>),
@@ -457,7 +503,7 @@ impl Accel {
         while set_up != 0 {
             let l = set_up.trailing_zeros() as usize & (RAY_LANES - 1);
             set_up &= set_up - 1;
-            let r = &rays[l];
+            let r = rays.ray(l);
             let w = WatertightRay::new(r.o, r.d);
             // SAFETY: this function runs only on CPUs with AVX.
             let tray = unsafe { TriRay8::new(&w) };
@@ -505,7 +551,7 @@ impl Accel {
             let hit = if ANY && lane.walk.found() {
                 Some(PrimHit { t: lane.t_max, shape: 0, prim: 0, b1: 0.0, b2: 0.0 })
             } else if others {
-                self.trace_others::<ANY, true>(&rays[l], &lane.bray, lane.t_max, lane.hit)
+                self.trace_others::<ANY, true>(&rays.ray(l), &lane.bray, lane.t_max, lane.hit)
             } else {
                 // What `trace_others` gives with both trees empty (an occlusion walk records no hit).
                 lane.hit.map(|h| self.tri_hit(lane.t_max, h))
@@ -529,7 +575,7 @@ impl Accel {
     /// The CPU must support AVX and POPCNT.
     #[cfg(target_arch = "x86_64")]
     #[target_feature(enable = "avx,popcnt")]
-    unsafe fn trace_coherent_avx(&self, rays: &[Ray; RAY_LANES], active: u8, records: &HitRecords, mut done: impl FnMut(usize, Option<PrimHit>)) {
+    unsafe fn trace_coherent_avx(&self, rays: &impl LaneRays, active: u8, records: &HitRecords, mut done: impl FnMut(usize, Option<PrimHit>)) {
         use super::coherent::{walk, Coherent, TIE};
         // SAFETY: this function runs only on CPUs with AVX.
         let b = self.bounds;
@@ -546,14 +592,14 @@ impl Accel {
         while finish != 0 {
             let l = finish.trailing_zeros() as usize & (RAY_LANES - 1);
             finish &= finish - 1;
-            let r = &rays[l];
+            let r = rays.ray(l);
             let hit = (f.slot[l] >= 0).then(|| (f.slot[l] as usize / LANES, f.slot[l] as usize % LANES, f.b1[l], f.b2[l]));
             if hit.is_some() && f.rival[l] <= f.t[l] * (1.0 + TIE) {
                 again |= 1 << l;
                 continue;
             }
             let t = if hit.is_some() { f.t[l] } else { r.t_max };
-            done(l, if others { self.trace_others::<false, true>(r, &BoxRay::new(r.o, r.d), t, hit) } else { hit.map(|h| self.tri_hit(t, h)) });
+            done(l, if others { self.trace_others::<false, true>(&r, &BoxRay::new(r.o, r.d), t, hit) } else { hit.map(|h| self.tri_hit(t, h)) });
         }
         if again != 0 {
             // SAFETY: as above.

@@ -31,9 +31,9 @@
 //! packet's lanes mix camera and bounce rays: 1.008 (within noise).
 
 use super::build::MAX_STACK;
+use super::bvh::LaneRays;
 use super::tri8::{nearest_lane, Lanes, Tri8, TriRay8, LANES, NO_TRI};
 use super::wide::{leaf_range, prefetch_child, BoxRay, Node, EMPTY_CHILD, FAR_SLACK, LEAF_BIT, PLANE_BYTES, WIDTH};
-use crate::geometry::Ray;
 use std::arch::x86_64::*;
 use std::mem::MaybeUninit;
 
@@ -98,6 +98,13 @@ unsafe fn min_max_lanes(v: __m256) -> (f32, f32) {
     (_mm_cvtss_f32(_mm_min_ss(mn, _mm_shuffle_ps::<1>(mn, mn))), _mm_cvtss_f32(_mm_max_ss(mx, _mm_shuffle_ps::<1>(mx, mx))))
 }
 
+/// A blend mask of the lanes of `m` (their sign bits set; AVX has no integer compare).
+#[inline(always)]
+unsafe fn lane_mask(m: u8) -> __m256 {
+    let signs: [f32; LANES] = std::array::from_fn(|l| if m & (1 << l) != 0 { -0.0 } else { 0.0 });
+    _mm256_loadu_ps(signs.as_ptr())
+}
+
 /// The eight lanes of `v`.
 #[inline(always)]
 unsafe fn lanes(v: __m256) -> [f32; LANES] {
@@ -116,26 +123,51 @@ impl Coherent {
     /// # Safety
     /// The CPU must support AVX, and the caller must be compiled with it enabled.
     #[inline(always)]
-    pub unsafe fn new(rays: &[Ray; LANES], active: u8, scale: f32) -> Option<Coherent> {
-        let lead = &rays[active.trailing_zeros() as usize & (LANES - 1)];
+    pub unsafe fn new(rays: &impl LaneRays, active: u8, scale: f32) -> Option<Coherent> {
+        let first = active.trailing_zeros() as usize & (LANES - 1);
+        let lead = rays.ray(first);
         // First a cheap look for unlike rays (a packet's bounce rays, at every bounce): each
         // active ray beside the first one, before the vector set-up.
         let (o_tol, d_tol) = (ORIGIN_SPREAD * scale, DIR_SPREAD * lead.d.abs().max_element());
-        for r in rays.iter().enumerate().filter(|&(l, _)| active & (1 << l) != 0).map(|(_, r)| r) {
-            if (r.o - lead.o).abs().max_element() > o_tol || (r.d - lead.d).abs().max_element() > d_tol {
+        let (ov, dv, t_max) = if let Some(r) = rays.rows() {
+            // Rows: the same look, eight lanes at once (a component over its tolerance, as
+            // `max_element`, which passes over NaN: an ordered compare), the inactive lanes
+            // then blended to the first active one.
+            let keep = lane_mask(active);
+            let (lo, ld) = ([lead.o.x, lead.o.y, lead.o.z], [lead.d.x, lead.d.y, lead.d.z]);
+            let abs = |v| _mm256_andnot_ps(_mm256_set1_ps(-0.0), v);
+            let mut far = _mm256_setzero_ps();
+            let (mut ov, mut dv) = ([_mm256_setzero_ps(); 3], [_mm256_setzero_ps(); 3]);
+            for a in 0..3 {
+                ov[a] = _mm256_blendv_ps(_mm256_set1_ps(lo[a]), _mm256_loadu_ps(r.o[a].as_ptr()), keep);
+                dv[a] = _mm256_blendv_ps(_mm256_set1_ps(ld[a]), _mm256_loadu_ps(r.d[a].as_ptr()), keep);
+                let o_far = _mm256_cmp_ps::<_CMP_GT_OQ>(abs(_mm256_sub_ps(ov[a], _mm256_set1_ps(lo[a]))), _mm256_set1_ps(o_tol));
+                let d_far = _mm256_cmp_ps::<_CMP_GT_OQ>(abs(_mm256_sub_ps(dv[a], _mm256_set1_ps(ld[a]))), _mm256_set1_ps(d_tol));
+                far = _mm256_or_ps(far, _mm256_or_ps(o_far, d_far));
+            }
+            if _mm256_movemask_ps(far) != 0 {
                 return None;
             }
-        }
-        let (mut o, mut d) = ([[0.0f32; LANES]; 3], [[0.0f32; LANES]; 3]);
-        let mut t_max = [0.0f32; LANES];
-        for (l, r) in rays.iter().enumerate() {
-            let r = if active & (1 << l) != 0 { r } else { lead };
-            (o[0][l], o[1][l], o[2][l]) = (r.o.x, r.o.y, r.o.z);
-            (d[0][l], d[1][l], d[2][l]) = (r.d.x, r.d.y, r.d.z);
-            t_max[l] = r.t_max;
-        }
-        let ov = [_mm256_loadu_ps(o[0].as_ptr()), _mm256_loadu_ps(o[1].as_ptr()), _mm256_loadu_ps(o[2].as_ptr())];
-        let dv = d.map(|v| _mm256_loadu_ps(v.as_ptr()));
+            let t = _mm256_blendv_ps(_mm256_set1_ps(lead.t_max), _mm256_loadu_ps(r.t_max.as_ptr()), keep);
+            (ov, dv, lanes(t))
+        } else {
+            for r in (0..LANES).filter(|&l| active & (1 << l) != 0).map(|l| rays.ray(l)) {
+                if (r.o - lead.o).abs().max_element() > o_tol || (r.d - lead.d).abs().max_element() > d_tol {
+                    return None;
+                }
+            }
+            let (mut o, mut d) = ([[0.0f32; LANES]; 3], [[0.0f32; LANES]; 3]);
+            let mut t_max = [0.0f32; LANES];
+            for l in 0..LANES {
+                let r = if active & (1 << l) != 0 { rays.ray(l) } else { lead };
+                (o[0][l], o[1][l], o[2][l]) = (r.o.x, r.o.y, r.o.z);
+                (d[0][l], d[1][l], d[2][l]) = (r.d.x, r.d.y, r.d.z);
+                t_max[l] = r.t_max;
+            }
+            let ov = [_mm256_loadu_ps(o[0].as_ptr()), _mm256_loadu_ps(o[1].as_ptr()), _mm256_loadu_ps(o[2].as_ptr())];
+            let dv = [_mm256_loadu_ps(d[0].as_ptr()), _mm256_loadu_ps(d[1].as_ptr()), _mm256_loadu_ps(d[2].as_ptr())];
+            (ov, dv, t_max)
+        };
         let one = _mm256_set1_ps(1.0);
         // As `BoxRay::new`: 1 / d, an exact division, so the single walk's inverse bit for bit.
         // (Vector code out of closures and `map`: those are not compiled with the caller's AVX.)
@@ -199,7 +231,7 @@ impl Coherent {
             o: ov,
             inv,
             k: [kx * LANES, ky * LANES, kz * LANES],
-            ok: [o[kx], o[ky], o[kz]],
+            ok: [lanes(ov[kx]), lanes(ov[ky]), lanes(ov[kz])],
             s,
             t_max,
         })

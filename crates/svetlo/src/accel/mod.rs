@@ -16,7 +16,7 @@ mod wide;
 #[cfg(test)]
 mod tests;
 
-pub use bvh::{Accel, HitRecords, RAY_LANES};
+pub use bvh::{Accel, HitRecords, LaneRays, RAY_LANES};
 pub use geometry_cache::GeometryCache;
 pub use kdtree::{KdPoint, KdTree};
 pub(crate) use wide::prefetch;

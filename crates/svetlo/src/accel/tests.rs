@@ -543,11 +543,35 @@ fn coherent_walks_match_single_walks() {
             // SAFETY: AVX is present.
             coherent += unsafe { super::coherent::Coherent::new(&eight, 0xff, 1.0) }.is_some() as usize;
         }
-        for active in [0xff, 0x7f, 0xf0, 0x3c] {
-            let hits = accel.intersect_lanes(&eight, active);
-            for (l, ray) in eight.iter().enumerate() {
-                let want = if active & (1 << l) != 0 { bits(accel.intersect(ray)) } else { None };
-                assert_eq!(bits(hits[l]), want, "lane {l} of group {g} (active {active:#x})");
+        // Beside the group as it is, the group with two or five of its rays unlike the rest
+        // (a packet's bounce rays beside its camera rays: the alike ones still walk as one).
+        let mut mixed = [eight; 3];
+        for (m, unlike) in [(1, 0b0100_0010u8), (2, 0b1011_0001)] {
+            for l in (0..RAY_LANES).filter(|l| unlike & (1 << l) != 0) {
+                mixed[m][l] = Ray::new(v3(&mut rng) * 3.0 - 1.0, (v3(&mut rng) - 0.5).normalize_or(Vec3::X));
+            }
+        }
+        for (m, eight) in mixed.iter().enumerate() {
+            // The rays as rows too, as the path kernel keeps them.
+            let mut rows = super::packet::Rays8::default();
+            for (l, r) in eight.iter().enumerate() {
+                for a in 0..3 {
+                    (rows.o[a][l], rows.d[a][l]) = (r.o[a], r.d[a]);
+                }
+                rows.t_max[l] = r.t_max;
+            }
+            for active in [0xff, 0x7f, 0xf0, 0x3c] {
+                let hits = accel.intersect_lanes(eight, active);
+                let mut row_hits = [None; RAY_LANES];
+                accel.intersect_lanes_with(&rows, active, &super::HitRecords::NONE, |l, hit| row_hits[l] = hit);
+                let blocked = accel.occluded_lanes_of(&rows, active);
+                for (l, ray) in eight.iter().enumerate() {
+                    let want = if active & (1 << l) != 0 { bits(accel.intersect(ray)) } else { None };
+                    assert_eq!(bits(hits[l]), want, "lane {l} of group {g}/{m} (active {active:#x})");
+                    assert_eq!(bits(row_hits[l]), want, "rows: lane {l} of group {g}/{m} (active {active:#x})");
+                    let occluded = active & (1 << l) != 0 && accel.occluded(ray);
+                    assert_eq!(blocked & (1 << l) != 0, occluded, "rows: lane {l} of group {g}/{m} (active {active:#x})");
+                }
             }
         }
         for ray in &eight[..2] {

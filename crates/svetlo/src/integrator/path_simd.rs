@@ -448,6 +448,12 @@ impl KernelGeometry {
         KernelGeometry { static_triangles: static_triangles.unwrap_or(n), tris, unpacked: unpack_tris, triangles: n as u32, meshes, light_tris }
     }
 
+    /// The meshes of the shapes `keep` takes, as (first triangle of the kernel's, count, shape).
+    fn texel_meshes(&self, keep: impl Fn(u32) -> bool) -> Vec<(u32, u32, u32)> {
+        let end = |k: usize| self.meshes.get(k + 1).map_or(self.triangles, |&(f, _)| f);
+        self.meshes.iter().enumerate().filter(|&(_, &(_, si))| keep(si)).map(|(k, &(f, si))| (f, end(k) - f, si)).collect()
+    }
+
     /// Whether `prim` (a lane's hit) names a triangle of the kernel's.
     #[inline(always)]
     fn is_triangle(&self, prim: u32) -> bool {
@@ -605,27 +611,24 @@ impl Tracer {
             return h;
         }
         let records = if let Tracer::Single { records, .. } = self { records } else { &HitRecords::NONE };
-        let lane_hits = scene.accel.intersect_lanes_asking(&lane_rays(rays), lanes, records);
-        for l in (0..LANES).filter(|l| lanes & (1 << l) != 0) {
-            let hit = lane_hits[l];
-            h.t[l] = hit.map_or(rays.t_max[l], |hit| hit.t);
-            h.prim[l] = match hit {
-                None => u32::MAX,
-                Some(hit) => {
-                    // The BVH's shape ids index the static shapes where some move.
-                    let shape = scene.static_shapes.get(hit.shape as usize).copied().unwrap_or(hit.shape);
-                    match first[shape as usize] {
-                        NOT_MESH => {
-                            others.prim[l] = (shape, hit.prim);
-                            OTHER
-                        }
-                        f => f + hit.prim,
-                    }
-                }
+        // The walks read the lanes' rows and write each lane's hit here as they finish it.
+        scene.accel.intersect_lanes_with(rays, lanes, records, |l, hit| {
+            let l = l & (LANES - 1);
+            let Some(hit) = hit else {
+                (h.t[l], h.prim[l], h.b1[l], h.b2[l]) = (rays.t_max[l], u32::MAX, 0.0, 0.0);
+                return;
             };
-            h.b1[l] = hit.map_or(0.0, |hit| hit.b1);
-            h.b2[l] = hit.map_or(0.0, |hit| hit.b2);
-        }
+            // The BVH's shape ids index the static shapes where some move.
+            let shape = scene.static_shapes.get(hit.shape as usize).copied().unwrap_or(hit.shape);
+            h.prim[l] = match first[shape as usize] {
+                NOT_MESH => {
+                    others.prim[l] = (shape, hit.prim);
+                    OTHER
+                }
+                f => f + hit.prim,
+            };
+            (h.t[l], h.b1[l], h.b2[l]) = (hit.t, hit.b1, hit.b2);
+        });
         h
     }
 
@@ -653,10 +656,10 @@ impl Tracer {
                 let spheres = &sp.0;
                 let blocked = bvh.occluded(rays, active);
                 let (hit, unsure) = spheres.occluded(rays, active & !blocked);
-                let again = if unsure != 0 { scene.accel.occluded_lanes(&lane_rays(rays), unsure) } else { 0 };
+                let again = if unsure != 0 { scene.accel.occluded_lanes_of(rays, unsure) } else { 0 };
                 blocked | (hit & !unsure) | again
             }
-            Tracer::Single { .. } => scene.accel.occluded_lanes(&lane_rays(rays), active),
+            Tracer::Single { .. } => scene.accel.occluded_lanes_of(rays, active),
             Tracer::Scene { .. } => {
                 (0..LANES).filter(|&l| active & (1 << l) != 0).fold(0, |m, l| if scene.occluded_ray(&timed_ray(rays, time, l)) { m | 1 << l } else { m })
             }
@@ -748,11 +751,6 @@ fn timed_ray(rays: &Rays8, time: &[f32; LANES], l: usize) -> Ray {
     Ray { time: time[l], ..lane_ray(rays, l) }
 }
 
-/// All eight lanes' rays, for the scene BVH's eight-ray queries (which walk them interleaved).
-fn lane_rays(rays: &Rays8) -> [Ray; LANES] {
-    std::array::from_fn(|l| lane_ray(rays, l))
-}
-
 /// Everything the kernel needs of a qualifying scene.
 pub struct SimdKernel {
     tracer: Tracer,
@@ -771,6 +769,9 @@ pub struct SimdKernel {
     /// Whether some shape's texels are asked for ahead of shading (`prefetch_texels`; with
     /// the triangles unpacked, whose uvs it reads).
     prefetch_texels: bool,
+    /// The kernel's triangles of those shapes, as (first, count, shape) per mesh: a lane's
+    /// hit is tested against these ranges, not searched for among all meshes.
+    texel_meshes: Vec<(u32, u32, u32)>,
     /// Run the AVX-512VL build of the kernel (detected at run time; tests may clear it).
     avx512: bool,
     /// Packets a tile steps in phase: [`PACKETS`] where Beckmann normals or sphere-light
@@ -960,6 +961,7 @@ impl SimdKernel {
             .collect();
         let env_light = scene.lights.iter().position(|l| matches!(l, Light::EnvMap(env) if env.large()));
         let prefetch_texels = geometry.unpacked && shapes.iter().any(|s| s.prefetch_texels);
+        let texel_meshes = if prefetch_texels { geometry.texel_meshes(|si| shapes[si as usize].prefetch_texels) } else { Vec::new() };
         let chains =
             sphere_lights.iter().any(Option::is_some) || shapes.iter().any(|s| s.uniform.as_ref().is_some_and(|b| b.beckmann_conductor(Vec3::Z).is_some()));
         let packets = if chains { PACKETS } else { 1 };
@@ -974,6 +976,7 @@ impl SimdKernel {
             sphere_lights,
             env_light,
             prefetch_texels,
+            texel_meshes,
             avx512: crate::cpu::avx512(),
             packets,
             plastics,
@@ -1885,22 +1888,25 @@ impl SimdKernel {
     /// misses overlap. The uvs go to `uv_ahead` for `gather`.
     #[inline(never)]
     fn prefetch_texels(&self, scene: &Scene, hits: &Hits8, active: u8, uv_ahead: &mut [Vec2; LANES]) {
-        for l in lanes_of(active as u32) {
-            // The hit's mesh and its index there from the kernel's index alone (`self.uv` of
-            // the unpacked triangle, the same value): the triangle's record, just asked for by
-            // `prefetch_hits`, is not waited on here (3 % of the grid's render, most of its
-            // lanes on shapes without such a bitmap).
-            let Some((si, t)) = self.geometry.mesh_of(hits.prim[l]) else { continue };
-            let sh = &self.shapes[si];
-            if !sh.prefetch_texels {
+        for &(first, count, si) in &self.texel_meshes {
+            // The lanes whose hit is on this mesh (all eight compared at once; a miss's
+            // `u32::MAX` is out of every range), and the hit's index there from the kernel's
+            // index alone (`self.uv` of the unpacked triangle, the same value): the
+            // triangle's record, just asked for by `prefetch_hits`, is not waited on here
+            // (3 % of the grid's render, most of its lanes on shapes without such a bitmap).
+            let on = (0..LANES).fold(0u8, |m, l| m | (u8::from(hits.prim[l].wrapping_sub(first) < count) << l)) & active;
+            if on == 0 {
                 continue;
             }
-            let Geometry::Mesh(m) = &*scene.shapes[si].geometry else { continue };
-            let uv = m.uv(t, hits.b1[l], hits.b2[l]);
-            uv_ahead[l] = uv;
-            sh.front.prefetch(uv);
-            if let Some(b) = &sh.back {
-                b.prefetch(uv);
+            let sh = &self.shapes[si as usize];
+            let Geometry::Mesh(m) = &*scene.shapes[si as usize].geometry else { continue };
+            for l in lanes_of(on as u32) {
+                let uv = m.uv((hits.prim[l] - first) as usize, hits.b1[l], hits.b2[l]);
+                uv_ahead[l] = uv;
+                sh.front.prefetch(uv);
+                if let Some(b) = &sh.back {
+                    b.prefetch(uv);
+                }
             }
         }
     }
