@@ -351,11 +351,12 @@ impl BlackSamples {
     }
 }
 
-/// One pixel sample's camera connections: (contribution, raster, whether it is splatted),
-/// the last unknown until its shadow ray has been tested. A lane's connection is put in
-/// when its lane has run, and only if it is splatted (a placeholder put in when it was
-/// staged cost a store per connection and a look-up of its slot); its place is kept only
-/// before a connection computed alone (`OrderedSplats::scalar`).
+/// One pixel sample's camera connections: (contribution, raster, whether it is splatted,
+/// which implies `SampleOut::splat`'s test of the contribution), the last unknown until
+/// its shadow ray has been tested. A lane's connection is put in when its lane has run,
+/// and only if it is splatted (a placeholder put in when it was staged cost a store per
+/// connection and a look-up of its slot); its place is kept only before a connection
+/// computed alone (`OrderedSplats::scalar`).
 #[derive(Default)]
 struct Slot {
     splats: Vec<(Rgb, Vec2, bool)>,
@@ -435,10 +436,10 @@ impl OrderedSplats {
     fn run_lanes(&mut self, batch: &CameraBatch, packets: &ShadowPackets) {
         batch.run(&mut self.lanes);
         let (rays, tested) = self.lanes.shadow_rays();
-        let blocked = packets.occluded_lanes(rays, tested);
+        let splatted = self.lanes.splatted() & !packets.occluded_lanes(rays, tested);
         for k in 0..self.lanes.staged() {
             let (i, at) = self.lane_of[k];
-            let splatted = self.lanes.valid(k) && blocked & (1 << k) == 0;
+            let splatted = splatted & (1 << k) != 0;
             let (l, raster) = (self.lanes.l(k), self.lanes.raster(k));
             let slot = self.slot(i);
             if at != Self::PUSH {
@@ -454,6 +455,10 @@ impl OrderedSplats {
     /// Sample `i`'s next connection, computed alone: its shadow ray (None or of no length:
     /// clear) waits for a packet.
     fn scalar(&mut self, packets: &ShadowPackets, i: usize, l: Rgb, raster: Vec2, shadow: Option<Ray>) {
+        // What `SampleOut::splat` would drop is left out here (`release` does not test).
+        if l.is_black() || !l.is_finite() {
+            return;
+        }
         // The sample's lanes still to run (the last staged) keep their places before it.
         let n = self.lanes.staged();
         let first = (0..n).rev().take_while(|&k| self.lane_of[k] == (i, Self::PUSH)).last();
@@ -509,7 +514,7 @@ impl OrderedSplats {
             }
             for &(l, raster, splat) in &s.splats {
                 if splat {
-                    out.splat(raster, l);
+                    out.splats.push(Splat { raster, channel: 0, value: l, layers: 0 });
                 }
             }
             s.splats.clear();
