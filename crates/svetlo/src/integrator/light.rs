@@ -314,7 +314,7 @@ impl Estimator {
                 }
             }
         }
-        conns.slot(i).made = true;
+        conns.made(i);
         conns.release(out);
     }
 }
@@ -351,13 +351,18 @@ impl BlackSamples {
     }
 }
 
-/// One pixel sample's camera connections: (contribution, raster, whether it is splatted),
-/// the last unknown until its lane has run and its shadow ray been tested.
+/// One pixel sample's camera connections: (contribution, raster, whether it is splatted,
+/// which implies `SampleOut::splat`'s test of the contribution), the last unknown until
+/// its shadow ray has been tested. A lane's connection is put in when its lane has run,
+/// and only if it is splatted (a placeholder put in when it was staged cost a store per
+/// connection and a look-up of its slot); its place is kept only before a connection
+/// computed alone (`OrderedSplats::scalar`).
 #[derive(Default)]
 struct Slot {
     splats: Vec<(Rgb, Vec2, bool)>,
-    /// Connections whose lane or shadow ray is still to run.
-    waiting: usize,
+    /// Connections whose lane or shadow ray is still to run, once `made` (before, less the
+    /// lanes that have run: it may be below zero).
+    waiting: isize,
     /// Whether all its connections are made.
     made: bool,
 }
@@ -376,9 +381,12 @@ struct OrderedSplats {
     head: usize,
     open: usize,
     base: usize,
-    /// The staged lanes, and whose connection each is.
+    /// The staged lanes, and whose connection each is (sample, index in its slot; `PUSH`:
+    /// put in after the slot's others).
     lanes: BatchScratch,
     lane_of: [(usize, usize); LANES],
+    /// Lanes staged for the sample being made (added to its `waiting` by [`Self::made`]).
+    staged: isize,
     /// Shadow rays of connections computed alone, waiting for a packet.
     rays: Rays8,
     ray_of: [(usize, usize); LANES],
@@ -399,6 +407,8 @@ impl OrderedSplats {
         i
     }
 
+    const PUSH: usize = usize::MAX;
+
     #[inline]
     fn slot(&mut self, i: usize) -> &mut Slot {
         let k = self.head + (i - self.base);
@@ -409,23 +419,34 @@ impl OrderedSplats {
     /// Sample `i`'s next connection is in lane `k` of `lanes`.
     #[inline]
     fn lane(&mut self, i: usize, k: usize) {
+        self.lane_of[k] = (i, Self::PUSH);
+        self.staged += 1;
+    }
+
+    /// Sample `i`'s connections are all staged.
+    #[inline]
+    fn made(&mut self, i: usize) {
+        let staged = std::mem::take(&mut self.staged);
         let slot = self.slot(i);
-        let at = slot.splats.len();
-        slot.splats.push((Rgb::BLACK, Vec2::ZERO, false));
-        slot.waiting += 1;
-        self.lane_of[k] = (i, at);
+        slot.waiting += staged;
+        slot.made = true;
     }
 
     /// The staged lanes' connections and their shadow rays as one packet, into their slots.
     fn run_lanes(&mut self, batch: &CameraBatch, packets: &ShadowPackets) {
         batch.run(&mut self.lanes);
         let (rays, tested) = self.lanes.shadow_rays();
-        let blocked = packets.occluded_lanes(rays, tested);
+        let splatted = self.lanes.splatted() & !packets.occluded_lanes(rays, tested);
         for k in 0..self.lanes.staged() {
             let (i, at) = self.lane_of[k];
-            let splat = (self.lanes.l(k), self.lanes.raster(k), self.lanes.valid(k) && blocked & (1 << k) == 0);
+            let splatted = splatted & (1 << k) != 0;
+            let (l, raster) = (self.lanes.l(k), self.lanes.raster(k));
             let slot = self.slot(i);
-            slot.splats[at] = splat;
+            if at != Self::PUSH {
+                slot.splats[at] = (l, raster, splatted);
+            } else if splatted {
+                slot.splats.push((l, raster, true));
+            }
             slot.waiting -= 1;
         }
         self.lanes.clear();
@@ -434,6 +455,21 @@ impl OrderedSplats {
     /// Sample `i`'s next connection, computed alone: its shadow ray (None or of no length:
     /// clear) waits for a packet.
     fn scalar(&mut self, packets: &ShadowPackets, i: usize, l: Rgb, raster: Vec2, shadow: Option<Ray>) {
+        // What `SampleOut::splat` would drop is left out here (`release` does not test).
+        if l.is_black() || !l.is_finite() {
+            return;
+        }
+        // The sample's lanes still to run (the last staged) keep their places before it.
+        let n = self.lanes.staged();
+        let first = (0..n).rev().take_while(|&k| self.lane_of[k] == (i, Self::PUSH)).last();
+        if let Some(first) = first {
+            let slot = self.slot(i);
+            let at = slot.splats.len();
+            slot.splats.resize(at + n - first, (Rgb::BLACK, Vec2::ZERO, false));
+            for (k, at) in (first..n).zip(at..) {
+                self.lane_of[k].1 = at;
+            }
+        }
         let slot = self.slot(i);
         let at = slot.splats.len();
         // (`ShadowedSplats::push`'s test: a ray of no length is clear.)
@@ -478,7 +514,7 @@ impl OrderedSplats {
             }
             for &(l, raster, splat) in &s.splats {
                 if splat {
-                    out.splat(raster, l);
+                    out.splats.push(Splat { raster, channel: 0, value: l, layers: 0 });
                 }
             }
             s.splats.clear();

@@ -185,6 +185,12 @@ impl BatchScratch {
     pub fn clear(&mut self) {
         self.lanes.n = 0;
     }
+    /// The lanes whose connection exists and whose contribution is finite (after `run`): those
+    /// a splat keeps (`SampleOut::splat`'s test; a lane's contribution is never black).
+    #[inline]
+    pub fn splatted(&self) -> u8 {
+        self.out.valid & self.out.finite
+    }
     /// Whether lane `i`'s connection exists (after `run`).
     #[inline]
     pub fn valid(&self, i: usize) -> bool {
@@ -312,6 +318,8 @@ impl Lanes {
 #[derive(Default)]
 struct Out {
     valid: u8,
+    /// The contribution is finite in every channel.
+    finite: u8,
     has_ray: u8,
     /// Valid, with a ray of positive (or NaN) length.
     tested: u8,
@@ -393,6 +401,7 @@ unsafe fn kernel(k: &Pinhole, v: &Lanes, out: &mut Out) {
     // l = beta f beta_cam |ns·w|, per channel left to right; not black.
     let cos = _mm256_blendv_ps(abs(zi), zero, coincident);
     let mut black = _mm256_castsi256_ps(_mm256_set1_epi32(-1));
+    let mut finite = black;
     // le_dir of a light's endpoint: its radiance where ng·w > 0, else black.
     let emitter = ld(&v.emitter);
     let lit_emitter = _mm256_cmp_ps::<_CMP_GT_OQ>(dot(w, ng), zero);
@@ -403,6 +412,7 @@ unsafe fn kernel(k: &Pinhole, v: &Lanes, out: &mut Out) {
         let f = _mm256_blendv_ps(f, zero, coincident);
         let l = mul(mul(mul(ld(&v.beta[c]), f), beta_cam), cos);
         black = and(black, _mm256_cmp_ps::<_CMP_EQ_OQ>(l, zero));
+        finite = and(finite, _mm256_cmp_ps::<_CMP_LT_OQ>(abs(l), set(f32::INFINITY)));
         _mm256_storeu_ps(out.l[c].as_mut_ptr(), l);
     }
     ok = _mm256_andnot_ps(black, ok);
@@ -433,6 +443,7 @@ unsafe fn kernel(k: &Pinhole, v: &Lanes, out: &mut Out) {
     let lanes = (1u32 << v.n) - 1;
     out.valid = (_mm256_movemask_ps(ok) as u32 & lanes) as u8;
     out.has_ray = (_mm256_movemask_ps(has_ray) as u32 & lanes) as u8;
+    out.finite = (_mm256_movemask_ps(finite) as u32 & lanes) as u8;
     // The rays a packet tests: `ShadowedSplats::push`'s, !(t_max <= 0).
     let tested = _mm256_and_ps(_mm256_and_ps(ok, has_ray), _mm256_cmp_ps::<_CMP_NLE_UQ>(t_max, zero));
     out.tested = (_mm256_movemask_ps(tested) as u32 & lanes) as u8;
