@@ -28,11 +28,8 @@
 //! call (`Bsdf::eval_pdf_and_sample`: a rough model's half vector, D and G1 computed once;
 //! a rough conductor's Λ(wo) once for both; a Beckmann one's visible normal, value, density
 //! and sample for all lanes at once before, by `conductor_samples`, the same bits). Large
-//! scenes whose rays go as packets take the kernel on their first render only with
-//! Lambertian materials (its set-up cost more than it gained there otherwise), on later
-//! renders with any; scenes that
-//! trace single rays read the triangles their rays hit from the meshes (unpacking them all
-//! only where a render takes several camera samples a triangle) and take it on any render.
+//! scenes that trace single rays read the triangles their rays hit from the meshes (unpacking
+//! them all only where a render takes several camera samples a triangle).
 //! Lights: area lights of constant radiance on meshes
 //! (sampled by the kernel's own unpacked copy), and every other light the scalar tracer
 //! takes (textured area lights, sphere lights, point, spot, directional, one constant or
@@ -148,16 +145,12 @@ impl Integrator for SimdPathTracer {
             if let Some(k) = SimdKernel::new(scene, settings) {
                 return k.render(scene, settings, progress);
             }
-            // A large scene the kernel declines takes it on its next render (see
-            // `SimdKernel::new`).
-            scene.kernel_declined.get_or_build(&KernelGeometry::key(scene), || ());
         }
         PathTracer.render(scene, settings, progress)
     }
 
     /// The kernel's set-up, made and dropped: its geometry (the packet tree, the unpacked
-    /// triangles) stays with the scene for the render. A scene the kernel declines on a first
-    /// render is left unmarked, so the render still takes the scalar tracer.
+    /// triangles) stays with the scene for the render.
     fn prepare(&self, scene: &Scene, settings: &RenderSettings) {
         if self.tries_kernel(settings) {
             drop(SimdKernel::new(scene, settings));
@@ -502,9 +495,11 @@ impl Tri {
     }
 }
 
-/// Scenes with more triangles than this are large: where their rays go as packets they take
-/// the kernel on their first render only with Lambertian materials (see [`SimdKernel::new`]),
-/// and their packets check ties.
+/// Scenes with more triangles than this are large: their packets check ties. (They took the
+/// kernel on a first render only with Lambertian materials until the kernel had lanes for
+/// rough dielectrics, plastics and conductors; on bsdf_spheres' single sphere, 32k triangles,
+/// the kernel then took 0.50-0.77 of the scalar tracer's render CPU and 0.65-0.90 of its
+/// whole process at 128 spp, the same bits.)
 const LARGE_TRIANGLES: usize = 20_000;
 /// Scenes with more triangles than this trace one ray at a time (see [`Tracer`]). Between
 /// [`LARGE_TRIANGLES`] and this, packets still won: bsdf_spheres' textured sphere (32k
@@ -843,24 +838,6 @@ impl SimdKernel {
         // (area light), and about the same as unpacking at 1024 spp (7 a triangle).
         let camera_samples = scene.camera.width as u64 * scene.camera.height as u64 * settings.spp as u64;
         let unpack = !scene_rays || camera_samples > UNPACK_SAMPLES_PER_TRIANGLE * triangles as u64;
-        // A large scene whose materials are not all Lambertian and whose rays go as packets
-        // takes the kernel from its second render on: its set-up (unpacking every triangle,
-        // the packet tree) cost more than the kernel gained on scalar BSDFs in one render.
-        // (Scenes of single rays unpack nothing: bsdf_spheres' grid, 325k triangles, 8 of 12
-        // spheres not Lambertian, depth 2, 128 spp, had taken 1.21 the scalar tracer's
-        // instructions on the kernel's first render with every triangle unpacked, 1.03 on a
-        // repeat render; it now takes the kernel on its first render.) The kernel takes such a
-        // scene when its set-up is kept, or a first render through the scalar tracer marked
-        // its geometry (`Scene::kernel_declined`; the second render unpacks). The tie check
-        // keeps a large scene's packets the scalar tracer's image bit for bit, so the order
-        // of the renders shows in no image.
-        if large && !scene_rays && scene.shapes.iter().any(|s| s.detail || scene.materials.get(s.material as usize).is_none_or(|m| lambert_sides(m).is_none()))
-        {
-            let key = KernelGeometry::key(scene);
-            if scene.kernel_geometry.get(&key).is_none() && scene.kernel_declined.get(&key).is_none() {
-                return None;
-            }
-        }
         // The mesh lights' (light, 1 / area, distribution, radiance); their triangles come
         // with the rest of the geometry once the scene is in scope.
         let mut mesh_lights = Vec::with_capacity(scene.lights.len());

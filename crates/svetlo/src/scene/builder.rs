@@ -216,7 +216,6 @@ impl SceneBuilder {
             warnings,
             packet_tree: Default::default(),
             kernel_geometry: Default::default(),
-            kernel_declined: Default::default(),
         })
     }
 }

@@ -145,9 +145,6 @@ pub struct Scene {
     /// The path kernel's unpacked triangles and mesh lights, kept for the next render (keyed
     /// by the shapes' and lights' geometry).
     pub(crate) kernel_geometry: crate::accel::GeometryCache<crate::integrator::path_simd::KernelGeometry>,
-    /// Marks the geometry of a large scene the path kernel declined (its first render took
-    /// the scalar tracer): the kernel takes its next renders.
-    pub(crate) kernel_declined: crate::accel::GeometryCache<()>,
 }
 
 impl Scene {
