@@ -498,7 +498,7 @@ impl Tri {
 /// Scenes with more triangles than this are large: their packets check ties. (They took the
 /// kernel on a first render only with Lambertian materials until the kernel had lanes for
 /// rough dielectrics, plastics and conductors; on bsdf_spheres' single sphere, 32k triangles,
-/// the kernel then took 0.50-0.77 of the scalar tracer's render CPU and 0.65-0.90 of its
+/// the kernel then took 0.50-0.80 of the scalar tracer's render CPU and 0.65-0.90 of its
 /// whole process at 128 spp, the same bits.)
 const LARGE_TRIANGLES: usize = 20_000;
 /// Scenes with more triangles than this trace one ray at a time (see [`Tracer`]). Between
