@@ -401,7 +401,7 @@ unsafe fn kernel(k: &Pinhole, v: &Lanes, out: &mut Out) {
     // l = beta f beta_cam |ns·w|, per channel left to right; not black.
     let cos = _mm256_blendv_ps(abs(zi), zero, coincident);
     let mut black = _mm256_castsi256_ps(_mm256_set1_epi32(-1));
-    let mut finite = black;
+    let mut l_finite = black;
     // le_dir of a light's endpoint: its radiance where ng·w > 0, else black.
     let emitter = ld(&v.emitter);
     let lit_emitter = _mm256_cmp_ps::<_CMP_GT_OQ>(dot(w, ng), zero);
@@ -412,7 +412,7 @@ unsafe fn kernel(k: &Pinhole, v: &Lanes, out: &mut Out) {
         let f = _mm256_blendv_ps(f, zero, coincident);
         let l = mul(mul(mul(ld(&v.beta[c]), f), beta_cam), cos);
         black = and(black, _mm256_cmp_ps::<_CMP_EQ_OQ>(l, zero));
-        finite = and(finite, _mm256_cmp_ps::<_CMP_LT_OQ>(abs(l), set(f32::INFINITY)));
+        l_finite = and(l_finite, _mm256_cmp_ps::<_CMP_LT_OQ>(abs(l), set(f32::INFINITY)));
         _mm256_storeu_ps(out.l[c].as_mut_ptr(), l);
     }
     ok = _mm256_andnot_ps(black, ok);
@@ -443,7 +443,7 @@ unsafe fn kernel(k: &Pinhole, v: &Lanes, out: &mut Out) {
     let lanes = (1u32 << v.n) - 1;
     out.valid = (_mm256_movemask_ps(ok) as u32 & lanes) as u8;
     out.has_ray = (_mm256_movemask_ps(has_ray) as u32 & lanes) as u8;
-    out.finite = (_mm256_movemask_ps(finite) as u32 & lanes) as u8;
+    out.finite = (_mm256_movemask_ps(l_finite) as u32 & lanes) as u8;
     // The rays a packet tests: `ShadowedSplats::push`'s, !(t_max <= 0).
     let tested = _mm256_and_ps(_mm256_and_ps(ok, has_ray), _mm256_cmp_ps::<_CMP_NLE_UQ>(t_max, zero));
     out.tested = (_mm256_movemask_ps(tested) as u32 & lanes) as u8;
@@ -541,7 +541,7 @@ mod tests {
         // One scratch for all paths, as the light tracer keeps it: a longer path's lanes
         // stay behind in a shorter one's batch.
         let mut scratch = BatchScratch::default();
-        let (mut total, mut lambertian, mut emitted) = (0, 0, 0);
+        let (mut total, mut lambertian, mut emitted, mut non_finite) = (0, 0, 0, 0);
         for k in 0..3000 {
             let path = subpath(&mut rng, light, 1 + k % 13);
             let mut a = IndependentSampler::new(1, k as u64);
@@ -558,10 +558,37 @@ mod tests {
             let next = a.next_1d().to_bits();
             assert_eq!(next, b.next_1d().to_bits(), "the same sampler dimensions");
             assert_eq!(next, c.next_1d().to_bits(), "the same sampler dimensions, owed draws paid");
+            // `splatted` is `valid` and a finite contribution, lane by lane; every fifth path's
+            // light vertices carry a non-finite or huge throughput (a NaN or an infinity).
+            let mut odd = path.clone();
+            if k % 5 == 0 {
+                for (j, v) in odd.iter_mut().enumerate() {
+                    v.beta = match j % 3 {
+                        0 => Rgb::new(f32::NAN, 1.0, 1.0),
+                        1 => Rgb::new(1.0, f32::INFINITY, 1.0),
+                        _ => v.beta * 1e38,
+                    };
+                }
+            }
+            let mut owed = 0;
+            let mut d = b.clone();
+            for s in 1..=odd.len() {
+                if scratch.is_full() {
+                    break;
+                }
+                batch.stage_lazy(&scene, &cfg, &odd, s, &mut d, &mut owed, &mut scratch);
+            }
+            if scratch.staged() > 0 {
+                batch.run(&mut scratch);
+                let want: u8 = (0..scratch.staged()).filter(|&i| scratch.valid(i) && scratch.l(i).is_finite()).fold(0, |m, i| m | 1 << i);
+                assert_eq!(scratch.splatted(), want, "path {k}: the splatted lanes");
+                non_finite += (0..scratch.staged()).filter(|&i| scratch.valid(i) && !scratch.l(i).is_finite()).count();
+                scratch.clear();
+            }
             total += want.len();
             emitted += usize::from(camera_connection(&scene, &cfg, &path, 1, &mut IndependentSampler::new(1, k as u64)).is_some());
             lambertian += path.iter().skip(1).filter(|v| matches!(v.bsdf.as_ref().map(|b| &b.front), Some(BsdfModel::Diffuse(_)))).count();
         }
-        assert!(total > 1500 && lambertian > 10_000 && emitted > 300, "{total} {lambertian} {emitted}");
+        assert!(total > 1500 && lambertian > 10_000 && emitted > 300 && non_finite > 100, "{total} {lambertian} {emitted} {non_finite}");
     }
 }
