@@ -338,6 +338,9 @@ pub const RAY_LANES: usize = 8;
 
 /// Eight rays as the lane walks read them: an array of rays, or rows of lanes (`Rays8`, as
 /// the path kernel keeps them: no array of rays built for a walk that makes rows again).
+/// (Rows alone, arrays converted at `intersect_lanes`, with the walks no longer generic,
+/// cost bsdf_spheres' test_envmap and test_arealight 1.08-1.09 of the render time in the
+/// kernel, which passes rows either way: the walks' code generation, not the conversion.)
 pub trait LaneRays {
     /// Lane `l`'s ray (its time unread by the walks).
     fn ray(&self, l: usize) -> Ray;
