@@ -199,14 +199,16 @@ impl BsdfModel {
     pub fn pdf(&self, wo: Vec3, wi: Vec3, mode: TransportMode) -> f32 {
         dispatch!(self, m => m.pdf(wo, wi, mode))
     }
-    /// ([`Self::eval`], [`Self::pdf`]), the same bits: the rough models compute their half
-    /// vector, D and G1 once for both.
+    /// ([`Self::eval`], [`Self::pdf`]), the same bits: the rough and principled models
+    /// compute their half vector, D and G1 once for both.
     #[inline]
     pub fn eval_pdf(&self, wo: Vec3, wi: Vec3, mode: TransportMode) -> (Rgb, f32) {
         match self {
             BsdfModel::RoughConductor(m) => m.eval_pdf(wo, wi),
             BsdfModel::RoughPlastic(m) => m.eval_pdf(wo, wi),
             BsdfModel::RoughDielectric(m) => m.eval_pdf(wo, wi, mode),
+            BsdfModel::Principled(m) => m.eval_pdf(wo, wi, mode),
+            BsdfModel::PrincipledThin(m) => m.eval_pdf(wo, wi, mode),
             m => (m.eval(wo, wi, mode), m.pdf(wo, wi, mode)),
         }
     }
@@ -349,6 +351,12 @@ impl Bsdf {
         if let (None, true, Some((BsdfModel::RoughConductor(c), flipped))) = (&self.detail, self.opacity >= 1.0, self.side(wo)) {
             let side = |w: Vec3| if flipped { flip(w) } else { w };
             let (nee, s) = c.eval_pdf_and_sample(side(wo), wi.map(side), u);
+            return Self::finish_conductor(self.opacity, flipped, nee, s);
+        }
+        // A principled model shares its terms of wo (wrapped as a conductor's).
+        if let (None, true, Some((BsdfModel::Principled(p), flipped))) = (&self.detail, self.opacity >= 1.0, self.side(wo)) {
+            let side = |w: Vec3| if flipped { flip(w) } else { w };
+            let (nee, s) = p.eval_pdf_and_sample(side(wo), wi.map(side), uc, u, mode);
             return Self::finish_conductor(self.opacity, flipped, nee, s);
         }
         (wi.map(|wi| self.eval_pdf(wo, wi, mode)), self.sample(wo, uc, u, mode))

@@ -36,13 +36,24 @@ fn schlick_weight(cos: f32) -> f32 {
 /// of an interface of relative IOR `eta`; from the optically denser side it uses the
 /// transmitted angle (and is 1 under total internal reflection), as Mitsuba does.
 fn schlick(r0: Rgb, cos_i: f32, eta: f32) -> Rgb {
+    schlick_blend(r0, schlick_fresnel_weight(cos_i, eta))
+}
+
+/// [`schlick`]'s weight, which does not depend on `r0`: one for all of a point's Schlick terms.
+#[inline]
+fn schlick_fresnel_weight(cos_i: f32, eta: f32) -> f32 {
     let (eta_it, eta_ti) = if cos_i >= 0.0 { (eta, 1.0 / eta) } else { (1.0 / eta, eta) };
-    let w = if eta_it > 1.0 {
+    if eta_it > 1.0 {
         schlick_weight(cos_i.abs())
     } else {
         let cos_t2 = 1.0 - (1.0 - cos_i * cos_i) * eta_ti * eta_ti;
         schlick_weight(cos_t2.max(0.0).sqrt())
-    };
+    }
+}
+
+/// [`schlick`] given its weight `w`.
+#[inline]
+fn schlick_blend(r0: Rgb, w: f32) -> Rgb {
     r0 * (1.0 - w) + Rgb::splat(w)
 }
 
@@ -80,7 +91,13 @@ pub fn eta_from_specular(specular: f32) -> f32 {
 /// clearcoat, per unit projected area; `alpha` in (0, 1).
 fn gtr1_d(alpha: f32, m: Vec3) -> f32 {
     let a2 = alpha * alpha;
-    let r = (a2 - 1.0) / (PI * a2.ln() * (1.0 + (a2 - 1.0) * m.z * m.z));
+    gtr1_d_given(a2, a2.ln(), m)
+}
+
+/// [`gtr1_d`] given alpha² and its logarithm (a point's, computed once).
+#[inline]
+fn gtr1_d_given(a2: f32, ln_a2: f32, m: Vec3) -> f32 {
+    let r = (a2 - 1.0) / (PI * ln_a2 * (1.0 + (a2 - 1.0) * m.z * m.z));
     if r * m.z > 1e-20 {
         r
     } else {
@@ -108,10 +125,17 @@ fn gtr1_pdf(alpha: f32, m: Vec3) -> f32 {
 
 /// Smith's GGX masking with a fixed isotropic `alpha` (the clearcoat's), zero where `v`
 /// sees the back of `m`.
+#[inline]
 fn smith_ggx1(v: Vec3, m: Vec3, alpha: f32) -> f32 {
     if v.dot(m) * v.z <= 0.0 {
         return 0.0;
     }
+    smith_ggx1_front(v, alpha)
+}
+
+/// [`smith_ggx1`] where `v` sees the front of the microfacet: a function of `v` alone.
+#[inline]
+fn smith_ggx1_front(v: Vec3, alpha: f32) -> f32 {
     if v.z == 1.0 {
         return 1.0;
     }
@@ -188,6 +212,32 @@ pub struct Principled {
     /// GTR1 roughness of the clearcoat: 0.1 at gloss 0 to 0.001 at gloss 1.
     pub clearcoat_alpha: f32,
     pub rates: SamplingRates,
+    /// What `eval_pdf` reads at every call, from the fields above when the model is built
+    /// ([`Principled::derived`]).
+    pub derived: PrincipledDerived,
+}
+
+/// The parts of [`Principled`] that depend on its parameters alone: computed once per
+/// point, not at each evaluation (the same values).
+#[derive(Clone, Copy, Debug, Default)]
+pub struct PrincipledDerived {
+    /// `tint_of(base_color)`.
+    tint: Rgb,
+    /// `sheen_color(base_color, sheen_tint)`.
+    sheen_color: Rgb,
+    /// The clearcoat's alpha² and its logarithm (where the clearcoat is positive).
+    cc_a2: f32,
+    cc_ln_a2: f32,
+}
+
+/// What a vertex's evaluations and its sample share: terms of `wo` alone.
+#[derive(Clone, Copy, Debug)]
+struct WoTerms {
+    /// Smith's Λ(wo) of the main lobes' GGX.
+    lambda: f32,
+    /// The clearcoat's masking toward `wo` where it sees the microfacet's front (0 without
+    /// a clearcoat: not read then).
+    g_cc: f32,
 }
 
 /// Lobe probabilities of `principled` from one side, normalised.
@@ -199,6 +249,17 @@ struct PrincipledLobes {
 }
 
 impl Principled {
+    /// [`PrincipledDerived`] of these parameters.
+    pub fn derived(&self) -> PrincipledDerived {
+        let cc_a2 = self.clearcoat_alpha * self.clearcoat_alpha;
+        PrincipledDerived {
+            tint: tint_of(self.base_color),
+            sheen_color: sheen_color(self.base_color, self.sheen_tint),
+            cc_a2,
+            cc_ln_a2: if self.clearcoat > 0.0 { cc_a2.ln() } else { 0.0 },
+        }
+    }
+
     /// Weight of the diffuse base (the BRDF's dielectric part).
     #[inline]
     fn brdf_weight(&self) -> f32 {
@@ -260,6 +321,17 @@ impl Principled {
         let eta_it = if cos_i >= 0.0 { self.eta } else { 1.0 / self.eta };
         let metal = schlick(self.base_color, cos_i, self.eta) * m;
         let tinted = schlick(tint_of(self.base_color) * r0_of_eta(eta_it), cos_i, self.eta) * ((1.0 - m) * t);
+        Rgb::splat((1.0 - m) * (1.0 - t) * f_dielectric) + metal + tinted
+    }
+
+    /// [`Self::fresnel`] on the front, given the Schlick weight `w` at `cos_i` and the
+    /// derived tint: the same value.
+    #[inline]
+    fn fresnel_front(&self, f_dielectric: f32, cos_i: f32, w: f32) -> Rgb {
+        let (m, t) = (self.metallic, self.spec_tint);
+        let eta_it = if cos_i >= 0.0 { self.eta } else { 1.0 / self.eta };
+        let metal = schlick_blend(self.base_color, w) * m;
+        let tinted = schlick_blend(self.derived.tint * r0_of_eta(eta_it), w) * ((1.0 - m) * t);
         Rgb::splat((1.0 - m) * (1.0 - t) * f_dielectric) + metal + tinted
     }
 
@@ -353,7 +425,109 @@ impl Principled {
         }
     }
 
+    /// ([`Self::eval`], [`Self::pdf`]), the same bits: the half vector, the dielectric
+    /// Fresnel term, D, G1 and the clearcoat's GTR1 D computed once for both (G1 toward `wo`
+    /// is the same for `wo` and the `-wo` that the density reads).
+    pub fn eval_pdf(&self, wo: Vec3, wi: Vec3, mode: TransportMode) -> (Rgb, f32) {
+        self.eval_pdf_with(wo, wi, mode, &self.wo_terms(wo))
+    }
+
+    #[inline]
+    fn wo_terms(&self, wo: Vec3) -> WoTerms {
+        WoTerms { lambda: self.distribution.lambda(wo), g_cc: if self.clearcoat > 0.0 { smith_ggx1_front(wo, 0.25) } else { 0.0 } }
+    }
+
+    /// ([`Self::eval_pdf`] toward `wi` where given, [`Self::sample`]): the same bits, the
+    /// terms of `wo` computed once for both (the path kernel's vertex).
+    pub fn eval_pdf_and_sample(&self, wo: Vec3, wi: Option<Vec3>, uc: f32, u: Vec2, mode: TransportMode) -> (Option<(Rgb, f32)>, Option<BsdfSample>) {
+        let t = self.wo_terms(wo);
+        (wi.map(|wi| self.eval_pdf_with(wo, wi, mode, &t)), self.sample_with(wo, uc, u, mode, &t))
+    }
+
+    /// [`Self::eval_pdf`] given the terms of `wo`.
+    fn eval_pdf_with(&self, wo: Vec3, wi: Vec3, mode: TransportMode, t: &WoTerms) -> (Rgb, f32) {
+        let (ci, co) = (wo.z, wi.z);
+        if ci == 0.0 || co == 0.0 {
+            return (Rgb::BLACK, 0.0);
+        }
+        let front = ci > 0.0;
+        let (bsdf, brdf) = (self.bsdf_weight(), self.brdf_weight());
+        if !front && bsdf <= 0.0 {
+            return (Rgb::BLACK, 0.0);
+        }
+        let (h, eta_path, reflect) = self.half_vector(wo, wi);
+        if h == Vec3::ZERO {
+            return (Rgb::BLACK, 0.0);
+        }
+        let (oh, ih) = (wo.dot(h), wi.dot(h));
+        let f_d = fresnel::dielectric(oh, self.eta).0;
+        let p = self.lobes(front, f_d);
+        let md = &self.distribution;
+        let ok = compatible(h, wo, wi, reflect);
+        // D(h), G1(wo) and G1(wi), where either half wants them.
+        let (d, g1o, g1i) = if ok { (md.d(h), Microfacet::g1_given(wo, h, || t.lambda), md.g1(wi, h)) } else { (0.0, 0.0, 0.0) };
+        let visible = || Microfacet::pdf_visible_given(wo * ci.signum(), h, d, g1o);
+        let jacobian = if reflect { (1.0 / (4.0 * ih)).abs() } else { (eta_path * eta_path * ih / ((oh + eta_path * ih) * (oh + eta_path * ih))).abs() };
+        let mut value = Rgb::BLACK;
+        let mut pdf = 0.0;
+        if reflect {
+            // The Schlick weight of the specular and the clearcoat Fresnel terms (same cosine).
+            let w = if ok && front && (f_d > 0.0 || self.clearcoat > 0.0) { schlick_fresnel_weight(oh, self.eta) } else { 0.0 };
+            if ok && f_d > 0.0 {
+                let f = if front { self.fresnel_front(f_d, oh, w) } else { self.fresnel(f_d, oh, front) };
+                value += f * (d * (g1o * g1i) / (4.0 * ci.abs() * co.abs()));
+            }
+            let dv = &self.derived;
+            let d_cc = if ok && front && (self.clearcoat > 0.0 || p.clearcoat > 0.0) { gtr1_d_given(dv.cc_a2, dv.cc_ln_a2, h) } else { 0.0 };
+            if front {
+                if ok && self.clearcoat > 0.0 {
+                    let f_cc = schlick_blend(Rgb::splat(0.04), w).r;
+                    let g_cc_o = if wo.dot(h) * wo.z <= 0.0 { 0.0 } else { t.g_cc };
+                    let g_cc = g_cc_o * smith_ggx1(wi, h, 0.25);
+                    value += Rgb::splat(0.25 * self.clearcoat * f_cc * d_cc * g_cc);
+                }
+                if brdf > 0.0 {
+                    value += self.base_color * (brdf * INV_PI * disney_diffuse(self.roughness, self.flatness, co, ci, ih));
+                }
+                if self.sheen > 0.0 && self.metallic < 1.0 {
+                    value += dv.sheen_color * (self.sheen * (1.0 - self.metallic) * schlick_weight(ih.abs()));
+                }
+            }
+            if ok {
+                if p.reflection > 0.0 {
+                    pdf += p.reflection * visible() * jacobian;
+                }
+                if p.clearcoat > 0.0 {
+                    pdf += p.clearcoat * (if h.z < 0.0 { 0.0 } else { h.z * d_cc }) * jacobian;
+                }
+            }
+            pdf += p.diffuse * warp::square_to_cosine_hemisphere_pdf(if front { wi } else { -wi });
+        } else if ok {
+            if bsdf > 0.0 && f_d < 1.0 {
+                let scale = match mode {
+                    TransportMode::Radiance => 1.0 / (eta_path * eta_path),
+                    TransportMode::Importance => 1.0,
+                };
+                let denom = oh + eta_path * ih;
+                let t = scale * (1.0 - f_d) * d * (g1o * g1i) * eta_path * eta_path * oh * ih / (ci * denom * denom);
+                let t = (t / co).abs();
+                if t.is_finite() {
+                    value += self.base_color.sqrt() * (bsdf * t);
+                }
+            }
+            if p.transmission > 0.0 {
+                pdf += p.transmission * visible() * jacobian;
+            }
+        }
+        (value, if pdf.is_finite() { pdf } else { 0.0 })
+    }
+
     pub fn sample(&self, wo: Vec3, uc: f32, u: Vec2, mode: TransportMode) -> Option<BsdfSample> {
+        self.sample_with(wo, uc, u, mode, &self.wo_terms(wo))
+    }
+
+    /// [`Self::sample`] given the terms of `wo`.
+    fn sample_with(&self, wo: Vec3, uc: f32, u: Vec2, mode: TransportMode, t: &WoTerms) -> Option<BsdfSample> {
         let ci = wo.z;
         if ci == 0.0 {
             return None;
@@ -391,11 +565,11 @@ impl Principled {
         if wi.z == 0.0 || reflects == lobe.contains(LobeFlags::TRANSMISSION) {
             return None;
         }
-        let pdf = self.pdf(wo, wi, mode);
+        let (f, pdf) = self.eval_pdf_with(wo, wi, mode, t);
         if !positive_finite(pdf) {
             return None;
         }
-        Some(BsdfSample { wi, f: self.eval(wo, wi, mode), pdf, lobe, eta })
+        Some(BsdfSample { wi, f, pdf, lobe, eta })
     }
 
     /// What radiosity takes for this surface: the base colour times the diffuse weight.
@@ -424,9 +598,33 @@ pub struct PrincipledThin {
     pub sheen_tint: f32,
     pub flatness: f32,
     pub rates: SamplingRates,
+    /// What `eval_pdf` reads at every call, from the fields above when the model is built
+    /// ([`PrincipledThin::derived`]).
+    pub derived: PrincipledThinDerived,
+}
+
+/// The parts of [`PrincipledThin`] that depend on its parameters alone: computed once per
+/// point, not at each evaluation (the same values).
+#[derive(Clone, Copy, Debug, Default)]
+pub struct PrincipledThinDerived {
+    /// The tinted Schlick term's normal reflectance, `tint_of(base_color) * r0_of_eta(eta)`.
+    tint_r0: Rgb,
+    /// `sheen_color(base_color, sheen_tint)`.
+    sheen_color: Rgb,
+    /// `lobes()`.
+    lobes: [f32; 4],
 }
 
 impl PrincipledThin {
+    /// [`PrincipledThinDerived`] of these parameters.
+    pub fn derived(&self) -> PrincipledThinDerived {
+        PrincipledThinDerived {
+            tint_r0: tint_of(self.base_color) * r0_of_eta(self.eta),
+            sheen_color: sheen_color(self.base_color, self.sheen_tint),
+            lobes: self.lobes(),
+        }
+    }
+
     pub fn flags(&self) -> LobeFlags {
         LobeFlags::DIFFUSE_REFLECTION | LobeFlags::DIFFUSE_TRANSMISSION | LobeFlags::GLOSSY_REFLECTION | LobeFlags::GLOSSY_TRANSMISSION
     }
@@ -515,13 +713,64 @@ impl PrincipledThin {
         }
     }
 
+    /// ([`Self::eval`], [`Self::pdf`]), the same bits: the frame, D and G1 toward `wo`
+    /// computed once for both.
+    pub fn eval_pdf(&self, wo: Vec3, wi: Vec3, _mode: TransportMode) -> (Rgb, f32) {
+        if wo.z == 0.0 || wi.z == 0.0 {
+            return (Rgb::BLACK, 0.0);
+        }
+        let (o, i, h) = Self::frame(wo, wi);
+        if h == Vec3::ZERO {
+            return (Rgb::BLACK, 0.0);
+        }
+        let (ci, co) = (o.z, i.z);
+        let (st, dt) = (self.spec_trans, self.diff_trans);
+        let reflect = co > 0.0;
+        let dv = &self.derived;
+        let [p_sr, p_st, p_dr, p_dt] = dv.lobes;
+        let (p_spec, md) = if reflect { (p_sr, &self.distribution) } else { (p_st, &self.transmission_distribution) };
+        let ok = compatible(h, o, i, reflect);
+        let (d, g1o) = if ok && (st > 0.0 || p_spec > 0.0) { (md.d(h), md.g1(o, h)) } else { (0.0, 0.0) };
+        let mut value = Rgb::BLACK;
+        if st > 0.0 && ok {
+            let oh = o.dot(h);
+            let f_d = fresnel::dielectric(oh, self.eta).0;
+            let k = st * d * (g1o * md.g1(i, h)) / (4.0 * ci * co.abs());
+            if reflect {
+                let tinted = schlick(dv.tint_r0, oh, self.eta);
+                value += (Rgb::splat(f_d) * (1.0 - self.spec_tint) + tinted * self.spec_tint) * k;
+            } else {
+                value += self.base_color * ((1.0 - f_d) * k);
+            }
+        }
+        if st < 1.0 {
+            if reflect && dt < 1.0 {
+                let ih = h.dot(i);
+                let w = (1.0 - st) * (1.0 - dt);
+                value += self.base_color * (w * INV_PI * disney_diffuse(self.roughness, self.flatness, co, ci, ih));
+                if self.sheen > 0.0 {
+                    value += dv.sheen_color * (self.sheen * w * schlick_weight(ih.abs()));
+                }
+            } else if !reflect && dt > 0.0 {
+                value += self.base_color * ((1.0 - st) * dt * INV_PI);
+            }
+        }
+        let mut pdf = 0.0;
+        if p_spec > 0.0 && ok {
+            let ir = Vec3::new(i.x, i.y, i.z.abs());
+            pdf += p_spec * Microfacet::pdf_visible_given(o, h, d, g1o) / (4.0 * ir.dot(h)).abs();
+        }
+        pdf += if reflect { p_dr } else { p_dt } * i.z.abs() * INV_PI;
+        (value, if pdf.is_finite() { pdf } else { 0.0 })
+    }
+
     pub fn sample(&self, wo: Vec3, uc: f32, u: Vec2, mode: TransportMode) -> Option<BsdfSample> {
         if wo.z == 0.0 {
             return None;
         }
         let s = wo.z.signum();
         let o = wo * s;
-        let [p_sr, p_st, p_dr, _] = self.lobes();
+        let [p_sr, p_st, p_dr, _] = self.derived.lobes;
         let (i, lobe) = if uc < p_sr {
             let m = self.distribution.sample_visible(o, u);
             let i = reflect(o, m);
@@ -546,11 +795,11 @@ impl PrincipledThin {
             return None;
         }
         let wi = i * s;
-        let pdf = self.pdf(wo, wi, mode);
+        let (f, pdf) = self.eval_pdf(wo, wi, mode);
         if !positive_finite(pdf) {
             return None;
         }
-        Some(BsdfSample { wi, f: self.eval(wo, wi, mode), pdf, lobe, eta: 1.0 })
+        Some(BsdfSample { wi, f, pdf, lobe, eta: 1.0 })
     }
 
     /// What radiosity takes for this surface: the base colour times the diffuse
@@ -655,7 +904,7 @@ impl PrincipledMaterial {
     /// The model at one point: textures evaluated, weights clamped to their ranges.
     pub fn model(&self, p: TexPoint) -> BsdfModel {
         let unit = |t: &Texture| {
-            let v = t.eval_f32(p);
+            let v = t.eval_f32_inline(&p);
             if v.is_nan() {
                 0.0
             } else {
@@ -666,15 +915,15 @@ impl PrincipledMaterial {
         let roughness = unit(&self.roughness);
         let anisotropic = unit(&self.anisotropic);
         let spec_trans = unit(&self.spec_trans);
-        let eta = self.eta.eval_f32(p);
+        let eta = self.eta.eval_f32_inline(&p);
         // Textured IORs cannot be checked when the scene is read: keep them usable.
         let eta = if eta > 0.0 && eta.is_finite() { eta } else { 1.0 };
         let (ax, ay) = disney_alphas(roughness, anisotropic);
         let distribution = Microfacet::new(MicrofacetKind::Ggx, ax, ay);
         if self.thin {
             let (tx, ty) = disney_alphas((0.65 * eta - 0.35) * roughness, anisotropic);
-            let dt = self.diff_trans.eval_f32(p);
-            BsdfModel::PrincipledThin(Box::new(PrincipledThin {
+            let dt = self.diff_trans.eval_f32_inline(&p);
+            let mut m = PrincipledThin {
                 base_color,
                 roughness,
                 distribution,
@@ -687,11 +936,14 @@ impl PrincipledMaterial {
                 sheen_tint: unit(&self.sheen_tint),
                 flatness: unit(&self.flatness),
                 rates: self.rates,
-            }))
+                derived: PrincipledThinDerived::default(),
+            };
+            m.derived = m.derived();
+            BsdfModel::PrincipledThin(Box::new(m))
         } else {
             // Mitsuba: an IOR of exactly 1 does not refract plausibly.
             let eta = if eta == 1.0 && !matches!(self.spec_trans, Texture::Constant(c) if c.r == 0.0) { 1.001 } else { eta };
-            BsdfModel::Principled(Box::new(Principled {
+            let mut m = Principled {
                 base_color,
                 roughness,
                 distribution,
@@ -705,7 +957,10 @@ impl PrincipledMaterial {
                 clearcoat: unit(&self.clearcoat),
                 clearcoat_alpha: 0.1 + (0.001 - 0.1) * unit(&self.clearcoat_gloss),
                 rates: self.rates,
-            }))
+                derived: PrincipledDerived::default(),
+            };
+            m.derived = m.derived();
+            BsdfModel::Principled(Box::new(m))
         }
     }
 }
@@ -744,6 +999,90 @@ mod tests {
                 let below = mass_below(alpha, m.z as f64);
                 assert!((below - (1.0 - uy as f64)).abs() < 2e-3, "alpha {alpha} u {uy}: {below}");
             }
+        }
+    }
+
+    /// The fused evaluation (`eval_pdf`: `sample` and the path kernel's
+    /// `Bsdf::eval_pdf_and_sample` use it) gives the bits of `eval` and `pdf` called apart,
+    /// and a sample's value and density are `eval`'s and `pdf`'s toward its direction:
+    /// `principled` and `principledthin` with every parameter a checkerboard (the float ones
+    /// read as `eval_1`: colours swapped, luminance), at many points, in both modes, with
+    /// random and mirror directions on both sides and grazing ones.
+    #[test]
+    fn fused_eval_pdf_and_sample_are_eval_pdf_and_sample() {
+        use super::super::Bsdf;
+        use crate::sampling::rng::Pcg32;
+        let mut rng = Pcg32::new(19, 7);
+        let checker = |rng: &mut Pcg32, lo: f32, hi: f32| {
+            let mut v = || lo + (hi - lo) * rng.next_f32();
+            let (a, b) = (v(), v());
+            let scale = 1.0 + 30.0 * rng.next_f32();
+            Texture::Checkerboard { color0: Rgb::splat(a), color1: Rgb::splat(b), to_uv: glam::Affine2::from_scale(Vec2::splat(scale)) }
+        };
+        let dir = |rng: &mut Pcg32| warp::square_to_uniform_sphere(Vec2::new(rng.next_f32(), rng.next_f32()));
+        let bits = |(f, pdf): (Rgb, f32)| (f.r.to_bits(), f.g.to_bits(), f.b.to_bits(), pdf.to_bits());
+        let sample_bits = |s: Option<BsdfSample>| s.map(|s| (s.wi.to_array().map(f32::to_bits), bits((s.f, s.pdf)), s.lobe, s.eta.to_bits()));
+        let grazing = [Vec3::new(1.0, 0.0, 1e-4).normalize(), Vec3::new(0.0, -1.0, -1e-4).normalize(), Vec3::Z, -Vec3::Z];
+        let (mut samples, mut specular, mut transmitted) = (0, 0, 0);
+        for k in 0..120 {
+            let thin = k % 3 == 2;
+            let mut m = PrincipledMaterial { thin, ..Default::default() };
+            m.base_color =
+                Texture::Checkerboard { color0: Rgb::new(0.2, 0.8, 0.1), color1: Rgb::new(0.9, 0.3, 0.5), to_uv: glam::Affine2::from_scale(Vec2::splat(7.0)) };
+            for t in [&mut m.roughness, &mut m.anisotropic, &mut m.metallic, &mut m.spec_trans, &mut m.spec_tint, &mut m.sheen, &mut m.sheen_tint] {
+                *t = checker(&mut rng, -0.1, 1.1);
+            }
+            m.flatness = checker(&mut rng, -0.2, 1.0);
+            m.clearcoat = checker(&mut rng, -0.1, 1.0);
+            m.clearcoat_gloss = checker(&mut rng, 0.0, 1.0);
+            m.diff_trans = checker(&mut rng, 0.0, 2.2);
+            m.eta = checker(&mut rng, 1.0, 2.0);
+            if k % 7 == 0 {
+                m.rates = SamplingRates { diffuse_reflection: 0.3, specular: 2.0, secondary: 0.5, diffuse_transmission: 0.0 };
+            }
+            for _ in 0..8 {
+                let model = m.model(Vec2::new(rng.next_f32(), rng.next_f32()).into());
+                // One-sided, two-sided (the back mirrored) and masked.
+                let bsdf = match k % 4 {
+                    1 => Bsdf { back: Some(model.clone()), ..Bsdf::new(model.clone()) },
+                    3 => Bsdf { opacity: 0.7, ..Bsdf::new(model.clone()) },
+                    _ => Bsdf::new(model.clone()),
+                };
+                for mode in [TransportMode::Radiance, TransportMode::Importance] {
+                    let mut pairs: Vec<(Vec3, Vec3)> = (0..60).map(|_| (dir(&mut rng), dir(&mut rng))).collect();
+                    pairs.extend(grazing.iter().flat_map(|&a| grazing.iter().map(move |&c| (a, c))));
+                    pairs.extend((0..20).map(|_| dir(&mut rng)).map(|w| (w, fresnel::reflect_z(w))));
+                    for (wo, wi) in pairs {
+                        let apart = (model.eval(wo, wi, mode), model.pdf(wo, wi, mode));
+                        assert_eq!(bits(model.eval_pdf(wo, wi, mode)), bits(apart), "{model:?} {mode:?} {wo} {wi}");
+                        let (uc, u) = (rng.next_f32(), Vec2::new(rng.next_f32(), rng.next_f32()));
+                        let (nee, s) = bsdf.eval_pdf_and_sample(wo, Some(wi), uc, u, mode);
+                        assert_eq!(nee.map(bits), Some(bits((bsdf.eval(wo, wi, mode), bsdf.pdf(wo, wi, mode)))), "{model:?} {mode:?} {wo} {wi}");
+                        assert_eq!(sample_bits(s), sample_bits(bsdf.sample(wo, uc, u, mode)), "{model:?} {mode:?} {wo} {uc} {u}");
+                        // The sample's value and density are those toward its direction.
+                        if let Some(s) = model.sample(wo, uc, u, mode) {
+                            assert_eq!(bits((s.f, s.pdf)), bits((model.eval(wo, s.wi, mode), model.pdf(wo, s.wi, mode))), "{model:?} {mode:?} {wo} {uc} {u}");
+                            samples += 1;
+                            specular += usize::from(s.lobe.contains(LobeFlags::GLOSSY_REFLECTION));
+                            transmitted += usize::from(s.lobe.contains(LobeFlags::TRANSMISSION));
+                        }
+                    }
+                }
+            }
+        }
+        assert!(samples > 50_000 && specular > 10_000 && transmitted > 5_000, "{samples} samples, {specular} specular, {transmitted} transmitted");
+    }
+
+    #[test]
+    fn float_checkerboard_is_the_swapped_colour_checkerboard_luminance() {
+        let (c0, c1) = (Rgb::new(0.05, 0.3, 0.7), Rgb::new(0.8, 0.1, 0.2));
+        let to_uv = glam::Affine2::from_scale(Vec2::new(25.0, 12.5));
+        let t = Texture::Checkerboard { color0: c0, color1: c1, to_uv };
+        let swapped = Texture::Checkerboard { color0: c1, color1: c0, to_uv };
+        let mut rng = crate::sampling::rng::Pcg32::new(3, 1);
+        for _ in 0..20_000 {
+            let uv = Vec2::new(rng.next_f32() * 3.0 - 1.0, rng.next_f32() * 3.0 - 1.0);
+            assert_eq!(t.eval_f32(uv).to_bits(), swapped.eval(uv).luminance().to_bits(), "{uv}");
         }
     }
 

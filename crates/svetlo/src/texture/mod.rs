@@ -290,6 +290,19 @@ fn wrap(i: i64, n: usize, mode: WrapMode) -> usize {
     }
 }
 
+/// A checkerboard read as a float (`eval_f32`): `eval_varying`'s test with the colours the
+/// other way round, then the luminance, in place (no swapped copy, no second call).
+#[inline(always)]
+fn checkerboard_f32(color0: &Rgb, color1: &Rgb, to_uv: &Affine2, uv: Vec2) -> f32 {
+    let p = to_uv.transform_point2(uv);
+    let (fx, fy) = (p.x - floor_exact(p.x), p.y - floor_exact(p.y));
+    if (fx > 0.5) == (fy > 0.5) {
+        color1.luminance()
+    } else {
+        color0.luminance()
+    }
+}
+
 impl Texture {
     /// Value at a point (a uv converts); constants (the common case) inline at the call site.
     #[inline]
@@ -381,11 +394,19 @@ impl Texture {
     #[inline(never)]
     fn eval_f32_varying(&self, p: TexPoint) -> f32 {
         match self {
-            Texture::Checkerboard { color0, color1, to_uv } => {
-                let swapped = Texture::Checkerboard { color0: *color1, color1: *color0, to_uv: *to_uv };
-                swapped.eval_varying(p).luminance()
-            }
+            Texture::Checkerboard { color0, color1, to_uv } => checkerboard_f32(color0, color1, to_uv, p.uv),
             _ => self.eval(p).luminance(),
+        }
+    }
+
+    /// [`Self::eval_f32`] with a checkerboard's lookup inlined where it is called (the
+    /// principled model's dozen parameters): no call and no copy of the point.
+    #[inline(always)]
+    pub fn eval_f32_inline(&self, p: &TexPoint) -> f32 {
+        match self {
+            Texture::Constant(c) => c.r,
+            Texture::Checkerboard { color0, color1, to_uv } => checkerboard_f32(color0, color1, to_uv, p.uv),
+            _ => self.eval_f32_varying(*p),
         }
     }
 
