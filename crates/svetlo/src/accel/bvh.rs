@@ -54,9 +54,11 @@ const TRI_LEAF: LeafParams = LeafParams { group: LANES, max_leaf: 16, traversal_
 const PREFETCH_MIN_BYTES: usize = 1 << 20;
 /// Hierarchies smaller than this walk alike rays interleaved rather than as one: the
 /// bsdf_spheres scenes (a few megabytes) took 1.04-1.07 the render CPU as one (their rays'
-/// walks hit the caches, and the interleaved walks overlap what latency is left), the 1M-mesh
-/// (60 MB) 0.86 at depth 1.
-const COHERENT_MIN_BYTES: usize = 16 << 20;
+/// walks hit the caches, and the interleaved walks overlap what latency is left), and so did
+/// its ten-sphere grid (325k triangles, 16-32 MB: in a 32 MB L3, and ~140 triangles a
+/// pixel, so a pixel's rays part at the leaves): test_envmap 1.07, test_arealight 1.03;
+/// the 1M-mesh (60 MB) 0.86 at depth 1.
+const COHERENT_MIN_BYTES: usize = 32 << 20;
 /// Up to this many meshes, a hit's mesh is found by a binary search of `Accel::meshes`
 /// (in L1) rather than read from `tri_mesh`, a load at a random place of a megabytes-long
 /// array: that load was 5-6 % of the closest-hit samples on the 1M-triangle bench scene
