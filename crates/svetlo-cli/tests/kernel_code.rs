@@ -1,5 +1,5 @@
 //! The path kernel's per-vertex arithmetic (`shade8`), its rough conductors' and rough
-//! plastics' lanes (`conductor8`, `plastic8`), the light walks' Lambertian step
+//! plastics' lanes (`conductor8`, `plastic8`, and their GGX copies), the light walks' Lambertian step
 //! (`path::step8`) and their emission samples (`light::emit8`) compile to eight-lane vector
 //! code in the shipped binary. Whether LLVM vectorises such a loop has flipped silently with
 //! unrelated edits (an `Option` field added to a struct it reads, a `bool` read under a
@@ -28,6 +28,10 @@ fn shade8_is_vector_code() {
         ("conductor8_avx512", 100),
         ("plastic8_avx2", 100),
         ("plastic8_avx512", 100),
+        ("conductor_ggx8_avx2", 100),
+        ("conductor_ggx8_avx512", 100),
+        ("plastic_ggx8_avx2", 100),
+        ("plastic_ggx8_avx512", 100),
         ("dielectric8_avx2", 100),
         ("dielectric8_avx512", 100),
         ("step8_avx2", 100),

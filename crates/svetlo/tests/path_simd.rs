@@ -533,6 +533,10 @@ fn every_bsdf_matches_scalar() {
         ("conductor", r#"<bsdf type="conductor"><string name="material" value="Au"/></bsdf>"#.to_string()),
         ("roughconductor", r#"<bsdf type="roughconductor"><string name="material" value="Cu"/><float name="alpha" value="0.2"/></bsdf>"#.into()),
         (
+            "ggx roughconductor",
+            r#"<bsdf type="roughconductor"><string name="distribution" value="ggx"/><string name="material" value="Au"/><float name="alpha_u" value="0.1"/><float name="alpha_v" value="0.3"/></bsdf>"#.into(),
+        ),
+        (
             "anisotropic roughconductor",
             r#"<bsdf type="roughconductor"><string name="distribution" value="beckmann"/><float name="alpha_u" value="0.05"/><float name="alpha_v" value="0.3"/></bsdf>"#.into(),
         ),
@@ -542,6 +546,10 @@ fn every_bsdf_matches_scalar() {
         ("glass", r#"<bsdf type="glass"/>"#.into()),
         ("plastic", r#"<bsdf type="plastic"><rgb name="diffuse_reflectance" value="0.2, 0.4, 0.6"/></bsdf>"#.into()),
         ("roughplastic", r#"<bsdf type="roughplastic"><rgb name="diffuse_reflectance" value="0.6, 0.3, 0.2"/><float name="alpha" value="0.1"/></bsdf>"#.into()),
+        (
+            "ggx roughplastic",
+            r#"<bsdf type="roughplastic"><string name="distribution" value="ggx"/><rgb name="diffuse_reflectance" value="0.2, 0.5, 0.3"/><float name="alpha" value="0.25"/><boolean name="nonlinear" value="true"/></bsdf>"#.into(),
+        ),
         ("phong", r#"<bsdf type="phong"><float name="exponent" value="20"/></bsdf>"#.into()),
         ("blinnphong", r#"<bsdf type="blinnphong"><float name="exponent" value="40"/></bsdf>"#.into()),
         ("cooktorrance", r#"<bsdf type="cooktorrance"><float name="alpha" value="0.2"/></bsdf>"#.into()),

@@ -132,7 +132,8 @@ impl RoughConductor {
     }
 }
 
-/// `N` lanes of Beckmann rough conductors for [`rough_conductor_lanes`], on the model's side
+/// `N` lanes of Beckmann (or GGX) rough conductors for [`rough_conductor_lanes`] (or
+/// [`rough_conductor_ggx_lanes`]), on the model's side
 /// (as `Bsdf::side` mirrors them). Unused lanes keep the defaults (or earlier lanes' values).
 #[derive(Clone, Copy, Debug)]
 pub(crate) struct RoughConductorLanes<const N: usize> {
@@ -184,8 +185,22 @@ impl<const N: usize> RoughConductorLanes<N> {
 /// lanes in eight are used, and a channel is five divisions and square roots. The same bits.
 #[inline(always)]
 pub(crate) fn rough_conductor_lanes<const N: usize>(q: &RoughConductorLanes<N>, used: usize) -> LaneSamples<N> {
+    conductor_lanes::<N, false>(q, used)
+}
+
+/// [`rough_conductor_lanes`] of GGX rough conductors (`q.beckmann` holds their roughness,
+/// `wo` and `u` likewise): the visible normals in closed form (`sample_visible_ggx_lanes`),
+/// D and Λ GGX's. The same bits as the scalar routine.
+#[inline(always)]
+pub(crate) fn rough_conductor_ggx_lanes<const N: usize>(q: &RoughConductorLanes<N>, used: usize) -> LaneSamples<N> {
+    conductor_lanes::<N, true>(q, used)
+}
+
+/// The body of [`rough_conductor_lanes`] (Beckmann) and [`rough_conductor_ggx_lanes`] (`GGX`).
+#[inline(always)]
+fn conductor_lanes<const N: usize, const GGX: bool>(q: &RoughConductorLanes<N>, used: usize) -> LaneSamples<N> {
     let b = &q.beckmann;
-    let m = mf::sample_visible_beckmann_lanes(b);
+    let m = if GGX { mf::sample_visible_ggx_lanes(b, &std::array::from_fn(|l| l < used)) } else { mf::sample_visible_beckmann_lanes(b) };
     // Per direction (0: toward the light sample, 1: the sample's), as `eval_pdf_given`.
     let (mut wi, mut h) = ([[[0.0f32; N]; 3]; 2], [[[0.0f32; N]; 3]; 2]);
     let (mut x, mut c2, mut ok) = ([[0.0f32; N]; 2], [[0.0f32; N]; 2], [[false; N]; 2]);
@@ -194,11 +209,14 @@ pub(crate) fn rough_conductor_lanes<const N: usize>(q: &RoughConductorLanes<N>, 
         let (ax, ay) = (b.alpha[0][l], b.alpha[1][l]);
         let wo = Vec3::new(b.v[0][l], b.v[1][l], b.v[2][l]);
         let ws = reflect(wo, Vec3::new(m[0][l], m[1][l], m[2][l]));
-        lambda[0][l] = mf::beckmann_lambda(ax, ay, wo);
+        let lambda_of = |w: Vec3| if GGX { mf::ggx_lambda(ax, ay, w) } else { mf::beckmann_lambda(ax, ay, w) };
+        lambda[0][l] = lambda_of(wo);
         for (e, w) in [Vec3::new(q.wi[0][l], q.wi[1][l], q.wi[2][l]), ws].into_iter().enumerate() {
             let hh = (wo + w).normalize();
-            (x[e][l], c2[e][l]) = mf::beckmann_d_exponent(ax, ay, hh);
-            lambda[1 + e][l] = mf::beckmann_lambda(ax, ay, w);
+            if !GGX {
+                (x[e][l], c2[e][l]) = mf::beckmann_d_exponent(ax, ay, hh);
+            }
+            lambda[1 + e][l] = lambda_of(w);
             ok[e][l] = !(wo.z <= 0.0 || w.z <= 0.0) && hh.z > 0.0;
             for k in 0..3 {
                 wi[e][k][l] = w[k];
@@ -208,7 +226,7 @@ pub(crate) fn rough_conductor_lanes<const N: usize>(q: &RoughConductorLanes<N>, 
     }
     // D's e^x, only where D is asked for and m.z > 0 (`Microfacet::d`'s first test) and x is
     // not below -104 (`beckmann_d_exp`).
-    let ex = mf::beckmann_d_exp_lanes(&x, &ok, used);
+    let ex = if GGX { x } else { mf::beckmann_d_exp_lanes(&x, &ok, used) };
     let (mut scale, mut pdf, mut cos) = ([[0.0f32; N]; 2], [[0.0f32; N]; 2], [[0.0f32; N]; 2]);
     let mut fresnel = [[false; N]; 2];
     for l in 0..N {
@@ -217,7 +235,13 @@ pub(crate) fn rough_conductor_lanes<const N: usize>(q: &RoughConductorLanes<N>, 
         for e in 0..2 {
             let w = Vec3::new(wi[e][0][l], wi[e][1][l], wi[e][2][l]);
             let hh = Vec3::new(h[e][0][l], h[e][1][l], h[e][2][l]);
-            let d = if hh.z <= 0.0 { 0.0 } else { mf::beckmann_d_of(ex[e][l], ax, ay, c2[e][l]) };
+            let d = if hh.z <= 0.0 {
+                0.0
+            } else if GGX {
+                mf::ggx_d(ax, ay, hh)
+            } else {
+                mf::beckmann_d_of(ex[e][l], ax, ay, c2[e][l])
+            };
             let g1o = Microfacet::g1_given(wo, hh, || lambda[0][l]);
             let wm = w.dot(hh);
             let p = if wm <= 0.0 { 0.0 } else { Microfacet::pdf_visible_given(wo, hh, d, g1o) / (4.0 * wm) };

@@ -40,17 +40,7 @@ impl Microfacet {
                 let (x, c2) = beckmann_d_exponent(ax, ay, m);
                 beckmann_d_of(beckmann_d_exp(x), ax, ay, c2)
             }
-            MicrofacetKind::Ggx => {
-                let c2 = m.z * m.z;
-                let e = (m.x / ax) * (m.x / ax) + (m.y / ay) * (m.y / ay);
-                let t = e + c2;
-                let r = 1.0 / (PI * ax * ay * t * t);
-                if r.is_finite() {
-                    r
-                } else {
-                    0.0
-                }
-            }
+            MicrofacetKind::Ggx => ggx_d(ax, ay, m),
         }
     }
 
@@ -62,7 +52,7 @@ impl Microfacet {
         }
         let a2t2 = xy / (v.z * v.z); // (alpha tan theta)^2 along v's azimuth
         match self.kind {
-            MicrofacetKind::Ggx => 0.5 * ((1.0 + a2t2).sqrt() - 1.0),
+            MicrofacetKind::Ggx => ggx_lambda_of(a2t2),
             MicrofacetKind::Beckmann => beckmann_lambda_of(a2t2),
         }
     }
@@ -210,6 +200,76 @@ impl VisibleSampler {
 }
 
 const INV_SQRT_PI: f32 = 0.564_189_6;
+
+/// GGX's D(m) of roughness (`ax`, `ay`) for m.z > 0 (0 where not finite), as
+/// [`Microfacet::d`] and the path kernel's lanes take it (the test a select).
+#[inline(always)]
+pub(crate) fn ggx_d(ax: f32, ay: f32, m: Vec3) -> f32 {
+    let c2 = m.z * m.z;
+    let e = (m.x / ax) * (m.x / ax) + (m.y / ay) * (m.y / ay);
+    let t = e + c2;
+    let r = 1.0 / (PI * ax * ay * t * t);
+    if r.is_finite() {
+        r
+    } else {
+        0.0
+    }
+}
+
+/// GGX's Smith Λ from (α tanθ)² along the direction's azimuth.
+#[inline(always)]
+fn ggx_lambda_of(a2t2: f32) -> f32 {
+    0.5 * ((1.0 + a2t2).sqrt() - 1.0)
+}
+
+/// [`Microfacet::lambda`] of a GGX distribution of roughness (`ax`, `ay`), as vector lanes
+/// run it (the test of its azimuth term a select).
+#[inline(always)]
+pub(crate) fn ggx_lambda(ax: f32, ay: f32, v: Vec3) -> f32 {
+    let xy = (ax * v.x).powi(2) + (ay * v.y).powi(2);
+    let a2t2 = xy / (v.z * v.z);
+    if xy == 0.0 {
+        0.0
+    } else {
+        ggx_lambda_of(a2t2)
+    }
+}
+
+/// [`Microfacet::sample_visible`] of a GGX distribution for `N` lanes at once (roughness, `v`
+/// and `u` as for Beckmann's): Heitz 2018's closed form, the same operations lane by lane
+/// with selects for branches. The disk angle's cosine and sine (libm's, lane by lane) only
+/// where `want` (other lanes' normals are unused). The same bits.
+#[inline(always)]
+pub(crate) fn sample_visible_ggx_lanes<const N: usize>(q: &BeckmannLanes<N>, want: &[bool; N]) -> [[f32; N]; 3] {
+    let (mut cos, mut sin) = ([1.0f32; N], [0.0f32; N]);
+    for l in 0..N {
+        if want[l] {
+            let phi = 2.0 * PI * q.u[1][l];
+            (cos[l], sin[l]) = (phi.cos(), phi.sin());
+        }
+    }
+    let mut m = [[0.0f32; N]; 3];
+    for l in 0..N {
+        let (ax, ay) = (q.alpha[0][l], q.alpha[1][l]);
+        // `VisibleSampler::new`.
+        let vh = Vec3::new(ax * q.v[0][l], ay * q.v[1][l], q.v[2][l]).normalize();
+        let len2 = vh.x * vh.x + vh.y * vh.y;
+        let t1 = Vec3::new(-vh.y, vh.x, 0.0) / len2.sqrt();
+        let t1 = if len2 > 0.0 { t1 } else { Vec3::X };
+        let (t2, s) = (vh.cross(t1), 0.5 * (1.0 + vh.z));
+        // `combine`.
+        let x = q.u[0][l].sqrt();
+        let p1 = x * cos[l];
+        let p2 = x * sin[l];
+        let p2 = (1.0 - s) * (1.0 - p1 * p1).max(0.0).sqrt() + s * p2;
+        let nh = p1 * t1 + p2 * t2 + (1.0 - p1 * p1 - p2 * p2).max(0.0).sqrt() * vh;
+        let n = Vec3::new(ax * nh.x, ay * nh.y, nh.z.max(1e-7)).normalize();
+        for k in 0..3 {
+            m[k][l] = n[k];
+        }
+    }
+    m
+}
 
 /// Beckmann's D(m) (m.z > 0) in three steps, so that eight lanes can run the first and last
 /// as vector code and only libm's expf lane by lane: the exponent -tan²θ/α² and cos²θ,

@@ -369,9 +369,20 @@ impl Bsdf {
     /// [`Self::finish_conductor`]).
     #[inline]
     pub(crate) fn beckmann_conductor(&self, wo: Vec3) -> Option<(&conductor::RoughConductor, bool)> {
+        self.rough_conductor_of(MicrofacetKind::Beckmann, wo)
+    }
+
+    /// [`Self::beckmann_conductor`] of a GGX rough conductor (`conductor::rough_conductor_ggx_lanes`).
+    #[inline]
+    pub(crate) fn ggx_conductor(&self, wo: Vec3) -> Option<(&conductor::RoughConductor, bool)> {
+        self.rough_conductor_of(MicrofacetKind::Ggx, wo)
+    }
+
+    #[inline]
+    fn rough_conductor_of(&self, kind: MicrofacetKind, wo: Vec3) -> Option<(&conductor::RoughConductor, bool)> {
         let (None, true, Some((BsdfModel::RoughConductor(c), flipped))) = (&self.detail, self.opacity >= 1.0, self.side(wo)) else { return None };
         let wo = if flipped { flip(wo) } else { wo };
-        (c.distribution.kind == MicrofacetKind::Beckmann && wo.z > 0.0).then_some((c, flipped))
+        (c.distribution.kind == kind && wo.z > 0.0).then_some((c, flipped))
     }
 
     /// Where this BSDF toward `wo` is a Beckmann rough plastic without mask or surface detail:
@@ -380,9 +391,20 @@ impl Bsdf {
     /// finished as a conductor's by [`Self::finish_conductor`]: the same wrapping).
     #[inline]
     pub(crate) fn beckmann_plastic(&self, wo: Vec3) -> Option<(&plastic::RoughPlastic, bool)> {
+        self.rough_plastic_of(MicrofacetKind::Beckmann, wo)
+    }
+
+    /// [`Self::beckmann_plastic`] of a GGX rough plastic (`plastic::rough_plastic_ggx_lanes`).
+    #[inline]
+    pub(crate) fn ggx_plastic(&self, wo: Vec3) -> Option<(&plastic::RoughPlastic, bool)> {
+        self.rough_plastic_of(MicrofacetKind::Ggx, wo)
+    }
+
+    #[inline]
+    fn rough_plastic_of(&self, kind: MicrofacetKind, wo: Vec3) -> Option<(&plastic::RoughPlastic, bool)> {
         let (None, true, Some((BsdfModel::RoughPlastic(p), flipped))) = (&self.detail, self.opacity >= 1.0, self.side(wo)) else { return None };
         let wo = if flipped { flip(wo) } else { wo };
-        (p.distribution.kind == MicrofacetKind::Beckmann && wo.z > 0.0).then_some((p, flipped))
+        (p.distribution.kind == kind && wo.z > 0.0).then_some((p, flipped))
     }
 
     /// Where this BSDF toward `wo` (not grazing) is a Beckmann rough dielectric without mask
@@ -706,9 +728,9 @@ mod tests {
     /// `Bsdf::eval_pdf_and_sample` (the path kernel's call at a vertex) gives the bits of
     /// `eval_pdf` and `sample` called apart, with and without the light's direction, for every
     /// wrapped model (two-sided rough conductors take the shared path), both modes, directions
-    /// on both sides and grazing; and so do a Beckmann conductor's lane of
-    /// `conductor::rough_conductor_lanes` and a Beckmann plastic's of
-    /// `plastic::rough_plastic_lanes` (finished by `finish_conductor`).
+    /// on both sides and grazing; and so do a Beckmann or GGX conductor's lane of
+    /// `conductor::rough_conductor_lanes` or `rough_conductor_ggx_lanes` and a Beckmann or GGX plastic's of
+    /// `plastic::rough_plastic_lanes` or `rough_plastic_ggx_lanes` (finished by `finish_conductor`).
     #[test]
     fn eval_pdf_and_sample_is_eval_pdf_then_sample() {
         let mut rng = crate::sampling::rng::Pcg32::new(23, 4);
@@ -716,7 +738,7 @@ mod tests {
         let sample_bits = |s: Option<BsdfSample>| s.map(|s| (s.wi.to_array().map(f32::to_bits), bits((s.f, s.pdf)), s.lobe, s.eta.to_bits()));
         let dir = |rng: &mut crate::sampling::rng::Pcg32| crate::math::warp::square_to_uniform_sphere(Vec2::new(rng.next_f32(), rng.next_f32()));
         let grazing = [Vec3::new(1.0, 0.0, 1e-4).normalize(), Vec3::new(0.0, -1.0, -1e-4).normalize(), Vec3::new(0.6, 0.8, 0.0), Vec3::Z, -Vec3::Z];
-        let (mut sampled, mut conductor_lanes, mut plastic_lanes) = (0, 0, 0);
+        let (mut sampled, mut conductor_lanes, mut plastic_lanes) = (0, [0; 2], [0; 2]);
         for b in &wrapped_models() {
             for mode in [TransportMode::Radiance, TransportMode::Importance] {
                 let mut pairs: Vec<(Vec3, Vec3)> = (0..2000).map(|_| (dir(&mut rng), dir(&mut rng))).collect();
@@ -729,12 +751,15 @@ mod tests {
                     let alone = b.sample(wo, uc, u, mode);
                     sampled += usize::from(alone.is_some());
                     assert_eq!(sample_bits(s), sample_bits(alone), "{:?} {mode:?} {wo} u {uc} {u}", b.front);
-                    // The path kernel's way: a Beckmann conductor's lane of `rough_conductor_lanes`.
-                    if let Some((c, flipped)) = b.beckmann_conductor(wo) {
+                    // The path kernel's way: a Beckmann conductor's lane of `rough_conductor_lanes`,
+                    // a GGX one's of `rough_conductor_ggx_lanes`.
+                    let conductor_lane = b.beckmann_conductor(wo).map(|c| (c, false)).or(b.ggx_conductor(wo).map(|c| (c, true)));
+                    if let Some(((c, flipped), ggx)) = conductor_lane {
                         let side = |w: Vec3| if flipped { flip(w) } else { w };
                         let mut q = conductor::RoughConductorLanes::<1>::default();
                         q.set(0, c, side(wo), wi.map(side), u);
-                        let (nee_l, s_l) = conductor::rough_conductor_lanes(&q, 1).lane(0, wi.is_some(), LobeFlags::GLOSSY_REFLECTION);
+                        let out = if ggx { conductor::rough_conductor_ggx_lanes(&q, 1) } else { conductor::rough_conductor_lanes(&q, 1) };
+                        let (nee_l, s_l) = out.lane(0, wi.is_some(), LobeFlags::GLOSSY_REFLECTION);
                         let (nee_m, s_m) = Bsdf::finish_conductor(b.opacity, flipped, nee_l, s_l);
                         assert_eq!(
                             (nee_m.map(bits), sample_bits(s_m)),
@@ -742,14 +767,17 @@ mod tests {
                             "{:?} {mode:?} {wo} u {u}: the conductor's lane",
                             b.front
                         );
-                        conductor_lanes += 1;
+                        conductor_lanes[usize::from(ggx)] += 1;
                     }
-                    // And a Beckmann plastic's lane of `plastic::rough_plastic_lanes`.
-                    if let Some((p, flipped)) = b.beckmann_plastic(wo) {
+                    // And a Beckmann plastic's lane of `plastic::rough_plastic_lanes`, a GGX
+                    // one's of `rough_plastic_ggx_lanes`.
+                    let plastic_lane = b.beckmann_plastic(wo).map(|p| (p, false)).or(b.ggx_plastic(wo).map(|p| (p, true)));
+                    if let Some(((p, flipped), ggx)) = plastic_lane {
                         let side = |w: Vec3| if flipped { flip(w) } else { w };
                         let mut q = plastic::RoughPlasticLanes::<1>::default();
                         q.set(0, p, side(wo), wi.map(side), uc, u);
-                        let (nee_l, s_l) = plastic::rough_plastic_lanes(&q, 1).lane(0, wi.is_some(), LobeFlags::DIFFUSE_REFLECTION);
+                        let out = if ggx { plastic::rough_plastic_ggx_lanes(&q, 1) } else { plastic::rough_plastic_lanes(&q, 1) };
+                        let (nee_l, s_l) = out.lane(0, wi.is_some(), LobeFlags::DIFFUSE_REFLECTION);
                         let (nee_m, s_m) = Bsdf::finish_conductor(b.opacity, flipped, nee_l, s_l);
                         assert_eq!(
                             (nee_m.map(bits), sample_bits(s_m)),
@@ -757,15 +785,15 @@ mod tests {
                             "{:?} {mode:?} {wo} u {uc} {u}: the plastic's lane",
                             b.front
                         );
-                        plastic_lanes += 1;
+                        plastic_lanes[usize::from(ggx)] += 1;
                     }
                 }
             }
         }
         // Each kind of lane on its own, so that neither count hides a model's lanes gone missing.
         assert!(
-            sampled > 50_000 && conductor_lanes > 3_000 && plastic_lanes > 3_000,
-            "{sampled} samples, {conductor_lanes} conductor lanes, {plastic_lanes} plastic lanes"
+            sampled > 50_000 && conductor_lanes.iter().chain(&plastic_lanes).all(|&n| n > 3_000),
+            "{sampled} samples, {conductor_lanes:?} conductor lanes, {plastic_lanes:?} plastic lanes (Beckmann, GGX)"
         );
     }
 

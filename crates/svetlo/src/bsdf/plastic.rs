@@ -423,7 +423,8 @@ fn specular_probability_lane(specular: f32, diffuse: f32, weight: f32) -> f32 {
     }
 }
 
-/// `N` lanes of Beckmann rough plastics for [`rough_plastic_lanes`], on the model's side (as
+/// `N` lanes of Beckmann (or GGX) rough plastics for [`rough_plastic_lanes`] (or
+/// [`rough_plastic_ggx_lanes`]), on the model's side (as
 /// `Bsdf::side` mirrors them). Unused lanes keep the defaults (or earlier lanes' values).
 #[derive(Clone, Copy, Debug)]
 pub(crate) struct RoughPlasticLanes<const N: usize> {
@@ -489,17 +490,35 @@ impl<const N: usize> RoughPlasticLanes<N> {
 /// their branches (D's expf as `conductor::rough_conductor_lanes` takes it). The same bits.
 #[inline(always)]
 pub(crate) fn rough_plastic_lanes<const N: usize>(q: &RoughPlasticLanes<N>, used: usize) -> LaneSamples<N> {
+    plastic_lanes::<N, false>(q, used)
+}
+
+/// [`rough_plastic_lanes`] of GGX rough plastics (`q.beckmann` holds their roughness, `wo`
+/// and `u` likewise): the visible normals in closed form (`sample_visible_ggx_lanes`), D
+/// and Λ GGX's. The same bits as the scalar routines.
+#[inline(always)]
+pub(crate) fn rough_plastic_ggx_lanes<const N: usize>(q: &RoughPlasticLanes<N>, used: usize) -> LaneSamples<N> {
+    plastic_lanes::<N, true>(q, used)
+}
+
+/// The body of [`rough_plastic_lanes`] (Beckmann) and [`rough_plastic_ggx_lanes`] (`GGX`).
+#[inline(always)]
+fn plastic_lanes<const N: usize, const GGX: bool>(q: &RoughPlasticLanes<N>, used: usize) -> LaneSamples<N> {
     let b = &q.beckmann;
     // `sample`'s start: the transmittance toward wo and the lobe. Lanes that take the
     // diffuse lobe draw no normal: they ask the Newton loop for an idle lane's, which
     // settles at once.
     let t_o = transmittance_lanes(&q.transmittance, &b.v[2]);
-    let (mut ps, mut glossy) = ([0.0f32; N], [false; N]);
+    let (mut ps, mut glossy, mut want) = ([0.0f32; N], [false; N], [false; N]);
     let (idle, mut draw) = (BeckmannLanes::<N>::default(), *b);
     for l in 0..N {
         ps[l] = specular_probability_lane(1.0 - t_o[l], t_o[l], q.sampling_weight[l]);
         glossy[l] = q.uc[l] < ps[l];
         let g = glossy[l] & (l < used);
+        want[l] = g;
+        if GGX {
+            continue;
+        }
         for k in 0..2 {
             draw.alpha[k][l] = if g { b.alpha[k][l] } else { idle.alpha[k][l] };
             draw.u[k][l] = if g { b.u[k][l] } else { idle.u[k][l] };
@@ -509,7 +528,13 @@ pub(crate) fn rough_plastic_lanes<const N: usize>(q: &RoughPlasticLanes<N>, used
         }
     }
     let any_glossy = glossy[..used.min(N)].iter().fold(false, |a, &g| a | g);
-    let m = if any_glossy { mf::sample_visible_beckmann_lanes(&draw) } else { [[0.0; N], [0.0; N], [1.0; N]] };
+    let m = if !any_glossy {
+        [[0.0; N], [0.0; N], [1.0; N]]
+    } else if GGX {
+        mf::sample_visible_ggx_lanes(b, &want)
+    } else {
+        mf::sample_visible_beckmann_lanes(&draw)
+    };
     // Per direction (0: toward the light sample, 1: the sample's), as `eval_pdf`.
     let (mut wi, mut h) = ([[[0.0f32; N]; 3]; 2], [[[0.0f32; N]; 3]; 2]);
     let (mut x, mut c2, mut ok) = ([[0.0f32; N]; 2], [[0.0f32; N]; 2], [[false; N]; 2]);
@@ -520,11 +545,14 @@ pub(crate) fn rough_plastic_lanes<const N: usize>(q: &RoughPlasticLanes<N>, used
         let r = fresnel::reflect(wo, Vec3::new(m[0][l], m[1][l], m[2][l]));
         let c = lane::cosine_hemisphere(b.u[0][l], b.u[1][l]);
         let ws = if glossy[l] { r } else { Vec3::from_array(c) };
-        lambda[0][l] = mf::beckmann_lambda(ax, ay, wo);
+        let lambda_of = |w: Vec3| if GGX { mf::ggx_lambda(ax, ay, w) } else { mf::beckmann_lambda(ax, ay, w) };
+        lambda[0][l] = lambda_of(wo);
         for (e, w) in [Vec3::new(q.wi[0][l], q.wi[1][l], q.wi[2][l]), ws].into_iter().enumerate() {
             let hh = (wo + w).normalize();
-            (x[e][l], c2[e][l]) = mf::beckmann_d_exponent(ax, ay, hh);
-            lambda[1 + e][l] = mf::beckmann_lambda(ax, ay, w);
+            if !GGX {
+                (x[e][l], c2[e][l]) = mf::beckmann_d_exponent(ax, ay, hh);
+            }
+            lambda[1 + e][l] = lambda_of(w);
             ok[e][l] = !(wo.z <= 0.0 || w.z <= 0.0) && hh.z > 0.0;
             for k in 0..3 {
                 wi[e][k][l] = w[k];
@@ -532,8 +560,8 @@ pub(crate) fn rough_plastic_lanes<const N: usize>(q: &RoughPlasticLanes<N>, used
             }
         }
     }
-    // D's e^x where D is asked for, as `rough_conductor_lanes`.
-    let ex = mf::beckmann_d_exp_lanes(&x, &ok, used);
+    // D's e^x where D is asked for, as `rough_conductor_lanes` (Beckmann's).
+    let ex = if GGX { x } else { mf::beckmann_d_exp_lanes(&x, &ok, used) };
     let t_i = [transmittance_lanes(&q.transmittance, &wi[0][2]), transmittance_lanes(&q.transmittance, &wi[1][2])];
     let (mut f, mut pdf) = ([[[0.0f32; N]; 3]; 2], [[0.0f32; N]; 2]);
     for l in 0..N {
@@ -542,7 +570,13 @@ pub(crate) fn rough_plastic_lanes<const N: usize>(q: &RoughPlasticLanes<N>, used
         for e in 0..2 {
             let w = Vec3::new(wi[e][0][l], wi[e][1][l], wi[e][2][l]);
             let hh = Vec3::new(h[e][0][l], h[e][1][l], h[e][2][l]);
-            let d = if hh.z <= 0.0 { 0.0 } else { mf::beckmann_d_of(ex[e][l], ax, ay, c2[e][l]) };
+            let d = if hh.z <= 0.0 {
+                0.0
+            } else if GGX {
+                mf::ggx_d(ax, ay, hh)
+            } else {
+                mf::beckmann_d_of(ex[e][l], ax, ay, c2[e][l])
+            };
             let g1o = Microfacet::g1_given(wo, hh, || lambda[0][l]);
             let hi = w.dot(hh);
             let spec_pdf = if hi > 0.0 { Microfacet::pdf_visible_given(wo, hh, d, g1o) / (4.0 * hi) } else { 0.0 };

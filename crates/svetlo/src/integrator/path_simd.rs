@@ -71,10 +71,10 @@ use super::path::{bsdf_pdf_toward, PathTracer};
 use super::{camera_sample, render_tiles, Integrator, Progress, RenderSettings};
 use crate::accel::packet::{Hits8, PacketBvh, PacketSpheres, Rays8, LANES};
 use crate::accel::HitRecords;
-use crate::bsdf::conductor::{rough_conductor_lanes, RoughConductor, RoughConductorLanes};
+use crate::bsdf::conductor::{rough_conductor_ggx_lanes, rough_conductor_lanes, RoughConductor, RoughConductorLanes};
 use crate::bsdf::dielectric::{rough_dielectric_lanes, RoughDielectric, RoughDielectricLanes};
 use crate::bsdf::lane_samples::LaneSamples;
-use crate::bsdf::plastic::{rough_plastic_lanes, RoughPlastic, RoughPlasticLanes};
+use crate::bsdf::plastic::{rough_plastic_ggx_lanes, rough_plastic_lanes, RoughPlastic, RoughPlasticLanes};
 use crate::bsdf::{Bsdf, BsdfSample, LobeFlags, Material, TransportMode};
 use crate::camera::{RayGenerator, RayLanes};
 use crate::error::{Error, Result};
@@ -776,6 +776,10 @@ pub struct SimdKernel {
     packets: usize,
     /// Whether some shape may have a Beckmann rough plastic (`plastic_samples`).
     plastics: bool,
+    /// Whether some shape may have a GGX rough plastic (`ggx_plastic_samples`).
+    ggx_plastics: bool,
+    /// Whether some shape may have a GGX rough conductor (`ggx_conductor_samples`).
+    ggx_conductors: bool,
     /// Whether some shape may have a Beckmann rough dielectric (`dielectric_samples`).
     dielectrics: bool,
 }
@@ -944,6 +948,8 @@ impl SimdKernel {
         let packets = if chains { PACKETS } else { 1 };
         // A shape whose BSDF is built per hit may be a plastic too.
         let plastics = shapes.iter().any(|s| s.scalar_bsdf && s.uniform.as_ref().is_none_or(|b| b.beckmann_plastic(Vec3::Z).is_some()));
+        let ggx_plastics = shapes.iter().any(|s| s.scalar_bsdf && s.uniform.as_ref().is_none_or(|b| b.ggx_plastic(Vec3::Z).is_some()));
+        let ggx_conductors = shapes.iter().any(|s| s.scalar_bsdf && s.uniform.as_ref().is_none_or(|b| b.ggx_conductor(Vec3::Z).is_some()));
         let dielectrics = shapes.iter().any(|s| s.scalar_bsdf && s.uniform.as_ref().is_none_or(|b| b.beckmann_dielectric(Vec3::Z).is_some()));
         Some(SimdKernel {
             tracer,
@@ -957,6 +963,8 @@ impl SimdKernel {
             avx512: crate::cpu::avx512(),
             packets,
             plastics,
+            ggx_plastics,
+            ggx_conductors,
             dielectrics,
         })
     }
@@ -1209,8 +1217,14 @@ impl SimdKernel {
                 self.env_samples(scene, &mut p.v);
             }
             self.conductor_samples(events, packets);
+            if self.ggx_conductors {
+                self.ggx_conductor_samples(events, packets);
+            }
             if self.plastics {
                 self.plastic_samples(events, packets);
+            }
+            if self.ggx_plastics {
+                self.ggx_plastic_samples(events, packets);
             }
             if self.dielectrics {
                 self.dielectric_samples(events, packets);
@@ -1931,6 +1945,26 @@ impl SimdKernel {
         self.group_samples::<S, RoughPlasticStep>(events, packets);
     }
 
+    /// The GGX rough conductors' (`Bsdf::ggx_conductor`), as [`Self::plastic_samples`] does the
+    /// plastics' (`rough_conductor_ggx_lanes`: visible normals in closed form).
+    #[inline(never)]
+    fn ggx_conductor_samples<S>(&self, events: &LaneEvents, packets: &mut [Packet<S>]) {
+        if packets.iter().fold(0, |a, p| a | p.v.scatter_lanes) == 0 {
+            return;
+        }
+        self.group_samples::<S, GgxConductorStep>(events, packets);
+    }
+
+    /// The GGX rough plastics' (`Bsdf::ggx_plastic`), as [`Self::plastic_samples`] does the
+    /// Beckmann ones' (`rough_plastic_ggx_lanes`: visible normals in closed form).
+    #[inline(never)]
+    fn ggx_plastic_samples<S>(&self, events: &LaneEvents, packets: &mut [Packet<S>]) {
+        if packets.iter().fold(0, |a, p| a | p.v.scatter_lanes) == 0 {
+            return;
+        }
+        self.group_samples::<S, GgxPlasticStep>(events, packets);
+    }
+
     /// The Beckmann rough dielectrics' (`Bsdf::beckmann_dielectric`) values and densities
     /// toward their light samples and their own samples, as [`Self::plastic_samples`] does a
     /// plastic's (`rough_dielectric_lanes`: the visible normal, the lobe by its Fresnel term,
@@ -2280,6 +2314,50 @@ impl LaneStep for RoughPlasticStep {
     const PORTABLE: fn(&Self::Group, usize) -> LaneSamples<LANES> = rough_plastic_lanes;
     #[cfg(target_arch = "x86_64")]
     const COPIES: Copies<Self::Group, LaneSamples<LANES>> = (plastic8_avx2, plastic8_avx512);
+    const OTHER_LOBE: LobeFlags = LobeFlags::DIFFUSE_REFLECTION;
+}
+
+/// GGX rough conductors (`conductor_ggx8`).
+struct GgxConductorStep;
+
+impl LaneStep for GgxConductorStep {
+    type Model = RoughConductor;
+    type Group = RoughConductorLanes<LANES>;
+    #[inline(always)]
+    fn model(bsdf: &Bsdf, wo: Vec3) -> Option<(&RoughConductor, bool)> {
+        bsdf.ggx_conductor(wo)
+    }
+    #[inline(always)]
+    fn set(q: &mut Self::Group, i: usize, m: &RoughConductor, wo: Vec3, wi: Option<Vec3>, u: [f32; 3]) {
+        RoughConductorStep::set(q, i, m, wo, wi, u);
+    }
+    const PORTABLE: fn(&Self::Group, usize) -> LaneSamples<LANES> = rough_conductor_ggx_lanes;
+    #[cfg(target_arch = "x86_64")]
+    const COPIES: Copies<Self::Group, LaneSamples<LANES>> = (conductor_ggx8_avx2, conductor_ggx8_avx512);
+    const OTHER_LOBE: LobeFlags = LobeFlags::GLOSSY_REFLECTION;
+}
+
+/// GGX rough plastics (`plastic_ggx8`).
+struct GgxPlasticStep;
+
+impl LaneStep for GgxPlasticStep {
+    type Model = RoughPlastic;
+    type Group = RoughPlasticLanes<LANES>;
+    #[inline(always)]
+    fn takes(flags: LobeFlags) -> bool {
+        RoughPlasticStep::takes(flags)
+    }
+    #[inline(always)]
+    fn model(bsdf: &Bsdf, wo: Vec3) -> Option<(&RoughPlastic, bool)> {
+        bsdf.ggx_plastic(wo)
+    }
+    #[inline(always)]
+    fn set(q: &mut Self::Group, i: usize, m: &RoughPlastic, wo: Vec3, wi: Option<Vec3>, u: [f32; 3]) {
+        RoughPlasticStep::set(q, i, m, wo, wi, u);
+    }
+    const PORTABLE: fn(&Self::Group, usize) -> LaneSamples<LANES> = rough_plastic_ggx_lanes;
+    #[cfg(target_arch = "x86_64")]
+    const COPIES: Copies<Self::Group, LaneSamples<LANES>> = (plastic_ggx8_avx2, plastic_ggx8_avx512);
     const OTHER_LOBE: LobeFlags = LobeFlags::DIFFUSE_REFLECTION;
 }
 
@@ -2986,6 +3064,8 @@ macro_rules! vector_step_copies {
 
 vector_step_copies!(rough_conductor_lanes(RoughConductorLanes<LANES>) -> LaneSamples<LANES>, conductor8_avx2, conductor8_avx512);
 vector_step_copies!(rough_plastic_lanes(RoughPlasticLanes<LANES>) -> LaneSamples<LANES>, plastic8_avx2, plastic8_avx512);
+vector_step_copies!(rough_conductor_ggx_lanes(RoughConductorLanes<LANES>) -> LaneSamples<LANES>, conductor_ggx8_avx2, conductor_ggx8_avx512);
+vector_step_copies!(rough_plastic_ggx_lanes(RoughPlasticLanes<LANES>) -> LaneSamples<LANES>, plastic_ggx8_avx2, plastic_ggx8_avx512);
 vector_step_copies!(rough_dielectric_lanes(RoughDielectricLanes<LANES>) -> LaneSamples<LANES>, dielectric8_avx2, dielectric8_avx512);
 
 /// A sampler of the kernel's lanes: one vertex's numbers for all of them at once, in the
@@ -3426,17 +3506,28 @@ mod tests {
         assert!(differ_from_start > 1000, "the walk steps states");
     }
 
-    /// The kernel's rough-conductor lanes (the baseline build and the AVX2 and AVX-512 copies
-    /// it runs) give `RoughConductor::eval_pdf_and_sample`'s bits lane by lane, with 1 to 8
+    /// The kernel's rough-conductor lanes, Beckmann and GGX (the baseline build and the AVX2
+    /// and AVX-512 copies it runs), give `RoughConductor::eval_pdf_and_sample`'s bits lane by lane, with 1 to 8
     /// lanes used: roughness from its floor to beyond 1, anisotropic, metals and
     /// dielectric-like IORs, incidence from normal to grazing, light directions on both sides
     /// and none, the numbers' ends.
     #[test]
     fn conductor_lanes_are_the_scalar_bsdf() {
+        use crate::bsdf::MicrofacetKind;
+        for (kind, seed) in [(MicrofacetKind::Beckmann, 9), (MicrofacetKind::Ggx, 10)] {
+            conductor_lanes_of(kind, seed);
+        }
+    }
+
+    fn conductor_lanes_of(kind: crate::bsdf::MicrofacetKind, seed: u64) {
         use crate::bsdf::conductor::RoughConductor;
         use crate::bsdf::microfacet::Microfacet;
         use crate::bsdf::MicrofacetKind;
-        let mut rng = Pcg32::new(31, 9);
+        let ggx = kind == MicrofacetKind::Ggx;
+        let step = |q: &RoughConductorLanes<LANES>, used: usize| if ggx { rough_conductor_ggx_lanes(q, used) } else { rough_conductor_lanes(q, used) };
+        #[cfg(target_arch = "x86_64")]
+        let copies: Copies<RoughConductorLanes<LANES>, LaneSamples<LANES>> = if ggx { GgxConductorStep::COPIES } else { RoughConductorStep::COPIES };
+        let mut rng = Pcg32::new(31, seed);
         let mut f = |lo: f32, hi: f32| lo + (hi - lo) * rng.next_f32();
         let alphas = [1e-4f32, 1e-3, 0.01, 0.05, 0.1, 0.3, 1.0, 2.0];
         let us = [0.0f32, 1e-7, 0.5, 1.0 - 6e-8, 1.0];
@@ -3458,12 +3549,7 @@ mod tests {
                 } else {
                     (Rgb::new(f(0.1, 3.0), f(0.1, 3.0), f(0.1, 3.0)), Rgb::new(f(0.0, 5.0), f(0.0, 5.0), f(0.0, 5.0)))
                 };
-                let c = RoughConductor {
-                    distribution: Microfacet::new(MicrofacetKind::Beckmann, au, av),
-                    eta,
-                    k,
-                    specular_reflectance: Rgb::new(f(0.0, 1.0), f(0.0, 1.0), 1.0),
-                };
+                let c = RoughConductor { distribution: Microfacet::new(kind, au, av), eta, k, specular_reflectance: Rgb::new(f(0.0, 1.0), f(0.0, 1.0), 1.0) };
                 let dir = |cos_t: f32, phi: f32| {
                     let sin_t = (1.0 - cos_t * cos_t).max(0.0).sqrt();
                     Vec3::new(sin_t * phi.cos(), sin_t * phi.sin(), cos_t)
@@ -3480,13 +3566,13 @@ mod tests {
                 q.set(l, &c, wo, wi, u);
                 lanes.push((c, wo, wi, u));
             }
-            let mut outs = vec![rough_conductor_lanes(&q, used)];
+            let mut outs = vec![step(&q, used)];
             #[cfg(target_arch = "x86_64")]
             if crate::cpu::avx2() && crate::cpu::fma() {
                 // SAFETY: AVX2 and FMA were detected, AVX-512 where `cpu::avx512()` says so.
-                outs.push(unsafe { conductor8_avx2(&q, used) });
+                outs.push(unsafe { copies.0(&q, used) });
                 if crate::cpu::avx512() {
-                    outs.push(unsafe { conductor8_avx512(&q, used) });
+                    outs.push(unsafe { copies.1(&q, used) });
                 }
             }
             for (l, (c, wo, wi, u)) in lanes.iter().enumerate() {
@@ -3498,28 +3584,39 @@ mod tests {
                 }
             }
         }
-        assert!(sampled > 40_000 && lit > 10_000, "{sampled} samples, {lit} lit light samples");
+        assert!(sampled > 40_000 && lit > 10_000, "{kind:?}: {sampled} samples, {lit} lit light samples");
     }
 
-    /// The kernel's rough-plastic lanes (the baseline build and the AVX2 and AVX-512 copies
-    /// it runs) give `RoughPlastic::eval_pdf` and `sample`'s bits lane by lane, with 1 to 8
-    /// lanes used: several roughnesses, IORs (1 included), sampling weights (both lobes
-    /// always, never, mixed), linear and nonlinear bases, incidence from normal to grazing,
-    /// light directions on both sides and none, the numbers' ends.
+    /// The kernel's rough-plastic lanes, Beckmann and GGX (the baseline build and the AVX2
+    /// and AVX-512 copies it runs), give `RoughPlastic::eval_pdf` and `sample`'s bits lane by
+    /// lane, with 1 to 8 lanes used: several roughnesses, IORs (1 included), sampling weights
+    /// (both lobes always, never, mixed), linear and nonlinear bases, incidence from normal
+    /// to grazing, light directions on both sides and none, the numbers' ends.
     #[test]
     fn plastic_lanes_are_the_scalar_bsdf() {
+        use crate::bsdf::MicrofacetKind;
+        for (kind, seed) in [(MicrofacetKind::Beckmann, 5), (MicrofacetKind::Ggx, 6)] {
+            plastic_lanes_of(kind, seed);
+        }
+    }
+
+    fn plastic_lanes_of(kind: crate::bsdf::MicrofacetKind, seed: u64) {
         use crate::bsdf::plastic::RoughPlastic;
         use crate::bsdf::MicrofacetKind;
-        let mut rng = Pcg32::new(37, 5);
+        let mut rng = Pcg32::new(37, seed);
         let mut f = |lo: f32, hi: f32| lo + (hi - lo) * rng.next_f32();
         let mut models = Vec::new();
-        for (i, &alpha) in [1e-4f32, 0.05, 0.1, 0.4, 1.0].iter().enumerate() {
+        for (i, &alpha) in [1e-4f32, 0.01, 0.05, 0.1, 0.4, 1.0].iter().enumerate() {
             for (j, &eta) in [1.5f32, 1.0, 1.9].iter().enumerate() {
                 let weight = [0.0f32, 1.0, 0.5, 0.667][(i + j) % 4];
                 let diffuse = if (i + j).is_multiple_of(2) { Rgb::new(0.1, 0.27, 0.36) } else { Rgb::splat(0.5) };
-                models.push(RoughPlastic::new(MicrofacetKind::Beckmann, alpha, diffuse, Rgb::new(1.0, 0.8, 0.6), eta, j == 2, weight));
+                models.push(RoughPlastic::new(kind, alpha, diffuse, Rgb::new(1.0, 0.8, 0.6), eta, j == 2, weight));
             }
         }
+        let ggx = kind == MicrofacetKind::Ggx;
+        let step = |q: &RoughPlasticLanes<LANES>, used: usize| if ggx { rough_plastic_ggx_lanes(q, used) } else { rough_plastic_lanes(q, used) };
+        #[cfg(target_arch = "x86_64")]
+        let copies: Copies<RoughPlasticLanes<LANES>, LaneSamples<LANES>> = if ggx { GgxPlasticStep::COPIES } else { RoughPlasticStep::COPIES };
         let us = [0.0f32, 1e-7, 0.5, 1.0 - 6e-8, 1.0];
         let cos_ts = [1.0f32, 0.999_999, 0.5, 1e-2, 1e-4, 1e-6];
         let bits = |(nee, s): (Option<(Rgb, f32)>, Option<BsdfSample>)| {
@@ -3551,13 +3648,13 @@ mod tests {
                 q.set(l, p, wo, wi, uc, u);
                 lanes.push((p, wo, wi, uc, u));
             }
-            let mut outs = vec![rough_plastic_lanes(&q, used)];
+            let mut outs = vec![step(&q, used)];
             #[cfg(target_arch = "x86_64")]
             if crate::cpu::avx2() && crate::cpu::fma() {
                 // SAFETY: AVX2 and FMA were detected, AVX-512 where `cpu::avx512()` says so.
-                outs.push(unsafe { plastic8_avx2(&q, used) });
+                outs.push(unsafe { copies.0(&q, used) });
                 if crate::cpu::avx512() {
-                    outs.push(unsafe { plastic8_avx512(&q, used) });
+                    outs.push(unsafe { copies.1(&q, used) });
                 }
             }
             for (l, &(p, wo, wi, uc, u)) in lanes.iter().enumerate() {
@@ -3573,7 +3670,7 @@ mod tests {
                 }
             }
         }
-        assert!(glossy > 10_000 && diffuse > 10_000 && lit > 10_000, "{glossy} glossy and {diffuse} diffuse samples, {lit} lit light samples");
+        assert!(glossy > 10_000 && diffuse > 10_000 && lit > 10_000, "{kind:?}: {glossy} glossy and {diffuse} diffuse samples, {lit} lit light samples");
     }
 
     /// The kernel's rough-dielectric lanes (the baseline build and the AVX2 and AVX-512 copies
