@@ -89,6 +89,7 @@ pub fn eta_from_specular(specular: f32) -> f32 {
 
 /// Burley's GTR1 ("generalised Trowbridge-Reitz", exponent 1) normal distribution of the
 /// clearcoat, per unit projected area; `alpha` in (0, 1).
+#[cfg(test)]
 fn gtr1_d(alpha: f32, m: Vec3) -> f32 {
     let a2 = alpha * alpha;
     gtr1_d_given(a2, a2.ln(), m)
@@ -114,12 +115,19 @@ fn gtr1_sample(alpha: f32, u: Vec2) -> Vec3 {
     Vec3::new(sin * phi.cos(), sin * phi.sin(), cos2.sqrt())
 }
 
-#[inline]
+/// The density of [`gtr1_sample`]'s normals of roughness `alpha`.
+#[cfg(test)]
 fn gtr1_pdf(alpha: f32, m: Vec3) -> f32 {
+    gtr1_pdf_given(gtr1_d(alpha, m), m)
+}
+
+/// The density of [`gtr1_sample`]'s normal `m`, given its D(m) `d`.
+#[inline]
+fn gtr1_pdf_given(d: f32, m: Vec3) -> f32 {
     if m.z < 0.0 {
         0.0
     } else {
-        m.z * gtr1_d(alpha, m)
+        m.z * d
     }
 }
 
@@ -418,7 +426,7 @@ impl Principled {
                     pdf += p.reflection * visible() * jacobian;
                 }
                 if p.clearcoat > 0.0 {
-                    pdf += p.clearcoat * (if h.z < 0.0 { 0.0 } else { h.z * d_cc }) * jacobian;
+                    pdf += p.clearcoat * gtr1_pdf_given(d_cc, h) * jacobian;
                 }
             }
             pdf += p.diffuse * warp::square_to_cosine_hemisphere_pdf(if front { wi } else { -wi });
