@@ -636,6 +636,66 @@ fn every_bsdf_matches_scalar() {
     let _ = std::fs::remove_dir_all(&dir);
 }
 
+/// A normal or bump map over a Lambertian material is a lane case of the kernel (its
+/// perturbed frame and shadowing term per lane, no `Bsdf` built): bsdf_spheres' bump- and
+/// normal-mapped spheres (32k triangles: packets that check ties, an area light and an
+/// environment) render the scalar tracer's image bit for bit on 1 and 2 threads, and a
+/// Cornell box whose boxes and back wall wear the maps (diffuse bounces, emitters met after
+/// them) agrees with it as `compare` asks, bit for bit with single rays, for both samplers.
+#[test]
+fn detail_over_lambertian_matches_scalar() {
+    let Some(root) = shared() else { return };
+    let spheres = root.join("mitsuba-data/tests/scenes/bsdf_spheres");
+    for name in ["bumpmap", "normalmap"] {
+        let scene = load(&spheres.join(format!("test_{name}_path.xml")), &[], 24);
+        let s = RenderSettings { spp: 3, seed: 5, ..RenderSettings::from_scene(&scene) };
+        assert!(SimdKernel::new(&scene, &s).is_some(), "{name}: the scene should qualify for the kernel");
+        if !avx2() {
+            continue;
+        }
+        let want = render(&scene, "path:simd=false", &s);
+        assert!(want.mean().max_component() > 0.0, "{name}: lit");
+        for threads in [1, 2] {
+            let t = RenderSettings { threads, ..s.clone() };
+            assert!(render(&scene, "path", &t).data == want.data, "{name}, {threads} threads: not the scalar tracer's image");
+        }
+    }
+    let tiles = root.join("mitsuba-data/common/textures/floor_tiles_bumpmap.png");
+    let diffuse = r#"<bsdf type="diffuse"><rgb name="reflectance" value="0.3, 0.5, 0.7"/></bsdf>"#;
+    let maps = [
+        (
+            "normalmap",
+            format!(
+                r#"<bsdf type="normalmap"><texture name="normalmap" type="checkerboard"><rgb name="color0" value="0.8, 0.3, 0.7"/><rgb name="color1" value="0.2, 0.6, 0.9"/></texture>{diffuse}</bsdf>"#
+            ),
+        ),
+        (
+            "bumpmap",
+            format!(
+                r#"<bsdf type="bumpmap"><texture type="bitmap"><boolean name="raw" value="true"/><string name="filename" value="{}"/></texture><float name="scale" value="0.5"/>{diffuse}</bsdf>"#,
+                tiles.display()
+            ),
+        ),
+    ];
+    let dir = std::env::temp_dir().join(format!("svetlo-simd-detail-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    let base = std::fs::read_to_string(repo_scene("cornell-box.xml")).unwrap();
+    for (name, bsdf) in &maps {
+        let mut xml = base.replace("<!-- A rectangle", &format!("{}\n    <!-- A rectangle", bsdf.replacen("<bsdf ", r#"<bsdf id="test" "#, 1)));
+        for shape in ["back", "short-box", "tall-box"] {
+            xml = with_material(&xml, shape, "test");
+        }
+        let path = dir.join(format!("{name}.xml"));
+        std::fs::write(&path, xml).unwrap();
+        let scene = load(&path, &[], 24);
+        for sampler in [svetlo::sampling::SamplerKind::Independent, svetlo::sampling::SamplerKind::Sobol] {
+            let s = RenderSettings { sampler, spp: 4, seed: 29, max_depth: 6, rr_depth: 3, ..RenderSettings::from_scene(&scene) };
+            compare(&scene, &s, &format!("cornell-box of {name} over diffuse, {sampler:?}"));
+        }
+    }
+    let _ = std::fs::remove_dir_all(&dir);
+}
+
 /// A textured emitter in the kernel: sampled through its own `Light::sample_li`, its radiance
 /// looked up where a path hits it (`AreaLight::l`), so the image and an emission layer equal
 /// the scalar tracer's (bit for bit with single rays), with a glossy box that reflects it.

@@ -72,10 +72,12 @@ use super::{camera_sample, render_tiles, Integrator, Progress, RenderSettings};
 use crate::accel::packet::{Hits8, PacketBvh, PacketSpheres, Rays8, LANES};
 use crate::accel::HitRecords;
 use crate::bsdf::conductor::{rough_conductor_ggx_lanes, rough_conductor_lanes, RoughConductor, RoughConductorLanes};
+use crate::bsdf::detail::{bump_map_normal, normal_map_normal, Detail};
 use crate::bsdf::dielectric::{rough_dielectric_lanes, RoughDielectric, RoughDielectricLanes};
+use crate::bsdf::diffuse::Diffuse;
 use crate::bsdf::lane_samples::LaneSamples;
 use crate::bsdf::plastic::{rough_plastic_ggx_lanes, rough_plastic_lanes, RoughPlastic, RoughPlasticLanes};
-use crate::bsdf::{Bsdf, BsdfSample, LobeFlags, Material, TransportMode};
+use crate::bsdf::{Bsdf, BsdfModel, BsdfSample, LobeFlags, Material, TransportMode};
 use crate::camera::{RayGenerator, RayLanes};
 use crate::error::{Error, Result};
 use crate::film::{Film, FilmTile};
@@ -248,6 +250,26 @@ struct ShapeData {
     reads_uv: bool,
     /// Whether a side's reflectance is a large bitmap, whose texels are asked for ahead.
     prefetch_texels: bool,
+    /// A normal or bump map over a one-sided Lambertian `front`: its lanes keep `scalar_bsdf`
+    /// for `shade8` but are shaded by `detail_scatter`, without a `Bsdf`.
+    detail: Option<DetailMap>,
+}
+
+/// The map of a [`ShapeData::detail`] (`Material::NormalMap`, `Material::BumpMap`).
+#[derive(Clone, Debug)]
+enum DetailMap {
+    Normal(Texture),
+    Bump { height: Texture, scale: f32 },
+}
+
+/// The detail map and Lambertian reflectance of a normal or bump map over a one-sided
+/// Lambertian material (what `Material::bsdf_with_detail` builds there).
+fn detail_lambert(m: &Material) -> Option<(DetailMap, Albedo)> {
+    match m {
+        Material::NormalMap { normals, inner } => Some((DetailMap::Normal(normals.clone()), diffuse_albedo(inner)?)),
+        Material::BumpMap { height, scale, inner } => Some((DetailMap::Bump { height: height.clone(), scale: *scale }, diffuse_albedo(inner)?)),
+        _ => None,
+    }
 }
 
 /// A mesh area light as `AreaLight::sample_li` samples it, unpacked: its triangles' vertices
@@ -782,6 +804,8 @@ pub struct SimdKernel {
     ggx_conductors: bool,
     /// Whether some shape may have a Beckmann rough dielectric (`dielectric_samples`).
     dielectrics: bool,
+    /// Whether some shape emits (`detail_scatter` then keeps its lane's `Bsdf` for MIS).
+    emitters: bool,
 }
 
 /// The reflectance of a diffuse model (a constant one clamped as `Material::bsdf` does).
@@ -875,11 +899,14 @@ impl SimdKernel {
             let mat = scene.materials.get(s.material as usize)?;
             let lambert = lambert_sides(mat);
             // Any other material (or surface detail) by its own scalar code, lane by lane.
-            let (scalar_bsdf, (front, back)) = match lambert {
-                Some(fb) if !s.detail => (false, fb),
-                _ => (true, (Albedo::Constant(Rgb::BLACK), None)),
+            // (A detail over a Lambertian one: `detail_scatter`.)
+            let detail = if s.detail { detail_lambert(mat) } else { None };
+            let (scalar_bsdf, (front, back), detail) = match (lambert, detail) {
+                (Some(fb), _) if !s.detail => (false, fb, None),
+                (_, Some((map, front))) => (true, (front, None), Some(map)),
+                _ => (true, (Albedo::Constant(Rgb::BLACK), None), None),
             };
-            let textured = matches!(front, Albedo::Textured(_)) || matches!(back, Some(Albedo::Textured(_)));
+            let textured = detail.is_none() && (matches!(front, Albedo::Textured(_)) || matches!(back, Some(Albedo::Textured(_))));
             let light = match s.light {
                 Some(li) => {
                     let a = area_of(scene, li)?;
@@ -895,7 +922,7 @@ impl SimdKernel {
             let uniform_flags = uniform.as_ref().map_or(LobeFlags::NONE, Bsdf::flags);
             let reads_uv = textured || matches!(light, Some((_, None))) || (scalar_bsdf && uniform.is_none());
             let prefetch_texels = !scalar_bsdf && (front.large_bitmap() || back.as_ref().is_some_and(Albedo::large_bitmap));
-            shapes.push(ShapeData { scalar_bsdf, front, back, textured, light, uniform, uniform_flags, reads_uv, prefetch_texels });
+            shapes.push(ShapeData { scalar_bsdf, front, back, textured, light, uniform, uniform_flags, reads_uv, prefetch_texels, detail });
         }
         // The meshes' triangles (other shapes' hits come as the scene's surface records:
         // `other_hit`), the ones of the scene's last render if its geometry is the same.
@@ -947,10 +974,14 @@ impl SimdKernel {
             sphere_lights.iter().any(Option::is_some) || shapes.iter().any(|s| s.uniform.as_ref().is_some_and(|b| b.beckmann_conductor(Vec3::Z).is_some()));
         let packets = if chains { PACKETS } else { 1 };
         // A shape whose BSDF is built per hit may be a plastic too.
-        let plastics = shapes.iter().any(|s| s.scalar_bsdf && s.uniform.as_ref().is_none_or(|b| b.beckmann_plastic(Vec3::Z).is_some()));
-        let ggx_plastics = shapes.iter().any(|s| s.scalar_bsdf && s.uniform.as_ref().is_none_or(|b| b.ggx_plastic(Vec3::Z).is_some()));
-        let ggx_conductors = shapes.iter().any(|s| s.scalar_bsdf && s.uniform.as_ref().is_none_or(|b| b.ggx_conductor(Vec3::Z).is_some()));
-        let dielectrics = shapes.iter().any(|s| s.scalar_bsdf && s.uniform.as_ref().is_none_or(|b| b.beckmann_dielectric(Vec3::Z).is_some()));
+        let plastics = shapes.iter().any(|s| s.scalar_bsdf && s.detail.is_none() && s.uniform.as_ref().is_none_or(|b| b.beckmann_plastic(Vec3::Z).is_some()));
+        let ggx_plastics = shapes.iter().any(|s| s.scalar_bsdf && s.detail.is_none() && s.uniform.as_ref().is_none_or(|b| b.ggx_plastic(Vec3::Z).is_some()));
+        let ggx_conductors =
+            shapes.iter().any(|s| s.scalar_bsdf && s.detail.is_none() && s.uniform.as_ref().is_none_or(|b| b.ggx_conductor(Vec3::Z).is_some()));
+        let dielectrics =
+            shapes.iter().any(|s| s.scalar_bsdf && s.detail.is_none() && s.uniform.as_ref().is_none_or(|b| b.beckmann_dielectric(Vec3::Z).is_some()));
+        // Whether a path may hit an emitting shape (where a detail lane's `Bsdf` is kept for MIS).
+        let emitters = shapes.iter().any(|s| s.light.is_some());
         Some(SimdKernel {
             tracer,
             geometry,
@@ -966,6 +997,7 @@ impl SimdKernel {
             ggx_plastics,
             ggx_conductors,
             dielectrics,
+            emitters,
         })
     }
 
@@ -1452,6 +1484,12 @@ impl SimdKernel {
             lanes &= lanes - 1;
             self.scalar_scatter(events, st, l, v);
         }
+        let mut lanes = std::mem::take(&mut v.detail_lanes);
+        while lanes != 0 {
+            let l = lanes.trailing_zeros() as usize;
+            lanes &= lanes - 1;
+            self.detail_scatter(events, st, l, v);
+        }
         // Writes every lane's next ray, shadow ray and state; only `go` lanes' count.
         self.shade8_on_cpu(v, settings.rr_depth, st, rays, shadow, o);
         // The `go` lanes' light samples that count now (1) or once their shadow ray is clear
@@ -1681,7 +1719,27 @@ impl SimdKernel {
                 st.prev_bsdf[l] = None;
             }
         }
-        if sh.scalar_bsdf {
+        if let Some(map) = &sh.detail {
+            // A detail over a Lambertian: its perturbed normal and reflectance, as
+            // `Scene::bsdf` builds them, for `detail_scatter`.
+            let tp = match hit {
+                Hit::Tri(tri) => TexPoint { uv: self.uv(scene, tri, b1, b2), prim: tri.local, bary: Vec2::new(b1, b2), p, n: ng },
+                Hit::Other(si) => si.tex_point(),
+            };
+            let n = match map {
+                DetailMap::Normal(t) => normal_map_normal(t.eval(tp)),
+                DetailMap::Bump { height, scale } => {
+                    let (dpdu, dpdv) = scene.dp_duv_at(shape, tp.prim, p, &frame);
+                    bump_map_normal(height.eval_f32_grad(tp) * *scale, &frame, ng, dpdu, dpdv)
+                }
+            };
+            put(&mut v.detail_n, Detail::new(n, true).n);
+            putc(&mut v.num.refl, sh.front.at(&tp));
+            v.flags[l] = LobeFlags::DIFFUSE_REFLECTION;
+            self.light_sample(scene, l, v, p, u_light, u_l2);
+            (v.scatter_u[1][l], v.scatter_u[2][l]) = (u.x, u.y);
+            v.detail_lanes |= 1 << l;
+        } else if sh.scalar_bsdf {
             // The hit's record only where `Scene::bsdf` builds the hit's own BSDF from it:
             // the rest of the vertex is in `v.num` (a record per lane, built and copied into
             // `Soa` and read back, had been most of a scalar lane's `gather`).
@@ -2100,6 +2158,36 @@ impl SimdKernel {
         }
     }
 
+    /// [`Self::scalar_scatter`] of a lane of a detail over a Lambertian (`ShapeData::detail`:
+    /// its perturbed normal in `v.detail_n`, its reflectance in `v.num.refl`), by
+    /// `Bsdf::detail_lambert`: the bits of its `Bsdf`, which is built only where a path may
+    /// meet an emitting shape (for the MIS weight there).
+    #[inline(never)]
+    fn detail_scatter<S>(&self, events: &LaneEvents, st: &mut Paths<S>, l: usize, v: &mut Soa) {
+        let frame = v.num.frame(l);
+        let wo = frame.to_local(lane3(&v.num.wo, l));
+        let wi = nee_dir(v, l, &frame);
+        let d = Detail { n: lane3(&v.detail_n, l), shadowing: true };
+        let refl = Rgb::new(v.num.refl[0][l], v.num.refl[1][l], v.num.refl[2][l]);
+        let (nee, bs) = Bsdf::detail_lambert(&d, refl, wo, wi, Vec2::new(v.scatter_u[1][l], v.scatter_u[2][l]));
+        let flags = LobeFlags::DIFFUSE_REFLECTION;
+        if let (Some(wi), Some((f, pdf))) = (wi, nee) {
+            put_light_value(v, l, f, pdf);
+            if let Some(view) = events.view {
+                v.class_nee[l] = view.class(events.aovs.scatter_event(v.shape[l], flags, None, wi.z * wo.z < 0.0));
+            }
+        }
+        let bs = bs.filter(|bs| bs.pdf > 0.0 && !bs.f.is_black());
+        v.num.bmoved[l] = bs.is_some();
+        st.prev_bsdf[l] = None;
+        let Some(bs) = bs else { return };
+        put_sample(events, v, l, flags, &bs);
+        st.prev_bsdf[l] = Some(PrevBsdf { shape: v.shape[l], frame, wo });
+        if self.emitters {
+            st.prev_own[l] = Some(Bsdf { detail: Some(d), ..Bsdf::new(BsdfModel::Diffuse(Diffuse { reflectance: refl })) });
+        }
+    }
+
     /// Lane `l`'s ray along `d` left the scene: what the environment adds there, weighted
     /// against the previous vertex's BSDF sample as the scalar tracer weighs it.
     #[inline(always)]
@@ -2507,6 +2595,10 @@ struct Soa {
     /// The lanes that wait on `scalar_scatter` (a Beckmann conductor's lane leaves in
     /// `conductor_samples`).
     scatter_lanes: u8,
+    /// The lanes of a detail over a Lambertian (`detail_scatter`), and their perturbed
+    /// normals (original shading frame).
+    detail_lanes: u8,
+    detail_n: [[f32; LANES]; 3],
     own: [Option<Bsdf>; LANES],
     flags: [LobeFlags; LANES],
     /// The rays' grid points (u, v) and sin θ in the environment map (`EnvMap::dirs_to_grid`),

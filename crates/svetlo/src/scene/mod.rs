@@ -425,11 +425,17 @@ impl Scene {
 
     /// (dp/du, dp/dv) at a hit, world space (a moving shape's in its reference pose).
     fn dp_duv(&self, si: &SurfaceInteraction) -> (Vec3, Vec3) {
-        match &*self.shapes[si.shape as usize].geometry {
-            Geometry::Mesh(m) => m.dp_duv(si.prim as usize),
-            Geometry::Sphere(s) => s.dp_duv(si.p),
+        self.dp_duv_at(si.shape, si.prim, si.p, &si.shading)
+    }
+
+    /// [`Self::dp_duv`] of a hit on triangle `prim` of `shape` (its local index) at `p`, shading frame `shading`.
+    #[inline]
+    pub(crate) fn dp_duv_at(&self, shape: u32, prim: u32, p: Vec3, shading: &Frame) -> (Vec3, Vec3) {
+        match &*self.shapes[shape as usize].geometry {
+            Geometry::Mesh(m) => m.dp_duv(prim as usize),
+            Geometry::Sphere(s) => s.dp_duv(p),
             // No uv parameterisation: the shading frame's axes stand in.
-            Geometry::SdfGrid(_) => (si.shading.s, si.shading.t),
+            Geometry::SdfGrid(_) => (shading.s, shading.t),
         }
     }
 
