@@ -132,6 +132,14 @@ impl Bitmap {
             Store::Codes(t, _) => t.rgb(i),
         }
     }
+    /// The luminances of the texels at indices `i` (row by row), as [`Self::texel`] reads them.
+    #[inline(always)]
+    fn luminances(&self, i: [usize; 4]) -> [f32; 4] {
+        match &self.store {
+            Store::Float(v) => i.map(|i| v[i].luminance()),
+            Store::Codes(t, _) => i.map(|i| t.rgb(i).luminance()),
+        }
+    }
     /// The texels row by row, as [`Bitmap::data`] holds them, without decoding a copy.
     pub fn texels(&self) -> impl Iterator<Item = Rgb> + '_ {
         (0..self.width * self.height).map(move |i| match &self.store {
@@ -426,8 +434,10 @@ impl Texture {
         let (x0, y0) = (floor_exact(x), floor_exact(y));
         let (fx, fy) = (x - x0, y - y0);
         let (x0, y0) = (x0 as i64, y0 as i64);
-        let t = |dx: i64, dy: i64| image.texel(wrap(x0 + dx, image.width, *wm), wrap(y0 + dy, image.height, *wm)).luminance();
-        let (f00, f10, f01, f11) = (t(0, 0), t(1, 0), t(0, 1), t(1, 1));
+        // Each axis wrapped once, the four texels read by one match on the store.
+        let (xa, xb) = (wrap(x0, image.width, *wm), wrap(x0 + 1, image.width, *wm));
+        let (ya, yb) = (wrap(y0, image.height, *wm), wrap(y0 + 1, image.height, *wm));
+        let [f00, f10, f01, f11] = image.luminances([ya * image.width + xa, ya * image.width + xb, yb * image.width + xa, yb * image.width + xb]);
         // d/dq of the interpolant, then the chain rule through to_uv (q = A uv + b).
         let dq = Vec2::new(((f10 - f00) * (1.0 - fy) + (f11 - f01) * fy) * w, ((f01 - f00) * (1.0 - fx) + (f11 - f10) * fx) * h);
         to_uv.matrix2.transpose() * dq
