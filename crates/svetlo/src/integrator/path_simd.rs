@@ -18,8 +18,10 @@
 //! `Scene::intersect` makes it: `other_hit`), and is shaded from it as a triangle's hit is.
 //! (Two-sided) Lambertian materials of constant or textured reflectance (any texture:
 //! bitmaps, procedural, mesh attributes; evaluated per lane where the path hits) are shaded
-//! as eight-lane arithmetic, on any shape; every other one (conductors, dielectrics, plastics, the classic models,
-//! principled, blends, masks, normal and bump maps) lane by lane through its scalar `Bsdf`
+//! as eight-lane arithmetic, on any shape; a normal or bump map over a one-sided Lambertian
+//! one by `detail_scatter` (the map per lane, no `Bsdf` built); every other one (conductors,
+//! dielectrics, plastics, the classic models, principled, blends, masks, maps over other
+//! models) lane by lane through its scalar `Bsdf`
 //! (`scalar_light_sample` in `gather`, `scalar_scatter` once every lane's sphere-light
 //! sample is in: the same calls and random numbers as `path.rs`), its results selected into
 //! `shade8`'s lanes. A shape whose material has no texture and no surface detail keeps its
@@ -229,7 +231,7 @@ const PREFETCH_TEXELS_MIN: usize = 1 << 18;
 #[derive(Clone, Debug)]
 struct ShapeData {
     /// Whether its lanes take the scalar `Bsdf` (any material but a plain Lambertian one, or
-    /// a normal or bump map); then `front` and `back` are unused.
+    /// a normal or bump map); then `front` and `back` are unused, but where `detail` is set.
     scalar_bsdf: bool,
     front: Albedo,
     /// Reflectance seen from the back (two-sided); None: black there.
@@ -1484,7 +1486,10 @@ impl SimdKernel {
             lanes &= lanes - 1;
             self.scalar_scatter(events, st, l, v);
         }
-        let mut lanes = std::mem::take(&mut v.detail_lanes);
+        let mut lanes = v.detail_lanes;
+        if lanes != 0 {
+            v.detail_lanes = 0;
+        }
         while lanes != 0 {
             let l = lanes.trailing_zeros() as usize;
             lanes &= lanes - 1;
@@ -1719,7 +1724,9 @@ impl SimdKernel {
                 st.prev_bsdf[l] = None;
             }
         }
-        if let Some(map) = &sh.detail {
+        if !sh.scalar_bsdf {
+            self.light_sample(scene, l, v, p, u_light, u_l2);
+        } else if let Some(map) = &sh.detail {
             // A detail over a Lambertian: its perturbed normal and reflectance, as
             // `Scene::bsdf` builds them, for `detail_scatter`.
             let tp = match hit {
@@ -1739,7 +1746,7 @@ impl SimdKernel {
             self.light_sample(scene, l, v, p, u_light, u_l2);
             (v.scatter_u[1][l], v.scatter_u[2][l]) = (u.x, u.y);
             v.detail_lanes |= 1 << l;
-        } else if sh.scalar_bsdf {
+        } else {
             // The hit's record only where `Scene::bsdf` builds the hit's own BSDF from it:
             // the rest of the vertex is in `v.num` (a record per lane, built and copied into
             // `Soa` and read back, had been most of a scalar lane's `gather`).
@@ -1761,8 +1768,6 @@ impl SimdKernel {
             self.scalar_light_sample(scene, l, v, shape, p, si.as_ref(), u_light, u_l2);
             (v.scatter_u[0][l], v.scatter_u[1][l], v.scatter_u[2][l]) = (uc, u.x, u.y);
             v.scatter_lanes |= 1 << l;
-        } else {
-            self.light_sample(scene, l, v, p, u_light, u_l2);
         }
         true
     }
