@@ -8,7 +8,7 @@ mod coherent;
 mod geometry_cache;
 mod kdtree;
 pub mod packet;
-mod pages;
+pub(crate) mod pages;
 mod tri4;
 mod tri8;
 mod wide;

@@ -89,6 +89,12 @@ impl<T: Copy> Deref for PagedSlice<T> {
     }
 }
 
+impl<T: Copy + std::fmt::Debug> std::fmt::Debug for PagedSlice<T> {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        (**self).fmt(f)
+    }
+}
+
 impl<T: Copy> Clone for PagedSlice<T> {
     fn clone(&self) -> PagedSlice<T> {
         PagedSlice::new(self.to_vec())

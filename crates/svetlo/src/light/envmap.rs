@@ -14,6 +14,7 @@
 //!   is positive wherever the radiance's luminance is.
 //! * `to_world` must be a rotation (directions are normalised after it).
 
+use crate::accel::pages::PagedSlice;
 use crate::math::lane::lanes_of;
 use crate::math::warp::sin_cos_2pi;
 use crate::math::{approx, safe_sqrt, INV_2PI, INV_PI, PI};
@@ -391,8 +392,9 @@ fn sample_linear(u: f32, a: f32, b: f32) -> f32 {
 /// at the vertices of a `cols` x `rows` grid of cells.
 #[derive(Clone, Debug)]
 struct BilinearDistribution {
-    /// The vertices' values (`weight`), with the radiance they came from.
-    texels: Vec<Texel>,
+    /// The vertices' values (`weight`), with the radiance they came from (on huge pages
+    /// when large: escaped rays' lookups land anywhere in it).
+    texels: PagedSlice<Texel>,
     /// Cells: `cols` wide (= image width), `rows` high (= image height - 1).
     cols: usize,
     rows: usize,
@@ -427,7 +429,17 @@ impl BilinearDistribution {
         let marginal = Distribution1D::new(&row_integrals);
         let integral = marginal.integral;
         let last_cell = (cols <= 1 << 24 && rows <= 1 << 24).then(|| ((cols - 1) as f32, (rows - 1) as f32));
-        BilinearDistribution { texels, cols, rows, cols_f: cols as f32, rows_f: rows as f32, last_cell, marginal, conditional, integral }
+        BilinearDistribution {
+            texels: PagedSlice::new(texels),
+            cols,
+            rows,
+            cols_f: cols as f32,
+            rows_f: rows as f32,
+            last_cell,
+            marginal,
+            conditional,
+            integral,
+        }
     }
 
     #[inline]

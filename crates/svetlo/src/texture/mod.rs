@@ -13,6 +13,7 @@
 pub mod noise;
 pub mod procedural;
 
+use crate::accel::pages::PagedSlice;
 use crate::spectrum::Rgb;
 use glam::{Affine2, Vec2, Vec3};
 use std::sync::{Arc, OnceLock};
@@ -56,7 +57,9 @@ enum Store {
 /// anywhere in it, then miss the cache far less often, and read back the very same values.
 #[derive(Clone, Debug)]
 struct Texels8 {
-    codes: Box<[[u8; 4]]>,
+    /// On huge pages when large: a large texture's lookups land anywhere in it, and on 4 KiB
+    /// pages nearly each missed the TLB as well (a row of 2048 texels is two pages).
+    codes: PagedSlice<[u8; 4]>,
     table: &'static [f32; 256],
 }
 
@@ -78,7 +81,7 @@ impl Bitmap {
     /// (sRGB to linear, or Mitsuba's `raw` code / 255).
     pub fn from_8bit(width: usize, height: usize, codes: Vec<[u8; 4]>, table: &'static [f32; 256]) -> Self {
         assert_eq!(codes.len(), width * height);
-        Bitmap { width, height, store: Store::Codes(Texels8 { codes: codes.into_boxed_slice(), table }, OnceLock::new()) }
+        Bitmap { width, height, store: Store::Codes(Texels8 { codes: PagedSlice::new(codes), table }, OnceLock::new()) }
     }
 
     /// Whether lookups read 8-bit codes ([`Bitmap::from_8bit`]).
