@@ -359,6 +359,11 @@ impl Bsdf {
             let (nee, s) = p.eval_pdf_and_sample(side(wo), wi.map(side), uc, u, mode);
             return Self::finish_conductor(self.opacity, flipped, nee, s);
         }
+        if let (None, true, Some((BsdfModel::PrincipledThin(p), flipped))) = (&self.detail, self.opacity >= 1.0, self.side(wo)) {
+            let side = |w: Vec3| if flipped { flip(w) } else { w };
+            let (nee, s) = p.eval_pdf_and_sample(side(wo), wi.map(side), uc, u);
+            return Self::finish_conductor(self.opacity, flipped, nee, s);
+        }
         (wi.map(|wi| self.eval_pdf(wo, wi, mode)), self.sample(wo, uc, u, mode))
     }
 

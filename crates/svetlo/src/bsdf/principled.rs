@@ -51,6 +51,19 @@ fn schlick_fresnel_weight(cos_i: f32, eta: f32) -> f32 {
     }
 }
 
+/// [`schlick_fresnel_weight`] where `cos_i` >= 0 (the front of a microfacet wo sees): the
+/// same value, 1 / eta only where eta <= 1.
+#[inline]
+fn schlick_fresnel_weight_front(cos_i: f32, eta: f32) -> f32 {
+    if eta > 1.0 {
+        schlick_weight(cos_i.abs())
+    } else {
+        let eta_ti = 1.0 / eta;
+        let cos_t2 = 1.0 - (1.0 - cos_i * cos_i) * eta_ti * eta_ti;
+        schlick_weight(cos_t2.max(0.0).sqrt())
+    }
+}
+
 /// [`schlick`] given its weight `w`.
 #[inline]
 fn schlick_blend(r0: Rgb, w: f32) -> Rgb {
@@ -153,9 +166,11 @@ fn smith_ggx1_front(v: Vec3, alpha: f32) -> f32 {
 }
 
 /// Burley's diffuse with retro-reflection, blended towards the fake subsurface term by
-/// `flatness`; `cos_d` is the cosine between the half vector and either direction.
-fn disney_diffuse(roughness: f32, flatness: f32, cos_o: f32, cos_i: f32, cos_d: f32) -> f32 {
-    let (fo, fi) = (schlick_weight(cos_o.abs()), schlick_weight(cos_i.abs()));
+/// `flatness`; `cos_d` is the cosine between the half vector and either direction, `fi`
+/// the Schlick weight of |`cos_i`| (wo's: a vertex's, computed once).
+#[inline]
+fn disney_diffuse_given(roughness: f32, flatness: f32, cos_o: f32, cos_i: f32, cos_d: f32, fi: f32) -> f32 {
+    let fo = schlick_weight(cos_o.abs());
     let f_diff = (1.0 - 0.5 * fi) * (1.0 - 0.5 * fo);
     let rr = 2.0 * roughness * cos_d * cos_d;
     let f_retro = rr * (fo + fi + fo * fi * (rr - 1.0));
@@ -246,6 +261,16 @@ struct WoTerms {
     /// The clearcoat's masking toward `wo` where it sees the microfacet's front (0 without
     /// a clearcoat: not read then).
     g_cc: f32,
+}
+
+/// What a `principledthin` vertex's evaluations and its sample share: terms of `wo` alone,
+/// Λ(wo) of each GGX computed where first read (an evaluation reads one of the two).
+#[derive(Clone, Copy, Debug)]
+struct ThinWoTerms {
+    lambda_r: Option<f32>,
+    lambda_t: Option<f32>,
+    /// The diffuse's Schlick weight of |wo.z|.
+    f_wo: f32,
 }
 
 /// Lobe probabilities of `principled` from one side, normalised.
@@ -415,7 +440,7 @@ impl Principled {
                     value += Rgb::splat(0.25 * self.clearcoat * f_cc * d_cc * g_cc);
                 }
                 if brdf > 0.0 {
-                    value += self.base_color * (brdf * INV_PI * disney_diffuse(self.roughness, self.flatness, co, ci, ih));
+                    value += self.base_color * (brdf * INV_PI * disney_diffuse_given(self.roughness, self.flatness, co, ci, ih, schlick_weight(ci.abs())));
                 }
                 if self.sheen > 0.0 && self.metallic < 1.0 {
                     value += dv.sheen_color * (self.sheen * (1.0 - self.metallic) * schlick_weight(ih.abs()));
@@ -591,6 +616,23 @@ impl PrincipledThin {
     /// The value and the density toward `wi`: the frame, D and G1 toward `wo` computed
     /// once for both.
     pub fn eval_pdf(&self, wo: Vec3, wi: Vec3, _mode: TransportMode) -> (Rgb, f32) {
+        self.eval_pdf_with(wo, wi, &mut self.wo_terms(wo))
+    }
+
+    #[inline]
+    fn wo_terms(&self, wo: Vec3) -> ThinWoTerms {
+        ThinWoTerms { lambda_r: None, lambda_t: None, f_wo: schlick_weight(wo.z.abs()) }
+    }
+
+    /// ([`Self::eval_pdf`] toward `wi` where given, [`Self::sample`]): the same bits, the
+    /// terms of `wo` computed once for both (the path kernel's vertex).
+    pub fn eval_pdf_and_sample(&self, wo: Vec3, wi: Option<Vec3>, uc: f32, u: Vec2) -> (Option<(Rgb, f32)>, Option<BsdfSample>) {
+        let mut t = self.wo_terms(wo);
+        (wi.map(|wi| self.eval_pdf_with(wo, wi, &mut t)), self.sample_with(wo, uc, u, &mut t))
+    }
+
+    /// [`Self::eval_pdf`] given the terms of `wo` (Λ filled in where first read).
+    fn eval_pdf_with(&self, wo: Vec3, wi: Vec3, t: &mut ThinWoTerms) -> (Rgb, f32) {
         if wo.z == 0.0 || wi.z == 0.0 {
             return (Rgb::BLACK, 0.0);
         }
@@ -603,16 +645,18 @@ impl PrincipledThin {
         let reflect = co > 0.0;
         let dv = &self.derived;
         let [p_sr, p_st, p_dr, p_dt] = dv.lobes;
-        let (p_spec, md) = if reflect { (p_sr, &self.distribution) } else { (p_st, &self.transmission_distribution) };
+        let (p_spec, md, lambda) = if reflect { (p_sr, &self.distribution, &mut t.lambda_r) } else { (p_st, &self.transmission_distribution, &mut t.lambda_t) };
         let ok = compatible(h, o, i, reflect);
-        let (d, g1o) = if ok && (st > 0.0 || p_spec > 0.0) { (md.d(h), md.g1(o, h)) } else { (0.0, 0.0) };
+        let (d, g1o) =
+            if ok && (st > 0.0 || p_spec > 0.0) { (md.d(h), Microfacet::g1_given(o, h, || *lambda.get_or_insert_with(|| md.lambda(o)))) } else { (0.0, 0.0) };
         let mut value = Rgb::BLACK;
         if st > 0.0 && ok {
             let oh = o.dot(h);
             let f_d = fresnel::dielectric(oh, self.eta).0;
             let k = st * d * (g1o * md.g1(i, h)) / (4.0 * ci * co.abs());
             if reflect {
-                let tinted = schlick(dv.tint_r0, oh, self.eta);
+                // oh > 0 where ok.
+                let tinted = schlick_blend(dv.tint_r0, schlick_fresnel_weight_front(oh, self.eta));
                 value += (Rgb::splat(f_d) * (1.0 - self.spec_tint) + tinted * self.spec_tint) * k;
             } else {
                 value += self.base_color * ((1.0 - f_d) * k);
@@ -622,7 +666,7 @@ impl PrincipledThin {
             if reflect && dt < 1.0 {
                 let ih = h.dot(i);
                 let w = (1.0 - st) * (1.0 - dt);
-                value += self.base_color * (w * INV_PI * disney_diffuse(self.roughness, self.flatness, co, ci, ih));
+                value += self.base_color * (w * INV_PI * disney_diffuse_given(self.roughness, self.flatness, co, ci, ih, t.f_wo));
                 if self.sheen > 0.0 {
                     value += dv.sheen_color * (self.sheen * w * schlick_weight(ih.abs()));
                 }
@@ -639,7 +683,12 @@ impl PrincipledThin {
         (value, if pdf.is_finite() { pdf } else { 0.0 })
     }
 
-    pub fn sample(&self, wo: Vec3, uc: f32, u: Vec2, mode: TransportMode) -> Option<BsdfSample> {
+    pub fn sample(&self, wo: Vec3, uc: f32, u: Vec2, _mode: TransportMode) -> Option<BsdfSample> {
+        self.sample_with(wo, uc, u, &mut self.wo_terms(wo))
+    }
+
+    /// [`Self::sample`] given the terms of `wo`.
+    fn sample_with(&self, wo: Vec3, uc: f32, u: Vec2, t: &mut ThinWoTerms) -> Option<BsdfSample> {
         if wo.z == 0.0 {
             return None;
         }
@@ -670,7 +719,7 @@ impl PrincipledThin {
             return None;
         }
         let wi = i * s;
-        let (f, pdf) = self.eval_pdf(wo, wi, mode);
+        let (f, pdf) = self.eval_pdf_with(wo, wi, t);
         if !positive_finite(pdf) {
             return None;
         }
