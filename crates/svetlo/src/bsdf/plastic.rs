@@ -286,6 +286,11 @@ pub struct RoughPlastic {
     pub nonlinear: bool,
     pub specular_sampling_weight: f32,
     pub tables: &'static CoatingTables,
+    /// The base's albedo under the coating (`base_albedo`) and INV_PI / eta², of the fields
+    /// above, made by `new`: each vertex (and the path kernel's lanes) read them, not three
+    /// divisions and one more.
+    base: Rgb,
+    base_scale: f32,
 }
 
 impl RoughPlastic {
@@ -300,7 +305,9 @@ impl RoughPlastic {
     ) -> Self {
         let distribution = Microfacet::new(kind, alpha, alpha);
         let tables = CoatingTables::get(kind, distribution.alpha_u, eta);
-        RoughPlastic { distribution, diffuse_reflectance, specular_reflectance, eta, nonlinear, specular_sampling_weight, tables }
+        let base = base_albedo(diffuse_reflectance, tables.internal_reflectance, nonlinear);
+        let base_scale = INV_PI / (eta * eta);
+        RoughPlastic { distribution, diffuse_reflectance, specular_reflectance, eta, nonlinear, specular_sampling_weight, tables, base, base_scale }
     }
     /// Build the coating tables that [`Self::new`] will look up for this roughness and IOR
     /// (once per process): at scene load, as Mitsuba builds them when it loads the plugin,
@@ -323,8 +330,7 @@ impl RoughPlastic {
         let f = fresnel::dielectric(wo.dot(h), self.eta).0;
         let spec = self.specular_reflectance * (f * md.d(h) * md.g(wo, wi, h) / (4.0 * wo.z * wi.z));
         let t = self.tables;
-        let diff = base_albedo(self.diffuse_reflectance, t.internal_reflectance, self.nonlinear)
-            * (INV_PI / (self.eta * self.eta) * t.transmittance_at(wo.z) * t.transmittance_at(wi.z));
+        let diff = self.base * (self.base_scale * t.transmittance_at(wo.z) * t.transmittance_at(wi.z));
         spec + diff
     }
     pub fn pdf(&self, wo: Vec3, wi: Vec3, _mode: TransportMode) -> f32 {
@@ -374,8 +380,7 @@ impl RoughPlastic {
         let pdf = ps * spec_pdf + (1.0 - ps) * warp::square_to_cosine_hemisphere_pdf(wi);
         let f = fresnel::dielectric(wo.dot(h), self.eta).0;
         let spec = self.specular_reflectance * (f * d * (g1o * md.g1(wi, h)) / (4.0 * wo.z * wi.z));
-        let diff =
-            base_albedo(self.diffuse_reflectance, t.internal_reflectance, self.nonlinear) * (INV_PI / (self.eta * self.eta) * t_o * t.transmittance_at(wi.z));
+        let diff = self.base * (self.base_scale * t_o * t.transmittance_at(wi.z));
         (spec + diff, pdf)
     }
     /// Hemispherical average of the diffuse lobe's albedo (for radiosity).
@@ -469,16 +474,14 @@ impl<const N: usize> RoughPlasticLanes<N> {
         let q = &mut self.beckmann;
         (q.alpha[0][l], q.alpha[1][l]) = (md.alpha_u, md.alpha_v);
         (q.u[0][l], q.u[1][l]) = (u.x, u.y);
-        let t = p.tables;
-        let base = base_albedo(p.diffuse_reflectance, t.internal_reflectance, p.nonlinear);
         for k in 0..3 {
             q.v[k][l] = wo[k];
             self.wi[k][l] = wi[k];
-            (self.specular_reflectance[k][l], self.base[k][l]) = (p.specular_reflectance[k], base[k]);
+            (self.specular_reflectance[k][l], self.base[k][l]) = (p.specular_reflectance[k], p.base[k]);
         }
         (self.uc[l], self.eta[l], self.sampling_weight[l]) = (uc, p.eta, p.specular_sampling_weight);
-        self.base_scale[l] = INV_PI / (p.eta * p.eta);
-        self.transmittance[l] = &t.transmittance;
+        self.base_scale[l] = p.base_scale;
+        self.transmittance[l] = &p.tables.transmittance;
     }
 }
 
