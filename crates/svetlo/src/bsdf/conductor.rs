@@ -3,7 +3,7 @@
 
 use super::fresnel::{self, reflect};
 use super::lane_samples::LaneSamples;
-use super::microfacet::{self as mf, BeckmannLanes, Microfacet};
+use super::microfacet::{self as mf, Microfacet, VisibleNormalLanes};
 use super::{BsdfSample, LobeFlags, TransportMode};
 use crate::spectrum::Rgb;
 use glam::{Vec2, Vec3};
@@ -138,7 +138,7 @@ impl RoughConductor {
 #[derive(Clone, Copy, Debug)]
 pub(crate) struct RoughConductorLanes<const N: usize> {
     /// The roughness, `wo` (upper hemisphere) and the sample's numbers `u`.
-    pub beckmann: BeckmannLanes<N>,
+    pub normals: VisibleNormalLanes<N>,
     /// Toward the light sample (local; below the surface where there is none).
     pub wi: [[f32; N]; 3],
     pub eta: [[f32; N]; 3],
@@ -149,7 +149,7 @@ pub(crate) struct RoughConductorLanes<const N: usize> {
 impl<const N: usize> Default for RoughConductorLanes<N> {
     fn default() -> Self {
         RoughConductorLanes {
-            beckmann: BeckmannLanes::default(),
+            normals: VisibleNormalLanes::default(),
             wi: [[0.0; N], [0.0; N], [-1.0; N]],
             eta: [[1.0; N]; 3],
             k: [[0.0; N]; 3],
@@ -165,7 +165,7 @@ impl<const N: usize> RoughConductorLanes<N> {
     pub(crate) fn set(&mut self, l: usize, c: &RoughConductor, wo: Vec3, wi: Option<Vec3>, u: Vec2) {
         let md = &c.distribution;
         let wi = wi.unwrap_or(Vec3::NEG_Z);
-        let q = &mut self.beckmann;
+        let q = &mut self.normals;
         (q.alpha[0][l], q.alpha[1][l]) = (md.alpha_u, md.alpha_v);
         (q.u[0][l], q.u[1][l]) = (u.x, u.y);
         for k in 0..3 {
@@ -188,7 +188,7 @@ pub(crate) fn rough_conductor_lanes<const N: usize>(q: &RoughConductorLanes<N>, 
     conductor_lanes::<N, false>(q, used)
 }
 
-/// [`rough_conductor_lanes`] of GGX rough conductors (`q.beckmann` holds their roughness,
+/// [`rough_conductor_lanes`] of GGX rough conductors (`q.normals` holds their roughness,
 /// `wo` and `u` likewise): the visible normals in closed form (`sample_visible_ggx_lanes`),
 /// D and Λ GGX's. The same bits as the scalar routine.
 #[inline(always)]
@@ -199,7 +199,7 @@ pub(crate) fn rough_conductor_ggx_lanes<const N: usize>(q: &RoughConductorLanes<
 /// The body of [`rough_conductor_lanes`] (Beckmann) and [`rough_conductor_ggx_lanes`] (`GGX`).
 #[inline(always)]
 fn conductor_lanes<const N: usize, const GGX: bool>(q: &RoughConductorLanes<N>, used: usize) -> LaneSamples<N> {
-    let b = &q.beckmann;
+    let b = &q.normals;
     let m = if GGX { mf::sample_visible_ggx_lanes(b, &std::array::from_fn(|l| l < used)) } else { mf::sample_visible_beckmann_lanes(b) };
     // Per direction (0: toward the light sample, 1: the sample's), as `eval_pdf_given`.
     let (mut wi, mut h) = ([[[0.0f32; N]; 3]; 2], [[[0.0f32; N]; 3]; 2]);

@@ -5,7 +5,7 @@
 
 use super::fresnel::{self, reflect, refract};
 use super::lane_samples::LaneSamples;
-use super::microfacet::{self as mf, BeckmannLanes, Microfacet};
+use super::microfacet::{self as mf, Microfacet, VisibleNormalLanes};
 use super::{BsdfSample, LobeFlags, TransportMode};
 use crate::spectrum::Rgb;
 use glam::{Vec2, Vec3};
@@ -182,7 +182,7 @@ impl RoughDielectric {
 #[derive(Clone, Copy, Debug)]
 pub(crate) struct RoughDielectricLanes<const N: usize> {
     /// The roughness, `wo` mirrored to the upper hemisphere and the direction's numbers `u`.
-    pub beckmann: BeckmannLanes<N>,
+    pub normals: VisibleNormalLanes<N>,
     /// `wo` itself (either side, not grazing).
     pub wo: [[f32; N]; 3],
     /// The lobe's number.
@@ -197,7 +197,7 @@ pub(crate) struct RoughDielectricLanes<const N: usize> {
 impl<const N: usize> Default for RoughDielectricLanes<N> {
     fn default() -> Self {
         RoughDielectricLanes {
-            beckmann: BeckmannLanes::default(),
+            normals: VisibleNormalLanes::default(),
             wo: [[0.0; N], [0.0; N], [1.0; N]],
             uc: [0.5; N],
             wi: [[0.0; N]; 3],
@@ -216,7 +216,7 @@ impl<const N: usize> RoughDielectricLanes<N> {
         let md = &d.distribution;
         let wi = wi.unwrap_or(Vec3::ZERO);
         let v = wo * wo.z.signum();
-        let q = &mut self.beckmann;
+        let q = &mut self.normals;
         (q.alpha[0][l], q.alpha[1][l]) = (md.alpha_u, md.alpha_v);
         (q.u[0][l], q.u[1][l]) = (u.x, u.y);
         for k in 0..3 {
@@ -235,7 +235,7 @@ impl<const N: usize> RoughDielectricLanes<N> {
 /// `conductor::rough_conductor_lanes` takes it). The same bits.
 #[inline(always)]
 pub(crate) fn rough_dielectric_lanes<const N: usize>(q: &RoughDielectricLanes<N>, used: usize) -> LaneSamples<N> {
-    let b = &q.beckmann;
+    let b = &q.normals;
     let m = mf::sample_visible_beckmann_lanes(b);
     // `sample`: the lobe and the direction.
     let (mut reflected, mut eta_s, mut ws) = ([false; N], [0.0f32; N], [[0.0f32; N]; 3]);

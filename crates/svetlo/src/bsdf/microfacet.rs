@@ -240,7 +240,7 @@ pub(crate) fn ggx_lambda(ax: f32, ay: f32, v: Vec3) -> f32 {
 /// with selects for branches. The disk angle's cosine and sine (libm's, lane by lane) only
 /// where `want` (other lanes' normals are unused). The same bits.
 #[inline(always)]
-pub(crate) fn sample_visible_ggx_lanes<const N: usize>(q: &BeckmannLanes<N>, want: &[bool; N]) -> [[f32; N]; 3] {
+pub(crate) fn sample_visible_ggx_lanes<const N: usize>(q: &VisibleNormalLanes<N>, want: &[bool; N]) -> [[f32; N]; 3] {
     let (mut cos, mut sin) = ([1.0f32; N], [0.0f32; N]);
     for l in 0..N {
         if want[l] {
@@ -357,20 +357,21 @@ pub(crate) fn beckmann_lambda_of(a2t2: f32) -> f32 {
     (0.5 * (e * INV_SQRT_PI / a - approx::erfc_nonneg(a, e))).max(0.0)
 }
 
-/// `N` lanes' Beckmann visible-normal draws for [`sample_visible_beckmann_lanes`]: the
-/// roughness (`alpha_u`, `alpha_v`), the direction `v` and the numbers `u`, per lane.
+/// `N` lanes' visible-normal draws for [`sample_visible_beckmann_lanes`] or
+/// [`sample_visible_ggx_lanes`]: the roughness (`alpha_u`, `alpha_v`), the direction `v` and
+/// the numbers `u`, per lane.
 #[derive(Clone, Copy, Debug)]
-pub(crate) struct BeckmannLanes<const N: usize> {
+pub(crate) struct VisibleNormalLanes<const N: usize> {
     pub alpha: [[f32; N]; 2],
     pub v: [[f32; N]; 3],
     pub u: [[f32; N]; 2],
 }
 
-impl<const N: usize> Default for BeckmannLanes<N> {
+impl<const N: usize> Default for VisibleNormalLanes<N> {
     /// Normal incidence at roughness 1 and u = 1/2 (unused lanes: the Newton loop settles
     /// them at once).
     fn default() -> Self {
-        BeckmannLanes { alpha: [[1.0; N]; 2], v: [[0.0; N], [0.0; N], [1.0; N]], u: [[0.5; N]; 2] }
+        VisibleNormalLanes { alpha: [[1.0; N]; 2], v: [[0.0; N], [0.0; N], [1.0; N]], u: [[0.5; N]; 2] }
     }
 }
 
@@ -380,7 +381,7 @@ impl<const N: usize> Default for BeckmannLanes<N> {
 /// Newton loop runs while any lane goes on; a lane that the scalar loop would have left is
 /// frozen where it stopped. The same bits.
 #[inline(always)]
-pub(crate) fn sample_visible_beckmann_lanes<const N: usize>(q: &BeckmannLanes<N>) -> [[f32; N]; 3] {
+pub(crate) fn sample_visible_beckmann_lanes<const N: usize>(q: &VisibleNormalLanes<N>) -> [[f32; N]; 3] {
     // `VisibleSampler::new`.
     let (mut cos_phi, mut sin_phi) = ([0.0f32; N], [0.0f32; N]);
     let (mut tan_t, mut x_max, mut c_max, mut erf_max, mut fit) = ([0.0f32; N], [0.0f32; N], [0.0f32; N], [0.0f32; N], [0.0f32; N]);
@@ -709,7 +710,7 @@ mod tests {
     /// `sample_visible_beckmann_lanes` compiled as the path kernel's AVX2 build compiles it.
     #[cfg(target_arch = "x86_64")]
     #[target_feature(enable = "avx2")]
-    unsafe fn beckmann_lanes_avx2(q: &BeckmannLanes<8>) -> [[f32; 8]; 3] {
+    unsafe fn beckmann_lanes_avx2(q: &VisibleNormalLanes<8>) -> [[f32; 8]; 3] {
         sample_visible_beckmann_lanes(q)
     }
 
@@ -725,7 +726,7 @@ mod tests {
         let cos_ts = [1.0f32, 0.999_999, 0.5, 1e-2, 1e-4, 1e-6, 1e-8, 0.0, -0.1];
         let mut grazing = 0;
         for batch in 0..20_000usize {
-            let mut q = BeckmannLanes::<8>::default();
+            let mut q = VisibleNormalLanes::<8>::default();
             let mut lanes = [(Microfacet::new(MicrofacetKind::Beckmann, 1.0, 1.0), Vec3::Z, Vec2::ZERO); 8];
             for (l, lane) in lanes.iter_mut().enumerate() {
                 let i = batch * 8 + l;

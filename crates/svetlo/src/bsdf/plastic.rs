@@ -10,7 +10,7 @@
 use super::fresnel;
 use super::lane_samples::LaneSamples;
 use super::material::MicrofacetKind;
-use super::microfacet::{self as mf, BeckmannLanes, Microfacet, VisibleSampler};
+use super::microfacet::{self as mf, Microfacet, VisibleNormalLanes, VisibleSampler};
 use super::{BsdfSample, LobeFlags, TransportMode};
 use crate::math::{lane, warp, INV_PI};
 use crate::spectrum::Rgb;
@@ -434,7 +434,7 @@ fn specular_probability_lane(specular: f32, diffuse: f32, weight: f32) -> f32 {
 #[derive(Clone, Copy, Debug)]
 pub(crate) struct RoughPlasticLanes<const N: usize> {
     /// The roughness, `wo` (upper hemisphere) and the direction's numbers `u`.
-    pub beckmann: BeckmannLanes<N>,
+    pub normals: VisibleNormalLanes<N>,
     /// The lobe's number.
     pub uc: [f32; N],
     /// Toward the light sample (local; below the surface where there is none).
@@ -451,7 +451,7 @@ pub(crate) struct RoughPlasticLanes<const N: usize> {
 impl<const N: usize> Default for RoughPlasticLanes<N> {
     fn default() -> Self {
         RoughPlasticLanes {
-            beckmann: BeckmannLanes::default(),
+            normals: VisibleNormalLanes::default(),
             uc: [0.5; N],
             wi: [[0.0; N], [0.0; N], [-1.0; N]],
             eta: [1.5; N],
@@ -471,7 +471,7 @@ impl<const N: usize> RoughPlasticLanes<N> {
     pub(crate) fn set(&mut self, l: usize, p: &RoughPlastic, wo: Vec3, wi: Option<Vec3>, uc: f32, u: Vec2) {
         let md = &p.distribution;
         let wi = wi.unwrap_or(Vec3::NEG_Z);
-        let q = &mut self.beckmann;
+        let q = &mut self.normals;
         (q.alpha[0][l], q.alpha[1][l]) = (md.alpha_u, md.alpha_v);
         (q.u[0][l], q.u[1][l]) = (u.x, u.y);
         for k in 0..3 {
@@ -496,7 +496,7 @@ pub(crate) fn rough_plastic_lanes<const N: usize>(q: &RoughPlasticLanes<N>, used
     plastic_lanes::<N, false>(q, used)
 }
 
-/// [`rough_plastic_lanes`] of GGX rough plastics (`q.beckmann` holds their roughness, `wo`
+/// [`rough_plastic_lanes`] of GGX rough plastics (`q.normals` holds their roughness, `wo`
 /// and `u` likewise): the visible normals in closed form (`sample_visible_ggx_lanes`), D
 /// and Λ GGX's. The same bits as the scalar routines.
 #[inline(always)]
@@ -507,13 +507,13 @@ pub(crate) fn rough_plastic_ggx_lanes<const N: usize>(q: &RoughPlasticLanes<N>, 
 /// The body of [`rough_plastic_lanes`] (Beckmann) and [`rough_plastic_ggx_lanes`] (`GGX`).
 #[inline(always)]
 fn plastic_lanes<const N: usize, const GGX: bool>(q: &RoughPlasticLanes<N>, used: usize) -> LaneSamples<N> {
-    let b = &q.beckmann;
+    let b = &q.normals;
     // `sample`'s start: the transmittance toward wo and the lobe. Lanes that take the
     // diffuse lobe draw no normal: they ask the Newton loop for an idle lane's, which
     // settles at once.
     let t_o = transmittance_lanes(&q.transmittance, &b.v[2]);
     let (mut ps, mut glossy, mut want) = ([0.0f32; N], [false; N], [false; N]);
-    let (idle, mut draw) = (BeckmannLanes::<N>::default(), *b);
+    let (idle, mut draw) = (VisibleNormalLanes::<N>::default(), *b);
     for l in 0..N {
         ps[l] = specular_probability_lane(1.0 - t_o[l], t_o[l], q.sampling_weight[l]);
         glossy[l] = q.uc[l] < ps[l];
