@@ -19,9 +19,11 @@
 //! (Two-sided) Lambertian materials of constant or textured reflectance (any texture:
 //! bitmaps, procedural, mesh attributes; evaluated per lane where the path hits) are shaded
 //! as eight-lane arithmetic, on any shape; a normal or bump map over a one-sided Lambertian
-//! one by `detail_scatter` (the map per lane, no `Bsdf` built); every other one (conductors,
-//! dielectrics, plastics, the classic models, principled, blends, masks, maps over other
-//! models) lane by lane through its scalar `Bsdf`
+//! one by `detail_scatter` (the map per lane, no `Bsdf` built), a one-sided rough conductor
+//! under a map or of textured parameters by `conductor_scatter` (the conductor and the
+//! perturbed frame per lane, the conductor lanes in that frame, no `Bsdf` built); every other
+//! one (conductors, dielectrics, plastics, the classic models, principled, blends, masks, maps
+//! over other models) lane by lane through its scalar `Bsdf`
 //! (`scalar_light_sample` in `gather`, `scalar_scatter` once every lane's sphere-light
 //! sample is in: the same calls and random numbers as `path.rs`), its results selected into
 //! `shade8`'s lanes. A shape whose material has no texture and no surface detail keeps its
@@ -78,8 +80,9 @@ use crate::bsdf::detail::{bump_map_normal, normal_map_normal, Detail};
 use crate::bsdf::dielectric::{rough_dielectric_lanes, RoughDielectric, RoughDielectricLanes};
 use crate::bsdf::diffuse::Diffuse;
 use crate::bsdf::lane_samples::LaneSamples;
+use crate::bsdf::material::Roughness;
 use crate::bsdf::plastic::{rough_plastic_ggx_lanes, rough_plastic_lanes, RoughPlastic, RoughPlasticLanes};
-use crate::bsdf::{Bsdf, BsdfModel, BsdfSample, LobeFlags, Material, TransportMode};
+use crate::bsdf::{Bsdf, BsdfModel, BsdfSample, LobeFlags, Material, MicrofacetKind, TransportMode};
 use crate::camera::{RayGenerator, RayLanes};
 use crate::error::{Error, Result};
 use crate::film::{Film, FilmTile};
@@ -255,6 +258,49 @@ struct ShapeData {
     /// A normal or bump map over a one-sided Lambertian `front`: its lanes keep `scalar_bsdf`
     /// for `shade8` but are shaded by `detail_scatter`, without a `Bsdf`.
     detail: Option<DetailMap>,
+    /// A one-sided rough conductor shaded by `conductor_scatter`, no `Bsdf` built: under a
+    /// normal or bump map, or of textured parameters (its lanes keep `scalar_bsdf`).
+    conductor: Option<KernelConductor>,
+}
+
+/// A [`ShapeData::conductor`]: `Material::Conductor`'s parameters (its textures evaluated per
+/// lane, as `Material::bsdf` evaluates them) and the map over it, if any.
+#[derive(Clone, Debug)]
+struct KernelConductor {
+    eta: Rgb,
+    k: Rgb,
+    specular_reflectance: Texture,
+    roughness: Roughness,
+    map: Option<DetailMap>,
+}
+
+impl KernelConductor {
+    /// Where material `m` (of a shape with surface detail: `detail`) is a rough conductor under
+    /// a normal or bump map, or a rough conductor of textured parameters without one.
+    fn of(m: &Material, detail: bool) -> Option<KernelConductor> {
+        let (map, inner) = match m {
+            Material::NormalMap { normals, inner } if detail => (Some(DetailMap::Normal(normals.clone())), &**inner),
+            Material::BumpMap { height, scale, inner } if detail => (Some(DetailMap::Bump { height: height.clone(), scale: *scale }), &**inner),
+            m if !detail => (None, m),
+            _ => return None,
+        };
+        // A uniform one without a map keeps its `Bsdf` (`ShapeData::uniform`).
+        if map.is_none() && inner.is_uniform() {
+            return None;
+        }
+        match inner {
+            Material::Conductor { eta, k, specular_reflectance, roughness: Some(r) } => {
+                Some(KernelConductor { eta: *eta, k: *k, specular_reflectance: specular_reflectance.clone(), roughness: r.clone(), map })
+            }
+            _ => None,
+        }
+    }
+
+    /// The conductor at `tp` (as `Material::bsdf` builds it).
+    #[inline(always)]
+    fn at(&self, tp: TexPoint) -> RoughConductor {
+        RoughConductor { distribution: self.roughness.at(tp), eta: self.eta, k: self.k, specular_reflectance: self.specular_reflectance.eval(tp) }
+    }
 }
 
 /// The map of a [`ShapeData::detail`] (`Material::NormalMap`, `Material::BumpMap`).
@@ -262,6 +308,19 @@ struct ShapeData {
 enum DetailMap {
     Normal(Texture),
     Bump { height: Texture, scale: f32 },
+}
+
+/// The perturbed normal (unnormalised, in the shading frame `frame`) of `map` at `tp` on
+/// `shape`, as `Material::bsdf_with_detail` finds it.
+#[inline(always)]
+fn detail_normal(scene: &Scene, map: &DetailMap, shape: u32, tp: TexPoint, frame: &Frame, ng: Vec3) -> Vec3 {
+    match map {
+        DetailMap::Normal(t) => normal_map_normal(t.eval(tp)),
+        DetailMap::Bump { height, scale } => {
+            let (dpdu, dpdv) = scene.dp_duv_at(shape, tp.prim, tp.p, frame);
+            bump_map_normal(height.eval_f32_grad(tp) * *scale, frame, ng, dpdu, dpdv)
+        }
+    }
 }
 
 /// The detail map and Lambertian reflectance of a normal or bump map over a one-sided
@@ -903,6 +962,8 @@ impl SimdKernel {
             // Any other material (or surface detail) by its own scalar code, lane by lane.
             // (A detail over a Lambertian one: `detail_scatter`.)
             let detail = if s.detail { detail_lambert(mat) } else { None };
+            // (A rough conductor under a map or of textured parameters: `conductor_scatter`.)
+            let conductor = if detail.is_none() { KernelConductor::of(mat, s.detail) } else { None };
             let (scalar_bsdf, (front, back), detail) = match (lambert, detail) {
                 (Some(fb), _) if !s.detail => (false, fb, None),
                 (_, Some((map, front))) => (true, (front, None), Some(map)),
@@ -920,11 +981,11 @@ impl SimdKernel {
                 }
                 None => None,
             };
-            let uniform = (scalar_bsdf && !s.detail && mat.is_uniform()).then(|| mat.bsdf(TexPoint::default()));
+            let uniform = (scalar_bsdf && !s.detail && conductor.is_none() && mat.is_uniform()).then(|| mat.bsdf(TexPoint::default()));
             let uniform_flags = uniform.as_ref().map_or(LobeFlags::NONE, Bsdf::flags);
             let reads_uv = textured || matches!(light, Some((_, None))) || (scalar_bsdf && uniform.is_none());
             let prefetch_texels = !scalar_bsdf && (front.large_bitmap() || back.as_ref().is_some_and(Albedo::large_bitmap));
-            shapes.push(ShapeData { scalar_bsdf, front, back, textured, light, uniform, uniform_flags, reads_uv, prefetch_texels, detail });
+            shapes.push(ShapeData { scalar_bsdf, front, back, textured, light, uniform, uniform_flags, reads_uv, prefetch_texels, detail, conductor });
         }
         // The meshes' triangles (other shapes' hits come as the scene's surface records:
         // `other_hit`), the ones of the scene's last render if its geometry is the same.
@@ -976,12 +1037,18 @@ impl SimdKernel {
             sphere_lights.iter().any(Option::is_some) || shapes.iter().any(|s| s.uniform.as_ref().is_some_and(|b| b.beckmann_conductor(Vec3::Z).is_some()));
         let packets = if chains { PACKETS } else { 1 };
         // A shape whose BSDF is built per hit may be a plastic too.
-        let plastics = shapes.iter().any(|s| s.scalar_bsdf && s.detail.is_none() && s.uniform.as_ref().is_none_or(|b| b.beckmann_plastic(Vec3::Z).is_some()));
-        let ggx_plastics = shapes.iter().any(|s| s.scalar_bsdf && s.detail.is_none() && s.uniform.as_ref().is_none_or(|b| b.ggx_plastic(Vec3::Z).is_some()));
-        let ggx_conductors =
-            shapes.iter().any(|s| s.scalar_bsdf && s.detail.is_none() && s.uniform.as_ref().is_none_or(|b| b.ggx_conductor(Vec3::Z).is_some()));
-        let dielectrics =
-            shapes.iter().any(|s| s.scalar_bsdf && s.detail.is_none() && s.uniform.as_ref().is_none_or(|b| b.beckmann_dielectric(Vec3::Z).is_some()));
+        let plastics = shapes
+            .iter()
+            .any(|s| s.scalar_bsdf && s.detail.is_none() && s.conductor.is_none() && s.uniform.as_ref().is_none_or(|b| b.beckmann_plastic(Vec3::Z).is_some()));
+        let ggx_plastics = shapes
+            .iter()
+            .any(|s| s.scalar_bsdf && s.detail.is_none() && s.conductor.is_none() && s.uniform.as_ref().is_none_or(|b| b.ggx_plastic(Vec3::Z).is_some()));
+        let ggx_conductors = shapes
+            .iter()
+            .any(|s| s.scalar_bsdf && s.detail.is_none() && s.conductor.is_none() && s.uniform.as_ref().is_none_or(|b| b.ggx_conductor(Vec3::Z).is_some()));
+        let dielectrics = shapes.iter().any(|s| {
+            s.scalar_bsdf && s.detail.is_none() && s.conductor.is_none() && s.uniform.as_ref().is_none_or(|b| b.beckmann_dielectric(Vec3::Z).is_some())
+        });
         // Whether a path may hit an emitting shape (where a detail lane's `Bsdf` is kept for MIS).
         let emitters = shapes.iter().any(|s| s.light.is_some());
         Some(SimdKernel {
@@ -1495,6 +1562,9 @@ impl SimdKernel {
             lanes &= lanes - 1;
             self.detail_scatter(events, st, l, v);
         }
+        if v.cond_lanes != 0 {
+            self.conductor_scatter(events, st, v);
+        }
         // Writes every lane's next ray, shadow ray and state; only `go` lanes' count.
         self.shade8_on_cpu(v, settings.rr_depth, st, rays, shadow, o);
         // The `go` lanes' light samples that count now (1) or once their shadow ray is clear
@@ -1726,21 +1796,26 @@ impl SimdKernel {
         }
         if !sh.scalar_bsdf {
             self.light_sample(scene, l, v, p, u_light, u_l2);
+        } else if let Some(c) = &sh.conductor {
+            // A rough conductor under a map or of textured parameters: the conductor and the
+            // perturbed normal, as `Scene::bsdf` builds them, for `conductor_scatter`.
+            let tp = self.tex_point(scene, &hit, b1, b2, p, ng);
+            if let Some(map) = &c.map {
+                put(&mut v.detail_n, Detail::new(detail_normal(scene, map, shape, tp, &frame, ng), true).n);
+                v.cond_detail |= 1 << l;
+            } else {
+                v.cond_detail &= !(1 << l);
+            }
+            v.cond[l] = Some(c.at(tp));
+            v.flags[l] = LobeFlags::GLOSSY_REFLECTION;
+            self.light_sample(scene, l, v, p, u_light, u_l2);
+            (v.scatter_u[1][l], v.scatter_u[2][l]) = (u.x, u.y);
+            v.cond_lanes |= 1 << l;
         } else if let Some(map) = &sh.detail {
             // A detail over a Lambertian: its perturbed normal and reflectance, as
             // `Scene::bsdf` builds them, for `detail_scatter`.
-            let tp = match hit {
-                Hit::Tri(tri) => TexPoint { uv: self.uv(scene, tri, b1, b2), prim: tri.local, bary: Vec2::new(b1, b2), p, n: ng },
-                Hit::Other(si) => si.tex_point(),
-            };
-            let n = match map {
-                DetailMap::Normal(t) => normal_map_normal(t.eval(tp)),
-                DetailMap::Bump { height, scale } => {
-                    let (dpdu, dpdv) = scene.dp_duv_at(shape, tp.prim, p, &frame);
-                    bump_map_normal(height.eval_f32_grad(tp) * *scale, &frame, ng, dpdu, dpdv)
-                }
-            };
-            put(&mut v.detail_n, Detail::new(n, true).n);
+            let tp = self.tex_point(scene, &hit, b1, b2, p, ng);
+            put(&mut v.detail_n, Detail::new(detail_normal(scene, map, shape, tp, &frame, ng), true).n);
             putc(&mut v.num.refl, sh.front.at(&tp));
             v.flags[l] = LobeFlags::DIFFUSE_REFLECTION;
             self.light_sample(scene, l, v, p, u_light, u_l2);
@@ -1770,6 +1845,16 @@ impl SimdKernel {
             v.scatter_lanes |= 1 << l;
         }
         true
+    }
+
+    /// The texture point of a hit at `p` (geometric normal `ng`), as `Scene::interaction`
+    /// gives it (`SurfaceInteraction::tex_point`).
+    #[inline(always)]
+    fn tex_point(&self, scene: &Scene, hit: &Hit, b1: f32, b2: f32, p: Vec3, ng: Vec3) -> TexPoint {
+        match hit {
+            Hit::Tri(tri) => TexPoint { uv: self.uv(scene, tri, b1, b2), prim: tri.local, bary: Vec2::new(b1, b2), p, n: ng },
+            Hit::Other(si) => si.tex_point(),
+        }
     }
 
     /// Lane `l`'s light sample from `p` (as `path::light_sample_unshadowed` up to the BSDF): the light
@@ -2193,6 +2278,49 @@ impl SimdKernel {
         }
     }
 
+    /// The lanes of rough conductors under a map or of textured parameters
+    /// (`ShapeData::conductor`: the conductor in `v.cond`, the perturbed normal in
+    /// `v.detail_n` where `v.cond_detail`), all at once by [`conductor_detail_lanes`], written
+    /// as [`Self::scalar_scatter`] writes a lane's: the bits of the `Bsdf` `Scene::bsdf`
+    /// builds, which is built only where a path may meet an emitting shape (for the MIS
+    /// weight there).
+    #[inline(never)]
+    fn conductor_scatter<S>(&self, events: &LaneEvents, st: &mut Paths<S>, v: &mut Soa) {
+        let lanes = std::mem::take(&mut v.cond_lanes);
+        let mut input: [Option<ConductorLane>; LANES] = [None; LANES];
+        let mut frames = [None; LANES];
+        for (l, x) in input.iter_mut().enumerate().filter(|(l, _)| lanes & (1 << l) != 0) {
+            let Some(c) = v.cond[l] else { continue };
+            let frame = v.num.frame(l);
+            let wo = frame.to_local(lane3(&v.num.wo, l));
+            let wi = nee_dir(v, l, &frame);
+            let d = (v.cond_detail & (1 << l) != 0).then(|| Detail { n: lane3(&v.detail_n, l), shadowing: true });
+            *x = Some(ConductorLane { c, d, wo, wi, u: Vec2::new(v.scatter_u[1][l], v.scatter_u[2][l]) });
+            frames[l] = Some(frame);
+        }
+        let out = conductor_detail_lanes(self.avx512, &input);
+        let flags = LobeFlags::GLOSSY_REFLECTION;
+        for (l, (x, frame)) in input.iter().zip(frames).enumerate() {
+            let (Some(x), Some(frame)) = (x, frame) else { continue };
+            let (nee, bs) = out[l];
+            if let (Some(wi), Some((f, pdf))) = (x.wi, nee) {
+                put_light_value(v, l, f, pdf);
+                if let Some(view) = events.view {
+                    v.class_nee[l] = view.class(events.aovs.scatter_event(v.shape[l], flags, None, wi.z * x.wo.z < 0.0));
+                }
+            }
+            let bs = bs.filter(|bs| bs.pdf > 0.0 && !bs.f.is_black());
+            v.num.bmoved[l] = bs.is_some();
+            st.prev_bsdf[l] = None;
+            let Some(bs) = bs else { continue };
+            put_sample(events, v, l, flags, &bs);
+            st.prev_bsdf[l] = Some(PrevBsdf { shape: v.shape[l], frame, wo: x.wo });
+            if self.emitters {
+                st.prev_own[l] = Some(Bsdf { detail: x.d, ..Bsdf::new(BsdfModel::RoughConductor(x.c)) });
+            }
+        }
+    }
+
     /// Lane `l`'s ray along `d` left the scene: what the environment adds there, weighted
     /// against the previous vertex's BSDF sample as the scalar tracer weighs it.
     #[inline(always)]
@@ -2218,6 +2346,73 @@ impl SimdKernel {
         v.shape[l] = ESCAPED;
         put_rgb(&mut v.emit, l, beta * le * w);
     }
+}
+
+/// A lane of [`conductor_detail_lanes`]: an opaque one-sided rough conductor `c` under surface
+/// detail `d` (None: none) seen from `wo` (local), its light sample toward `wi` where it has
+/// one, the sample's numbers `u`.
+#[derive(Clone, Copy, Debug)]
+struct ConductorLane {
+    c: RoughConductor,
+    d: Option<Detail>,
+    wo: Vec3,
+    wi: Option<Vec3>,
+    u: Vec2,
+}
+
+/// A lane's (value, density) toward its light sample and its own sample.
+type LaneResult = (Option<(Rgb, f32)>, Option<BsdfSample>);
+
+/// `Bsdf::eval_pdf_and_sample` (radiance) of each used lane's `Bsdf` (the conductor, under
+/// its detail), the same bits: per lane the perturbed frame and the directions in it (as
+/// `Bsdf::eval_detail` and `sample_detail` make them), the lanes whose `wo` lies above the
+/// conductor there through its distribution's conductor lanes (`rough_conductor_ggx_lanes`,
+/// `rough_conductor_lanes`) together, the others black (the back of a one-sided model),
+/// then each finished by its detail's shadowing term and frame (`Bsdf::finish_detail`).
+#[inline(always)]
+fn conductor_detail_lanes(avx512: bool, lanes: &[Option<ConductorLane>; LANES]) -> [LaneResult; LANES] {
+    let mut out: [LaneResult; LANES] = [(None, None); LANES];
+    let mut frames = [None; LANES];
+    let mut local = [(Vec3::ZERO, None); LANES];
+    for (l, x) in lanes.iter().enumerate() {
+        let Some(x) = x else { continue };
+        let f = x.d.map(|d| d.frame(x.wo));
+        local[l] = match &f {
+            Some(f) => (f.to_local(x.wo), x.wi.map(|w| f.to_local(w))),
+            None => (x.wo, x.wi),
+        };
+        frames[l] = f;
+    }
+    for kind in [MicrofacetKind::Ggx, MicrofacetKind::Beckmann] {
+        let mut q = RoughConductorLanes::<LANES>::default();
+        let (mut at, mut used) = ([0usize; LANES], 0usize);
+        for (l, x) in lanes.iter().enumerate() {
+            let Some(x) = x.filter(|x| x.c.distribution.kind == kind) else { continue };
+            let (pwo, pwi) = local[l];
+            if pwo.z > 0.0 {
+                q.set(used, &x.c, pwo, pwi, x.u);
+                at[used] = l;
+                used += 1;
+            } else {
+                out[l] = (x.wi.map(|_| (Rgb::BLACK, 0.0)), None);
+            }
+        }
+        if used == 0 {
+            continue;
+        }
+        let r = if kind == MicrofacetKind::Ggx { GgxConductorStep::run(avx512, &q, used) } else { RoughConductorStep::run(avx512, &q, used) };
+        for (i, &l) in at[..used].iter().enumerate() {
+            out[l] = r.lane(i, local[l].1.is_some(), LobeFlags::GLOSSY_REFLECTION);
+        }
+    }
+    for (l, x) in lanes.iter().enumerate() {
+        let (Some(x), Some(f)) = (x, &frames[l]) else { continue };
+        let Some(d) = &x.d else { continue };
+        let (pwo, pwi) = local[l];
+        let (nee, s) = out[l];
+        out[l] = Bsdf::finish_detail(d, f, (x.wo, pwo), x.wi.zip(pwi), nee.unwrap_or((Rgb::BLACK, 0.0)), s);
+    }
+    out
 }
 
 /// Lane `l`'s direction toward its light sample from its vertex (`v.num.p`, shading frame
@@ -2604,6 +2799,11 @@ struct Soa {
     /// normals (original shading frame).
     detail_lanes: u8,
     detail_n: [[f32; LANES]; 3],
+    /// The lanes of a `ShapeData::conductor` (`conductor_scatter`), their conductors, and
+    /// those under a map (their perturbed normals in `detail_n`).
+    cond_lanes: u8,
+    cond: [Option<RoughConductor>; LANES],
+    cond_detail: u8,
     own: [Option<Bsdf>; LANES],
     flags: [LobeFlags; LANES],
     /// The rays' grid points (u, v) and sin θ in the environment map (`EnvMap::dirs_to_grid`),
@@ -3601,6 +3801,77 @@ mod tests {
             differ_from_start += (qa != q) as u32;
         }
         assert!(differ_from_start > 1000, "the walk steps states");
+    }
+
+    /// `conductor_detail_lanes` (rough conductors under normal or bump maps, or none; GGX and
+    /// Beckmann lanes mixed; every build) gives the bits of the conductor's `Bsdf` with that
+    /// detail, lane by lane. Enough lit lanes see the shadowing term below 1 and enough the
+    /// mirrored normal (`wo` below the perturbed one) that a route dropping either, or the
+    /// sample's turn back out of the perturbed frame, fails.
+    #[test]
+    fn conductor_detail_lanes_are_the_detail_bsdf() {
+        use crate::bsdf::microfacet::Microfacet;
+        let mut rng = Pcg32::new(7, 19);
+        let mut f = |lo: f32, hi: f32| lo + (hi - lo) * rng.next_f32();
+        let bits = |(nee, s): LaneResult| {
+            let rgb = |c: Rgb| [c.r, c.g, c.b].map(f32::to_bits);
+            (nee.map(|(c, p)| (rgb(c), p.to_bits())), s.map(|s| (s.wi.to_array().map(f32::to_bits), rgb(s.f), s.pdf.to_bits(), s.lobe, s.eta.to_bits())))
+        };
+        let mut builds = vec![false];
+        if crate::cpu::avx512() {
+            builds.push(true);
+        }
+        let (mut shadowed, mut mirrored, mut lit, mut sampled) = (0, 0, 0, 0);
+        for batch in 0..6000usize {
+            let mut lanes = [None; LANES];
+            for (l, x) in lanes.iter_mut().enumerate() {
+                let i = batch * LANES + l;
+                if i % 11 == 3 {
+                    continue;
+                }
+                let kind = if i.is_multiple_of(2) { MicrofacetKind::Ggx } else { MicrofacetKind::Beckmann };
+                let c = RoughConductor {
+                    distribution: Microfacet::new(kind, f(0.01, 0.6), f(0.01, 0.6)),
+                    eta: Rgb::new(f(0.1, 3.0), f(0.1, 3.0), f(0.1, 3.0)),
+                    k: Rgb::new(f(0.0, 5.0), f(0.0, 5.0), f(0.0, 5.0)),
+                    specular_reflectance: Rgb::new(f(0.0, 1.0), f(0.0, 1.0), 1.0),
+                };
+                // Tilted normals (bump maps reach grazing ones), a flat one, or no detail.
+                let d = match i % 5 {
+                    0 => None,
+                    1 => Some(Detail::new(normal_map_normal(Rgb::new(0.5, 0.5, 1.0)), true)),
+                    _ => Some(Detail::new(Vec3::new(f(-1.0, 1.0), f(-1.0, 1.0), f(0.05, 1.0)), true)),
+                };
+                let dir = |z: f32, phi: f32| {
+                    let r = (1.0 - z * z).max(0.0).sqrt();
+                    Vec3::new(r * phi.cos(), r * phi.sin(), z)
+                };
+                let wo = dir(f(-0.2, 1.0), f(0.0, 6.3));
+                let wi = (!i.is_multiple_of(4)).then(|| dir(f(-0.3, 1.0), f(0.0, 6.3)));
+                *x = Some(ConductorLane { c, d, wo, wi, u: Vec2::new(f(0.0, 1.0), f(0.0, 1.0)) });
+            }
+            let outs: Vec<_> = builds.iter().map(|&avx512| conductor_detail_lanes(avx512, &lanes)).collect();
+            for (l, x) in lanes.iter().enumerate() {
+                let Some(x) = x else { continue };
+                let b = Bsdf { detail: x.d, ..Bsdf::new(BsdfModel::RoughConductor(x.c)) };
+                let want = b.eval_pdf_and_sample(x.wo, x.wi, 0.5, x.u, TransportMode::Radiance);
+                for out in &outs {
+                    assert_eq!(bits(out[l]), bits(want), "{x:?}");
+                }
+                let Some(d) = x.d else { continue };
+                let nee = want.0.filter(|(v, _)| !v.is_black());
+                lit += usize::from(nee.is_some());
+                sampled += usize::from(want.1.is_some());
+                let lit_wi = nee.and(x.wi);
+                if lit_wi.into_iter().chain(want.1.map(|s| s.wi)).any(|w| d.shadowing(w) < 0.99) {
+                    shadowed += 1;
+                }
+                if (nee.is_some() || want.1.is_some()) && x.wo.z * x.wo.dot(d.n) <= 0.0 {
+                    mirrored += 1;
+                }
+            }
+        }
+        assert!(lit > 5000 && sampled > 5000 && shadowed > 1000 && mirrored > 100, "lit {lit}, sampled {sampled}, shadowed {shadowed}, mirrored {mirrored}");
     }
 
     /// The kernel's rough-conductor lanes, Beckmann and GGX (the baseline build and the AVX2
