@@ -1796,6 +1796,16 @@ impl SimdKernel {
         }
         if !sh.scalar_bsdf {
             self.light_sample(scene, l, v, p, u_light, u_l2);
+        } else if let Some(map) = &sh.detail {
+            // A detail over a Lambertian: its perturbed normal and reflectance, as
+            // `Scene::bsdf` builds them, for `detail_scatter`.
+            let tp = self.tex_point(scene, &hit, b1, b2, p, ng);
+            put(&mut v.detail_n, Detail::new(detail_normal(scene, map, shape, tp, &frame, ng), true).n);
+            putc(&mut v.num.refl, sh.front.at(&tp));
+            v.flags[l] = LobeFlags::DIFFUSE_REFLECTION;
+            self.light_sample(scene, l, v, p, u_light, u_l2);
+            (v.scatter_u[1][l], v.scatter_u[2][l]) = (u.x, u.y);
+            v.detail_lanes |= 1 << l;
         } else if let Some(c) = &sh.conductor {
             // A rough conductor under a map or of textured parameters: the conductor and the
             // perturbed normal, as `Scene::bsdf` builds them, for `conductor_scatter`.
@@ -1811,16 +1821,6 @@ impl SimdKernel {
             self.light_sample(scene, l, v, p, u_light, u_l2);
             (v.scatter_u[1][l], v.scatter_u[2][l]) = (u.x, u.y);
             v.cond_lanes |= 1 << l;
-        } else if let Some(map) = &sh.detail {
-            // A detail over a Lambertian: its perturbed normal and reflectance, as
-            // `Scene::bsdf` builds them, for `detail_scatter`.
-            let tp = self.tex_point(scene, &hit, b1, b2, p, ng);
-            put(&mut v.detail_n, Detail::new(detail_normal(scene, map, shape, tp, &frame, ng), true).n);
-            putc(&mut v.num.refl, sh.front.at(&tp));
-            v.flags[l] = LobeFlags::DIFFUSE_REFLECTION;
-            self.light_sample(scene, l, v, p, u_light, u_l2);
-            (v.scatter_u[1][l], v.scatter_u[2][l]) = (u.x, u.y);
-            v.detail_lanes |= 1 << l;
         } else {
             // The hit's record only where `Scene::bsdf` builds the hit's own BSDF from it:
             // the rest of the vertex is in `v.num` (a record per lane, built and copied into
@@ -2374,8 +2374,10 @@ fn conductor_detail_lanes(avx512: bool, lanes: &[Option<ConductorLane>; LANES]) 
     let mut out: [LaneResult; LANES] = [(None, None); LANES];
     let mut frames = [None; LANES];
     let mut local = [(Vec3::ZERO, None); LANES];
+    let mut kinds = [false; 2];
     for (l, x) in lanes.iter().enumerate() {
         let Some(x) = x else { continue };
+        kinds[usize::from(x.c.distribution.kind == MicrofacetKind::Beckmann)] = true;
         let f = x.d.map(|d| d.frame(x.wo));
         local[l] = match &f {
             Some(f) => (f.to_local(x.wo), x.wi.map(|w| f.to_local(w))),
@@ -2383,7 +2385,7 @@ fn conductor_detail_lanes(avx512: bool, lanes: &[Option<ConductorLane>; LANES]) 
         };
         frames[l] = f;
     }
-    for kind in [MicrofacetKind::Ggx, MicrofacetKind::Beckmann] {
+    for (kind, _) in [MicrofacetKind::Ggx, MicrofacetKind::Beckmann].into_iter().zip(kinds).filter(|k| k.1) {
         let mut q = RoughConductorLanes::<LANES>::default();
         let (mut at, mut used) = ([0usize; LANES], 0usize);
         for (l, x) in lanes.iter().enumerate() {
