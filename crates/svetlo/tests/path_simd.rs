@@ -775,6 +775,68 @@ fn conductors_with_detail_or_textures_match_scalar() {
     let _ = std::fs::remove_dir_all(&dir);
 }
 
+/// Textured `principled` and `principledthin` materials are a lane case of the kernel (the
+/// model built in a lane's slot, no `Bsdf`; kept for the MIS weight at an emitter): bsdf_spheres'
+/// three principled scenes (an area light and an environment) render the scalar tracer's image
+/// bit for bit on 1 and 2 threads, and a Cornell box whose boxes and back wall are textured
+/// principled (thin) materials (principled bounces, emitters met after them) agrees with it as
+/// `compare` asks, bit for bit with single rays, for both samplers.
+#[test]
+fn principled_matches_scalar() {
+    let Some(root) = shared() else { return };
+    let spheres = root.join("mitsuba-data/tests/scenes/bsdf_spheres");
+    for name in ["texturedprincipled1", "texturedprincipled2", "texturedprincipledthin"] {
+        let scene = load(&spheres.join(format!("test_{name}_path.xml")), &[], 24);
+        let s = RenderSettings { spp: 3, seed: 5, ..RenderSettings::from_scene(&scene) };
+        assert!(SimdKernel::new(&scene, &s).is_some(), "{name}: the scene should qualify for the kernel");
+        if !avx2() {
+            continue;
+        }
+        let want = render(&scene, "path:simd=false", &s);
+        assert!(want.mean().max_component() > 0.0, "{name}: lit");
+        for threads in [1, 2] {
+            let t = RenderSettings { threads, ..s.clone() };
+            assert!(render(&scene, "path", &t).data == want.data, "{name}, {threads} threads: not the scalar tracer's image");
+        }
+    }
+    let checker = |name: &str, a: f32, b: f32| {
+        format!(
+            r#"<texture name="{name}" type="checkerboard"><transform name="to_uv"><scale x="4" y="4"/></transform><float name="color0" value="{a}"/><float name="color1" value="{b}"/></texture>"#
+        )
+    };
+    let full = format!(
+        r#"<bsdf type="principled"><rgb name="base_color" value="0.3, 0.6, 0.8"/><float name="roughness" value="0.3"/>{}{}{}{}<float name="spec_trans" value="0.2"/></bsdf>"#,
+        checker("anisotropic", 0.1, 0.7),
+        checker("metallic", 0.6, 0.1),
+        checker("clearcoat", 0.8, 0.2),
+        checker("sheen", 0.2, 0.9)
+    );
+    let thin = format!(
+        r#"<bsdf type="principledthin"><rgb name="base_color" value="0.7, 0.2, 0.1"/>{}{}{}<float name="eta" value="1.33"/></bsdf>"#,
+        checker("spec_trans", 0.2, 0.7),
+        checker("diff_trans", 0.4, 1.4),
+        checker("sheen", 0.1, 0.8)
+    );
+    let dir = std::env::temp_dir().join(format!("svetlo-simd-principled-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    let base = std::fs::read_to_string(repo_scene("cornell-box.xml")).unwrap();
+    for (name, bsdf) in [("principled", &full), ("principledthin", &thin)] {
+        let mut xml = base.replace("<!-- A rectangle", &format!("{}\n    <!-- A rectangle", bsdf.replacen("<bsdf ", r#"<bsdf id="test" "#, 1)));
+        for shape in ["back", "short-box", "tall-box"] {
+            xml = with_material(&xml, shape, "test");
+        }
+        let path = dir.join(format!("{name}.xml"));
+        std::fs::write(&path, xml).unwrap();
+        let scene = load(&path, &[], 24);
+        for sampler in [svetlo::sampling::SamplerKind::Independent, svetlo::sampling::SamplerKind::Sobol] {
+            let s = RenderSettings { sampler, spp: 4, seed: 29, max_depth: 6, rr_depth: 3, ..RenderSettings::from_scene(&scene) };
+            compare(&scene, &s, &format!("cornell-box of textured {name}, {sampler:?}"));
+        }
+    }
+    let _ = std::fs::remove_dir_all(&dir);
+}
+
+
 /// A textured emitter in the kernel: sampled through its own `Light::sample_li`, its radiance
 /// looked up where a path hits it (`AreaLight::l`), so the image and an emission layer equal
 /// the scalar tracer's (bit for bit with single rays), with a glossy box that reflects it.

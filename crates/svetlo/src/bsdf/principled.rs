@@ -827,6 +827,12 @@ impl PrincipledMaterial {
 
     /// The model at one point: textures evaluated, weights clamped to their ranges.
     pub fn model(&self, p: TexPoint) -> BsdfModel {
+        self.at(p).into_model()
+    }
+
+    /// [`Self::model`] unboxed (the path kernel keeps it in a lane's slot).
+    #[inline]
+    pub fn at(&self, p: TexPoint) -> PrincipledAt {
         let unit = |t: &Texture| {
             let v = t.eval_f32_inline(&p);
             if v.is_nan() {
@@ -863,7 +869,7 @@ impl PrincipledMaterial {
                 derived: PrincipledThinDerived::default(),
             };
             m.derived = m.derived();
-            BsdfModel::PrincipledThin(Box::new(m))
+            PrincipledAt::Thin(m)
         } else {
             // Mitsuba: an IOR of exactly 1 does not refract plausibly.
             let eta = if eta == 1.0 && !matches!(self.spec_trans, Texture::Constant(c) if c.r == 0.0) { 1.001 } else { eta };
@@ -884,8 +890,45 @@ impl PrincipledMaterial {
                 derived: PrincipledDerived::default(),
             };
             m.derived = m.derived();
-            BsdfModel::Principled(Box::new(m))
+            PrincipledAt::Full(m)
         }
+    }
+}
+
+/// A `principled` or `principledthin` model at one point, unboxed ([`PrincipledMaterial::at`]).
+#[derive(Clone, Copy, Debug)]
+pub enum PrincipledAt {
+    Full(Principled),
+    Thin(PrincipledThin),
+}
+
+impl PrincipledAt {
+    /// The boxed model ([`PrincipledMaterial::model`]).
+    pub fn into_model(self) -> BsdfModel {
+        match self {
+            PrincipledAt::Full(m) => BsdfModel::Principled(Box::new(m)),
+            PrincipledAt::Thin(m) => BsdfModel::PrincipledThin(Box::new(m)),
+        }
+    }
+
+    pub fn flags(&self) -> LobeFlags {
+        match self {
+            PrincipledAt::Full(m) => m.flags(),
+            PrincipledAt::Thin(m) => m.flags(),
+        }
+    }
+
+    /// `Bsdf::new(self.into_model()).eval_pdf_and_sample(..)` (one-sided, opaque, no surface
+    /// detail), the same bits without building the `Bsdf`: the front model takes `wo` where
+    /// it is on the front or the model transmits (`Bsdf::side`); else nothing scatters.
+    #[inline]
+    pub fn eval_pdf_and_sample(&self, wo: Vec3, wi: Option<Vec3>, uc: f32, u: Vec2, mode: TransportMode) -> (Option<(Rgb, f32)>, Option<BsdfSample>) {
+        let (nee, s) = match self {
+            PrincipledAt::Full(m) if wo.z >= 0.0 || m.flags().intersects(LobeFlags::TRANSMISSION) => m.eval_pdf_and_sample(wo, wi, uc, u, mode),
+            PrincipledAt::Thin(m) => m.eval_pdf_and_sample(wo, wi, uc, u),
+            PrincipledAt::Full(_) => return (wi.map(|_| (Rgb::BLACK, 0.0)), None),
+        };
+        super::Bsdf::finish_conductor(1.0, false, nee, s)
     }
 }
 
@@ -965,7 +1008,8 @@ mod tests {
                 m.rates = SamplingRates { diffuse_reflection: 0.3, specular: 2.0, secondary: 0.5, diffuse_transmission: 0.0 };
             }
             for _ in 0..8 {
-                let model = m.model(Vec2::new(rng.next_f32(), rng.next_f32()).into());
+                let at = m.at(Vec2::new(rng.next_f32(), rng.next_f32()).into());
+                let model = at.into_model();
                 // One-sided, two-sided (the back mirrored) and masked.
                 let bsdf = match k % 4 {
                     1 => Bsdf { back: Some(model.clone()), ..Bsdf::new(model.clone()) },
@@ -981,6 +1025,13 @@ mod tests {
                         let (nee, s) = bsdf.eval_pdf_and_sample(wo, Some(wi), uc, u, mode);
                         assert_eq!(nee.map(bits), Some(bits((bsdf.eval(wo, wi, mode), bsdf.pdf(wo, wi, mode)))), "{model:?} {mode:?} {wo} {wi}");
                         assert_eq!(sample_bits(s), sample_bits(bsdf.sample(wo, uc, u, mode)), "{model:?} {mode:?} {wo} {uc} {u}");
+                        // The path kernel's route without a `Bsdf` (one-sided and opaque).
+                        if k % 2 == 0 {
+                            let (at_nee, at_s) = at.eval_pdf_and_sample(wo, Some(wi), uc, u, mode);
+                            assert_eq!(at_nee.map(bits), nee.map(bits), "{model:?} {mode:?} {wo} {wi}");
+                            assert_eq!(sample_bits(at_s), sample_bits(s), "{model:?} {mode:?} {wo} {uc} {u}");
+                            assert_eq!(at.eval_pdf_and_sample(wo, None, uc, u, mode).0.map(bits), None);
+                        }
                         // The sample's value and density are those toward its direction.
                         if let Some(s) = model.sample(wo, uc, u, mode) {
                             assert_eq!(bits((s.f, s.pdf)), bits((model.eval(wo, s.wi, mode), model.pdf(wo, s.wi, mode))), "{model:?} {mode:?} {wo} {uc} {u}");

@@ -82,6 +82,7 @@ use crate::bsdf::diffuse::Diffuse;
 use crate::bsdf::lane_samples::LaneSamples;
 use crate::bsdf::material::Roughness;
 use crate::bsdf::plastic::{rough_plastic_ggx_lanes, rough_plastic_lanes, RoughPlastic, RoughPlasticLanes};
+use crate::bsdf::principled::{PrincipledAt, PrincipledMaterial};
 use crate::bsdf::{Bsdf, BsdfModel, BsdfSample, LobeFlags, Material, MicrofacetKind, TransportMode};
 use crate::camera::{RayGenerator, RayLanes};
 use crate::error::{Error, Result};
@@ -261,6 +262,10 @@ struct ShapeData {
     /// A one-sided rough conductor shaded by `conductor_scatter`, no `Bsdf` built: under a
     /// normal or bump map, or of textured parameters (its lanes keep `scalar_bsdf`).
     conductor: Option<KernelConductor>,
+    /// A textured `principled` or `principledthin` material (no surface detail): its lanes
+    /// keep `scalar_bsdf` but build its model in a slot of their own (`principled_scatter`),
+    /// no `Bsdf`.
+    principled: bool,
 }
 
 /// A [`ShapeData::conductor`]: `Material::Conductor`'s parameters (its textures evaluated per
@@ -985,7 +990,8 @@ impl SimdKernel {
             let uniform_flags = uniform.as_ref().map_or(LobeFlags::NONE, Bsdf::flags);
             let reads_uv = textured || matches!(light, Some((_, None))) || (scalar_bsdf && uniform.is_none());
             let prefetch_texels = !scalar_bsdf && (front.large_bitmap() || back.as_ref().is_some_and(Albedo::large_bitmap));
-            shapes.push(ShapeData { scalar_bsdf, front, back, textured, light, uniform, uniform_flags, reads_uv, prefetch_texels, detail, conductor });
+            let principled = scalar_bsdf && !s.detail && uniform.is_none() && matches!(mat, Material::Principled(_));
+            shapes.push(ShapeData { scalar_bsdf, front, back, textured, light, uniform, uniform_flags, reads_uv, prefetch_texels, detail, conductor, principled });
         }
         // The meshes' triangles (other shapes' hits come as the scene's surface records:
         // `other_hit`), the ones of the scene's last render if its geometry is the same.
@@ -1227,8 +1233,13 @@ impl SimdKernel {
         let mut layers = LaneLayers::new(events, aovs, jobs);
         let cam = scene.camera.ray_generator();
         let pinhole = cam.is_pinhole();
-        let mut all: [Packet<S>; PACKETS] = std::array::from_fn(|_| Packet::new(sampler.clone()));
-        let packets = &mut all[..self.packets];
+        // The tile's packets, each written in place (an array from `array::from_fn` copied
+        // each packet, 13 KB, two to four times once the principled slots were added).
+        let mut all: Vec<Packet<S>> = Vec::with_capacity(self.packets);
+        for _ in 0..self.packets {
+            all.push(Packet::new(sampler.clone()));
+        }
+        let packets = &mut all[..];
         // Camera samples started eight at a time for lanes that fall idle a few a step.
         let mut ahead = CameraAhead::new(sampler.clone());
         let env_map = scene.environment_lights.first().and_then(|&ei| match &scene.lights[ei as usize] {
@@ -1553,6 +1564,12 @@ impl SimdKernel {
             lanes &= lanes - 1;
             self.scalar_scatter(events, st, l, v);
         }
+        let mut lanes = std::mem::take(&mut v.princ_lanes);
+        while lanes != 0 {
+            let l = lanes.trailing_zeros() as usize;
+            lanes &= lanes - 1;
+            self.principled_scatter(events, st, l, v);
+        }
         let mut lanes = v.detail_lanes;
         if lanes != 0 {
             v.detail_lanes = 0;
@@ -1691,6 +1708,11 @@ impl SimdKernel {
                     let prev_p = Vec3::new(st.num.prev_p[0][l], st.num.prev_p[1][l], st.num.prev_p[2][l]);
                     let pdf_li = area_of(scene, li).map_or(0.0, |a| a.pdf_li(prev_p, p, ng));
                     let pdf_bsdf = match &st.prev_bsdf[l] {
+                        // A principled vertex's `Bsdf` (`Scene::bsdf`'s), built only here.
+                        Some(pb) if self.shapes[pb.shape as usize].principled => match st.prev_princ.get(l) {
+                            Some(Some(m)) => bsdf_pdf_toward(&Bsdf::new(m.into_model()), &pb.frame, pb.wo, prev_p, p).unwrap_or(st.num.prev_pdf[l]),
+                            _ => st.num.prev_pdf[l],
+                        },
                         Some(pb) => match self.shapes[pb.shape as usize].uniform.as_ref().or(st.prev_own[l].as_ref()) {
                             Some(bsdf) => bsdf_pdf_toward(bsdf, &pb.frame, pb.wo, prev_p, p).unwrap_or(st.num.prev_pdf[l]),
                             // Never: a shape without a uniform BSDF left its own in `prev_own`.
@@ -1821,6 +1843,11 @@ impl SimdKernel {
             self.light_sample(scene, l, v, p, u_light, u_l2);
             (v.scatter_u[1][l], v.scatter_u[2][l]) = (u.x, u.y);
             v.cond_lanes |= 1 << l;
+        } else if let Some(pm) = sh.principled.then(|| principled_material(scene, shape)).flatten() {
+            let tp = self.tex_point(scene, &hit, b1, b2, p, ng);
+            self.principled_light_sample(scene, l, v, pm, tp, u_light, u_l2);
+            (v.scatter_u[0][l], v.scatter_u[1][l], v.scatter_u[2][l]) = (uc, u.x, u.y);
+            v.princ_lanes |= 1 << l;
         } else {
             // The hit's record only where `Scene::bsdf` builds the hit's own BSDF from it:
             // the rest of the vertex is in `v.num` (a record per lane, built and copied into
@@ -2248,6 +2275,68 @@ impl SimdKernel {
         }
     }
 
+    /// [`Self::scalar_light_sample`] of a lane of a principled shape (`ShapeData::principled`):
+    /// its model at `tp` built into `v.princ` (`Scene::bsdf` builds it boxed, in a `Bsdf`).
+    #[allow(clippy::too_many_arguments)]
+    #[inline(never)]
+    fn principled_light_sample(&self, scene: &Scene, l: usize, v: &mut Soa, pm: &PrincipledMaterial, tp: TexPoint, u_light: f32, u_l2: Vec2) {
+        let m = pm.at(tp);
+        let flags = m.flags();
+        if v.princ.len() < LANES {
+            v.princ.resize(LANES, None);
+        }
+        v.princ[l] = Some(m);
+        if flags.has_non_specular() {
+            self.light_sample(scene, l, v, tp.p, u_light, u_l2);
+        } else {
+            v.num.nee_ok[l] = false;
+        }
+        v.flags[l] = flags;
+    }
+
+    /// [`Self::scalar_scatter`] of a lane of a principled shape, by its model in `v.princ`
+    /// (`PrincipledAt::eval_pdf_and_sample`: the bits of its `Bsdf`'s), kept in
+    /// `Paths::prev_princ` where a path may meet an emitting shape (for the MIS weight there).
+    #[inline(never)]
+    fn principled_scatter<S>(&self, events: &LaneEvents, st: &mut Paths<S>, l: usize, v: &mut Soa) {
+        let (uc, ux, uy) = (v.scatter_u[0][l], v.scatter_u[1][l], v.scatter_u[2][l]);
+        let shape = v.shape[l];
+        let frame = v.num.frame(l);
+        let wo = frame.to_local(lane3(&v.num.wo, l));
+        let wi = nee_dir(v, l, &frame);
+        st.prev_bsdf[l] = None;
+        let Some(m) = v.princ.get(l).and_then(Option::as_ref) else {
+            // Never: `gather` built the lane's model.
+            v.num.nee_ok[l] = false;
+            v.num.bmoved[l] = false;
+            return;
+        };
+        let (nee, bs) = m.eval_pdf_and_sample(wo, wi, uc, Vec2::new(ux, uy), TransportMode::Radiance);
+        let flags = v.flags[l];
+        if let (Some(wi), Some((f, pdf))) = (wi, nee) {
+            put_light_value(v, l, f, pdf);
+            if let Some(view) = events.view {
+                v.class_nee[l] = view.class(events.aovs.scatter_event(shape, flags, None, wi.z * wo.z < 0.0));
+            }
+        }
+        let bs = bs.filter(|bs| bs.pdf > 0.0 && !bs.f.is_black());
+        v.num.bmoved[l] = bs.is_some();
+        let Some(bs) = bs else { return };
+        put_sample(events, v, l, flags, &bs);
+        if bs.lobe.contains(LobeFlags::TRANSMISSION) {
+            st.num.eta_scale[l] *= bs.eta * bs.eta;
+        }
+        if !bs.lobe.is_specular() {
+            st.prev_bsdf[l] = Some(PrevBsdf { shape, frame, wo });
+            if self.emitters {
+                if st.prev_princ.len() < LANES {
+                    st.prev_princ.resize(LANES, None);
+                }
+                st.prev_princ[l] = v.princ[l];
+            }
+        }
+    }
+
     /// [`Self::scalar_scatter`] of a lane of a detail over a Lambertian (`ShapeData::detail`:
     /// its perturbed normal in `v.detail_n`, its reflectance in `v.num.refl`), by
     /// `Bsdf::detail_lambert`: the bits of its `Bsdf`, which is built only where a path may
@@ -2431,6 +2520,16 @@ fn nee_dir(v: &Soa, l: usize, frame: &Frame) -> Option<Vec3> {
         };
         frame.to_local(wi_w)
     })
+}
+
+/// The `principled` or `principledthin` material of `shape`, if it is one.
+#[inline(always)]
+fn principled_material(scene: &Scene, shape: u32) -> Option<&PrincipledMaterial> {
+    let s = scene.shapes.get(shape as usize)?;
+    match scene.materials.get(s.material as usize)? {
+        Material::Principled(pm) => Some(pm.as_ref()),
+        _ => None,
+    }
 }
 
 /// Lane `l` of a row of vectors.
@@ -2807,6 +2906,10 @@ struct Soa {
     cond: [Option<RoughConductor>; LANES],
     cond_detail: u8,
     own: [Option<Bsdf>; LANES],
+    /// The lanes of a principled shape (`principled_scatter`), and their models (`LANES`
+    /// slots from the first such lane: the packets, made per tile, stay small without).
+    princ_lanes: u8,
+    princ: Vec<Option<PrincipledAt>>,
     flags: [LobeFlags; LANES],
     /// The rays' grid points (u, v) and sin θ in the environment map (`EnvMap::dirs_to_grid`),
     /// set when some lane escaped.
@@ -3456,6 +3559,9 @@ struct Paths<S> {
     /// `Option<Bsdf>` inside `PrevBsdf` was copied whole, memcpy, at every scalar vertex;
     /// stale where the shape has a uniform one, and then not read).
     prev_own: [Option<Bsdf>; LANES],
+    /// The model of that vertex where its shape is a principled one (`ShapeData::principled`;
+    /// `LANES` slots from the first, as `Soa::princ`).
+    prev_princ: Vec<Option<PrincipledAt>>,
     /// The camera ray's time (every ray of the path sees the scene then).
     time: [f32; LANES],
 }
@@ -3478,6 +3584,7 @@ impl<S: Clone> Paths<S> {
             },
             prev_bsdf: [None; LANES],
             prev_own: std::array::from_fn(|_| None),
+            prev_princ: Vec::new(),
             time: [0.0; LANES],
         }
     }
@@ -3651,6 +3758,8 @@ struct Packet<S> {
 }
 
 impl<S: Clone> Packet<S> {
+    // Inlined: written in place into the tile's packets (out of line, copied there).
+    #[inline(always)]
     fn new(sampler: S) -> Packet<S> {
         Packet {
             st: Paths::new(sampler),
