@@ -857,9 +857,9 @@ pub struct SimdKernel {
     texel_meshes: Vec<(u32, u32, u32)>,
     /// Run the AVX-512VL build of the kernel (detected at run time; tests may clear it).
     avx512: bool,
-    /// Packets a tile steps in phase: [`PACKETS`] where Beckmann normals or sphere-light
-    /// samples (latency chains for a few lanes a step) are drawn or lane groups of rough
-    /// plastics, conductors or dielectrics filled, else one (the second
+    /// Packets a tile steps in phase: [`PACKETS`] where lane groups of rough plastics,
+    /// conductors or dielectrics are filled, [`CHAIN_PACKETS`] where Beckmann normals or
+    /// sphere-light samples (latency chains for a few lanes a step) are drawn, else one (the second
     /// packet's longer drain at a tile's end and its bookkeeping cost 2 % more instructions
     /// on cbox-rgb, for nothing to overlap).
     packets: usize,
@@ -1056,9 +1056,9 @@ impl SimdKernel {
             s.scalar_bsdf && s.detail.is_none() && s.conductor.is_none() && s.uniform.as_ref().is_none_or(|b| b.beckmann_dielectric(Vec3::Z).is_some())
         });
         // The lane groups (`group_samples`) take the lanes of all packets: with one packet a GGX
-        // plastic group ran ~2.9 lanes on bsdf_spheres' four plastics (128k triangles); three
-        // fill them fuller (render Ir -1.9 % at 8 spp). Shapes whose BSDF is built per hit
-        // (textures) are not counted: those scenes were not measured so.
+        // plastic group ran ~2.9 lanes on bsdf_spheres' four plastics (128k triangles), with
+        // three 5.7 (render Ir -1.9 % at 8 spp), four a little more (-0.5 % more). Shapes whose
+        // BSDF is built per hit (textures) are not counted: those scenes were not measured so.
         let groups = shapes.iter().any(|s| {
             s.scalar_bsdf
                 && s.detail.is_none()
@@ -1069,7 +1069,13 @@ impl SimdKernel {
                         || b.beckmann_dielectric(Vec3::Z).is_some()
                 })
         });
-        let packets = if chains || groups { PACKETS } else { 1 };
+        let packets = if groups {
+            PACKETS
+        } else if chains {
+            CHAIN_PACKETS
+        } else {
+            1
+        };
         // Whether a path may hit an emitting shape (where a detail lane's `Bsdf` is kept for MIS).
         let emitters = shapes.iter().any(|s| s.light.is_some());
         Some(SimdKernel {
@@ -1216,7 +1222,7 @@ impl SimdKernel {
     }
 
     /// Samples `s0..s0 + n` of every pixel of `rect` (the tile's own pixels; the film tile
-    /// extends past them by the filter radius), [`PACKETS`] packets of eight paths stepped in
+    /// extends past them by the filter radius), up to [`PACKETS`] packets of eight paths stepped in
     /// phase; a lane whose path ends takes the next camera sample; each lane draws from its
     /// own copy of `sampler`. (Which lane runs which sample does not change its numbers: each
     /// path's sampler restarts at its pixel sample, and its result goes to its job's slot.)
@@ -3752,9 +3758,13 @@ thread_local! {
     static RESULTS: std::cell::Cell<Vec<(Vec2, Rgb)>> = const { std::cell::Cell::new(Vec::new()) };
 }
 
-/// Packets of eight paths a tile steps in phase: while one packet's latency chains
-/// (camera rays, sphere samples, Beckmann normals) wait, the other's work fills the wait.
-const PACKETS: usize = 3;
+/// Packets of eight paths a tile steps in phase, at most: while one packet's latency chains
+/// (camera rays, sphere samples, Beckmann normals) wait, the other's work fills the wait
+/// ([`CHAIN_PACKETS`] of them); the lane groups of rough plastics, conductors and dielectrics
+/// take the lanes of all packets, and four filled them fuller than three.
+const PACKETS: usize = 4;
+/// Packets of a tile where only latency chains call for more than one.
+const CHAIN_PACKETS: usize = 3;
 
 /// One packet's paths, rays and the scratch of its step.
 struct Packet<S> {
