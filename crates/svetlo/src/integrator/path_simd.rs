@@ -1057,7 +1057,8 @@ impl SimdKernel {
         });
         // The lane groups (`group_samples`) take the lanes of all packets: with one packet a GGX
         // plastic group ran ~2.9 lanes on bsdf_spheres' four plastics (128k triangles), with
-        // three 5.7 (render Ir -1.9 % at 8 spp), four a little more (-0.5 % more). Shapes whose
+        // three 5.7 (render Ir -1.9 % at 8 spp), four a little more (-0.5 % more); veach-mis's
+        // Beckmann conductors took -1.0 % with four (three before, for their chains). Shapes whose
         // BSDF is built per hit (textures) are not counted: those scenes were not measured so.
         let groups = shapes.iter().any(|s| {
             s.scalar_bsdf
@@ -1067,6 +1068,7 @@ impl SimdKernel {
                         || b.beckmann_plastic(Vec3::Z).is_some()
                         || b.ggx_conductor(Vec3::Z).is_some()
                         || b.beckmann_dielectric(Vec3::Z).is_some()
+                        || b.beckmann_conductor(Vec3::Z).is_some()
                 })
         });
         let packets = if groups {
