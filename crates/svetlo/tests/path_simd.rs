@@ -836,7 +836,6 @@ fn principled_matches_scalar() {
     let _ = std::fs::remove_dir_all(&dir);
 }
 
-
 /// A textured emitter in the kernel: sampled through its own `Light::sample_li`, its radiance
 /// looked up where a path hits it (`AreaLight::l`), so the image and an emission layer equal
 /// the scalar tracer's (bit for bit with single rays), with a glossy box that reflects it.

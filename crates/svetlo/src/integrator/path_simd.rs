@@ -992,7 +992,20 @@ impl SimdKernel {
             let reads_uv = textured || matches!(light, Some((_, None))) || (scalar_bsdf && uniform.is_none());
             let prefetch_texels = !scalar_bsdf && (front.large_bitmap() || back.as_ref().is_some_and(Albedo::large_bitmap));
             let principled = scalar_bsdf && !s.detail && uniform.is_none() && matches!(mat, Material::Principled(_));
-            shapes.push(ShapeData { scalar_bsdf, front, back, textured, light, uniform, uniform_flags, reads_uv, prefetch_texels, detail, conductor, principled });
+            shapes.push(ShapeData {
+                scalar_bsdf,
+                front,
+                back,
+                textured,
+                light,
+                uniform,
+                uniform_flags,
+                reads_uv,
+                prefetch_texels,
+                detail,
+                conductor,
+                principled,
+            });
         }
         // The meshes' triangles (other shapes' hits come as the scene's surface records:
         // `other_hit`), the ones of the scene's last render if its geometry is the same.
