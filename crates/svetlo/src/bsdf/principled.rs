@@ -21,8 +21,9 @@ use super::microfacet::Microfacet;
 use super::{positive_finite, BsdfModel, BsdfSample, LobeFlags, TransportMode};
 use crate::math::{warp, INV_PI, PI};
 use crate::spectrum::Rgb;
-use crate::texture::{TexPoint, Texture};
-use glam::{Vec2, Vec3};
+use crate::texture::{checker_parity, TexPoint, Texture};
+use glam::{Affine2, Vec2, Vec3};
+use std::sync::OnceLock;
 
 /// Schlick's weight (1 - cos)^5, cos clamped to [0, 1].
 #[inline]
@@ -756,6 +757,103 @@ pub struct PrincipledMaterial {
     /// converted by [`eta_from_specular`] when the scene is read).
     pub eta: Texture,
     pub rates: SamplingRates,
+    /// The models `at` copies where every parameter is a constant or a checkerboard: built
+    /// at the first `at` from the fields above (set them before; `textures_mut` clears it).
+    pub table: ModelTable,
+}
+
+/// [`PrincipledMaterial::at`]'s models by checkerboard parities: the textures of one
+/// `to_uv` share one test, so a point's model is one of 2^groups, each built once by the
+/// same code from the values the textures take there (the same bits as evaluating each).
+#[derive(Debug, Default)]
+pub struct ModelTable(OnceLock<Option<Box<Table>>>);
+
+#[derive(Debug)]
+struct Table {
+    /// Distinct `to_uv` of the checkerboards (group g is bit g of a model's index).
+    to_uv: Vec<Affine2>,
+    models: Vec<PrincipledAt>,
+}
+
+/// At most 8 models: more groups fall back to evaluating the textures.
+const TABLE_GROUPS: usize = 3;
+
+impl Clone for ModelTable {
+    /// Empty: a clone's fields may be changed before its first `at`.
+    fn clone(&self) -> Self {
+        ModelTable::default()
+    }
+}
+
+impl Table {
+    fn build(m: &PrincipledMaterial) -> Option<Box<Table>> {
+        let mut to_uv: Vec<Affine2> = Vec::new();
+        let key = |a: &Affine2| a.to_cols_array().map(f32::to_bits);
+        // Every field `at_with` may read (`textures` leaves out those Mitsuba's variant lacks).
+        let all = [
+            &m.base_color,
+            &m.roughness,
+            &m.anisotropic,
+            &m.metallic,
+            &m.spec_trans,
+            &m.spec_tint,
+            &m.sheen,
+            &m.sheen_tint,
+            &m.flatness,
+            &m.clearcoat,
+            &m.clearcoat_gloss,
+            &m.diff_trans,
+            &m.eta,
+        ];
+        for t in all {
+            match t {
+                Texture::Constant(_) => {}
+                Texture::Checkerboard { to_uv: a, .. } => {
+                    if !to_uv.iter().any(|b| key(b) == key(a)) {
+                        to_uv.push(*a);
+                    }
+                }
+                _ => return None,
+            }
+        }
+        if to_uv.is_empty() || to_uv.len() > TABLE_GROUPS {
+            return None;
+        }
+        // Group of a checkerboard (found above); its test's outcome in model `i`.
+        let parity = |a: &Affine2, i: usize| to_uv.iter().position(|b| key(b) == key(a)).is_some_and(|g| (i >> g) & 1 == 1);
+        let models = (0..1usize << to_uv.len())
+            .map(|i| {
+                // `eval_f32` and `eval` of the checkerboard where its test gives `parity`.
+                let f = |t: &Texture| match t {
+                    Texture::Constant(c) => c.r,
+                    Texture::Checkerboard { color0, color1, to_uv } => (if parity(to_uv, i) { color1 } else { color0 }).luminance(),
+                    _ => f32::NAN,
+                };
+                let rgb = |t: &Texture| match t {
+                    Texture::Constant(c) => *c,
+                    Texture::Checkerboard { color0, color1, to_uv } => {
+                        if parity(to_uv, i) {
+                            *color0
+                        } else {
+                            *color1
+                        }
+                    }
+                    _ => Rgb::splat(f32::NAN),
+                };
+                m.at_with(f, rgb)
+            })
+            .collect();
+        Some(Box::new(Table { to_uv, models }))
+    }
+
+    #[inline]
+    fn at(&self, uv: Vec2) -> Option<PrincipledAt> {
+        let mut i = 0;
+        for (g, a) in self.to_uv.iter().enumerate() {
+            i |= usize::from(checker_parity(a, uv)) << g;
+        }
+        self.models.get(i).copied()
+    }
 }
 
 impl Default for PrincipledMaterial {
@@ -778,6 +876,7 @@ impl Default for PrincipledMaterial {
             diff_trans: c(0.0),
             eta: c(eta_from_specular(0.5)),
             rates: SamplingRates::default(),
+            table: ModelTable::default(),
         }
     }
 }
@@ -804,6 +903,7 @@ impl PrincipledMaterial {
     }
 
     pub fn textures_mut(&mut self) -> Vec<&mut Texture> {
+        self.table = ModelTable::default();
         vec![
             &mut self.base_color,
             &mut self.roughness,
@@ -833,26 +933,41 @@ impl PrincipledMaterial {
     /// [`Self::model`] unboxed (the path kernel keeps it in a lane's slot).
     #[inline]
     pub fn at(&self, p: TexPoint) -> PrincipledAt {
+        if let Some(m) = self.table.0.get_or_init(|| Table::build(self)).as_ref().and_then(|t| t.at(p.uv)) {
+            return m;
+        }
+        self.at_evaluated(p)
+    }
+
+    /// [`Self::at`] with each texture evaluated (what the table holds, per point).
+    #[inline]
+    pub fn at_evaluated(&self, p: TexPoint) -> PrincipledAt {
+        self.at_with(|t| t.eval_f32_inline(&p), |t| t.eval(p))
+    }
+
+    /// The model from the parameters' values: `f` a float texture's, `rgb` the base colour's.
+    #[inline(always)]
+    fn at_with(&self, f: impl Fn(&Texture) -> f32, rgb: impl Fn(&Texture) -> Rgb) -> PrincipledAt {
         let unit = |t: &Texture| {
-            let v = t.eval_f32_inline(&p);
+            let v = f(t);
             if v.is_nan() {
                 0.0
             } else {
                 v.clamp(0.0, 1.0)
             }
         };
-        let base_color = self.base_color.eval(p).clamp(0.0, 1.0);
+        let base_color = rgb(&self.base_color).clamp(0.0, 1.0);
         let roughness = unit(&self.roughness);
         let anisotropic = unit(&self.anisotropic);
         let spec_trans = unit(&self.spec_trans);
-        let eta = self.eta.eval_f32_inline(&p);
+        let eta = f(&self.eta);
         // Textured IORs cannot be checked when the scene is read: keep them usable.
         let eta = if eta > 0.0 && eta.is_finite() { eta } else { 1.0 };
         let (ax, ay) = disney_alphas(roughness, anisotropic);
         let distribution = Microfacet::new(MicrofacetKind::Ggx, ax, ay);
         if self.thin {
             let (tx, ty) = disney_alphas((0.65 * eta - 0.35) * roughness, anisotropic);
-            let dt = self.diff_trans.eval_f32_inline(&p);
+            let dt = f(&self.diff_trans);
             let mut m = PrincipledThin {
                 base_color,
                 roughness,
@@ -1044,6 +1159,84 @@ mod tests {
             }
         }
         assert!(samples > 50_000 && specular > 10_000 && transmitted > 5_000, "{samples} samples, {specular} specular, {transmitted} transmitted");
+    }
+
+    /// The table's models are those of the textures evaluated at each point, bit for bit
+    /// (Debug prints every float's shortest round-trip form): the three bsdf_spheres
+    /// textured scenes' materials and random mixes of constants and checkerboards sharing
+    /// up to four `to_uv` (four falls back), both variants, IOR 1 included.
+    #[test]
+    fn table_models_are_the_evaluated_models() {
+        use crate::sampling::rng::Pcg32;
+        let mut rng = Pcg32::new(5, 11);
+        let scales = [25.0, 12.5, 7.0, 3.0];
+        let cb = |c0: f32, c1: f32, s: f32| Texture::Checkerboard {
+            color0: Rgb::splat(c0),
+            color1: Rgb::splat(c1),
+            to_uv: glam::Affine2::from_scale(Vec2::splat(s)),
+        };
+        let mut scene1 = PrincipledMaterial { base_color: Texture::Constant(Rgb::new(0.2, 0.8, 0.1)), roughness: Texture::from(0.15), ..Default::default() };
+        (scene1.anisotropic, scene1.metallic, scene1.clearcoat, scene1.sheen) =
+            (cb(0.05, 0.8, 25.0), cb(0.7, 0.1, 25.0), cb(0.9, 0.1, 12.5), cb(0.2, 0.9, 12.5));
+        let mut thin =
+            PrincipledMaterial { thin: true, base_color: Texture::Constant(Rgb::new(0.7, 0.1, 0.1)), eta: Texture::from(1.33), ..Default::default() };
+        (thin.anisotropic, thin.spec_trans, thin.diff_trans, thin.sheen) = (cb(0.05, 0.8, 25.0), cb(0.2, 0.8, 25.0), cb(0.4, 1.4, 12.5), cb(0.1, 0.8, 12.5));
+        let mut materials = vec![scene1, thin];
+        let (mut tabled, mut fallback) = (0, 0);
+        for k in 0..200 {
+            let mut m = PrincipledMaterial { thin: k % 3 == 2, ..Default::default() };
+            let groups = 1 + k % 4;
+            let param = |rng: &mut Pcg32, lo: f32, hi: f32| {
+                let constant = rng.next_f32() < 0.4;
+                let scale = scales[(rng.next_u32() as usize) % groups];
+                let mut v = || lo + (hi - lo) * rng.next_f32();
+                if constant {
+                    Texture::from(v())
+                } else {
+                    cb(v(), v(), scale)
+                }
+            };
+            for t in [&mut m.roughness, &mut m.anisotropic, &mut m.metallic, &mut m.spec_trans, &mut m.spec_tint, &mut m.sheen, &mut m.sheen_tint] {
+                *t = param(&mut rng, -0.1, 1.1);
+            }
+            m.flatness = param(&mut rng, -0.2, 1.0);
+            m.clearcoat = param(&mut rng, -0.1, 1.0);
+            m.clearcoat_gloss = param(&mut rng, 0.0, 1.0);
+            m.diff_trans = param(&mut rng, 0.0, 2.2);
+            m.eta = if k % 5 == 0 { Texture::from(1.0) } else { param(&mut rng, 0.9, 2.0) };
+            if k % 4 == 1 {
+                m.base_color = Texture::Checkerboard {
+                    color0: Rgb::new(0.2, 0.8, 0.1),
+                    color1: Rgb::new(0.9, 0.3, 1.5),
+                    to_uv: glam::Affine2::from_scale(Vec2::splat(scales[0])),
+                };
+            }
+            materials.push(m);
+        }
+        for m in &materials {
+            for i in 0..400 {
+                // Random points, and points on the checkers' edges.
+                let uv = if i % 4 == 0 {
+                    Vec2::new((rng.next_u32() % 200) as f32 / 50.0, (rng.next_u32() % 200) as f32 / 25.0 - 2.0)
+                } else {
+                    Vec2::new(rng.next_f32() * 4.0 - 2.0, rng.next_f32() * 4.0 - 2.0)
+                };
+                let p = TexPoint::from(uv);
+                assert_eq!(format!("{:?}", m.at(p)), format!("{:?}", m.at_evaluated(p)), "{uv}");
+            }
+            match m.table.0.get() {
+                Some(Some(_)) => tabled += 1,
+                _ => fallback += 1,
+            }
+        }
+        assert!(tabled > 100 && fallback > 20, "{tabled} tabled, {fallback} fallback");
+        // A clone starts empty; `textures_mut` empties the table.
+        let mut m = materials[0].clone();
+        assert!(m.table.0.get().is_none());
+        let p = TexPoint::from(Vec2::new(0.01, 0.01));
+        m.at(p);
+        *m.textures_mut()[0] = Texture::from(0.9);
+        assert_eq!(format!("{:?}", m.at(p)), format!("{:?}", m.at_evaluated(p)));
     }
 
     #[test]

@@ -301,13 +301,20 @@ fn wrap(i: i64, n: usize, mode: WrapMode) -> usize {
     }
 }
 
+/// A checkerboard's test at `uv`: true where the colour lookup gives `color0` (the float one
+/// `color1`). Checkerboards of one `to_uv` share it (the principled model's table).
+#[inline(always)]
+pub fn checker_parity(to_uv: &Affine2, uv: Vec2) -> bool {
+    let p = to_uv.transform_point2(uv);
+    let (fx, fy) = (p.x - floor_exact(p.x), p.y - floor_exact(p.y));
+    (fx > 0.5) == (fy > 0.5)
+}
+
 /// A checkerboard read as a float (`eval_f32`): `eval_varying`'s test with the colours the
 /// other way round, then the luminance, in place (no swapped copy, no second call).
 #[inline(always)]
 fn checkerboard_f32(color0: &Rgb, color1: &Rgb, to_uv: &Affine2, uv: Vec2) -> f32 {
-    let p = to_uv.transform_point2(uv);
-    let (fx, fy) = (p.x - floor_exact(p.x), p.y - floor_exact(p.y));
-    if (fx > 0.5) == (fy > 0.5) {
+    if checker_parity(to_uv, uv) {
         color1.luminance()
     } else {
         color0.luminance()
@@ -356,9 +363,7 @@ impl Texture {
             Texture::UnboundAttribute(_) => Rgb::BLACK,
             Texture::Procedural(t) => t.eval(&p),
             Texture::Checkerboard { color0, color1, to_uv } => {
-                let p = to_uv.transform_point2(uv);
-                let (fx, fy) = (p.x - floor_exact(p.x), p.y - floor_exact(p.y));
-                if (fx > 0.5) == (fy > 0.5) {
+                if checker_parity(to_uv, uv) {
                     *color0
                 } else {
                     *color1
