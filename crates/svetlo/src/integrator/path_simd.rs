@@ -2288,21 +2288,8 @@ impl SimdKernel {
         // conductor's lanes come not here: `conductor_samples` wrote theirs).
         let wo = frame.to_local(lane3(&v.num.wo, l));
         let wi = nee_dir(v, l, &frame);
-        let (nee, bs) = bsdf.eval_pdf_and_sample(wo, wi, uc, Vec2::new(ux, uy), TransportMode::Radiance);
-        if let (Some(wi), Some((f, pdf))) = (wi, nee) {
-            put_light_value(v, l, f, pdf);
-            if let Some(view) = events.view {
-                v.class_nee[l] = view.class(events.aovs.scatter_event(v.shape[l], flags, None, wi.z * wo.z < 0.0));
-            }
-        }
-        let bs = bs.filter(|bs| bs.pdf > 0.0 && !bs.f.is_black());
-        v.num.bmoved[l] = bs.is_some();
-        st.prev_bsdf[l] = None;
-        let Some(bs) = bs else { return };
-        put_sample(events, v, l, flags, &bs);
-        if bs.lobe.contains(LobeFlags::TRANSMISSION) {
-            st.num.eta_scale[l] *= bs.eta * bs.eta;
-        }
+        let result = bsdf.eval_pdf_and_sample(wo, wi, uc, Vec2::new(ux, uy), TransportMode::Radiance);
+        let Some(bs) = put_scatter(events, st, v, l, flags, wo, wi, result) else { return };
         if !bs.lobe.is_specular() {
             st.prev_bsdf[l] = Some(PrevBsdf { shape, frame, wo });
             if own.is_some() {
@@ -2347,21 +2334,8 @@ impl SimdKernel {
             v.num.bmoved[l] = false;
             return;
         };
-        let (nee, bs) = m.eval_pdf_and_sample(wo, wi, uc, Vec2::new(ux, uy), TransportMode::Radiance);
-        let flags = v.flags[l];
-        if let (Some(wi), Some((f, pdf))) = (wi, nee) {
-            put_light_value(v, l, f, pdf);
-            if let Some(view) = events.view {
-                v.class_nee[l] = view.class(events.aovs.scatter_event(shape, flags, None, wi.z * wo.z < 0.0));
-            }
-        }
-        let bs = bs.filter(|bs| bs.pdf > 0.0 && !bs.f.is_black());
-        v.num.bmoved[l] = bs.is_some();
-        let Some(bs) = bs else { return };
-        put_sample(events, v, l, flags, &bs);
-        if bs.lobe.contains(LobeFlags::TRANSMISSION) {
-            st.num.eta_scale[l] *= bs.eta * bs.eta;
-        }
+        let result = m.eval_pdf_and_sample(wo, wi, uc, Vec2::new(ux, uy), TransportMode::Radiance);
+        let Some(bs) = put_scatter(events, st, v, l, v.flags[l], wo, wi, result) else { return };
         if !bs.lobe.is_specular() {
             st.prev_bsdf[l] = Some(PrevBsdf { shape, frame, wo });
             if self.emitters {
@@ -2384,19 +2358,10 @@ impl SimdKernel {
         let wi = nee_dir(v, l, &frame);
         let d = Detail { n: lane3(&v.detail_n, l), shadowing: true };
         let refl = Rgb::new(v.num.refl[0][l], v.num.refl[1][l], v.num.refl[2][l]);
-        let (nee, bs) = Bsdf::detail_lambert(&d, refl, wo, wi, Vec2::new(v.scatter_u[1][l], v.scatter_u[2][l]));
-        let flags = LobeFlags::DIFFUSE_REFLECTION;
-        if let (Some(wi), Some((f, pdf))) = (wi, nee) {
-            put_light_value(v, l, f, pdf);
-            if let Some(view) = events.view {
-                v.class_nee[l] = view.class(events.aovs.scatter_event(v.shape[l], flags, None, wi.z * wo.z < 0.0));
-            }
+        let result = Bsdf::detail_lambert(&d, refl, wo, wi, Vec2::new(v.scatter_u[1][l], v.scatter_u[2][l]));
+        if put_scatter(events, st, v, l, LobeFlags::DIFFUSE_REFLECTION, wo, wi, result).is_none() {
+            return;
         }
-        let bs = bs.filter(|bs| bs.pdf > 0.0 && !bs.f.is_black());
-        v.num.bmoved[l] = bs.is_some();
-        st.prev_bsdf[l] = None;
-        let Some(bs) = bs else { return };
-        put_sample(events, v, l, flags, &bs);
         st.prev_bsdf[l] = Some(PrevBsdf { shape: v.shape[l], frame, wo });
         if self.emitters {
             st.prev_own[l] = Some(Bsdf { detail: Some(d), ..Bsdf::new(BsdfModel::Diffuse(Diffuse { reflectance: refl })) });
@@ -2424,21 +2389,11 @@ impl SimdKernel {
             frames[l] = Some(frame);
         }
         let out = conductor_detail_lanes(self.avx512, &input);
-        let flags = LobeFlags::GLOSSY_REFLECTION;
         for (l, (x, frame)) in input.iter().zip(frames).enumerate() {
             let (Some(x), Some(frame)) = (x, frame) else { continue };
-            let (nee, bs) = out[l];
-            if let (Some(wi), Some((f, pdf))) = (x.wi, nee) {
-                put_light_value(v, l, f, pdf);
-                if let Some(view) = events.view {
-                    v.class_nee[l] = view.class(events.aovs.scatter_event(v.shape[l], flags, None, wi.z * x.wo.z < 0.0));
-                }
+            if put_scatter(events, st, v, l, LobeFlags::GLOSSY_REFLECTION, x.wo, x.wi, out[l]).is_none() {
+                continue;
             }
-            let bs = bs.filter(|bs| bs.pdf > 0.0 && !bs.f.is_black());
-            v.num.bmoved[l] = bs.is_some();
-            st.prev_bsdf[l] = None;
-            let Some(bs) = bs else { continue };
-            put_sample(events, v, l, flags, &bs);
             st.prev_bsdf[l] = Some(PrevBsdf { shape: v.shape[l], frame, wo: x.wo });
             if self.emitters {
                 st.prev_own[l] = Some(Bsdf { detail: x.d, ..Bsdf::new(BsdfModel::RoughConductor(x.c)) });
@@ -2581,6 +2536,40 @@ fn put_light_value(v: &mut Soa, l: usize, f: Rgb, pdf: f32) {
     v.num.nee_ok[l] = !f.is_black();
     put_rgb(&mut v.num.bf, l, f);
     v.num.bpdf_nee[l] = if v.num.delta[l] { 0.0 } else { pdf };
+}
+
+/// Lane `l`'s BSDF results seen from `wo` (local): its value and density toward the light
+/// sample `wi`, where the lane has one, and its own sample, with their events (`flags`: the
+/// BSDF's lobes), into `v` for `shade8`; a transmitted sample's η² into the path's scale.
+/// The sample where it moves the path (the caller keeps the vertex for MIS); the lane's
+/// previous MIS vertex is cleared.
+#[allow(clippy::too_many_arguments)]
+#[inline(always)]
+fn put_scatter<S>(
+    events: &LaneEvents,
+    st: &mut Paths<S>,
+    v: &mut Soa,
+    l: usize,
+    flags: LobeFlags,
+    wo: Vec3,
+    wi: Option<Vec3>,
+    (nee, bs): LaneResult,
+) -> Option<BsdfSample> {
+    if let (Some(wi), Some((f, pdf))) = (wi, nee) {
+        put_light_value(v, l, f, pdf);
+        if let Some(view) = events.view {
+            v.class_nee[l] = view.class(events.aovs.scatter_event(v.shape[l], flags, None, wi.z * wo.z < 0.0));
+        }
+    }
+    let bs = bs.filter(|bs| bs.pdf > 0.0 && !bs.f.is_black());
+    v.num.bmoved[l] = bs.is_some();
+    st.prev_bsdf[l] = None;
+    let bs = bs?;
+    put_sample(events, v, l, flags, &bs);
+    if bs.lobe.contains(LobeFlags::TRANSMISSION) {
+        st.num.eta_scale[l] *= bs.eta * bs.eta;
+    }
+    Some(bs)
 }
 
 /// Lane `l`'s scalar BSDF's own sample `bs` (which moves the path), for `shade8`, and its
