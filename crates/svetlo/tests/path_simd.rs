@@ -679,21 +679,29 @@ fn detail_over_lambertian_matches_scalar() {
     ];
     let dir = std::env::temp_dir().join(format!("svetlo-simd-detail-{}", std::process::id()));
     std::fs::create_dir_all(&dir).unwrap();
-    let base = std::fs::read_to_string(repo_scene("cornell-box.xml")).unwrap();
     for (name, bsdf) in &maps {
-        let mut xml = base.replace("<!-- A rectangle", &format!("{}\n    <!-- A rectangle", bsdf.replacen("<bsdf ", r#"<bsdf id="test" "#, 1)));
-        for shape in ["back", "short-box", "tall-box"] {
-            xml = with_material(&xml, shape, "test");
-        }
-        let path = dir.join(format!("{name}.xml"));
-        std::fs::write(&path, xml).unwrap();
-        let scene = load(&path, &[], 24);
-        for sampler in [svetlo::sampling::SamplerKind::Independent, svetlo::sampling::SamplerKind::Sobol] {
-            let s = RenderSettings { sampler, spp: 4, seed: 29, max_depth: 6, rr_depth: 3, ..RenderSettings::from_scene(&scene) };
-            compare(&scene, &s, &format!("cornell-box of {name} over diffuse, {sampler:?}"));
-        }
+        compare_cornell_box_wearing(&dir, name, bsdf, "{} over diffuse");
     }
     let _ = std::fs::remove_dir_all(&dir);
+}
+
+/// A Cornell box whose back wall and boxes wear `bsdf` (a `<bsdf>` element), written to
+/// `dir`: the kernel agrees with the scalar tracer as `compare` asks (bit for bit with single
+/// rays), for both samplers. `label` goes around the name in the message (`{}` its place).
+fn compare_cornell_box_wearing(dir: &Path, name: &str, bsdf: &str, label: &str) {
+    let base = std::fs::read_to_string(repo_scene("cornell-box.xml")).unwrap();
+    let mut xml = base.replace("<!-- A rectangle", &format!("{}\n    <!-- A rectangle", bsdf.replacen("<bsdf ", r#"<bsdf id="test" "#, 1)));
+    for shape in ["back", "short-box", "tall-box"] {
+        xml = with_material(&xml, shape, "test");
+    }
+    let path = dir.join(format!("{}.xml", name.replace(' ', "_")));
+    std::fs::write(&path, xml).unwrap();
+    let scene = load(&path, &[], 24);
+    let what = label.replace("{}", name);
+    for sampler in [svetlo::sampling::SamplerKind::Independent, svetlo::sampling::SamplerKind::Sobol] {
+        let s = RenderSettings { sampler, spp: 4, seed: 29, max_depth: 6, rr_depth: 3, ..RenderSettings::from_scene(&scene) };
+        compare(&scene, &s, &format!("cornell-box of {what}, {sampler:?}"));
+    }
 }
 
 /// Rough conductors under normal and bump maps, and one of textured roughness, in the kernel
@@ -758,19 +766,8 @@ fn conductors_with_detail_or_textures_match_scalar() {
             ),
         ),
     ];
-    let base = std::fs::read_to_string(repo_scene("cornell-box.xml")).unwrap();
     for (name, bsdf) in &maps {
-        let mut xml = base.replace("<!-- A rectangle", &format!("{}\n    <!-- A rectangle", bsdf.replacen("<bsdf ", r#"<bsdf id="test" "#, 1)));
-        for shape in ["back", "short-box", "tall-box"] {
-            xml = with_material(&xml, shape, "test");
-        }
-        let path = dir.join(format!("{}.xml", name.replace(' ', "_")));
-        std::fs::write(&path, xml).unwrap();
-        let scene = load(&path, &[], 24);
-        for sampler in [svetlo::sampling::SamplerKind::Independent, svetlo::sampling::SamplerKind::Sobol] {
-            let s = RenderSettings { sampler, spp: 4, seed: 29, max_depth: 6, rr_depth: 3, ..RenderSettings::from_scene(&scene) };
-            compare(&scene, &s, &format!("cornell-box of {name}, {sampler:?}"));
-        }
+        compare_cornell_box_wearing(&dir, name, bsdf, "{}");
     }
     let _ = std::fs::remove_dir_all(&dir);
 }
@@ -819,19 +816,8 @@ fn principled_matches_scalar() {
     );
     let dir = std::env::temp_dir().join(format!("svetlo-simd-principled-{}", std::process::id()));
     std::fs::create_dir_all(&dir).unwrap();
-    let base = std::fs::read_to_string(repo_scene("cornell-box.xml")).unwrap();
     for (name, bsdf) in [("principled", &full), ("principledthin", &thin)] {
-        let mut xml = base.replace("<!-- A rectangle", &format!("{}\n    <!-- A rectangle", bsdf.replacen("<bsdf ", r#"<bsdf id="test" "#, 1)));
-        for shape in ["back", "short-box", "tall-box"] {
-            xml = with_material(&xml, shape, "test");
-        }
-        let path = dir.join(format!("{name}.xml"));
-        std::fs::write(&path, xml).unwrap();
-        let scene = load(&path, &[], 24);
-        for sampler in [svetlo::sampling::SamplerKind::Independent, svetlo::sampling::SamplerKind::Sobol] {
-            let s = RenderSettings { sampler, spp: 4, seed: 29, max_depth: 6, rr_depth: 3, ..RenderSettings::from_scene(&scene) };
-            compare(&scene, &s, &format!("cornell-box of textured {name}, {sampler:?}"));
-        }
+        compare_cornell_box_wearing(&dir, name, bsdf, "textured {}");
     }
     let _ = std::fs::remove_dir_all(&dir);
 }
