@@ -648,17 +648,7 @@ fn detail_over_lambertian_matches_scalar() {
     let spheres = root.join("mitsuba-data/tests/scenes/bsdf_spheres");
     for name in ["bumpmap", "normalmap"] {
         let scene = load(&spheres.join(format!("test_{name}_path.xml")), &[], 24);
-        let s = RenderSettings { spp: 3, seed: 5, ..RenderSettings::from_scene(&scene) };
-        assert!(SimdKernel::new(&scene, &s).is_some(), "{name}: the scene should qualify for the kernel");
-        if !avx2() {
-            continue;
-        }
-        let want = render(&scene, "path:simd=false", &s);
-        assert!(want.mean().max_component() > 0.0, "{name}: lit");
-        for threads in [1, 2] {
-            let t = RenderSettings { threads, ..s.clone() };
-            assert!(render(&scene, "path", &t).data == want.data, "{name}, {threads} threads: not the scalar tracer's image");
-        }
+        kernel_renders_scalar_image(&scene, name);
     }
     let tiles = root.join("mitsuba-data/common/textures/floor_tiles_bumpmap.png");
     let diffuse = r#"<bsdf type="diffuse"><rgb name="reflectance" value="0.3, 0.5, 0.7"/></bsdf>"#;
@@ -683,6 +673,22 @@ fn detail_over_lambertian_matches_scalar() {
         compare_cornell_box_wearing(&dir, name, bsdf, "{} over diffuse");
     }
     let _ = std::fs::remove_dir_all(&dir);
+}
+
+/// `scene` (3 spp, seed 5) qualifies for the kernel, and where it runs (AVX2) its image is the
+/// scalar tracer's bit for bit on 1 and 2 threads.
+fn kernel_renders_scalar_image(scene: &Scene, name: &str) {
+    let s = RenderSettings { spp: 3, seed: 5, ..RenderSettings::from_scene(scene) };
+    assert!(SimdKernel::new(scene, &s).is_some(), "{name}: the scene should qualify for the kernel");
+    if !avx2() {
+        return;
+    }
+    let want = render(scene, "path:simd=false", &s);
+    assert!(want.mean().max_component() > 0.0, "{name}: lit");
+    for threads in [1, 2] {
+        let t = RenderSettings { threads, ..s.clone() };
+        assert!(render(scene, "path", &t).data == want.data, "{name}, {threads} threads: not the scalar tracer's image");
+    }
 }
 
 /// A Cornell box whose back wall and boxes wear `bsdf` (a `<bsdf>` element), written to
@@ -731,17 +737,7 @@ fn conductors_with_detail_or_textures_match_scalar() {
     for path in paths {
         let name = path.display().to_string();
         let scene = load(&path, &[], 24);
-        let s = RenderSettings { spp: 3, seed: 5, ..RenderSettings::from_scene(&scene) };
-        assert!(SimdKernel::new(&scene, &s).is_some(), "{name}: the scene should qualify for the kernel");
-        if !avx2() {
-            continue;
-        }
-        let want = render(&scene, "path:simd=false", &s);
-        assert!(want.mean().max_component() > 0.0, "{name}: lit");
-        for threads in [1, 2] {
-            let t = RenderSettings { threads, ..s.clone() };
-            assert!(render(&scene, "path", &t).data == want.data, "{name}, {threads} threads: not the scalar tracer's image");
-        }
+        kernel_renders_scalar_image(&scene, &name);
     }
     let tiles = root.join("mitsuba-data/common/textures/floor_tiles_bumpmap.png");
     let conductor = |d: &str| {
@@ -784,17 +780,7 @@ fn principled_matches_scalar() {
     let spheres = root.join("mitsuba-data/tests/scenes/bsdf_spheres");
     for name in ["texturedprincipled1", "texturedprincipled2", "texturedprincipledthin"] {
         let scene = load(&spheres.join(format!("test_{name}_path.xml")), &[], 24);
-        let s = RenderSettings { spp: 3, seed: 5, ..RenderSettings::from_scene(&scene) };
-        assert!(SimdKernel::new(&scene, &s).is_some(), "{name}: the scene should qualify for the kernel");
-        if !avx2() {
-            continue;
-        }
-        let want = render(&scene, "path:simd=false", &s);
-        assert!(want.mean().max_component() > 0.0, "{name}: lit");
-        for threads in [1, 2] {
-            let t = RenderSettings { threads, ..s.clone() };
-            assert!(render(&scene, "path", &t).data == want.data, "{name}, {threads} threads: not the scalar tracer's image");
-        }
+        kernel_renders_scalar_image(&scene, name);
     }
     let checker = |name: &str, a: f32, b: f32| {
         format!(
