@@ -454,7 +454,14 @@ impl Bsdf {
     fn sample_detail(&self, d: &detail::Detail, wo: Vec3, uc: f32, u: Vec2, mode: TransportMode) -> Option<BsdfSample> {
         let f = d.frame(wo);
         let pwo = f.to_local(wo);
-        let mut s = self.sample_local(pwo, uc, u, mode)?;
+        let s = self.sample_local(pwo, uc, u, mode)?;
+        Self::detail_sample_out(d, mode, &f, (wo, pwo), s)
+    }
+
+    /// A sample `s` drawn in the perturbed frame `f` of detail `d` (from `pwo`, which is `wo`
+    /// there), turned back to the shading frame and weighted by the detail's factor.
+    #[inline(always)]
+    fn detail_sample_out(d: &detail::Detail, mode: TransportMode, f: &Frame, (wo, pwo): (Vec3, Vec3), mut s: BsdfSample) -> Option<BsdfSample> {
         let pwi = s.wi;
         s.wi = f.to_world(pwi);
         s.f *= Self::detail_factor(d, mode, (wo, s.wi), (pwo, pwi))?;
@@ -472,6 +479,7 @@ impl Bsdf {
         let pwo = f.to_local(wo);
         // `lambertian_front`'s test; the back of a one-sided model is black.
         let front = pwo.z >= 0.0;
+        // The model evaluated only where the detail lets light through.
         let nee = wi.map(|wi| {
             let pwi = f.to_local(wi);
             match Self::detail_factor(d, mode, (wo, wi), (pwo, pwi)) {
@@ -483,13 +491,7 @@ impl Bsdf {
             }
         });
         let s = if front { m.sample(pwo, 0.0, u, mode) } else { None };
-        let s = s.and_then(|mut s| {
-            let pwi = s.wi;
-            s.wi = f.to_world(pwi);
-            s.f *= Self::detail_factor(d, mode, (wo, s.wi), (pwo, pwi))?;
-            Some(s)
-        });
-        (nee, s)
+        (nee, s.and_then(|s| Self::detail_sample_out(d, mode, &f, (wo, pwo), s)))
     }
 
     /// [`Self::eval_pdf_and_sample`] (radiance) of an opaque one-sided BSDF under surface
@@ -512,13 +514,7 @@ impl Bsdf {
             Some(k) => (nee.0 * k, nee.1),
             None => (Rgb::BLACK, 0.0),
         });
-        let s = s.and_then(|mut s| {
-            let pwi = s.wi;
-            s.wi = f.to_world(pwi);
-            s.f *= Self::detail_factor(d, mode, (wo, s.wi), (pwo, pwi))?;
-            Some(s)
-        });
-        (nee, s)
+        (nee, s.and_then(|s| Self::detail_sample_out(d, mode, f, (wo, pwo), s)))
     }
 
     /// The Lambertian front seen from the front (`side`'s answer there), without the dispatch

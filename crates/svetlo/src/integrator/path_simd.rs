@@ -1920,6 +1920,19 @@ impl SimdKernel {
         }
     }
 
+    /// Lane `l`'s vertex of a BSDF of lobes `flags` at `p`: its light sample where a lobe is not
+    /// specular (`light_sample`), else none.
+    #[allow(clippy::too_many_arguments)]
+    #[inline(always)]
+    fn scalar_vertex_light(&self, scene: &Scene, l: usize, v: &mut Soa, p: Vec3, flags: LobeFlags, u_light: f32, u_l2: Vec2) {
+        if flags.has_non_specular() {
+            self.light_sample(scene, l, v, p, u_light, u_l2);
+        } else {
+            v.num.nee_ok[l] = false;
+        }
+        v.flags[l] = flags;
+    }
+
     /// Lane `l`'s light sample from `p` (as `path::light_sample_unshadowed` up to the BSDF): the light
     /// chosen by `u_light`, its point by `u_l2`; `nee_ok` where it counts so far.
     #[inline(always)]
@@ -2260,12 +2273,7 @@ impl SimdKernel {
             }
             None => sh.uniform_flags,
         };
-        if flags.has_non_specular() {
-            self.light_sample(scene, l, v, p, u_light, u_l2);
-        } else {
-            v.num.nee_ok[l] = false;
-        }
-        v.flags[l] = flags;
+        self.scalar_vertex_light(scene, l, v, p, flags, u_light, u_l2);
     }
 
     /// The rest of lane `l`'s vertex of a scalar BSDF (`scalar_light_sample` took the light
@@ -2309,12 +2317,7 @@ impl SimdKernel {
             v.princ.resize(LANES, None);
         }
         v.princ[l] = Some(m);
-        if flags.has_non_specular() {
-            self.light_sample(scene, l, v, tp.p, u_light, u_l2);
-        } else {
-            v.num.nee_ok[l] = false;
-        }
-        v.flags[l] = flags;
+        self.scalar_vertex_light(scene, l, v, tp.p, flags, u_light, u_l2);
     }
 
     /// [`Self::scalar_scatter`] of a lane of a principled shape, by its model in `v.princ`
