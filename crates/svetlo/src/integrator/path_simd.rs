@@ -315,6 +315,22 @@ enum DetailMap {
     Bump { height: Texture, scale: f32 },
 }
 
+impl DetailMap {
+    /// Whether its lookups land anywhere in a bitmap too large to stay cached (see
+    /// [`PREFETCH_TEXELS_MIN`]).
+    fn large_bitmap(&self) -> bool {
+        let (DetailMap::Normal(t) | DetailMap::Bump { height: t, .. }) = self;
+        matches!(t, Texture::Bitmap { image, .. } if image.width * image.height >= PREFETCH_TEXELS_MIN)
+    }
+
+    /// Asks for the texels a lookup at `uv` will read (a hint: changes no value).
+    #[inline(always)]
+    fn prefetch(&self, uv: Vec2) {
+        let (DetailMap::Normal(t) | DetailMap::Bump { height: t, .. }) = self;
+        t.prefetch(uv);
+    }
+}
+
 /// The perturbed normal (unnormalised, in the shading frame `frame`) of `map` at `tp` on
 /// `shape`, as `Material::bsdf_with_detail` finds it.
 #[inline(always)]
@@ -326,6 +342,12 @@ fn detail_normal(scene: &Scene, map: &DetailMap, shape: u32, tp: TexPoint, frame
             bump_map_normal(height.eval_f32_grad(tp) * *scale, frame, ng, dpdu, dpdv)
         }
     }
+}
+
+/// The normal or bump map of a shape's detail route (`ShapeData::detail`) or conductor route
+/// (`ShapeData::conductor`), if any.
+fn map_of<'a>(detail: &'a Option<DetailMap>, conductor: &'a Option<KernelConductor>) -> Option<&'a DetailMap> {
+    detail.as_ref().or_else(|| conductor.as_ref().and_then(|c| c.map.as_ref()))
 }
 
 /// The detail map and Lambertian reflectance of a normal or bump map over a one-sided
@@ -990,7 +1012,12 @@ impl SimdKernel {
             let uniform = (scalar_bsdf && !s.detail && conductor.is_none() && mat.is_uniform()).then(|| mat.bsdf(TexPoint::default()));
             let uniform_flags = uniform.as_ref().map_or(LobeFlags::NONE, Bsdf::flags);
             let reads_uv = textured || matches!(light, Some((_, None))) || (scalar_bsdf && uniform.is_none());
-            let prefetch_texels = !scalar_bsdf && (front.large_bitmap() || back.as_ref().is_some_and(Albedo::large_bitmap));
+            let prefetch_texels = if scalar_bsdf {
+                // A normal or bump map's texels (its lanes' `gather` reads them).
+                map_of(&detail, &conductor).is_some_and(DetailMap::large_bitmap)
+            } else {
+                front.large_bitmap() || back.as_ref().is_some_and(Albedo::large_bitmap)
+            };
             let principled = scalar_bsdf && !s.detail && uniform.is_none() && matches!(mat, Material::Principled(_));
             shapes.push(ShapeData {
                 scalar_bsdf,
@@ -1857,7 +1884,7 @@ impl SimdKernel {
         } else if let Some(map) = &sh.detail {
             // A detail over a Lambertian: its perturbed normal and reflectance, as
             // `Scene::bsdf` builds them, for `detail_scatter`.
-            let tp = self.tex_point(scene, &hit, b1, b2, p, ng);
+            let tp = self.tex_point_ahead(scene, sh, v, l, &hit, b1, b2, p, ng);
             put(&mut v.detail_n, Detail::new(detail_normal(scene, map, shape, tp, &frame, ng), true).n);
             putc(&mut v.num.refl, sh.front.at(&tp));
             v.flags[l] = LobeFlags::DIFFUSE_REFLECTION;
@@ -1867,7 +1894,7 @@ impl SimdKernel {
         } else if let Some(c) = &sh.conductor {
             // A rough conductor under a map or of textured parameters: the conductor and the
             // perturbed normal, as `Scene::bsdf` builds them, for `conductor_scatter`.
-            let tp = self.tex_point(scene, &hit, b1, b2, p, ng);
+            let tp = self.tex_point_ahead(scene, sh, v, l, &hit, b1, b2, p, ng);
             if let Some(map) = &c.map {
                 put(&mut v.detail_n, Detail::new(detail_normal(scene, map, shape, tp, &frame, ng), true).n);
                 v.cond_detail |= 1 << l;
@@ -1917,6 +1944,18 @@ impl SimdKernel {
         match hit {
             Hit::Tri(tri) => TexPoint { uv: self.uv(scene, tri, b1, b2), prim: tri.local, bary: Vec2::new(b1, b2), p, n: ng },
             Hit::Other(si) => si.tex_point(),
+        }
+    }
+
+    /// As [`Self::tex_point`], taking the uv `prefetch_texels` computed for lane `l` where it
+    /// did (the same value) for a shape of `sh`.
+    #[allow(clippy::too_many_arguments)]
+    #[inline(always)]
+    fn tex_point_ahead(&self, scene: &Scene, sh: &ShapeData, v: &Soa, l: usize, hit: &Hit, b1: f32, b2: f32, p: Vec3, ng: Vec3) -> TexPoint {
+        match hit {
+            // (With `prefetch_texels` every triangle hit is an unpacked one, whose uv it took.)
+            Hit::Tri(tri) if sh.prefetch_texels && self.prefetch_texels => TexPoint { uv: v.uv_ahead[l], prim: tri.local, bary: Vec2::new(b1, b2), p, n: ng },
+            _ => self.tex_point(scene, hit, b1, b2, p, ng),
         }
     }
 
@@ -2115,9 +2154,14 @@ impl SimdKernel {
             }
             let sh = &self.shapes[si as usize];
             let Geometry::Mesh(m) = &*scene.shapes[si as usize].geometry else { continue };
+            let map = map_of(&sh.detail, &sh.conductor);
             for l in lanes_of(on as u32) {
                 let uv = m.uv((hits.prim[l] - first) as usize, hits.b1[l], hits.b2[l]);
                 uv_ahead[l] = uv;
+                if let Some(map) = map {
+                    map.prefetch(uv);
+                    continue;
+                }
                 sh.front.prefetch(uv);
                 if let Some(b) = &sh.back {
                     b.prefetch(uv);
