@@ -13,8 +13,14 @@ use glam::Vec3;
 /// internal reflection), and the relative IORs transmitted/incident and incident/transmitted.
 #[inline]
 pub fn dielectric(cos_i: f32, eta: f32) -> (f32, f32, f32, f32) {
+    dielectric_given_inverse(cos_i, eta, 1.0 / eta)
+}
+
+/// [`dielectric`] given `inv_eta` = 1 / eta (computed once for several calls): the same bits.
+#[inline(always)]
+pub(crate) fn dielectric_given_inverse(cos_i: f32, eta: f32, inv_eta: f32) -> (f32, f32, f32, f32) {
     let outside = cos_i >= 0.0;
-    let eta_it = if outside { eta } else { 1.0 / eta };
+    let eta_it = if outside { eta } else { inv_eta };
     let eta_ti = 1.0 / eta_it;
     if eta == 1.0 {
         return (0.0, -cos_i, 1.0, 1.0);

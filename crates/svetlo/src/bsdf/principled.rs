@@ -391,22 +391,7 @@ impl Principled {
     /// `fresnel::dielectric(cos_i, self.eta)` given 1 / eta: the same bits.
     #[inline(always)]
     fn dielectric(&self, cos_i: f32, t: &WoTerms) -> (f32, f32, f32, f32) {
-        let eta = self.eta;
-        let outside = cos_i >= 0.0;
-        let (eta_it, eta_ti) = if outside { (eta, t.inv_eta) } else { (t.inv_eta, 1.0 / t.inv_eta) };
-        if eta == 1.0 {
-            return (0.0, -cos_i, 1.0, 1.0);
-        }
-        let ci = cos_i.abs().min(1.0);
-        let cos_t2 = 1.0 - eta_ti * eta_ti * (1.0 - ci * ci);
-        if cos_t2 <= 0.0 {
-            return (1.0, 0.0, eta_it, eta_ti);
-        }
-        let ct = cos_t2.sqrt();
-        let rs = (ci - eta_it * ct) / (ci + eta_it * ct);
-        let rp = (eta_it * ci - ct) / (eta_it * ci + ct);
-        let f = 0.5 * (rs * rs + rp * rp);
-        (f, if outside { -ct } else { ct }, eta_it, eta_ti)
+        fresnel::dielectric_given_inverse(cos_i, self.eta, t.inv_eta)
     }
 
     /// [`Self::lobes`] on the front at `f_dielectric`, derived where they do not depend on it.
