@@ -8,6 +8,7 @@ pub mod coated;
 pub mod conductor;
 pub mod cook_torrance;
 pub mod detail;
+pub(crate) mod detail_lanes;
 pub mod dielectric;
 pub mod diffuse;
 pub mod diffuse_transmission;
@@ -470,8 +471,9 @@ impl Bsdf {
 
     /// [`Self::eval_pdf_and_sample`] (radiance) of an opaque one-sided Lambertian of
     /// reflectance `refl` under surface detail `d`, the same bits with the perturbed frame
-    /// made once, not three times, and no `Bsdf` built (the path kernel's detail lanes).
-    #[inline]
+    /// made once, not three times, and no `Bsdf` built: the scalar reference of the path
+    /// kernel's `detail_lanes::detail_lambert_lanes`, which tests check against it.
+    #[cfg(test)]
     pub(crate) fn detail_lambert(d: &detail::Detail, refl: Rgb, wo: Vec3, wi: Option<Vec3>, u: Vec2) -> (Option<(Rgb, f32)>, Option<BsdfSample>) {
         let mode = TransportMode::Radiance;
         let m = diffuse::Diffuse { reflectance: refl };

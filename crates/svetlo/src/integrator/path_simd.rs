@@ -77,6 +77,7 @@ use crate::accel::packet::{Hits8, PacketBvh, PacketSpheres, Rays8, LANES};
 use crate::accel::HitRecords;
 use crate::bsdf::conductor::{rough_conductor_ggx_lanes, rough_conductor_lanes, RoughConductor, RoughConductorLanes};
 use crate::bsdf::detail::{bump_map_normal, normal_map_normal, Detail};
+use crate::bsdf::detail_lanes::{detail_lambert_lanes, DetailLambertLanes};
 use crate::bsdf::dielectric::{rough_dielectric_lanes, RoughDielectric, RoughDielectricLanes};
 use crate::bsdf::diffuse::Diffuse;
 use crate::bsdf::lane_samples::LaneSamples;
@@ -1643,14 +1644,8 @@ impl SimdKernel {
             lanes &= lanes - 1;
             self.principled_scatter(events, st, l, v);
         }
-        let mut lanes = v.detail_lanes;
-        if lanes != 0 {
-            v.detail_lanes = 0;
-        }
-        while lanes != 0 {
-            let l = lanes.trailing_zeros() as usize;
-            lanes &= lanes - 1;
-            self.detail_scatter(events, st, l, v);
+        if v.detail_lanes != 0 {
+            self.detail_scatter(events, st, v);
         }
         // (`v.cond_lanes` were taken by `conductor_scatter` across the packets.)
         // Writes every lane's next ray, shadow ray and state; only `go` lanes' count.
@@ -2402,24 +2397,42 @@ impl SimdKernel {
         }
     }
 
-    /// [`Self::scalar_scatter`] of a lane of a detail over a Lambertian (`ShapeData::detail`:
-    /// its perturbed normal in `v.detail_n`, its reflectance in `v.num.refl`), by
-    /// `Bsdf::detail_lambert`: the bits of its `Bsdf`, which is built only where a path may
-    /// meet an emitting shape (for the MIS weight there).
+    /// [`Self::scalar_scatter`] of the lanes of a detail over a Lambertian
+    /// (`ShapeData::detail`: the perturbed normals in `v.detail_n`, the reflectances in
+    /// `v.num.refl`), all at once by `detail_lambert_lanes` (the bits of
+    /// `Bsdf::detail_lambert`), the `Bsdf` built only where a path may meet an emitting shape
+    /// (for the MIS weight there).
     #[inline(never)]
-    fn detail_scatter<S>(&self, events: &LaneEvents, st: &mut Paths<S>, l: usize, v: &mut Soa) {
-        let frame = v.num.frame(l);
-        let wo = frame.to_local(lane3(&v.num.wo, l));
-        let wi = nee_dir(v, l, &frame);
-        let d = Detail { n: lane3(&v.detail_n, l), shadowing: true };
-        let refl = Rgb::new(v.num.refl[0][l], v.num.refl[1][l], v.num.refl[2][l]);
-        let result = Bsdf::detail_lambert(&d, refl, wo, wi, Vec2::new(v.scatter_u[1][l], v.scatter_u[2][l]));
-        if put_scatter(events, st, v, l, LobeFlags::DIFFUSE_REFLECTION, wo, wi, result).is_none() {
-            return;
+    fn detail_scatter<S>(&self, events: &LaneEvents, st: &mut Paths<S>, v: &mut Soa) {
+        let lanes = std::mem::take(&mut v.detail_lanes);
+        let mut q = DetailLambertLanes::<LANES>::default();
+        let mut frames = [Frame { s: Vec3::X, t: Vec3::Y, n: Vec3::Z }; LANES];
+        for l in lanes_of(lanes.into()) {
+            let frame = v.num.frame(l);
+            let wo = frame.to_local(lane3(&v.num.wo, l));
+            let wi = nee_dir(v, l, &frame);
+            for c in 0..3 {
+                q.wo[c][l] = wo[c];
+                q.wi[c][l] = wi.unwrap_or(Vec3::ZERO)[c];
+            }
+            q.lit[l] = wi.is_some();
+            frames[l] = frame;
         }
-        st.prev_bsdf[l] = Some(PrevBsdf { shape: v.shape[l], frame, wo });
-        if self.emitters {
-            st.prev_own[l] = Some(Bsdf { detail: Some(d), ..Bsdf::new(BsdfModel::Diffuse(Diffuse { reflectance: refl })) });
+        (q.n, q.refl, q.u) = (v.detail_n, v.num.refl, [v.scatter_u[1], v.scatter_u[2]]);
+        let out = detail_lanes_on_cpu(self.avx512, &q);
+        for l in lanes_of(lanes.into()) {
+            let wo = Vec3::new(q.wo[0][l], q.wo[1][l], q.wo[2][l]);
+            let wi = q.lit[l].then(|| Vec3::new(q.wi[0][l], q.wi[1][l], q.wi[2][l]));
+            let result = out.lane(l, q.lit[l], LobeFlags::DIFFUSE_REFLECTION);
+            if put_scatter(events, st, v, l, LobeFlags::DIFFUSE_REFLECTION, wo, wi, result).is_none() {
+                continue;
+            }
+            st.prev_bsdf[l] = Some(PrevBsdf { shape: v.shape[l], frame: frames[l], wo });
+            if self.emitters {
+                let d = Detail { n: lane3(&v.detail_n, l), shadowing: true };
+                let refl = Rgb::new(v.num.refl[0][l], v.num.refl[1][l], v.num.refl[2][l]);
+                st.prev_own[l] = Some(Bsdf { detail: Some(d), ..Bsdf::new(BsdfModel::Diffuse(Diffuse { reflectance: refl })) });
+            }
         }
     }
 
@@ -3586,6 +3599,46 @@ vector_step_copies!(rough_plastic_lanes(RoughPlasticLanes<LANES>) -> LaneSamples
 vector_step_copies!(rough_conductor_ggx_lanes(RoughConductorLanes<LANES>) -> LaneSamples<LANES>, conductor_ggx8_avx2, conductor_ggx8_avx512);
 vector_step_copies!(rough_plastic_ggx_lanes(RoughPlasticLanes<LANES>) -> LaneSamples<LANES>, plastic_ggx8_avx2, plastic_ggx8_avx512);
 vector_step_copies!(rough_dielectric_lanes(RoughDielectricLanes<LANES>) -> LaneSamples<LANES>, dielectric8_avx2, dielectric8_avx512);
+
+/// `detail_lambert_lanes` of the kernel's eight lanes compiled for AVX2.
+///
+/// # Safety
+/// The CPU must support AVX2 and FMA.
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx2,fma")]
+#[inline(never)]
+unsafe fn detail8_avx2(q: &DetailLambertLanes<LANES>) -> LaneSamples<LANES> {
+    detail_lambert_lanes(q)
+}
+
+/// `detail_lambert_lanes` compiled for AVX-512VL.
+///
+/// # Safety
+/// The CPU must support AVX2, FMA, AVX-512F and AVX-512VL.
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx2,fma,avx512f,avx512vl")]
+#[inline(never)]
+unsafe fn detail8_avx512(q: &DetailLambertLanes<LANES>) -> LaneSamples<LANES> {
+    detail_lambert_lanes(q)
+}
+
+/// `detail_lambert_lanes` by this CPU's build, as [`LaneStep::run`] picks one.
+#[inline(always)]
+fn detail_lanes_on_cpu(avx512: bool, q: &DetailLambertLanes<LANES>) -> LaneSamples<LANES> {
+    #[cfg(target_arch = "x86_64")]
+    if crate::cpu::avx2() && crate::cpu::fma() {
+        // SAFETY: `avx2()` and `fma()` detect AVX2 and FMA at run time, and the kernel's
+        // `avx512` is set only where AVX-512F and VL were.
+        return unsafe {
+            if avx512 {
+                detail8_avx512(q)
+            } else {
+                detail8_avx2(q)
+            }
+        };
+    }
+    detail_lambert_lanes(q)
+}
 
 /// A sampler of the kernel's lanes: one vertex's numbers for all of them at once, in the
 /// scalar tracer's order per vertex (light choice, light point, BSDF lobe, BSDF direction,
