@@ -2761,20 +2761,14 @@ trait LaneStep {
     /// FMA, else the portable code.
     #[inline(always)]
     fn run(avx512: bool, q: &Self::Group, used: usize) -> LaneSamples<LANES> {
-        #[cfg(target_arch = "x86_64")]
-        if crate::cpu::avx2() && crate::cpu::fma() {
-            let (avx2_copy, avx512_copy) = Self::COPIES;
-            // SAFETY: `avx2()` and `fma()` detect AVX2 and FMA at run time, and the kernel's
-            // `avx512` is set only where AVX-512F and VL were.
-            return unsafe {
-                if avx512 {
-                    avx512_copy(q, used)
-                } else {
-                    avx2_copy(q, used)
-                }
-            };
-        }
-        Self::PORTABLE(q, used)
+        run_vector_step(
+            avx512,
+            Self::PORTABLE,
+            #[cfg(target_arch = "x86_64")]
+            Self::COPIES,
+            q,
+            used,
+        )
     }
     /// The model's lobe besides the glossy reflection (the conductor has none: its own).
     const OTHER_LOBE: LobeFlags;
@@ -2789,6 +2783,33 @@ trait LaneStep {
 /// instruction set, so calling one is unsafe.
 #[cfg(target_arch = "x86_64")]
 type Copies<Q, O> = (unsafe fn(&Q, usize) -> O, unsafe fn(&Q, usize) -> O);
+
+/// The first `used` lanes' results of a vector step by this CPU's build: its AVX-512 copy
+/// where the kernel runs AVX-512 (`avx512`), its AVX2 copy where the CPU has AVX2 and FMA,
+/// else its portable code.
+#[inline(always)]
+fn run_vector_step<Q>(
+    avx512: bool,
+    portable: fn(&Q, usize) -> LaneSamples<LANES>,
+    #[cfg(target_arch = "x86_64")] copies: Copies<Q, LaneSamples<LANES>>,
+    q: &Q,
+    used: usize,
+) -> LaneSamples<LANES> {
+    #[cfg(target_arch = "x86_64")]
+    if crate::cpu::avx2() && crate::cpu::fma() {
+        let (avx2_copy, avx512_copy) = copies;
+        // SAFETY: `avx2()` and `fma()` detect AVX2 and FMA at run time, and the kernel's
+        // `avx512` is set only where AVX-512F and VL were.
+        return unsafe {
+            if avx512 {
+                avx512_copy(q, used)
+            } else {
+                avx2_copy(q, used)
+            }
+        };
+    }
+    portable(q, used)
+}
 
 /// Beckmann rough conductors (`conductor8`).
 struct RoughConductorStep;
@@ -3600,44 +3621,25 @@ vector_step_copies!(rough_conductor_ggx_lanes(RoughConductorLanes<LANES>) -> Lan
 vector_step_copies!(rough_plastic_ggx_lanes(RoughPlasticLanes<LANES>) -> LaneSamples<LANES>, plastic_ggx8_avx2, plastic_ggx8_avx512);
 vector_step_copies!(rough_dielectric_lanes(RoughDielectricLanes<LANES>) -> LaneSamples<LANES>, dielectric8_avx2, dielectric8_avx512);
 
-/// `detail_lambert_lanes` of the kernel's eight lanes compiled for AVX2.
-///
-/// # Safety
-/// The CPU must support AVX2 and FMA.
-#[cfg(target_arch = "x86_64")]
-#[target_feature(enable = "avx2,fma")]
-#[inline(never)]
-unsafe fn detail8_avx2(q: &DetailLambertLanes<LANES>) -> LaneSamples<LANES> {
+/// [`detail_lambert_lanes`] as a vector step (all eight lanes computed, `used` or not).
+#[inline(always)]
+fn detail_step(q: &DetailLambertLanes<LANES>, _used: usize) -> LaneSamples<LANES> {
     detail_lambert_lanes(q)
 }
 
-/// `detail_lambert_lanes` compiled for AVX-512VL.
-///
-/// # Safety
-/// The CPU must support AVX2, FMA, AVX-512F and AVX-512VL.
-#[cfg(target_arch = "x86_64")]
-#[target_feature(enable = "avx2,fma,avx512f,avx512vl")]
-#[inline(never)]
-unsafe fn detail8_avx512(q: &DetailLambertLanes<LANES>) -> LaneSamples<LANES> {
-    detail_lambert_lanes(q)
-}
+vector_step_copies!(detail_step(DetailLambertLanes<LANES>) -> LaneSamples<LANES>, detail8_avx2, detail8_avx512);
 
-/// `detail_lambert_lanes` by this CPU's build, as [`LaneStep::run`] picks one.
+/// [`detail_step`] by this CPU's build.
 #[inline(always)]
 fn detail_lanes_on_cpu(avx512: bool, q: &DetailLambertLanes<LANES>) -> LaneSamples<LANES> {
-    #[cfg(target_arch = "x86_64")]
-    if crate::cpu::avx2() && crate::cpu::fma() {
-        // SAFETY: `avx2()` and `fma()` detect AVX2 and FMA at run time, and the kernel's
-        // `avx512` is set only where AVX-512F and VL were.
-        return unsafe {
-            if avx512 {
-                detail8_avx512(q)
-            } else {
-                detail8_avx2(q)
-            }
-        };
-    }
-    detail_lambert_lanes(q)
+    run_vector_step(
+        avx512,
+        detail_step,
+        #[cfg(target_arch = "x86_64")]
+        (detail8_avx2, detail8_avx512),
+        q,
+        LANES,
+    )
 }
 
 /// A sampler of the kernel's lanes: one vertex's numbers for all of them at once, in the
@@ -4088,6 +4090,22 @@ mod tests {
         assert!(differ_from_start > 1000, "the walk steps states");
     }
 
+    /// A lane's results as bits, to compare.
+    #[allow(clippy::type_complexity)]
+    fn lane_result_bits((nee, s): LaneResult) -> (Option<([u32; 3], u32)>, Option<([u32; 3], [u32; 3], u32, LobeFlags, u32)>) {
+        let rgb = |c: Rgb| [c.r, c.g, c.b].map(f32::to_bits);
+        (nee.map(|(c, p)| (rgb(c), p.to_bits())), s.map(|s| (s.wi.to_array().map(f32::to_bits), rgb(s.f), s.pdf.to_bits(), s.lobe, s.eta.to_bits())))
+    }
+
+    /// The `avx512` arguments of `conductor_detail_lanes` this CPU can run.
+    fn conductor_builds() -> Vec<bool> {
+        let mut builds = vec![false];
+        if crate::cpu::avx512() {
+            builds.push(true);
+        }
+        builds
+    }
+
     /// `conductor_detail_lanes` (rough conductors under normal or bump maps, or none; GGX and
     /// Beckmann lanes mixed; every build) gives the bits of the conductor's `Bsdf` with that
     /// detail, lane by lane. Enough lit lanes see the shadowing term below 1 and enough the
@@ -4098,14 +4116,7 @@ mod tests {
         use crate::bsdf::microfacet::Microfacet;
         let mut rng = Pcg32::new(7, 19);
         let mut f = |lo: f32, hi: f32| lo + (hi - lo) * rng.next_f32();
-        let bits = |(nee, s): LaneResult| {
-            let rgb = |c: Rgb| [c.r, c.g, c.b].map(f32::to_bits);
-            (nee.map(|(c, p)| (rgb(c), p.to_bits())), s.map(|s| (s.wi.to_array().map(f32::to_bits), rgb(s.f), s.pdf.to_bits(), s.lobe, s.eta.to_bits())))
-        };
-        let mut builds = vec![false];
-        if crate::cpu::avx512() {
-            builds.push(true);
-        }
+        let (bits, builds) = (lane_result_bits, conductor_builds());
         let (mut shadowed, mut mirrored, mut lit, mut sampled) = (0, 0, 0, 0);
         for batch in 0..6000usize {
             let mut lanes = [None; LANES];
@@ -4168,14 +4179,7 @@ mod tests {
         use crate::bsdf::microfacet::Microfacet;
         let mut rng = Pcg32::new(11, 5);
         let mut f = |lo: f32, hi: f32| lo + (hi - lo) * rng.next_f32();
-        let bits = |(nee, s): LaneResult| {
-            let rgb = |c: Rgb| [c.r, c.g, c.b].map(f32::to_bits);
-            (nee.map(|(c, p)| (rgb(c), p.to_bits())), s.map(|s| (s.wi.to_array().map(f32::to_bits), rgb(s.f), s.pdf.to_bits(), s.lobe, s.eta.to_bits())))
-        };
-        let mut builds = vec![false];
-        if crate::cpu::avx512() {
-            builds.push(true);
-        }
+        let (bits, builds) = (lane_result_bits, conductor_builds());
         let dir = |z: f32, phi: f32| {
             let r = (1.0 - z * z).max(0.0).sqrt();
             Vec3::new(r * phi.cos(), r * phi.sin(), z)
