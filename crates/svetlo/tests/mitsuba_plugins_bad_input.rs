@@ -239,3 +239,35 @@ fn sdfgrid_sphere_matches_the_analytic_sphere() {
     assert!(both > 1000, "{both} pixels hit");
     assert!(disagree < 40, "{disagree} silhouette pixels disagree");
 }
+
+/// Bitmap normal maps: a float one with no direction (every texel 0.5) or a texel outside
+/// [0, 1] is refused with its line, as the constant ones above; an 8-bit one (its values
+/// checked through its code table, not a decoded copy) loads.
+#[test]
+fn bitmap_normal_maps() {
+    use svetlo::spectrum::Rgb;
+    let dir = std::env::temp_dir().join(format!("svetlo-normalmap-bitmaps-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    let write = |name: &str, texels: Vec<Rgb>| {
+        let path = dir.join(name);
+        svetlo::io::image_io::write_exr(&path, &svetlo::film::Image::new(4, 2, texels)).unwrap();
+        path
+    };
+    let bitmap = |path: &Path| {
+        format!(r#"<texture type="bitmap" name="normalmap"><boolean name="raw" value="true"/><string name="filename" value="{}"/></texture>"#, path.display())
+    };
+    let flat = write("flat.exr", vec![Rgb::splat(0.5); 8]);
+    let e = error_of(&format!("<bsdf type=\"normalmap\" id=\"a\">\n{}{DIFFUSE}</bsdf>{USE}", bitmap(&flat)));
+    assert!(e.contains("bad.xml:4") && e.contains("no direction"), "{e}");
+    let mut texels = vec![Rgb::new(0.5, 0.5, 1.0); 8];
+    texels[5] = Rgb::new(0.5, 1.5, 1.0);
+    let big = write("big.exr", texels);
+    let e = error_of(&format!("<bsdf type=\"normalmap\" id=\"a\">\n{}{DIFFUSE}</bsdf>{USE}", bitmap(&big)));
+    assert!(e.contains("bad.xml:4") && e.contains("texel 5") && e.contains("outside [0, 1]"), "{e}");
+    // An 8-bit map (PNG) loads.
+    let png = dir.join("up.png");
+    svetlo::io::image_io::write_image(&png, &svetlo::film::Image::new(4, 2, vec![Rgb::new(0.5, 0.5, 1.0); 8])).unwrap();
+    let text = format!("<scene version=\"3.0.0\">\n{SENSOR}\n<bsdf type=\"normalmap\" id=\"a\">{}{DIFFUSE}</bsdf>{USE}\n</scene>", bitmap(&png));
+    load_scene_from_str(&text, Path::new("/nowhere/ok.xml"), &[]).expect("an 8-bit normal map loads");
+    let _ = std::fs::remove_dir_all(&dir);
+}

@@ -143,6 +143,15 @@ impl Bitmap {
             Store::Codes(t, _) => i.map(|i| t.rgb(i).luminance()),
         }
     }
+    /// Bounds that every channel of every texel lies within, known without reading the
+    /// texels: an 8-bit bitmap's are its code table's least and greatest values; None for a
+    /// float bitmap.
+    pub fn channel_bounds(&self) -> Option<(f32, f32)> {
+        match &self.store {
+            Store::Float(_) => None,
+            Store::Codes(t, _) => Some(t.table.iter().fold((f32::INFINITY, f32::NEG_INFINITY), |(lo, hi), &v| (lo.min(v), hi.max(v)))),
+        }
+    }
     /// The texels row by row, as [`Bitmap::data`] holds them, without decoding a copy.
     pub fn texels(&self) -> impl Iterator<Item = Rgb> + '_ {
         (0..self.width * self.height).map(move |i| match &self.store {
@@ -535,6 +544,11 @@ mod tests {
             assert!(compact.is_8bit());
             let float = Arc::new(Bitmap::new(w, h, codes.iter().map(|c| Rgb::new(table[c[0] as usize], table[c[1] as usize], table[c[2] as usize])).collect()));
             assert_eq!(compact.data(), float.data());
+            // Every channel lies within the 8-bit bitmap's bounds, which are the table's ends.
+            let (lo, hi) = compact.channel_bounds().unwrap();
+            assert_eq!((lo, hi), (table[0], table[255]));
+            assert!(compact.texels().all(|c| [c.r, c.g, c.b].iter().all(|&v| lo <= v && v <= hi)));
+            assert!(float.channel_bounds().is_none());
             assert_eq!(compact.mean(), float.mean());
             for filter in [FilterMode::Nearest, FilterMode::Bilinear] {
                 for wrap in [WrapMode::Repeat, WrapMode::Mirror, WrapMode::Clamp] {
