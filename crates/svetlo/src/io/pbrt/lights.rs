@@ -157,7 +157,7 @@ impl Loader {
                     )));
                 }
                 // pbrt keeps one channel: the mean of R, G and B.
-                (img.data().iter().map(|c| ((c.r + c.g + c.b) / 3.0).max(0.0)).collect(), img.width)
+                (img.texels().map(|c| ((c.r + c.g + c.b) / 3.0).max(0.0)).collect(), img.width)
             }
         };
         let to_world = *m * Goniometric::pbrt_swap_yz();
