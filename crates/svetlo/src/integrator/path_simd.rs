@@ -1853,14 +1853,7 @@ impl SimdKernel {
         } else if !sh.scalar_bsdf {
             let (front, back) = if sh.textured {
                 // The hit's texture point, as `Scene::interaction` gives it (`SurfaceInteraction::tex_point`).
-                let tp = match hit {
-                    Hit::Tri(tri) => {
-                        // (With `prefetch_texels` every triangle hit is an unpacked one, whose uv it took.)
-                        let uv = if sh.prefetch_texels && self.prefetch_texels { v.uv_ahead[l] } else { self.uv(scene, tri, b1, b2) };
-                        TexPoint { uv, prim: tri.local, bary: Vec2::new(b1, b2), p, n: ng }
-                    }
-                    Hit::Other(si) => si.tex_point(),
-                };
+                let tp = self.tex_point_ahead(scene, sh, v, l, &hit, b1, b2, p, ng);
                 (sh.front.at(&tp), sh.back.as_ref().map_or(Rgb::BLACK, |b| b.at(&tp)))
             } else {
                 // Constant on both sides. (No texture point made: copying one that was just
