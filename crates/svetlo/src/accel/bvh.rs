@@ -516,6 +516,10 @@ impl Accel {
         }
         let nodes = &self.tri_nodes[..];
         let tris_at = |code| self.tris_at(code);
+        // Entries asked for at their pop (see `Walk::step`) where the tree fits the last-level
+        // cache: on bsdf_spheres' four spheres (128k triangles) the render ran 2 % fewer
+        // instructions in the same time; the 1M-triangle mesh (in memory) took 1.01-1.02.
+        let lazy = !self.coherent;
         let mut live = active;
         while live != 0 {
             let mut turn = live;
@@ -533,7 +537,7 @@ impl Accel {
                 };
                 // A lane keeps the turn while its next entry was asked for steps ago (likely in cache).
                 loop {
-                    if !lane.walk.step::<ANY, true>(&mut stacks[l], nodes, &lane.bray, &mut lane.t_max, true, true, &tris_at, &mut leaf) {
+                    if !lane.walk.step::<ANY, true>(&mut stacks[l], nodes, &lane.bray, &mut lane.t_max, true, true, lazy, &tris_at, &mut leaf) {
                         live &= !(1 << l);
                         break;
                     }

@@ -161,6 +161,12 @@ fn run(shapes: &[Geometry], rays: &[Ray]) -> usize {
         accel.prefetch = interleaved;
         check_lanes(&accel, rays);
     }
+    // The interleaved walks as in a tree past the last-level cache too (`coherent`): the
+    // farther children asked for when pushed, not when popped (`Walk::step`'s `lazy`).
+    accel.prefetch = true;
+    accel.coherent = !accel.coherent;
+    check_lanes(&accel, rays);
+    accel.coherent = !accel.coherent;
     if accel.avx512 {
         // The interleaved walks' AVX copy too (the AVX-512 one ran above).
         accel.avx512 = false;

@@ -270,7 +270,7 @@ pub fn traverse<const ANY: bool, const AVX: bool>(
     }
     let mut stack = Walk::stack();
     let mut walk = Walk::new();
-    while walk.step::<ANY, AVX>(&mut stack, nodes, ray, t_max, prefetch, false, &leaf_at, &mut leaf) {}
+    while walk.step::<ANY, AVX>(&mut stack, nodes, ray, t_max, prefetch, false, false, &leaf_at, &mut leaf) {}
     walk.found()
 }
 
@@ -341,6 +341,8 @@ impl Walk {
     /// whether the walk goes on; `stack` must be the one this walk started with. With
     /// `interleaved` (other walks step before this one's next step), a next entry that was
     /// not pushed (and so not prefetched) is prefetched too: its lines arrive meanwhile.
+    /// With `lazy` (interleaved closest-hit walks), the farther of two children is pushed
+    /// unasked and asked for only when popped, the walk then yielding its turn.
     #[inline(always)]
     #[allow(clippy::too_many_arguments)]
     pub fn step<const ANY: bool, const AVX: bool>(
@@ -351,9 +353,13 @@ impl Walk {
         t_max: &mut f32,
         prefetch: bool,
         interleaved: bool,
+        lazy: bool,
         leaf_at: &impl Fn(u32) -> *const u8,
         leaf: &mut impl FnMut(u32, &mut f32) -> bool,
     ) -> bool {
+        // A closest-hit walk culls many of the entries it pushes: asked for at the push, their
+        // lines take miss slots that the walks' next nodes wait for.
+        let lazy = !ANY && lazy;
         let cur = self.cur;
         let mut sp = self.sp;
         // Whether the entry popped below was pushed by this step.
@@ -378,7 +384,9 @@ impl Walk {
                     let second = if two { mask.trailing_zeros() as usize & (WIDTH - 1) } else { first };
                     // Occlusion needs no order: any hit ends the walk.
                     let (near, far) = if ANY || tn[first] <= tn[second] { (first, second) } else { (second, first) };
-                    prefetch_child(prefetch, nodes, c[far], leaf_at);
+                    if !lazy {
+                        prefetch_child(prefetch, nodes, c[far], leaf_at);
+                    }
                     stack[sp].write((c[far], tn[far]));
                     self.sp = sp + usize::from(two);
                     self.cur = c[near];
@@ -438,6 +446,11 @@ impl Walk {
                 self.cur = n;
                 self.sp = sp;
                 self.fresh = pushed_now;
+                if lazy && !pushed_now {
+                    // Asked for now; other walks step while it comes.
+                    prefetch_child(interleaved, nodes, n, leaf_at);
+                    self.fresh = true;
+                }
                 return true;
             }
         }
