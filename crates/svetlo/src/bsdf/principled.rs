@@ -356,6 +356,7 @@ impl Principled {
 
     /// The generalised half vector of (wo, wi), oriented to +z, with the relative IOR of
     /// the crossing (other side over wo's side) and whether it is a reflection.
+    #[inline(always)]
     fn half_vector(&self, wo: Vec3, wi: Vec3, t: &WoTerms) -> (Vec3, f32, bool) {
         let reflect = wo.z * wi.z > 0.0;
         let eta_path = if wo.z > 0.0 { self.eta } else { t.inv_eta };
@@ -380,7 +381,7 @@ impl Principled {
 
     /// [`Self::fresnel`] on the front, given the Schlick weight `w` at `cos_i` and the
     /// derived tint: the same value.
-    #[inline]
+    #[inline(always)]
     fn fresnel_front(&self, f_dielectric: f32, cos_i: f32, w: f32, t: &WoTerms) -> Rgb {
         let eta_it = if cos_i >= 0.0 { self.eta } else { t.inv_eta };
         let metal = schlick_blend(self.base_color, w) * self.metallic;
@@ -440,7 +441,138 @@ impl Principled {
     /// terms of `wo` computed once for both (the path kernel's vertex).
     pub fn eval_pdf_and_sample(&self, wo: Vec3, wi: Option<Vec3>, uc: f32, u: Vec2, mode: TransportMode) -> (Option<(Rgb, f32)>, Option<BsdfSample>) {
         let t = self.wo_terms(wo);
-        (wi.map(|wi| self.eval_pdf_with(wo, wi, mode, &t)), self.sample_with(wo, uc, u, mode, &t))
+        let Some(wi) = wi else { return (None, self.sample_with(wo, uc, u, mode, &t)) };
+        // Both evaluations in one pass, their chains side by side (the same bits).
+        match self.sample_direction(wo, uc, u, &t) {
+            Some((ws, lobe, eta)) => {
+                let [nee, (f, pdf)] = self.eval_pdf_lanes(wo, [wi, ws], mode, &t);
+                (Some(nee), positive_finite(pdf).then_some(BsdfSample { wi: ws, f, pdf, lobe, eta }))
+            }
+            None => (Some(self.eval_pdf_with(wo, wi, mode, &t)), None),
+        }
+    }
+
+    /// [`Self::eval_pdf_with`] toward each of `wi`: each the same operations in the same
+    /// order (the same bits), taken stage by stage across the directions so that their
+    /// latency chains overlap.
+    #[inline(always)]
+    fn eval_pdf_lanes<const N: usize>(&self, wo: Vec3, wi: [Vec3; N], mode: TransportMode, t: &WoTerms) -> [(Rgb, f32); N] {
+        let none = [(Rgb::BLACK, 0.0); N];
+        let ci = wo.z;
+        let front = ci > 0.0;
+        let (bsdf, brdf) = (self.bsdf_weight(), self.brdf_weight());
+        if ci == 0.0 || (!front && bsdf <= 0.0) {
+            return none;
+        }
+        let hv: [(Vec3, f32, bool); N] = std::array::from_fn(|k| self.half_vector(wo, wi[k], t));
+        let live: [bool; N] = std::array::from_fn(|k| wi[k].z != 0.0 && hv[k].0 != Vec3::ZERO);
+        let (mut oh, mut ih, mut f_d) = ([0.0f32; N], [0.0f32; N], [0.0f32; N]);
+        for k in 0..N {
+            (oh[k], ih[k]) = (wo.dot(hv[k].0), wi[k].dot(hv[k].0));
+            f_d[k] = self.dielectric(oh[k], t).0;
+        }
+        let p: [PrincipledLobes; N] = std::array::from_fn(|k| self.lobes_at(front, f_d[k], t));
+        let ok: [bool; N] = std::array::from_fn(|k| live[k] && compatible(hv[k].0, wo, wi[k], hv[k].2));
+        let md = &self.distribution;
+        let mut dg = [(0.0f32, 0.0f32, 0.0f32); N];
+        for k in 0..N {
+            if ok[k] {
+                let h = hv[k].0;
+                dg[k] = (md.d(h), Microfacet::g1_given(wo, h, || t.lambda), md.g1_inline(wi[k], h));
+            }
+        }
+        let jacobian: [f32; N] = std::array::from_fn(|k| {
+            let (_, eta_path, reflect) = hv[k];
+            let (oh, ih) = (oh[k], ih[k]);
+            if reflect {
+                (1.0 / (4.0 * ih)).abs()
+            } else {
+                (eta_path * eta_path * ih / ((oh + eta_path * ih) * (oh + eta_path * ih))).abs()
+            }
+        });
+        let (mut value, mut pdf) = ([Rgb::BLACK; N], [0.0f32; N]);
+        let dv = &self.derived;
+        // Reflection: the Schlick weight, the specular lobe, the clearcoat's D.
+        let w: [f32; N] = std::array::from_fn(|k| {
+            if hv[k].2 && ok[k] && front && (f_d[k] > 0.0 || self.clearcoat > 0.0) {
+                schlick_fresnel_weight(oh[k], self.eta)
+            } else {
+                0.0
+            }
+        });
+        for k in 0..N {
+            if hv[k].2 && ok[k] && f_d[k] > 0.0 {
+                let (d, g1o, g1i) = dg[k];
+                let f = if front { self.fresnel_front(f_d[k], oh[k], w[k], t) } else { self.fresnel(f_d[k], oh[k], front) };
+                value[k] += f * (d * (g1o * g1i) / (4.0 * ci.abs() * wi[k].z.abs()));
+            }
+        }
+        let d_cc: [f32; N] = std::array::from_fn(|k| {
+            if hv[k].2 && ok[k] && front && (self.clearcoat > 0.0 || p[k].clearcoat > 0.0) {
+                gtr1_d_given(dv.cc_a2, dv.cc_ln_a2, hv[k].0)
+            } else {
+                0.0
+            }
+        });
+        if front {
+            for k in 0..N {
+                if hv[k].2 && ok[k] && self.clearcoat > 0.0 {
+                    let h = hv[k].0;
+                    let f_cc = schlick_blend(Rgb::splat(0.04), w[k]).r;
+                    let g_cc_o = if wo.dot(h) * wo.z <= 0.0 { 0.0 } else { t.g_cc };
+                    let g_cc = g_cc_o * smith_ggx1(wi[k], h, 0.25);
+                    value[k] += Rgb::splat(t.cc_w * f_cc * d_cc[k] * g_cc);
+                }
+            }
+            if brdf > 0.0 {
+                for k in 0..N {
+                    if hv[k].2 {
+                        value[k] += self.base_color * (t.diffuse_w * disney_diffuse_given(self.roughness, self.flatness, wi[k].z, ci, ih[k], t.fi));
+                    }
+                }
+            }
+            if self.sheen > 0.0 && self.metallic < 1.0 {
+                for k in 0..N {
+                    if hv[k].2 {
+                        value[k] += dv.sheen_color * (t.sheen_w * schlick_weight(ih[k].abs()));
+                    }
+                }
+            }
+        }
+        for k in 0..N {
+            let (h, eta_path, reflect) = hv[k];
+            let (d, g1o, g1i) = dg[k];
+            let visible = || Microfacet::pdf_visible_given(wo * ci.signum(), h, d, g1o);
+            if reflect {
+                if ok[k] {
+                    if p[k].reflection > 0.0 {
+                        pdf[k] += p[k].reflection * visible() * jacobian[k];
+                    }
+                    if p[k].clearcoat > 0.0 {
+                        pdf[k] += p[k].clearcoat * gtr1_pdf_given(d_cc[k], h) * jacobian[k];
+                    }
+                }
+                pdf[k] += p[k].diffuse * warp::square_to_cosine_hemisphere_pdf(if front { wi[k] } else { -wi[k] });
+            } else if ok[k] {
+                if bsdf > 0.0 && f_d[k] < 1.0 {
+                    let scale = match mode {
+                        TransportMode::Radiance => 1.0 / (eta_path * eta_path),
+                        TransportMode::Importance => 1.0,
+                    };
+                    let (oh, ih) = (oh[k], ih[k]);
+                    let denom = oh + eta_path * ih;
+                    let tr = scale * (1.0 - f_d[k]) * d * (g1o * g1i) * eta_path * eta_path * oh * ih / (ci * denom * denom);
+                    let tr = (tr / wi[k].z).abs();
+                    if tr.is_finite() {
+                        value[k] += self.base_color.sqrt() * (bsdf * tr);
+                    }
+                }
+                if p[k].transmission > 0.0 {
+                    pdf[k] += p[k].transmission * visible() * jacobian[k];
+                }
+            }
+        }
+        std::array::from_fn(|k| if live[k] { (value[k], if pdf[k].is_finite() { pdf[k] } else { 0.0 }) } else { none[k] })
     }
 
     /// [`Self::eval_pdf`] given the terms of `wo`.
@@ -527,6 +659,17 @@ impl Principled {
 
     /// [`Self::sample`] given the terms of `wo`.
     fn sample_with(&self, wo: Vec3, uc: f32, u: Vec2, mode: TransportMode, t: &WoTerms) -> Option<BsdfSample> {
+        let (wi, lobe, eta) = self.sample_direction(wo, uc, u, t)?;
+        let (f, pdf) = self.eval_pdf_with(wo, wi, mode, t);
+        if !positive_finite(pdf) {
+            return None;
+        }
+        Some(BsdfSample { wi, f, pdf, lobe, eta })
+    }
+
+    /// [`Self::sample`]'s direction, lobe and relative IOR, before its evaluation.
+    #[inline(always)]
+    fn sample_direction(&self, wo: Vec3, uc: f32, u: Vec2, t: &WoTerms) -> Option<(Vec3, LobeFlags, f32)> {
         let ci = wo.z;
         if ci == 0.0 {
             return None;
@@ -550,11 +693,7 @@ impl Principled {
         if wi.z == 0.0 || reflects == lobe.contains(LobeFlags::TRANSMISSION) {
             return None;
         }
-        let (f, pdf) = self.eval_pdf_with(wo, wi, mode, t);
-        if !positive_finite(pdf) {
-            return None;
-        }
-        Some(BsdfSample { wi, f, pdf, lobe, eta })
+        Some((wi, lobe, eta))
     }
 
     /// [`Self::sample`]'s lobe by `uc` among `p`, and its direction: `m` gives the visible
@@ -699,7 +838,94 @@ impl PrincipledThin {
     /// terms of `wo` computed once for both (the path kernel's vertex).
     pub fn eval_pdf_and_sample(&self, wo: Vec3, wi: Option<Vec3>, uc: f32, u: Vec2) -> (Option<(Rgb, f32)>, Option<BsdfSample>) {
         let mut t = self.wo_terms(wo);
-        (wi.map(|wi| self.eval_pdf_with(wo, wi, &mut t)), self.sample_with(wo, uc, u, &mut t))
+        let Some(wi) = wi else { return (None, self.sample_with(wo, uc, u, &mut t)) };
+        // Both evaluations in one pass, their chains side by side (the same bits).
+        match self.sample_direction(wo, uc, u) {
+            Some((ws, lobe)) => {
+                let [nee, (f, pdf)] = self.eval_pdf_lanes(wo, [wi, ws], &mut t);
+                (Some(nee), positive_finite(pdf).then_some(BsdfSample { wi: ws, f, pdf, lobe, eta: 1.0 }))
+            }
+            None => (Some(self.eval_pdf_with(wo, wi, &mut t)), None),
+        }
+    }
+
+    /// [`Self::eval_pdf_with`] toward each of `wi`: each the same operations in the same
+    /// order (the same bits), taken stage by stage across the directions so that their
+    /// latency chains overlap.
+    #[inline(always)]
+    fn eval_pdf_lanes<const N: usize>(&self, wo: Vec3, wi: [Vec3; N], t: &mut ThinWoTerms) -> [(Rgb, f32); N] {
+        let none = [(Rgb::BLACK, 0.0); N];
+        if wo.z == 0.0 {
+            return none;
+        }
+        let fr: [(Vec3, Vec3, Vec3); N] = std::array::from_fn(|k| Self::frame(wo, wi[k]));
+        let live: [bool; N] = std::array::from_fn(|k| wi[k].z != 0.0 && fr[k].2 != Vec3::ZERO);
+        let (st, dt) = (self.spec_trans, self.diff_trans);
+        let dv = &self.derived;
+        let [p_sr, p_st, p_dr, p_dt] = dv.lobes;
+        let reflect: [bool; N] = std::array::from_fn(|k| fr[k].1.z > 0.0);
+        let ok: [bool; N] = std::array::from_fn(|k| live[k] && compatible(fr[k].2, fr[k].0, fr[k].1, reflect[k]));
+        let mut dg = [(0.0f32, 0.0f32); N];
+        for k in 0..N {
+            let (o, _, h) = fr[k];
+            let (p_spec, md, lambda) =
+                if reflect[k] { (p_sr, &self.distribution, &mut t.lambda_r) } else { (p_st, &self.transmission_distribution, &mut t.lambda_t) };
+            if ok[k] && (st > 0.0 || p_spec > 0.0) {
+                dg[k] = (md.d(h), Microfacet::g1_given(o, h, || *lambda.get_or_insert_with(|| md.lambda(o))));
+            }
+        }
+        let mut value = [Rgb::BLACK; N];
+        if st > 0.0 {
+            for k in 0..N {
+                if ok[k] {
+                    let (o, i, h) = fr[k];
+                    let (ci, co) = (o.z, i.z);
+                    let md = if reflect[k] { &self.distribution } else { &self.transmission_distribution };
+                    let (d, g1o) = dg[k];
+                    let oh = o.dot(h);
+                    let f_d = fresnel::dielectric(oh, self.eta).0;
+                    let kk = st * d * (g1o * md.g1_inline(i, h)) / (4.0 * ci * co.abs());
+                    if reflect[k] {
+                        // oh > 0 where ok.
+                        let tinted = schlick_blend(dv.tint_r0, schlick_fresnel_weight_front(oh, self.eta));
+                        value[k] += (Rgb::splat(f_d) * (1.0 - self.spec_tint) + tinted * self.spec_tint) * kk;
+                    } else {
+                        value[k] += self.base_color * ((1.0 - f_d) * kk);
+                    }
+                }
+            }
+        }
+        if st < 1.0 {
+            for k in 0..N {
+                let (o, i, h) = fr[k];
+                let (ci, co) = (o.z, i.z);
+                if reflect[k] && dt < 1.0 {
+                    let ih = h.dot(i);
+                    let w = (1.0 - st) * (1.0 - dt);
+                    value[k] += self.base_color * (w * INV_PI * disney_diffuse_given(self.roughness, self.flatness, co, ci, ih, t.f_wo));
+                    if self.sheen > 0.0 {
+                        value[k] += dv.sheen_color * (self.sheen * w * schlick_weight(ih.abs()));
+                    }
+                } else if !reflect[k] && dt > 0.0 {
+                    value[k] += self.base_color * ((1.0 - st) * dt * INV_PI);
+                }
+            }
+        }
+        std::array::from_fn(|k| {
+            let (o, i, h) = fr[k];
+            let p_spec = if reflect[k] { p_sr } else { p_st };
+            let mut pdf = 0.0;
+            if p_spec > 0.0 && ok[k] {
+                let ir = Vec3::new(i.x, i.y, i.z.abs());
+                pdf += p_spec * Microfacet::pdf_visible_given(o, h, dg[k].0, dg[k].1) / (4.0 * ir.dot(h)).abs();
+            }
+            pdf += if reflect[k] { p_dr } else { p_dt } * i.z.abs() * INV_PI;
+            if live[k] {
+                (value[k], if pdf.is_finite() { pdf } else { 0.0 })
+            } else {
+                none[k]
+            }
+        })
     }
 
     /// [`Self::eval_pdf`] given the terms of `wo` (Λ filled in where first read).
@@ -760,6 +986,17 @@ impl PrincipledThin {
 
     /// [`Self::sample`] given the terms of `wo`.
     fn sample_with(&self, wo: Vec3, uc: f32, u: Vec2, t: &mut ThinWoTerms) -> Option<BsdfSample> {
+        let (wi, lobe) = self.sample_direction(wo, uc, u)?;
+        let (f, pdf) = self.eval_pdf_with(wo, wi, t);
+        if !positive_finite(pdf) {
+            return None;
+        }
+        Some(BsdfSample { wi, f, pdf, lobe, eta: 1.0 })
+    }
+
+    /// [`Self::sample`]'s direction and lobe, before its evaluation.
+    #[inline(always)]
+    fn sample_direction(&self, wo: Vec3, uc: f32, u: Vec2) -> Option<(Vec3, LobeFlags)> {
         if wo.z == 0.0 {
             return None;
         }
@@ -789,12 +1026,7 @@ impl PrincipledThin {
         if i.z == 0.0 {
             return None;
         }
-        let wi = i * s;
-        let (f, pdf) = self.eval_pdf_with(wo, wi, t);
-        if !positive_finite(pdf) {
-            return None;
-        }
-        Some(BsdfSample { wi, f, pdf, lobe, eta: 1.0 })
+        Some((i * s, lobe))
     }
 
     /// What radiosity takes for this surface: the base colour times the diffuse
@@ -1448,6 +1680,127 @@ mod tests {
             }
         }
         assert!(opaque > 150 && samples > 150_000, "{opaque} opaque models, {samples} samples");
+    }
+
+    /// Directions evaluated side by side (`eval_pdf_lanes`: the light sample's and the
+    /// sample's in `eval_pdf_and_sample`) give each one's `eval_pdf_with` bits: random
+    /// models (a third opaque, some of IOR 1 or near it or below 1), directions on both
+    /// sides, grazing, in the tangent plane, mirror and sampled ones, both modes.
+    #[test]
+    fn paired_evaluations_give_the_single_bits() {
+        use crate::sampling::rng::Pcg32;
+        let mut rng = Pcg32::new(41, 3);
+        let mut v = |lo: f32, hi: f32| lo + (hi - lo) * rng.next_f32();
+        let c = |x: f32| Texture::Constant(Rgb::splat(x));
+        let bits = |(f, pdf): (Rgb, f32)| (f.r.to_bits(), f.g.to_bits(), f.b.to_bits(), pdf.to_bits());
+        let special = [Vec3::new(1.0, 0.0, 1e-4).normalize(), Vec3::new(0.0, -1.0, -1e-4).normalize(), Vec3::Z, -Vec3::Z, Vec3::X, Vec3::new(0.6, -0.8, 0.0)];
+        let (mut sampled, mut nonzero) = (0, 0);
+        for k in 0..600 {
+            let mut m = PrincipledMaterial { base_color: Texture::Constant(Rgb::new(v(0.0, 1.0), v(0.0, 1.0), v(0.0, 1.0))), ..Default::default() };
+            for t in [
+                &mut m.roughness,
+                &mut m.anisotropic,
+                &mut m.metallic,
+                &mut m.spec_tint,
+                &mut m.sheen,
+                &mut m.sheen_tint,
+                &mut m.clearcoat,
+                &mut m.clearcoat_gloss,
+            ] {
+                *t = c(v(-0.1, 1.1));
+            }
+            m.flatness = c(if k % 2 == 0 { 0.0 } else { v(-0.2, 1.0) });
+            m.spec_trans = c(if k % 3 == 0 { 0.0 } else { v(-0.1, 1.1) });
+            m.eta = c(match k % 11 {
+                0 => 1.0,
+                1 => 1.0 + v(0.0, 1e-3),
+                2 => v(0.5, 1.0),
+                _ => v(1.0, 2.5),
+            });
+            if k % 7 == 0 {
+                m.rates = SamplingRates { diffuse_reflection: v(0.0, 2.0), specular: v(0.0, 2.0), secondary: v(0.0, 2.0), diffuse_transmission: 0.0 };
+            }
+            let PrincipledAt::Full(model) = m.at_evaluated(Vec2::ZERO.into()) else { unreachable!("not thin") };
+            let dir = |v: &mut dyn FnMut(f32, f32) -> f32| warp::square_to_uniform_sphere(Vec2::new(v(0.0, 1.0), v(0.0, 1.0)));
+            let mut wos: Vec<Vec3> = (0..60).map(|_| dir(&mut v)).collect();
+            wos.extend(special);
+            for mode in [TransportMode::Radiance, TransportMode::Importance] {
+                for &wo in &wos {
+                    let t = model.wo_terms(wo);
+                    let (uc, u) = (v(0.0, 1.0), Vec2::new(v(0.0, 1.0), v(0.0, 1.0)));
+                    let mut dirs = vec![dir(&mut v), dir(&mut v), fresnel::reflect_z(wo), -wo];
+                    dirs.extend(special);
+                    if let Some((ws, _, _)) = model.sample_direction(wo, uc, u, &t) {
+                        dirs.push(ws);
+                        sampled += 1;
+                    }
+                    let a = dirs[(k + 3 * dirs.len()) % dirs.len()];
+                    for &b in &dirs {
+                        let want = [bits(model.eval_pdf_with(wo, a, mode, &t)), bits(model.eval_pdf_with(wo, b, mode, &t))];
+                        assert_eq!(model.eval_pdf_lanes(wo, [a, b], mode, &t).map(bits), want, "{model:?} {mode:?} {wo} {a} {b}");
+                        assert_eq!(model.eval_pdf_lanes(wo, [b], mode, &t).map(bits), [want[1]], "{model:?} {mode:?} {wo} {b}");
+                        nonzero += usize::from(want[1].3 != 0);
+                    }
+                }
+            }
+        }
+        assert!(sampled > 50_000 && nonzero > 200_000, "{sampled} sampled, {nonzero} with a density");
+    }
+
+    /// [`paired_evaluations_give_the_single_bits`] for `principledthin`: random sheets
+    /// (some all specular, some all diffuse, IOR below and above 1), Λ filled in by either
+    /// evaluation first.
+    #[test]
+    fn thin_paired_evaluations_give_the_single_bits() {
+        use crate::sampling::rng::Pcg32;
+        let mut rng = Pcg32::new(43, 1);
+        let mut v = |lo: f32, hi: f32| lo + (hi - lo) * rng.next_f32();
+        let c = |x: f32| Texture::Constant(Rgb::splat(x));
+        let bits = |(f, pdf): (Rgb, f32)| (f.r.to_bits(), f.g.to_bits(), f.b.to_bits(), pdf.to_bits());
+        let special = [Vec3::new(1.0, 0.0, 1e-4).normalize(), Vec3::new(0.0, -1.0, -1e-4).normalize(), Vec3::Z, -Vec3::Z, Vec3::X, Vec3::new(0.6, -0.8, 0.0)];
+        let (mut sampled, mut nonzero) = (0, 0);
+        for k in 0..600 {
+            let mut m = PrincipledMaterial { thin: true, base_color: Texture::Constant(Rgb::new(v(0.0, 1.0), v(0.0, 1.0), v(0.0, 1.0))), ..Default::default() };
+            for t in [&mut m.roughness, &mut m.anisotropic, &mut m.spec_tint, &mut m.sheen, &mut m.sheen_tint] {
+                *t = c(v(-0.1, 1.1));
+            }
+            m.flatness = c(if k % 2 == 0 { 0.0 } else { v(-0.2, 1.0) });
+            m.spec_trans = c(match k % 5 {
+                0 => 0.0,
+                1 => 1.0,
+                _ => v(-0.1, 1.1),
+            });
+            m.diff_trans = c(v(0.0, 2.2));
+            m.eta = c(if k % 4 == 0 { v(0.5, 1.0) } else { v(1.0, 2.5) });
+            if k % 7 == 0 {
+                m.rates = SamplingRates { diffuse_reflection: v(0.0, 2.0), specular: v(0.0, 2.0), secondary: v(0.0, 2.0), diffuse_transmission: v(0.0, 2.0) };
+            }
+            let PrincipledAt::Thin(model) = m.at_evaluated(Vec2::ZERO.into()) else { unreachable!("thin") };
+            let dir = |v: &mut dyn FnMut(f32, f32) -> f32| warp::square_to_uniform_sphere(Vec2::new(v(0.0, 1.0), v(0.0, 1.0)));
+            let mut wos: Vec<Vec3> = (0..60).map(|_| dir(&mut v)).collect();
+            wos.extend(special);
+            for &wo in &wos {
+                let (uc, u) = (v(0.0, 1.0), Vec2::new(v(0.0, 1.0), v(0.0, 1.0)));
+                let mut dirs = vec![dir(&mut v), dir(&mut v), fresnel::reflect_z(wo), -wo];
+                dirs.extend(special);
+                if let Some((ws, _)) = model.sample_direction(wo, uc, u) {
+                    dirs.push(ws);
+                    sampled += 1;
+                }
+                let a = dirs[k % dirs.len()];
+                for &b in &dirs {
+                    let want = [bits(model.eval_pdf_with(wo, a, &mut model.wo_terms(wo))), bits(model.eval_pdf_with(wo, b, &mut model.wo_terms(wo)))];
+                    assert_eq!(model.eval_pdf_lanes(wo, [a, b], &mut model.wo_terms(wo)).map(bits), want, "{model:?} {wo} {a} {b}");
+                    // Terms of wo shared with an evaluation before.
+                    let mut t = model.wo_terms(wo);
+                    model.eval_pdf_with(wo, b, &mut t);
+                    assert_eq!(model.eval_pdf_lanes(wo, [a, b], &mut t).map(bits), want, "{model:?} {wo} {a} {b}");
+                    assert_eq!(model.eval_pdf_lanes(wo, [b], &mut model.wo_terms(wo)).map(bits), [want[1]], "{model:?} {wo} {b}");
+                    nonzero += usize::from(want[1].3 != 0);
+                }
+            }
+        }
+        assert!(sampled > 25_000 && nonzero > 150_000, "{sampled} sampled, {nonzero} with a density");
     }
 
     /// The table's models are those of the textures evaluated at each point, bit for bit
