@@ -38,6 +38,27 @@ pub(crate) fn dielectric_given_inverse(cos_i: f32, eta: f32, inv_eta: f32) -> (f
     (f, if outside { -ct } else { ct }, eta_it, eta_ti)
 }
 
+/// [`dielectric_given_inverse`] given 1 / (1 / eta) too (`eta_ti` of either side without a
+/// division in the chain): the same bits.
+#[inline(always)]
+pub(crate) fn dielectric_given_inverses(cos_i: f32, eta: f32, inv_eta: f32, inv_inv_eta: f32) -> (f32, f32, f32, f32) {
+    let outside = cos_i >= 0.0;
+    let (eta_it, eta_ti) = if outside { (eta, inv_eta) } else { (inv_eta, inv_inv_eta) };
+    if eta == 1.0 {
+        return (0.0, -cos_i, 1.0, 1.0);
+    }
+    let ci = cos_i.abs().min(1.0);
+    let cos_t2 = 1.0 - eta_ti * eta_ti * (1.0 - ci * ci);
+    if cos_t2 <= 0.0 {
+        return (1.0, 0.0, eta_it, eta_ti);
+    }
+    let ct = cos_t2.sqrt();
+    let rs = (ci - eta_it * ct) / (ci + eta_it * ct);
+    let rp = (eta_it * ci - ct) / (eta_it * ci + ct);
+    let f = 0.5 * (rs * rs + rp * rp);
+    (f, if outside { -ct } else { ct }, eta_it, eta_ti)
+}
+
 /// [`dielectric`]'s reflectance alone, its branches as selects, so that a loop over lanes
 /// that calls it runs as vector code (the rough plastic's lanes). The same bits.
 #[inline(always)]
@@ -170,6 +191,30 @@ mod tests {
 
     /// The select forms (`dielectric_lane`, and `dielectric_reflectance` built on it) give
     /// `dielectric`'s values bit for bit.
+    /// `dielectric_given_inverses` is `dielectric` bit for bit: cosines of both signs
+    /// (normal, grazing, ±0), IORs below, at and above 1, total internal reflection.
+    #[test]
+    fn dielectric_given_inverses_is_dielectric() {
+        let mut rng = crate::sampling::Pcg32::new(37, 2);
+        let bits = |r: (f32, f32, f32, f32)| [r.0, r.1, r.2, r.3].map(f32::to_bits);
+        for k in 0..200_000 {
+            let eta = match k % 7 {
+                0 => 1.0,
+                1 => 0.3 + 0.7 * rng.next_f32(),
+                _ => 1.0 + 2.0 * rng.next_f32(),
+            };
+            let c = match k % 11 {
+                0 => 0.0,
+                1 => -0.0,
+                2 => 1.0,
+                3 => -1.0,
+                _ => 2.0 * rng.next_f32() - 1.0,
+            };
+            let inv = 1.0 / eta;
+            assert_eq!(bits(dielectric_given_inverses(c, eta, inv, 1.0 / inv)), bits(dielectric(c, eta)), "{c} {eta}");
+        }
+    }
+
     #[test]
     fn select_forms_are_dielectrics() {
         let bits = |v: (f32, f32, f32, f32)| [v.0, v.1, v.2, v.3].map(f32::to_bits);

@@ -52,6 +52,18 @@ fn schlick_fresnel_weight(cos_i: f32, eta: f32) -> f32 {
     }
 }
 
+/// [`schlick_fresnel_weight`] given `inv_eta` = 1 / eta: the same value.
+#[inline(always)]
+fn schlick_fresnel_weight_given(cos_i: f32, eta: f32, inv_eta: f32) -> f32 {
+    let (eta_it, eta_ti) = if cos_i >= 0.0 { (eta, inv_eta) } else { (inv_eta, eta) };
+    if eta_it > 1.0 {
+        schlick_weight(cos_i.abs())
+    } else {
+        let cos_t2 = 1.0 - (1.0 - cos_i * cos_i) * eta_ti * eta_ti;
+        schlick_weight(cos_t2.max(0.0).sqrt())
+    }
+}
+
 /// [`schlick_fresnel_weight`] where `cos_i` >= 0 (the front of a microfacet wo sees): the
 /// same value, 1 / eta only where eta <= 1.
 #[inline]
@@ -266,8 +278,9 @@ struct WoTerms {
     g_cc: f32,
     /// The diffuse's Schlick weight of |wo.z|.
     fi: f32,
-    /// 1 / eta.
+    /// 1 / eta, and 1 / (1 / eta) (the Fresnel term's eta_ti seen from inside).
     inv_eta: f32,
+    inv_inv_eta: f32,
     /// The specular Fresnel blend's weights: (1 - metallic) spec_tint and
     /// (1 - metallic) (1 - spec_tint).
     tinted_w: f32,
@@ -392,7 +405,7 @@ impl Principled {
     /// `fresnel::dielectric(cos_i, self.eta)` given 1 / eta: the same bits.
     #[inline(always)]
     fn dielectric(&self, cos_i: f32, t: &WoTerms) -> (f32, f32, f32, f32) {
-        fresnel::dielectric_given_inverse(cos_i, self.eta, t.inv_eta)
+        fresnel::dielectric_given_inverses(cos_i, self.eta, t.inv_eta, t.inv_inv_eta)
     }
 
     /// [`Self::lobes`] on the front at `f_dielectric`, derived where they do not depend on it.
@@ -423,11 +436,13 @@ impl Principled {
 
     #[inline]
     fn wo_terms(&self, wo: Vec3) -> WoTerms {
+        let inv_eta = 1.0 / self.eta;
         WoTerms {
             lambda: self.distribution.lambda(wo),
             g_cc: if self.clearcoat > 0.0 { smith_ggx1_front(wo, 0.25) } else { 0.0 },
             fi: schlick_weight(wo.z.abs()),
-            inv_eta: 1.0 / self.eta,
+            inv_eta,
+            inv_inv_eta: 1.0 / inv_eta,
             tinted_w: (1.0 - self.metallic) * self.spec_tint,
             dielectric_w: (1.0 - self.metallic) * (1.0 - self.spec_tint),
             diffuse_w: self.brdf_weight() * INV_PI,
@@ -495,7 +510,7 @@ impl Principled {
         // Reflection: the Schlick weight, the specular lobe, the clearcoat's D.
         let w: [f32; N] = std::array::from_fn(|k| {
             if hv[k].2 && ok[k] && front && (f_d[k] > 0.0 || self.clearcoat > 0.0) {
-                schlick_fresnel_weight(oh[k], self.eta)
+                schlick_fresnel_weight_given(oh[k], self.eta, t.inv_eta)
             } else {
                 0.0
             }
@@ -603,7 +618,7 @@ impl Principled {
         let mut pdf = 0.0;
         if reflect {
             // The Schlick weight of the specular and the clearcoat Fresnel terms (same cosine).
-            let w = if ok && front && (f_d > 0.0 || self.clearcoat > 0.0) { schlick_fresnel_weight(oh, self.eta) } else { 0.0 };
+            let w = if ok && front && (f_d > 0.0 || self.clearcoat > 0.0) { schlick_fresnel_weight_given(oh, self.eta, t.inv_eta) } else { 0.0 };
             if ok && f_d > 0.0 {
                 let f = if front { self.fresnel_front(f_d, oh, w, t) } else { self.fresnel(f_d, oh, front) };
                 value += f * (d * (g1o * g1i) / (4.0 * ci.abs() * co.abs()));
