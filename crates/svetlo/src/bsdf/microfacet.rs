@@ -73,6 +73,20 @@ impl Microfacet {
         1.0 / (1.0 + lambda())
     }
 
+    /// [`Self::lambda`] inlined (a vertex's Λ(wo), once per vertex): the same operations.
+    #[inline(always)]
+    pub(crate) fn lambda_inline(&self, v: Vec3) -> f32 {
+        let xy = (self.alpha_u * v.x).powi(2) + (self.alpha_v * v.y).powi(2);
+        if xy == 0.0 {
+            return 0.0;
+        }
+        let a2t2 = xy / (v.z * v.z);
+        match self.kind {
+            MicrofacetKind::Ggx => ggx_lambda_of(a2t2),
+            MicrofacetKind::Beckmann => beckmann_lambda_of(a2t2),
+        }
+    }
+
     /// [`Self::g1`] inlined whole, Λ(v) included (a caller that runs two chains side by
     /// side): the same operations, the same value.
     #[inline(always)]
@@ -819,6 +833,7 @@ mod tests {
                 let (v, m) = (if j < special.len() { special[j] } else { dir(&mut rng) }, dir(&mut rng));
                 let m = if m.z < 0.0 { -m } else { m };
                 assert_eq!(md.g1_inline(v, m).to_bits(), md.g1(v, m).to_bits(), "{md:?} {v} {m}");
+                assert_eq!(md.lambda_inline(v).to_bits(), md.lambda(v).to_bits(), "{md:?} {v}");
             }
         }
     }

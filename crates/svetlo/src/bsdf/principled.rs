@@ -438,7 +438,7 @@ impl Principled {
     fn wo_terms(&self, wo: Vec3) -> WoTerms {
         let inv_eta = 1.0 / self.eta;
         WoTerms {
-            lambda: self.distribution.lambda(wo),
+            lambda: self.distribution.lambda_inline(wo),
             g_cc: if self.clearcoat > 0.0 { smith_ggx1_front(wo, 0.25) } else { 0.0 },
             fi: schlick_weight(wo.z.abs()),
             inv_eta,
