@@ -590,82 +590,10 @@ impl Principled {
         std::array::from_fn(|k| if live[k] { (value[k], if pdf[k].is_finite() { pdf[k] } else { 0.0 }) } else { none[k] })
     }
 
-    /// [`Self::eval_pdf`] given the terms of `wo`.
+    /// [`Self::eval_pdf`] given the terms of `wo`: [`Self::eval_pdf_lanes`] of one direction.
     fn eval_pdf_with(&self, wo: Vec3, wi: Vec3, mode: TransportMode, t: &WoTerms) -> (Rgb, f32) {
-        let (ci, co) = (wo.z, wi.z);
-        if ci == 0.0 || co == 0.0 {
-            return (Rgb::BLACK, 0.0);
-        }
-        let front = ci > 0.0;
-        let (bsdf, brdf) = (self.bsdf_weight(), self.brdf_weight());
-        if !front && bsdf <= 0.0 {
-            return (Rgb::BLACK, 0.0);
-        }
-        let (h, eta_path, reflect) = self.half_vector(wo, wi, t);
-        if h == Vec3::ZERO {
-            return (Rgb::BLACK, 0.0);
-        }
-        let (oh, ih) = (wo.dot(h), wi.dot(h));
-        let f_d = self.dielectric(oh, t).0;
-        let p = self.lobes_at(front, f_d, t);
-        let md = &self.distribution;
-        let ok = compatible(h, wo, wi, reflect);
-        // D(h), G1(wo) and G1(wi), where either half wants them.
-        let (d, g1o, g1i) = if ok { (md.d(h), Microfacet::g1_given(wo, h, || t.lambda), md.g1(wi, h)) } else { (0.0, 0.0, 0.0) };
-        let visible = || Microfacet::pdf_visible_given(wo * ci.signum(), h, d, g1o);
-        let jacobian = if reflect { (1.0 / (4.0 * ih)).abs() } else { (eta_path * eta_path * ih / ((oh + eta_path * ih) * (oh + eta_path * ih))).abs() };
-        let mut value = Rgb::BLACK;
-        let mut pdf = 0.0;
-        if reflect {
-            // The Schlick weight of the specular and the clearcoat Fresnel terms (same cosine).
-            let w = if ok && front && (f_d > 0.0 || self.clearcoat > 0.0) { schlick_fresnel_weight_given(oh, self.eta, t.inv_eta) } else { 0.0 };
-            if ok && f_d > 0.0 {
-                let f = if front { self.fresnel_front(f_d, oh, w, t) } else { self.fresnel(f_d, oh, front) };
-                value += f * (d * (g1o * g1i) / (4.0 * ci.abs() * co.abs()));
-            }
-            let dv = &self.derived;
-            let d_cc = if ok && front && (self.clearcoat > 0.0 || p.clearcoat > 0.0) { gtr1_d_given(dv.cc_a2, dv.cc_ln_a2, h) } else { 0.0 };
-            if front {
-                if ok && self.clearcoat > 0.0 {
-                    let f_cc = schlick_blend(Rgb::splat(0.04), w).r;
-                    let g_cc_o = if wo.dot(h) * wo.z <= 0.0 { 0.0 } else { t.g_cc };
-                    let g_cc = g_cc_o * smith_ggx1(wi, h, 0.25);
-                    value += Rgb::splat(t.cc_w * f_cc * d_cc * g_cc);
-                }
-                if brdf > 0.0 {
-                    value += self.base_color * (t.diffuse_w * disney_diffuse_given(self.roughness, self.flatness, co, ci, ih, t.fi));
-                }
-                if self.sheen > 0.0 && self.metallic < 1.0 {
-                    value += dv.sheen_color * (t.sheen_w * schlick_weight(ih.abs()));
-                }
-            }
-            if ok {
-                if p.reflection > 0.0 {
-                    pdf += p.reflection * visible() * jacobian;
-                }
-                if p.clearcoat > 0.0 {
-                    pdf += p.clearcoat * gtr1_pdf_given(d_cc, h) * jacobian;
-                }
-            }
-            pdf += p.diffuse * warp::square_to_cosine_hemisphere_pdf(if front { wi } else { -wi });
-        } else if ok {
-            if bsdf > 0.0 && f_d < 1.0 {
-                let scale = match mode {
-                    TransportMode::Radiance => 1.0 / (eta_path * eta_path),
-                    TransportMode::Importance => 1.0,
-                };
-                let denom = oh + eta_path * ih;
-                let t = scale * (1.0 - f_d) * d * (g1o * g1i) * eta_path * eta_path * oh * ih / (ci * denom * denom);
-                let t = (t / co).abs();
-                if t.is_finite() {
-                    value += self.base_color.sqrt() * (bsdf * t);
-                }
-            }
-            if p.transmission > 0.0 {
-                pdf += p.transmission * visible() * jacobian;
-            }
-        }
-        (value, if pdf.is_finite() { pdf } else { 0.0 })
+        let [r] = self.eval_pdf_lanes(wo, [wi], mode, t);
+        r
     }
 
     pub fn sample(&self, wo: Vec3, uc: f32, u: Vec2, mode: TransportMode) -> Option<BsdfSample> {
@@ -926,7 +854,9 @@ impl PrincipledThin {
                 }
             }
         }
-        std::array::from_fn(|k| {
+        // (A loop, not `from_fn`: for one direction LLVM left that closure out of line.)
+        let mut out = none;
+        for k in (0..N).filter(|&k| live[k]) {
             let (o, i, h) = fr[k];
             let p_spec = if reflect[k] { p_sr } else { p_st };
             let mut pdf = 0.0;
@@ -935,64 +865,16 @@ impl PrincipledThin {
                 pdf += p_spec * Microfacet::pdf_visible_given(o, h, dg[k].0, dg[k].1) / (4.0 * ir.dot(h)).abs();
             }
             pdf += if reflect[k] { p_dr } else { p_dt } * i.z.abs() * INV_PI;
-            if live[k] {
-                (value[k], if pdf.is_finite() { pdf } else { 0.0 })
-            } else {
-                none[k]
-            }
-        })
+            out[k] = (value[k], if pdf.is_finite() { pdf } else { 0.0 });
+        }
+        out
     }
 
-    /// [`Self::eval_pdf`] given the terms of `wo` (Λ filled in where first read).
+    /// [`Self::eval_pdf`] given the terms of `wo` (Λ filled in where first read):
+    /// [`Self::eval_pdf_lanes`] of one direction.
     fn eval_pdf_with(&self, wo: Vec3, wi: Vec3, t: &mut ThinWoTerms) -> (Rgb, f32) {
-        if wo.z == 0.0 || wi.z == 0.0 {
-            return (Rgb::BLACK, 0.0);
-        }
-        let (o, i, h) = Self::frame(wo, wi);
-        if h == Vec3::ZERO {
-            return (Rgb::BLACK, 0.0);
-        }
-        let (ci, co) = (o.z, i.z);
-        let (st, dt) = (self.spec_trans, self.diff_trans);
-        let reflect = co > 0.0;
-        let dv = &self.derived;
-        let [p_sr, p_st, p_dr, p_dt] = dv.lobes;
-        let (p_spec, md, lambda) = if reflect { (p_sr, &self.distribution, &mut t.lambda_r) } else { (p_st, &self.transmission_distribution, &mut t.lambda_t) };
-        let ok = compatible(h, o, i, reflect);
-        let (d, g1o) =
-            if ok && (st > 0.0 || p_spec > 0.0) { (md.d(h), Microfacet::g1_given(o, h, || *lambda.get_or_insert_with(|| md.lambda(o)))) } else { (0.0, 0.0) };
-        let mut value = Rgb::BLACK;
-        if st > 0.0 && ok {
-            let oh = o.dot(h);
-            let f_d = fresnel::dielectric(oh, self.eta).0;
-            let k = st * d * (g1o * md.g1(i, h)) / (4.0 * ci * co.abs());
-            if reflect {
-                // oh > 0 where ok.
-                let tinted = schlick_blend(dv.tint_r0, schlick_fresnel_weight_front(oh, self.eta));
-                value += (Rgb::splat(f_d) * (1.0 - self.spec_tint) + tinted * self.spec_tint) * k;
-            } else {
-                value += self.base_color * ((1.0 - f_d) * k);
-            }
-        }
-        if st < 1.0 {
-            if reflect && dt < 1.0 {
-                let ih = h.dot(i);
-                let w = (1.0 - st) * (1.0 - dt);
-                value += self.base_color * (w * INV_PI * disney_diffuse_given(self.roughness, self.flatness, co, ci, ih, t.f_wo));
-                if self.sheen > 0.0 {
-                    value += dv.sheen_color * (self.sheen * w * schlick_weight(ih.abs()));
-                }
-            } else if !reflect && dt > 0.0 {
-                value += self.base_color * ((1.0 - st) * dt * INV_PI);
-            }
-        }
-        let mut pdf = 0.0;
-        if p_spec > 0.0 && ok {
-            let ir = Vec3::new(i.x, i.y, i.z.abs());
-            pdf += p_spec * Microfacet::pdf_visible_given(o, h, d, g1o) / (4.0 * ir.dot(h)).abs();
-        }
-        pdf += if reflect { p_dr } else { p_dt } * i.z.abs() * INV_PI;
-        (value, if pdf.is_finite() { pdf } else { 0.0 })
+        let [r] = self.eval_pdf_lanes(wo, [wi], t);
+        r
     }
 
     pub fn sample(&self, wo: Vec3, uc: f32, u: Vec2, _mode: TransportMode) -> Option<BsdfSample> {
@@ -1698,7 +1580,9 @@ mod tests {
     }
 
     /// Directions evaluated side by side (`eval_pdf_lanes`: the light sample's and the
-    /// sample's in `eval_pdf_and_sample`) give each one's `eval_pdf_with` bits: random
+    /// sample's in `eval_pdf_and_sample`) give each one's `eval_pdf_with` bits (one
+    /// direction alone; `derived_terms_give_the_reference_bits` checks that against the
+    /// earlier code), so neither direction's result depends on the other: random
     /// models (a third opaque, some of IOR 1 or near it or below 1), directions on both
     /// sides, grazing, in the tangent plane, mirror and sampled ones, both modes.
     #[test]
