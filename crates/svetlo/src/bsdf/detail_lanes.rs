@@ -29,13 +29,13 @@ impl<const N: usize> Default for DetailLambertLanes<N> {
 
 /// `glam`'s `a.cross(b)`, operation for operation.
 #[inline(always)]
-fn cross3(a: [f32; 3], b: [f32; 3]) -> [f32; 3] {
+pub(crate) fn cross3(a: [f32; 3], b: [f32; 3]) -> [f32; 3] {
     [a[1] * b[2] - b[1] * a[2], a[2] * b[0] - b[2] * a[0], a[0] * b[1] - b[0] * a[1]]
 }
 
 /// `Detail::shadowing`'s `tan2` of a direction with this z.
 #[inline(always)]
-fn tan2(z: f32) -> f32 {
+pub(crate) fn tan2(z: f32) -> f32 {
     (1.0 - z * z).max(0.0) / (z * z)
 }
 

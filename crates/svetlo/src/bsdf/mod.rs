@@ -496,29 +496,6 @@ impl Bsdf {
         (nee, s.and_then(|s| Self::detail_sample_out(d, mode, &f, (wo, pwo), s)))
     }
 
-    /// [`Self::eval_pdf_and_sample`] (radiance) of an opaque one-sided BSDF under surface
-    /// detail `d`, from its model's own results in the perturbed frame `f`: `nee` its
-    /// (value, density) from `pwo` toward `pwi` (where the light sample `wi` is), `s` its
-    /// sample from `pwo` (`wo` in `f`). As `eval_detail`, `pdf_detail` and `sample_detail`
-    /// finish them (an opacity of 1 changes no bit): the same bits, the frame made once (the
-    /// path kernel's conductor lanes).
-    #[inline]
-    pub(crate) fn finish_detail(
-        d: &detail::Detail,
-        f: &Frame,
-        (wo, pwo): (Vec3, Vec3),
-        wi: Option<(Vec3, Vec3)>,
-        nee: (Rgb, f32),
-        s: Option<BsdfSample>,
-    ) -> (Option<(Rgb, f32)>, Option<BsdfSample>) {
-        let mode = TransportMode::Radiance;
-        let nee = wi.map(|(wi, pwi)| match Self::detail_factor(d, mode, (wo, wi), (pwo, pwi)) {
-            Some(k) => (nee.0 * k, nee.1),
-            None => (Rgb::BLACK, 0.0),
-        });
-        (nee, s.and_then(|s| Self::detail_sample_out(d, mode, f, (wo, pwo), s)))
-    }
-
     /// The Lambertian front seen from the front (`side`'s answer there), without the dispatch
     /// over every model: most of the calls in diffuse scenes.
     #[inline(always)]

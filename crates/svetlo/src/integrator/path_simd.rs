@@ -77,7 +77,7 @@ use crate::accel::packet::{Hits8, PacketBvh, PacketSpheres, Rays8, LANES};
 use crate::accel::HitRecords;
 use crate::bsdf::conductor::{rough_conductor_ggx_lanes, rough_conductor_lanes, RoughConductor, RoughConductorLanes};
 use crate::bsdf::detail::{bump_map_normal, normal_map_normal, Detail};
-use crate::bsdf::detail_lanes::{detail_lambert_lanes, DetailLambertLanes};
+use crate::bsdf::detail_lanes::{cross3, detail_lambert_lanes, tan2, DetailLambertLanes};
 use crate::bsdf::dielectric::{rough_dielectric_lanes, RoughDielectric, RoughDielectricLanes};
 use crate::bsdf::diffuse::Diffuse;
 use crate::bsdf::lane_samples::LaneSamples;
@@ -2433,14 +2433,14 @@ impl SimdKernel {
     /// (`ShapeData::conductor`: the conductor in `v.cond`, the perturbed normal in
     /// `v.detail_n` where `v.cond_detail`) of the packets that `scatter_and_shade` runs for
     /// (`layers`: whether AOV layers are on), eight at a time across the packets by
-    /// [`conductor_detail_lanes`] (a packet has about four such lanes a step), each written
+    /// [`conductor_slots`] (a packet has about four such lanes a step), each written
     /// as [`Self::scalar_scatter`] writes a lane's: the bits of the `Bsdf` `Scene::bsdf`
     /// builds, which is built only where a path may meet an emitting shape (for the MIS
     /// weight there). (The lanes are independent: a lane's bits do not depend on its slot or
     /// its neighbours.) Out of line: in the tile loop, it cost scenes without such lanes ~2 %.
     #[inline(never)]
     fn conductor_scatter<S>(&self, events: &LaneEvents, packets: &mut [Packet<S>], layers: bool) {
-        let mut input: [Option<ConductorLane>; LANES] = [None; LANES];
+        let mut q = ConductorSlots::default();
         let mut at = [(0usize, 0usize); LANES];
         let mut frames = [Frame::from_normal(Vec3::Z); LANES];
         let mut used = 0usize;
@@ -2458,43 +2458,36 @@ impl SimdKernel {
                 let wo = frame.to_local(lane3(&v.num.wo, l));
                 let wi = nee_dir(v, l, &frame);
                 let d = (v.cond_detail & (1 << l) != 0).then(|| Detail { n: lane3(&v.detail_n, l), shadowing: true });
-                input[used] = Some(ConductorLane { c, d, wo, wi, u: Vec2::new(v.scatter_u[1][l], v.scatter_u[2][l]) });
+                q.set(used, c, d, wo, wi, Vec2::new(v.scatter_u[1][l], v.scatter_u[2][l]));
                 (at[used], frames[used]) = ((pk, l), frame);
                 used += 1;
                 if used == LANES {
-                    self.put_conductors(events, &input, &at, &frames, packets);
+                    self.put_conductors(events, &q, &at, &frames, packets);
                     used = 0;
                 }
             }
         }
         if used > 0 {
             // (The slots past `used` hold the previous group's lanes: not run again.)
-            input[used..].fill(None);
-            self.put_conductors(events, &input, &at[..used], &frames[..used], packets);
+            self.put_conductors(events, &q, &at[..used], &frames[..used], packets);
         }
     }
 
-    /// One group of [`Self::conductor_scatter`]: lanes `input` (slot `i` lane `at[i]` of its
+    /// One group of [`Self::conductor_scatter`]: slots `q` (slot `i` lane `at[i]` of its
     /// packet, shading frame `frames[i]`), run and written into their packets.
     #[inline(always)]
-    fn put_conductors<S>(
-        &self,
-        events: &LaneEvents,
-        input: &[Option<ConductorLane>; LANES],
-        at: &[(usize, usize)],
-        frames: &[Frame],
-        packets: &mut [Packet<S>],
-    ) {
-        let out = conductor_detail_lanes(self.avx512, input);
+    fn put_conductors<S>(&self, events: &LaneEvents, q: &ConductorSlots, at: &[(usize, usize)], frames: &[Frame], packets: &mut [Packet<S>]) {
+        let out = conductor_slots(self.avx512, q, at.len());
         for (i, (&(pk, l), &frame)) in at.iter().zip(frames).enumerate() {
-            let Some(x) = input[i] else { continue };
             let Packet { st, v, .. } = &mut packets[pk];
-            if put_scatter(events, st, v, l, LobeFlags::GLOSSY_REFLECTION, x.wo, x.wi, out[i]).is_none() {
+            let (wo, lit) = (lane3(&q.wo, i), q.lit[i]);
+            let wi = lit.then(|| lane3(&q.wi, i));
+            if put_scatter(events, st, v, l, LobeFlags::GLOSSY_REFLECTION, wo, wi, out.lane(i, lit, LobeFlags::GLOSSY_REFLECTION)).is_none() {
                 continue;
             }
-            st.prev_bsdf[l] = Some(PrevBsdf { shape: v.shape[l], frame, wo: x.wo });
+            st.prev_bsdf[l] = Some(PrevBsdf { shape: v.shape[l], frame, wo });
             if self.emitters {
-                st.prev_own[l] = Some(Bsdf { detail: x.d, ..Bsdf::new(BsdfModel::RoughConductor(x.c)) });
+                st.prev_own[l] = Some(Bsdf { detail: q.detail_of(i), ..Bsdf::new(BsdfModel::RoughConductor(q.c[i])) });
             }
         }
     }
@@ -2526,9 +2519,10 @@ impl SimdKernel {
     }
 }
 
-/// A lane of [`conductor_detail_lanes`]: an opaque one-sided rough conductor `c` under surface
+/// A lane of [`conductor_detail_lanes`] (tests): an opaque one-sided rough conductor `c` under surface
 /// detail `d` (None: none) seen from `wo` (local), its light sample toward `wi` where it has
 /// one, the sample's numbers `u`.
+#[cfg(test)]
 #[derive(Clone, Copy, Debug)]
 struct ConductorLane {
     c: RoughConductor,
@@ -2541,56 +2535,201 @@ struct ConductorLane {
 /// A lane's (value, density) toward its light sample and its own sample.
 type LaneResult = (Option<(Rgb, f32)>, Option<BsdfSample>);
 
-/// `Bsdf::eval_pdf_and_sample` (radiance) of each used lane's `Bsdf` (the conductor, under
-/// its detail), the same bits: per lane the perturbed frame and the directions in it (as
-/// `Bsdf::eval_detail` and `sample_detail` make them), the lanes whose `wo` lies above the
-/// conductor there through its distribution's conductor lanes (`rough_conductor_ggx_lanes`,
-/// `rough_conductor_lanes`) together, the others black (the back of a one-sided model),
-/// then each finished by its detail's shadowing term and frame (`Bsdf::finish_detail`).
-#[inline(always)]
-fn conductor_detail_lanes(avx512: bool, lanes: &[Option<ConductorLane>; LANES]) -> [LaneResult; LANES] {
-    let mut out: [LaneResult; LANES] = [(None, None); LANES];
-    let mut frames = [None; LANES];
-    let mut local = [(Vec3::ZERO, None); LANES];
-    let mut kinds = [false; 2];
-    for (l, x) in lanes.iter().enumerate() {
-        let Some(x) = x else { continue };
-        kinds[usize::from(x.c.distribution.kind == MicrofacetKind::Beckmann)] = true;
-        let f = x.d.map(|d| d.frame(x.wo));
-        local[l] = match &f {
-            Some(f) => (f.to_local(x.wo), x.wi.map(|w| f.to_local(w))),
-            None => (x.wo, x.wi),
+/// Up to eight lanes of [`conductor_slots`], slot by slot as lane rows: slot `i` an opaque
+/// one-sided rough conductor `c[i]`, under a detail where `detail[i]` (its unit normal `n`,
+/// with the shadowing term where `shadowing`), seen from `wo` (local), its light sample
+/// toward `wi` where `lit`, the sample's numbers `u`.
+#[derive(Clone, Copy, Debug)]
+struct ConductorSlots {
+    c: [RoughConductor; LANES],
+    detail: [bool; LANES],
+    shadowing: [bool; LANES],
+    n: [[f32; LANES]; 3],
+    wo: [[f32; LANES]; 3],
+    wi: [[f32; LANES]; 3],
+    lit: [bool; LANES],
+    u: [[f32; LANES]; 2],
+}
+
+impl Default for ConductorSlots {
+    fn default() -> Self {
+        let c = RoughConductor {
+            distribution: crate::bsdf::microfacet::Microfacet::new(MicrofacetKind::Ggx, 1.0, 1.0),
+            eta: Rgb::splat(1.0),
+            k: Rgb::BLACK,
+            specular_reflectance: Rgb::splat(1.0),
         };
-        frames[l] = f;
-    }
-    for (kind, _) in [MicrofacetKind::Ggx, MicrofacetKind::Beckmann].into_iter().zip(kinds).filter(|k| k.1) {
-        let mut q = RoughConductorLanes::<LANES>::default();
-        let (mut at, mut used) = ([0usize; LANES], 0usize);
-        for (l, x) in lanes.iter().enumerate() {
-            let Some(x) = x.filter(|x| x.c.distribution.kind == kind) else { continue };
-            let (pwo, pwi) = local[l];
-            if pwo.z > 0.0 {
-                q.set(used, &x.c, pwo, pwi, x.u);
-                at[used] = l;
-                used += 1;
-            } else {
-                out[l] = (x.wi.map(|_| (Rgb::BLACK, 0.0)), None);
-            }
+        ConductorSlots {
+            c: [c; LANES],
+            detail: [false; LANES],
+            shadowing: [false; LANES],
+            n: [[0.0; LANES], [0.0; LANES], [1.0; LANES]],
+            wo: [[0.0; LANES], [0.0; LANES], [1.0; LANES]],
+            wi: [[0.0; LANES], [0.0; LANES], [-1.0; LANES]],
+            lit: [false; LANES],
+            u: [[0.5; LANES]; 2],
         }
-        if used == 0 {
+    }
+}
+
+impl ConductorSlots {
+    /// Slot `i`: conductor `c` under detail `d` from `wo`, light sample toward `wi`, numbers `u`.
+    #[inline(always)]
+    fn set(&mut self, i: usize, c: RoughConductor, d: Option<Detail>, wo: Vec3, wi: Option<Vec3>, u: Vec2) {
+        self.c[i] = c;
+        self.detail[i] = d.is_some();
+        self.shadowing[i] = d.is_some_and(|d| d.shadowing);
+        let n = d.map_or(Vec3::Z, |d| d.n);
+        let w = wi.unwrap_or(Vec3::NEG_Z);
+        for k in 0..3 {
+            (self.n[k][i], self.wo[k][i], self.wi[k][i]) = (n[k], wo[k], w[k]);
+        }
+        self.lit[i] = wi.is_some();
+        (self.u[0][i], self.u[1][i]) = (u.x, u.y);
+    }
+
+    /// Slot `i`'s detail, if any.
+    #[inline(always)]
+    fn detail_of(&self, i: usize) -> Option<Detail> {
+        self.detail[i].then(|| Detail { n: lane3(&self.n, i), shadowing: self.shadowing[i] })
+    }
+}
+
+/// `Bsdf::eval_pdf_and_sample` (radiance) of the first `used` slots' `Bsdf`s (the conductor,
+/// under its detail), the same bits, read back by `LaneSamples::lane` (`nee`: the slot's
+/// `lit`): the perturbed frames and the directions in them (as `Bsdf::eval_detail` and
+/// `sample_detail` make them) as lane arithmetic over all slots, the slots whose `wo` lies
+/// above the conductor there through its distribution's conductor lanes
+/// (`rough_conductor_ggx_lanes`, `rough_conductor_lanes`) together, the others black (the
+/// back of a one-sided model), then the detail's factor and frame applied as `eval_detail`,
+/// `pdf_detail` and `detail_sample_out` apply them, as lane arithmetic again (per lane, in
+/// `Bsdf::finish_detail`, it had been most of the route's time outside the conductor lanes).
+#[inline(always)]
+fn conductor_slots(avx512: bool, q: &ConductorSlots, used: usize) -> LaneSamples<LANES> {
+    // `Detail::frame(wo)` and `to_local` (as `detail_lambert_lanes`); slots without detail
+    // keep their directions.
+    let used = used.min(LANES);
+    // Without detail (textured conductors) both passes are skipped.
+    let any_detail = q.detail[..used].contains(&true);
+    let (mut fs, mut ft, mut fnn) = ([[0.0f32; LANES]; 3], [[0.0f32; LANES]; 3], [[0.0f32; LANES]; 3]);
+    let (mut pwo, mut pwi) = (q.wo, q.wi);
+    for l in (0..LANES).filter(|_| any_detail) {
+        let n = [q.n[0][l], q.n[1][l], q.n[2][l]];
+        let wo = [q.wo[0][l], q.wo[1][l], q.wo[2][l]];
+        let wi = [q.wi[0][l], q.wi[1][l], q.wi[2][l]];
+        let flip = wo[2] * dot3(wo, n) <= 0.0;
+        let nn = [if flip { -n[0] } else { n[0] }, if flip { -n[1] } else { n[1] }, n[2]];
+        let s = [1.0 - nn[0] * nn[0], 0.0 - nn[1] * nn[0], 0.0 - nn[2] * nn[0]];
+        let len2 = dot3(s, s);
+        let len = len2.sqrt();
+        let tilted = len2 > 1e-12;
+        let s = [if tilted { s[0] / len } else { 0.0 }, if tilted { s[1] / len } else { 1.0 }, if tilted { s[2] / len } else { 0.0 }];
+        let t = cross3(nn, s);
+        let d = q.detail[l];
+        let lo = [dot3(wo, s), dot3(wo, t), dot3(wo, nn)];
+        let li = [dot3(wi, s), dot3(wi, t), dot3(wi, nn)];
+        for c in 0..3 {
+            pwo[c][l] = if d { lo[c] } else { wo[c] };
+            pwi[c][l] = if d { li[c] } else { wi[c] };
+            (fs[c][l], ft[c][l], fnn[c][l]) = (s[c], t[c], nn[c]);
+        }
+    }
+    let mut o = LaneSamples::<LANES> {
+        nee_f: [[0.0; LANES]; 3],
+        nee_pdf: [0.0; LANES],
+        sampled: [false; LANES],
+        glossy: [true; LANES],
+        eta: [1.0; LANES],
+        wi: [[0.0; LANES]; 3],
+        f: [[0.0; LANES]; 3],
+        pdf: [0.0; LANES],
+    };
+    for kind in [MicrofacetKind::Ggx, MicrofacetKind::Beckmann] {
+        let mut g = RoughConductorLanes::<LANES>::default();
+        let (mut at, mut n) = ([0usize; LANES], 0usize);
+        for l in 0..used {
+            if q.c[l].distribution.kind != kind || pwo[2][l] <= 0.0 || pwo[2][l].is_nan() {
+                continue;
+            }
+            g.set(n, &q.c[l], lane3(&pwo, l), q.lit[l].then(|| lane3(&pwi, l)), Vec2::new(q.u[0][l], q.u[1][l]));
+            at[n] = l;
+            n += 1;
+        }
+        if n == 0 {
             continue;
         }
-        let r = if kind == MicrofacetKind::Ggx { GgxConductorStep::run(avx512, &q, used) } else { RoughConductorStep::run(avx512, &q, used) };
-        for (i, &l) in at[..used].iter().enumerate() {
-            out[l] = r.lane(i, local[l].1.is_some(), LobeFlags::GLOSSY_REFLECTION);
+        let r = if kind == MicrofacetKind::Ggx { GgxConductorStep::run(avx512, &g, n) } else { RoughConductorStep::run(avx512, &g, n) };
+        if n == used {
+            // Every slot, in order.
+            o = r;
+            break;
+        }
+        for (i, &l) in at[..n].iter().enumerate() {
+            for c in 0..3 {
+                (o.nee_f[c][l], o.wi[c][l], o.f[c][l]) = (r.nee_f[c][i], r.wi[c][i], r.f[c][i]);
+            }
+            (o.nee_pdf[l], o.sampled[l], o.pdf[l]) = (r.nee_pdf[i], r.sampled[i], r.pdf[i]);
         }
     }
+    // `Bsdf::detail_factor` toward the light sample and the sample (turned back to the
+    // shading frame as `detail_sample_out` turns it).
+    for l in (0..LANES).filter(|_| any_detail) {
+        let d = q.detail[l];
+        let alpha2 = (0.125 * tan2(q.n[2][l])).min(1.0);
+        let shadowing = |z: f32| {
+            if !q.shadowing[l] {
+                return 1.0;
+            }
+            let g = 2.0 / (1.0 + (1.0 + alpha2 * tan2(z)).sqrt());
+            if g.is_finite() {
+                g
+            } else {
+                0.0
+            }
+        };
+        let (wz, pwz) = (q.wi[2][l], pwi[2][l]);
+        let through = wz * pwz > 0.0;
+        let k = pwz.abs() / wz.abs() * shadowing(wz);
+        for c in 0..3 {
+            let v = o.nee_f[c][l];
+            o.nee_f[c][l] = if !d {
+                v
+            } else if through {
+                v * k
+            } else {
+                0.0
+            };
+        }
+        o.nee_pdf[l] = if !d || through { o.nee_pdf[l] } else { 0.0 };
+        let pw = [o.wi[0][l], o.wi[1][l], o.wi[2][l]];
+        let w: [f32; 3] = std::array::from_fn(|c| fs[c][l] * pw[0] + ft[c][l] * pw[1] + fnn[c][l] * pw[2]);
+        let through = w[2] * pw[2] > 0.0;
+        let k = pw[2].abs() / w[2].abs() * shadowing(w[2]);
+        for c in 0..3 {
+            o.wi[c][l] = if d { w[c] } else { pw[c] };
+            o.f[c][l] = if d { o.f[c][l] * k } else { o.f[c][l] };
+        }
+        o.sampled[l] = o.sampled[l] && (!d || through);
+    }
+    o
+}
+
+/// [`conductor_slots`] of the lanes that are there (the tests' form).
+#[cfg(test)]
+fn conductor_detail_lanes(avx512: bool, lanes: &[Option<ConductorLane>; LANES]) -> [LaneResult; LANES] {
+    let mut q = ConductorSlots::default();
+    let mut at = [0usize; LANES];
+    let mut used = 0usize;
     for (l, x) in lanes.iter().enumerate() {
-        let (Some(x), Some(f)) = (x, &frames[l]) else { continue };
-        let Some(d) = &x.d else { continue };
-        let (pwo, pwi) = local[l];
-        let (nee, s) = out[l];
-        out[l] = Bsdf::finish_detail(d, f, (x.wo, pwo), x.wi.zip(pwi), nee.unwrap_or((Rgb::BLACK, 0.0)), s);
+        let Some(x) = x else { continue };
+        q.set(used, x.c, x.d, x.wo, x.wi, x.u);
+        at[used] = l;
+        used += 1;
+    }
+    let o = conductor_slots(avx512, &q, used);
+    let mut out: [LaneResult; LANES] = [(None, None); LANES];
+    for (i, &l) in at[..used].iter().enumerate() {
+        out[l] = o.lane(i, q.lit[i], LobeFlags::GLOSSY_REFLECTION);
     }
     out
 }
