@@ -263,6 +263,9 @@ struct ShapeData {
     /// A one-sided rough conductor shaded by `conductor_scatter`, no `Bsdf` built: under a
     /// normal or bump map, or of textured parameters (its lanes keep `scalar_bsdf`).
     conductor: Option<KernelConductor>,
+    /// Its `KernelConductor::fixed` where that has a normal map (a fixed one without is a
+    /// uniform `Bsdf`).
+    conductor_fixed: Option<(RoughConductor, Vec3)>,
     /// A textured `principled` or `principledthin` material (no surface detail): its lanes
     /// keep `scalar_bsdf` but build its model in a slot of their own (`principled_scatter`),
     /// no `Bsdf`.
@@ -278,6 +281,10 @@ struct KernelConductor {
     specular_reflectance: Texture,
     roughness: Roughness,
     map: Option<DetailMap>,
+    /// The conductor and the map's perturbed normal (`Detail::n`) where neither depends on
+    /// the hit (constant textures, no map or a constant normal map): made once, the hit's
+    /// texture point not made (a mesh's uv was ~1 % of an identity normal map's time).
+    fixed: Option<(RoughConductor, Option<Vec3>)>,
 }
 
 impl KernelConductor {
@@ -296,7 +303,17 @@ impl KernelConductor {
         }
         match inner {
             Material::Conductor { eta, k, specular_reflectance, roughness: Some(r) } => {
-                Some(KernelConductor { eta: *eta, k: *k, specular_reflectance: specular_reflectance.clone(), roughness: r.clone(), map })
+                let mut c = KernelConductor { eta: *eta, k: *k, specular_reflectance: specular_reflectance.clone(), roughness: r.clone(), map, fixed: None };
+                let constant = |t: &Texture| matches!(t, Texture::Constant(_));
+                let n = match &c.map {
+                    None => Some(None),
+                    Some(DetailMap::Normal(t)) if constant(t) => Some(Some(Detail::new(normal_map_normal(t.eval(TexPoint::default())), true).n)),
+                    Some(_) => None,
+                };
+                if let Some(n) = n.filter(|_| constant(&c.specular_reflectance) && constant(&c.roughness.alpha_u) && constant(&c.roughness.alpha_v)) {
+                    c.fixed = Some((c.at(TexPoint::default()), n));
+                }
+                Some(c)
             }
             _ => None,
         }
@@ -1033,6 +1050,7 @@ impl SimdKernel {
                 reads_uv,
                 prefetch_texels,
                 detail,
+                conductor_fixed: conductor.as_ref().and_then(|c| c.fixed).and_then(|(c, n)| Some((c, n?))),
                 conductor,
                 principled,
             });
@@ -1887,6 +1905,16 @@ impl SimdKernel {
             self.light_sample(scene, l, v, p, u_light, u_l2);
             (v.scatter_u[1][l], v.scatter_u[2][l]) = (u.x, u.y);
             v.detail_lanes |= 1 << l;
+        } else if let Some((cond, n)) = sh.conductor_fixed {
+            // The same of a conductor route's shape whose conductor and normal do not depend
+            // on the hit (`KernelConductor::fixed`): no texture point made.
+            put(&mut v.detail_n, n);
+            v.cond_detail |= 1 << l;
+            v.cond[l] = Some(cond);
+            v.flags[l] = LobeFlags::GLOSSY_REFLECTION;
+            self.light_sample(scene, l, v, p, u_light, u_l2);
+            (v.scatter_u[1][l], v.scatter_u[2][l]) = (u.x, u.y);
+            v.cond_lanes |= 1 << l;
         } else if let Some(c) = &sh.conductor {
             // A rough conductor under a map or of textured parameters: the conductor and the
             // perturbed normal, as `Scene::bsdf` builds them, for `conductor_scatter`.
@@ -4227,6 +4255,40 @@ mod tests {
     fn lane_result_bits((nee, s): LaneResult) -> (Option<([u32; 3], u32)>, Option<([u32; 3], [u32; 3], u32, LobeFlags, u32)>) {
         let rgb = |c: Rgb| [c.r, c.g, c.b].map(f32::to_bits);
         (nee.map(|(c, p)| (rgb(c), p.to_bits())), s.map(|s| (s.wi.to_array().map(f32::to_bits), rgb(s.f), s.pdf.to_bits(), s.lobe, s.eta.to_bits())))
+    }
+
+    /// `KernelConductor::fixed`: made where the conductor's textures and its normal map are
+    /// constant (the map's normal as `Detail::new` makes it, the conductor as `at` any point),
+    /// not where the map, the roughness or the reflectance varies, nor under a bump map.
+    #[test]
+    fn fixed_conductors_are_those_of_constant_textures() {
+        let checker = Texture::Checkerboard { color0: Rgb::splat(0.1), color1: Rgb::splat(0.3), to_uv: glam::Affine2::IDENTITY };
+        let conductor = |alpha: Texture, refl: Texture| {
+            Box::new(Material::Conductor {
+                eta: Rgb::new(1.5, 0.9, 0.6),
+                k: Rgb::new(3.0, 2.5, 2.0),
+                specular_reflectance: refl,
+                roughness: Some(Roughness { kind: MicrofacetKind::Ggx, alpha_u: alpha.clone(), alpha_v: Texture::Constant(Rgb::splat(0.05)) }),
+            })
+        };
+        let constant = |c: f32| Texture::Constant(Rgb::splat(c));
+        let texel = Rgb::new(0.7, 0.4, 0.9);
+        let m = Material::NormalMap { normals: Texture::Constant(texel), inner: conductor(constant(0.25), constant(1.0)) };
+        let c = KernelConductor::of(&m, true).unwrap();
+        let tp = TexPoint { uv: Vec2::new(0.3, 0.8), ..TexPoint::default() };
+        let (fixed, n) = c.fixed.unwrap();
+        assert_eq!(format!("{fixed:?}"), format!("{:?}", c.at(tp)));
+        assert_eq!(n.map(|n| n.to_array().map(f32::to_bits)), Some(Detail::new(normal_map_normal(texel), true).n.to_array().map(f32::to_bits)));
+        for m in [
+            Material::NormalMap { normals: checker.clone(), inner: conductor(constant(0.25), constant(1.0)) },
+            Material::NormalMap { normals: Texture::Constant(texel), inner: conductor(checker.clone(), constant(1.0)) },
+            Material::NormalMap { normals: Texture::Constant(texel), inner: conductor(constant(0.25), checker.clone()) },
+            Material::BumpMap { height: constant(0.5), scale: 1.0, inner: conductor(constant(0.25), constant(1.0)) },
+        ] {
+            assert!(KernelConductor::of(&m, true).unwrap().fixed.is_none(), "{m:?}");
+        }
+        // Without a map: only textured ones take the route, never fixed.
+        assert!(KernelConductor::of(&conductor(checker, constant(1.0)), false).unwrap().fixed.is_none());
     }
 
     /// The `avx512` arguments of `conductor_detail_lanes` this CPU can run.
