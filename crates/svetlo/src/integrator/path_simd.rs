@@ -2704,15 +2704,15 @@ fn conductor_slots(avx512: bool, q: &ConductorSlots, used: usize) -> LaneSamples
     for l in (0..LANES).filter(|_| any_detail) {
         let d = q.detail[l];
         let alpha2 = (0.125 * tan2(q.n[2][l])).min(1.0);
+        // Selects, no early return: with one, this pass ran as scalar code (perf: ~9 % of
+        // `conductor_scatter` on this closure).
         let shadowing = |z: f32| {
-            if !q.shadowing[l] {
-                return 1.0;
-            }
             let g = 2.0 / (1.0 + (1.0 + alpha2 * tan2(z)).sqrt());
-            if g.is_finite() {
+            let g = if g.is_finite() { g } else { 0.0 };
+            if q.shadowing[l] {
                 g
             } else {
-                0.0
+                1.0
             }
         };
         let (wz, pwz) = (q.wi[2][l], pwi[2][l]);
