@@ -33,6 +33,20 @@ pub(crate) fn cross3(a: [f32; 3], b: [f32; 3]) -> [f32; 3] {
     [a[1] * b[2] - b[1] * a[2], a[2] * b[0] - b[2] * a[0], a[0] * b[1] - b[0] * a[1]]
 }
 
+/// `Detail::frame(wo)` of a lane's detail normal `n`: its normal, mirrored where `wo` is below
+/// it, and the frame's s and t (selects per component: whole arrays became branches).
+#[inline(always)]
+pub(crate) fn detail_frame(n: [f32; 3], wo: [f32; 3]) -> ([f32; 3], [f32; 3], [f32; 3]) {
+    let flip = wo[2] * dot3(wo, n) <= 0.0;
+    let nn = [if flip { -n[0] } else { n[0] }, if flip { -n[1] } else { n[1] }, n[2]];
+    let s = [1.0 - nn[0] * nn[0], 0.0 - nn[1] * nn[0], 0.0 - nn[2] * nn[0]];
+    let len2 = dot3(s, s);
+    let len = len2.sqrt();
+    let tilted = len2 > 1e-12;
+    let s = [if tilted { s[0] / len } else { 0.0 }, if tilted { s[1] / len } else { 1.0 }, if tilted { s[2] / len } else { 0.0 }];
+    (nn, s, cross3(nn, s))
+}
+
 /// `Detail::shadowing`'s `tan2` of a direction with this z.
 #[inline(always)]
 pub(crate) fn tan2(z: f32) -> f32 {
@@ -60,15 +74,7 @@ pub(crate) fn detail_lambert_lanes<const N: usize>(q: &DetailLambertLanes<N>) ->
         let wo = [q.wo[0][l], q.wo[1][l], q.wo[2][l]];
         let wi = [q.wi[0][l], q.wi[1][l], q.wi[2][l]];
         let refl = [q.refl[0][l], q.refl[1][l], q.refl[2][l]];
-        // `Detail::frame(wo)` (selects per component: whole arrays became branches).
-        let flip = wo[2] * dot3(wo, n) <= 0.0;
-        let nn = [if flip { -n[0] } else { n[0] }, if flip { -n[1] } else { n[1] }, n[2]];
-        let s = [1.0 - nn[0] * nn[0], 0.0 - nn[1] * nn[0], 0.0 - nn[2] * nn[0]];
-        let len2 = dot3(s, s);
-        let len = len2.sqrt();
-        let tilted = len2 > 1e-12;
-        let s = [if tilted { s[0] / len } else { 0.0 }, if tilted { s[1] / len } else { 1.0 }, if tilted { s[2] / len } else { 0.0 }];
-        let t = cross3(nn, s);
+        let (nn, s, t) = detail_frame(n, wo);
         let pwo_z = dot3(wo, nn);
         // `Detail::shadowing` (of the unmirrored normal: the same z).
         let alpha2 = (0.125 * tan2(n[2])).min(1.0);

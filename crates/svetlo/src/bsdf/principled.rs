@@ -1515,6 +1515,32 @@ mod tests {
         assert!(samples > 50_000 && specular > 10_000 && transmitted > 5_000, "{samples} samples, {specular} specular, {transmitted} transmitted");
     }
 
+    /// The `k`th random model of the bit-for-bit tests, from numbers `v(lo, hi)`: parameters
+    /// a little outside their ranges too, every third opaque, IOR 1, near 1, below and above
+    /// it, every seventh with its own sampling rates.
+    fn random_model(k: usize, v: &mut impl FnMut(f32, f32) -> f32) -> Principled {
+        let c = |x: f32| Texture::Constant(Rgb::splat(x));
+        let mut m = PrincipledMaterial { base_color: Texture::Constant(Rgb::new(v(0.0, 1.0), v(0.0, 1.0), v(0.0, 1.0))), ..Default::default() };
+        for t in
+            [&mut m.roughness, &mut m.anisotropic, &mut m.metallic, &mut m.spec_tint, &mut m.sheen, &mut m.sheen_tint, &mut m.clearcoat, &mut m.clearcoat_gloss]
+        {
+            *t = c(v(-0.1, 1.1));
+        }
+        m.flatness = c(if k.is_multiple_of(2) { 0.0 } else { v(-0.2, 1.0) });
+        m.spec_trans = c(if k.is_multiple_of(3) { 0.0 } else { v(-0.1, 1.1) });
+        m.eta = c(match k % 11 {
+            0 => 1.0,
+            1 => 1.0 + v(0.0, 1e-3),
+            2 => v(0.5, 1.0),
+            _ => v(1.0, 2.5),
+        });
+        if k.is_multiple_of(7) {
+            m.rates = SamplingRates { diffuse_reflection: v(0.0, 2.0), specular: v(0.0, 2.0), secondary: v(0.0, 2.0), diffuse_transmission: 0.0 };
+        }
+        let PrincipledAt::Full(model) = m.at_evaluated(Vec2::ZERO.into()) else { unreachable!("not thin") };
+        model
+    }
+
     /// The evaluation and the sample with the derived weights, reciprocals of eta and lobes
     /// without refraction give the bits of the code before them (`reference`), for random
     /// models (a third opaque, some of IOR 1 or near it), directions on both sides, grazing
@@ -1524,37 +1550,12 @@ mod tests {
         use crate::sampling::rng::Pcg32;
         let mut rng = Pcg32::new(23, 5);
         let mut v = |lo: f32, hi: f32| lo + (hi - lo) * rng.next_f32();
-        let c = |x: f32| Texture::Constant(Rgb::splat(x));
         let bits = |(f, pdf): (Rgb, f32)| (f.r.to_bits(), f.g.to_bits(), f.b.to_bits(), pdf.to_bits());
         let sample_bits = |s: Option<BsdfSample>| s.map(|s| (s.wi.to_array().map(f32::to_bits), bits((s.f, s.pdf)), s.lobe, s.eta.to_bits()));
         let grazing = [Vec3::new(1.0, 0.0, 1e-4).normalize(), Vec3::new(0.0, -1.0, -1e-4).normalize(), Vec3::Z, -Vec3::Z];
         let (mut opaque, mut samples) = (0, 0);
         for k in 0..600 {
-            let mut m = PrincipledMaterial { base_color: Texture::Constant(Rgb::new(v(0.0, 1.0), v(0.0, 1.0), v(0.0, 1.0))), ..Default::default() };
-            for t in [
-                &mut m.roughness,
-                &mut m.anisotropic,
-                &mut m.metallic,
-                &mut m.spec_tint,
-                &mut m.sheen,
-                &mut m.sheen_tint,
-                &mut m.clearcoat,
-                &mut m.clearcoat_gloss,
-            ] {
-                *t = c(v(-0.1, 1.1));
-            }
-            m.flatness = c(if k % 2 == 0 { 0.0 } else { v(-0.2, 1.0) });
-            m.spec_trans = c(if k % 3 == 0 { 0.0 } else { v(-0.1, 1.1) });
-            m.eta = c(match k % 11 {
-                0 => 1.0,
-                1 => 1.0 + v(0.0, 1e-3),
-                2 => v(0.5, 1.0),
-                _ => v(1.0, 2.5),
-            });
-            if k % 7 == 0 {
-                m.rates = SamplingRates { diffuse_reflection: v(0.0, 2.0), specular: v(0.0, 2.0), secondary: v(0.0, 2.0), diffuse_transmission: 0.0 };
-            }
-            let PrincipledAt::Full(model) = m.at_evaluated(Vec2::ZERO.into()) else { unreachable!("not thin") };
+            let model = random_model(k, &mut v);
             opaque += usize::from(model.wo_terms(Vec3::Z).opaque_lobes.is_some());
             let mut pairs: Vec<(Vec3, Vec3)> = (0..200)
                 .map(|_| {
@@ -1590,36 +1591,11 @@ mod tests {
         use crate::sampling::rng::Pcg32;
         let mut rng = Pcg32::new(41, 3);
         let mut v = |lo: f32, hi: f32| lo + (hi - lo) * rng.next_f32();
-        let c = |x: f32| Texture::Constant(Rgb::splat(x));
         let bits = |(f, pdf): (Rgb, f32)| (f.r.to_bits(), f.g.to_bits(), f.b.to_bits(), pdf.to_bits());
         let special = [Vec3::new(1.0, 0.0, 1e-4).normalize(), Vec3::new(0.0, -1.0, -1e-4).normalize(), Vec3::Z, -Vec3::Z, Vec3::X, Vec3::new(0.6, -0.8, 0.0)];
         let (mut sampled, mut nonzero) = (0, 0);
         for k in 0..600 {
-            let mut m = PrincipledMaterial { base_color: Texture::Constant(Rgb::new(v(0.0, 1.0), v(0.0, 1.0), v(0.0, 1.0))), ..Default::default() };
-            for t in [
-                &mut m.roughness,
-                &mut m.anisotropic,
-                &mut m.metallic,
-                &mut m.spec_tint,
-                &mut m.sheen,
-                &mut m.sheen_tint,
-                &mut m.clearcoat,
-                &mut m.clearcoat_gloss,
-            ] {
-                *t = c(v(-0.1, 1.1));
-            }
-            m.flatness = c(if k % 2 == 0 { 0.0 } else { v(-0.2, 1.0) });
-            m.spec_trans = c(if k % 3 == 0 { 0.0 } else { v(-0.1, 1.1) });
-            m.eta = c(match k % 11 {
-                0 => 1.0,
-                1 => 1.0 + v(0.0, 1e-3),
-                2 => v(0.5, 1.0),
-                _ => v(1.0, 2.5),
-            });
-            if k % 7 == 0 {
-                m.rates = SamplingRates { diffuse_reflection: v(0.0, 2.0), specular: v(0.0, 2.0), secondary: v(0.0, 2.0), diffuse_transmission: 0.0 };
-            }
-            let PrincipledAt::Full(model) = m.at_evaluated(Vec2::ZERO.into()) else { unreachable!("not thin") };
+            let model = random_model(k, &mut v);
             let dir = |v: &mut dyn FnMut(f32, f32) -> f32| warp::square_to_uniform_sphere(Vec2::new(v(0.0, 1.0), v(0.0, 1.0)));
             let mut wos: Vec<Vec3> = (0..60).map(|_| dir(&mut v)).collect();
             wos.extend(special);
