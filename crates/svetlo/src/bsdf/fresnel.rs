@@ -13,41 +13,29 @@ use glam::Vec3;
 /// internal reflection), and the relative IORs transmitted/incident and incident/transmitted.
 #[inline]
 pub fn dielectric(cos_i: f32, eta: f32) -> (f32, f32, f32, f32) {
-    dielectric_given_inverse(cos_i, eta, 1.0 / eta)
+    let inv_eta = 1.0 / eta;
+    // (The inside's 1 / (1 / eta) only there: outside one division.)
+    let (eta_it, eta_ti) = if cos_i >= 0.0 { (eta, inv_eta) } else { (inv_eta, 1.0 / inv_eta) };
+    dielectric_between(cos_i, eta, eta_it, eta_ti)
 }
 
-/// [`dielectric`] given `inv_eta` = 1 / eta (computed once for several calls): the same bits.
+/// [`dielectric`] given `inv_eta` = 1 / eta and `inv_inv_eta` = 1 / inv_eta (computed once
+/// for several calls: `eta_ti` of either side without a division in the chain).
 #[inline(always)]
-pub(crate) fn dielectric_given_inverse(cos_i: f32, eta: f32, inv_eta: f32) -> (f32, f32, f32, f32) {
+pub(crate) fn dielectric_given_inverses(cos_i: f32, eta: f32, inv_eta: f32, inv_inv_eta: f32) -> (f32, f32, f32, f32) {
+    let (eta_it, eta_ti) = if cos_i >= 0.0 { (eta, inv_eta) } else { (inv_eta, inv_inv_eta) };
+    dielectric_between(cos_i, eta, eta_it, eta_ti)
+}
+
+/// [`dielectric`] given the relative IORs of `cos_i`'s side, `eta_it` and `eta_ti` = 1 / eta_it.
+#[inline(always)]
+fn dielectric_between(cos_i: f32, eta: f32, eta_it: f32, eta_ti: f32) -> (f32, f32, f32, f32) {
     let outside = cos_i >= 0.0;
-    let eta_it = if outside { eta } else { inv_eta };
-    let eta_ti = 1.0 / eta_it;
     if eta == 1.0 {
         return (0.0, -cos_i, 1.0, 1.0);
     }
     let ci = cos_i.abs().min(1.0);
     // Snell: sin_t = eta_ti * sin_i.
-    let cos_t2 = 1.0 - eta_ti * eta_ti * (1.0 - ci * ci);
-    if cos_t2 <= 0.0 {
-        return (1.0, 0.0, eta_it, eta_ti);
-    }
-    let ct = cos_t2.sqrt();
-    let rs = (ci - eta_it * ct) / (ci + eta_it * ct);
-    let rp = (eta_it * ci - ct) / (eta_it * ci + ct);
-    let f = 0.5 * (rs * rs + rp * rp);
-    (f, if outside { -ct } else { ct }, eta_it, eta_ti)
-}
-
-/// [`dielectric_given_inverse`] given 1 / (1 / eta) too (`eta_ti` of either side without a
-/// division in the chain): the same bits.
-#[inline(always)]
-pub(crate) fn dielectric_given_inverses(cos_i: f32, eta: f32, inv_eta: f32, inv_inv_eta: f32) -> (f32, f32, f32, f32) {
-    let outside = cos_i >= 0.0;
-    let (eta_it, eta_ti) = if outside { (eta, inv_eta) } else { (inv_eta, inv_inv_eta) };
-    if eta == 1.0 {
-        return (0.0, -cos_i, 1.0, 1.0);
-    }
-    let ci = cos_i.abs().min(1.0);
     let cos_t2 = 1.0 - eta_ti * eta_ti * (1.0 - ci * ci);
     if cos_t2 <= 0.0 {
         return (1.0, 0.0, eta_it, eta_ti);
@@ -191,30 +179,6 @@ mod tests {
 
     /// The select forms (`dielectric_lane`, and `dielectric_reflectance` built on it) give
     /// `dielectric`'s values bit for bit.
-    /// `dielectric_given_inverses` is `dielectric` bit for bit: cosines of both signs
-    /// (normal, grazing, ±0), IORs below, at and above 1, total internal reflection.
-    #[test]
-    fn dielectric_given_inverses_is_dielectric() {
-        let mut rng = crate::sampling::Pcg32::new(37, 2);
-        let bits = |r: (f32, f32, f32, f32)| [r.0, r.1, r.2, r.3].map(f32::to_bits);
-        for k in 0..200_000 {
-            let eta = match k % 7 {
-                0 => 1.0,
-                1 => 0.3 + 0.7 * rng.next_f32(),
-                _ => 1.0 + 2.0 * rng.next_f32(),
-            };
-            let c = match k % 11 {
-                0 => 0.0,
-                1 => -0.0,
-                2 => 1.0,
-                3 => -1.0,
-                _ => 2.0 * rng.next_f32() - 1.0,
-            };
-            let inv = 1.0 / eta;
-            assert_eq!(bits(dielectric_given_inverses(c, eta, inv, 1.0 / inv)), bits(dielectric(c, eta)), "{c} {eta}");
-        }
-    }
-
     #[test]
     fn select_forms_are_dielectrics() {
         let bits = |v: (f32, f32, f32, f32)| [v.0, v.1, v.2, v.3].map(f32::to_bits);

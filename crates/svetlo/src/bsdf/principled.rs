@@ -43,16 +43,10 @@ fn schlick(r0: Rgb, cos_i: f32, eta: f32) -> Rgb {
 /// [`schlick`]'s weight, which does not depend on `r0`: one for all of a point's Schlick terms.
 #[inline]
 fn schlick_fresnel_weight(cos_i: f32, eta: f32) -> f32 {
-    let (eta_it, eta_ti) = if cos_i >= 0.0 { (eta, 1.0 / eta) } else { (1.0 / eta, eta) };
-    if eta_it > 1.0 {
-        schlick_weight(cos_i.abs())
-    } else {
-        let cos_t2 = 1.0 - (1.0 - cos_i * cos_i) * eta_ti * eta_ti;
-        schlick_weight(cos_t2.max(0.0).sqrt())
-    }
+    schlick_fresnel_weight_given(cos_i, eta, 1.0 / eta)
 }
 
-/// [`schlick_fresnel_weight`] given `inv_eta` = 1 / eta: the same value.
+/// [`schlick_fresnel_weight`] given `inv_eta` = 1 / eta.
 #[inline(always)]
 fn schlick_fresnel_weight_given(cos_i: f32, eta: f32, inv_eta: f32) -> f32 {
     let (eta_it, eta_ti) = if cos_i >= 0.0 { (eta, inv_eta) } else { (inv_eta, eta) };
