@@ -59,16 +59,7 @@ pub(crate) fn tan2(z: f32) -> f32 {
 /// compute garbage that no one reads.
 #[inline(always)]
 pub(crate) fn detail_lambert_lanes<const N: usize>(q: &DetailLambertLanes<N>) -> LaneSamples<N> {
-    let mut o = LaneSamples::<N> {
-        nee_f: [[0.0; N]; 3],
-        nee_pdf: [0.0; N],
-        sampled: [false; N],
-        glossy: [false; N],
-        eta: [1.0; N],
-        wi: [[0.0; N]; 3],
-        f: [[0.0; N]; 3],
-        pdf: [0.0; N],
-    };
+    let mut o = LaneSamples::<N>::empty(false);
     for l in 0..N {
         let n = [q.n[0][l], q.n[1][l], q.n[2][l]];
         let wo = [q.wo[0][l], q.wo[1][l], q.wo[2][l]];

@@ -21,6 +21,22 @@ pub(crate) struct LaneSamples<const N: usize> {
 }
 
 impl<const N: usize> LaneSamples<N> {
+    /// No light-sample value, no sample, every lane of the lobe `glossy` says, eta 1: what a
+    /// vector step fills in.
+    #[inline(always)]
+    pub(crate) fn empty(glossy: bool) -> Self {
+        LaneSamples {
+            nee_f: [[0.0; N]; 3],
+            nee_pdf: [0.0; N],
+            sampled: [false; N],
+            glossy: [glossy; N],
+            eta: [1.0; N],
+            wi: [[0.0; N]; 3],
+            f: [[0.0; N]; 3],
+            pdf: [0.0; N],
+        }
+    }
+
     /// Lane `l` as (`eval_pdf` where it was given a light sample, `nee`; `sample`) give it;
     /// `other`: the model's lobe besides the glossy reflection (a plastic's diffuse one, a
     /// dielectric's transmission).

@@ -2655,16 +2655,7 @@ fn conductor_slots(avx512: bool, q: &ConductorSlots, used: usize) -> LaneSamples
             (fs[c][l], ft[c][l], fnn[c][l]) = (s[c], t[c], nn[c]);
         }
     }
-    let mut o = LaneSamples::<LANES> {
-        nee_f: [[0.0; LANES]; 3],
-        nee_pdf: [0.0; LANES],
-        sampled: [false; LANES],
-        glossy: [true; LANES],
-        eta: [1.0; LANES],
-        wi: [[0.0; LANES]; 3],
-        f: [[0.0; LANES]; 3],
-        pdf: [0.0; LANES],
-    };
+    let mut o = LaneSamples::<LANES>::empty(true);
     for kind in [MicrofacetKind::Ggx, MicrofacetKind::Beckmann] {
         let mut g = RoughConductorLanes::<LANES>::default();
         let (mut at, mut n) = ([0usize; LANES], 0usize);
